@@ -1,0 +1,38 @@
+"""ament_python set-up for impact_arm (also installable with plain pip)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'impact_arm'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(include=[PACKAGE, PACKAGE + '.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
+    ],
+    package_data={PACKAGE: ['scenes/*.yaml']},
+    # rclpy and the message packages come from the ROS install (package.xml) or, without ROS,
+    # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
+    install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib'],
+    zip_safe=True,
+    maintainer='impact_arm developers',
+    maintainer_email='impact-arm@example.com',
+    description='Planar two-link impacting arm: physics core, ROS 2 nodes, MCAP record/replay.',
+    license='Apache-2.0',
+    python_requires='>=3.10',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'impact-arm = impact_arm.cli:main',
+            'simulator = impact_arm.nodes.simulator:main',
+            'controller = impact_arm.nodes.controller:main',
+            'recorder = impact_arm.nodes.recorder:main',
+            'replay = impact_arm.nodes.replay:main',
+        ],
+    },
+)
