@@ -1,0 +1,86 @@
+"""Contact laws of one impact (model.md): Hertz elastic compression, Jackson-Green
+elasto-plastic compression, elastic restitution about a residual dent, and tanh-smoothed
+Coulomb friction. Plain functions of the indentation so they test against closed forms.
+
+Penetration δ = h - y_B is positive inside the surface. The force laws are zero for a
+non-positive argument: that *is* the law (no adhesion), and it keeps trial stages of a
+Runge-Kutta step that overshoot separation finite instead of producing NaN.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .scene import Material
+
+YIELD_ONSET_FACTOR = 1.9   # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
+
+
+@dataclass(frozen=True)
+class ContactConstants:
+    """Everything one tip/surface pairing needs, computed once per scene (model.md)."""
+    E: float          # reduced modulus [Pa]
+    R: float          # reduced radius [m] (flat surface: the tip radius)
+    S_y: float        # yield strength of the weaker material [Pa]
+    nu: float         # Poisson ratio used in C_j (that of the weaker material)
+    C_j: float
+    delta_c: float    # critical interference at yield onset [m]
+    P_c: float        # critical load [N]
+    B: float
+
+    @property
+    def delta_yield(self) -> float:
+        return YIELD_ONSET_FACTOR * self.delta_c
+
+
+def contact_constants(arm: Material, surface: Material, tip_radius: float) -> ContactConstants:
+    E = arm.E * surface.E / (surface.E * (1 - arm.nu ** 2) + arm.E * (1 - surface.nu ** 2))
+    weaker = arm if arm.S_y <= surface.S_y else surface
+    S_y, nu = weaker.S_y, weaker.nu
+    R = tip_radius
+    C_j = 1.295 * math.exp(0.736 * nu)
+    delta_c = R * (math.pi * C_j * S_y / (2 * E)) ** 2
+    P_c = 4.0 / 3.0 * (R / E) ** 2 * (math.pi * C_j * S_y / 2) ** 3
+    B = 0.14 * math.exp(23 * S_y / E)
+    return ContactConstants(E, R, S_y, nu, C_j, delta_c, P_c, B)
+
+
+def hertz_force(delta: float, E: float, R: float) -> float:
+    """Hertz sphere-on-flat: F = 4/3 E √R δ^1.5."""
+    return 4.0 / 3.0 * E * math.sqrt(R) * delta * math.sqrt(delta) if delta > 0 else 0.0
+
+
+def jackson_green_force(delta: float, c: ContactConstants) -> float:
+    """Elasto-plastic compression force, article eq. 12 with model.md's a and H."""
+    if delta <= 0:
+        return 0.0
+    ratio = delta / c.delta_c
+    a = math.sqrt(c.R * delta * (delta / c.delta_yield) ** c.B)
+    hardness = c.S_y * (2.84 - 0.92 * (1 - math.cos(math.pi * a / c.R)))
+    return c.P_c * (math.exp(-0.25 * ratio ** (5.0 / 12.0)) * ratio ** 1.5
+                    + 4 * hardness / (c.C_j * c.S_y) * (1 - math.exp(-ratio ** (5.0 / 9.0) / 25))
+                    * ratio)
+
+
+def residual_indentation(delta_m: float, c: ContactConstants) -> float:
+    """δr after unloading from δm (Etsion et al. fit, model.md).
+
+    The fit is for contacts that yielded (δm ≥ δc); below δc the contact stayed elastic and
+    unloads along its loading curve, so δr = 0 — the fit itself would turn negative there."""
+    if delta_m <= c.delta_c:
+        return 0.0
+    return delta_m * 1.02 * (1 - ((delta_m / c.delta_c + 5.9) / 6.9) ** -0.54)
+
+
+def restitution_radius(delta_m: float, delta_r: float, P_m: float, E: float) -> float:
+    """Rr chosen so the restitution curve starts at (δm, Pm): Rr = (3Pm/4E)² / (δm-δr)³."""
+    return (3 * P_m / (4 * E)) ** 2 / (delta_m - delta_r) ** 3
+
+
+def restitution_force(delta: float, delta_r: float, E: float, R_r: float) -> float:
+    return hertz_force(delta - delta_r, E, R_r)
+
+
+def friction_force(normal_force: float, slip_velocity: float, mu: float, v_d: float) -> float:
+    """Tangential force opposing slip: -μ |Fn| tanh(v/v_d) (model.md fixes eq. 14's sign)."""
+    return -mu * abs(normal_force) * math.tanh(slip_velocity / v_d)

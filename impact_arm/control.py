@@ -1,0 +1,157 @@
+"""Control laws (article §2.3, model.md) and the down/up cycle logic, free of ROS.
+
+Torques are joint torques τ_i acting from link i-1 on link i (τ_1 = T01, τ_2 = T12). With the
+absolute-angle coordinates of the model they enter Lagrange's equations as
+Q_i = τ_i - τ_{i+1} (article eq. 6).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')
+
+
+def torques_to_generalized(tau):
+    """Q_i = τ_i - τ_{i+1}: joint i's torque acts on link i and reacts on link i-1."""
+    n = len(tau)
+    return [tau[i] - (tau[i + 1] if i + 1 < n else 0.0) for i in range(n)]
+
+
+def q_law(q, qd, target, kp, kd, gravity_forces):
+    """Article eq. 9 generalised to n links: PD on the absolute angles plus exact gravity
+    compensation. τ_i = -Kd_i q̇_i - Kp_i (q_i - q_if) - Σ_{j≥i} Q_jg, so that after the
+    mapping Q_i = τ_i - τ_{i+1} the gravity generalized forces cancel exactly."""
+    n = len(q)
+    tail = 0.0
+    tau = [0.0] * n
+    for i in range(n - 1, -1, -1):
+        tail += gravity_forces[i]
+        tau[i] = -kd[i] * qd[i] - kp[i] * (q[i] - target[i]) - tail
+    return tau
+
+
+def to_joint_space(q):
+    """Relative (encoder) angles: joint1 = q1, joint_i = q_i - q_{i-1}."""
+    return [q[0]] + [q[i] - q[i - 1] for i in range(1, len(q))]
+
+
+def to_absolute(theta):
+    out, acc = [], 0.0
+    for value in theta:
+        acc += value
+        out.append(acc)
+    return out
+
+
+def pid_error(q, qd, target, space):
+    """Error and its rate in the angles the PID acts on (absolute link angles, as article
+    eq. 10 and model.md read it, or relative joint angles)."""
+    if space == 'joint':
+        e = [a - b for a, b in zip(to_joint_space(q), to_joint_space(target))]
+        rate = to_joint_space(qd)
+    else:
+        e = [a - b for a, b in zip(q, target)]
+        rate = list(qd)
+    return e, rate
+
+
+def pid_law(error, rate, integral, kp, kd, ki):
+    """τ_i = -Kd_i ė_i - Kp_i e_i - Ki_i ∫e_i (article eq. 10; PD when Ki = 0)."""
+    return [-kd[i] * rate[i] - kp[i] * error[i] - ki[i] * integral[i] for i in range(len(error))]
+
+
+@dataclass
+class PidIntegrator:
+    """Discrete integral state with control_toolbox-style clamping of the integral term."""
+    n: int
+    i_clamp_max: float = math.inf
+    i_clamp_min: float = -math.inf
+    antiwindup: str = 'none'
+    value: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if self.antiwindup not in ANTIWINDUP_STRATEGIES:
+            raise ValueError(f'antiwindup_strategy = {self.antiwindup!r}: choose one of '
+                             f'{", ".join(ANTIWINDUP_STRATEGIES)}')
+        self.reset()
+
+    def reset(self):
+        self.value = [0.0] * self.n
+
+    def update(self, error, dt, ki, saturated=None):
+        for i in range(self.n):
+            if self.antiwindup == 'conditional_integration' and saturated and saturated[i]:
+                continue  # hold the integral while the actuator is at its limit
+            self.value[i] += error[i] * dt
+            if self.antiwindup == 'legacy' and ki[i] > 0:
+                # clamp the integral *term* ki·∫e to [i_clamp_min, i_clamp_max]
+                term = min(max(ki[i] * self.value[i], self.i_clamp_min), self.i_clamp_max)
+                self.value[i] = term / ki[i]
+
+
+class CycleController:
+    """The down/up striking cycle as a sampled controller sees it (ROS node, offline ZOH).
+
+    It knows only what a real model-based controller knows: the arm's kinematics and gravity
+    terms (``model``), the sampled joint state and, if available, the contact force. Down→up on
+    impact (normal force above ``force_threshold``, or the tip's vertical velocity reversing
+    within ``reversal_band`` of the surface); up→down when the tip reaches ``switch_height``.
+    """
+
+    def __init__(self, model, law, kp, kd, ki, down_target, up_target, switch_height,
+                 surface_height, space='absolute', force_threshold=1.0, reversal_band=0.01,
+                 integrator: PidIntegrator | None = None):
+        self.model = model
+        self.law = law
+        self.kp, self.kd, self.ki = list(kp), list(kd), list(ki)
+        self.targets = {'down': list(down_target), 'up': list(up_target)}
+        self.switch_height = switch_height
+        self.surface_height = surface_height
+        self.space = space
+        self.force_threshold = force_threshold
+        self.reversal_band = reversal_band
+        self.integral = integrator or PidIntegrator(len(kp))
+        self.mode = 'down'
+        self.switches = 0
+        self._last_t = None
+        self._last_vy = None
+
+    def _switch(self, mode):
+        self.mode = mode
+        self.switches += 1
+        self.integral.reset()
+
+    def update(self, t, q, qd, normal_force=None):
+        """Torques for the sample at time t (the caller holds them until the next sample)."""
+        _, y_tip, _, vy_tip = self.model.tip(q, qd)
+        if self.mode == 'down' and self.surface_height is not None:
+            hit = normal_force is not None and normal_force > self.force_threshold
+            reversed_near = (self._last_vy is not None and self._last_vy < 0 <= vy_tip
+                             and y_tip < self.surface_height + self.reversal_band)
+            if hit or reversed_near:
+                self._switch('up')
+        elif self.mode == 'up' and y_tip >= self.switch_height:
+            self._switch('down')
+        self._last_vy = vy_tip
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        self._last_t = t
+        return self.torque(q, qd, dt)
+
+    def torque(self, q, qd, dt=0.0):
+        target = self.targets[self.mode]
+        if self.law == 'none':
+            return [0.0] * len(q)
+        if self.law == 'q':
+            return q_law(q, qd, target, self.kp, self.kd, self.model.gravity_forces(q))
+        error, rate = pid_error(q, qd, target, self.space)
+        ki = self.ki if self.law == 'pid' else [0.0] * len(q)
+        if self.law == 'pid' and dt > 0:
+            self.integral.update(error, dt, ki)
+        return pid_law(error, rate, self.integral.value, self.kp, self.kd, ki)
+
+
+def clip_torques(tau, max_effort):
+    return np.clip(np.asarray(tau, dtype=float), -max_effort, max_effort)

@@ -1,0 +1,18 @@
+"""Exceptions shared by the core. Each carries a message meant for the user, not a traceback."""
+
+
+class ImpactArmError(Exception):
+    """Base class: anything the command line reports as a one-line error."""
+
+
+class SceneError(ImpactArmError):
+    """A scene file is missing, malformed, or has a value outside its allowed range."""
+
+
+class SimulationError(ImpactArmError):
+    """The integration cannot continue (non-finite state, step size underflow, model limit)."""
+
+    def __init__(self, message, t=None, state=None):
+        super().__init__(message)
+        self.t = t
+        self.state = state

@@ -1,0 +1,94 @@
+"""Impact metrics (model.md): assembled from the integrator's located events, so every number
+comes from the state at an exactly located phase switch, not from a sampled signal."""
+from __future__ import annotations
+
+import math
+
+from .model import ArmModel, kinetic_energy_split
+
+IMPACT_FIELDS = ('index', 't_contact', 'q_contact_deg', 'duration', 'delta_m', 'delta_r',
+                 'F_max', 'v_before', 'v_after', 'cor_kinematic', 'T_before', 'T_after',
+                 'cor_energetic', 'phase_durations')
+PHASE_ORDER = ('contact', 'yield', 'max_compression', 'separation')
+
+
+class ImpactBuilder:
+    """Feed it events in order; it emits one impact record per completed impact and checks
+    that no phase is skipped or repeated."""
+
+    def __init__(self, model: ArmModel):
+        self.model = model
+        self.impacts = []
+        self._open = None
+
+    def _tip_and_energy(self, y):
+        n = self.model.n
+        q, qd = y[:n].tolist(), y[n:2 * n].tolist()
+        _, _, vx, vy = self.model.tip(q, qd)
+        return q, (vx, vy), kinetic_energy_split(self.model, q, qd)
+
+    def feed(self, event):
+        """Returns the finished impact record when ``event`` completes one, else None."""
+        kind = event.kind
+        if kind not in PHASE_ORDER:
+            return None
+        if kind == 'contact':
+            if self._open is not None:
+                raise RuntimeError(f'contact at t = {event.t:.9g} s inside an open impact')
+            q, v, T = self._tip_and_energy(event.y)
+            self._open = {'t_contact': event.t, 'q': q, 'v_before': v, 'T_before': T,
+                          'times': {'contact': event.t}, 'surface': event.surface}
+            return None
+        impact = self._open
+        if impact is None or kind in impact['times']:
+            raise RuntimeError(f'{kind} at t = {event.t:.9g} s out of order (phase repeated '
+                               f'or no contact)')
+        impact['times'][kind] = event.t
+        impact.update(event.info)
+        if kind != 'separation':
+            return None
+        self._open = None
+        record = self._finish(impact, event)
+        self.impacts.append(record)
+        return record
+
+    def _finish(self, impact, event):
+        _, v_after, T_after = self._tip_and_energy(event.y)
+        times = impact['times']
+        t0, t_sep = times['contact'], times['separation']
+        t_max = times['max_compression']
+        t_yield = times.get('yield', t_max)  # Hertz-only or gentle: no elasto-plastic phase
+        v_before, T_before = impact['v_before'], impact['T_before']
+        return {
+            'index': len(self.impacts) + 1,
+            't_contact': t0,
+            'q_contact_deg': [math.degrees(a) for a in impact['q']],
+            'duration': t_sep - t0,
+            'delta_m': impact['delta_m'],
+            'delta_r': impact['delta_r'],
+            'F_max': impact['F_max'],
+            'v_before': list(v_before),
+            'v_after': list(v_after),
+            'cor_kinematic': -v_after[1] / v_before[1] if v_before[1] else math.nan,
+            'T_before': list(T_before),
+            'T_after': list(T_after),
+            'cor_energetic': [math.sqrt(a / b) if b > 0 else math.nan
+                              for a, b in zip(T_after, T_before)],
+            'phase_durations': [t_yield - t0, t_max - t_yield, t_sep - t_max],
+        }
+
+
+def settle_index(impacts, rel_tol=1e-3, keys=('q_contact_deg', 'v_before')):
+    """The number N of the impact (1-based) from which every later impact repeats its
+    predecessor's contact angles and velocities to ``rel_tol``: the limit cycle is reached
+    after N impacts. None if the run never settles (or has fewer than two impacts)."""
+    def close(a, b):
+        for key in keys:
+            for x, y in zip(a[key], b[key]):
+                if abs(x - y) > rel_tol * max(1.0, abs(y)):
+                    return False
+        return True
+    for k in range(1, len(impacts)):
+        if all(close(impacts[j], impacts[j - 1]) for j in range(k, len(impacts))):
+            return k
+    return None

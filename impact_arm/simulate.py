@@ -1,0 +1,221 @@
+"""Offline runs of a scene: the down/up striking cycle, sampled output, impact records.
+
+Two ways to drive the arm, both on the same integrator:
+* continuous control (``control_rate`` 0): the law is evaluated inside the right-hand side and
+  its target switches at located events, as in the article;
+* sampled control (``control_rate`` > 0 Hz): a ``CycleController`` sees the sampled joint
+  state and contact force and its torques are held between samples, as the ROS loop does.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .control import CycleController
+from .integrator import PhaseIntegrator
+from .metrics import ImpactBuilder, settle_index
+from .model import ArmModel
+from .scene import Scene
+
+
+@dataclass
+class Sample:
+    t: float
+    q: tuple
+    qd: tuple
+    tau: tuple
+    wrench: tuple    # (F_tangential, F_normal) averaged over the period that ends at t
+    mode: str
+
+
+@dataclass
+class RunResult:
+    scene: Scene
+    impacts: list
+    samples: list = field(default_factory=list)
+    traces: list = field(default_factory=list)     # one list of trace rows per impact
+    t_end: float = 0.0
+    rhs_evaluations: int = 0
+    wall_time: float = 0.0
+    stopped: str = ''                              # why the run ended
+    error: str = ''
+
+    def summary(self) -> dict:
+        """The "run" object of the JSON output (SI units, angles in degrees)."""
+        imp = self.impacts
+        contact_times = [i['t_contact'] for i in imp]
+        q = np.array([s.q for s in self.samples]) if self.samples else np.zeros((0, 2))
+        model_tip = getattr(self, '_tip_velocities', None)
+        vx = [v[0] for v in model_tip] if model_tip else [0.0]
+        vy = [v[1] for v in model_tip] if model_tip else [0.0]
+
+        def deg_range(col):
+            return [math.degrees(q[:, col].min()), math.degrees(q[:, col].max())] if len(q) else []
+        return {
+            'impacts': len(imp),
+            't_end': self.t_end,
+            'period_last': contact_times[-1] - contact_times[-2] if len(imp) > 1 else None,
+            'q1_range_deg': deg_range(0),
+            'q2_range_deg': deg_range(1),
+            'vx_range': [min(vx), max(vx)],
+            'vy_range': [min(vy), max(vy)],
+            'rhs_evaluations': self.rhs_evaluations,
+            'wall_time': self.wall_time,
+        }
+
+    def to_json(self) -> dict:
+        return {'impacts': self.impacts, 'run': self.summary()}
+
+    @property
+    def settled_after(self):
+        return settle_index(self.impacts)
+
+
+def run(scene: Scene, *, control_rate: float | None = None, preset: str | None = None,
+        rtol=None, atol=None, publish_rate: float | None = None, trace=False,
+        observer=None, progress=None, t_max: float | None = None) -> RunResult:
+    """Simulate ``scene`` for its number of cycles (or until ``t_max``).
+
+    ``observer`` may have ``on_sample(sample)``, ``on_impact(record, trace_rows)``; ``progress``
+    is called as progress(cycle, cycles, impacts, t)."""
+    control_rate = scene.controller.rate if control_rate is None else control_rate
+    publish_rate = publish_rate or scene.publish_rate
+    t_max = scene.t_max if t_max is None else t_max
+    model = ArmModel(scene)
+    spec = scene.integrator
+    integ = PhaseIntegrator(
+        model, preset=preset or spec.preset,
+        rtol=rtol if rtol is not None else spec.rtol, atol=atol if atol is not None else spec.atol,
+        max_step=spec.max_step, control='held' if control_rate else 'continuous', trace=True)
+    st = integ.state
+    n = model.n
+    ctrl = None
+    if control_rate:
+        c = scene.controller
+        ctrl = CycleController(model, c.law, c.kp, c.kd, c.ki, c.down_target, c.up_target,
+                               c.switch_height,
+                               min((s.height for s in model.surfaces), default=None),
+                               space=c.space)
+    builder = ImpactBuilder(model)
+    result = RunResult(scene=scene, impacts=builder.impacts)
+    tip_velocities = []
+    cycles_done = 0
+    impulse = [0.0, 0.0]
+    last_publish = 0.0
+    wall0 = time.perf_counter()
+
+    # the clock of the loop: publish samples and control ticks, merged
+    k_pub, k_ctl = 0, 0
+    dt_pub = 1.0 / publish_rate
+    dt_ctl = 1.0 / control_rate if control_rate else math.inf
+
+    def apply_control(t):
+        q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+        fn = impulse_since_ctl[1] / dt_ctl if dt_ctl < math.inf else None
+        mode_before = ctrl.mode
+        tau = ctrl.update(t, q, qd, normal_force=fn)
+        st.held_torque = tuple(tau)
+        integ.reset_derivative()
+        return mode_before, ctrl.mode
+
+    impulse_since_ctl = [0.0, 0.0]
+    tau_now = tuple([0.0] * n)
+    if ctrl:
+        apply_control(0.0)
+    try:
+        while True:
+            t_pub = k_pub * dt_pub
+            t_ctl = k_ctl * dt_ctl
+            t_next = min(t_pub, t_ctl)
+            if t_next > t_max:
+                result.stopped = f't_max = {t_max:g} s reached'
+                break
+            if t_next > st.t:
+                events = integ.advance(t_next)
+                j = integ.take_impulse()
+                impulse[0] += j[0]
+                impulse[1] += j[1]
+                impulse_since_ctl[0] += j[0]
+                impulse_since_ctl[1] += j[1]
+                for ev in events:
+                    if ev.kind == 'switch':
+                        cycles_done += 1
+                    record = builder.feed(ev)
+                    if record is not None:
+                        rows = integ.trace[:]
+                        integ.trace.clear()
+                        if trace:
+                            result.traces.append(rows)
+                        if observer is not None and hasattr(observer, 'on_impact'):
+                            observer.on_impact(record, rows)
+                        if progress:
+                            progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
+            if ctrl and t_ctl <= t_next:
+                before, after = apply_control(t_ctl)
+                impulse_since_ctl = [0.0, 0.0]
+                if before == 'up' and after == 'down':
+                    cycles_done += 1
+                k_ctl += 1
+            if t_pub <= t_next:
+                q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+                period = t_pub - last_publish
+                wrench = (impulse[0] / period, impulse[1] / period) if period > 0 else \
+                    integ.contact_force_now()
+                impulse = [0.0, 0.0]
+                last_publish = t_pub
+                tau = integ.torque(st.t, q, qd, st.y)
+                tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
+                sample = Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench,
+                                ctrl.mode if ctrl else st.mode)
+                result.samples.append(sample)
+                tip_velocities.append(model.tip(q, qd)[2:])
+                if observer is not None and hasattr(observer, 'on_sample'):
+                    observer.on_sample(sample)
+                k_pub += 1
+            if scene.cycles and cycles_done >= scene.cycles:
+                result.stopped = f'{scene.cycles} cycles completed'
+                break
+    except Exception as exc:  # keep what was simulated; the caller reports the error
+        from .errors import SimulationError
+        if not isinstance(exc, SimulationError):
+            raise
+        result.error = str(exc)
+        result.stopped = 'error'
+    result.t_end = st.t
+    result.rhs_evaluations = integ.stats.rhs_evaluations
+    result.wall_time = time.perf_counter() - wall0
+    result._tip_velocities = tip_velocities
+    result.integrator = integ
+    return result
+
+
+def format_table(result: RunResult) -> str:
+    """The impact table people read in a terminal."""
+    lines = [f"{'#':>3} {'t [s]':>9} {'q1,q2 [deg]':>15} {'dur [us]':>9} {'dm [um]':>8} "
+             f"{'dr [um]':>8} {'Fmax [kN]':>9} {'vx,vy before':>14} {'vx,vy after':>14} "
+             f"{'e':>6} {'T before->after [J]':>19} {'e_energy':>17}"]
+    for i in result.impacts:
+        lines.append(
+            f"{i['index']:>3} {i['t_contact']:>9.5f} "
+            f"{i['q_contact_deg'][0]:>7.2f},{i['q_contact_deg'][1]:>7.2f} "
+            f"{i['duration'] * 1e6:>9.2f} {i['delta_m'] * 1e6:>8.2f} {i['delta_r'] * 1e6:>8.2f} "
+            f"{i['F_max'] / 1e3:>9.3f} "
+            f"{i['v_before'][0]:>6.3f},{i['v_before'][1]:>7.3f} "
+            f"{i['v_after'][0]:>6.3f},{i['v_after'][1]:>7.3f} {i['cor_kinematic']:>6.3f} "
+            f"{i['T_before'][-1]:>8.3f} -> {i['T_after'][-1]:>7.3f} "
+            f"{', '.join(f'{e:.3f}' for e in i['cor_energetic']):>17}")
+    s = result.summary()
+    lines.append('')
+    lines.append(f"{s['impacts']} impacts in {s['t_end']:.4f} s simulated "
+                 f"({result.stopped}); {s['rhs_evaluations']} right-hand-side evaluations, "
+                 f"{s['wall_time']:.3f} s wall")
+    if s['period_last'] is not None:
+        settled = result.settled_after
+        lines.append(f"last period {s['period_last']:.5f} s; limit cycle "
+                     + (f"reached after {settled} impacts" if settled else 'not reached'))
+    if result.error:
+        lines.append(f'STOPPED: {result.error}')
+    return '\n'.join(lines)
