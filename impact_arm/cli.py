@@ -1,0 +1,138 @@
+"""``impact-arm``: the user command (simulate, run, replay, analyze, bench).
+
+Each sub-command lives in its own small function; errors meant for the user (bad scene, bad
+argument, a run that had to stop) are printed as one line on stderr with exit status 2 or 1,
+never as a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from .errors import ImpactArmError
+
+DEFAULT_SCENE = 'paper'
+
+
+def _positive(value):
+    number = float(value)
+    if not number > 0:
+        raise argparse.ArgumentTypeError(f'{value} must be > 0')
+    return number
+
+
+def _non_negative(value):
+    number = float(value)
+    if not number >= 0:
+        raise argparse.ArgumentTypeError(f'{value} must be >= 0')
+    return number
+
+
+def cmd_simulate(args) -> int:
+    from .scene import load_scene
+    from .simulate import format_table, run
+
+    scene = load_scene(args.scene)
+    observer = None
+    if args.mcap:
+        from .offline_mcap import OfflineRecorder
+        observer = OfflineRecorder(args.mcap, scene)
+
+    def progress(cycle, cycles, impacts, t):
+        if sys.stderr.isatty():
+            print(f'\r  cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  '
+                  f't = {t:.3f} s', end='', file=sys.stderr, flush=True)
+
+    try:
+        result = run(scene, control_rate=args.control_rate, preset=args.preset,
+                     observer=observer, progress=progress)
+    finally:
+        if observer is not None:
+            observer.close()
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    print(format_table(result))
+    if args.json:
+        _write_json(args.json, result.to_json())
+    if args.mcap:
+        print(f'recorded to {args.mcap}')
+    return 1 if result.error else 0
+
+
+def _write_json(path, data):
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    tmp = path + '.tmp'
+    with open(tmp, 'w', encoding='utf-8') as f:
+        json.dump(data, f, indent=1)
+    os.replace(tmp, path)
+
+
+def build_parser(selected=None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='impact-arm', description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest='command', required=True)
+
+    p = sub.add_parser('simulate', help='integrate a scene offline (no ROS graph needed)')
+    p.add_argument('--scene', default=DEFAULT_SCENE, help='scene file or installed scene name')
+    p.add_argument('--control-rate', type=_non_negative, default=None, metavar='HZ',
+                   help='sample the controller at HZ with zero-order hold (0: continuous, '
+                        'as the article; default: the scene\'s controller.rate)')
+    p.add_argument('--preset', default=None,
+                   choices=['reference', 'accurate', 'balanced', 'fast'],
+                   help="integrator preset (default: the scene's)")
+    p.add_argument('--json', metavar='FILE', help='write impacts and run summary as JSON')
+    p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
+    p.set_defaults(func=cmd_simulate)
+
+    for name, (module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_text)
+        if name == selected:
+            _attach(p, module)
+    return parser
+
+
+# Sub-commands implemented in their own modules: ``add_arguments(parser)`` and
+# ``cli(args) -> int``. Only the selected one is imported, so `simulate` never loads rclpy.
+COMMANDS = {
+    'run': ('runner', 'start simulator, controller and recorder over DDS; record to MCAP'),
+    'replay': ('nodes.replay', 'republish a recorded MCAP file with its original timing'),
+    'analyze': ('analysis', 'impact table, limit cycle, Poincare sections and figures'),
+    'bench': ('bench', 'speed/accuracy and rate benchmarks'),
+}
+
+
+def _attach(parser, module):
+    import importlib
+    try:
+        mod = importlib.import_module(f'.{module}', __package__)
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.startswith(__package__):
+            parser.set_defaults(func=lambda args: _missing(parser.prog))
+            return
+        raise
+    mod.add_arguments(parser)
+    parser.set_defaults(func=mod.cli)
+
+
+def _missing(prog):
+    raise ImpactArmError(f'{prog} is not available in this version')
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    selected = next((a for a in argv if not a.startswith('-')), None)
+    args = build_parser(selected).parse_args(argv)
+    try:
+        return args.func(args)
+    except ImpactArmError as exc:
+        print(f'impact-arm {args.command}: error: {exc}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f'impact-arm {args.command}: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())
