@@ -1,0 +1,1 @@
+"""ROS 2 nodes: thin adapters of the core to topics and parameters."""
