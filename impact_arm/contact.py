@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .jit import jit
 from .scene import Material
 
 YIELD_ONSET_FACTOR = 1.9   # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
@@ -45,42 +46,56 @@ def contact_constants(arm: Material, surface: Material, tip_radius: float) -> Co
     return ContactConstants(E, R, S_y, nu, C_j, delta_c, P_c, B)
 
 
-def hertz_force(delta: float, E: float, R: float) -> float:
+@jit
+def hertz_force(delta, E, R):
     """Hertz sphere-on-flat: F = 4/3 E √R δ^1.5."""
     return 4.0 / 3.0 * E * math.sqrt(R) * delta * math.sqrt(delta) if delta > 0 else 0.0
 
 
-def jackson_green_force(delta: float, c: ContactConstants) -> float:
+@jit
+def jackson_green(delta, delta_c, R, S_y, C_j, P_c, B):
     """Elasto-plastic compression force, article eq. 12 with model.md's a and H."""
     if delta <= 0:
         return 0.0
-    ratio = delta / c.delta_c
-    a = math.sqrt(c.R * delta * (delta / c.delta_yield) ** c.B)
-    hardness = c.S_y * (2.84 - 0.92 * (1 - math.cos(math.pi * a / c.R)))
-    return c.P_c * (math.exp(-0.25 * ratio ** (5.0 / 12.0)) * ratio ** 1.5
-                    + 4 * hardness / (c.C_j * c.S_y) * (1 - math.exp(-ratio ** (5.0 / 9.0) / 25))
-                    * ratio)
+    ratio = delta / delta_c
+    a = math.sqrt(R * delta * (delta / (YIELD_ONSET_FACTOR * delta_c)) ** B)
+    hardness = S_y * (2.84 - 0.92 * (1 - math.cos(math.pi * a / R)))
+    return P_c * (math.exp(-0.25 * ratio ** (5.0 / 12.0)) * ratio ** 1.5
+                  + 4 * hardness / (C_j * S_y) * (1 - math.exp(-ratio ** (5.0 / 9.0) / 25))
+                  * ratio)
 
 
-def residual_indentation(delta_m: float, c: ContactConstants) -> float:
+def jackson_green_force(delta: float, c: ContactConstants) -> float:
+    return jackson_green(delta, c.delta_c, c.R, c.S_y, c.C_j, c.P_c, c.B)
+
+
+@jit
+def residual(delta_m, delta_c):
     """δr after unloading from δm (Etsion et al. fit, model.md).
 
     The fit is for contacts that yielded (δm ≥ δc); below δc the contact stayed elastic and
     unloads along its loading curve, so δr = 0 — the fit itself would turn negative there."""
-    if delta_m <= c.delta_c:
+    if delta_m <= delta_c:
         return 0.0
-    return delta_m * 1.02 * (1 - ((delta_m / c.delta_c + 5.9) / 6.9) ** -0.54)
+    return delta_m * 1.02 * (1 - ((delta_m / delta_c + 5.9) / 6.9) ** -0.54)
 
 
-def restitution_radius(delta_m: float, delta_r: float, P_m: float, E: float) -> float:
+def residual_indentation(delta_m: float, c: ContactConstants) -> float:
+    return residual(delta_m, c.delta_c)
+
+
+@jit
+def restitution_radius(delta_m, delta_r, P_m, E):
     """Rr chosen so the restitution curve starts at (δm, Pm): Rr = (3Pm/4E)² / (δm-δr)³."""
     return (3 * P_m / (4 * E)) ** 2 / (delta_m - delta_r) ** 3
 
 
-def restitution_force(delta: float, delta_r: float, E: float, R_r: float) -> float:
+@jit
+def restitution_force(delta, delta_r, E, R_r):
     return hertz_force(delta - delta_r, E, R_r)
 
 
-def friction_force(normal_force: float, slip_velocity: float, mu: float, v_d: float) -> float:
+@jit
+def friction_force(normal_force, slip_velocity, mu, v_d):
     """Tangential force opposing slip: -μ |Fn| tanh(v/v_d) (model.md fixes eq. 14's sign)."""
     return -mu * abs(normal_force) * math.tanh(slip_velocity / v_d)

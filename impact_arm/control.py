@@ -11,26 +11,48 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .jit import jit
+
 ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')
 
 
-def torques_to_generalized(tau):
-    """Q_i = τ_i - τ_{i+1}: joint i's torque acts on link i and reacts on link i-1."""
-    n = len(tau)
-    return [tau[i] - (tau[i + 1] if i + 1 < n else 0.0) for i in range(n)]
+@jit
+def add_joint_torques(tau, generalized):
+    """Q_i += τ_i - τ_{i+1}: joint i's torque acts on link i and reacts on link i-1."""
+    n = tau.shape[0]
+    for i in range(n):
+        generalized[i] += tau[i] - (tau[i + 1] if i + 1 < n else 0.0)
 
 
-def q_law(q, qd, target, kp, kd, gravity_forces):
+@jit
+def q_law(q, qd, target, kp, kd, gravity_forces, out):
     """Article eq. 9 generalised to n links: PD on the absolute angles plus exact gravity
     compensation. τ_i = -Kd_i q̇_i - Kp_i (q_i - q_if) - Σ_{j≥i} Q_jg, so that after the
     mapping Q_i = τ_i - τ_{i+1} the gravity generalized forces cancel exactly."""
-    n = len(q)
     tail = 0.0
-    tau = [0.0] * n
-    for i in range(n - 1, -1, -1):
+    for i in range(q.shape[0] - 1, -1, -1):
         tail += gravity_forces[i]
-        tau[i] = -kd[i] * qd[i] - kp[i] * (q[i] - target[i]) - tail
-    return tau
+        out[i] = -kd[i] * qd[i] - kp[i] * (q[i] - target[i]) - tail
+
+
+@jit
+def pid_error(q, qd, target, joint_space, error, rate):
+    """Error and its rate in the angles the PID acts on: absolute link angles (article
+    eq. 10 as model.md reads it) or relative joint angles (encoder angles)."""
+    for i in range(q.shape[0]):
+        if joint_space and i > 0:
+            error[i] = (q[i] - q[i - 1]) - (target[i] - target[i - 1])
+            rate[i] = qd[i] - qd[i - 1]
+        else:
+            error[i] = q[i] - target[i]
+            rate[i] = qd[i]
+
+
+@jit
+def pid_law(error, rate, integral, kp, kd, ki, out):
+    """τ_i = -Kd_i ė_i - Kp_i e_i - Ki_i ∫e_i (article eq. 10; PD when Ki = 0)."""
+    for i in range(error.shape[0]):
+        out[i] = -kd[i] * rate[i] - kp[i] * error[i] - ki[i] * integral[i]
 
 
 def to_joint_space(q):
@@ -44,23 +66,6 @@ def to_absolute(theta):
         acc += value
         out.append(acc)
     return out
-
-
-def pid_error(q, qd, target, space):
-    """Error and its rate in the angles the PID acts on (absolute link angles, as article
-    eq. 10 and model.md read it, or relative joint angles)."""
-    if space == 'joint':
-        e = [a - b for a, b in zip(to_joint_space(q), to_joint_space(target))]
-        rate = to_joint_space(qd)
-    else:
-        e = [a - b for a, b in zip(q, target)]
-        rate = list(qd)
-    return e, rate
-
-
-def pid_law(error, rate, integral, kp, kd, ki):
-    """τ_i = -Kd_i ė_i - Kp_i e_i - Ki_i ∫e_i (article eq. 10; PD when Ki = 0)."""
-    return [-kd[i] * rate[i] - kp[i] * error[i] - ki[i] * integral[i] for i in range(len(error))]
 
 
 @dataclass
@@ -141,16 +146,25 @@ class CycleController:
         return self.torque(q, qd, dt)
 
     def torque(self, q, qd, dt=0.0):
-        target = self.targets[self.mode]
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        n = q.shape[0]
+        out = np.zeros(n)
+        target = np.asarray(self.targets[self.mode], dtype=float)
         if self.law == 'none':
-            return [0.0] * len(q)
+            return out.tolist()
         if self.law == 'q':
-            return q_law(q, qd, target, self.kp, self.kd, self.model.gravity_forces(q))
-        error, rate = pid_error(q, qd, target, self.space)
-        ki = self.ki if self.law == 'pid' else [0.0] * len(q)
+            q_law(q, qd, target, np.asarray(self.kp, float), np.asarray(self.kd, float),
+                  np.asarray(self.model.gravity_forces(q), float), out)
+            return out.tolist()
+        error, rate = np.zeros(n), np.zeros(n)
+        pid_error(q, qd, target, self.space == 'joint', error, rate)
+        ki = self.ki if self.law == 'pid' else [0.0] * n
         if self.law == 'pid' and dt > 0:
             self.integral.update(error, dt, ki)
-        return pid_law(error, rate, self.integral.value, self.kp, self.kd, ki)
+        pid_law(error, rate, np.asarray(self.integral.value, float), np.asarray(self.kp, float),
+                np.asarray(self.kd, float), np.asarray(ki, float), out)
+        return out.tolist()
 
 
 def clip_torques(tau, max_effort):

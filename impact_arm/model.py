@@ -8,11 +8,12 @@ does (time, coordinates, velocities, integral states, contact phase, the current
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 
+from . import layout
 from .contact import ContactConstants, contact_constants
 from .equations import load_equations
 from .scene import Scene
@@ -41,73 +42,128 @@ class ArmModel:
     def __init__(self, scene: Scene):
         self.scene = scene
         self.n = scene.n_links
-        self.L = tuple(scene.lengths)
-        self.m = tuple(scene.masses)
+        self.L = np.array(scene.lengths, dtype=float)
+        self.m = np.array(scene.masses, dtype=float)
         self.g = scene.gravity
         self.surfaces = tuple(
             SurfaceModel(i, s.height, s.law, s.mu, s.v_d,
                          contact_constants(scene.arm_material, s.material, scene.tip_radius))
-            for i, s in enumerate(scene.surfaces) if s.law != 'none')
-        # Model only what the scene needs: the generated code has no gravity terms for g = 0.
-        self.eq = load_equations(self.n, gravity=self.g != 0.0)
+            for i, s in enumerate(s for s in scene.surfaces if s.law != 'none'))
         ctrl = scene.controller
         # integral states exist only if a PID is evaluated continuously in the right-hand side
         self.n_integral = self.n if (ctrl.law == 'pid' and ctrl.rate == 0) else 0
         self.size = 2 * self.n + self.n_integral
+        # Model only what the scene needs: the generated module has no gravity terms for g = 0,
+        # and its kernel no contact code without surfaces, no friction term when every μ = 0.
+        self.eq = load_equations(self.n, gravity=self.g != 0.0, contact=bool(self.surfaces),
+                                 friction=any(s.mu > 0 for s in self.surfaces),
+                                 n_integral=self.n_integral)
+        self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
+        for s in self.surfaces:
+            c = s.constants
+            self.surface_table[s.index] = (s.height, 0 if s.law == 'elastoplastic' else 1, s.mu,
+                                           s.v_d, c.E, c.R, c.S_y, c.C_j, c.delta_c, c.P_c, c.B)
+        if not self.surfaces:
+            self.surface_table = self.surface_table[:0]
 
     # --- kinematics and energies (thin wrappers over the generated functions) ---
     def tip(self, q, qd):
         """(x_B, y_B, ẋ_B, ẏ_B) of the tip centre B."""
-        return self.eq.tip(q, qd, self.L)
+        return self.eq.tip(np.asarray(q, float), np.asarray(qd, float), self.L)
 
     def tip_jacobian(self, q):
         """(∂x_B/∂q, ∂y_B/∂q) flattened: first n entries x, next n entries y."""
-        return self.eq.tip_jacobian(q, self.L)
+        return self.eq.tip_jacobian(np.asarray(q, float), self.L)
 
     def gravity_forces(self, q):
-        return self.eq.gravity_forces(q, self.L, self.m, self.g)
+        return self.eq.gravity_forces(np.asarray(q, float), self.L, self.m, self.g)
 
     def link_energies(self, q, qd):
-        return self.eq.link_energies(q, qd, self.L, self.m)
+        return self.eq.link_energies(np.asarray(q, float), np.asarray(qd, float), self.L,
+                                     self.m)
 
     def potential_energy(self, q):
-        return self.eq.potential(q, self.L, self.m, self.g)[0]
+        return self.eq.potential(np.asarray(q, float), self.L, self.m, self.g)[0]
 
-    def accelerations(self, q, qd, Qx):
-        if hasattr(self.eq, 'accel'):
-            return self.eq.accel(q, qd, Qx, self.L, self.m, self.g)
-        values = self.eq.mass_and_rhs(q, qd, Qx, self.L, self.m, self.g)
+    def mass_matrix(self, q):
         n = self.n
-        M = np.array(values[:n * n]).reshape(n, n)
-        return tuple(np.linalg.solve(M, np.array(values[n * n:])))
+        values = self.eq.mass_and_rhs(np.asarray(q, float), np.zeros(n), np.zeros(n), self.L,
+                                      self.m, self.g)
+        return np.array(values[:n * n]).reshape(n, n)
+
+    def parameters(self, rtol, atol, max_step):
+        """The flat parameter array of the kernel (layout: P_* in the generated module)."""
+        eq, n, c = self.eq, self.n, self.scene.controller
+        P = np.zeros(eq.P_SIZE)
+        P[eq.P_L:eq.P_L + n] = self.L
+        P[eq.P_M:eq.P_M + n] = self.m
+        P[eq.P_G] = self.g
+        P[eq.P_KP:eq.P_KP + n] = c.kp
+        P[eq.P_KD:eq.P_KD + n] = c.kd
+        P[eq.P_KI:eq.P_KI + n] = c.ki if c.law == 'pid' else 0.0
+        P[eq.P_TDOWN:eq.P_TDOWN + n] = c.down_target
+        P[eq.P_TUP:eq.P_TUP + n] = c.up_target
+        P[eq.P_SWITCH] = c.switch_height
+        P[eq.P_RTOL], P[eq.P_ATOL], P[eq.P_MAXSTEP] = rtol, atol, max_step
+        return P
 
     def initial_state(self) -> 'ArmState':
         s = self.scene
         y = np.zeros(self.size)
         y[:self.n] = s.q0
         y[self.n:2 * self.n] = s.qd0
-        return ArmState(t=0.0, y=y, levels=[surf.height for surf in self.surfaces])
+        return ArmState(0.0, y, [surf.height for surf in self.surfaces], self.n)
 
 
-@dataclass
 class ArmState:
-    """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID)]."""
-    t: float
-    y: np.ndarray
-    phase: Phase = Phase.FREE
-    surface: int = -1                 # index into model.surfaces while in contact
-    levels: list = field(default_factory=list)  # contact height per surface (dent memory)
-    delta_m: float = 0.0
-    P_m: float = 0.0
-    delta_r: float = 0.0
-    R_r: float = 0.0
-    mode: str = 'down'                # cycle phase of the continuous controller
-    held_torque: tuple | None = None  # zero-order-hold torque (sampled control)
+    """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID)]; the
+    contact phase machine lives in the flat array ``c`` the kernel reads (layout.C_*)."""
+
+    def __init__(self, t, y, levels, n):
+        self.t = float(t)
+        self.y = np.asarray(y, dtype=float)
+        self.levels = np.array(levels, dtype=float)   # contact height per surface (dent memory)
+        self.c = np.zeros(layout.C_SIZE)
+        self.c[layout.C_SURF] = -1
+        self.held = np.zeros(n)                        # zero-order-hold torque (sampled control)
+
+    def _field(index, kind=float, doc=''):
+        def get(self):
+            return kind(self.c[index])
+
+        def put(self, value):
+            self.c[index] = float(value)
+        return property(get, put, doc=doc)
+
+    phase = _field(layout.C_PHASE, lambda v: Phase(int(v)))
+    surface = _field(layout.C_SURF, int, 'index into model.surfaces while in contact')
+    delta_r = _field(layout.C_DR)
+    R_r = _field(layout.C_RR)
+    delta_m = _field(layout.C_DM)
+    P_m = _field(layout.C_PM)
+    del _field
+
+    @property
+    def mode(self):
+        """Cycle half of the continuous controller: 'down' or 'up'."""
+        return 'up' if self.c[layout.C_MODE] > 0.5 else 'down'
+
+    @mode.setter
+    def mode(self, value):
+        self.c[layout.C_MODE] = 1.0 if value == 'up' else 0.0
+
+    @property
+    def held_torque(self):
+        return tuple(self.held.tolist())
+
+    @held_torque.setter
+    def held_torque(self, tau):
+        self.held[:] = tau
 
     def copy(self) -> 'ArmState':
-        other = ArmState(**{k: getattr(self, k) for k in self.__dataclass_fields__})
-        other.y = self.y.copy()
-        other.levels = list(self.levels)
+        other = ArmState(self.t, self.y.copy(), self.levels.copy(), self.held.shape[0])
+        other.c[:] = self.c
+        other.held[:] = self.held
         return other
 
 

@@ -1,0 +1,357 @@
+# flake8: noqa
+# Template, not imported directly: equations.py appends this text to the module it generates
+# for one scene shape, after the constants (N, NI, HAS_CONTACT, HAS_FRICTION, P_* offsets) and
+# the sympy-generated functions (tip, tip_jacobian, gravity_forces, link_energies, accel or
+# mass_and_rhs). Written in the numba-compatible subset of Python: compiled with numba when it
+# is available, interpreted otherwise. Module-level constants are compile-time constants for
+# numba, so a scene without contact or friction has no contact code in its hot loop at all.
+#
+# The stepped phase integrator kernel: Dormand-Prince 5(4) with error control; every step is
+# checked for sign changes of the phase's event functions, and a crossing is located by
+# root-finding on real Runge-Kutta steps from the step start (Illinois method), so the state at
+# a switch is as accurate as any step end. The kernel returns at each event with the state at
+# the event; the Python wrapper applies the phase switch (rare) and calls it again.
+
+A21 = 1 / 5
+A31, A32 = 3 / 40, 9 / 40
+A41, A42, A43 = 44 / 45, -56 / 15, 32 / 9
+A51, A52, A53, A54 = 19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729
+A61, A62, A63, A64, A65 = 9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656
+B1, B3, B4, B5, B6 = 35 / 384, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84
+E1 = 35 / 384 - 5179 / 57600
+E3 = 500 / 1113 - 7571 / 16695
+E4 = 125 / 192 - 393 / 640
+E5 = -2187 / 6784 + 92097 / 339200
+E6 = 11 / 84 - 187 / 2100
+E7 = -1 / 40
+C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
+
+
+@jit
+def accelerations(q, qd, generalized, P, out):
+    L = P[P_L:P_L + N]
+    m = P[P_M:P_M + N]
+    if HAS_ACCEL:
+        values = accel(q, qd, generalized, L, m, P[P_G])
+        for i in range(N):
+            out[i] = values[i]
+    else:
+        values = mass_and_rhs(q, qd, generalized, L, m, P[P_G])
+        M = np.empty((N, N))
+        b = np.empty(N)
+        for i in range(N):
+            b[i] = values[N * N + i]
+            for j in range(N):
+                M[i, j] = values[i * N + j]
+        x = np.linalg.solve(M, b)
+        for i in range(N):
+            out[i] = x[i]
+
+
+@jit
+def contact_forces(y, P, SURF, C, levels):
+    """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
+    L = P[P_L:P_L + N]
+    tip_state = tip(y[:N], y[N:2 * N], L)
+    s = int(C[C_SURF])
+    phase = int(C[C_PHASE])
+    delta = levels[s] - tip_state[1]
+    if phase == ELASTIC:
+        fn = hertz_force(delta, SURF[s, S_E], SURF[s, S_R])
+    elif phase == ELASTOPLASTIC:
+        fn = jackson_green(delta, SURF[s, S_DC], SURF[s, S_R], SURF[s, S_SY], SURF[s, S_CJ],
+                           SURF[s, S_PC], SURF[s, S_B])
+    else:
+        fn = restitution_force(delta, C[C_DR], SURF[s, S_E], C[C_RR])
+    ff = 0.0
+    if HAS_FRICTION:
+        if SURF[s, S_MU] > 0:
+            ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])
+    return delta, fn, ff, tip_state[2], tip_state[3]
+
+
+@jit
+def control_torque(y, P, I, C, tau_held, tau):
+    """Joint torques acting now into ``tau``; False when the actuators are off."""
+    if HAS_CONTACT:
+        if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
+            return False
+    law = I[I_LAW]
+    if law == LAW_NONE:
+        return False
+    if law == LAW_HELD:
+        for i in range(N):
+            tau[i] = tau_held[i]
+        return True
+    q = y[:N]
+    qd = y[N:2 * N]
+    target = P[P_TUP:P_TUP + N] if C[C_MODE] > 0.5 else P[P_TDOWN:P_TDOWN + N]
+    if law == LAW_Q:
+        qg = gravity_forces(q, P[P_L:P_L + N], P[P_M:P_M + N], P[P_G])
+        tail = 0.0
+        for i in range(N - 1, -1, -1):
+            tail += qg[i]
+            tau[i] = -P[P_KD + i] * qd[i] - P[P_KP + i] * (q[i] - target[i]) - tail
+        return True
+    error = np.empty(N)
+    rate = np.empty(N)
+    pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
+    if NI > 0:
+        pid_law(error, rate, y[2 * N:2 * N + NI], P[P_KP:P_KP + N], P[P_KD:P_KD + N],
+                P[P_KI:P_KI + N], tau)
+    else:
+        pid_law(error, rate, np.zeros(N), P[P_KP:P_KP + N], P[P_KD:P_KD + N],
+                P[P_KI:P_KI + N], tau)
+    return True
+
+
+@jit
+def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats):
+    stats[0] += 1
+    q = y[:N]
+    qd = y[N:2 * N]
+    generalized = np.zeros(N)
+    if HAS_CONTACT:
+        if int(C[C_PHASE]) != FREE:
+            delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
+            jac = tip_jacobian(q, P[P_L:P_L + N])
+            for i in range(N):
+                generalized[i] += jac[i] * ff + jac[N + i] * fn
+    tau = np.zeros(N)
+    acting = control_torque(y, P, I, C, tau_held, tau)
+    if acting:
+        add_joint_torques(tau, generalized)
+    for i in range(N):
+        out[i] = qd[i]
+    accelerations(q, qd, generalized, P, out[N:2 * N])
+    if NI > 0:
+        # the integral runs only while the controller acts (it is off during contact)
+        if acting:
+            target = P[P_TUP:P_TUP + N] if C[C_MODE] > 0.5 else P[P_TDOWN:P_TDOWN + N]
+            error = np.empty(N)
+            rate = np.empty(N)
+            pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
+            for i in range(NI):
+                out[2 * N + i] = error[i]
+        else:
+            for i in range(NI):
+                out[2 * N + i] = 0.0
+
+
+@jit
+def rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats):
+    """One Dormand-Prince step of size h: y1, f1 = f(t+h, y1) (FSAL) and the error vector."""
+    size = y.shape[0]
+    for i in range(size):
+        work[i] = y[i] + h * A21 * f0[i]
+    rhs(t + C2 * h, work, K[0], P, I, SURF, C, levels, tau_held, stats)
+    for i in range(size):
+        work[i] = y[i] + h * (A31 * f0[i] + A32 * K[0, i])
+    rhs(t + C3 * h, work, K[1], P, I, SURF, C, levels, tau_held, stats)
+    for i in range(size):
+        work[i] = y[i] + h * (A41 * f0[i] + A42 * K[0, i] + A43 * K[1, i])
+    rhs(t + C4 * h, work, K[2], P, I, SURF, C, levels, tau_held, stats)
+    for i in range(size):
+        work[i] = y[i] + h * (A51 * f0[i] + A52 * K[0, i] + A53 * K[1, i] + A54 * K[2, i])
+    rhs(t + C5 * h, work, K[3], P, I, SURF, C, levels, tau_held, stats)
+    for i in range(size):
+        work[i] = y[i] + h * (A61 * f0[i] + A62 * K[0, i] + A63 * K[1, i] + A64 * K[2, i]
+                              + A65 * K[3, i])
+    rhs(t + h, work, K[4], P, I, SURF, C, levels, tau_held, stats)
+    for i in range(size):
+        y1[i] = y[i] + h * (B1 * f0[i] + B3 * K[1, i] + B4 * K[2, i] + B5 * K[3, i]
+                            + B6 * K[4, i])
+    rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats)
+    for i in range(size):
+        err[i] = h * (E1 * f0[i] + E3 * K[1, i] + E4 * K[2, i] + E5 * K[3, i] + E6 * K[4, i]
+                      + E7 * f1[i])
+
+
+@jit
+def error_norm(err, y0, y1, rtol, atol):
+    total = 0.0
+    size = err.shape[0]
+    for i in range(size):
+        scale = atol + rtol * max(abs(y0[i]), abs(y1[i]))
+        total += (err[i] / scale) ** 2
+    return math.sqrt(total / size)
+
+
+@jit
+def event_values(y, P, I, SURF, C, levels, g):
+    """Event functions of the current phase; a switch happens when one rises through zero.
+    Slots that are not armed in this phase hold -1."""
+    ns = SURF.shape[0]
+    for k in range(g.shape[0]):
+        g[k] = -1.0
+    tip_state = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])
+    y_tip = tip_state[1]
+    phase = int(C[C_PHASE])
+    if phase == FREE:
+        if HAS_CONTACT:
+            for s in range(ns):
+                g[s] = levels[s] - y_tip
+        if (I[I_LAW] == LAW_Q or I[I_LAW] == LAW_PID) and C[C_MODE] > 0.5:
+            g[ns + EV_SWITCH] = y_tip - P[P_SWITCH]
+        return
+    s = int(C[C_SURF])
+    delta = levels[s] - y_tip
+    if phase == ELASTIC:
+        if SURF[s, S_LAW] == 0:
+            g[ns + EV_YIELD] = delta - YIELD_ONSET * SURF[s, S_DC]
+        g[ns + EV_MAX] = tip_state[3]       # δ̇ = -ẏ_B turns from + to -
+    elif phase == ELASTOPLASTIC:
+        g[ns + EV_MAX] = tip_state[3]
+    else:
+        g[ns + EV_SEP] = C[C_DR] - delta    # δ falls through δr
+
+
+@jit
+def record_point(t, y, P, I, SURF, C, levels, trace, tcount):
+    """Peak force, trapezoidal contact impulse and (optionally) a trace row at a contact point."""
+    delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
+    if fn > C[C_PEAK]:
+        C[C_PEAK] = fn
+    dt = t - C[C_IMP_T]
+    C[C_JT] += 0.5 * (ff + C[C_IMP_FF]) * dt
+    C[C_JN] += 0.5 * (fn + C[C_IMP_FN]) * dt
+    C[C_IMP_T], C[C_IMP_FF], C[C_IMP_FN] = t, ff, fn
+    if I[I_TRACE] != 0 and tcount[0] < trace.shape[0]:
+        row = trace[tcount[0]]
+        row[0], row[1], row[2], row[3], row[4], row[5], row[6] = t, C[C_PHASE], delta, fn, ff, vx, vy
+        energies = link_energies(y[:N], y[N:2 * N], P[P_L:P_L + N], P[P_M:P_M + N])
+        for i in range(N):
+            row[7 + i] = energies[i]
+        tcount[0] += 1
+    return delta
+
+
+@jit
+def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels,
+           tau_held, stats):
+    """Smallest s in (0, h] with g_k(RK step of size s) >= 0 (Illinois regula falsi).
+    Returns s; y_out holds the state there."""
+    a, b = 0.0, h
+    fa, fb = ga, gb
+    side = 0
+    tol = max(h * 1e-12, 1e-18)
+    for _ in range(200):
+        if b - a <= tol:
+            break
+        c = (a * fb - b * fa) / (fb - fa)
+        if not (a < c < b):
+            c = 0.5 * (a + b)
+        rk_step(t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
+                stats)
+        event_values(y_out, P, I, SURF, C, levels, g)
+        fc = g[k]
+        if fc >= 0.0:
+            b, fb = c, fc
+            if side == -1:
+                fa *= 0.5
+            side = -1
+            if fc == 0.0:
+                break
+        else:
+            a, fa = c, fc
+            if side == 1:
+                fb *= 0.5
+            side = 1
+    rk_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats)
+    return b
+
+
+@jit
+def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev):
+    """Integrate from T[0] to t_end with step T[1]; y, f updated in place.
+
+    Returns DONE at t_end, EVENT with the state at a located switch (slot in ev[0]),
+    TRACE_FULL when the trace buffer needs draining, or an ERR_* status."""
+    size = y.shape[0]
+    ns = SURF.shape[0]
+    rtol, atol, max_step = P[P_RTOL], P[P_ATOL], P[P_MAXSTEP]
+    y1 = np.empty(size)
+    f1 = np.empty(size)
+    err = np.empty(size)
+    work = np.empty(size)
+    y_root = np.empty(size)
+    f_tmp = np.empty(size)
+    K = np.empty((5, size))
+    g0 = np.empty(ns + 4)
+    g1 = np.empty(ns + 4)
+    g_tmp = np.empty(ns + 4)
+    event_values(y, P, I, SURF, C, levels, g0)
+    t = T[0]
+    h = T[1]
+    eps4 = 4 * 2.220446049250313e-16 * max(1.0, abs(t_end))
+    status = DONE
+    while t < t_end:
+        remaining = t_end - t
+        if remaining <= eps4:
+            t = t_end
+            break
+        step = min(h, max_step)
+        clipped = step >= remaining
+        if clipped:
+            step = remaining
+        rk_step(t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats)
+        norm = error_norm(err, y, y1, rtol, atol)
+        if not norm <= 1.0:  # also catches NaN
+            stats[2] += 1
+            if math.isfinite(norm):
+                h = step * max(0.2, 0.9 * norm ** -0.2)
+            else:
+                h = step * 0.2
+            if h < 1e-15 * max(1.0, abs(t)):
+                status = ERR_NONFINITE if not math.isfinite(norm) else ERR_UNDERFLOW
+                break
+            continue
+        stats[1] += 1
+        factor = 5.0 if norm == 0.0 else min(5.0, max(0.2, 0.9 * norm ** -0.2))
+        h = min(h, step * factor) if clipped else step * factor
+        event_values(y1, P, I, SURF, C, levels, g1)
+        best_s = step + 1.0
+        best_k = -1
+        for k in range(ns + 4):
+            if g0[k] < 0.0 <= g1[k]:
+                s_k = locate(t, y, f, step, k, g0[k], g1[k], y_root, f_tmp, err, K, work,
+                             g_tmp, P, I, SURF, C, levels, tau_held, stats)
+                if s_k < best_s:
+                    best_s, best_k = s_k, k
+        if best_k >= 0:
+            if best_s < step:
+                rk_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
+                        tau_held, stats)
+            else:
+                y_root[:] = y1
+            y[:] = y_root
+            t = t + best_s
+            if int(C[C_PHASE]) != FREE:
+                record_point(t, y, P, I, SURF, C, levels, trace, tcount)
+            ev[0] = best_k
+            status = EVENT
+            break
+        y[:] = y1
+        f[:] = f1
+        t = t_end if clipped else t + step
+        for k in range(ns + 4):
+            g0[k] = g1[k]
+        if HAS_CONTACT:
+            if int(C[C_PHASE]) != FREE:
+                delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount)
+                if delta > SURF[int(C[C_SURF]), S_R]:
+                    status = ERR_PENETRATION
+                    break
+                if tcount[0] >= trace.shape[0]:
+                    status = TRACE_FULL
+                    break
+            else:
+                # the dent is forgotten once the tip has risen above the surface again
+                y_tip = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])[1]
+                for s in range(ns):
+                    if levels[s] != SURF[s, S_H] and y_tip > SURF[s, S_H]:
+                        levels[s] = SURF[s, S_H]
+                        g0[s] = levels[s] - y_tip
+    T[0] = t
+    T[1] = h
+    return status
