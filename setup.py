@@ -19,7 +19,7 @@ setup(
     # rclpy and the message packages come from the ROS install (package.xml) or, without ROS,
     # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
     install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib',
-                      'numba'],,
+                      'numba'],
     zip_safe=True,
     maintainer='impact_arm developers',
     maintainer_email='impact-arm@example.com',
