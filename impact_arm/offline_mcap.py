@@ -1,0 +1,224 @@
+"""Record an offline run (``impact-arm simulate --mcap FILE``) as a ROS 2 MCAP file.
+
+``OfflineRecorder(path, scene)`` is an observer for ``simulate.run``: it writes, as the run goes,
+the topics and types the live simulator publishes (design.md §3, docs/topics.md), so
+``impact-arm analyze``, ``rosbags``, ``ros2 bag play`` and the replay node treat an offline file
+like a live recording. Every time below is *simulated* time: header stamps, and also the MCAP
+log and publish times (t = 0 at the start of the run), so time-ordered readers see the run in
+order.
+
+Topics
+------
+``/joint_states`` (sensor_msgs/msg/JointState), one per published sample (scene
+``publish_rate``): names ``joint1`` … ``jointN``; position and velocity are the *relative*
+encoder angles (joint1 = q1, joint_k = q_k − q_(k−1)) and their rates; effort = the joint
+torques applied at that instant (T01, T12 …; zero while the actuators are off in contact).
+Header stamp = sample time, frame_id ''.
+
+``/contact_wrench`` (geometry_msgs/msg/WrenchStamped), one per sample: force.x = tangential
+(friction) force, force.y = normal force on the tip in the surface frame, both averaged over the
+publish period that ends at the stamp (so the contact impulse is kept); torque = 0.
+frame_id ``surface``.
+
+``/impact_report`` (std_msgs/msg/String), one per impact: ``data`` is the impact record as one
+JSON object, the same fields and values as ``simulate --json`` (docs/outputs.md). Logged at the
+separation time t_contact + duration.
+
+``/impact_trace`` (std_msgs/msg/Float64MultiArray), one per impact, logged with its report:
+every point the integrator computed inside that impact, at full resolution, as a row-major
+matrix::
+
+    layout.dim[0]: label 'row',  size = number of rows,    stride = rows × columns
+    layout.dim[1]: label = the column names joined by ',', size = columns, stride = columns
+    layout.data_offset = 0
+    columns (two links): t,phase,delta,F_n,F_f,v_x,v_y,T1,T2
+
+t [s]; phase 1 elastic, 2 elasto-plastic, 3 restitution; delta = penetration [m]; F_n normal and
+F_f friction force [N]; v_x, v_y tip velocity [m/s]; T1 … TN link kinetic energies [J]. The k-th
+trace belongs to the k-th report.
+
+Stored with the messages
+------------------------
+metadata ``impact_arm``: version, ros_distro, node ``offline``, mode ``offline``, control
+(``continuous`` or ``sampled``), control_rate_hz, publish_rate_hz, preset, scene name;
+metadata ``scene``: path and the YAML text; attachment ``<scene>.yaml`` (application/yaml): the
+scene file as read, so the run can be reproduced from the recording alone; at ``close`` (when
+given the run's result) metadata ``run``: the run summary, why it stopped, any error.
+
+The file is flushed after every impact and at least every ``flush_interval`` seconds of wall
+time, so a crashed or killed run keeps what was recorded before (the writer keeps the file a
+complete MCAP after each flush).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+TRACE_TOPIC = '/impact_trace'
+TRACE_TYPE = 'std_msgs/msg/Float64MultiArray'
+TOPICS = {
+    '/joint_states': 'sensor_msgs/msg/JointState',
+    '/contact_wrench': 'geometry_msgs/msg/WrenchStamped',
+    '/impact_report': 'std_msgs/msg/String',
+    TRACE_TOPIC: TRACE_TYPE,
+}
+WRENCH_FRAME = 'surface'
+
+
+def trace_columns(n_links: int) -> list:
+    """Column names of an /impact_trace row for an arm of ``n_links`` links."""
+    return ['t', 'phase', 'delta', 'F_n', 'F_f', 'v_x', 'v_y'] + [
+        f'T{i + 1}' for i in range(n_links)]
+
+
+def joint_names(n_links: int) -> list:
+    return [f'joint{i + 1}' for i in range(n_links)]
+
+
+def to_joint_space(values) -> list:
+    """Absolute link angles (or rates) -> relative joint angles: [a1, a2 - a1, ...]."""
+    values = [float(v) for v in values]
+    return [values[0]] + [values[i] - values[i - 1] for i in range(1, len(values))]
+
+
+def from_joint_space(values) -> list:
+    """Relative joint angles (or rates) -> absolute link angles (cumulative sum)."""
+    out, acc = [], 0.0
+    for v in values:
+        acc += float(v)
+        out.append(acc)
+    return out
+
+
+def sim_time_ns(t: float) -> int:
+    return int(round(t * 1e9))
+
+
+def _stamp(msg_header, t_ns: int):
+    msg_header.stamp.sec = t_ns // 1_000_000_000
+    msg_header.stamp.nanosec = t_ns % 1_000_000_000
+
+
+class OfflineRecorder:
+    """Observer of ``simulate.run`` writing the live system's topics to an MCAP file.
+
+    ``control_rate`` / ``preset`` only describe the run in the file's metadata (None: the
+    scene's). ``flush_interval``: seconds of wall time between automatic flushes."""
+
+    def __init__(self, path, scene, *, control_rate=None, preset=None,
+                 flush_interval: float = 0.5, compression: str = 'zstd'):
+        from geometry_msgs.msg import WrenchStamped
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+
+        from . import __version__
+        from .mcap_ros2 import Ros2McapWriter, TopicQos, package_version, ros_distro
+
+        self.path = os.fspath(path)
+        self.scene = scene
+        self.n = scene.n_links
+        self._JointState, self._WrenchStamped = JointState, WrenchStamped
+        self._String, self._Array, self._Dim = String, Float64MultiArray, MultiArrayDimension
+        self._names = joint_names(self.n)
+        self._columns = trace_columns(self.n)
+        self.counts = {topic: 0 for topic in TOPICS}
+        self.writer = Ros2McapWriter(self.path, flush_interval=flush_interval,
+                                     compression=compression)
+        for topic, type_name in TOPICS.items():
+            # the contract's QoS for the contract topics; traces like the reports
+            qos = TopicQos(durability='transient_local', depth=100) \
+                if topic == TRACE_TOPIC else None
+            self.writer.add_topic(topic, type_name, qos)
+        rate = scene.controller.rate if control_rate is None else float(control_rate)
+        version = package_version() or __version__
+        self.writer.add_metadata('impact_arm', {
+            'version': version, 'ros_distro': ros_distro(), 'node': 'offline',
+            'mode': 'offline', 'control': 'sampled' if rate else 'continuous',
+            'control_rate_hz': repr(float(rate)), 'publish_rate_hz': repr(scene.publish_rate),
+            'preset': preset or scene.integrator.preset, 'scene_name': scene.name,
+            'time': 'simulated (log time = header stamp = sim time)',
+            'trace_columns': ','.join(self._columns),
+            'topics': json.dumps(list(TOPICS))})
+        text = scene.source_text or ''
+        scene_file = os.path.basename(scene.source_path) if scene.source_path else \
+            f'{scene.name}.yaml'
+        self.writer.add_metadata('scene', {'path': os.path.abspath(scene.source_path)
+                                           if scene.source_path else '', 'yaml': text})
+        self.writer.add_attachment(scene_file, text.encode('utf-8'), 'application/yaml',
+                                   log_time_ns=0, create_time_ns=0)
+        self.writer.flush()
+        self._closed = False
+
+    # --- observer interface of simulate.run -----------------------------------------------
+    def on_sample(self, sample):
+        t_ns = sim_time_ns(sample.t)
+        js = self._JointState()
+        _stamp(js.header, t_ns)
+        js.name = list(self._names)
+        js.position = to_joint_space(sample.q)
+        js.velocity = to_joint_space(sample.qd)
+        js.effort = [float(x) for x in sample.tau]
+        self.writer.write_message('/joint_states', js, t_ns, t_ns)
+        ws = self._WrenchStamped()
+        _stamp(ws.header, t_ns)
+        ws.header.frame_id = WRENCH_FRAME
+        ws.wrench.force.x = float(sample.wrench[0])
+        ws.wrench.force.y = float(sample.wrench[1])
+        self.writer.write_message('/contact_wrench', ws, t_ns, t_ns)
+        self.counts['/joint_states'] += 1
+        self.counts['/contact_wrench'] += 1
+
+    def on_impact(self, record, trace_rows):
+        t_ns = sim_time_ns(record['t_contact'] + record['duration'])
+        self.writer.write_message('/impact_report', self._String(data=json.dumps(record)),
+                                  t_ns, t_ns)
+        self.writer.write_message(TRACE_TOPIC, self.trace_message(trace_rows), t_ns, t_ns)
+        self.counts['/impact_report'] += 1
+        self.counts[TRACE_TOPIC] += 1
+        self.writer.flush()  # an impact is never lost, whatever happens later
+
+    def trace_message(self, rows):
+        """Float64MultiArray holding ``rows`` row-major (layout in the module docstring)."""
+        cols = len(self._columns)
+        msg = self._Array()
+        flat = []
+        for row in rows:
+            if len(row) != cols:
+                raise ValueError(f'trace row of {len(row)} values, expected {cols} '
+                                 f'({",".join(self._columns)})')
+            flat.extend(float(v) for v in row)
+        msg.layout.dim = [self._Dim(label='row', size=len(rows), stride=len(rows) * cols),
+                          self._Dim(label=','.join(self._columns), size=cols, stride=cols)]
+        msg.layout.data_offset = 0
+        msg.data = flat
+        return msg
+
+    def close(self, result=None):
+        """Flush and close (idempotent). With the run's ``RunResult``, also store its summary
+        (metadata ``run``) so the analysis can report how the run ended."""
+        if self._closed:
+            return
+        try:
+            if result is not None:
+                self.writer.add_metadata('run', run_metadata(result))
+        finally:
+            self._closed = True
+            self.writer.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self.close()
+
+
+def run_metadata(result) -> dict:
+    """The string map stored as metadata ``run`` (values are JSON)."""
+    summary = result.summary()
+
+    def clean(v):
+        return None if isinstance(v, float) and not math.isfinite(v) else v
+    return {'summary': json.dumps({k: clean(v) if not isinstance(v, list) else v
+                                   for k, v in summary.items()}),
+            'stopped': result.stopped, 'error': result.error or ''}
