@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .jit import jit
+from .jit import jit_leaf as jit
 from .scene import Material
 
 YIELD_ONSET_FACTOR = 1.9   # the elastic phase ends at δ = 1.9 δc (Jackson-Green)

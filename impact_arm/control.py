@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .jit import jit
+from .jit import jit_leaf as jit
 
 ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')
 

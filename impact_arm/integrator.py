@@ -88,13 +88,14 @@ class PhaseIntegrator:
                             1 if model.scene.actuators_during_contact else 0,
                             1 if trace else 0], dtype=np.int64)
         self._stats = np.zeros(3, dtype=np.int64)     # rhs evaluations, steps, rejected
-        self._T = np.zeros(2)                          # t, next step size
+        self._T = np.zeros(3)                   # t, next step size (0: choose), f stale flag
         self._f = np.zeros(model.size)
         self._f_valid = False
-        self._h = None
+        self._h = 0.0
         self._trace_buffer = np.zeros((TRACE_CAPACITY, 7 + model.n))
         self._trace_count = np.zeros(1, dtype=np.int64)
         self._ev = np.zeros(1, dtype=np.int64)
+        self._W = np.zeros(4 * model.n)
         self.events = 0
 
     @property
@@ -106,7 +107,8 @@ class PhaseIntegrator:
         out = np.zeros(self.model.size)
         st = self.state
         self.model.eq.rhs(t, np.asarray(y, float), out, self._P, self._I,
-                          self.model.surface_table, st.c, st.levels, st.held, self._stats)
+                          self.model.surface_table, st.c, st.levels, st.held, self._stats,
+                          self._W)
         return out
 
     def contact_forces(self, q, qd):
@@ -120,7 +122,8 @@ class PhaseIntegrator:
         """Joint torques acting at the current state, or None when the actuators are off."""
         st = self.state
         tau = np.zeros(self.model.n)
-        acting = self.model.eq.control_torque(st.y, self._P, self._I, st.c, st.held, tau)
+        acting = self.model.eq.control_torque(st.y, self._P, self._I, st.c, st.held, tau,
+                                              np.zeros(self.model.n), np.zeros(self.model.n))
         return tuple(tau.tolist()) if acting else None
 
     def contact_force_now(self):
@@ -187,20 +190,6 @@ class PhaseIntegrator:
         if self.model.n_integral:
             self.state.y[2 * self.model.n:] = 0.0  # integral states reset when the target switches
 
-    def _initial_step(self):
-        """Hairer's starting step: the phase just entered may be far stiffer than the last."""
-        st = self.state
-        y, f0 = st.y, self._f
-        scale = self.atol + self.rtol * np.abs(y)
-        d0 = math.sqrt(float(np.mean((y / scale) ** 2)))
-        d1 = math.sqrt(float(np.mean((f0 / scale) ** 2)))
-        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-        f1 = self.rhs(st.t + h0, y + h0 * f0)
-        d2 = math.sqrt(float(np.mean(((f1 - f0) / scale) ** 2))) / h0
-        h1 = (max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15
-              else (0.01 / max(d1, d2)) ** (1 / 5))
-        return min(100 * h0, h1, self.max_step)
-
     # --- public API ---------------------------------------------------------------------------
     def advance(self, t_end, stop_at_event=False):
         """Integrate to ``t_end`` (exactly), crossing and reporting every phase switch.
@@ -210,12 +199,9 @@ class PhaseIntegrator:
         model = self.model
         events = []
         while True:
-            if not self._f_valid:
-                self._f = self.rhs(st.t, st.y)
-                self._f_valid = True
-            if self._h is None:
-                self._h = self._initial_step()
             self._T[0], self._T[1] = st.t, self._h
+            self._T[2] = 0.0 if self._f_valid else 1.0
+            self._f_valid = True
             status = model.eq.advance(self._T, float(t_end), st.y, self._f, self._P, self._I,
                                       model.surface_table, st.c, st.levels, st.held,
                                       self._stats, self._trace_buffer, self._trace_count,
@@ -230,11 +216,9 @@ class PhaseIntegrator:
                 kind, surface, info = self._apply_event(int(self._ev[0]))
                 self.events += 1
                 events.append(Event(kind, st.t, surface, st.y.copy(), info))
-                self._f_valid = False
+                self._f_valid = False        # the right-hand side changed with the phase
                 if kind != 'switch':
-                    self._f = self.rhs(st.t, st.y)
-                    self._f_valid = True
-                    self._h = self._initial_step()
+                    self._h = 0.0            # and so did its time scale: choose a new step
                 if stop_at_event:
                     return events
                 continue

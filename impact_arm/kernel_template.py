@@ -27,7 +27,7 @@ E7 = -1 / 40
 C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
 
 
-@jit
+@jit_leaf
 def accelerations(q, qd, generalized, P, out):
     L = P[P_L:P_L + N]
     m = P[P_M:P_M + N]
@@ -48,7 +48,7 @@ def accelerations(q, qd, generalized, P, out):
             out[i] = x[i]
 
 
-@jit
+@jit_leaf
 def contact_forces(y, P, SURF, C, levels):
     """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
     L = P[P_L:P_L + N]
@@ -70,8 +70,8 @@ def contact_forces(y, P, SURF, C, levels):
     return delta, fn, ff, tip_state[2], tip_state[3]
 
 
-@jit
-def control_torque(y, P, I, C, tau_held, tau):
+@jit_leaf
+def control_torque(y, P, I, C, tau_held, tau, error, rate):
     """Joint torques acting now into ``tau``; False when the actuators are off."""
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
@@ -93,75 +93,71 @@ def control_torque(y, P, I, C, tau_held, tau):
             tail += qg[i]
             tau[i] = -P[P_KD + i] * qd[i] - P[P_KP + i] * (q[i] - target[i]) - tail
         return True
-    error = np.empty(N)
-    rate = np.empty(N)
     pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
     if NI > 0:
         pid_law(error, rate, y[2 * N:2 * N + NI], P[P_KP:P_KP + N], P[P_KD:P_KD + N],
                 P[P_KI:P_KI + N], tau)
     else:
-        pid_law(error, rate, np.zeros(N), P[P_KP:P_KP + N], P[P_KD:P_KD + N],
+        pid_law(error, rate, P[P_KI:P_KI + N] * 0.0, P[P_KP:P_KP + N], P[P_KD:P_KD + N],
                 P[P_KI:P_KI + N], tau)
     return True
 
 
 @jit
-def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats):
+def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
+    """ẏ into ``out``. W is scratch space (4N) so the hot loop never allocates."""
     stats[0] += 1
     q = y[:N]
     qd = y[N:2 * N]
-    generalized = np.zeros(N)
+    generalized = W[:N]
+    tau = W[N:2 * N]
+    error = W[2 * N:3 * N]
+    rate = W[3 * N:4 * N]
+    for i in range(N):
+        generalized[i] = 0.0
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE:
             delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
             jac = tip_jacobian(q, P[P_L:P_L + N])
             for i in range(N):
                 generalized[i] += jac[i] * ff + jac[N + i] * fn
-    tau = np.zeros(N)
-    acting = control_torque(y, P, I, C, tau_held, tau)
+    acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
     if acting:
         add_joint_torques(tau, generalized)
     for i in range(N):
         out[i] = qd[i]
     accelerations(q, qd, generalized, P, out[N:2 * N])
     if NI > 0:
-        # the integral runs only while the controller acts (it is off during contact)
-        if acting:
-            target = P[P_TUP:P_TUP + N] if C[C_MODE] > 0.5 else P[P_TDOWN:P_TDOWN + N]
-            error = np.empty(N)
-            rate = np.empty(N)
-            pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
-            for i in range(NI):
-                out[2 * N + i] = error[i]
-        else:
-            for i in range(NI):
-                out[2 * N + i] = 0.0
+        # the integral runs only while the controller acts (it is off during contact);
+        # control_torque left the PID error in ``error``
+        for i in range(NI):
+            out[2 * N + i] = error[i] if acting else 0.0
 
 
 @jit
-def rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats):
+def rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W):
     """One Dormand-Prince step of size h: y1, f1 = f(t+h, y1) (FSAL) and the error vector."""
     size = y.shape[0]
     for i in range(size):
         work[i] = y[i] + h * A21 * f0[i]
-    rhs(t + C2 * h, work, K[0], P, I, SURF, C, levels, tau_held, stats)
+    rhs(t + C2 * h, work, K[0], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
         work[i] = y[i] + h * (A31 * f0[i] + A32 * K[0, i])
-    rhs(t + C3 * h, work, K[1], P, I, SURF, C, levels, tau_held, stats)
+    rhs(t + C3 * h, work, K[1], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
         work[i] = y[i] + h * (A41 * f0[i] + A42 * K[0, i] + A43 * K[1, i])
-    rhs(t + C4 * h, work, K[2], P, I, SURF, C, levels, tau_held, stats)
+    rhs(t + C4 * h, work, K[2], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
         work[i] = y[i] + h * (A51 * f0[i] + A52 * K[0, i] + A53 * K[1, i] + A54 * K[2, i])
-    rhs(t + C5 * h, work, K[3], P, I, SURF, C, levels, tau_held, stats)
+    rhs(t + C5 * h, work, K[3], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
         work[i] = y[i] + h * (A61 * f0[i] + A62 * K[0, i] + A63 * K[1, i] + A64 * K[2, i]
                               + A65 * K[3, i])
-    rhs(t + h, work, K[4], P, I, SURF, C, levels, tau_held, stats)
+    rhs(t + h, work, K[4], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
         y1[i] = y[i] + h * (B1 * f0[i] + B3 * K[1, i] + B4 * K[2, i] + B5 * K[3, i]
                             + B6 * K[4, i])
-    rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats)
+    rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
         err[i] = h * (E1 * f0[i] + E3 * K[1, i] + E4 * K[2, i] + E5 * K[3, i] + E6 * K[4, i]
                       + E7 * f1[i])
@@ -227,22 +223,36 @@ def record_point(t, y, P, I, SURF, C, levels, trace, tcount):
 
 
 @jit
+def event_rate(y, f, k, P, SURF):
+    """Time derivative of event function k at state y with derivative f (for Newton)."""
+    ns = SURF.shape[0]
+    L = P[P_L:P_L + N]
+    vy = tip(y[:N], y[N:2 * N], L)[3]
+    if k < ns or k == ns + EV_YIELD:
+        return -vy                       # δ grows as the tip moves down
+    if k == ns + EV_MAX:
+        return tip_acceleration(y[:N], y[N:2 * N], f[N:2 * N], L)[1]
+    return vy                            # switch height, separation
+
+
+@jit
 def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels,
-           tau_held, stats):
-    """Smallest s in (0, h] with g_k(RK step of size s) >= 0 (Illinois regula falsi).
-    Returns s; y_out holds the state there."""
+           tau_held, stats, W):
+    """Smallest s in (0, h] with g_k(RK step of size s) >= 0; y_out holds the state there.
+
+    Newton's method on real Runge-Kutta steps (the step's FSAL derivative gives ġ for free),
+    kept inside a shrinking bracket and falling back to Illinois regula falsi when a Newton
+    step would leave it."""
     a, b = 0.0, h
     fa, fb = ga, gb
     side = 0
     tol = max(h * 1e-12, 1e-18)
-    for _ in range(200):
-        if b - a <= tol:
-            break
-        c = (a * fb - b * fa) / (fb - fa)
+    c = (a * fb - b * fa) / (fb - fa)
+    for _ in range(100):
         if not (a < c < b):
             c = 0.5 * (a + b)
         rk_step(t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
-                stats)
+                stats, W)
         event_values(y_out, P, I, SURF, C, levels, g)
         fc = g[k]
         if fc >= 0.0:
@@ -250,20 +260,64 @@ def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C
             if side == -1:
                 fa *= 0.5
             side = -1
-            if fc == 0.0:
-                break
         else:
             a, fa = c, fc
             if side == 1:
                 fb *= 0.5
             side = 1
-    rk_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats)
+        if fc == 0.0 or b - a <= tol:
+            break
+        rate = event_rate(y_out, f_tmp, k, P, SURF)
+        newton = c - fc / rate if rate != 0.0 else -1.0
+        if abs(newton - c) <= tol:
+            # converged: step just past the root so the event has really happened
+            c = min(b, newton + tol)
+            if c == b:
+                break
+            continue
+        if a < newton < b:
+            c = newton
+        else:
+            c = (a * fb - b * fa) / (fb - fa)
+    if b != c:
+        rk_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
+                stats, W)
     return b
 
 
 @jit
+def initial_step(t, y, f0, P, I, SURF, C, levels, tau_held, stats, W, work, f1):
+    """Hairer's starting step size: the phase just entered may be far stiffer than the last."""
+    rtol, atol, max_step = P[P_RTOL], P[P_ATOL], P[P_MAXSTEP]
+    size = y.shape[0]
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(size):
+        scale = atol + rtol * abs(y[i])
+        d0 += (y[i] / scale) ** 2
+        d1 += (f0[i] / scale) ** 2
+    d0 = math.sqrt(d0 / size)
+    d1 = math.sqrt(d1 / size)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    for i in range(size):
+        work[i] = y[i] + h0 * f0[i]
+    rhs(t + h0, work, f1, P, I, SURF, C, levels, tau_held, stats, W)
+    d2 = 0.0
+    for i in range(size):
+        scale = atol + rtol * abs(y[i])
+        d2 += ((f1[i] - f0[i]) / scale) ** 2
+    d2 = math.sqrt(d2 / size) / h0
+    if max(d1, d2) <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** 0.2
+    return min(100 * h0, h1, max_step)
+
+
+@jit
 def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev):
-    """Integrate from T[0] to t_end with step T[1]; y, f updated in place.
+    """Integrate from T[0] to t_end with step T[1]; y, f updated in place. T[2] != 0 asks
+    for f to be recomputed first (new phase, new command); T[1] <= 0 for a fresh step size.
 
     Returns DONE at t_end, EVENT with the state at a located switch (slot in ev[0]),
     TRACE_FULL when the trace buffer needs draining, or an ERR_* status."""
@@ -277,12 +331,18 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
     y_root = np.empty(size)
     f_tmp = np.empty(size)
     K = np.empty((5, size))
+    W = np.empty(4 * N)
     g0 = np.empty(ns + 4)
     g1 = np.empty(ns + 4)
     g_tmp = np.empty(ns + 4)
-    event_values(y, P, I, SURF, C, levels, g0)
     t = T[0]
+    if T[2] != 0.0:
+        rhs(t, y, f, P, I, SURF, C, levels, tau_held, stats, W)
+        T[2] = 0.0
+    if T[1] <= 0.0:
+        T[1] = initial_step(t, y, f, P, I, SURF, C, levels, tau_held, stats, W, work, f1)
     h = T[1]
+    event_values(y, P, I, SURF, C, levels, g0)
     eps4 = 4 * 2.220446049250313e-16 * max(1.0, abs(t_end))
     status = DONE
     while t < t_end:
@@ -294,7 +354,7 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
         clipped = step >= remaining
         if clipped:
             step = remaining
-        rk_step(t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats)
+        rk_step(t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W)
         norm = error_norm(err, y, y1, rtol, atol)
         if not norm <= 1.0:  # also catches NaN
             stats[2] += 1
@@ -315,13 +375,13 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
         for k in range(ns + 4):
             if g0[k] < 0.0 <= g1[k]:
                 s_k = locate(t, y, f, step, k, g0[k], g1[k], y_root, f_tmp, err, K, work,
-                             g_tmp, P, I, SURF, C, levels, tau_held, stats)
+                             g_tmp, P, I, SURF, C, levels, tau_held, stats, W)
                 if s_k < best_s:
                     best_s, best_k = s_k, k
         if best_k >= 0:
             if best_s < step:
                 rk_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
-                        tau_held, stats)
+                        tau_held, stats, W)
             else:
                 y_root[:] = y1
             y[:] = y_root

@@ -219,3 +219,22 @@ def format_table(result: RunResult) -> str:
     if result.error:
         lines.append(f'STOPPED: {result.error}')
     return '\n'.join(lines)
+
+
+def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None):
+    """The scene's cycles with continuous control and no sampled output: the integrator runs
+    from event to event. What benchmarks time. Returns (impacts, t_end, integrator, wall)."""
+    model = ArmModel(scene)
+    spec = scene.integrator
+    integ = PhaseIntegrator(model, preset=preset or spec.preset,
+                            rtol=rtol if rtol is not None else spec.rtol,
+                            atol=atol if atol is not None else spec.atol,
+                            max_step=max_step if max_step is not None else spec.max_step)
+    builder = ImpactBuilder(model)
+    cycles = 0
+    wall0 = time.perf_counter()
+    while integ.state.t < scene.t_max and (not scene.cycles or cycles < scene.cycles):
+        for event in integ.advance(scene.t_max, stop_at_event=True):
+            cycles += event.kind == 'switch'
+            builder.feed(event)
+    return builder.impacts, integ.state.t, integ, time.perf_counter() - wall0

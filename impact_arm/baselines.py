@@ -1,0 +1,79 @@
+"""The same scene integrated by scipy's ``solve_ivp`` (RK45 = MATLAB's ode45, DOP853, LSODA,
+Radau) with terminal events, restarting at every phase switch exactly as the article does.
+
+Used only by benchmarks, as the baseline our integrator is measured against. It shares the
+model, the right-hand side and the phase machine's transitions with ``PhaseIntegrator``, so the
+two differ only in how they step and locate events.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from . import layout
+from .integrator import Event, PhaseIntegrator
+from .metrics import ImpactBuilder
+from .model import ArmModel, Phase
+from .scene import Scene
+
+SCIPY_METHODS = ('RK45', 'DOP853', 'LSODA', 'Radau')
+
+
+def _armed_slots(integ: PhaseIntegrator):
+    """Event slots that can fire in the current phase (the others hold a constant -1)."""
+    st, n_surf = integ.state, len(integ.model.surfaces)
+    if st.phase == Phase.FREE:
+        slots = list(range(n_surf))
+        if integ._I[layout.I_LAW] in (layout.LAW_Q, layout.LAW_PID) and st.mode == 'up':
+            slots.append(n_surf + layout.EV_SWITCH)
+        return slots
+    if st.phase == Phase.ELASTIC:
+        yields = integ.model.surfaces[st.surface].law == 'elastoplastic'
+        return ([n_surf + layout.EV_YIELD] if yields else []) + [n_surf + layout.EV_MAX]
+    if st.phase == Phase.ELASTOPLASTIC:
+        return [n_surf + layout.EV_MAX]
+    return [n_surf + layout.EV_SEP]
+
+
+def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None):
+    """Run ``scene`` for its cycles with solve_ivp; returns (impacts, t_end, nfev, wall)."""
+    model = ArmModel(scene)
+    integ = PhaseIntegrator(model, control='continuous')
+    st = integ.state
+    builder = ImpactBuilder(model)
+    atol = rtol * 1e-2 if atol is None else atol
+    t_max = scene.t_max if t_max is None else t_max
+    g = np.zeros(len(model.surfaces) + 4)
+    eq, P, I, surf = model.eq, integ._P, integ._I, model.surface_table
+    nfev = 0
+    cycles = 0
+    wall0 = time.perf_counter()
+
+    def make_event(slot):
+        def event(t, y):
+            eq.event_values(y, P, I, surf, st.c, st.levels, g)
+            return g[slot]
+        event.terminal = True
+        event.direction = 1.0
+        return event
+
+    while st.t < t_max and (not scene.cycles or cycles < scene.cycles):
+        slots = _armed_slots(integ)
+        sol = solve_ivp(integ.rhs, (st.t, t_max), st.y, method=method, rtol=rtol, atol=atol,
+                        events=[make_event(s) for s in slots])
+        nfev += sol.nfev
+        if sol.status == -1:
+            raise RuntimeError(f'solve_ivp {method} failed at t = {sol.t[-1]}: {sol.message}')
+        fired = [(te[0], i) for i, te in enumerate(sol.t_events) if len(te)]
+        if not fired:
+            st.t, st.y = float(sol.t[-1]), sol.y[:, -1].copy()
+            break
+        t_event, i = min(fired)
+        st.t, st.y = float(t_event), sol.y_events[i][0].copy()
+        kind, surface, info = integ._apply_event(slots[i])
+        if kind == 'switch':
+            cycles += 1
+        builder.feed(Event(kind, st.t, surface, st.y.copy(), info))
+    return builder.impacts, st.t, nfev, time.perf_counter() - wall0
