@@ -38,19 +38,21 @@ def cmd_simulate(args) -> int:
     observer = None
     if args.mcap:
         from .offline_mcap import OfflineRecorder
-        observer = OfflineRecorder(args.mcap, scene)
+        observer = OfflineRecorder(args.mcap, scene, control_rate=args.control_rate,
+                                   preset=args.preset)
 
     def progress(cycle, cycles, impacts, t):
         if sys.stderr.isatty():
             print(f'\r  cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  '
                   f't = {t:.3f} s', end='', file=sys.stderr, flush=True)
 
+    result = None
     try:
         result = run(scene, control_rate=args.control_rate, preset=args.preset,
                      observer=observer, progress=progress)
     finally:
         if observer is not None:
-            observer.close()
+            observer.close(result)  # with the result: its summary is stored in the file
     if sys.stderr.isatty():
         print(file=sys.stderr)
     print(format_table(result))

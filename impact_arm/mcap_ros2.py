@@ -1,0 +1,615 @@
+"""ROS 2 MCAP files: a crash-safe writer, message definitions from introspection, a reader.
+
+Files follow what rosbag2's MCAP storage writes, so ``ros2 bag play``/``info``, the ``mcap``
+library and ``rosbags`` read them: profile ``ros2``; one schema per type named ``pkg/msg/Type``
+with encoding ``ros2msg`` (the full definition text, dependencies after a line of 80 ``=`` and
+``MSG: pkg/Type``); CDR message data; channel metadata ``offered_qos_profiles`` (rosbag2 QoS
+YAML) and ``topic_type_hash``; a ``rosbag2`` metadata record; zstd/lz4 chunks with message and
+chunk indexes and statistics so readers can play in log-time order.
+
+Crash safety: the file is a complete MCAP after every flush. A flush writes the new chunk and
+then a fresh *tail* (rosbag2 metadata record, DataEnd, summary, footer, magic) in one write at
+the end of the committed data; the next flush overwrites that tail. A process killed at any time
+(SIGKILL included) leaves everything up to its last flush readable. ``flush_interval`` bounds
+how old that is (the writer checks on each write; a recorder also flushes from a timer).
+
+QoS of the topic contract (design §3), used by publishers, the recorder and replay:
+
+=============================  =======================================  ========================
+topic                          type                                     QoS
+=============================  =======================================  ========================
+/joint_states                  sensor_msgs/msg/JointState               reliable, volatile, 100
+/contact_wrench                geometry_msgs/msg/WrenchStamped          reliable, volatile, 100
+/impact_report                 std_msgs/msg/String                      reliable, transient_local, 100
+/diagnostics                   diagnostic_msgs/msg/DiagnosticArray      reliable, volatile, 10
+/clock                         rosgraph_msgs/msg/Clock                  best_effort, volatile, 1
+/effort_controller/commands    std_msgs/msg/Float64MultiArray           reliable, volatile, 10
+=============================  =======================================  ========================
+
+All keep_last; deadline, lifespan and liveliness lease infinite; liveliness automatic.
+``/impact_report`` is transient_local so a late subscriber (recorder, analysis) still gets
+every impact. ``/clock`` is best effort like rclcpp's ClockQoS.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+import struct
+import threading
+import time
+import zlib
+from typing import Iterator, NamedTuple, Optional
+
+from .errors import ImpactArmError
+from .msgdefs import message_class, message_definition, serialize_cdr, type_hash, type_name_of
+
+__all__ = ['CONTRACT_TOPICS', 'RawMessage', 'RecordingError', 'Ros2McapWriter', 'TopicInfo',
+           'TopicQos', 'contract_qos', 'iter_raw', 'message_class', 'message_definition',
+           'qos_yaml', 'read_attachments', 'read_messages', 'read_metadata', 'serialize_cdr',
+           'topics_info', 'type_name_of']
+
+MAGIC = b'\x89MCAP0\r\n'
+ROSBAG2_METADATA_VERSION = 9  # rosbag2 BagMetadata version whose QoS YAML uses policy names
+_INF_SEC, _INF_NSEC = 9223372036, 854775807  # RMW_DURATION_INFINITE as rosbag2 writes it
+_INFINITE_NS = _INF_SEC * 1_000_000_000 + _INF_NSEC
+
+
+class RecordingError(ImpactArmError, OSError):
+    """The MCAP file cannot be written (path, permissions, disk full). Flushed data stays."""
+
+
+# --------------------------------------------------------------------------------------- QoS
+@dataclasses.dataclass(frozen=True)
+class TopicQos:
+    """A QoS profile in rosbag2's terms. Durations in ns; None = infinite."""
+
+    reliability: str = 'reliable'
+    durability: str = 'volatile'
+    depth: int = 10
+    history: str = 'keep_last'
+    deadline_ns: Optional[int] = None
+    lifespan_ns: Optional[int] = None
+    liveliness: str = 'automatic'
+    liveliness_lease_ns: Optional[int] = None
+    avoid_ros_namespace_conventions: bool = False
+
+    def as_dict(self) -> dict:
+        """The mapping rosbag2 serializes (key order as rosbag2 writes it)."""
+        def dur(ns):
+            ns = _INFINITE_NS if ns is None or ns <= 0 or ns >= _INFINITE_NS else ns
+            return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+        return {'history': self.history, 'depth': int(self.depth),
+                'reliability': self.reliability, 'durability': self.durability,
+                'deadline': dur(self.deadline_ns), 'lifespan': dur(self.lifespan_ns),
+                'liveliness': self.liveliness,
+                'liveliness_lease_duration': dur(self.liveliness_lease_ns),
+                'avoid_ros_namespace_conventions': bool(self.avoid_ros_namespace_conventions)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> 'TopicQos':
+        def ns(v):
+            t = int(v['sec']) * 1_000_000_000 + int(v['nsec'])
+            return None if t == 0 or t >= _INFINITE_NS else t
+        return cls(str(d['reliability']), str(d['durability']), int(d.get('depth', 0)),
+                   str(d.get('history', 'keep_last')), ns(d['deadline']), ns(d['lifespan']),
+                   str(d['liveliness']), ns(d['liveliness_lease_duration']),
+                   bool(d.get('avoid_ros_namespace_conventions', False)))
+
+    @classmethod
+    def from_rclpy(cls, p) -> 'TopicQos':
+        def ns(d):
+            t = d.nanoseconds
+            return None if t <= 0 or t >= _INFINITE_NS else t
+        return cls(p.reliability.name.lower(), p.durability.name.lower(), int(p.depth),
+                   p.history.name.lower(), ns(p.deadline), ns(p.lifespan),
+                   p.liveliness.name.lower(), ns(p.liveliness_lease_duration),
+                   bool(p.avoid_ros_namespace_conventions))
+
+    def to_rclpy(self, min_depth: int = 1):
+        """An rclpy QoSProfile; 'unknown' policies (as discovery reports them) become defaults."""
+        from rclpy.duration import Duration
+        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
+                               ReliabilityPolicy)
+
+        def pol(enum, name, default):
+            return default if name in ('unknown', '') else enum[name.upper()]
+        kw = {}
+        for key, attr in (('deadline', 'deadline_ns'), ('lifespan', 'lifespan_ns'),
+                          ('liveliness_lease_duration', 'liveliness_lease_ns')):
+            if getattr(self, attr) is not None:
+                kw[key] = Duration(nanoseconds=getattr(self, attr))
+        return QoSProfile(
+            history=pol(HistoryPolicy, self.history, HistoryPolicy.KEEP_LAST),
+            depth=max(int(self.depth), min_depth),
+            reliability=pol(ReliabilityPolicy, self.reliability, ReliabilityPolicy.RELIABLE),
+            durability=pol(DurabilityPolicy, self.durability, DurabilityPolicy.VOLATILE),
+            liveliness=pol(LivelinessPolicy, self.liveliness, LivelinessPolicy.AUTOMATIC),
+            avoid_ros_namespace_conventions=self.avoid_ros_namespace_conventions, **kw)
+
+
+def qos_yaml(profiles) -> str:
+    """rosbag2's ``offered_qos_profiles`` string: a YAML sequence, laid out as yaml-cpp does."""
+    lines = []
+    for p in profiles:
+        for i, (k, v) in enumerate(p.as_dict().items()):
+            lead = '- ' if i == 0 else '  '
+            if isinstance(v, dict):
+                lines.append(f'{lead}{k}:')
+                lines += [f'    {kk}: {vv}' for kk, vv in v.items()]
+            else:
+                lines.append(f'{lead}{k}: {str(v).lower() if isinstance(v, bool) else v}')
+    return '\n'.join(lines)
+
+
+def parse_qos_yaml(text: str) -> list:
+    import yaml
+    return [TopicQos.from_dict(d) for d in (yaml.safe_load(text) or [])]
+
+
+RELIABLE_100 = TopicQos(depth=100)
+CONTRACT_TOPICS = {  # topic -> (type, QoS); see the module docstring
+    '/joint_states': ('sensor_msgs/msg/JointState', RELIABLE_100),
+    '/contact_wrench': ('geometry_msgs/msg/WrenchStamped', RELIABLE_100),
+    '/impact_report': ('std_msgs/msg/String', TopicQos(durability='transient_local', depth=100)),
+    '/diagnostics': ('diagnostic_msgs/msg/DiagnosticArray', TopicQos(depth=10)),
+    '/clock': ('rosgraph_msgs/msg/Clock', TopicQos(reliability='best_effort', depth=1)),
+    '/effort_controller/commands': ('std_msgs/msg/Float64MultiArray', TopicQos(depth=10)),
+}
+
+
+def contract_qos(topic: str, default: TopicQos = TopicQos()) -> TopicQos:
+    """The QoS the contract gives ``topic`` (remapped names fall back to ``default``)."""
+    return CONTRACT_TOPICS.get(topic, (None, default))[1]
+
+
+def ros_distro() -> str:
+    if os.environ.get('ROS_DISTRO'):
+        return os.environ['ROS_DISTRO']
+    try:  # PyPI wheels (no ROS install) are named ros-<distro>-rclpy
+        from importlib.metadata import distributions
+        for dist in distributions():
+            m = re.fullmatch(r'ros-([a-z]+)-rclpy', (dist.metadata['Name'] or '').lower())
+            if m:
+                return m.group(1)
+    except Exception:  # noqa: BLE001 - the distro is informational only
+        pass
+    return ''
+
+
+def package_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version('impact_arm')
+    except Exception:  # noqa: BLE001 - running from a source tree without metadata
+        return '0.1.0'
+
+
+# --------------------------------------------------------------------------- records
+def _s(text: str) -> bytes:
+    b = text.encode()
+    return struct.pack('<I', len(b)) + b
+
+
+def _map(d: dict) -> bytes:
+    body = b''.join(_s(k) + _s(v) for k, v in d.items())
+    return struct.pack('<I', len(body)) + body
+
+
+def _rec(op: int, body: bytes) -> bytes:
+    return struct.pack('<BQ', op, len(body)) + body
+
+
+_MSG_HEAD = struct.Struct('<BQHIQQ')  # opcode, length, channel, sequence, log, publish time
+
+
+class _Channel:
+    __slots__ = ('id', 'topic', 'type_name', 'qos', 'type_hash', 'seq', 'count')
+
+    def __init__(self, cid, topic, type_name, qos, thash):
+        self.id, self.topic, self.type_name = cid, topic, type_name
+        self.qos, self.type_hash, self.seq, self.count = qos, thash, 0, 0
+
+
+class Ros2McapWriter:
+    """Writes a ROS 2 MCAP file that stays readable after every flush (see module doc).
+
+    ``compression``: 'zstd', 'lz4' or ''. ``chunk_size``: uncompressed bytes after which a chunk
+    is closed (and flushed). ``flush_interval``: seconds between automatic flushes on write
+    (None: only on chunk size, ``flush()`` and ``close()``). Thread safe.
+    """
+
+    def __init__(self, path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
+                 flush_interval: Optional[float] = 1.0, library: str = ''):
+        self.path = os.fspath(path)
+        if compression == 'zstd':
+            import zstandard
+            self._compress = zstandard.ZstdCompressor(level=3).compress
+        elif compression == 'lz4':
+            import lz4.frame
+            self._compress = lz4.frame.compress
+        elif compression in ('', 'none', None):
+            compression, self._compress = '', None
+        else:
+            raise ValueError(f"compression must be 'zstd', 'lz4' or '', not {compression!r}")
+        self.compression, self.chunk_size, self.flush_interval = compression, chunk_size, \
+            flush_interval
+        self._lock = threading.RLock()
+        self._channels: dict = {}        # topic -> _Channel
+        self._schema_ids: dict = {}      # type name -> schema id
+        self._pending = bytearray()      # data-section records not yet in the file
+        self._chunk = bytearray()        # uncompressed records of the open chunk
+        self._chunk_index: dict = {}     # channel id -> [(log time, offset in chunk)]
+        self._chunk_times = [None, None]
+        self._summary_schemas = bytearray()
+        self._summary_channels = bytearray()
+        self._summary_chunk_indexes = bytearray()
+        self._summary_attachment_indexes = bytearray()
+        self._summary_metadata_indexes = bytearray()
+        self._counts = {'message': 0, 'chunk': 0, 'attachment': 0, 'metadata': 0}
+        self._times = [None, None]       # first and last log time of the file
+        self._error: Optional[RecordingError] = None
+        self._closed = False
+        self._fd = None
+        try:
+            parent = os.path.dirname(os.path.abspath(self.path))
+            os.makedirs(parent, exist_ok=True)
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError as e:
+            raise self._fail(e, 'cannot create') from None
+        lib = library or f'impact_arm {package_version()}'
+        head = MAGIC + _rec(0x01, _s('ros2') + _s(lib))
+        self._committed = 0   # end of the data that later flushes never rewrite
+        self._file_end = 0
+        self._tail = b''
+        self._pending += head
+        self._last_flush = time.monotonic()
+        try:
+            self.flush()  # an empty but complete file from the start
+        except RecordingError:
+            os.close(self._fd)
+            self._closed = True
+            raise
+
+    # ------------------------------------------------------------------ public API
+    def add_topic(self, topic: str, type_name: str, qos=None, type_hash_str: str = None) -> int:
+        """Register ``topic`` (idempotent); ``qos``: a TopicQos, a list of them, or None for the
+        contract's. Returns the channel id."""
+        with self._lock:
+            if topic in self._channels:
+                return self._channels[topic].id
+            type_name = type_name_of(message_class(type_name))  # validates, normalises
+            qos_list = [contract_qos(topic)] if qos is None else (
+                list(qos) if isinstance(qos, (list, tuple)) else [qos])
+            thash = type_hash(type_name) if type_hash_str is None else type_hash_str
+            if type_name not in self._schema_ids:
+                sid = len(self._schema_ids) + 1
+                rec = _rec(0x03, struct.pack('<H', sid) + _s(type_name) + _s('ros2msg')
+                           + _s(message_definition(type_name)))
+                self._schema_ids[type_name] = sid
+                self._pending += rec
+                self._summary_schemas += rec
+            ch = _Channel(len(self._channels) + 1, topic, type_name, qos_list, thash)
+            rec = _rec(0x04, struct.pack('<HH', ch.id, self._schema_ids[type_name]) + _s(topic)
+                       + _s('cdr') + _map({'offered_qos_profiles': qos_yaml(qos_list),
+                                           'topic_type_hash': thash}))
+            self._pending += rec
+            self._summary_channels += rec
+            self._channels[topic] = ch
+            return ch.id
+
+    def write(self, topic: str, data, log_time_ns: int, publish_time_ns: int = None):
+        """Append one serialized (CDR) message on a registered topic."""
+        with self._lock:
+            if self._error or self._closed:
+                raise self._error or RecordingError(f'{self.path}: writer is closed')
+            ch = self._channels[topic]
+            log_time_ns = int(log_time_ns)
+            pub = log_time_ns if publish_time_ns is None else int(publish_time_ns)
+            offset = len(self._chunk)
+            self._chunk += _MSG_HEAD.pack(0x05, 22 + len(data), ch.id, ch.seq, log_time_ns, pub)
+            self._chunk += data
+            ch.seq = (ch.seq + 1) & 0xFFFFFFFF
+            ch.count += 1
+            self._chunk_index.setdefault(ch.id, []).append((log_time_ns, offset))
+            t = self._chunk_times
+            if t[0] is None or log_time_ns < t[0]:
+                t[0] = log_time_ns
+            if t[1] is None or log_time_ns > t[1]:
+                t[1] = log_time_ns
+            if len(self._chunk) >= self.chunk_size or (
+                    self.flush_interval is not None
+                    and time.monotonic() - self._last_flush >= self.flush_interval):
+                self._flush()
+
+    def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int = None):
+        """Serialize a message object (``serialize_cdr``) and write it; registers the topic
+        on first use with its contract QoS."""
+        if topic not in self._channels:
+            self.add_topic(topic, type_name_of(msg))
+        self.write(topic, serialize_cdr(msg), log_time_ns, publish_time_ns)
+
+    def add_metadata(self, name: str, data: dict):
+        """Store a named string map (a Metadata record); written at the next flush."""
+        if name == 'rosbag2':
+            raise ValueError("the 'rosbag2' metadata record is written by the writer itself")
+        with self._lock:
+            rec = _rec(0x0C, _s(name) + _map({str(k): str(v) for k, v in data.items()}))
+            self._summary_metadata_indexes += _rec(0x0D, struct.pack(
+                '<QQ', self._committed + len(self._pending), len(rec)) + _s(name))
+            self._pending += rec
+            self._counts['metadata'] += 1
+
+    def add_attachment(self, name: str, data: bytes, media_type: str = 'application/octet-stream',
+                       log_time_ns: int = None, create_time_ns: int = None):
+        """Store a file (e.g. the scene YAML) as an Attachment record."""
+        now = time.time_ns()
+        log_time_ns = now if log_time_ns is None else int(log_time_ns)
+        create_time_ns = log_time_ns if create_time_ns is None else int(create_time_ns)
+        data = data.encode() if isinstance(data, str) else bytes(data)
+        with self._lock:
+            body = (struct.pack('<QQ', log_time_ns, create_time_ns) + _s(name) + _s(media_type)
+                    + struct.pack('<Q', len(data)) + data)
+            rec = _rec(0x09, body + struct.pack('<I', zlib.crc32(body)))
+            self._summary_attachment_indexes += _rec(0x0A, struct.pack(
+                '<QQQQQ', self._committed + len(self._pending), len(rec), log_time_ns,
+                create_time_ns, len(data)) + _s(name) + _s(media_type))
+            self._pending += rec
+            self._counts['attachment'] += 1
+
+    def has_topic(self, topic: str) -> bool:
+        return topic in self._channels
+
+    @property
+    def message_count(self) -> int:
+        return self._counts['message'] + sum(len(v) for v in self._chunk_index.values())
+
+    def flush(self):
+        """Write the open chunk and a fresh summary: the file is complete on return."""
+        with self._lock:
+            if self._error:
+                raise self._error
+            if not self._closed:
+                self._flush()
+
+    def close(self):
+        """Flush and close (idempotent). After a RecordingError it only releases the file."""
+        with self._lock:
+            if self._closed:
+                return
+            try:
+                if not self._error:
+                    self._flush()
+                    os.fsync(self._fd)
+            except OSError as e:
+                self._fail(e, 'cannot write')
+            finally:
+                self._closed = True
+                if self._fd is not None:
+                    os.close(self._fd)
+            if self._error:
+                raise self._error
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            self.close()
+        except RecordingError:
+            if exc_type is None:
+                raise
+
+    # --------------------------------------------------------------- internals
+    def _fail(self, err: OSError, what: str) -> RecordingError:
+        self._error = RecordingError(
+            f'{what} MCAP file {self.path}: {err.strerror or err}')
+        self._error.errno = err.errno
+        return self._error
+
+    def _close_chunk(self, out: bytearray, base: int):
+        """Append the open chunk, its message indexes, and record its chunk index."""
+        raw = bytes(self._chunk)
+        data = self._compress(raw) if self._compress else raw
+        start, end = self._chunk_times
+        chunk = _rec(0x06, struct.pack('<QQQI', start, end, len(raw), zlib.crc32(raw))
+                     + _s(self.compression) + struct.pack('<Q', len(data)) + data)
+        chunk_offset = base + len(out)
+        out += chunk
+        index_offsets = bytearray()
+        index_start = len(out)
+        for cid in sorted(self._chunk_index):
+            entries = sorted(self._chunk_index[cid])
+            flat = [x for e in entries for x in e]
+            index_offsets += struct.pack('<HQ', cid, base + len(out))
+            out += _rec(0x07, struct.pack('<HI', cid, 16 * len(entries))
+                        + struct.pack(f'<{len(flat)}Q', *flat))
+            self._counts['message'] += len(entries)
+        self._summary_chunk_indexes += _rec(0x08, struct.pack(
+            '<QQQQ', start, end, chunk_offset, len(chunk)) + struct.pack(
+            '<I', len(index_offsets)) + index_offsets + struct.pack(
+            '<Q', len(out) - index_start) + _s(self.compression) + struct.pack(
+            '<QQ', len(data), len(raw)))
+        self._counts['chunk'] += 1
+        t = self._times
+        t[0] = start if t[0] is None else min(t[0], start)
+        t[1] = end if t[1] is None else max(t[1], end)
+        self._chunk = bytearray()
+        self._chunk_index = {}
+        self._chunk_times = [None, None]
+
+    def _flush(self):
+        self._last_flush = time.monotonic()
+        if not self._pending and not self._chunk and self._tail:
+            return
+        out = bytearray(self._pending)
+        if self._chunk:
+            self._close_chunk(out, self._committed)
+        tail = self._build_tail(self._committed + len(out))
+        short = len(self._tail) - len(out) - len(tail)
+        if short > 0:
+            # Never end the file before the previous tail does: a kill between the write and a
+            # truncate would leave the old footer behind. YAML ignores trailing blanks.
+            tail = self._build_tail(self._committed + len(out), pad=short)
+        buf = bytes(out) + tail
+        try:
+            # One write replaces the previous tail, so the file is valid before and after it.
+            self._pwrite_all(buf, self._committed)
+        except OSError as e:
+            err = self._fail(e, 'cannot write')
+            self._restore_tail()
+            raise err from None
+        self._pending = bytearray()
+        self._committed += len(out)
+        self._file_end = self._committed + len(tail)
+        self._tail = tail
+
+    def _pwrite_all(self, buf: bytes, offset: int):
+        view = memoryview(buf)
+        while view:
+            n = os.pwrite(self._fd, view, offset)
+            view, offset = view[n:], offset + n
+
+    def _restore_tail(self):
+        """After a failed write (disk full), put back the last complete tail."""
+        try:
+            if self._tail:
+                self._pwrite_all(self._tail, self._committed)
+                os.ftruncate(self._fd, self._committed + len(self._tail))
+        except OSError:
+            pass  # nothing more can be done; the error already names the cause
+
+    def _bag_metadata(self, pad: int = 0) -> str:
+        import yaml
+        start, end = self._times
+        n = self._counts['message']
+        start = start or 0
+        duration = (end - start) if n else 0
+        name = os.path.basename(self.path)
+        topics = [{'topic_metadata': {
+            'name': ch.topic, 'type': ch.type_name, 'serialization_format': 'cdr',
+            'offered_qos_profiles': [q.as_dict() for q in ch.qos],
+            'type_description_hash': ch.type_hash},
+            'message_count': self._flushed_count(ch)} for ch in self._channels.values()]
+        meta = {'version': ROSBAG2_METADATA_VERSION, 'storage_identifier': 'mcap',
+                'duration': {'nanoseconds': duration},
+                'starting_time': {'nanoseconds_since_epoch': start}, 'message_count': n,
+                'topics_with_message_count': topics, 'compression_format': '',
+                'compression_mode': '', 'relative_file_paths': [name],
+                'files': [{'path': name, 'starting_time': {'nanoseconds_since_epoch': start},
+                           'duration': {'nanoseconds': duration}, 'message_count': n}],
+                'custom_data': {'impact_arm_version': package_version()},
+                'ros_distro': _distro()}
+        return yaml.safe_dump(meta, sort_keys=False, default_flow_style=False) + ' ' * pad
+
+    def _flushed_count(self, ch) -> int:
+        return ch.count - len(self._chunk_index.get(ch.id, ()))
+
+    def _build_tail(self, base: int, pad: int = 0) -> bytes:
+        """rosbag2 metadata record + DataEnd + summary + footer + magic, starting at base."""
+        meta = _rec(0x0C, _s('rosbag2') + _map({'serialized_metadata': self._bag_metadata(pad),
+                                                'ROS_DISTRO': _distro()}))
+        data_tail = meta + _rec(0x0F, struct.pack('<I', 0))  # 0: data CRC not computed
+        summary_start = base + len(data_tail)
+        counts = {ch.id: self._flushed_count(ch) for ch in self._channels.values()}
+        start, end = self._times
+        stats = _rec(0x0B, struct.pack(
+            '<QHIIII', self._counts['message'], len(self._schema_ids), len(self._channels),
+            self._counts['attachment'], self._counts['metadata'] + 1, self._counts['chunk'])
+            + struct.pack('<QQ', start or 0, end or 0)
+            + struct.pack('<I', 10 * len(counts))
+            + b''.join(struct.pack('<HQ', k, v) for k, v in counts.items()))
+        meta_index = _rec(0x0D, struct.pack('<QQ', base, len(meta)) + _s('rosbag2'))
+        groups = [(0x03, bytes(self._summary_schemas)), (0x04, bytes(self._summary_channels)),
+                  (0x0B, stats), (0x08, bytes(self._summary_chunk_indexes)),
+                  (0x0A, bytes(self._summary_attachment_indexes)),
+                  (0x0D, bytes(self._summary_metadata_indexes) + meta_index)]
+        summary = bytearray()
+        offsets = bytearray()
+        for op, body in groups:
+            if body:
+                offsets += _rec(0x0E, struct.pack('<BQQ', op, summary_start + len(summary),
+                                                  len(body)))
+                summary += body
+        footer = struct.pack('<BQQQ', 0x02, 20, summary_start,
+                             summary_start + len(summary))
+        crc = zlib.crc32(bytes(summary) + bytes(offsets) + footer)
+        return data_tail + bytes(summary) + bytes(offsets) + footer + struct.pack(
+            '<I', crc) + MAGIC
+
+
+_DISTRO = []
+
+
+def _distro() -> str:
+    if not _DISTRO:
+        _DISTRO.append(ros_distro())
+    return _DISTRO[0]
+
+
+# ----------------------------------------------------------------------------- reading
+class RawMessage(NamedTuple):
+    topic: str
+    type_name: str
+    log_time_ns: int
+    publish_time_ns: int
+    data: bytes
+
+
+def iter_raw(path, topics=None, start_time_ns: int = None) -> Iterator[RawMessage]:
+    """Serialized messages in log-time order (chunk indexes let the reader sort)."""
+    from mcap.reader import make_reader
+    with open(path, 'rb') as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages(
+                topics=list(topics) if topics else None, start_time=start_time_ns,
+                log_time_order=True):
+            yield RawMessage(channel.topic, schema.name if schema else '', message.log_time,
+                             message.publish_time, message.data)
+
+
+def read_messages(path, topics=None):
+    """(topic, type name, log time ns, publish time ns, message object) in log-time order."""
+    from rclpy.serialization import deserialize_message
+    classes = {}
+    for m in iter_raw(path, topics):
+        cls = classes.get(m.type_name) or classes.setdefault(m.type_name,
+                                                              message_class(m.type_name))
+        yield m.topic, m.type_name, m.log_time_ns, m.publish_time_ns, deserialize_message(
+            m.data, cls)
+
+
+class TopicInfo(NamedTuple):
+    type_name: str
+    qos: list
+    message_count: int
+
+
+def topics_info(path) -> dict:
+    """topic -> TopicInfo(type name, [TopicQos], message count) from the file's summary."""
+    from mcap.reader import make_reader
+    with open(path, 'rb') as f:
+        summary = make_reader(f).get_summary()
+    if summary is None:
+        return {}
+    counts = summary.statistics.channel_message_counts if summary.statistics else {}
+    out = {}
+    for cid, ch in summary.channels.items():
+        schema = summary.schemas.get(ch.schema_id)
+        text = ch.metadata.get('offered_qos_profiles', '')
+        out[ch.topic] = TopicInfo(schema.name if schema else '',
+                                  parse_qos_yaml(text) if text else [], counts.get(cid, 0))
+    return out
+
+
+def read_metadata(path) -> dict:
+    """name -> string map of every Metadata record (the last one wins for a repeated name)."""
+    from mcap.reader import make_reader
+    with open(path, 'rb') as f:
+        return {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
+
+
+def read_attachments(path) -> dict:
+    from mcap.reader import make_reader
+    with open(path, 'rb') as f:
+        return {a.name: bytes(a.data) for a in make_reader(f).iter_attachments()}
