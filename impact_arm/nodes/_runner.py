@@ -1,0 +1,63 @@
+"""Process life cycle for the record/replay nodes.
+
+rclpy's own SIGINT handler shuts the context down at once, after which a node can no longer
+ask other nodes anything. Here SIGINT/SIGTERM only set a flag: the spin loop ends, the node's
+``finish`` runs with the middleware still up (final parameter query, closing the file), and the
+process exits with the node's exit code and no traceback.
+"""
+import signal
+import sys
+
+
+def make_executor(context=None):
+    """A single-threaded executor. ``IMPACT_ARM_EXECUTOR=events`` picks rclpy's C++ events
+    executor instead; it is not the default because in rclpy 9 (Kilted) it cannot call
+    subscription callbacks that take a ``MessageInfo`` (spin fails with "SystemError: null
+    argument to internal routine"), which the recorder needs for publish times. The recorder
+    drains its queues in each callback, so the single-threaded executor keeps up anyway."""
+    import os
+    if os.environ.get('IMPACT_ARM_EXECUTOR') == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor(context=context)
+        except ImportError:
+            pass
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor(context=context)
+
+
+def run(node_factory, args=None) -> int:
+    """Create the node, spin until it is done or a signal arrives, let it finish. The node
+    provides ``done`` (bool) and ``finish(executor) -> int`` (the exit code)."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+
+    from ..errors import ImpactArmError
+
+    stopped = []
+    previous = {s: signal.signal(s, lambda signum, frame: stopped.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node, executor, code = None, None, 0
+    try:
+        node = node_factory()
+        executor = make_executor()
+        executor.add_node(node)
+        while not stopped and not node.done and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+        code = node.finish(executor if rclpy.ok() else None)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        code = node.finish(None) if node is not None else 0
+    except (ImpactArmError, ValueError) as e:  # bad parameters, unreadable files
+        print(f'[ERROR] {e}', file=sys.stderr)
+        code = 2 if node is None else (node.finish(None) or 1)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if executor is not None and hasattr(executor, 'shutdown'):
+            executor.shutdown()
+        rclpy.try_shutdown()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    return code

@@ -1,0 +1,204 @@
+"""recorder: subscribes to topics as serialized data and writes a crash-safe ROS 2 MCAP file.
+
+Parameters: output, topics, scene, param_nodes, flush_interval (see their descriptions).
+Messages are stored as received (no deserialization): log time = reception time, publish
+time = the publisher's source timestamp. The file also holds the scene YAML (attachment and
+metadata), the parameters of ``param_nodes`` at start and at shutdown, and the package version.
+"""
+import functools
+import json
+import os
+import time
+
+from rclpy.node import Node
+from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.srv import GetParameters, ListParameters
+
+from ..mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
+                         contract_qos, message_class, package_version, ros_distro)
+from ._runner import run
+
+DRAIN_MAX = 500  # messages taken directly per callback
+RECORDER_MIN_DEPTH = 1000  # reader history: absorbs bursts while a chunk is compressed/written
+
+
+def _param(node, name, default, description):
+    return node.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+
+
+class Recorder(Node):
+    def __init__(self):
+        super().__init__('recorder')
+        stamp = time.strftime('%Y%m%d-%H%M%S')
+        self.output = _param(self, 'output', f'runs/{stamp}.mcap', 'MCAP file to write')
+        topics = _param(self, 'topics', list(CONTRACT_TOPICS),
+                        'topics to record; "name" or "name:pkg/msg/Type" (contract topics and '
+                        'published topics need no type)')
+        scene = _param(self, 'scene', '', 'scene YAML to store in the file (optional)')
+        self.param_nodes = _param(self, 'param_nodes', ['simulator', 'controller'],
+                                  'nodes whose parameters are stored at start and at shutdown')
+        interval = _param(self, 'flush_interval', 0.5,
+                          'seconds between flushes: at most this much is lost if killed')
+        if not interval > 0:
+            raise ValueError(f'flush_interval = {interval}: must be > 0 s')
+        scene_text = None
+        if scene:
+            try:
+                with open(scene, encoding='utf-8') as f:
+                    scene_text = f.read()
+            except OSError as e:
+                raise ValueError(f'scene = {scene!r}: cannot read ({e.strerror})') from None
+        try:
+            self.writer = Ros2McapWriter(self.output, flush_interval=interval)
+        except RecordingError as e:
+            raise RecordingError(f'output = {self.output!r}: {e}') from None
+        self.writer.add_metadata('impact_arm', {
+            'version': package_version(), 'ros_distro': ros_distro(), 'node': 'recorder',
+            'start_time_ns': str(time.time_ns()), 'topics': json.dumps(topics)})
+        self.writer.add_metadata('parameters/recorder', {
+            name: json.dumps(p.value) for name, p in self.get_parameters_by_prefix('').items()})
+        if scene_text is not None:
+            self.writer.add_attachment(os.path.basename(scene), scene_text, 'application/yaml')
+            self.writer.add_metadata('scene', {'path': os.path.abspath(scene),
+                                               'yaml': scene_text})
+        self.failed = False
+        self.received = 0
+        self.wanted = {}  # topic -> type name ('' until discovered)
+        for entry in topics:
+            name, _, type_name = entry.partition(':')
+            self.wanted[name] = type_name or CONTRACT_TOPICS.get(name, ('',))[0]
+        self.subs = {}
+        self._subscribe_known()
+        self.create_timer(interval, self._flush)
+        self.create_timer(0.5, self._discover)
+        self.params = {}  # node -> 'start'/'end' state; queries never block the recording
+        self.param_clients = {n: (self.create_client(ListParameters, f'{n}/list_parameters'),
+                                  self.create_client(GetParameters, f'{n}/get_parameters'))
+                              for n in self.param_nodes}
+        self.get_logger().info(f'recording {len(self.wanted)} topics to {self.output}')
+
+    @property
+    def done(self):
+        return self.failed
+
+    # ---------------------------------------------------------------- subscriptions
+    def _subscribe_known(self):
+        for topic, type_name in self.wanted.items():
+            if type_name and topic not in self.subs:
+                qos = contract_qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
+                self.subs[topic] = self.create_subscription(
+                    message_class(type_name), topic, functools.partial(self._on_message, topic),
+                    qos, raw=True)
+
+    def _offered_default(self, topic) -> TopicQos:
+        """For a topic outside the contract: a QoS every current publisher is compatible with."""
+        offers = [TopicQos.from_rclpy(i.qos_profile)
+                  for i in self.get_publishers_info_by_topic(topic)]
+        reliable = offers and all(q.reliability == 'reliable' for q in offers)
+        durable = offers and all(q.durability == 'transient_local' for q in offers)
+        return TopicQos(reliability='reliable' if reliable else 'best_effort',
+                        durability='transient_local' if durable else 'volatile')
+
+    def _discover(self):
+        """Find the types of topics given without one, once someone publishes them."""
+        missing = [t for t, ty in self.wanted.items() if not ty]
+        if missing:
+            graph = dict(self.get_topic_names_and_types())
+            for topic in missing:
+                if graph.get(topic):
+                    self.wanted[topic] = graph[topic][0]
+            self._subscribe_known()
+        self._query_parameters('start')
+
+    def _on_message(self, topic, data, info):
+        self._store(topic, data, info)
+        # One executor cycle costs far more than a take: drain what is already queued (bounded,
+        # so timers and other topics still get their turn).
+        sub = self.subs.get(topic)
+        if sub is None:
+            return
+        with sub.handle:
+            for _ in range(DRAIN_MAX):
+                taken = sub.handle.take_message(sub.msg_type, True)
+                if taken is None or self.failed:
+                    break
+                self._store(topic, *taken)
+
+    def _store(self, topic, data, info):
+        received = info.get('received_timestamp') or time.time_ns()
+        try:
+            if not self.writer.has_topic(topic):
+                # Like rosbag2: store the QoS the publishers actually offer, else the contract's.
+                pubs = self.get_publishers_info_by_topic(topic)
+                offered = [TopicQos.from_rclpy(p.qos_profile) for p in pubs] or None
+                thash = str(pubs[0].topic_type_hash) if pubs else None
+                self.writer.add_topic(topic, self.wanted[topic], offered,
+                                      None if thash in (None, 'INVALID') else thash)
+            self.writer.write(topic, data, received, info.get('source_timestamp') or received)
+            self.received += 1
+        except RecordingError as e:
+            self._fail(e)
+
+    def _flush(self):
+        try:
+            self.writer.flush()
+        except RecordingError as e:
+            self._fail(e)
+
+    def _fail(self, err):
+        if not self.failed:
+            self.get_logger().error(f'recording stopped: {err}')
+        self.failed = True
+        for sub in self.subs.values():
+            self.destroy_subscription(sub)
+        self.subs.clear()
+
+    # ------------------------------------------------------------------- parameters
+    def _query_parameters(self, phase):
+        """Ask each param node (list, then get) without waiting; results become metadata."""
+        for name, (list_cli, get_cli) in self.param_clients.items():
+            if self.params.get(name) in (phase, phase + ' asked') or \
+                    not list_cli.service_is_ready() or not get_cli.service_is_ready():
+                continue
+            self.params[name] = phase + ' asked'
+            future = list_cli.call_async(ListParameters.Request())
+            future.add_done_callback(functools.partial(self._on_list, name, phase))
+
+    def _on_list(self, name, phase, future):
+        names = list(future.result().result.names) if future.result() else []
+        future = self.param_clients[name][1].call_async(GetParameters.Request(names=names))
+        future.add_done_callback(functools.partial(self._on_get, name, phase, names))
+
+    def _on_get(self, name, phase, names, future):
+        from rclpy.parameter import parameter_value_to_python
+        if future.result() is None or self.failed:
+            return
+        values = {n: json.dumps(parameter_value_to_python(v), default=str)
+                  for n, v in zip(names, future.result().values)}
+        self.writer.add_metadata(f'parameters/{name}/{phase}', values)
+        self.params[name] = phase
+
+    def finish(self, executor) -> int:
+        """Final parameter query (≤ 1 s, recording continues meanwhile), then close."""
+        if executor is not None and not self.failed:
+            self._query_parameters('end')
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline and any(
+                    s == 'end asked' for s in self.params.values()):
+                executor.spin_once(timeout_sec=0.05)
+        try:
+            self.writer.close()
+        except RecordingError as e:
+            self._fail(e)
+        self.get_logger().info(
+            f'{self.writer.message_count} messages in {self.output}' if not self.failed else
+            f'recording failed; {self.output} holds the data flushed before the error')
+        return 1 if self.failed else 0
+
+
+def main(args=None):
+    raise SystemExit(run(Recorder, args))
+
+
+if __name__ == '__main__':
+    main()

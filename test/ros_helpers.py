@@ -1,0 +1,210 @@
+"""DDS test helpers: a private domain per test module, node processes that are always ended
+(by PID), and a small publisher/subscriber program (run this file) for node tests.
+
+    from ros_helpers import ros_env, start_process, wait_for   # ros_env is a fixture
+
+Every process gets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and the module's ROS_DOMAIN_ID.
+"""
+import argparse
+import contextlib
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PYTHON = sys.executable
+HERE = os.path.abspath(__file__)
+
+
+def make_env(domain=None, **extra) -> dict:
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['ROS_DOMAIN_ID'] = str(domain if domain is not None else random.randint(1, 100))
+    env['PYTHONUNBUFFERED'] = '1'
+    env['PYTHONPATH'] = ROOT + os.pathsep + env.get('PYTHONPATH', '')
+    env.update({k: str(v) for k, v in extra.items()})
+    return env
+
+
+@pytest.fixture(scope='module')
+def ros_env():
+    """Environment for the node processes of one test module: its own random DDS domain."""
+    return make_env()
+
+
+class Proc:
+    """A started process whose stdout/stderr go to files (no pipe can fill up and block it)."""
+
+    def __init__(self, args, env, workdir, name):
+        self.name = name
+        self.out_path = os.path.join(workdir, f'{name}.out')
+        self.err_path = os.path.join(workdir, f'{name}.err')
+        with open(self.out_path, 'wb') as out, open(self.err_path, 'wb') as err:
+            self.popen = subprocess.Popen(args, env=env, cwd=workdir, stdout=out, stderr=err,
+                                          stdin=subprocess.DEVNULL)
+        self.pid = self.popen.pid
+
+    def signal(self, sig):
+        if self.popen.poll() is None:
+            os.kill(self.pid, sig)
+
+    def wait(self, timeout=10.0):
+        return self.popen.wait(timeout)
+
+    def alive(self):
+        return self.popen.poll() is None
+
+    @property
+    def stdout(self):
+        with open(self.out_path, encoding='utf-8', errors='replace') as f:
+            return f.read()
+
+    @property
+    def stderr(self):
+        with open(self.err_path, encoding='utf-8', errors='replace') as f:
+            return f.read()
+
+    def lines(self):
+        """stdout JSON lines (the helper programs' events)."""
+        out = []
+        for line in self.stdout.splitlines():
+            if line.startswith('{'):
+                with contextlib.suppress(ValueError):
+                    out.append(json.loads(line))
+        return out
+
+    def stop(self, timeout=5.0):
+        """SIGINT, then SIGKILL by PID if it does not exit in time."""
+        if self.alive():
+            self.signal(signal.SIGINT)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.signal(signal.SIGKILL)
+                self.popen.wait(5)
+
+
+@contextlib.contextmanager
+def start_process(args, env, workdir, name='proc'):
+    """Run ``args``; always ended (SIGINT then SIGKILL, by PID) when the block leaves."""
+    proc = Proc(args, env, workdir, name)
+    try:
+        yield proc
+    finally:
+        proc.stop()
+
+
+def node_args(module, *params, ros_args=()):
+    """``python -m module --ros-args -p k:=v ...``."""
+    args = [PYTHON, '-m', module, '--ros-args']
+    for p in params:
+        args += ['-p', p]
+    return args + list(ros_args)
+
+
+def helper_args(*args):
+    return [PYTHON, HERE] + [str(a) for a in args]
+
+
+def wait_for(predicate, timeout=10.0, interval=0.05):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval)
+    return predicate()
+
+
+# ------------------------------------------------------- helper program (run as a process)
+def _publish(args):
+    """Publish numbered JointState (+ WrenchStamped) messages; print one JSON line per batch."""
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from sensor_msgs.msg import JointState
+    from impact_arm.mcap_ros2 import contract_qos
+    rclpy.init()
+    node = rclpy.create_node('test_publisher')
+    js = node.create_publisher(JointState, '/joint_states',
+                               contract_qos('/joint_states').to_rclpy())
+    wr = node.create_publisher(WrenchStamped, '/contact_wrench',
+                               contract_qos('/contact_wrench').to_rclpy()) if args.wrench else None
+    end = time.monotonic() + args.wait_sub
+    while js.get_subscription_count() < 1 and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    print(json.dumps({'event': 'matched', 'subs': js.get_subscription_count()}), flush=True)
+    period = 1.0 / args.rate
+    start = time.monotonic()
+    for i in range(args.count):
+        target = start + i * period
+        delay = target - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        m = JointState(name=['joint1', 'joint2'], position=[i * 1e-3, -i * 1e-3],
+                       velocity=[float(i), 0.5], effort=[0.25, -0.25])
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(i, 1000)[0], (i % 1000) * 1_000_000
+        js.publish(m)
+        if wr is not None:
+            w = WrenchStamped()
+            w.header.stamp = m.header.stamp
+            w.wrench.force.x, w.wrench.force.y = float(i), 2.0 * i
+            wr.publish(w)
+        if i % args.batch == args.batch - 1 or i == args.count - 1:
+            print(json.dumps({'event': 'sent', 'n': i + 1, 't': time.time_ns()}), flush=True)
+    print(json.dumps({'event': 'done', 'elapsed': time.monotonic() - start}), flush=True)
+    end = time.monotonic() + args.linger  # keep answering (parameter services) for a while
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def _subscribe(args):
+    """Print one JSON line per received message: topic, wall time, a value identifying it."""
+    import rclpy
+    from impact_arm.mcap_ros2 import CONTRACT_TOPICS, contract_qos, message_class
+    rclpy.init()
+    node = rclpy.create_node('test_subscriber')
+
+    def make_cb(topic):
+        def cb(msg):
+            now = time.time_ns()
+            stamp = getattr(getattr(msg, 'header', None), 'stamp', None) or getattr(
+                msg, 'clock', None)
+            value = (stamp.sec * 10**9 + stamp.nanosec) if stamp is not None else None
+            print(json.dumps({'topic': topic, 't': now, 'stamp': value}), flush=True)
+        return cb
+    subs = [node.create_subscription(message_class(CONTRACT_TOPICS[t][0]), t, make_cb(t),
+                                     contract_qos(t).to_rclpy(1000)) for t in args.topics]
+    print(json.dumps({'event': 'ready', 'n': len(subs)}), flush=True)
+    end = time.monotonic() + args.duration
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest='cmd', required=True)
+    p = sub.add_parser('pub')
+    p.add_argument('--count', type=int, default=100)
+    p.add_argument('--rate', type=float, default=100.0)
+    p.add_argument('--wrench', action='store_true')
+    p.add_argument('--batch', type=int, default=10)
+    p.add_argument('--wait-sub', type=float, default=10.0)
+    p.add_argument('--linger', type=float, default=0.5)
+    s = sub.add_parser('sub')
+    s.add_argument('topics', nargs='+')
+    s.add_argument('--duration', type=float, default=5.0)
+    a = parser.parse_args()
+    try:
+        _publish(a) if a.cmd == 'pub' else _subscribe(a)
+    except KeyboardInterrupt:
+        pass

@@ -1,0 +1,133 @@
+"""The recorder node over DDS (separate processes, this machine only, a private domain): what
+was published is what the file holds; SIGKILL keeps everything up to the last flush; an
+unwritable output is a clear error and a non-zero exit."""
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import yaml
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from ros_helpers import helper_args, node_args, ros_env, start_process, wait_for  # noqa: F401
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PAPER = os.path.join(ROOT, 'config', 'paper.yaml')
+RECORDER = 'impact_arm.nodes.recorder'
+
+
+def read(path):
+    out = {}
+    with AnyReader([Path(path)]) as reader:
+        for c in reader.connections:
+            out[c.topic] = (c.msgtype, [])
+        for con, t, raw in reader.messages():
+            out[con.topic][1].append(reader.deserialize(raw, con.msgtype))
+    return out
+
+
+def count_messages(path):
+    """Messages in the file as it is now, or None while it cannot be read (mid-write)."""
+    try:
+        with open(path, 'rb') as f:
+            return make_reader(f).get_summary().statistics.message_count
+    except Exception:  # noqa: BLE001 - polling a file another process is writing
+        return None
+
+
+def test_records_what_was_published(ros_env, tmp_path):
+    out = tmp_path / 'run.mcap'
+    n = 150
+    rec_args = node_args(RECORDER, f'output:={out}', f'scene:={PAPER}',
+                         'param_nodes:=[test_publisher]', 'flush_interval:=0.2')
+    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
+            start_process(helper_args('pub', '--count', n, '--rate', 300, '--wrench',
+                                      '--linger', 2.0), ros_env, tmp_path, 'pub') as pub:
+        assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), \
+            pub.stderr + rec.stderr
+        assert [e for e in pub.lines() if e.get('event') == 'matched'][0]['subs'] >= 1
+        # everything published has reached a flushed file before the recorder is stopped
+        assert wait_for(lambda: count_messages(out) == 2 * n, 10), rec.stderr
+        assert wait_for(lambda: not pub.alive(), 10)
+        rec.stop()
+        assert rec.popen.returncode == 0, rec.stderr
+
+    got = read(out)
+    assert {t: (ty, len(m)) for t, (ty, m) in got.items()} == {
+        '/joint_states': ('sensor_msgs/msg/JointState', n),
+        '/contact_wrench': ('geometry_msgs/msg/WrenchStamped', n)}
+    for i, m in enumerate(got['/joint_states'][1]):
+        assert list(m.name) == ['joint1', 'joint2']
+        assert list(m.position) == [i * 1e-3, -i * 1e-3]
+        assert list(m.velocity) == [float(i), 0.5] and list(m.effort) == [0.25, -0.25]
+        assert (m.header.stamp.sec, m.header.stamp.nanosec) == (i // 1000, (i % 1000) * 10**6)
+    for i, m in enumerate(got['/contact_wrench'][1]):
+        assert (m.wrench.force.x, m.wrench.force.y) == (float(i), 2.0 * i)
+
+    with open(out, 'rb') as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        for c in summary.channels.values():
+            qos = yaml.safe_load(c.metadata['offered_qos_profiles'])
+            assert qos and qos[0]['reliability'] == 'reliable'
+            assert {'deadline', 'lifespan', 'liveliness_lease_duration'} <= set(qos[0])
+        messages = [m for _, c, m in reader.iter_messages(log_time_order=True)
+                    if c.topic == '/joint_states']
+        # log time = receive time, publish time = send time: received after sent, shortly
+        assert all(0 <= m.log_time - m.publish_time < 5 * 10**9 for m in messages)
+        batches = [e for e in pub.lines() if e.get('event') == 'sent']
+        for e in batches:  # message n-1 was sent before the publisher printed its batch line
+            assert messages[e['n'] - 1].publish_time <= e['t']
+        assert messages[0].publish_time > batches[0]['t'] - 10**9
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        attachments = {a.name: a.data for a in reader.iter_attachments()}
+    assert meta['impact_arm']['version'] and meta['impact_arm']['node'] == 'recorder'
+    with open(PAPER, 'rb') as f:
+        scene_text = f.read()
+    assert attachments['paper.yaml'] == scene_text
+    assert meta['scene']['yaml'].encode() == scene_text
+    own = {k: json.loads(v) for k, v in meta['parameters/recorder'].items()}
+    assert own['output'] == str(out) and own['flush_interval'] == 0.2
+    assert 'use_sim_time' in meta['parameters/test_publisher/start']
+
+
+def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
+    out = tmp_path / 'killed.mcap'
+    rec_args = node_args(RECORDER, f'output:={out}', 'flush_interval:=0.2',
+                         'param_nodes:=[""]')
+    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
+            start_process(helper_args('pub', '--count', 3000, '--rate', 200), ros_env,
+                          tmp_path, 'pub') as pub:
+        seen = wait_for(lambda: (count_messages(out) or 0) >= 60 and count_messages(out), 30)
+        assert seen, rec.stderr + pub.stderr
+        rec.signal(signal.SIGKILL)
+        rec.wait(10)
+        assert rec.popen.returncode == -signal.SIGKILL
+        assert pub.alive()  # the recorder died mid-run
+    got = read(out)['/joint_states'][1]
+    assert len(got) >= seen
+    # a prefix of what was published, in order, nothing missing
+    assert [m.velocity[0] for m in got] == [float(i) for i in range(len(got))]
+    with open(out, 'rb') as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) == len(got)
+
+
+def test_unwritable_output_is_a_clear_error(ros_env, tmp_path):
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('x')
+    with start_process(node_args(RECORDER, f'output:={blocker}/run.mcap'), ros_env, tmp_path,
+                       'recorder') as rec:
+        code = rec.wait(30)
+    assert code != 0
+    assert 'output' in rec.stderr and str(blocker) in rec.stderr
+    assert 'Traceback' not in rec.stderr
+
+
+def test_bad_parameter_names_the_parameter(ros_env, tmp_path):
+    with start_process(node_args(RECORDER, f'output:={tmp_path}/x.mcap', 'flush_interval:=0.0'),
+                       ros_env, tmp_path, 'recorder') as rec:
+        code = rec.wait(30)
+    assert code == 2 and 'flush_interval' in rec.stderr and '> 0' in rec.stderr
+    time.sleep(0)  # nothing left running: start_process ends it by PID
