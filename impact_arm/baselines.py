@@ -59,10 +59,24 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None):
         event.direction = 1.0
         return event
 
+    L = model.L
+    heights = [s.height for s in model.surfaces]
+
+    def make_rise(s):
+        # the kernel forgets a surface's dent once the tip is back above the surface
+        def event(t, y):
+            return eq.tip(y[:model.n], y[model.n:2 * model.n], L)[1] - heights[s]
+        event.terminal = True
+        event.direction = 1.0
+        return event
+
     while st.t < t_max and (not scene.cycles or cycles < scene.cycles):
         slots = _armed_slots(integ)
+        if st.phase == Phase.FREE:
+            slots += [-1 - s for s in range(len(heights)) if st.levels[s] != heights[s]]
         sol = solve_ivp(integ.rhs, (st.t, t_max), st.y, method=method, rtol=rtol, atol=atol,
-                        events=[make_event(s) for s in slots])
+                        events=[make_event(s) if s >= 0 else make_rise(-1 - s)
+                                for s in slots])
         nfev += sol.nfev
         if sol.status == -1:
             raise RuntimeError(f'solve_ivp {method} failed at t = {sol.t[-1]}: {sol.message}')
@@ -72,6 +86,9 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None):
             break
         t_event, i = min(fired)
         st.t, st.y = float(t_event), sol.y_events[i][0].copy()
+        if slots[i] < 0:
+            st.levels[-1 - slots[i]] = heights[-1 - slots[i]]
+            continue
         kind, surface, info = integ._apply_event(slots[i])
         if kind == 'switch':
             cycles += 1

@@ -101,7 +101,7 @@ COMMANDS = {
     'run': ('runner', 'start simulator, controller and recorder over DDS; record to MCAP'),
     'replay': ('nodes.replay', 'republish a recorded MCAP file with its original timing'),
     'analyze': ('analysis', 'impact table, limit cycle, Poincare sections and figures'),
-    'bench': ('bench', 'speed/accuracy and rate benchmarks'),
+    'bench': ('benchmarks', 'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
 
 

@@ -1,0 +1,48 @@
+"""``impact-arm bench <sub-command>``: benchmarks that print figures measured in one run.
+
+Benchmarks are not tests: they time things and print ratios; tests never assert wall-clock
+times. Each sub-command is a module with ``add_arguments(parser)`` and ``run(args) -> int``;
+``SUBCOMMANDS`` maps its name to (module path, one-line help). To add one (for example the
+node benchmark ``rates``), write such a module anywhere in the package and add one line here,
+e.g. ``'rates': ('impact_arm.nodes.rates_bench', 'realtime / lockstep node rates')``.
+Modules import their heavy dependencies inside ``run`` (so ``bench speed`` never loads rclpy).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS = {
+    'speed': ('impact_arm.benchmarks.speed',
+              'offline speed at equal accuracy vs scipy solve_ivp (issue 6)'),
+    'tradeoff': ('impact_arm.benchmarks.tradeoff',
+                 'work-precision table and plot: presets and solve_ivp methods vs reference'),
+    'stress': ('impact_arm.benchmarks.stress',
+               'stability matrix at the extremes of the parameter space'),
+    'features': ('impact_arm.benchmarks.features',
+                 'cost per simulated second of free motion, Hertz contact, the article'),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Every sub-command's options. Modules keep heavy imports (scipy, matplotlib, rclpy)
+    inside ``run`` so building the parser stays cheap."""
+    sub = parser.add_subparsers(dest='bench', required=True,
+                                metavar='{%s}' % ','.join(SUBCOMMANDS))
+    for name, (module, help_text) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        mod = importlib.import_module(module)
+        mod.add_arguments(p)
+        p.set_defaults(bench_run=mod.run)
+
+
+def cli(args) -> int:
+    return args.bench_run(args)
+
+
+def main(argv=None) -> int:
+    """Entry point of the thin scripts in ``bench/``: ``python bench/speed.py --json out``."""
+    from ..cli import main as cli_main
+    argv = list(sys.argv[1:] if argv is None else argv)
+    return cli_main(['bench'] + argv)

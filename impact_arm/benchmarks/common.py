@@ -1,0 +1,186 @@
+"""Helpers shared by the benchmarks: timed runs (ours and scipy's), error metrics against the
+``reference`` preset, tables, JSON output and progress lines.
+
+Every timing is the best of ``repeats`` runs inside the same process, so ratios printed by one
+benchmark compare like with like on the same machine at the same moment.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+import warnings
+
+LEVELS_DOC = 'relative error vs the reference preset'
+
+
+def progress(message: str) -> None:
+    """One status line on stderr (overwritten on a terminal, plain lines otherwise)."""
+    if sys.stderr.isatty():
+        print(f'\r\033[K{message}', end='', file=sys.stderr, flush=True)
+    else:
+        print(message, file=sys.stderr, flush=True)
+
+
+def progress_done() -> None:
+    if sys.stderr.isatty():
+        print('\r\033[K', end='', file=sys.stderr, flush=True)
+
+
+def load(scene_name: str):
+    from ..scene import load_scene
+    return load_scene(scene_name)
+
+
+# --- timed runs -----------------------------------------------------------------------------
+def time_ours(scene, rtol, atol, repeats=3, max_step=None):
+    """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
+    from ..simulate import run_events
+    best = math.inf
+    out = None
+    for _ in range(max(1, repeats)):
+        impacts, t_end, integ, wall = run_events(scene, rtol=rtol, atol=atol, max_step=max_step)
+        if wall < best:
+            best = wall
+        out = impacts, t_end, integ.stats.rhs_evaluations
+    impacts, t_end, nfev = out
+    return {'impacts': impacts, 't_end': t_end, 'rhs_evaluations': nfev, 'wall': best}
+
+
+def time_scipy(scene, method, rtol, atol, repeats=3):
+    from ..baselines import run_scipy
+    best = math.inf
+    out = None
+    for _ in range(max(1, repeats)):
+        with warnings.catch_warnings():
+            # rejected trial steps of the explicit methods overflow harmlessly inside contact
+            warnings.simplefilter('ignore', RuntimeWarning)
+            impacts, t_end, nfev, wall = run_scipy(scene, method, rtol, atol)
+        best = min(best, wall)
+        out = impacts, t_end, nfev
+    impacts, t_end, nfev = out
+    return {'impacts': impacts, 't_end': t_end, 'rhs_evaluations': nfev, 'wall': best}
+
+
+# --- metrics --------------------------------------------------------------------------------
+def _rel(value, ref):
+    if ref == 0:
+        return abs(value)
+    return abs(value / ref - 1.0)
+
+
+def _rel_vec(value, ref):
+    num = math.sqrt(sum((a - b) ** 2 for a, b in zip(value, ref)))
+    den = math.sqrt(sum(b * b for b in ref))
+    return num / den if den else num
+
+
+# issue 6: "the first impact's metrics (duration, δm, δr, F_max, post-impact tip velocity,
+# energies)": each component's own relative error, the level is their maximum
+SPEED_KEYS = ('duration', 'delta_m', 'delta_r', 'F_max', 'v_after', 'T_before', 'T_after')
+
+
+def first_impact_error(impacts, ref_impacts):
+    """Worst relative error, component by component, of the first impact's metrics."""
+    if not impacts:
+        return math.inf
+    a, b = impacts[0], ref_impacts[0]
+    worst = 0.0
+    for key in SPEED_KEYS:
+        va, vb = a[key], b[key]
+        if isinstance(vb, list):
+            worst = max([worst] + [_rel(x, y) for x, y in zip(va, vb)])
+        else:
+            worst = max(worst, _rel(va, vb))
+    return worst
+
+
+# issue 5: the trade-off metrics, each a relative error (t15: as a fraction of the period)
+TRADEOFF_METRICS = ('delta_m', 'F_max', 'v_after', 'cor_kin', 'cor_energy', 'v15_contact',
+                    't15')
+METRIC_LABELS = {
+    'delta_m': 'δm #1', 'F_max': 'Fmax #1', 'v_after': 'v after #1', 'cor_kin': 'e #1',
+    'cor_energy': 'e_energy #1', 'v15_contact': 'v contact #15', 't15': 't #15 / period'}
+
+
+def tradeoff_errors(impacts, ref_impacts):
+    """Relative errors of the issue-5 metrics; inf where the run lacks the impact."""
+    out = {k: math.inf for k in TRADEOFF_METRICS}
+    if impacts:
+        a, b = impacts[0], ref_impacts[0]
+        out['delta_m'] = _rel(a['delta_m'], b['delta_m'])
+        out['F_max'] = _rel(a['F_max'], b['F_max'])
+        out['v_after'] = _rel_vec(a['v_after'], b['v_after'])
+        out['cor_kin'] = _rel(a['cor_kinematic'], b['cor_kinematic'])
+        out['cor_energy'] = max(_rel(x, y) for x, y in zip(a['cor_energetic'],
+                                                            b['cor_energetic']))
+    k = len(ref_impacts) - 1
+    if len(impacts) > k >= 1:
+        a, b = impacts[k], ref_impacts[k]
+        period = b['t_contact'] - ref_impacts[k - 1]['t_contact']
+        out['v15_contact'] = _rel_vec(a['v_before'], b['v_before'])
+        out['t15'] = abs(a['t_contact'] - b['t_contact']) / period
+    return out
+
+
+def worst(errors: dict) -> float:
+    return max(errors.values()) if errors else math.inf
+
+
+# --- output ---------------------------------------------------------------------------------
+def fmt_err(x: float) -> str:
+    if x is None or not math.isfinite(x):
+        return 'miss'
+    if x == 0:
+        return '0'
+    return f'{x:.1e}'
+
+
+def table(header, rows, align=None) -> str:
+    """Plain-text table (also valid Markdown)."""
+    cells = [list(map(str, header))] + [[str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    align = align or ['<'] + ['>'] * (len(header) - 1)
+
+    def line(r):
+        return '| ' + ' | '.join(f'{c:{a}{w}}' for c, a, w in zip(r, align, widths)) + ' |'
+    sep = '|' + '|'.join(('-' * (w + 1) + ':') if a == '>' else ('-' * (w + 2))
+                         for a, w in zip(align, widths)) + '|'
+    return '\n'.join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
+
+
+def _clean(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def write_json(path, data) -> None:
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    tmp = path + '.tmp'
+    with open(tmp, 'w', encoding='utf-8') as f:
+        json.dump(_clean(data), f, indent=1)
+    os.replace(tmp, path)
+    print(f'wrote {path}')
+
+
+def machine() -> dict:
+    import platform
+    import numpy
+    import scipy
+    try:
+        import numba
+        nb = numba.__version__
+    except ImportError:
+        nb = None
+    from .. import jit
+    return {'python': platform.python_version(), 'numpy': numpy.__version__,
+            'scipy': scipy.__version__, 'numba': nb, 'jit': jit.AVAILABLE,
+            'cpus': os.cpu_count(), 'time': time.strftime('%Y-%m-%dT%H:%M:%S')}
