@@ -561,9 +561,13 @@ def iter_raw(path, topics=None, start_time_ns: int = None) -> Iterator[RawMessag
     from mcap.reader import make_reader
     with open(path, 'rb') as f:
         reader = make_reader(f)
+        kw = {}
+        if start_time_ns is not None:  # inclusive; mcap >= 1.2 renamed the argument
+            import inspect
+            new = 'starting_at' in inspect.signature(reader.iter_messages).parameters
+            kw['starting_at' if new else 'start_time'] = int(start_time_ns)
         for schema, channel, message in reader.iter_messages(
-                topics=list(topics) if topics else None, start_time=start_time_ns,
-                log_time_order=True):
+                topics=list(topics) if topics else None, log_time_order=True, **kw):
             yield RawMessage(channel.topic, schema.name if schema else '', message.log_time,
                              message.publish_time, message.data)
 

@@ -1,0 +1,218 @@
+"""replay: republish a recorded MCAP file, like ``ros2 bag play``.
+
+``ros2 run impact_arm replay --ros-args -p file:=run.mcap -p rate:=2.0`` and
+``impact-arm replay run.mcap --rate 2``. Each topic is published with its recorded type and the
+QoS its publishers offered (from the file), as the recorded serialized bytes (nothing is
+deserialized); timing follows the recorded log times scaled by ``rate``
+(``impact_arm.replay`` computes the schedule). Parameters:
+
+==========================  ========  =====================================================
+``file``                    string    MCAP file to replay (required)
+``rate``                    float     speed factor, (0, 1000]; 1.0 = recorded speed
+``clock``                   float     publish /clock (recorded time) at this many Hz of
+                                      wall time, [0, 10000]; 0 = no /clock
+``loop``                    bool      start again after the last message
+``topics``                  string[]  replay only these topics ([] = all)
+``start_offset``            float     skip this many seconds of recorded time, >= 0
+``delay``                   float     wait this long before the first message, [0, 3600] s
+``wait_for_subscribers``    int       before starting, wait (at most 30 s) until every topic
+                                      has this many subscribers, [0, 1000]
+==========================  ========  =====================================================
+
+Publishing runs in its own thread paced by the monotonic clock, so the executor (parameter
+services) never delays a message; a late message is published at once, never skipped.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import threading
+import time
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from ..errors import ImpactArmError
+from ..mcap_ros2 import TopicQos, contract_qos, message_class
+from ..replay import ReplayError, ReplayPlan, summarize
+from ._runner import run
+
+WAIT_SUBSCRIBERS_MAX = 30.0
+
+PARAMETERS = {  # name: (default, description, check -> converted value or raise)
+    'file': ('', 'MCAP file to replay'),
+    'rate': (1.0, 'speed factor, (0, 1000]; 1.0 = recorded speed'),
+    'clock': (0.0, 'publish /clock at this many Hz of wall time, [0, 10000]; 0 = off'),
+    'loop': (False, 'start again after the last message'),
+    'topics': ([''], 'topics to replay ([] or [""] = all)'),
+    'start_offset': (0.0, 'seconds of recorded time to skip, >= 0'),
+    'delay': (0.0, 'seconds to wait before the first message, [0, 3600]'),
+    'wait_for_subscribers': (0, 'wait (<= 30 s) for this many subscribers per topic, [0, 1000]'),
+}
+
+
+def _number(name, value, low, high, kind=float):
+    try:
+        number = kind(value)
+    except (TypeError, ValueError):
+        raise ReplayError(f'{name} = {value!r}: must be a number in [{low}, {high}]') from None
+    if isinstance(value, bool) or not (math.isfinite(number) and low <= number <= high):
+        raise ReplayError(f'{name} = {value!r}: must be in [{low}, {high}]')
+    return number
+
+
+class Replay(Node):
+    def __init__(self, **overrides):
+        super().__init__('replay', parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
+        values = {name: self.declare_parameter(
+            name, default, ParameterDescriptor(description=text, dynamic_typing=True)).value
+            for name, (default, text) in PARAMETERS.items()}
+        if not values['file']:
+            raise ReplayError('file = "": the MCAP file to replay is required '
+                              '(-p file:=run.mcap)')
+        clock = _number('clock', values['clock'], 0, 10000)
+        self.delay = _number('delay', values['delay'], 0, 3600)
+        self.wait_subs = _number('wait_for_subscribers', values['wait_for_subscribers'], 0,
+                                 1000, int)
+        loop = values['loop']
+        if not isinstance(loop, bool):
+            raise ReplayError(f'loop = {loop!r}: must be true or false')
+        topics = values['topics'] or []
+        if isinstance(topics, str):
+            topics = [topics]
+        self.plan = ReplayPlan.open(values['file'], rate=values['rate'],
+                                    start_offset=values['start_offset'],
+                                    topics=[t for t in topics if t], loop=loop)
+        self.clock_period = 1.0 / clock if clock else math.inf
+        self.publishers_ = {}
+        for topic, info in self.plan.topics.items():
+            if topic == '/clock' and clock:
+                self.get_logger().warning('not replaying the recorded /clock: clock > 0 '
+                                          'publishes it from the replay')
+                continue
+            qos = info.qos[0] if info.qos and all(
+                (q.reliability, q.durability) == (info.qos[0].reliability,
+                                                  info.qos[0].durability)
+                for q in info.qos) else contract_qos(topic, TopicQos())
+            self.publishers_[topic] = self.create_publisher(
+                message_class(info.type_name), topic, qos.to_rclpy(min_depth=10))
+        self.clock_pub = None
+        if clock:
+            from rosgraph_msgs.msg import Clock
+            self.clock_pub = self.create_publisher(Clock, '/clock',
+                                                   contract_qos('/clock').to_rclpy())
+            self._Clock = Clock
+        self.published = 0
+        self.error = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._play, name='replay', daemon=True)
+        self.get_logger().info('replaying ' + summarize(self.plan))
+        self._thread.start()
+
+    @property
+    def done(self):
+        return not self._thread.is_alive()
+
+    def _wait_for_subscribers(self):
+        if not self.wait_subs:
+            return
+        end = time.monotonic() + WAIT_SUBSCRIBERS_MAX
+        while not self._stop.is_set() and time.monotonic() < end:
+            if all(p.get_subscription_count() >= self.wait_subs
+                   for p in self.publishers_.values()):
+                return
+            self._stop.wait(0.02)
+        self.get_logger().warning(f'starting without {self.wait_subs} subscribers on '
+                                  f'every topic after {WAIT_SUBSCRIBERS_MAX:g} s')
+
+    def _play(self):
+        try:
+            self._wait_for_subscribers()
+            if self._stop.wait(self.delay):
+                return
+            progress = sys.stderr.isatty()
+            wall0 = time.monotonic()
+            next_clock = 0.0 if self.clock_pub else math.inf
+            for due, m in self.plan.events():
+                while True:
+                    now = time.monotonic() - wall0
+                    if next_clock <= min(due, now):
+                        self._publish_clock(self.plan.recorded_time_ns(next_clock))
+                        next_clock += self.clock_period
+                        continue
+                    wait = min(due, next_clock) - now
+                    if wait <= 0:
+                        break
+                    if self._stop.wait(min(wait, 0.1)):
+                        return
+                pub = self.publishers_.get(m.topic)
+                if pub is not None:
+                    pub.publish(m.data)
+                    self.published += 1
+                    if progress and self.published % 500 == 0:
+                        print(f'\r  {self.published} messages, {due:.1f} s', end='',
+                              file=sys.stderr, flush=True)
+        except Exception as e:  # noqa: BLE001 - reported by finish(), exit code 1
+            self.error = e
+
+    def _publish_clock(self, t_ns):
+        msg = self._Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
+        self.clock_pub.publish(msg)
+
+    def finish(self, executor) -> int:
+        self._stop.set()
+        self._thread.join(5.0)
+        if self.error is not None:
+            self.get_logger().error(f'replay stopped: {self.error}')
+            return 1
+        self.get_logger().info(f'{self.published} messages replayed')
+        return 0
+
+
+# ------------------------------------------------------------------- impact-arm replay
+def add_arguments(parser):
+    parser.add_argument('file', help='MCAP file to replay')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='speed factor, (0, 1000] (default 1.0: recorded speed)')
+    parser.add_argument('--clock', type=float, nargs='?', const=100.0, default=0.0,
+                        metavar='HZ', help='publish /clock with the recorded time '
+                        '(default 100 Hz when given without a value)')
+    parser.add_argument('--loop', action='store_true', help='start again after the end')
+    parser.add_argument('--topics', nargs='+', default=[], metavar='TOPIC',
+                        help='replay only these topics (default: all)')
+    parser.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                        help='skip this many seconds of recorded time')
+    parser.add_argument('--delay', type=float, default=0.0, metavar='S',
+                        help='wait this long before the first message')
+    parser.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
+                        help='wait (at most 30 s) until every topic has N subscribers')
+
+
+def cli(args) -> int:
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    overrides = {'file': os.path.abspath(args.file), 'rate': float(args.rate),
+                 'clock': float(args.clock), 'loop': bool(args.loop),
+                 'topics': list(args.topics) or [''], 'start_offset': float(args.start_offset),
+                 'delay': float(args.delay), 'wait_for_subscribers': int(args.wait_for_subscribers)}
+    # the same checks as the node, before any DDS start-up: errors come as one line
+    ReplayPlan.open(overrides['file'], rate=overrides['rate'],
+                    start_offset=overrides['start_offset'],
+                    topics=[t for t in overrides['topics'] if t], loop=overrides['loop'])
+    _number('clock', overrides['clock'], 0, 10000)
+    _number('delay', overrides['delay'], 0, 3600)
+    _number('wait_for_subscribers', overrides['wait_for_subscribers'], 0, 1000, int)
+    return run(lambda: Replay(**overrides), ['impact-arm-replay'])
+
+
+def main(args=None):
+    raise SystemExit(run(Replay, args))
+
+
+__all__ = ['Replay', 'ImpactArmError', 'add_arguments', 'cli', 'main']
+
+if __name__ == '__main__':
+    main()
