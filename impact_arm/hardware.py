@@ -1,0 +1,146 @@
+"""The simulated arm as its driver sees it, free of ROS: torque commands in; sampled joint
+states, period-averaged contact wrenches and impact reports out.
+
+The simulator node is a thin shell around ``SimulatedArm``: it decides *when* to call
+``step`` (wall clock or lockstep) and turns what comes back into messages. Joint space here is
+the driver's: relative encoder angles (joint1 = q1, joint2 = q2 - q1), joint torques T01, T12.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from .control import to_joint_space
+from .errors import ImpactArmError
+from .integrator import PRESETS, PhaseIntegrator
+from .metrics import ImpactBuilder
+from .model import ArmModel
+from .scene import Scene
+
+
+class CommandError(ImpactArmError):
+    """A torque command that must not be applied (wrong length, non-finite values)."""
+
+
+@dataclass
+class Tick:
+    """What the arm's sensors show at the end of one period."""
+    t: float                      # simulated time [s]
+    position: list                # joint angles [rad] (relative, encoder convention)
+    velocity: list                # joint rates [rad/s]
+    effort: list                  # joint torques acting now [N m] (0 while actuators are off)
+    wrench: tuple                 # (tangential, normal) contact force averaged over the period [N]
+    impacts: list = field(default_factory=list)   # [(record, trace rows)] completed this period
+
+
+class SimulatedArm:
+    """One arm, one clock: ``step()`` advances exactly one period of ``1 / rate`` seconds.
+
+    Time is counted in whole periods (t = k / rate) so that a long run never drifts from the
+    schedule by accumulated rounding."""
+
+    def __init__(self, scene: Scene, rate: float, *, preset: str | None = None,
+                 max_effort: float = math.inf, trace: bool = True):
+        if not rate > 0:
+            raise ValueError(f'rate = {rate}: must be > 0 Hz')
+        preset = preset or scene.integrator.preset
+        if preset not in PRESETS:
+            raise ValueError(f'preset = {preset!r}: choose one of {", ".join(PRESETS)}')
+        self.scene = scene
+        self.model = ArmModel(scene)
+        self.n = self.model.n
+        self.rate = float(rate)
+        self.max_effort = float(max_effort)
+        spec = scene.integrator
+        self.integrator = PhaseIntegrator(
+            self.model, preset=preset,
+            rtol=spec.rtol if preset == spec.preset else None,
+            atol=spec.atol if preset == spec.preset else None,
+            max_step=spec.max_step, control='held', trace=trace)
+        self.builder = ImpactBuilder(self.model)
+        self.periods = 0
+        self.command = [0.0] * self.n          # the torque being held (after clipping)
+        self.clipped = 0                        # commands that hit max_effort
+
+    def warm_up(self):
+        """Load every compiled function the stepping path may call (numba loads them from its
+        cache on first use: ~0.5 s in all), so that the first period, or the first impact,
+        of a real-time run does not pay for it."""
+        from .contact import residual_indentation, restitution_radius
+        from .model import kinetic_energy_split
+        scratch = PhaseIntegrator(self.model, self.integrator.state.copy(),
+                                  preset='fast', control='held')
+        scratch.advance(scratch.state.t + 1.0 / self.rate)
+        n, y = self.n, scratch.state.y
+        scratch.torque()
+        scratch.contact_forces(y[:n], y[n:2 * n])
+        kinetic_energy_split(self.model, y[:n], y[n:2 * n])
+        self.model.tip(y[:n], y[n:2 * n])
+        self.model.gravity_forces(y[:n])
+        for surface in self.model.surfaces:
+            c = surface.constants
+            dm = 3.0 * c.delta_c
+            dr = residual_indentation(dm, c) if surface.law == 'elastoplastic' else 0.0
+            restitution_radius(dm, dr, 10.0 * c.P_c, c.E)
+
+    # ----------------------------------------------------------------------- commands
+    def check_command(self, values) -> list:
+        """The command as floats, or CommandError saying why it is refused."""
+        values = list(values)
+        if len(values) != self.n:
+            raise CommandError(f'command has {len(values)} values, expected {self.n} '
+                               f'(one torque per joint)')
+        out = [float(v) for v in values]
+        bad = [i for i, v in enumerate(out) if not math.isfinite(v)]
+        if bad:
+            raise CommandError(f'command value(s) {out} not finite (index {bad})')
+        return out
+
+    def apply(self, values):
+        """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
+        tau = self.check_command(values)
+        limited = [min(max(v, -self.max_effort), self.max_effort) for v in tau]
+        self.clipped += limited != tau
+        self._hold(limited)
+
+    def release(self):
+        """Zero torque (watchdog expired, controller gone)."""
+        self._hold([0.0] * self.n)
+
+    def _hold(self, tau):
+        if tau != self.command:
+            self.command = tau
+            self.integrator.state.held_torque = tau
+            self.integrator.reset_derivative()
+
+    # ----------------------------------------------------------------------------- time
+    @property
+    def t(self) -> float:
+        return self.integrator.state.t
+
+    def step(self) -> Tick:
+        """Advance one period under the held command; raises SimulationError when the physics
+        leaves its validity (the state stays at the last good point)."""
+        integ = self.integrator
+        t_end = (self.periods + 1) / self.rate
+        impacts = []
+        for event in integ.advance(t_end):
+            record = self.builder.feed(event)
+            if record is not None:
+                rows = []
+                if integ.trace is not None:
+                    rows, integ.trace[:] = integ.trace[:], []
+                impacts.append((record, rows))
+        self.periods += 1
+        jt, jn = integ.take_impulse()
+        return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
+
+    def sample(self, wrench=(0.0, 0.0), impacts=()) -> Tick:
+        """The sensors' view of the current state."""
+        st = self.integrator.state
+        n = self.n
+        q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+        tau = self.integrator.torque()
+        return Tick(st.t, to_joint_space(q), to_joint_space(qd),
+                    list(tau) if tau is not None else [0.0] * n, tuple(wrench), list(impacts))
+

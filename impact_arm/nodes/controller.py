@@ -1,0 +1,222 @@
+"""controller: the down/up striking cycle as an effort controller (design.md §3-4).
+
+It knows the arm only as a real model-based controller would (kinematics and gravity terms
+from the scene) and talks only through topics: /joint_states and, if anyone publishes it,
+/contact_wrench in; /effort_controller/commands out, [τ_joint1, τ_joint2] in the order of
+``joints`` — what ros2_control's forward_command_controller named ``effort_controller`` takes.
+
+trigger joint_states (default): one command per joint state whose stamp reaches the next tick
+of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer: a timer at
+``rate`` on the node's clock uses the latest joint state. On shutdown it sends a zero command.
+"""
+from __future__ import annotations
+
+import math
+
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from ..control import ANTIWINDUP_STRATEGIES, CycleController, PidIntegrator, to_absolute
+from ..control import to_joint_space
+from ..mcap_ros2 import contract_qos
+from ..model import ArmModel
+from ..scene import load_scene, resolve_scene_path
+from ._runner import run
+from .params import Param, ParameterError, declare, validator
+
+COMMAND_TOPIC = '/effort_controller/commands'
+STAMP_EPS = 1e-9                 # stamps are integer nanoseconds: ticks compare to 1 ns
+
+
+def parameter_table(scene):
+    """The controller's parameters; defaults come from the scene's controller section."""
+    c, n = scene.controller, scene.n_links
+    surfaces = [s.height for s in scene.surfaces]
+    return (
+        Param('scene', '', 'scene YAML file or installed scene name (empty: paper): the model '
+              'the controller knows (kinematics, gravity) and its default gains', 'str',
+              read_only=True),
+        Param('law', c.law if c.law in ('q', 'pid', 'pd') else 'q',
+              'q (article eq. 9: PD on link angles + gravity compensation), pid or pd', 'str',
+              choices=('q', 'pid', 'pd')),
+        Param('rate', 1000.0, 'command rate [Hz]', low=0.1, high=100000.0, read_only=True),
+        Param('trigger', 'joint_states', 'joint_states: compute on each joint state reaching '
+              'the next tick; timer: compute at rate on the node clock', 'str',
+              choices=('joint_states', 'timer'), read_only=True),
+        Param('p', list(c.kp), 'proportional gains per joint [N m/rad]', 'floats', low=0.0,
+              size=n),
+        Param('i', list(c.ki), 'integral gains per joint [N m/(rad s)] (law pid)', 'floats',
+              low=0.0, size=n),
+        Param('d', list(c.kd), 'derivative gains per joint [N m s/rad]', 'floats', low=0.0,
+              size=n),
+        Param('i_clamp_max', math.inf, 'upper clamp of the integral term [N m] (legacy)',
+              high=math.inf),
+        Param('i_clamp_min', -math.inf, 'lower clamp of the integral term [N m] (legacy)',
+              low=-math.inf),
+        Param('antiwindup_strategy', 'none', 'integral anti-windup', 'str',
+              choices=ANTIWINDUP_STRATEGIES),
+        Param('space', c.space, 'angles the PID acts on: absolute link angles or relative '
+              'joint angles', 'str', choices=('absolute', 'joint')),
+        Param('down_target', to_joint_space(c.down_target), 'joint positions aimed at on the '
+              'way down [rad]', 'floats', low=-4 * math.pi, high=4 * math.pi, size=n),
+        Param('up_target', to_joint_space(c.up_target), 'joint positions aimed at on the way '
+              'up [rad]', 'floats', low=-4 * math.pi, high=4 * math.pi, size=n),
+        Param('switch_height', c.switch_height, 'tip height that ends the up phase [m]',
+              low=-1e3, high=1e3),
+        Param('surface_height', min(surfaces) if surfaces else -1e3,
+              'height of the struck surface, for velocity-reversal detection [m]',
+              low=-1e3, high=1e3),
+        Param('force_threshold', 1.0, 'contact normal force that means impact [N]', low=0.0),
+        Param('reversal_band', 0.01, 'tip velocity reversal within this height above the '
+              'surface means impact [m]', low=0.0, high=10.0),
+        Param('joints', [f'joint{k + 1}' for k in range(n)], 'joint order of the command '
+              'array', 'strs', size=n, read_only=True),
+    )
+
+
+class Controller(Node):
+    def __init__(self):
+        super().__init__('controller')
+        name = self.declare_parameter('scene', '').value
+        scene = load_scene(resolve_scene_path(name or 'paper'))
+        self.undeclare_parameter('scene')
+        self.table = parameter_table(scene)
+        p = self.p = declare(self, self.table)
+        self.n = scene.n_links
+        self.model = ArmModel(scene)
+        self.joint_names = [f'joint{k + 1}' for k in range(self.n)]
+        if sorted(p['joints']) != self.joint_names:
+            raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
+                                 f'{self.joint_names} once')
+        self.order = [self.joint_names.index(j) for j in p['joints']]
+        self.ctrl = CycleController(self.model, p['law'], p['p'], p['d'], p['i'],
+                                    to_absolute(p['down_target']), to_absolute(p['up_target']),
+                                    p['switch_height'], p['surface_height'], space=p['space'],
+                                    force_threshold=p['force_threshold'],
+                                    reversal_band=p['reversal_band'],
+                                    integrator=self._integrator(p))
+        self._warm_up(scene)
+        self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
+        self.period = 1.0 / p['rate']
+        self.next_tick = 0.0
+        self.latest = None                 # (t, q, qd) in absolute angles
+        self.waiting = None                # a joint state waiting for its wrench
+        self.wrench_stamp = -math.inf
+        self.normal_force = None
+        self.sent = 0
+        self.warned_names = False
+        self.pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC,
+                                         contract_qos(COMMAND_TOPIC).to_rclpy())
+        # keep only the newest sample: a controller that fell behind acts on the present
+        latest_only = contract_qos('/joint_states').to_rclpy()
+        latest_only.depth = 1
+        self.sub_wrench = self.create_subscription(WrenchStamped, '/contact_wrench',
+                                                   self._on_wrench, latest_only)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_state, latest_only)
+        if p['trigger'] == 'timer':
+            self.create_timer(self.period, self._on_timer)
+        self.msg = Float64MultiArray()
+        self.get_logger().info(f'law {p["law"]} at {p["rate"]:g} Hz ({p["trigger"]}), '
+                               f'scene {scene.name!r}')
+
+    done = False
+
+    def _warm_up(self, scene):
+        """Load the compiled laws and kinematics now: their first call reads numba's cache
+        (~0.5 s), which must not happen on the first tick, with the arm already moving."""
+        c, law = self.ctrl, self.ctrl.law
+        for c.law in ('q', 'pid'):
+            c.torque(scene.q0, scene.qd0)
+        c.law = law
+        self.model.tip(scene.q0, scene.qd0)
+
+    @staticmethod
+    def _integrator(p):
+        return PidIntegrator(len(p['p']), p['i_clamp_max'], p['i_clamp_min'],
+                             p['antiwindup_strategy'])
+
+    def _set_parameters(self, values):
+        p = dict(self.p, **values)
+        if p['i_clamp_min'] > p['i_clamp_max']:
+            raise ParameterError(f'i_clamp_min = {p["i_clamp_min"]:g} > i_clamp_max = '
+                                 f'{p["i_clamp_max"]:g}')
+        c = self.ctrl
+        if p['law'] != c.law or p['antiwindup_strategy'] != self.p['antiwindup_strategy'] or \
+                p['i_clamp_max'] != self.p['i_clamp_max'] or \
+                p['i_clamp_min'] != self.p['i_clamp_min']:
+            c.integral = self._integrator(p)   # a new law or clamp starts a fresh integral
+        c.law, c.space = p['law'], p['space']
+        c.kp, c.ki, c.kd = list(p['p']), list(p['i']), list(p['d'])
+        c.targets = {'down': to_absolute(p['down_target']), 'up': to_absolute(p['up_target'])}
+        c.switch_height, c.surface_height = p['switch_height'], p['surface_height']
+        c.force_threshold, c.reversal_band = p['force_threshold'], p['reversal_band']
+        self.p = p
+        self.get_logger().info(f'parameters changed: {", ".join(sorted(values))}')
+
+    # ------------------------------------------------------------------------- inputs
+    def _on_wrench(self, msg):
+        self.wrench_stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.normal_force = msg.wrench.force.y
+        if self.waiting is not None and self.wrench_stamp >= self.waiting[0] - STAMP_EPS:
+            state, self.waiting = self.waiting, None
+            self._tick(*state)
+
+    def _on_joint_state(self, msg):
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        try:
+            index = [list(msg.name).index(j) for j in self.joint_names]
+            pos = [msg.position[k] for k in index]
+            vel = [msg.velocity[k] for k in index]
+        except (ValueError, IndexError):
+            self.get_logger().warning(f'joint state without {self.joint_names} positions and '
+                                      f'velocities: ignored', throttle_duration_sec=2.0)
+            return
+        if not all(math.isfinite(v) for v in pos + vel):
+            self.get_logger().warning('non-finite joint state ignored', throttle_duration_sec=2.0)
+            return
+        self.latest = (t, to_absolute(pos), to_absolute(vel))
+        if self.p['trigger'] != 'joint_states' or t < self.next_tick - STAMP_EPS:
+            return
+        # the wrench of the same instant is published just before the joint state: wait for
+        # it when someone publishes wrenches, so the decision never depends on arrival order
+        if self.wrench_stamp < t - STAMP_EPS and self.sub_wrench.get_publisher_count() > 0:
+            self.waiting = self.latest
+            return
+        self.waiting = None
+        self._tick(*self.latest)
+
+    def _on_timer(self):
+        if self.latest is not None:
+            self._tick(*self.latest)
+
+    # ------------------------------------------------------------------------ output
+    def _tick(self, t, q, qd):
+        self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
+        tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
+        self._send([tau[j] for j in self.order])
+
+    def _send(self, values):
+        self.msg.data = [float(v) for v in values]
+        self.pub.publish(self.msg)
+        self.sent += 1
+
+    def finish(self, executor) -> int:
+        """Like a deactivated controller: leave the actuators with zero torque."""
+        from rclpy.duration import Duration
+        try:
+            self._send([0.0] * self.n)
+            self.pub.wait_for_all_acked(Duration(seconds=0.5))
+        except Exception:  # noqa: BLE001 - best effort once the middleware is shutting down
+            self.get_logger().warning('could not send the zero command on exit')
+        self.get_logger().info(f'{self.sent} commands sent; zero command on exit')
+        return 0
+
+
+def main(args=None):
+    raise SystemExit(run(Controller, args))
+
+
+if __name__ == '__main__':
+    main()

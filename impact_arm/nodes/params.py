@@ -1,0 +1,148 @@
+"""Node parameters declared from one table: descriptor (description, range) for ``ros2 param
+describe``, and the same check at start-up and on ``ros2 param set``, with a message naming the
+parameter and the allowed range.
+
+Numbers accept ints where floats are meant (``-p publish_rate:=500`` just works).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+
+from ..errors import ImpactArmError
+
+
+class ParameterError(ImpactArmError, ValueError):
+    """A parameter value outside what the node accepts."""
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    default: object
+    description: str
+    kind: str = 'float'
+    low: float | None = None          # inclusive bounds
+    high: float | None = None
+    choices: tuple = ()
+    size: int | None = None           # arrays: required length (None: any, >= 1)
+    read_only: bool = False           # start-up only (changing it needs a restart)
+    open_low: bool = False            # low bound excluded (e.g. rates > 0)
+
+    def allowed(self) -> str:
+        if self.choices:
+            return 'one of ' + ', '.join(repr(c) for c in self.choices)
+        if self.low is not None and self.high is not None:
+            return f'{"(" if self.open_low else "["}{self.low:g}, {self.high:g}]'
+        if self.low is not None:
+            return f'{">" if self.open_low else ">="} {self.low:g}'
+        if self.high is not None:
+            return f'<= {self.high:g}'
+        return {'floats': 'a list of numbers', 'strs': 'a list of strings'}.get(
+            self.kind, f'a {self.kind}')
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(description=f'{self.description} (allowed: {self.allowed()})',
+                                read_only=self.read_only, dynamic_typing=True)
+        if self.kind == 'float' and self.low is not None and self.high is not None:
+            d.floating_point_range = [FloatingPointRange(from_value=float(self.low),
+                                                         to_value=float(self.high))]
+        elif self.kind == 'int' and self.low is not None and self.high is not None:
+            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high))]
+        return d
+
+    def check(self, value):
+        """The value converted to the parameter's type, or ParameterError."""
+        def fail(why):
+            raise ParameterError(f'parameter {self.name} = {value!r}: {why}; allowed: '
+                                 f'{self.allowed()}')
+        if self.kind in ('float', 'int'):
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                fail('not a number')
+            if self.kind == 'int' and not float(value).is_integer():
+                fail('not an integer')
+            number = float(value) if self.kind == 'float' else int(value)
+            unbounded = (number == math.inf and self.high == math.inf) or \
+                (number == -math.inf and self.low == -math.inf)
+            if not math.isfinite(number) and not unbounded:
+                fail('not finite')
+            self._range(number, fail)
+            return number
+        if self.kind == 'floats':
+            if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+                fail('not a list of numbers')
+            if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+                fail('not a list of numbers')
+            out = [float(v) for v in value]
+            if self.size is not None and len(out) != self.size:
+                fail(f'needs {self.size} values')
+            if not out:
+                fail('empty')
+            if any(math.isnan(v) for v in out):
+                fail('NaN')
+            for v in out:
+                self._range(v, fail)
+            return out
+        if self.kind == 'strs':
+            if isinstance(value, str) or not all(isinstance(v, str) for v in value):
+                fail('not a list of strings')
+            out = list(value)
+            if self.size is not None and len(out) != self.size:
+                fail(f'needs {self.size} values')
+            return out
+        if self.kind == 'bool':
+            if not isinstance(value, bool):
+                fail('not true/false')
+            return value
+        if not isinstance(value, str):
+            fail('not a string')
+        if self.choices and value not in self.choices:
+            fail('unknown value')
+        return value
+
+    def _range(self, number, fail):
+        if self.low is not None and (number < self.low or (self.open_low and number == self.low)):
+            fail('out of range')
+        if self.high is not None and number > self.high:
+            fail('out of range')
+
+
+def declare(node, table) -> dict:
+    """Declare every parameter of ``table``; returns {name: checked value}. Raises
+    ParameterError for the first bad value, naming it and its range."""
+    values = {}
+    for p in table:
+        default = list(p.default) if isinstance(p.default, tuple) else p.default
+        value = node.declare_parameter(p.name, default, p.descriptor()).value
+        values[p.name] = p.check(value)
+    return values
+
+
+def validator(table, apply):
+    """An on-set-parameters callback: refuse bad or read-only values (with the reason ``ros2
+    param set`` prints), else pass the checked values to ``apply(dict)``."""
+    by_name = {p.name: p for p in table}
+
+    def callback(parameters):
+        checked = {}
+        for param in parameters:
+            spec = by_name.get(param.name)
+            if spec is None:
+                continue
+            if spec.read_only:
+                return SetParametersResult(successful=False,
+                                           reason=f'{param.name} is fixed at start-up')
+            try:
+                checked[param.name] = spec.check(param.value)
+            except ParameterError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        if checked:
+            try:
+                apply(checked)
+            except ParameterError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+    return callback

@@ -1,0 +1,370 @@
+"""simulator: the arm as a hardware driver presents it (design.md §3-4).
+
+Publishes /joint_states, /contact_wrench (averaged over each period), /impact_report (one JSON
+object per impact), /diagnostics (~1 Hz) and, on simulated time, /clock; applies the latest
+/effort_controller/commands as a zero-order hold with an effort limit and a watchdog.
+
+mode realtime: a dedicated thread paces the periods by the wall clock (a late period is an
+overrun and the schedule is kept, never stretched); commands are taken by the executor thread.
+Until the first command arrives the arm is held at its initial state (brakes on) and the
+initial state is published with stamp 0: simulated time starts with the first command.
+mode lockstep: each command advances one period, inside the command callback (deterministic).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+
+from ..errors import SimulationError
+from ..hardware import CommandError, SimulatedArm
+from ..integrator import PRESETS
+from ..mcap_ros2 import contract_qos
+from ..scene import load_scene, resolve_scene_path
+from ._runner import run
+from .params import Param, ParameterError, declare, validator
+
+COMMAND_TOPIC = '/effort_controller/commands'
+PARAMS = (
+    Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
+          'str', read_only=True),
+    Param('publish_rate', 1000.0, 'rate of /joint_states and /contact_wrench [Hz]',
+          low=1.0, high=100000.0, read_only=True),
+    Param('mode', 'realtime', 'realtime: paced by the wall clock; lockstep: one period per '
+          'received command', 'str', choices=('realtime', 'lockstep'), read_only=True),
+    Param('rate_factor', 1.0, 'simulated seconds per wall second (lockstep: 0 = as fast as '
+          'commands arrive); /clock is published unless realtime at 1.0',
+          low=0.0, high=1000.0, read_only=True),
+    Param('command_timeout', 0.1, 'seconds without a valid command before the torques are '
+          'zeroed (watchdog)', low=0.0, high=3600.0, open_low=True),
+    Param('max_effort', 5000.0, 'commanded torques are clipped to +-max_effort [N m]',
+          low=0.0, high=1e9, open_low=True),
+    Param('joints', ['joint1', 'joint2'], 'joint order of the command array', 'strs',
+          read_only=True),
+    Param('preset', '', "integrator preset (empty: the scene's)", 'str',
+          choices=('',) + tuple(PRESETS), read_only=True),
+    Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages',
+          low=0.05, high=60.0, read_only=True),
+    Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
+          read_only=True),
+)
+
+
+class PeriodStats:
+    """Timing of the published periods, kept by the stepping thread, read by diagnostics."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.intervals = []        # wall time between consecutive publications [s]
+        self.computes = []         # wall time to step and publish one period [s]
+        self.published = 0
+        self.overruns = 0
+        self.worst_compute = 0.0
+        self.worst_compute_t = 0.0
+        self.last_publish = None
+
+    def add(self, published_at, compute, t_sim, overrun):
+        with self.lock:
+            if self.last_publish is not None:
+                self.intervals.append(published_at - self.last_publish)
+            self.last_publish = published_at
+            self.computes.append(compute)
+            self.published += 1
+            self.overruns += overrun
+            if compute > self.worst_compute:
+                self.worst_compute, self.worst_compute_t = compute, t_sim
+
+    def take(self):
+        with self.lock:
+            intervals, computes = self.intervals, self.computes
+            self.intervals, self.computes = [], []
+            return intervals, computes
+
+
+class Simulator(Node):
+    def __init__(self):
+        super().__init__('simulator')
+        p = self.p = declare(self, PARAMS)
+        scene_path = resolve_scene_path(p['scene'] or 'paper')
+        self.scene = load_scene(scene_path)
+        self.arm = SimulatedArm(self.scene, p['publish_rate'], preset=p['preset'] or None,
+                                max_effort=p['max_effort'])
+        names = [f'joint{i + 1}' for i in range(self.arm.n)]
+        if sorted(p['joints']) != sorted(names):
+            raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
+                                 f'{names} once (the order of the command array)')
+        self.command_order = [names.index(j) for j in p['joints']]
+        self.add_on_set_parameters_callback(validator(PARAMS, self._set_parameters))
+        self.lockstep = p['mode'] == 'lockstep'
+        self.publish_clock = self.lockstep or p['rate_factor'] != 1.0
+        if not self.lockstep and p['rate_factor'] == 0.0:
+            raise ParameterError('parameter rate_factor = 0.0: realtime mode needs a pace '
+                                 '> 0 (use mode lockstep to run as fast as possible)')
+
+        def qos(topic):
+            return contract_qos(topic).to_rclpy()
+        self.pub_joints = self.create_publisher(JointState, '/joint_states', qos('/joint_states'))
+        self.pub_wrench = self.create_publisher(WrenchStamped, '/contact_wrench',
+                                                qos('/contact_wrench'))
+        self.pub_impact = self.create_publisher(String, '/impact_report', qos('/impact_report'))
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                              qos('/diagnostics'))
+        self.pub_clock = (self.create_publisher(Clock, '/clock', qos('/clock'))
+                          if self.publish_clock else None)
+        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command,
+                                 qos(COMMAND_TOPIC))
+
+        # pre-built messages: the loop only fills in numbers
+        self.msg_joints = JointState(name=names)
+        self.msg_wrench = WrenchStamped()
+        self.msg_wrench.header.frame_id = p['frame_id']
+        self.msg_clock = Clock()
+
+        self.stats = PeriodStats()
+        self.pending = None                # (torques, monotonic time) from the command callback
+        self.last_command = None           # monotonic time of the last valid command
+        self.commands = self.rejected = 0
+        self.watchdog = 'waiting'          # waiting (no command yet) | ok | timeout
+        self.failed = ''
+        self.impacts = 0
+        self.start_wall = None
+        self.diag_window_start = time.monotonic()
+        self.diag_published = 0
+        self._stop = threading.Event()
+        self._thread = None
+        self._handshake = None
+        self.create_timer(p['diagnostics_period'], self._publish_diagnostics)
+
+        self.arm.warm_up()                 # before the clock starts: no compile-cache loads later
+        self._publish(self.arm.sample())   # the state at t = 0, before anything moves
+        if self.lockstep:
+            # until the first command arrives, repeat the initial state so a controller that
+            # starts later still gets one (it answers each stamp once)
+            self._handshake = self.create_timer(0.1, self._repeat_initial_state)
+        else:
+            self._thread = threading.Thread(target=self._realtime_loop, name='sim-loop',
+                                            daemon=True)
+            self._thread.start()
+        self.get_logger().info(
+            f'scene {self.scene.name!r} ({scene_path}), {p["mode"]} at '
+            f'{p["publish_rate"]:g} Hz, preset {self.arm.integrator.rtol:g} rtol')
+
+    # ---------------------------------------------------------------------- parameters
+    def _set_parameters(self, values):
+        if 'max_effort' in values:
+            self.arm.max_effort = values['max_effort']
+        if 'command_timeout' in values:
+            self.p['command_timeout'] = values['command_timeout']
+
+    @property
+    def done(self):
+        return bool(self.failed)
+
+    # ------------------------------------------------------------------------ commands
+    def _on_command(self, msg):
+        now = time.monotonic()
+        try:
+            values = self.arm.check_command(msg.data)
+        except CommandError as exc:
+            self.rejected += 1
+            self.get_logger().warning(f'command rejected: {exc}', throttle_duration_sec=1.0)
+            return
+        torques = [0.0] * self.arm.n
+        for k, joint in enumerate(self.command_order):
+            torques[joint] = values[k]
+        self.commands += 1
+        self.pending = (torques, now)
+        self.last_command = now
+        if self.lockstep and not self.failed:
+            if self._handshake is not None:
+                self.destroy_timer(self._handshake)
+                self._handshake = None
+            self._lockstep_period(torques)
+
+    def _watchdog(self, now):
+        """Hold the latest command, or zero torque when it is too old."""
+        pending = self.pending
+        if pending is None:
+            self.watchdog = 'waiting'
+            self.arm.release()
+            return
+        if now - pending[1] > self.p['command_timeout']:
+            if self.watchdog != 'timeout':
+                self.get_logger().warning(
+                    f'no command for {self.p["command_timeout"]:g} s: torques zeroed')
+            self.watchdog = 'timeout'
+            self.arm.release()
+            return
+        if self.watchdog == 'timeout':
+            self.get_logger().info('commands resumed')
+        self.watchdog = 'ok'
+        self.arm.apply(pending[0])
+
+    # -------------------------------------------------------------------------- stepping
+    def _step_and_publish(self):
+        try:
+            tick = self.arm.step()
+        except SimulationError as exc:
+            self._fail(f'{exc} [state {exc.state.tolist() if exc.state is not None else "?"}, '
+                       f'held torque {self.arm.command}]')
+            return False
+        self._publish(tick)
+        return True
+
+    def _realtime_loop(self):
+        # The executor thread (commands, diagnostics) and this one share the GIL; a thread
+        # waking from its sleep would otherwise wait up to the 5 ms default switch interval.
+        sys.setswitchinterval(5e-5)
+        wall_period = 1.0 / (self.p['publish_rate'] * self.p['rate_factor'])
+        self.start_wall = start = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            deadline = start + (k + 1) * wall_period
+            now = time.monotonic()
+            if deadline > now:
+                time.sleep(deadline - now)
+            woke = time.monotonic()
+            k += 1
+            if self.pending is None and self.arm.periods == 0:
+                # brakes on until the first command: the arm holds its initial state and
+                # simulated time starts at 0 with the first command, as offline
+                self._publish(self.arm.sample())
+                self.stats.add(time.monotonic(), 0.0, 0.0, False)
+                continue
+            self._watchdog(woke)
+            if not self._step_and_publish():
+                return
+            done = time.monotonic()
+            # late if this period's publication happened after the next one was due
+            self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period)
+
+    def _lockstep_period(self, torques):
+        self.arm.apply(torques)
+        self.watchdog = 'ok'
+        woke = time.monotonic()
+        if self.start_wall is None:
+            self.start_wall = woke
+        factor = self.p['rate_factor']
+        if factor > 0:  # paced: never ahead of rate_factor x wall time
+            due = self.start_wall + (self.arm.periods + 1) / (self.p['publish_rate'] * factor)
+            if due > woke:
+                time.sleep(due - woke)
+                woke = time.monotonic()
+        if self._step_and_publish():
+            done = time.monotonic()
+            self.stats.add(done, done - woke, self.arm.t, False)
+
+    def _repeat_initial_state(self):
+        if self.commands == 0:
+            self._publish(self.arm.sample())
+
+    def _publish(self, tick):
+        sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
+        if self.pub_clock is not None:
+            self.msg_clock.clock.sec, self.msg_clock.clock.nanosec = sec, nsec
+            self.pub_clock.publish(self.msg_clock)
+        for record, _rows in tick.impacts:
+            self.impacts += 1
+            self.pub_impact.publish(String(data=json.dumps(record)))
+        w = self.msg_wrench
+        w.header.stamp.sec, w.header.stamp.nanosec = sec, nsec
+        w.wrench.force.x, w.wrench.force.y = tick.wrench
+        self.pub_wrench.publish(w)
+        js = self.msg_joints
+        js.header.stamp.sec, js.header.stamp.nanosec = sec, nsec
+        js.position, js.velocity, js.effort = tick.position, tick.velocity, tick.effort
+        self.pub_joints.publish(js)
+
+    def _fail(self, why):
+        self.failed = why
+        self.get_logger().error(f'simulation stopped: {why}')
+        self._publish_diagnostics()
+
+    # ------------------------------------------------------------------------ diagnostics
+    def _publish_diagnostics(self):
+        now = time.monotonic()
+        if not self.lockstep and self.watchdog == 'ok' and self.pending is not None and \
+                now - self.pending[1] > self.p['command_timeout']:
+            self.watchdog = 'timeout'   # the loop will zero the torque on its next period
+        if self.lockstep and self.last_command is not None and \
+                now - self.last_command > self.p['command_timeout']:
+            self.watchdog = 'timeout'
+        intervals, computes = self.stats.take()
+        window = now - self.diag_window_start
+        self.diag_window_start = now
+        published = self.stats.published
+        achieved = (published - self.diag_published) / window if window > 0 else 0.0
+        self.diag_published = published
+        nominal = 1.0 / self.p['publish_rate'] / (self.p['rate_factor'] or 1.0)
+        jitter = np.abs(np.asarray(intervals) - nominal) if intervals else np.zeros(1)
+        integ = self.arm.integrator.stats
+        if self.failed:
+            level, message = DiagnosticStatus.ERROR, f'stopped: {self.failed}'
+        elif self.watchdog == 'timeout':
+            level, message = DiagnosticStatus.WARN, (
+                f'no command for more than {self.p["command_timeout"]:g} s: torques zeroed'
+                + (' (lockstep paused)' if self.lockstep else ''))
+        elif self.watchdog == 'waiting':
+            level, message = DiagnosticStatus.WARN, 'waiting for the first command (zero torque)'
+        else:
+            level, message = DiagnosticStatus.OK, 'running'
+        elapsed = now - self.start_wall if self.start_wall else 0.0
+        values = {
+            'mode': self.p['mode'],
+            'publish_rate_requested': f'{self.p["publish_rate"]:g}',
+            'publish_rate_achieved': f'{achieved * (self.p["rate_factor"] or 1.0):.1f}'
+            if not self.lockstep else f'{achieved:.1f}',
+            'jitter_p50_us': f'{np.percentile(jitter, 50) * 1e6:.1f}',
+            'jitter_p99_us': f'{np.percentile(jitter, 99) * 1e6:.1f}',
+            'jitter_max_us': f'{jitter.max() * 1e6:.1f}',
+            'overruns': str(self.stats.overruns),
+            'compute_max_us': f'{(max(computes) if computes else 0.0) * 1e6:.1f}',
+            'compute_worst_us': f'{self.stats.worst_compute * 1e6:.1f}',
+            'compute_worst_at_s': f'{self.stats.worst_compute_t:.6f}',
+            'period_us': f'{nominal * 1e6:.1f}',
+            'watchdog': self.watchdog,
+            'commands': str(self.commands),
+            'commands_rejected': str(self.rejected),
+            'commands_clipped': str(self.arm.clipped),
+            'sim_time': f'{self.arm.t:.6f}',
+            'real_time_factor': f'{self.arm.t / elapsed:.3f}' if elapsed > 0 else '0',
+            'impacts': str(self.impacts),
+            'rhs_evaluations': str(integ.rhs_evaluations),
+            'steps': str(integ.steps),
+            'rejected_steps': str(integ.rejected),
+            'events': str(integ.events),
+        }
+        status = DiagnosticStatus(level=level, name='impact_arm: simulator', message=message,
+                                  hardware_id='impact_arm_simulated_arm',
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
+
+    def finish(self, executor) -> int:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        if executor is not None:
+            self._publish_diagnostics()
+        self.get_logger().info(
+            f'{self.arm.periods} periods, {self.impacts} impacts, {self.stats.overruns} '
+            f'overruns, t = {self.arm.t:.3f} s')
+        return 1 if self.failed else 0
+
+
+def main(args=None):
+    raise SystemExit(run(Simulator, args))
+
+
+if __name__ == '__main__':
+    main()
