@@ -1,0 +1,255 @@
+"""``impact-arm run``: simulator, controller and recorder as separate processes over DDS.
+
+The embedded default behind ``make run``: the same nodes a ROS 2 user starts with
+``ros2 launch impact_arm arm.launch.py``, without needing ros2cli or launch. DDS stays on this
+machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and on a domain nobody else uses, unless
+the user chose otherwise. Every child is ended by its PID on success, failure or Ctrl-C, and
+dies with this process even if it is killed (PR_SET_PDEATHSIG).
+"""
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+from .errors import ImpactArmError
+
+NODES = ('recorder', 'controller', 'simulator')       # start order; stopped in reverse
+STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, recorder last
+
+
+def add_arguments(parser):
+    parser.add_argument('--scene', default='paper', help='scene file or installed scene name')
+    parser.add_argument('--mode', choices=('realtime', 'lockstep'), default='realtime',
+                        help='realtime: paced by the wall clock; lockstep: as fast as the '
+                             'controller answers, deterministic')
+    parser.add_argument('--rate', type=float, default=1000.0, metavar='HZ',
+                        help='publish and control rate (default 1000)')
+    parser.add_argument('--law', choices=('q', 'pid', 'pd'), default=None,
+                        help="control law (default: the scene's)")
+    parser.add_argument('--name', default=None,
+                        help='recording name: runs/NAME.mcap (default: scene and time)')
+    parser.add_argument('--out', default='runs', help='directory of the recording')
+    parser.add_argument('--no-record', action='store_true', help='do not start the recorder')
+    parser.add_argument('--timeout', type=float, default=None, metavar='S',
+                        help="give up after S wall seconds (default: 3 x the scene's t_max)")
+
+
+def cli(args) -> int:
+    from .scene import load_scene, resolve_scene_path
+    from .simulate import RunResult, format_table
+
+    if not 1.0 <= args.rate <= 100000.0:
+        raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
+    scene_path = resolve_scene_path(args.scene)
+    scene = load_scene(scene_path)
+    name = args.name or f'{scene.name}-{time.strftime("%Y%m%d-%H%M%S")}'
+    output = os.path.join(args.out, name + '.mcap') if not args.no_record else None
+    if output:
+        os.makedirs(args.out, exist_ok=True)
+    env = dds_environment()
+    run = Run(scene, scene_path, args, output, env)
+    try:
+        run.start()
+        outcome = run.watch(args.timeout or 3 * scene.t_max + 30)
+    except KeyboardInterrupt:
+        outcome = 'interrupted'
+    finally:
+        codes = run.stop()
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    result = RunResult(scene=scene, impacts=run.impacts, t_end=run.sim_time,
+                       rhs_evaluations=run.rhs_evaluations, wall_time=run.wall,
+                       stopped=outcome)
+    print(format_table(result))
+    if args.mode == 'lockstep' and run.wall > 0:
+        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall, '
+              f'real-time factor {run.sim_time / run.wall:.2f}')
+    elif run.diagnostics:
+        d = run.diagnostics
+        print(f"realtime: {d.get('overruns', '?')} overruns; worst period compute "
+              f"{d.get('compute_worst_us', '?')} us of {d.get('period_us', '?')} us")
+    if output:
+        print(f'recorded to {output}' if os.path.exists(output) else
+              f'no recording: {output} was not written')
+    failed = {n: c for n, c in codes.items() if c not in (0, None)}
+    if failed or outcome not in ('completed',):
+        for node, code in failed.items():
+            print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def dds_environment() -> dict:
+    """The children's environment: localhost discovery, and a domain nobody is using, unless
+    the user set them."""
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env['PYTHONUNBUFFERED'] = '1'
+    if 'ROS_DOMAIN_ID' not in env:
+        env['ROS_DOMAIN_ID'] = str(free_domain(env))
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
+    return env
+
+
+def free_domain(env, tries=5, listen=0.3) -> int:
+    """A ROS_DOMAIN_ID in 1..101 on which no participant answers within ``listen`` s."""
+    import rclpy
+    from rclpy.context import Context
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = env['ROS_AUTOMATIC_DISCOVERY_RANGE']
+    candidates = random.sample(range(1, 102), tries)
+    for domain in candidates:
+        context = Context()
+        rclpy.init(context=context, domain_id=domain)
+        try:
+            node = rclpy.create_node('impact_arm_domain_probe', context=context)
+            time.sleep(listen)
+            others = [n for n in node.get_node_names() if n != 'impact_arm_domain_probe']
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)
+        if not others:
+            return domain
+    return candidates[-1]
+
+
+def _die_with_parent():
+    """In the child: get SIGTERM when the runner dies, however it dies."""
+    try:
+        import ctypes
+        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+    os.setpgrp()   # Ctrl-C reaches the runner only; it stops the nodes in order
+
+
+class Run:
+    def __init__(self, scene, scene_path, args, output, env):
+        self.scene, self.scene_path, self.args, self.output, self.env = \
+            scene, scene_path, args, output, env
+        self.procs, self.logs = {}, {}
+        self.impacts = []
+        self.diagnostics = {}
+        self.sim_time = 0.0
+        self.rhs_evaluations = 0
+        self.wall = 0.0
+        self.node = None
+        self._reported = 0
+        self.logdir = os.path.join(args.out, 'logs')
+
+    def command(self, node):
+        a = self.args
+        params = {'simulator': [f'scene:={self.scene_path}', f'publish_rate:={a.rate}',
+                                f'mode:={a.mode}',
+                                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}'],
+                  'controller': [f'scene:={self.scene_path}', f'rate:={a.rate}']
+                  + ([f'law:={a.law}'] if a.law else []),
+                  'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
+        cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']
+        for p in params:
+            cmd += ['-p', p]
+        return cmd
+
+    def start(self):
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+        from std_msgs.msg import String
+
+        os.makedirs(self.logdir, exist_ok=True)
+        rclpy.init(domain_id=int(self.env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node('impact_arm_run')
+        self.node.create_subscription(
+            String, '/impact_report', self._on_impact,
+            QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        for node in NODES:
+            if node == 'recorder' and not self.output:
+                continue
+            self.logs[node] = os.path.join(self.logdir, f'{node}.log')
+            with open(self.logs[node], 'wb') as log:
+                self.procs[node] = subprocess.Popen(
+                    self.command(node), env=self.env, stdout=log, stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent)
+        print(f'impact-arm run: scene {self.scene.name!r}, {self.args.mode} at '
+              f'{self.args.rate:g} Hz, ROS_DOMAIN_ID={self.env["ROS_DOMAIN_ID"]}, '
+              f'logs in {self.logdir}', file=sys.stderr)
+
+    def _on_impact(self, msg):
+        self.impacts.append(json.loads(msg.data))
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name.endswith('simulator'):
+                self.diagnostics = {kv.key: kv.value for kv in status.values}
+                self.diagnostics['level'] = int.from_bytes(bytes(status.level), 'little') \
+                    if isinstance(status.level, (bytes, bytearray)) else int(status.level)
+                self.diagnostics['message'] = status.message
+                self.sim_time = float(self.diagnostics.get('sim_time', self.sim_time))
+                self.rhs_evaluations = int(self.diagnostics.get('rhs_evaluations', 0))
+
+    def watch(self, timeout) -> str:
+        """Spin until the scene's cycles are done; returns why the run ended."""
+        import rclpy
+        cycles = self.scene.cycles or 1
+        start = time.monotonic()
+        first = None
+        while True:
+            rclpy.spin_once(self.node, timeout_sec=0.1)
+            now = time.monotonic()
+            if first is None and self.diagnostics.get('commands', '0') != '0':
+                first = now
+            if self.impacts:
+                self.sim_time = max(self.sim_time, self.impacts[-1]['t_contact']
+                                    + self.impacts[-1]['duration'])
+            self.wall = now - (first or start)
+            self._progress(cycles)
+            if len(self.impacts) >= cycles:
+                return 'completed'
+            for name, proc in self.procs.items():
+                if proc.poll() is not None:
+                    return f'{name} exited with status {proc.returncode}'
+            if self.diagnostics.get('level') == 2:
+                return f'simulator stopped: {self.diagnostics.get("message")}'
+            if now - start > timeout:
+                return f'timeout after {timeout:g} s'
+
+    def _progress(self, cycles):
+        """One refreshed line on a terminal; otherwise a line per impact (logs stay short)."""
+        count = len(self.impacts)
+        line = (f'cycle {min(count + 1, cycles)}/{cycles}  impacts {count}  '
+                f't = {self.sim_time:7.3f} s')
+        if self.diagnostics:
+            line += f"  watchdog {self.diagnostics.get('watchdog')}"
+        if sys.stderr.isatty():
+            print('\r  ' + line, end='', file=sys.stderr, flush=True)
+        elif count != self._reported:
+            self._reported = count
+            print('  ' + line, file=sys.stderr, flush=True)
+
+    def stop(self) -> dict:
+        """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any
+        that does not exit; returns exit codes by node."""
+        codes = {}
+        for name in STOP_ORDER:
+            proc = self.procs.get(name)
+            if proc is None:
+                continue
+            if name == 'recorder':
+                time.sleep(0.3)          # let the last messages reach it
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+            try:
+                codes[name] = proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                codes[name] = proc.wait()
+        if self.node is not None:
+            import rclpy
+            self.node.destroy_node()
+            rclpy.try_shutdown()
+        return codes
