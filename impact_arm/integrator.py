@@ -171,6 +171,14 @@ class PhaseIntegrator:
             st.delta_m, st.P_m = delta, fn
             st.delta_r = (residual_indentation(delta, surf.constants)
                           if surf.law == 'elastoplastic' else 0.0)
+            if not 0.0 <= st.delta_r < delta:
+                ratio = delta / surf.constants.delta_c
+                raise SimulationError(
+                    f'residual indentation fit gives delta_r = {st.delta_r:.4g} m >= delta_m = '
+                    f'{delta:.4g} m at t = {st.t:.9g} s: delta_m / delta_c = {ratio:.3g} is '
+                    f'beyond the fit\'s range (delta_r < delta_m needs delta_m / delta_c < '
+                    f'~9.8e3); the material is far too stiff for its yield strength',
+                    t=st.t, state=st.y.copy())
             st.R_r = restitution_radius(delta, st.delta_r, fn, surf.constants.E)
             st.c[layout.C_PEAK] = max(st.c[layout.C_PEAK], fn)
             st.phase = Phase.RESTITUTION

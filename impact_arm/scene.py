@@ -25,6 +25,7 @@ INTEGRATOR_PRESETS = ('reference', 'accurate', 'balanced', 'fast')
 CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
 CONTROL_LAWS = ('q', 'pid', 'pd', 'none')
 PID_SPACES = ('absolute', 'joint')
+MAX_YIELD_STRAIN = 0.1   # S_y / E* beyond which the Jackson-Green law is meaningless
 
 
 @dataclass(frozen=True)
@@ -290,6 +291,20 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
         if s.law != 'none' and abs(s.height) >= reach:
             check.fail(f'surfaces[{i}].height',
                        f'= {s.height:g} is out of reach: must satisfy |height| < {reach:g} (m)')
+    for i, s in enumerate(surfaces):
+        if s.law != 'elastoplastic':
+            continue
+        # the Jackson-Green fit (B = 0.14 exp(23 S_y/E)) holds for metals-like yield strains;
+        # far beyond it B overflows and the force law means nothing
+        a, b = arm, s.material
+        e_red = a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
+        strain = min(a.S_y, b.S_y) / e_red
+        if strain > MAX_YIELD_STRAIN:
+            check.fail(f'surfaces[{i}].material',
+                       f'= {raw["surfaces"][i]["material"]!r}: yield strain S_y/E* = '
+                       f'{strain:.3g} is out of range: must be <= {MAX_YIELD_STRAIN:g} for the '
+                       f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
+                       f'E and S_y')
     integ = IntegratorSpec(**raw['integrator'])
     return Scene(
         name=raw['name'], lengths=tuple(l['length'] for l in raw['links']),
