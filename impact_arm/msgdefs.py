@@ -245,3 +245,79 @@ def serialize_cdr(msg) -> bytes:
         from rclpy.serialization import serialize_message
         return serialize_message(msg)
     return bytes(buf)
+
+
+# ----------------------------------------------------------------------- CDR, reading
+class _Reader:
+    __slots__ = ('data', 'pos', 'endian')
+
+    def __init__(self, data):
+        self.data = memoryview(data)
+        if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
+            raise ValueError('not a CDR message (bad encapsulation header)')
+        self.endian = '<' if data[1] == 1 else '>'
+        self.pos = 4
+
+    def align(self, n):
+        self.pos += -(self.pos - 4) % n
+
+    def unpack(self, fmt, size, count=1):
+        end = self.pos + size * count
+        if end > len(self.data):
+            raise ValueError('CDR message too short for its type')
+        values = struct.unpack_from(f'{self.endian}{count}{fmt}', self.data, self.pos)
+        self.pos = end
+        return values
+
+
+def _read(r: _Reader, t):
+    from rosidl_parser import definition as d
+    if isinstance(t, d.BasicType):
+        name = t.typename
+        if name not in _FORMATS:
+            raise NotImplementedError(f'CDR of {name}')
+        r.align(_SIZES[name])
+        v = r.unpack(_FORMATS[name], _SIZES[name])[0]
+        return bytes([v]) if name == 'octet' else (chr(v) if name == 'char' else v)
+    if isinstance(t, (d.UnboundedString, d.BoundedString)):
+        r.align(4)
+        n = r.unpack('I', 4)[0]
+        raw = r.data[r.pos:r.pos + n]
+        r.pos += n
+        return bytes(raw[:-1] if n else raw).decode()
+    if isinstance(t, d.NamespacedType):
+        return _read_message(r, message_class('/'.join(t.namespaces + [t.name])))
+    if isinstance(t, d.AbstractNestedType):
+        if isinstance(t, d.AbstractSequence):
+            r.align(4)
+            n = r.unpack('I', 4)[0]
+        else:
+            n = t.size
+        et = t.value_type
+        if isinstance(et, d.BasicType) and et.typename in _FORMATS:
+            if not n:
+                return bytes() if et.typename == 'octet' else []
+            r.align(_SIZES[et.typename])
+            values = r.unpack(_FORMATS[et.typename], _SIZES[et.typename], n)
+            if et.typename == 'octet':
+                return bytes(values)
+            return [chr(v) for v in values] if et.typename == 'char' else list(values)
+        return [_read(r, et) for _ in range(n)]
+    raise NotImplementedError(f'CDR of {type(t).__name__}')
+
+
+def _read_message(r: _Reader, cls):
+    fields = _fields(cls)
+    msg = cls()
+    if not fields:
+        r.unpack('B', 1)
+    for name, t in fields:
+        setattr(msg, name, _read(r, t))
+    return msg
+
+
+def deserialize_cdr(data, type_name_or_class):
+    """The message object of CDR ``data`` (the inverse of ``serialize_cdr``; no rclpy)."""
+    cls = type_name_or_class if isinstance(type_name_or_class, type) else \
+        message_class(type_name_or_class)
+    return _read_message(_Reader(data), cls)

@@ -1,0 +1,138 @@
+"""``impact-arm analyze`` on the offline article run: the impact table of ``simulate`` exactly,
+the limit cycle, Poincaré sections, every figure (opened and measured) and the report."""
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from impact_arm.analysis import limit_cycle, poincare
+from impact_arm.figures import FIGURE_SIZE
+
+FIGURES = ['fig3_controllers.png', 'fig4_link_angles.png', 'fig5_phase_portraits.png',
+           'fig6_poincare.png', 'fig7_tip_velocity.png', 'fig8_indentation.png',
+           'fig9_impact_velocity.png', 'fig10_contact_force.png', 'fig11_kinetic_energy.png']
+
+
+def cli(*argv, cwd):
+    return subprocess.run([sys.executable, '-m', 'impact_arm.cli', *map(str, argv)],
+                          capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+@pytest.fixture(scope='module')
+def article(tmp_path_factory):
+    d = tmp_path_factory.mktemp('article')
+    sim = cli('simulate', '--scene', 'paper', '--mcap', d / 'paper.mcap', '--json',
+              d / 'paper.json', cwd=d)
+    assert sim.returncode == 0, sim.stderr
+    ana = cli('analyze', d / 'paper.mcap', '--out', d / 'out', cwd=d)
+    assert ana.returncode == 0, ana.stderr
+    return d, sim, ana
+
+
+def test_impact_table_is_exactly_the_simulated_one(article):
+    d, sim, ana = article
+    with open(d / 'paper.json', encoding='utf-8') as f:
+        simulated = json.load(f)
+    with open(d / 'out' / 'impacts.json', encoding='utf-8') as f:
+        analysed = json.load(f)
+    assert len(simulated['impacts']) == 15
+    assert analysed['impacts'] == simulated['impacts']  # every field, every digit
+    # the printed table: the same rows as simulate prints
+    rows = sim.stdout.split('\n\n')[0].strip('\n')
+    assert rows in ana.stdout
+    with open(d / 'out' / 'impact_table.txt', encoding='utf-8') as f:
+        assert f.read().strip('\n') == rows
+
+
+def test_limit_cycle_and_poincare_sections(article):
+    d, sim, ana = article
+    assert 'limit cycle reached after 5 impacts' in sim.stdout
+    assert 'limit cycle reached after 5 impacts' in ana.stdout
+    with open(d / 'paper.json', encoding='utf-8') as f:
+        run = json.load(f)['run']
+    assert f'period {run["period_last"]:.5f} s' in ana.stdout
+    for k in (1, 2):
+        rows = np.loadtxt(d / 'out' / f'poincare_qd{k}_zero.csv', delimiter=',', skiprows=1)
+        assert rows.ndim == 2 and rows.shape[1] == 4 and len(rows) >= 2 * 15 - 2
+        assert np.all(np.isfinite(rows)) and np.all(np.diff(rows[:, 0]) > 0)
+        # on the limit cycle the sections repeat: the last crossings of each direction agree
+        # (to the 1 kHz sampling: a crossing through an impact is interpolated across it)
+        for direction in (-1, 1):
+            last = rows[rows[:, 3] == direction][-3:, 1:3]
+            assert np.ptp(last, axis=0) == pytest.approx([0, 0], abs=0.5)
+            first = rows[rows[:, 3] == direction][0, 1:3]
+            assert np.max(np.abs(first - last[-1])) > 1.0  # ... and differ from the start
+        lo, hi = run['q1_range_deg']
+        assert lo - 1 <= rows[:, 1].min() and rows[:, 1].max() <= hi + 1
+
+
+def png_size(path):
+    with open(path, 'rb') as f:
+        head = f.read(24)
+    assert head[:8] == b'\x89PNG\r\n\x1a\n' and head[12:16] == b'IHDR'
+    return struct.unpack('>II', head[16:24])
+
+
+def test_every_figure_is_written_non_empty_and_of_the_stated_size(article):
+    import matplotlib.image as mpimg
+    d, _, ana = article
+    for name in FIGURES:
+        path = d / 'out' / name
+        assert png_size(path) == FIGURE_SIZE, name
+        pixels = mpimg.imread(path)
+        assert pixels.shape[:2] == (FIGURE_SIZE[1], FIGURE_SIZE[0])
+        # not blank: a good share of pixels differ from the background colour
+        background = pixels[0, 0]
+        drawn = np.any(np.abs(pixels - background) > 0.05, axis=-1).mean()
+        assert 0.01 < drawn < 0.9, (name, drawn)
+        assert f'({name})' in open(d / 'out' / 'report.md', encoding='utf-8').read()
+    assert 'figure 9/9' in ana.stderr  # progress is shown
+
+
+def test_report_states_table_cycle_and_sections(article):
+    d, _, _ = article
+    text = (d / 'out' / 'report.md').read_text(encoding='utf-8')
+    for needle in ('# Analysis of paper.mcap', '## Impacts', '## Limit cycle',
+                   'limit cycle reached after 5 impacts', '## Poincaré sections',
+                   'poincare_qd1_zero.csv', 'scene paper, law q'):
+        assert needle in text, needle
+
+
+def test_poincare_crossings_of_a_known_signal():
+    t = np.linspace(0, 2, 2001)
+    q = np.stack([np.sin(2 * np.pi * t), np.cos(2 * np.pi * t)], axis=1)
+    qd = np.stack([2 * np.pi * np.cos(2 * np.pi * t), -2 * np.pi * np.sin(2 * np.pi * t)], 1)
+    rows = poincare(t, q, qd, 0)  # q̇1 = 0 at t = 0.25, 0.75, 1.25, 1.75
+    assert rows[:, 0] == pytest.approx([0.25, 0.75, 1.25, 1.75], abs=1e-6)
+    assert rows[:, 1] == pytest.approx([1, -1, 1, -1], abs=1e-5)
+    assert list(rows[:, 3]) == [-1, 1, -1, 1]
+    qd[5, 0] = math.nan  # a non-finite sample makes no crossing, and is not hidden elsewhere
+    assert len(poincare(t, q, qd, 0)) == 4
+
+
+def test_limit_cycle_of_records():
+    impacts = [{'t_contact': 0.4 * i, 'q_contact_deg': [1.0, 2.0 + (i < 3)],
+                'v_before': [0.0, -1.0]} for i in range(8)]
+    lc = limit_cycle(impacts)
+    assert lc["settled_after"] == 4 and lc['period'] == pytest.approx(0.4)
+
+
+def test_compare_and_errors(article, tmp_path):
+    d, _, _ = article
+    ok = cli('analyze', d / 'paper.mcap', '--out', tmp_path / 'cmp', '--compare',
+             d / 'paper.mcap', '--impact', 15, cwd=tmp_path)
+    assert ok.returncode == 0, ok.stderr
+    assert 'Figure 3 compares: paper.mcap, paper.mcap' in (
+        tmp_path / 'cmp' / 'report.md').read_text(encoding='utf-8')
+    for argv, needle in (([tmp_path / 'none.mcap'], 'no such file'),
+                         ([d / 'paper.mcap', '--impact', 16], '--impact = 16: must be in [1, 15]'),
+                         ([d / 'paper.mcap', '--laws', 'lqr'], "--laws: 'lqr' is not one of"),
+                         ([d / 'paper.json'], 'not a readable MCAP file')):
+        bad = cli('analyze', *argv, cwd=tmp_path)
+        assert bad.returncode == 2 and needle in bad.stderr, bad.stderr
+        assert 'Traceback' not in bad.stderr
