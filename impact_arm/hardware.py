@@ -60,7 +60,6 @@ class SimulatedArm:
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n          # the torque being held (after clipping)
-        self.clipped = 0                        # commands that hit max_effort
 
     def warm_up(self):
         """Load every compiled function the stepping path may call (numba loads them from its
@@ -99,9 +98,7 @@ class SimulatedArm:
     def apply(self, values):
         """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
         tau = self.check_command(values)
-        limited = [min(max(v, -self.max_effort), self.max_effort) for v in tau]
-        self.clipped += limited != tau
-        self._hold(limited)
+        self._hold([min(max(v, -self.max_effort), self.max_effort) for v in tau])
 
     def release(self):
         """Zero torque (watchdog expired, controller gone)."""

@@ -77,6 +77,8 @@ def parameter_table(scene):
 
 
 class Controller(Node):
+    executor_kind = 'events'   # see _runner.make_executor
+
     def __init__(self):
         super().__init__('controller')
         name = self.declare_parameter('scene', '').value

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+
 from ..errors import ImpactArmError
 
 
@@ -116,7 +118,14 @@ def declare(node, table) -> dict:
     values = {}
     for p in table:
         default = list(p.default) if isinstance(p.default, tuple) else p.default
-        value = node.declare_parameter(p.name, default, p.descriptor()).value
+        try:
+            value = node.declare_parameter(p.name, default, p.descriptor()).value
+        except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+            # rclpy checks the descriptor's range itself; say it the way the rest of us do
+            given = node._parameter_overrides.get(p.name)
+            shown = given.value if given is not None else '?'
+            raise ParameterError(f'parameter {p.name} = {shown!r}: out of range; allowed: '
+                                 f'{p.allowed()}') from exc
         values[p.name] = p.check(value)
     return values
 

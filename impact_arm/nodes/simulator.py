@@ -91,6 +91,8 @@ class PeriodStats:
 
 
 class Simulator(Node):
+    executor_kind = 'events'   # see _runner.make_executor
+
     def __init__(self):
         super().__init__('simulator')
         p = self.p = declare(self, PARAMS)
@@ -132,7 +134,7 @@ class Simulator(Node):
         self.stats = PeriodStats()
         self.pending = None                # (torques, monotonic time) from the command callback
         self.last_command = None           # monotonic time of the last valid command
-        self.commands = self.rejected = 0
+        self.commands = self.rejected = self.clipped = 0
         self.watchdog = 'waiting'          # waiting (no command yet) | ok | timeout
         self.failed = ''
         self.impacts = 0
@@ -182,6 +184,7 @@ class Simulator(Node):
         for k, joint in enumerate(self.command_order):
             torques[joint] = values[k]
         self.commands += 1
+        self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
         self.pending = (torques, now)
         self.last_command = now
         if self.lockstep and not self.failed:
@@ -334,7 +337,7 @@ class Simulator(Node):
             'watchdog': self.watchdog,
             'commands': str(self.commands),
             'commands_rejected': str(self.rejected),
-            'commands_clipped': str(self.arm.clipped),
+            'commands_clipped': str(self.clipped),
             'sim_time': f'{self.arm.t:.6f}',
             'real_time_factor': f'{self.arm.t / elapsed:.3f}' if elapsed > 0 else '0',
             'impacts': str(self.impacts),
