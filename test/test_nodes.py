@@ -213,6 +213,7 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
     ('simulator', 'mode:=fast', 'mode'),
     ('simulator', 'joints:=[joint1,jointX]', 'joints'),
     ('simulator', 'scene:=/no/such/scene.yaml', 'scene'),
+    ('simulator', 'publish_rat:=5.0', 'publish_rat'),
     ('controller', 'law:=lqr', 'law'),
     ('controller', 'p:=[1.0]', 'p'),
     ('controller', 'rate:=0.0', 'rate'),

@@ -24,7 +24,7 @@ from ..mcap_ros2 import contract_qos
 from ..model import ArmModel
 from ..scene import load_scene, resolve_scene_path
 from ._runner import run
-from .params import Param, ParameterError, declare, validator
+from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
 STAMP_EPS = 1e-9                 # stamps are integer nanoseconds: ticks compare to 1 ns
@@ -93,6 +93,7 @@ class Controller(Node):
             raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
                                  f'{self.joint_names} once')
         self.order = [self.joint_names.index(j) for j in p['joints']]
+        refuse_unknown(self)
         self.ctrl = CycleController(self.model, p['law'], p['p'], p['d'], p['i'],
                                     to_absolute(p['down_target']), to_absolute(p['up_target']),
                                     p['switch_height'], p['surface_height'], space=p['space'],

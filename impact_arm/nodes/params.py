@@ -155,3 +155,13 @@ def validator(table, apply):
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
     return callback
+
+
+def refuse_unknown(node):
+    """ROS ignores parameters a node never declares; a typo in a parameter file or on the
+    command line would then silently change nothing. Refuse them instead."""
+    unknown = sorted(set(node._parameter_overrides) - set(node._parameters))
+    if unknown:
+        known = ', '.join(sorted(node._parameters))
+        raise ParameterError(f'unknown parameter(s) {", ".join(unknown)} for node '
+                             f'{node.get_name()}; known: {known}')

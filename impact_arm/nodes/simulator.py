@@ -31,7 +31,7 @@ from ..integrator import PRESETS
 from ..mcap_ros2 import contract_qos
 from ..scene import load_scene, resolve_scene_path
 from ._runner import run
-from .params import Param, ParameterError, declare, validator
+from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
 PARAMS = (
@@ -105,6 +105,7 @@ class Simulator(Node):
             raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
                                  f'{names} once (the order of the command array)')
         self.command_order = [names.index(j) for j in p['joints']]
+        refuse_unknown(self)
         self.add_on_set_parameters_callback(validator(PARAMS, self._set_parameters))
         self.lockstep = p['mode'] == 'lockstep'
         self.publish_clock = self.lockstep or p['rate_factor'] != 1.0

@@ -1,0 +1,90 @@
+"""The launch file and the node parameter files: what a ROS 2 user starts with
+`ros2 launch impact_arm arm.launch.py` must name real executables and valid parameters."""
+import ast
+import os
+import subprocess
+import sys
+import types
+
+import pytest
+import yaml
+
+from ros_helpers import PYTHON, ROOT, ros_env  # noqa: F401
+
+NODES = ('simulator', 'controller', 'recorder')
+
+
+def console_scripts():
+    tree = ast.parse(open(os.path.join(ROOT, 'setup.py')).read())
+    scripts = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+               and isinstance(n.value, str) and ' = impact_arm.' in n.value]
+    return {s.split(' = ')[0] for s in scripts}
+
+
+def load_launch_with_stubs(share):
+    """Evaluate launch/arm.launch.py against minimal stand-ins of launch/launch_ros."""
+    created = []
+
+    class Action:
+        def __init__(self, *args, **kwargs):
+            self.args, self.kwargs = args, kwargs
+            created.append(self)
+    stubs = {
+        'ament_index_python': types.ModuleType('ament_index_python'),
+        'ament_index_python.packages': types.ModuleType('ament_index_python.packages'),
+        'launch': types.ModuleType('launch'),
+        'launch.actions': types.ModuleType('launch.actions'),
+        'launch.substitutions': types.ModuleType('launch.substitutions'),
+        'launch_ros': types.ModuleType('launch_ros'),
+        'launch_ros.actions': types.ModuleType('launch_ros.actions'),
+    }
+    stubs['ament_index_python.packages'].get_package_share_directory = lambda pkg: share
+    stubs['launch'].LaunchDescription = lambda actions: actions
+    stubs['launch.actions'].DeclareLaunchArgument = type('DeclareLaunchArgument', (Action,), {})
+    stubs['launch.substitutions'].LaunchConfiguration = type('LaunchConfiguration', (Action,), {})
+    stubs['launch.substitutions'].PythonExpression = type('PythonExpression', (Action,), {})
+    stubs['launch_ros.actions'].Node = type('Node', (Action,), {})
+    saved = {k: sys.modules.get(k) for k in stubs}
+    sys.modules.update(stubs)
+    try:
+        namespace = {}
+        path = os.path.join(ROOT, 'launch', 'arm.launch.py')
+        exec(compile(open(path).read(), path, 'exec'), namespace)
+        return namespace['generate_launch_description']()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                sys.modules.pop(k, None)
+            else:
+                sys.modules[k] = v
+
+
+def test_launch_file_starts_the_three_nodes_with_their_parameter_files():
+    actions = load_launch_with_stubs(ROOT)
+    nodes = [a for a in actions if type(a).__name__ == 'Node']
+    arguments = {a.args[0] for a in actions if type(a).__name__ == 'DeclareLaunchArgument'}
+    assert {'scene', 'law', 'rate', 'mode'} <= arguments
+    assert sorted(n.kwargs['executable'] for n in nodes) == sorted(NODES)
+    assert {n.kwargs['executable'] for n in nodes} <= console_scripts()
+    for n in nodes:
+        files = [p for p in n.kwargs['parameters'] if isinstance(p, str)]
+        assert files == [os.path.join(ROOT, 'config', n.kwargs['executable'] + '.yaml')]
+        assert os.path.exists(files[0])
+
+
+@pytest.mark.parametrize('node', ['simulator', 'controller'])
+def test_parameter_files_are_accepted_by_the_nodes(ros_env, tmp_path, node):
+    """Start the node with its parameter file; a bad key or value would stop it at once."""
+    params = os.path.join(ROOT, 'config', f'{node}.yaml')
+    assert yaml.safe_load(open(params))[node]['ros__parameters']
+    proc = subprocess.Popen([PYTHON, '-m', f'impact_arm.nodes.{node}', '--ros-args',
+                             '--params-file', params], env=ros_env, cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        out, _ = proc.communicate(timeout=6)
+        pytest.fail(f'{node} exited with {proc.returncode}:\n{out}')
+    except subprocess.TimeoutExpired:
+        proc.send_signal(2)
+        out, _ = proc.communicate(timeout=10)
+    assert proc.returncode == 0, out
+    assert 'Traceback' not in out and 'ERROR' not in out, out
