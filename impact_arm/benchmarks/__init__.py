@@ -20,6 +20,8 @@ SUBCOMMANDS = {
                  'work-precision table and plot: presets and solve_ivp methods vs reference'),
     'stress': ('impact_arm.benchmarks.stress',
                'stability matrix at the extremes of the parameter space'),
+    'rates': ('impact_arm.benchmarks.rates',
+              'nodes over DDS: realtime jitter/overruns at 1 and 5 kHz, lockstep speed'),
     'features': ('impact_arm.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }

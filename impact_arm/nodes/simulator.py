@@ -71,17 +71,35 @@ class PeriodStats:
         self.worst_compute = 0.0
         self.worst_compute_t = 0.0
         self.last_publish = None
+        self.nominal = None
+        # whole-run jitter |interval - period| as a 1 us histogram (0 ... 20 ms), plus the max
+        self.histogram = np.zeros(20001, dtype=np.int64)
+        self.jitter_max = 0.0
 
     def add(self, published_at, compute, t_sim, overrun):
         with self.lock:
             if self.last_publish is not None:
-                self.intervals.append(published_at - self.last_publish)
+                interval = published_at - self.last_publish
+                self.intervals.append(interval)
+                if self.nominal is not None:
+                    jitter = abs(interval - self.nominal)
+                    self.histogram[min(int(jitter * 1e6), 20000)] += 1
+                    self.jitter_max = max(self.jitter_max, jitter)
             self.last_publish = published_at
             self.computes.append(compute)
             self.published += 1
             self.overruns += overrun
             if compute > self.worst_compute:
                 self.worst_compute, self.worst_compute_t = compute, t_sim
+
+    def run_percentiles(self, *qs):
+        """Whole-run jitter percentiles [s] from the histogram."""
+        with self.lock:
+            total = int(self.histogram.sum())
+            if not total:
+                return [0.0 for _ in qs]
+            cumulative = np.cumsum(self.histogram)
+            return [float(np.searchsorted(cumulative, q / 100 * total)) * 1e-6 for q in qs]
 
     def take(self):
         with self.lock:
@@ -133,6 +151,8 @@ class Simulator(Node):
         self.msg_clock = Clock()
 
         self.stats = PeriodStats()
+        if not self.lockstep:
+            self.stats.nominal = 1.0 / (p['publish_rate'] * p['rate_factor'] or 1.0)
         self.pending = None                # (torques, monotonic time) from the command callback
         self.last_command = None           # monotonic time of the last valid command
         self.commands = self.rejected = self.clipped = 0
@@ -140,6 +160,7 @@ class Simulator(Node):
         self.failed = ''
         self.impacts = 0
         self.start_wall = None
+        self.first_command_wall = None
         self.diag_window_start = time.monotonic()
         self.diag_published = 0
         self._stop = threading.Event()
@@ -184,6 +205,8 @@ class Simulator(Node):
         torques = [0.0] * self.arm.n
         for k, joint in enumerate(self.command_order):
             torques[joint] = values[k]
+        if self.commands == 0:
+            self.first_command_wall = now     # simulated time starts here
         self.commands += 1
         self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
         self.pending = (torques, now)
@@ -322,6 +345,7 @@ class Simulator(Node):
         else:
             level, message = DiagnosticStatus.OK, 'running'
         elapsed = now - self.start_wall if self.start_wall else 0.0
+        run_p50, run_p99 = self.stats.run_percentiles(50, 99)
         values = {
             'mode': self.p['mode'],
             'publish_rate_requested': f'{self.p["publish_rate"]:g}',
@@ -330,6 +354,11 @@ class Simulator(Node):
             'jitter_p50_us': f'{np.percentile(jitter, 50) * 1e6:.1f}',
             'jitter_p99_us': f'{np.percentile(jitter, 99) * 1e6:.1f}',
             'jitter_max_us': f'{jitter.max() * 1e6:.1f}',
+            'jitter_run_p50_us': f'{run_p50 * 1e6:.0f}',
+            'jitter_run_p99_us': f'{run_p99 * 1e6:.0f}',
+            'jitter_run_max_us': f'{self.stats.jitter_max * 1e6:.1f}',
+            'periods_published': str(published),
+            'wall_time': f'{elapsed:.6f}',
             'overruns': str(self.stats.overruns),
             'compute_max_us': f'{(max(computes) if computes else 0.0) * 1e6:.1f}',
             'compute_worst_us': f'{self.stats.worst_compute * 1e6:.1f}',
@@ -340,7 +369,8 @@ class Simulator(Node):
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
             'sim_time': f'{self.arm.t:.6f}',
-            'real_time_factor': f'{self.arm.t / elapsed:.3f}' if elapsed > 0 else '0',
+            'real_time_factor': f'{self.arm.t / (now - self.first_command_wall):.3f}'
+            if self.first_command_wall and now > self.first_command_wall else '0',
             'impacts': str(self.impacts),
             'rhs_evaluations': str(integ.rhs_evaluations),
             'steps': str(integ.steps),

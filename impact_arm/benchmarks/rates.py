@@ -1,0 +1,173 @@
+"""``impact-arm bench rates``: the nodes as a user runs them, measured.
+
+1. realtime at 1 kHz, the article's 15 cycles with the controller in its own process:
+   overruns, whole-run period jitter p50/p99/max, worst compute time of one period (with the
+   simulated time it happened at: an impact period), simulator CPU and memory;
+2. realtime at 5 kHz for a few seconds: achieved publish rate (simulator's count and a
+   subscriber's count);
+3. lockstep at 1 kHz, simulator and controller over DDS: real-time factor of the 15 cycles;
+4. start-up: process start to the first /joint_states message; resident memory of each node.
+
+Processes run on a free local DDS domain (localhost discovery) and are ended by PID.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+
+def add_arguments(parser):
+    parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
+    parser.add_argument('--scene', default='paper')
+    parser.add_argument('--fast-seconds', type=float, default=5.0, metavar='S',
+                        help='duration of the 5 kHz run (default 5)')
+    parser.add_argument('--skip', nargs='*', default=[], choices=('realtime', 'fast', 'lockstep'))
+
+
+def _cpu_seconds(pid):
+    with open(f'/proc/{pid}/stat') as f:
+        fields = f.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def _memory_mb(pid, key='VmHWM'):
+    with open(f'/proc/{pid}/status') as f:
+        for line in f:
+            if line.startswith(key + ':'):
+                return int(line.split()[1]) / 1024
+    return float('nan')
+
+
+def _session(scene_path, mode, rate, rate_factor=None):
+    from ..runner import Run
+    args = argparse.Namespace(mode=mode, rate=rate, law=None, out=os.path.join('runs', 'bench'))
+    return Run(_scene(scene_path), scene_path, args, None, os.environ.copy())
+
+
+def _scene(path):
+    from ..scene import load_scene
+    return load_scene(path)
+
+
+def _run_cycles(scene_path, mode, rate, timeout=300):
+    """Simulator + controller until the scene's cycles are done; returns measurements."""
+    import rclpy
+    from sensor_msgs.msg import JointState
+    run = _session(scene_path, mode, rate)
+    started = time.monotonic()
+    first_state = []
+    run.start()
+    run.node.create_subscription(
+        JointState, '/joint_states',
+        lambda m: first_state or first_state.append(time.monotonic()), 10)
+    try:
+        sim = run.procs['simulator']
+        while not run.diagnostics or run.diagnostics.get('commands', '0') == '0':
+            rclpy.spin_once(run.node, timeout_sec=0.05)
+            if time.monotonic() - started > 60 or sim.poll() is not None:
+                raise RuntimeError(f'simulator did not start; see {run.logs["simulator"]}')
+        cpu0, wall0 = _cpu_seconds(sim.pid), time.monotonic()
+        outcome = run.watch(timeout)
+        cpu1, wall1 = _cpu_seconds(sim.pid), time.monotonic()
+        final = run.diagnostics
+        deadline = time.monotonic() + 2.5          # one more report, covering the last impact
+        while run.diagnostics is final and time.monotonic() < deadline:
+            rclpy.spin_once(run.node, timeout_sec=0.05)
+        memory = {name: _memory_mb(p.pid) for name, p in run.procs.items()}
+        d = run.diagnostics
+    finally:
+        run.stop()
+    return {
+        'mode': mode, 'rate_hz': rate, 'outcome': outcome, 'impacts': len(run.impacts),
+        'sim_time_s': float(d.get('sim_time', 0)),
+        'real_time_factor': float(d.get('real_time_factor', 0)),
+        'overruns': int(d.get('overruns', -1)),
+        'jitter_p50_us': float(d.get('jitter_run_p50_us', 'nan')),
+        'jitter_p99_us': float(d.get('jitter_run_p99_us', 'nan')),
+        'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
+        'worst_compute_us': float(d.get('compute_worst_us', 'nan')),
+        'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
+        'period_us': 1e6 / rate,
+        'simulator_cpu_percent': 100 * (cpu1 - cpu0) / (wall1 - wall0),
+        'rss_peak_mb': memory,
+        'first_joint_state_after_s': (first_state[0] - started) if first_state else None,
+    }
+
+
+def _run_fast(scene_path, rate, seconds):
+    """Realtime at ``rate`` Hz (controller at 1 kHz) for ``seconds``: achieved rate."""
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+    from sensor_msgs.msg import JointState
+    run = _session(scene_path, 'realtime', rate)
+    run.args.rate = rate
+    received = []
+    run.start()
+    executor = EventsExecutor()
+    executor.add_node(run.node)
+    run.node.create_subscription(JointState, '/joint_states',
+                                 lambda m: received.append(time.monotonic()), 1000)
+    try:
+        deadline = time.monotonic() + 60
+        while run.diagnostics.get('commands', '0') == '0' and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        begin = len(received)
+        first = dict(run.diagnostics)
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        window = received[begin:]
+        last = dict(run.diagnostics)
+    finally:
+        run.stop()
+    periods = int(last.get('periods_published', 0)) - int(first.get('periods_published', 0))
+    wall = float(last.get('wall_time', 0)) - float(first.get('wall_time', 0))
+    sub_rate = (len(window) - 1) / (window[-1] - window[0]) if len(window) > 1 else 0.0
+    return {'mode': 'realtime', 'rate_hz': rate,
+            'achieved_hz_simulator': periods / wall if wall > 0 else 0.0,
+            'achieved_hz_subscriber': sub_rate,
+            'overruns': int(last.get('overruns', -1)),
+            'jitter_p99_us': float(last.get('jitter_run_p99_us', 'nan'))}
+
+
+def run(args) -> int:
+    from ..runner import dds_environment
+    from ..scene import resolve_scene_path
+    scene_path = resolve_scene_path(args.scene)
+    env = dds_environment()
+    print(f'bench rates: scene {args.scene}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} '
+          f'(localhost); machine: {os.cpu_count()} cores', file=sys.stderr)
+    rows = []
+    if 'realtime' not in args.skip:
+        print('  realtime 1 kHz, 15 cycles ...', file=sys.stderr, flush=True)
+        rows.append(_run_cycles(scene_path, 'realtime', 1000.0))
+        r = rows[-1]
+        print(f"realtime 1 kHz: {r['impacts']} impacts, {r['overruns']} overruns; period "
+              f"jitter p50 {r['jitter_p50_us']:.0f} us, p99 {r['jitter_p99_us']:.0f} us, max "
+              f"{r['jitter_max_us']:.0f} us; worst compute {r['worst_compute_us']:.0f} us of "
+              f"a {r['period_us']:.0f} us period (at t = {r['worst_compute_at_s']:.3f} s); "
+              f"simulator CPU {r['simulator_cpu_percent']:.1f} % of one core; peak RSS "
+              + ', '.join(f'{k} {v:.0f} MB' for k, v in r['rss_peak_mb'].items())
+              + f"; first /joint_states {r['first_joint_state_after_s']:.2f} s after start")
+    if 'fast' not in args.skip:
+        print('  realtime 5 kHz ...', file=sys.stderr, flush=True)
+        rows.append(_run_fast(scene_path, 5000.0, args.fast_seconds))
+        r = rows[-1]
+        print(f"realtime 5 kHz: simulator published {r['achieved_hz_simulator']:.1f} Hz "
+              f"({100 * r['achieved_hz_simulator'] / 5000:.2f} %), a subscriber received "
+              f"{r['achieved_hz_subscriber']:.1f} Hz; {r['overruns']} overruns, jitter p99 "
+              f"{r['jitter_p99_us']:.0f} us")
+    if 'lockstep' not in args.skip:
+        print('  lockstep 1 kHz, 15 cycles ...', file=sys.stderr, flush=True)
+        rows.append(_run_cycles(scene_path, 'lockstep', 1000.0))
+        r = rows[-1]
+        print(f"lockstep 1 kHz: {r['impacts']} impacts, {r['sim_time_s']:.3f} s simulated, "
+              f"real-time factor {r['real_time_factor']:.2f}")
+    if args.json:
+        with open(args.json, 'w') as f:
+            json.dump(rows, f, indent=1)
+        print(f'rows written to {args.json}')
+    return 0
