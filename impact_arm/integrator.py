@@ -186,6 +186,12 @@ class PhaseIntegrator:
         elif kind == 'separation':
             # keep the dent: a re-strike before the tip leaves it meets the dent's floor
             st.levels[s] -= st.delta_r
+            # The contact event fires when level - y_B rises through zero from below; the
+            # located separation leaves y_B on the new level to rounding, and a +1e-20 there
+            # made the next contact undetectable (the tip of a controller pressing down
+            # tunnelled through the floor). Keep the level strictly below the tip.
+            y_tip = float(self.model.tip(st.y[:n], st.y[n:2 * n])[1])
+            st.levels[s] = min(st.levels[s], y_tip - 4 * float(np.spacing(abs(y_tip))))
             info = {'F_max': float(st.c[layout.C_PEAK]), 'delta_m': st.delta_m,
                     'delta_r': st.delta_r}
             st.phase, st.surface = Phase.FREE, -1

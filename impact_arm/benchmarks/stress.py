@@ -200,8 +200,14 @@ def check_run(case: Case, scene, deadline=None):
             if deadline and time.perf_counter() - t0 > deadline:
                 return stop(FAIL, f'no result within {deadline:g} s of wall time')
             events = integ.advance(scene.t_max, stop_at_event=True)
-            if not np.all(np.isfinite(integ.state.y)):
-                return stop(FAIL, f'non-finite state at t = {integ.state.t:g} s, not reported')
+            st = integ.state
+            if not np.all(np.isfinite(st.y)):
+                return stop(FAIL, f'non-finite state at t = {st.t:g} s, not reported')
+            if st.phase.name == 'FREE' and len(st.levels):
+                y_tip = model.tip(st.y[:n], st.y[n:2 * n])[1]
+                if y_tip < min(st.levels) - 1e-9:
+                    return stop(FAIL, f'tip {min(st.levels) - y_tip:.3g} m below a surface '
+                                      f'in free flight at t = {st.t:.6g} s (impact missed)')
             for ev in events:
                 cycles += ev.kind == 'switch'
                 if ev.kind == 'contact':
