@@ -202,7 +202,7 @@ def cli(args) -> int:
         if law not in LAWS:
             raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(LAWS)}')
     run = load(args.file)
-    if not 1 <= args.impact <= max(len(run.traces), 1):
+    if run.traces and not 1 <= args.impact <= len(run.traces):
         raise AnalysisError(f'--impact = {args.impact}: must be in [1, {len(run.traces)}] '
                             f'(the impacts with a trace in {args.file})')
     others = [load(f) for f in args.compare]

@@ -15,16 +15,16 @@ how old that is (the writer checks on each write; a recorder also flushes from a
 
 QoS of the topic contract (design §3), used by publishers, the recorder and replay:
 
-=============================  =======================================  ========================
-topic                          type                                     QoS
-=============================  =======================================  ========================
-/joint_states                  sensor_msgs/msg/JointState               reliable, volatile, 100
-/contact_wrench                geometry_msgs/msg/WrenchStamped          reliable, volatile, 100
-/impact_report                 std_msgs/msg/String                      reliable, transient_local, 100
-/diagnostics                   diagnostic_msgs/msg/DiagnosticArray      reliable, volatile, 10
-/clock                         rosgraph_msgs/msg/Clock                  best_effort, volatile, 1
-/effort_controller/commands    std_msgs/msg/Float64MultiArray           reliable, volatile, 10
-=============================  =======================================  ========================
+===========================  ===================================  =============================
+topic                        type                                 QoS
+===========================  ===================================  =============================
+/joint_states                sensor_msgs/msg/JointState           reliable, volatile, 100
+/contact_wrench              geometry_msgs/msg/WrenchStamped      reliable, volatile, 100
+/impact_report               std_msgs/msg/String                  reliable, transient_local, 100
+/diagnostics                 diagnostic_msgs/msg/DiagnosticArray  reliable, volatile, 10
+/clock                       rosgraph_msgs/msg/Clock              best_effort, volatile, 1
+/effort_controller/commands  std_msgs/msg/Float64MultiArray       reliable, volatile, 10
+===========================  ===================================  =============================
 
 All keep_last; deadline, lifespan and liveliness lease infinite; liveliness automatic.
 ``/impact_report`` is transient_local so a late subscriber (recorder, analysis) still gets

@@ -122,13 +122,40 @@ def test_limit_cycle_of_records():
     assert lc["settled_after"] == 4 and lc['period'] == pytest.approx(0.4)
 
 
-def test_compare_and_errors(article, tmp_path):
+def small_recording(path):
+    """Joint states only: no scene, no impacts, no traces (a bare live recording)."""
+    from sensor_msgs.msg import JointState
+
+    from impact_arm.mcap_ros2 import Ros2McapWriter
+    with Ros2McapWriter(path) as w:
+        for i in range(400):
+            t = i * 0.005
+            m = JointState(name=['joint1', 'joint2'],
+                           position=[math.sin(4 * t), 0.5 * math.cos(4 * t) - math.sin(4 * t)],
+                           velocity=[4 * math.cos(4 * t),
+                                     -2 * math.sin(4 * t) - 4 * math.cos(4 * t)])
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(i * 5_000_000, 10**9)
+            w.write_message('/joint_states', m, i * 5_000_000)
+    return path
+
+
+def test_what_the_data_allows_compare_and_errors(article, tmp_path):
     d, _, _ = article
-    ok = cli('analyze', d / 'paper.mcap', '--out', tmp_path / 'cmp', '--compare',
-             d / 'paper.mcap', '--impact', 15, cwd=tmp_path)
+    small = small_recording(tmp_path / 'small.mcap')
+    ok = cli('analyze', small, '--out', tmp_path / 'cmp', '--compare', small, cwd=tmp_path)
     assert ok.returncode == 0, ok.stderr
-    assert 'Figure 3 compares: paper.mcap, paper.mcap' in (
-        tmp_path / 'cmp' / 'report.md').read_text(encoding='utf-8')
+    made = sorted(p.name for p in (tmp_path / 'cmp').glob('*.png'))
+    assert made == sorted(FIGURES[:4])  # no scene: no Fig. 7; no traces: no Figs. 8-11
+    report = (tmp_path / 'cmp' / 'report.md').read_text(encoding='utf-8')
+    assert 'Figure 3 compares: small.mcap, small.mcap' in report
+    assert '0 impact reports' in report and 'no impacts recorded' in report
+    rows = np.loadtxt(tmp_path / 'cmp' / 'poincare_qd1_zero.csv', delimiter=',', skiprows=1)
+    # q̇1 = 4 cos 4t crosses zero at t = π/8, 3π/8, 5π/8 within 2 s, where q1 = ±1 rad and
+    # the absolute q2 = joint1 + joint2 = 0.5 cos 4t = 0
+    assert rows[:, 0] == pytest.approx([math.pi / 8, 3 * math.pi / 8, 5 * math.pi / 8],
+                                       abs=1e-3)
+    assert rows[:, 1] == pytest.approx([57.2958, -57.2958, 57.2958], abs=0.01)
+    assert rows[:, 2] == pytest.approx([0, 0, 0], abs=0.01)
     for argv, needle in (([tmp_path / 'none.mcap'], 'no such file'),
                          ([d / 'paper.mcap', '--impact', 16], '--impact = 16: must be in [1, 15]'),
                          ([d / 'paper.mcap', '--laws', 'lqr'], "--laws: 'lqr' is not one of"),

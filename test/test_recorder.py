@@ -37,6 +37,14 @@ def count_messages(path):
         return None
 
 
+def metadata(path):
+    try:
+        with open(path, 'rb') as f:
+            return {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    except Exception:  # noqa: BLE001 - polling a file another process is writing
+        return {}
+
+
 def test_records_what_was_published(ros_env, tmp_path):
     out = tmp_path / 'run.mcap'
     n = 150
@@ -44,13 +52,15 @@ def test_records_what_was_published(ros_env, tmp_path):
                          'param_nodes:=[test_publisher]', 'flush_interval:=0.2')
     with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
             start_process(helper_args('pub', '--count', n, '--rate', 300, '--wrench',
-                                      '--linger', 2.0), ros_env, tmp_path, 'pub') as pub:
+                                      '--linger', 30.0), ros_env, tmp_path, 'pub') as pub:
         assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), \
             pub.stderr + rec.stderr
         assert [e for e in pub.lines() if e.get('event') == 'matched'][0]['subs'] >= 1
         # everything published has reached a flushed file before the recorder is stopped
         assert wait_for(lambda: count_messages(out) == 2 * n, 10), rec.stderr
-        assert wait_for(lambda: not pub.alive(), 10)
+        # the publisher's parameters are asked once its services are discovered
+        assert wait_for(lambda: 'parameters/test_publisher/start' in metadata(out), 20)
+        pub.stop()
         rec.stop()
         assert rec.popen.returncode == 0, rec.stderr
 
