@@ -18,7 +18,8 @@ import time
 
 from .errors import ImpactArmError
 
-NODES = ('recorder', 'controller', 'simulator')       # start order; stopped in reverse
+NODES = ('recorder', 'simulator', 'controller')       # start order (the arm moves with the
+# first command, so the controller comes last, once the recorder listens)
 STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, recorder last
 
 
@@ -170,6 +171,8 @@ class Run:
         for node in NODES:
             if node == 'recorder' and not self.output:
                 continue
+            if node == 'controller':
+                self._await_graph()
             self.logs[node] = os.path.join(self.logdir, f'{node}.log')
             with open(self.logs[node], 'wb') as log:
                 self.procs[node] = subprocess.Popen(
@@ -178,6 +181,23 @@ class Run:
         print(f'impact-arm run: scene {self.scene.name!r}, {self.args.mode} at '
               f'{self.args.rate:g} Hz, ROS_DOMAIN_ID={self.env["ROS_DOMAIN_ID"]}, '
               f'logs in {self.logdir}', file=sys.stderr)
+
+    def _await_graph(self, timeout=60.0):
+        """Until the recorder (if any) subscribes to the simulator's joint states: the arm
+        starts moving with the controller's first command and nothing must go unrecorded."""
+        import rclpy
+        listeners = 1 if self.output else 0
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+            if self.node.count_publishers('/joint_states') >= 1 and \
+                    self.node.count_subscribers('/joint_states') >= listeners:
+                return
+            for name, proc in self.procs.items():
+                if proc.poll() is not None:
+                    return                      # watch() reports it
+        raise ImpactArmError(f'the simulator and recorder did not appear within {timeout:g} s;'
+                             f' see {self.logdir}')
 
     def _on_impact(self, msg):
         self.impacts.append(json.loads(msg.data))
