@@ -34,7 +34,7 @@ class Recorder(Node):
         topics = _param(self, 'topics', list(CONTRACT_TOPICS),
                         'topics to record; "name" or "name:pkg/msg/Type" (contract topics and '
                         'published topics need no type)')
-        scene = _param(self, 'scene', '', 'scene YAML to store in the file (optional)')
+        scene = _param(self, 'scene', '', 'scene file or installed scene name to store in the file (optional)')
         self.param_nodes = _param(self, 'param_nodes', ['simulator', 'controller'],
                                   'nodes whose parameters are stored at start and at shutdown')
         interval = _param(self, 'flush_interval', 0.5,
@@ -43,6 +43,8 @@ class Recorder(Node):
             raise ValueError(f'flush_interval = {interval}: must be > 0 s')
         scene_text = None
         if scene:
+            from ..scene import resolve_scene_path
+            scene = resolve_scene_path(scene)   # an installed scene name, as the simulator's
             try:
                 with open(scene, encoding='utf-8') as f:
                     scene_text = f.read()
