@@ -25,9 +25,11 @@ STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, reco
 
 def add_arguments(parser):
     parser.add_argument('--scene', default='paper', help='scene file or installed scene name')
-    parser.add_argument('--mode', choices=('realtime', 'lockstep'), default='realtime',
-                        help='realtime: paced by the wall clock; lockstep: as fast as the '
-                             'controller answers, deterministic')
+    parser.add_argument('--mode', choices=('realtime', 'lockstep'), default='lockstep',
+                        help='lockstep (default): one period per controller command, '
+                             'deterministic, as fast as the loop allows; realtime: paced by '
+                             'the wall clock like hardware (the article\'s stiff gains need a '
+                             'machine that keeps every 1 ms deadline)')
     parser.add_argument('--rate', type=float, default=1000.0, metavar='HZ',
                         help='publish and control rate (default 1000)')
     parser.add_argument('--law', choices=('q', 'pid', 'pd'), default=None,

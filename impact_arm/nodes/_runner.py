@@ -5,6 +5,7 @@ ask other nodes anything. Here SIGINT/SIGTERM only set a flag: the spin loop end
 ``finish`` runs with the middleware still up (final parameter query, closing the file), and the
 process exits with the node's exit code and no traceback.
 """
+import gc
 import signal
 import sys
 
@@ -44,10 +45,18 @@ def run(node_factory, args=None) -> int:
     node, executor, code = None, None, 0
     try:
         node = node_factory()
+        # Everything built so far (numba dispatchers, message classes, the model) lives for
+        # the whole process: move it out of the collector's sight, so that a periodic full
+        # collection cannot stall a period for milliseconds.
+        gc.collect()
+        gc.freeze()
         executor = make_executor(prefer=getattr(node, 'executor_kind', None))
         executor.add_node(node)
-        while not stopped and not node.done and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+        if hasattr(node, 'spin'):     # a node with its own loop (the realtime simulator)
+            node.spin(executor, lambda: bool(stopped) or node.done or not rclpy.ok())
+        else:
+            while not stopped and not node.done and rclpy.ok():
+                executor.spin_once(timeout_sec=0.1)
         code = node.finish(executor if rclpy.ok() else None)
     except (KeyboardInterrupt, ExternalShutdownException):
         code = node.finish(None) if node is not None else 0
