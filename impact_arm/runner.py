@@ -55,12 +55,21 @@ def cli(args) -> int:
     if output:
         os.makedirs(args.out, exist_ok=True)
     env = dds_environment()
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+    # Ctrl-C and SIGTERM stop the run the same orderly way (even if SIGINT was ignored, as
+    # for a background job of a non-interactive shell)
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     run = Run(scene, scene_path, args, output, env)
     try:
         run.start()
         outcome = run.watch(args.timeout or 3 * scene.t_max + 30)
     except KeyboardInterrupt:
         outcome = 'interrupted'
+        if sys.stderr.isatty():
+            print(file=sys.stderr)
     finally:
         codes = run.stop()
     if sys.stderr.isatty():
@@ -80,6 +89,9 @@ def cli(args) -> int:
         print(f'recorded to {output}' if os.path.exists(output) else
               f'no recording: {output} was not written')
     failed = {n: c for n, c in codes.items() if c not in (0, None)}
+    if outcome == 'interrupted':
+        print('interrupted: nodes stopped, recording closed', file=sys.stderr)
+        return 130
     if failed or outcome not in ('completed',):
         for node, code in failed.items():
             print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
@@ -164,7 +176,11 @@ class Run:
         from std_msgs.msg import String
 
         os.makedirs(self.logdir, exist_ok=True)
-        rclpy.init(domain_id=int(self.env['ROS_DOMAIN_ID']))
+        from rclpy.signals import SignalHandlerOptions
+        # Ctrl-C must reach us as KeyboardInterrupt (rclpy's handler would shut the context
+        # down under our feet): the nodes are then stopped in order and the table printed
+        rclpy.init(domain_id=int(self.env['ROS_DOMAIN_ID']),
+                   signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node('impact_arm_run')
         self.node.create_subscription(
             String, '/impact_report', self._on_impact,

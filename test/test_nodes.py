@@ -319,7 +319,35 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert counts.get('/impact_report') == 15
     assert counts.get('/joint_states', 0) > 5000
     assert counts.get('/effort_controller/commands', 0) > 5000
-    # no node process of this domain survives the run
+    assert not node_processes(env['ROS_DOMAIN_ID'])
+
+
+def test_run_command_interrupted_stops_nodes_and_keeps_the_recording(ros_env, tmp_path):
+    from rosbags.highlevel import AnyReader
+    from pathlib import Path
+    logs = tmp_path / 'runs' / 'logs'
+    proc = subprocess.Popen([PYTHON, '-m', 'impact_arm.cli', 'run', '--name', 'i', '--out',
+                             str(tmp_path / 'runs')], env=ros_env, cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        # interrupt once the arm moves (the controller's log exists once it was started)
+        assert wait_for(lambda: (logs / 'controller.log').exists(), timeout=60)
+        time.sleep(2.0)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, out
+    assert 'Traceback' not in out, out
+    assert not node_processes(ros_env['ROS_DOMAIN_ID'])
+    with AnyReader([Path(tmp_path / 'runs' / 'i.mcap')]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts.get('/joint_states', 0) > 0
+
+
+def node_processes(domain):
+    """PIDs of impact_arm node processes on DDS domain ``domain``."""
     leftovers = []
     for pid in filter(str.isdigit, os.listdir('/proc')):
         try:
@@ -329,7 +357,6 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
                 environ = f.read().split(b'\0')
         except OSError:
             continue
-        if b'impact_arm.nodes' in cmd and \
-                f'ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}'.encode() in environ:
+        if b'impact_arm.nodes' in cmd and f'ROS_DOMAIN_ID={domain}'.encode() in environ:
             leftovers.append(pid)
-    assert not leftovers
+    return leftovers
