@@ -7,6 +7,7 @@ the driver's: relative encoder angles (joint1 = q1, joint2 = q2 - q1), joint tor
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -70,6 +71,14 @@ class SimulatedArm:
         scratch = PhaseIntegrator(self.model, self.integrator.state.copy(),
                                   preset='fast', control='held')
         scratch.advance(scratch.state.t + 1.0 / self.rate)
+        # a whole impact on a scratch copy, released without torque (under gravity the arm
+        # falls onto its surface within a second): every Python path an impact takes
+        builder = ImpactBuilder(self.model)
+        for event in scratch.advance(scratch.state.t + 2.0):
+            record = builder.feed(event)
+            if record is not None:
+                json.dumps(record)
+                break
         n, y = self.n, scratch.state.y
         scratch.torque()
         scratch.contact_forces(y[:n], y[n:2 * n])

@@ -161,7 +161,8 @@ class Run:
         params = {'simulator': [f'scene:={self.scene_path}', f'publish_rate:={a.rate}',
                                 f'mode:={a.mode}',
                                 f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}'],
-                  'controller': [f'scene:={self.scene_path}', f'rate:={a.rate}']
+                  'controller': [f'scene:={self.scene_path}',
+                                 f'rate:={getattr(a, "control_rate", None) or a.rate}']
                   + ([f'law:={a.law}'] if a.law else []),
                   'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
         cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']

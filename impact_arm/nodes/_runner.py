@@ -6,8 +6,22 @@ ask other nodes anything. Here SIGINT/SIGTERM only set a flag: the spin loop end
 process exits with the node's exit code and no traceback.
 """
 import gc
+import os
 import signal
 import sys
+
+
+def realtime_priority(priority):
+    """Run the calling thread under SCHED_FIFO at ``priority`` (1-99), as ros2_control's
+    loop does when the system allows it; 0 leaves the normal scheduler. Returns what was
+    obtained, for /diagnostics."""
+    if priority <= 0 or not hasattr(os, 'sched_setscheduler'):
+        return 'normal'
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        return f'SCHED_FIFO {priority}'
+    except (PermissionError, OSError) as exc:
+        return f'normal (SCHED_FIFO refused: {exc.strerror or exc})'
 
 
 def make_executor(context=None, prefer=None):

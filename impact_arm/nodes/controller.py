@@ -23,7 +23,7 @@ from ..control import to_joint_space
 from ..mcap_ros2 import contract_qos
 from ..model import ArmModel
 from ..scene import load_scene, resolve_scene_path
-from ._runner import run
+from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
@@ -73,6 +73,9 @@ def parameter_table(scene):
               'surface means impact [m]', low=0.0, high=10.0),
         Param('joints', [f'joint{k + 1}' for k in range(n)], 'joint order of the command '
               'array', 'strs', size=n, read_only=True),
+        Param('thread_priority', 50, 'SCHED_FIFO priority of the control thread (0: normal '
+              'scheduling; falls back when the system refuses)', 'int', low=0, high=99,
+              read_only=True),
     )
 
 
@@ -121,8 +124,10 @@ class Controller(Node):
         if p['trigger'] == 'timer':
             self.create_timer(self.period, self._on_timer)
         self.msg = Float64MultiArray()
+        # like a controller manager's update loop: the thread that runs the callbacks
+        self.scheduling = realtime_priority(p['thread_priority'])
         self.get_logger().info(f'law {p["law"]} at {p["rate"]:g} Hz ({p["trigger"]}), '
-                               f'scene {scene.name!r}')
+                               f'scene {scene.name!r}, scheduling {self.scheduling}')
 
     done = False
 

@@ -30,7 +30,7 @@ from ..hardware import CommandError, SimulatedArm
 from ..integrator import PRESETS
 from ..mcap_ros2 import contract_qos
 from ..scene import load_scene, resolve_scene_path
-from ._runner import run
+from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
@@ -52,6 +52,9 @@ PARAMS = (
           read_only=True),
     Param('preset', '', "integrator preset (empty: the scene's)", 'str',
           choices=('',) + tuple(PRESETS), read_only=True),
+    Param('thread_priority', 50, 'SCHED_FIFO priority of the realtime loop thread (0: normal '
+          'scheduling; needs CAP_SYS_NICE or an rtprio limit, else it falls back with a note '
+          'in /diagnostics)', 'int', low=0, high=99, read_only=True),
     Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages',
           low=0.05, high=60.0, read_only=True),
     Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
@@ -75,6 +78,7 @@ class PeriodStats:
         # whole-run jitter |interval - period| as a 1 us histogram (0 ... 20 ms), plus the max
         self.histogram = np.zeros(20001, dtype=np.int64)
         self.jitter_max = 0.0
+        self.jitter_max_t = 0.0
 
     def add(self, published_at, compute, t_sim, overrun):
         with self.lock:
@@ -84,7 +88,8 @@ class PeriodStats:
                 if self.nominal is not None:
                     jitter = abs(interval - self.nominal)
                     self.histogram[min(int(jitter * 1e6), 20000)] += 1
-                    self.jitter_max = max(self.jitter_max, jitter)
+                    if jitter > self.jitter_max:
+                        self.jitter_max, self.jitter_max_t = jitter, t_sim
             self.last_publish = published_at
             self.computes.append(compute)
             self.published += 1
@@ -166,6 +171,7 @@ class Simulator(Node):
         self._stop = threading.Event()
         self._thread = None
         self._handshake = None
+        self.scheduling = 'normal'
         self.create_timer(p['diagnostics_period'], self._publish_diagnostics)
 
         self.arm.warm_up()                 # before the clock starts: no compile-cache loads later
@@ -251,6 +257,7 @@ class Simulator(Node):
         # The executor thread (commands, diagnostics) and this one share the GIL; a thread
         # waking from its sleep would otherwise wait up to the 5 ms default switch interval.
         sys.setswitchinterval(5e-5)
+        self.scheduling = realtime_priority(self.p['thread_priority'])
         wall_period = 1.0 / (self.p['publish_rate'] * self.p['rate_factor'])
         self.start_wall = start = time.monotonic()
         k = 0
@@ -263,9 +270,10 @@ class Simulator(Node):
             k += 1
             if self.pending is None and self.arm.periods == 0:
                 # brakes on until the first command: the arm holds its initial state and
-                # simulated time starts at 0 with the first command, as offline
+                # simulated time starts at 0 with the first command, as offline. (Timing
+                # statistics start with the motion: start-up hiccups are not the loop's.)
                 self._publish(self.arm.sample())
-                self.stats.add(time.monotonic(), 0.0, 0.0, False)
+                self.stats.published += 1
                 continue
             self._watchdog(woke)
             if not self._step_and_publish():
@@ -357,6 +365,7 @@ class Simulator(Node):
             'jitter_run_p50_us': f'{run_p50 * 1e6:.0f}',
             'jitter_run_p99_us': f'{run_p99 * 1e6:.0f}',
             'jitter_run_max_us': f'{self.stats.jitter_max * 1e6:.1f}',
+            'jitter_run_max_at_s': f'{self.stats.jitter_max_t:.6f}',
             'periods_published': str(published),
             'wall_time': f'{elapsed:.6f}',
             'overruns': str(self.stats.overruns),
@@ -365,6 +374,7 @@ class Simulator(Node):
             'compute_worst_at_s': f'{self.stats.worst_compute_t:.6f}',
             'period_us': f'{nominal * 1e6:.1f}',
             'watchdog': self.watchdog,
+            'scheduling': self.scheduling,
             'commands': str(self.commands),
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
