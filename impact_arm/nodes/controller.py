@@ -73,7 +73,7 @@ def parameter_table(scene):
               'surface means impact [m]', low=0.0, high=10.0),
         Param('joints', [f'joint{k + 1}' for k in range(n)], 'joint order of the command '
               'array', 'strs', size=n, read_only=True),
-        Param('thread_priority', 50, 'SCHED_FIFO priority of the control thread (0: normal '
+        Param('thread_priority', 0, 'SCHED_FIFO priority of the control thread (0: normal '
               'scheduling; falls back when the system refuses)', 'int', low=0, high=99,
               read_only=True),
     )
