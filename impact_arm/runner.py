@@ -210,7 +210,8 @@ class Run:
         while time.monotonic() < end:
             rclpy.spin_once(self.node, timeout_sec=0.05)
             if self.node.count_publishers('/joint_states') >= 1 and \
-                    self.node.count_subscribers('/joint_states') >= listeners:
+                    self.node.count_subscribers('/joint_states') >= listeners and \
+                    self.node.count_subscribers('/effort_controller/commands') >= 1 + listeners:
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:

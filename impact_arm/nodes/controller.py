@@ -112,6 +112,7 @@ class Controller(Node):
         self.wrench_stamp = -math.inf
         self.normal_force = None
         self.sent = 0
+        self.started = False
         self.warned_names = False
         self.pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC,
                                          contract_qos(COMMAND_TOPIC).to_rclpy())
@@ -201,6 +202,13 @@ class Controller(Node):
 
     # ------------------------------------------------------------------------ output
     def _tick(self, t, q, qd):
+        if not self.started:
+            # The arm is held until our first command, so send it only once every reader
+            # the graph knows of (the driver, a recorder) is matched: nothing of the run goes
+            # unheard. The driver repeats its held state, which brings us back here.
+            if self.pub.get_subscription_count() < max(1, self.count_subscribers(COMMAND_TOPIC)):
+                return
+            self.started = True
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
         self._send([tau[j] for j in self.order])
