@@ -123,6 +123,9 @@ def _missing(prog):
 
 
 def main(argv=None) -> int:
+    # every sub-command that touches DDS keeps discovery on this machine unless the user
+    # chose otherwise
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     argv = sys.argv[1:] if argv is None else list(argv)
     selected = next((a for a in argv if not a.startswith('-')), None)
     args = build_parser(selected).parse_args(argv)

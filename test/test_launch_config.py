@@ -88,3 +88,27 @@ def test_parameter_files_are_accepted_by_the_nodes(ros_env, tmp_path, node):
         out, _ = proc.communicate(timeout=10)
     assert proc.returncode == 0, out
     assert 'Traceback' not in out and 'ERROR' not in out, out
+
+
+def test_nodes_keep_discovery_on_this_machine_unless_told_otherwise(ros_env):
+    """Started without ROS_AUTOMATIC_DISCOVERY_RANGE, a node process limits DDS discovery to
+    localhost before rclpy starts; an explicit choice is kept."""
+    probe = ('import os, rclpy\n'
+             'from rclpy.node import Node\n'
+             'from impact_arm.nodes._runner import run\n'
+             'class Once(Node):\n'
+             '    done = True\n'
+             '    def __init__(self):\n'
+             '        super().__init__("once")\n'
+             '        print("RANGE=" + os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"])\n'
+             '    def finish(self, executor):\n'
+             '        return 0\n'
+             'raise SystemExit(run(Once))\n')
+    for given, expected in ((None, 'LOCALHOST'), ('OFF', 'OFF')):
+        env = {k: v for k, v in ros_env.items() if k != 'ROS_AUTOMATIC_DISCOVERY_RANGE'}
+        if given:
+            env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = given
+        out = subprocess.run([PYTHON, '-c', probe], env=env, capture_output=True, text=True,
+                             timeout=60)
+        assert out.returncode == 0, out.stderr
+        assert f'RANGE={expected}' in out.stdout

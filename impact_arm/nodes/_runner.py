@@ -52,6 +52,9 @@ def run(node_factory, args=None) -> int:
 
     from ..errors import ImpactArmError
 
+    # DDS stays on this machine unless the user chose otherwise (multi-machine set-ups set
+    # ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET explicitly)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     stopped = []
     previous = {s: signal.signal(s, lambda signum, frame: stopped.append(signum))
                 for s in (signal.SIGINT, signal.SIGTERM)}
