@@ -136,7 +136,9 @@ def _publish(args):
     wr = node.create_publisher(WrenchStamped, '/contact_wrench',
                                contract_qos('/contact_wrench').to_rclpy()) if args.wrench else None
     end = time.monotonic() + args.wait_sub
-    while js.get_subscription_count() < 1 and time.monotonic() < end:
+    # every publisher matched (not just the first), or its first messages go nowhere
+    while (js.get_subscription_count() < 1 or (wr is not None and wr.get_subscription_count()
+                                               < 1)) and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
     print(json.dumps({'event': 'matched', 'subs': js.get_subscription_count()}), flush=True)
     period = 1.0 / args.rate
