@@ -154,7 +154,9 @@ CONTRACT_TOPICS = {  # topic -> (type, QoS); see the module docstring
     '/impact_report': ('std_msgs/msg/String', TopicQos(durability='transient_local', depth=100)),
     '/diagnostics': ('diagnostic_msgs/msg/DiagnosticArray', TopicQos(depth=10)),
     '/clock': ('rosgraph_msgs/msg/Clock', TopicQos(reliability='best_effort', depth=1)),
-    '/effort_controller/commands': ('std_msgs/msg/Float64MultiArray', TopicQos(depth=10)),
+    # depth 100 like the joint states: a recorder that is briefly slower than a lockstep loop
+    # must not lose commands the driver already acknowledged
+    '/effort_controller/commands': ('std_msgs/msg/Float64MultiArray', RELIABLE_100),
 }
 
 
@@ -500,7 +502,10 @@ class Ros2McapWriter:
                            'duration': {'nanoseconds': duration}, 'message_count': n}],
                 'custom_data': {'impact_arm_version': package_version()},
                 'ros_distro': _distro()}
-        return yaml.safe_dump(meta, sort_keys=False, default_flow_style=False) + ' ' * pad
+        # libyaml's dumper when present: this runs at every flush
+        dumper = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
+        return yaml.dump(meta, Dumper=dumper, sort_keys=False,
+                         default_flow_style=False) + ' ' * pad
 
     def _flushed_count(self, ch) -> int:
         return ch.count - len(self._chunk_index.get(ch.id, ()))

@@ -4,6 +4,12 @@ Parameters: output, topics, scene, param_nodes, flush_interval (see their descri
 Messages are stored as received (no deserialization): log time = reception time, publish
 time = the publisher's source timestamp. The file also holds the scene YAML (attachment and
 metadata), the parameters of ``param_nodes`` at start and at shutdown, and the package version.
+
+The subscriptions live on a second node, ``_recorder_reader``, that no executor waits on: the
+recording loop takes whatever has arrived every ``POLL_PERIOD``. One executor cycle per message
+cost about as much CPU as the simulator's whole period; in lockstep that CPU is taken from the
+loop being recorded. DDS keeps acknowledging in the background (reader history
+``RECORDER_MIN_DEPTH``), so nothing waits for the poll.
 """
 import functools
 import json
@@ -18,7 +24,7 @@ from ..mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQ
                          contract_qos, message_class, package_version, ros_distro)
 from ._runner import run
 
-DRAIN_MAX = 500  # messages taken directly per callback
+POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 RECORDER_MIN_DEPTH = 1000  # reader history: absorbs bursts while a chunk is compressed/written
 
 
@@ -70,6 +76,7 @@ class Recorder(Node):
             name, _, type_name = entry.partition(':')
             self.wanted[name] = type_name or CONTRACT_TOPICS.get(name, ('',))[0]
         self.subs = {}
+        self.reader = Node('_recorder_reader', context=self.context)
         self._subscribe_known()
         self.create_timer(interval, self._flush)
         self.create_timer(0.5, self._discover)
@@ -88,9 +95,8 @@ class Recorder(Node):
         for topic, type_name in self.wanted.items():
             if type_name and topic not in self.subs:
                 qos = contract_qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
-                self.subs[topic] = self.create_subscription(
-                    message_class(type_name), topic, functools.partial(self._on_message, topic),
-                    qos, raw=True)
+                self.subs[topic] = self.reader.create_subscription(
+                    message_class(type_name), topic, _never_called, qos, raw=True)
 
     def _offered_default(self, topic) -> TopicQos:
         """For a topic outside the contract: a QoS every current publisher is compatible with."""
@@ -112,19 +118,28 @@ class Recorder(Node):
             self._subscribe_known()
         self._query_parameters('start')
 
-    def _on_message(self, topic, data, info):
-        self._store(topic, data, info)
-        # One executor cycle costs far more than a take: drain what is already queued (bounded,
-        # so timers and other topics still get their turn).
-        sub = self.subs.get(topic)
-        if sub is None:
-            return
-        with sub.handle:
-            for _ in range(DRAIN_MAX):
-                taken = sub.handle.take_message(sub.msg_type, True)
-                if taken is None or self.failed:
-                    break
-                self._store(topic, *taken)
+    def spin(self, executor, should_stop):
+        """Timers and parameter replies through the executor, messages by polling."""
+        while not should_stop() and not self.failed:
+            executor.spin_once(timeout_sec=POLL_PERIOD)
+            self._drain()
+
+    def _drain(self):
+        """Take every queued message of every topic and write them in order of reception."""
+        batch = []
+        for topic, sub in list(self.subs.items()):
+            with sub.handle:
+                while True:
+                    taken = sub.handle.take_message(sub.msg_type, True)
+                    if taken is None:
+                        break
+                    batch.append((taken[1].get('received_timestamp') or time.time_ns(), topic,
+                                  taken[0], taken[1]))
+        batch.sort(key=lambda m: m[0])
+        for _, topic, data, info in batch:
+            if self.failed:
+                break
+            self._store(topic, data, info)
 
     def _store(self, topic, data, info):
         received = info.get('received_timestamp') or time.time_ns()
@@ -152,7 +167,7 @@ class Recorder(Node):
             self.get_logger().error(f'recording stopped: {err}')
         self.failed = True
         for sub in self.subs.values():
-            self.destroy_subscription(sub)
+            self.reader.destroy_subscription(sub)
         self.subs.clear()
 
     # ------------------------------------------------------------------- parameters
@@ -187,7 +202,10 @@ class Recorder(Node):
             deadline = time.monotonic() + 1.0
             while time.monotonic() < deadline and any(
                     s == 'end asked' for s in self.params.values()):
-                executor.spin_once(timeout_sec=0.05)
+                executor.spin_once(timeout_sec=POLL_PERIOD)
+                self._drain()
+        if not self.failed:
+            self._drain()
         try:
             self.writer.close()
         except RecordingError as e:
@@ -196,6 +214,16 @@ class Recorder(Node):
             f'{self.writer.message_count} messages in {self.output}' if not self.failed else
             f'recording failed; {self.output} holds the data flushed before the error')
         return 1 if self.failed else 0
+
+
+    def destroy_node(self):
+        if getattr(self, 'reader', None) is not None:   # absent if the output was refused
+            self.reader.destroy_node()
+        super().destroy_node()
+
+
+def _never_called(msg):
+    """Subscriptions of the reader node are drained by ``Recorder._drain``."""
 
 
 def main(args=None):

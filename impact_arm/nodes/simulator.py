@@ -303,13 +303,9 @@ class Simulator(Node):
             self._publish(self.arm.sample())
 
     def _publish(self, tick):
+        # the controller waits for this period's wrench and joint state: they go first, what
+        # no control loop waits for (/clock, impact reports) after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-        if self.pub_clock is not None:
-            self.msg_clock.clock.sec, self.msg_clock.clock.nanosec = sec, nsec
-            self.pub_clock.publish(self.msg_clock)
-        for record, _rows in tick.impacts:
-            self.impacts += 1
-            self.pub_impact.publish(String(data=json.dumps(record)))
         w = self.msg_wrench
         w.header.stamp.sec, w.header.stamp.nanosec = sec, nsec
         w.wrench.force.x, w.wrench.force.y = tick.wrench
@@ -318,6 +314,12 @@ class Simulator(Node):
         js.header.stamp.sec, js.header.stamp.nanosec = sec, nsec
         js.position, js.velocity, js.effort = tick.position, tick.velocity, tick.effort
         self.pub_joints.publish(js)
+        if self.pub_clock is not None:
+            self.msg_clock.clock.sec, self.msg_clock.clock.nanosec = sec, nsec
+            self.pub_clock.publish(self.msg_clock)
+        for record, _rows in tick.impacts:
+            self.impacts += 1
+            self.pub_impact.publish(String(data=json.dumps(record)))
 
     def _fail(self, why):
         self.failed = why
