@@ -19,7 +19,7 @@ import sys
 import tempfile
 import types
 
-GENERATOR_VERSION = '6'
+GENERATOR_VERSION = '7'
 
 
 def jit_options():
@@ -126,7 +126,7 @@ def _module_header(n, gravity, contact, friction, n_integral):
              '# Do not edit: delete the file to regenerate it.',
              f'# compiled with {jit_options()}',
              'import math', 'from math import sin, cos, sqrt', 'import numpy as np',
-             'from impact_arm.jit import jit, jit_leaf',
+             'from impact_arm.jit import jit, jit_alloc, jit_leaf',
              'from impact_arm.layout import *  # noqa: F401,F403',
              'from impact_arm.contact import (hertz_force, jackson_green, restitution_force,',
              '                                friction_force, YIELD_ONSET_FACTOR as YIELD_ONSET)',

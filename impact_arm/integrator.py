@@ -95,7 +95,7 @@ class PhaseIntegrator:
         self._trace_buffer = np.zeros((TRACE_CAPACITY, 7 + model.n))
         self._trace_count = np.zeros(1, dtype=np.int64)
         self._ev = np.zeros(1, dtype=np.int64)
-        self._W = np.zeros(4 * model.n)
+        self._W = np.zeros(model.eq.SCRATCH)
         self.events = 0
 
     @property

@@ -25,10 +25,12 @@ E5 = -2187 / 6784 + 92097 / 339200
 E6 = 11 / 84 - 187 / 2100
 E7 = -1 / 40
 C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
+SCRATCH = 4 * N + N * N   # rhs scratch: generalized forces, torques, PID error and rate, M
 
 
 @jit_leaf
-def accelerations(q, qd, generalized, P, out):
+def accelerations(q, qd, generalized, P, out, S):
+    """q̈ into ``out``; S is N*N scratch for the general case (no allocation here)."""
     L = P[P_L:P_L + N]
     m = P[P_M:P_M + N]
     if HAS_ACCEL:
@@ -36,16 +38,28 @@ def accelerations(q, qd, generalized, P, out):
         for i in range(N):
             out[i] = values[i]
     else:
+        # M q̈ = b with M symmetric positive definite (it is a kinetic energy): Cholesky
+        # M = G G^T into S (row-major, lower triangle), then two triangular solves
         values = mass_and_rhs(q, qd, generalized, L, m, P[P_G])
-        M = np.empty((N, N))
-        b = np.empty(N)
         for i in range(N):
-            b[i] = values[N * N + i]
-            for j in range(N):
-                M[i, j] = values[i * N + j]
-        x = np.linalg.solve(M, b)
+            for j in range(i + 1):
+                s = values[i * N + j]
+                for k in range(j):
+                    s -= S[i * N + k] * S[j * N + k]
+                if i == j:
+                    S[i * N + i] = math.sqrt(s)
+                else:
+                    S[i * N + j] = s / S[j * N + j]
         for i in range(N):
-            out[i] = x[i]
+            s = values[N * N + i]
+            for k in range(i):
+                s -= S[i * N + k] * out[k]
+            out[i] = s / S[i * N + i]
+        for i in range(N - 1, -1, -1):
+            s = out[i]
+            for k in range(i + 1, N):
+                s -= S[k * N + i] * out[k]
+            out[i] = s / S[i * N + i]
 
 
 @jit_leaf
@@ -98,14 +112,14 @@ def control_torque(y, P, I, C, tau_held, tau, error, rate):
         pid_law(error, rate, y[2 * N:2 * N + NI], P[P_KP:P_KP + N], P[P_KD:P_KD + N],
                 P[P_KI:P_KI + N], tau)
     else:
-        pid_law(error, rate, P[P_KI:P_KI + N] * 0.0, P[P_KP:P_KP + N], P[P_KD:P_KD + N],
-                P[P_KI:P_KI + N], tau)
+        for i in range(N):   # no integral state: PD (the Ki term has nothing to act on)
+            tau[i] = -P[P_KD + i] * rate[i] - P[P_KP + i] * error[i]
     return True
 
 
 @jit
 def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
-    """ẏ into ``out``. W is scratch space (4N) so the hot loop never allocates."""
+    """ẏ into ``out``. W is scratch space (SCRATCH) so the hot loop never allocates."""
     stats[0] += 1
     q = y[:N]
     qd = y[N:2 * N]
@@ -126,7 +140,7 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
         add_joint_torques(tau, generalized)
     for i in range(N):
         out[i] = qd[i]
-    accelerations(q, qd, generalized, P, out[N:2 * N])
+    accelerations(q, qd, generalized, P, out[N:2 * N], W[4 * N:])
     if NI > 0:
         # the integral runs only while the controller acts (it is off during contact);
         # control_torque left the PID error in ``error``
@@ -314,7 +328,7 @@ def initial_step(t, y, f0, P, I, SURF, C, levels, tau_held, stats, W, work, f1):
     return min(100 * h0, h1, max_step)
 
 
-@jit
+@jit_alloc
 def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev):
     """Integrate from T[0] to t_end with step T[1]; y, f updated in place. T[2] != 0 asks
     for f to be recomputed first (new phase, new command); T[1] <= 0 for a fresh step size.
@@ -323,18 +337,20 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
     TRACE_FULL when the trace buffer needs draining, or an ERR_* status."""
     size = y.shape[0]
     ns = SURF.shape[0]
+    # the only allocation: scratch for the stepping loop, which itself runs without NRT
+    return stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount,
+                         ev, np.empty(size), np.empty(size), np.empty(size), np.empty(size),
+                         np.empty(size), np.empty(size), np.empty((5, size)),
+                         np.empty(SCRATCH), np.empty(ns + 4), np.empty(ns + 4),
+                         np.empty(ns + 4))
+
+
+@jit
+def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev,
+                  y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp):
+    """``advance`` with its scratch arrays."""
+    ns = SURF.shape[0]
     rtol, atol, max_step = P[P_RTOL], P[P_ATOL], P[P_MAXSTEP]
-    y1 = np.empty(size)
-    f1 = np.empty(size)
-    err = np.empty(size)
-    work = np.empty(size)
-    y_root = np.empty(size)
-    f_tmp = np.empty(size)
-    K = np.empty((5, size))
-    W = np.empty(4 * N)
-    g0 = np.empty(ns + 4)
-    g1 = np.empty(ns + 4)
-    g_tmp = np.empty(ns + 4)
     t = T[0]
     if T[2] != 0.0:
         rhs(t, y, f, P, I, SURF, C, levels, tau_held, stats, W)
@@ -383,16 +399,20 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
                 rk_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
                         tau_held, stats, W)
             else:
-                y_root[:] = y1
-            y[:] = y_root
+                for i in range(y_root.shape[0]):   # (a slice copy would need NRT)
+                    y_root[i] = y1[i]
+            for i in range(y.shape[0]):   # (a slice copy would need NRT)
+                y[i] = y_root[i]
             t = t + best_s
             if int(C[C_PHASE]) != FREE:
                 record_point(t, y, P, I, SURF, C, levels, trace, tcount)
             ev[0] = best_k
             status = EVENT
             break
-        y[:] = y1
-        f[:] = f1
+        for i in range(y.shape[0]):   # (a slice copy would need NRT)
+            y[i] = y1[i]
+        for i in range(f.shape[0]):   # (a slice copy would need NRT)
+            f[i] = f1[i]
         t = t_end if clipped else t + step
         for k in range(ns + 4):
             g0[k] = g1[k]

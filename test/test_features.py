@@ -99,7 +99,7 @@ def test_contact_friction_and_integral_code_sits_behind_compile_time_constants()
                 assert 'HAS_FRICTION' in guards
                 checked += 1
     # the step loop: per-step contact bookkeeping only under HAS_CONTACT
-    loop_calls = [(c, g) for c, g in guarded_calls(functions['advance'])
+    loop_calls = [(c, g) for c, g in guarded_calls(functions['stepping_loop'])
                   if c == 'record_point']
     assert any('HAS_CONTACT' in g for c, g in loop_calls)
     assert checked >= 3
