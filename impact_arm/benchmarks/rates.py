@@ -6,7 +6,9 @@
 2. realtime at 5 kHz for a few seconds: achieved publish rate (simulator's count and a
    subscriber's count);
 3. lockstep at 1 kHz, simulator and controller over DDS: real-time factor of the 15 cycles;
-4. start-up: process start to the first /joint_states message; resident memory of each node.
+4. start-up: process start to the first /joint_states message; resident memory of each node;
+5. the transport floor: the same lockstep exchange with no physics and no control law in it
+   (``transport_floor``), i.e. the best real-time factor rclpy and DDS allow on this machine.
 
 Processes run on a free local DDS domain (localhost discovery) and are ended by PID.
 """
@@ -24,7 +26,8 @@ def add_arguments(parser):
     parser.add_argument('--scene', default='paper')
     parser.add_argument('--fast-seconds', type=float, default=5.0, metavar='S',
                         help='duration of the 5 kHz run (default 5)')
-    parser.add_argument('--skip', nargs='*', default=[], choices=('realtime', 'fast', 'lockstep'))
+    parser.add_argument('--skip', nargs='*', default=[],
+                        choices=('realtime', 'fast', 'lockstep', 'floor'))
 
 
 def _cpu_seconds(pid):
@@ -178,6 +181,16 @@ def run(args) -> int:
         r = rows[-1]
         print(f"lockstep 1 kHz: {r['impacts']} impacts, {r['sim_time_s']:.3f} s simulated, "
               f"real-time factor {r['real_time_factor']:.2f}")
+    if 'floor' not in args.skip:
+        from .transport_floor import measure
+        print('  transport floor (lockstep exchange without physics or control) ...',
+              file=sys.stderr, flush=True)
+        floor = measure(env=env)
+        rows.append({'mode': 'transport_floor', 'period_s': floor,
+                     'real_time_factor_ceiling_1khz': 1e-3 / floor})
+        print(f"transport floor: {floor * 1e6:.0f} us per lockstep period with no physics and "
+              f"no control law (wrench + joint state + clock out, command back): real-time "
+              f"factor at 1 kHz can never exceed {1e-3 / floor:.2f} here")
     if args.json:
         with open(args.json, 'w') as f:
             json.dump(rows, f, indent=1)
