@@ -32,7 +32,7 @@ OPTIONS = dict(cache=True, nogil=True, _nrt=False)
 # arithmetic of a two-link right-hand side (measured 0.36 -> 0.21 us per call). Inlining the
 # big kernel functions too would make compilation explode, so they stay plain calls.
 LEAF_OPTIONS = dict(OPTIONS, inline='always')
-ALLOC_OPTIONS = dict(cache=True, nogil=True)
+ALLOC_OPTIONS = dict(OPTIONS, _nrt=True)
 
 
 def jit(func):

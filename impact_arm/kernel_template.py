@@ -345,6 +345,13 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
                          np.empty(ns + 4))
 
 
+@jit_leaf
+def copy_into(dst, src):
+    """dst[:] = src (a slice assignment may allocate a temporary, which needs NRT)."""
+    for i in range(dst.shape[0]):
+        dst[i] = src[i]
+
+
 @jit
 def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev,
                   y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp):
@@ -398,24 +405,19 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             if best_s < step:
                 rk_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
                         tau_held, stats, W)
+                copy_into(y, y_root)
             else:
-                for i in range(y_root.shape[0]):   # (a slice copy would need NRT)
-                    y_root[i] = y1[i]
-            for i in range(y.shape[0]):   # (a slice copy would need NRT)
-                y[i] = y_root[i]
+                copy_into(y, y1)
             t = t + best_s
             if int(C[C_PHASE]) != FREE:
                 record_point(t, y, P, I, SURF, C, levels, trace, tcount)
             ev[0] = best_k
             status = EVENT
             break
-        for i in range(y.shape[0]):   # (a slice copy would need NRT)
-            y[i] = y1[i]
-        for i in range(f.shape[0]):   # (a slice copy would need NRT)
-            f[i] = f1[i]
+        copy_into(y, y1)
+        copy_into(f, f1)
         t = t_end if clipped else t + step
-        for k in range(ns + 4):
-            g0[k] = g1[k]
+        copy_into(g0, g1)
         if HAS_CONTACT:
             if int(C[C_PHASE]) != FREE:
                 delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount)
