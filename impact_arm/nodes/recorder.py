@@ -12,6 +12,7 @@ loop being recorded. DDS keeps acknowledging in the background (reader history
 ``RECORDER_MIN_DEPTH``), so nothing waits for the poll.
 """
 import functools
+import heapq
 import json
 import os
 import time
@@ -125,24 +126,26 @@ class Recorder(Node):
             self._drain()
 
     def _drain(self):
-        """Take every queued message of every topic and write them in order of reception."""
-        batch = []
+        """Take every queued message of every topic; write them in order of reception, each
+        topic's messages strictly in the order they were taken."""
+        per_topic = []
         for topic, sub in list(self.subs.items()):
+            taken = []
             with sub.handle:
                 while True:
-                    taken = sub.handle.take_message(sub.msg_type, True)
-                    if taken is None:
+                    message = sub.handle.take_message(sub.msg_type, True)
+                    if message is None:
                         break
-                    batch.append((taken[1].get('received_timestamp') or time.time_ns(), topic,
-                                  taken[0], taken[1]))
-        batch.sort(key=lambda m: m[0])
-        for _, topic, data, info in batch:
+                    data, info = message
+                    received = info.get('received_timestamp') or time.time_ns()
+                    taken.append((received, topic, data, info.get('source_timestamp') or received))
+            per_topic.append(taken)
+        for received, topic, data, published in heapq.merge(*per_topic, key=lambda m: m[0]):
             if self.failed:
                 break
-            self._store(topic, data, info)
+            self._store(topic, data, received, published)
 
-    def _store(self, topic, data, info):
-        received = info.get('received_timestamp') or time.time_ns()
+    def _store(self, topic, data, received, published):
         try:
             if not self.writer.has_topic(topic):
                 # Like rosbag2: store the QoS the publishers actually offer, else the contract's.
@@ -151,7 +154,7 @@ class Recorder(Node):
                 thash = str(pubs[0].topic_type_hash) if pubs else None
                 self.writer.add_topic(topic, self.wanted[topic], offered,
                                       None if thash in (None, 'INVALID') else thash)
-            self.writer.write(topic, data, received, info.get('source_timestamp') or received)
+            self.writer.write(topic, data, received, published)
             self.received += 1
         except RecordingError as e:
             self._fail(e)
