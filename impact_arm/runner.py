@@ -163,7 +163,8 @@ class Run:
                                 f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}'],
                   'controller': [f'scene:={self.scene_path}',
                                  f'rate:={getattr(a, "control_rate", None) or a.rate}']
-                  + ([f'law:={a.law}'] if a.law else []),
+                  + ([f'law:={a.law}'] if a.law else [])
+                  + (['command_readers:=2'] if self.output else []),   # simulator + recorder
                   'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
         cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']
         for p in params:

@@ -36,7 +36,8 @@ def generate_launch_description():
                                                            ' else 1.0'])}]),
         Node(package='impact_arm', executable='controller', name='controller', output='screen',
              parameters=[os.path.join(config, 'controller.yaml'),
-                         {'scene': scene, 'law': law, 'rate': rate}]),
+                         {'scene': scene, 'law': law, 'rate': rate,
+                          'command_readers': 2}]),   # simulator and recorder hear the start
         Node(package='impact_arm', executable='recorder', name='recorder', output='screen',
              parameters=[os.path.join(config, 'recorder.yaml'),
                          {'scene': scene, 'output': LaunchConfiguration('output')}]),

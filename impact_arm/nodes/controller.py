@@ -73,6 +73,9 @@ def parameter_table(scene):
               'surface means impact [m]', low=0.0, high=10.0),
         Param('joints', [f'joint{k + 1}' for k in range(n)], 'joint order of the command '
               'array', 'strs', size=n, read_only=True),
+        Param('command_readers', 1, 'readers of the command topic (the driver, a recorder) '
+              'matched before the first command; the arm is held until then, so nothing of the '
+              'run goes unrecorded', 'int', low=1, high=100, read_only=True),
         Param('thread_priority', 0, 'SCHED_FIFO priority of the control thread (0: normal '
               'scheduling; falls back when the system refuses)', 'int', low=0, high=99,
               read_only=True),
@@ -203,10 +206,12 @@ class Controller(Node):
     # ------------------------------------------------------------------------ output
     def _tick(self, t, q, qd):
         if not self.started:
-            # The arm is held until our first command, so send it only once every reader
-            # the graph knows of (the driver, a recorder) is matched: nothing of the run goes
-            # unheard. The driver repeats its held state, which brings us back here.
-            if self.pub.get_subscription_count() < max(1, self.count_subscribers(COMMAND_TOPIC)):
+            # The arm is held until our first command, so send it only once the readers we
+            # were told of (command_readers) and every one the graph already knows of are
+            # matched: our own view of the graph may not show a recorder yet. The driver
+            # repeats its held state, which brings us back here.
+            if self.pub.get_subscription_count() < max(self.p['command_readers'],
+                                                       self.count_subscribers(COMMAND_TOPIC)):
                 return
             self.started = True
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
