@@ -174,9 +174,24 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         time.sleep(3.5)
         window = states[begin:]
         stamps = [stamp(m) for _, m in window]
-        # every period published once, none lost or repeated: consecutive stamps 1 ms apart
-        assert all(abs(b - a - 1e-3) < 1e-6 for a, b in zip(stamps, stamps[1:])), \
-            'joint states lost or repeated'
+        # Every period published once, in order: consecutive stamps lie on the 1 ms grid and
+        # advance. A gap can only be this probe falling behind the publisher's reliable
+        # history (depth 100) while a loaded machine stalls it, so gaps are tolerated up to
+        # a small share; a repeated, reordered or off-grid stamp is a simulator fault.
+        steps = [(b - a) / 1e-3 for a, b in zip(stamps, stamps[1:])]
+        bad = [(i, s) for i, s in enumerate(steps) if round(s) < 1 or abs(s - round(s)) > 1e-3]
+        assert not bad, f'joint states repeated, reordered or off the 1 ms grid: {bad[:5]}'
+        lost = sum(round(s) - 1 for s in steps)
+        assert lost <= 0.05 * len(stamps), f'{lost} of {len(stamps) + lost} joint states lost'
+        # the simulator's own count says every period was published: between two of its
+        # diagnostics, periods published = simulated time advanced / 1 ms
+        running = [diagnostics_values(m) for _, m in diags]
+        running = [v for v in running if float(v['sim_time']) > 0.2]
+        assert len(running) >= 2, 'fewer than two /diagnostics while running'
+        first, last = running[0], running[-1]
+        periods = (float(last['sim_time']) - float(first['sim_time'])) / 1e-3
+        published = int(last['periods_published']) - int(first['periods_published'])
+        assert periods > 1000 and abs(published - periods) <= 2, (first, last)
         # and published at the wall-clock pace: the rate is the number of periods over the
         # wall time they took. Time the window's ends by the promptest deliveries near them
         # (the lower envelope of receive time - stamp), so a moment's lag of this probe is
@@ -185,7 +200,7 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         edge = len(window) // 10
         drift = min(offsets[-edge:]) - min(offsets[:edge])
         wall = (stamps[-edge] - stamps[edge - 1]) + drift
-        rate = (len(window) - 2 * edge + 1) / wall
+        rate = (stamps[-edge] - stamps[edge - 1]) / 1e-3 / wall   # periods by their stamps
         assert stamps[-1] - stamps[0] >= 3.0
         assert rate >= 0.99 * 1000.0, f'{rate:.1f} Hz'
 
