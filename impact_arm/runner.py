@@ -164,7 +164,8 @@ class Run:
                   'controller': [f'scene:={self.scene_path}',
                                  f'rate:={getattr(a, "control_rate", None) or a.rate}']
                   + ([f'law:={a.law}'] if a.law else [])
-                  + (['command_readers:=2'] if self.output else []),   # simulator + recorder
+                  + (['command_readers:=2'] if self.output else [])    # simulator + recorder
+                  + list(getattr(a, 'controller_params', None) or []),
                   'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
         cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']
         for p in params:
