@@ -108,8 +108,8 @@ def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
     rec_args = node_args(RECORDER, f'output:={out}', 'flush_interval:=0.2',
                          'param_nodes:=[""]')
     with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
-            start_process(helper_args('pub', '--count', 3000, '--rate', 200), ros_env,
-                          tmp_path, 'pub') as pub:
+            start_process(helper_args('pub', '--count', 3000, '--rate', 200, '--wait-sub', 30),
+                          ros_env, tmp_path, 'pub') as pub:
         seen = wait_for(lambda: (count_messages(out) or 0) >= 60 and count_messages(out), 30)
         assert seen, rec.stderr + pub.stderr
         rec.signal(signal.SIGKILL)
