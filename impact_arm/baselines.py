@@ -37,13 +37,17 @@ def _armed_slots(integ: PhaseIntegrator):
     return [n_surf + layout.EV_SEP]
 
 
-def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None):
-    """Run ``scene`` for its cycles with solve_ivp; returns (impacts, t_end, nfev, wall)."""
+def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, contact_rtol=None):
+    """Run ``scene`` for its cycles with solve_ivp; returns (impacts, t_end, nfev, wall).
+    ``contact_rtol`` (default rtol) is the tolerance of contact phases, as in PhaseIntegrator;
+    the contact atol keeps the atol/rtol ratio."""
     model = ArmModel(scene)
     integ = PhaseIntegrator(model, control='continuous')
     st = integ.state
     builder = ImpactBuilder(model)
     atol = rtol * 1e-2 if atol is None else atol
+    contact_rtol = rtol if contact_rtol is None else contact_rtol
+    contact_atol = atol * contact_rtol / rtol
     t_max = scene.t_max if t_max is None else t_max
     g = np.zeros(len(model.surfaces) + 4)
     eq, P, I, surf = model.eq, integ._P, integ._I, model.surface_table
@@ -74,7 +78,9 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None):
         slots = _armed_slots(integ)
         if st.phase == Phase.FREE:
             slots += [-1 - s for s in range(len(heights)) if st.levels[s] != heights[s]]
-        sol = solve_ivp(integ.rhs, (st.t, t_max), st.y, method=method, rtol=rtol, atol=atol,
+        free = st.phase == Phase.FREE
+        sol = solve_ivp(integ.rhs, (st.t, t_max), st.y, method=method,
+                        rtol=rtol if free else contact_rtol, atol=atol if free else contact_atol,
                         events=[make_event(s) if s >= 0 else make_rise(-1 - s)
                                 for s in slots])
         nfev += sol.nfev

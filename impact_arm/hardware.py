@@ -57,7 +57,8 @@ class SimulatedArm:
             self.model, preset=preset,
             rtol=spec.rtol if preset == spec.preset else None,
             atol=spec.atol if preset == spec.preset else None,
-            max_step=spec.max_step, control='held', trace=trace)
+            max_step=spec.max_step, control='held', trace=trace, method=spec.method,
+            contact_rtol=spec.contact_rtol if preset == spec.preset else None)
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n          # the torque being held (after clipping)

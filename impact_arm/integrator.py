@@ -34,6 +34,11 @@ PRESETS = {
     'fast': (1e-5, 1e-8),
 }
 
+# step methods: 'dopri5' everywhere, or 'rosenbrock' (linearly implicit 4(3)) in free flight,
+# where the controller's damping makes the motion stiff, and Dormand-Prince in contact
+METHODS = {'dopri5': layout.METHOD_DOPRI5, 'rosenbrock': layout.METHOD_ROSENBROCK}
+
+
 @dataclass
 class Event:
     kind: str            # contact | yield | max_compression | separation | switch | sample
@@ -68,11 +73,15 @@ class PhaseIntegrator:
     """
 
     def __init__(self, model: ArmModel, state: ArmState | None = None, *, preset='balanced',
-                 rtol=None, atol=None, max_step=None, control='continuous', trace=False):
+                 rtol=None, atol=None, max_step=None, control='continuous', trace=False,
+                 method='dopri5', contact_rtol=None):
         if preset not in PRESETS:
             raise ValueError(f'integrator preset {preset!r}: choose one of {", ".join(PRESETS)}')
         if control not in ('continuous', 'held'):
             raise ValueError(f"control = {control!r}: choose 'continuous' or 'held'")
+        if method not in METHODS:
+            raise ValueError(f'integrator method {method!r}: choose one of {", ".join(METHODS)}')
+        self.method = method
         self.model = model
         self.state = state or model.initial_state()
         self.rtol, self.atol = PRESETS[preset]
@@ -82,11 +91,20 @@ class PhaseIntegrator:
         self.control = control
         self.trace = [] if trace else None
         spec = model.scene.controller
-        self._P = model.parameters(self.rtol, self.atol, self.max_step)
+        # Contact phases may need a tighter tolerance than free flight: the indentation
+        # (0.1-1 mm) is a difference of tip coordinates of order L, so the relative tolerance
+        # on the joint state that suits the motion is loose for δ. The contact atol keeps the
+        # preset's atol/rtol ratio.
+        if contact_rtol is not None and not 1e-14 <= contact_rtol <= 0.1:
+            raise ValueError(f'contact_rtol = {contact_rtol:g}: allowed 1e-14 ... 0.1')
+        self.contact_rtol = contact_rtol if contact_rtol is not None else self.rtol
+        self.contact_atol = self.atol * self.contact_rtol / self.rtol
+        self._P = model.parameters(self.rtol, self.atol, self.max_step, self.contact_rtol,
+                                   self.contact_atol)
         self._I = np.array([_LAWS['held' if control == 'held' else spec.law],
                             1 if spec.space == 'joint' else 0,
                             1 if model.scene.actuators_during_contact else 0,
-                            1 if trace else 0], dtype=np.int64)
+                            1 if trace else 0, METHODS[method]], dtype=np.int64)
         self._stats = np.zeros(3, dtype=np.int64)     # rhs evaluations, steps, rejected
         self._T = np.zeros(3)                   # t, next step size (0: choose), f stale flag
         self._f = np.zeros(model.size)
@@ -231,10 +249,11 @@ class PhaseIntegrator:
                 self.events += 1
                 events.append(Event(kind, st.t, surface, st.y.copy(), info))
                 self._f_valid = False        # the right-hand side changed with the phase
-                if kind in ('contact', 'separation'):
-                    # and so did its time scale: choose a new step. Across yield and maximum
-                    # compression the force is (nearly) continuous, so the last step size
-                    # carries over (saves the start-up rejections: ~2-3 % fewer evaluations)
+                if kind in ('contact', 'separation', 'switch'):
+                    # and so did its time scale (or, at a switch, the control target jumped):
+                    # choose a new step. Across yield and maximum compression the force is
+                    # (nearly) continuous, so the last step size carries over (saves the
+                    # start-up rejections: ~2-3 % fewer evaluations)
                     self._h = 0.0
                 if stop_at_event:
                     return events

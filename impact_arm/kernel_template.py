@@ -25,6 +25,17 @@ E5 = -2187 / 6784 + 92097 / 339200
 E6 = 11 / 84 - 187 / 2100
 E7 = -1 / 40
 C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
+# Rosenbrock 4(3), Shampine's parameters (Kaps-Rentrop form, as in Numerical Recipes' stiff):
+# four stages, three evaluations, A-stable. The right-hand side has no explicit time
+# dependence (the control law switches at located events), so the dF/dt terms vanish.
+RGAM = 1 / 2
+RA21, RA31, RA32 = 2.0, 48 / 25, 6 / 25
+RC21, RC31, RC32 = -8.0, 372 / 25, 12 / 5
+RC41, RC42, RC43 = -112 / 125, -54 / 125, -2 / 5
+RB1, RB2, RB3, RB4 = 19 / 9, 1 / 2, 25 / 108, 125 / 108
+RE1, RE2, RE4 = 17 / 54, 7 / 36, 125 / 108
+RA2X, RA3X = 1.0, 3 / 5
+FD_STEP = 1.4901161193847656e-08   # sqrt(machine epsilon): finite-difference Jacobian
 SCRATCH = 4 * N + N * N   # rhs scratch: generalized forces, torques, PID error and rate, M
 
 
@@ -177,6 +188,121 @@ def rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, 
                       + E7 * f1[i])
 
 
+@jit_leaf
+def lu_factor(A, piv):
+    """In-place LU with partial pivoting (row k swapped with row piv[k]); False if singular."""
+    n = A.shape[0]
+    for k in range(n):
+        p = k
+        big = abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > big:
+                p, big = i, abs(A[i, k])
+        piv[k] = p
+        if big == 0.0 or not math.isfinite(big):
+            return False
+        if p != k:
+            for j in range(n):
+                A[k, j], A[p, j] = A[p, j], A[k, j]
+        for i in range(k + 1, n):
+            A[i, k] /= A[k, k]
+            for j in range(k + 1, n):
+                A[i, j] -= A[i, k] * A[k, j]
+    return True
+
+
+@jit_leaf
+def lu_solve(A, piv, b):
+    """b := A⁻¹ b for A factored by lu_factor."""
+    n = A.shape[0]
+    for k in range(n):
+        p = int(piv[k])
+        if p != k:
+            b[k], b[p] = b[p], b[k]
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= A[i, k] * b[k]
+        b[i] = s
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, n):
+            s -= A[i, k] * b[k]
+        b[i] = s / A[i, i]
+
+
+@jit
+def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W,
+             JW):
+    """One Rosenbrock 4(3) step of size h: y1, f1 = f(t+h, y1) and the error vector.
+
+    The free flight is stiff (the controller's damping on the links' small inertia puts an
+    eigenvalue near -1000 1/s), which caps an explicit step at ~3 ms whatever the tolerance;
+    this linearly implicit step is not capped. JW holds the Jacobian (rows 0..n-1, by finite
+    differences at (t, y), kept while JW[2n+1, 0] = 1: a rejected step or an event search
+    restarts from the same point), the LU factors of I/(γh) - J (rows n..2n-1) and the
+    pivots (row 2n)."""
+    n = y.shape[0]
+    J = JW[:n]
+    LU = JW[n:2 * n]
+    piv = JW[2 * n]
+    if JW[2 * n + 1, 0] == 0.0:
+        for j in range(n):
+            for i in range(n):
+                work[i] = y[i]
+            d = FD_STEP * max(1.0, abs(y[j]))
+            work[j] = y[j] + d
+            d = work[j] - y[j]             # the step actually representable
+            rhs(t, work, f1, P, I, SURF, C, levels, tau_held, stats, W)
+            for i in range(n):
+                J[i, j] = (f1[i] - f0[i]) / d
+        JW[2 * n + 1, 0] = 1.0
+    diag = 1.0 / (RGAM * h)
+    for i in range(n):
+        for j in range(n):
+            LU[i, j] = -J[i, j]
+        LU[i, i] += diag
+    if not lu_factor(LU, piv):
+        for i in range(n):
+            err[i] = math.inf              # rejected: the caller shrinks the step
+        return
+    g1, g2, g3, g4, tmp = K[0], K[1], K[2], K[3], K[4]
+    for i in range(n):
+        g1[i] = f0[i]
+    lu_solve(LU, piv, g1)
+    for i in range(n):
+        work[i] = y[i] + RA21 * g1[i]
+    rhs(t + RA2X * h, work, tmp, P, I, SURF, C, levels, tau_held, stats, W)
+    for i in range(n):
+        g2[i] = tmp[i] + RC21 * g1[i] / h
+    lu_solve(LU, piv, g2)
+    for i in range(n):
+        work[i] = y[i] + RA31 * g1[i] + RA32 * g2[i]
+    rhs(t + RA3X * h, work, tmp, P, I, SURF, C, levels, tau_held, stats, W)
+    for i in range(n):
+        g3[i] = tmp[i] + (RC31 * g1[i] + RC32 * g2[i]) / h
+    lu_solve(LU, piv, g3)
+    for i in range(n):
+        g4[i] = tmp[i] + (RC41 * g1[i] + RC42 * g2[i] + RC43 * g3[i]) / h
+    lu_solve(LU, piv, g4)
+    for i in range(n):
+        y1[i] = y[i] + RB1 * g1[i] + RB2 * g2[i] + RB3 * g3[i] + RB4 * g4[i]
+        err[i] = RE1 * g1[i] + RE2 * g2[i] + RE4 * g4[i]
+    rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats, W)
+
+
+@jit
+def trial_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W,
+               JW):
+    """The step of the current phase's method: Rosenbrock in free flight when chosen, else
+    Dormand-Prince (contact forces are not smooth enough for a linearly implicit step)."""
+    if I[I_METHOD] == METHOD_ROSENBROCK and int(C[C_PHASE]) == FREE:
+        ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats,
+                 W, JW)
+    else:
+        rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W)
+
+
 @jit
 def error_norm(err, y0, y1, rtol, atol):
     total = 0.0
@@ -251,7 +377,7 @@ def event_rate(y, f, k, P, SURF):
 
 @jit
 def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels,
-           tau_held, stats, W):
+           tau_held, stats, W, JW):
     """Smallest s in (0, h] with g_k(RK step of size s) >= 0; y_out holds the state there.
 
     Newton's method on real Runge-Kutta steps (the step's FSAL derivative gives ġ for free),
@@ -265,8 +391,8 @@ def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C
     for _ in range(100):
         if not (a < c < b):
             c = 0.5 * (a + b)
-        rk_step(t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
-                stats, W)
+        trial_step(t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
+                   stats, W, JW)
         event_values(y_out, P, I, SURF, C, levels, g)
         fc = g[k]
         if fc >= 0.0:
@@ -294,15 +420,25 @@ def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C
         else:
             c = (a * fb - b * fa) / (fb - fa)
     if b != c:
-        rk_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
-                stats, W)
+        trial_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
+                   stats, W, JW)
     return b
+
+
+@jit_leaf
+def phase_tolerances(P, C):
+    """(rtol, atol) of the current phase: contact phases have their own (see PhaseIntegrator)."""
+    if HAS_CONTACT:
+        if int(C[C_PHASE]) != FREE:
+            return P[P_CRTOL], P[P_CATOL]
+    return P[P_RTOL], P[P_ATOL]
 
 
 @jit
 def initial_step(t, y, f0, P, I, SURF, C, levels, tau_held, stats, W, work, f1):
     """Hairer's starting step size: the phase just entered may be far stiffer than the last."""
-    rtol, atol, max_step = P[P_RTOL], P[P_ATOL], P[P_MAXSTEP]
+    rtol, atol = phase_tolerances(P, C)
+    max_step = P[P_MAXSTEP]
     size = y.shape[0]
     d0 = 0.0
     d1 = 0.0
@@ -342,7 +478,7 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
                          ev, np.empty(size), np.empty(size), np.empty(size), np.empty(size),
                          np.empty(size), np.empty(size), np.empty((5, size)),
                          np.empty(SCRATCH), np.empty(ns + 4), np.empty(ns + 4),
-                         np.empty(ns + 4))
+                         np.empty(ns + 4), np.zeros((2 * size + 2, size)))
 
 
 @jit_leaf
@@ -354,10 +490,11 @@ def copy_into(dst, src):
 
 @jit
 def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev,
-                  y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp):
+                  y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp, JW):
     """``advance`` with its scratch arrays."""
     ns = SURF.shape[0]
-    rtol, atol, max_step = P[P_RTOL], P[P_ATOL], P[P_MAXSTEP]
+    rtol, atol = phase_tolerances(P, C)
+    max_step = P[P_MAXSTEP]
     t = T[0]
     if T[2] != 0.0:
         rhs(t, y, f, P, I, SURF, C, levels, tau_held, stats, W)
@@ -367,6 +504,9 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
     h = T[1]
     event_values(y, P, I, SURF, C, levels, g0)
     eps4 = 4 * 2.220446049250313e-16 * max(1.0, abs(t_end))
+    # step-size exponent: 1 / (order of the error estimate + 1)
+    expo = 0.25 if I[I_METHOD] == METHOD_ROSENBROCK and int(C[C_PHASE]) == FREE else 0.2
+    jac_valid = JW.shape[0] - 1
     status = DONE
     while t < t_end:
         remaining = t_end - t
@@ -377,12 +517,13 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
         clipped = step >= remaining
         if clipped:
             step = remaining
-        rk_step(t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W)
+        trial_step(t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats,
+                   W, JW)
         norm = error_norm(err, y, y1, rtol, atol)
         if not norm <= 1.0:  # also catches NaN
             stats[2] += 1
             if math.isfinite(norm):
-                h = step * max(0.2, 0.9 * norm ** -0.2)
+                h = step * max(0.2, 0.9 * norm ** -expo)
             else:
                 h = step * 0.2
             if h < 1e-15 * max(1.0, abs(t)):
@@ -390,7 +531,7 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                 break
             continue
         stats[1] += 1
-        factor = 5.0 if norm == 0.0 else min(5.0, max(0.2, 0.9 * norm ** -0.2))
+        factor = 5.0 if norm == 0.0 else min(5.0, max(0.2, 0.9 * norm ** -expo))
         h = min(h, step * factor) if clipped else step * factor
         event_values(y1, P, I, SURF, C, levels, g1)
         best_s = step + 1.0
@@ -398,13 +539,13 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
         for k in range(ns + 4):
             if g0[k] < 0.0 <= g1[k]:
                 s_k = locate(t, y, f, step, k, g0[k], g1[k], y_root, f_tmp, err, K, work,
-                             g_tmp, P, I, SURF, C, levels, tau_held, stats, W)
+                             g_tmp, P, I, SURF, C, levels, tau_held, stats, W, JW)
                 if s_k < best_s:
                     best_s, best_k = s_k, k
         if best_k >= 0:
             if best_s < step:
-                rk_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
-                        tau_held, stats, W)
+                trial_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
+                           tau_held, stats, W, JW)
                 copy_into(y, y_root)
             else:
                 copy_into(y, y1)
@@ -416,6 +557,7 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             break
         copy_into(y, y1)
         copy_into(f, f1)
+        JW[jac_valid, 0] = 0.0      # a new point: the Jacobian is due again
         t = t_end if clipped else t + step
         copy_into(g0, g1)
         if HAS_CONTACT:

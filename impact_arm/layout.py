@@ -15,7 +15,10 @@ C_SIZE = 13
 S_H, S_LAW, S_MU, S_VD, S_E, S_R, S_SY, S_CJ, S_DC, S_PC, S_B = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
 S_SIZE = 11
 # integer options I
-I_LAW, I_SPACE, I_ACT, I_TRACE = 0, 1, 2, 3
+I_LAW, I_SPACE, I_ACT, I_TRACE, I_METHOD = 0, 1, 2, 3, 4
+I_SIZE = 5
+# step methods (I_METHOD): Dormand-Prince everywhere, or a Rosenbrock step in free flight
+METHOD_DOPRI5, METHOD_ROSENBROCK = 0, 1
 # kernel status
 DONE, EVENT, TRACE_FULL, ERR_UNDERFLOW, ERR_PENETRATION, ERR_NONFINITE = 0, 1, 2, 3, 4, 5
 # event slots: contact per surface, then switch, yield, max_compression, separation

@@ -91,8 +91,9 @@ class ArmModel:
                                       self.m, self.g)
         return np.array(values[:n * n]).reshape(n, n)
 
-    def parameters(self, rtol, atol, max_step):
-        """The flat parameter array of the kernel (layout: P_* in the generated module)."""
+    def parameters(self, rtol, atol, max_step, contact_rtol=None, contact_atol=None):
+        """The flat parameter array of the kernel (layout: P_* in the generated module).
+        Contact phases use ``contact_rtol`` / ``contact_atol`` (default: rtol / atol)."""
         eq, n, c = self.eq, self.n, self.scene.controller
         P = np.zeros(eq.P_SIZE)
         P[eq.P_L:eq.P_L + n] = self.L
@@ -105,6 +106,8 @@ class ArmModel:
         P[eq.P_TUP:eq.P_TUP + n] = c.up_target
         P[eq.P_SWITCH] = c.switch_height
         P[eq.P_RTOL], P[eq.P_ATOL], P[eq.P_MAXSTEP] = rtol, atol, max_step
+        P[eq.P_CRTOL] = rtol if contact_rtol is None else contact_rtol
+        P[eq.P_CATOL] = atol if contact_atol is None else contact_atol
         return P
 
     def initial_state(self) -> 'ArmState':

@@ -22,6 +22,7 @@ import yaml
 from .errors import SceneError
 
 INTEGRATOR_PRESETS = ('reference', 'accurate', 'balanced', 'fast')
+INTEGRATOR_METHODS = ('dopri5', 'rosenbrock')
 CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
 CONTROL_LAWS = ('q', 'pid', 'pd', 'none')
 PID_SPACES = ('absolute', 'joint')
@@ -63,6 +64,8 @@ class IntegratorSpec:
     rtol: float | None = None
     atol: float | None = None
     max_step: float | None = None
+    method: str = 'dopri5'
+    contact_rtol: float | None = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +136,8 @@ INTEGRATOR = {
     'rtol': _num(1e-14, 1e-1, unit='-', default=None),
     'atol': _num(1e-16, 1e-1, unit='-', default=None),
     'max_step': _num(0, 10, low_open=True, unit='s', default=None),
+    'method': _choice(INTEGRATOR_METHODS, 'dopri5'),
+    'contact_rtol': _num(1e-14, 1e-1, unit='-', default=None),
 }
 SCHEMA = {
     'name': ('str', None, '', 'scene'),

@@ -89,7 +89,9 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
     integ = PhaseIntegrator(
         model, preset=preset or spec.preset,
         rtol=rtol if rtol is not None else spec.rtol, atol=atol if atol is not None else spec.atol,
-        max_step=spec.max_step, control='held' if control_rate else 'continuous', trace=True)
+        max_step=spec.max_step, control='held' if control_rate else 'continuous', trace=True,
+        method=spec.method,
+        contact_rtol=spec.contact_rtol if preset is None and rtol is None else None)
     st = integ.state
     n = model.n
     ctrl = None
@@ -221,7 +223,8 @@ def format_table(result: RunResult) -> str:
     return '\n'.join(lines)
 
 
-def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None):
+def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None,
+               method=None, contact_rtol=None):
     """The scene's cycles with continuous control and no sampled output: the integrator runs
     from event to event. What benchmarks time. Returns (impacts, t_end, integrator, wall)."""
     model = ArmModel(scene)
@@ -229,7 +232,10 @@ def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None
     integ = PhaseIntegrator(model, preset=preset or spec.preset,
                             rtol=rtol if rtol is not None else spec.rtol,
                             atol=atol if atol is not None else spec.atol,
-                            max_step=max_step if max_step is not None else spec.max_step)
+                            max_step=max_step if max_step is not None else spec.max_step,
+                            method=method or spec.method,
+                            contact_rtol=contact_rtol if contact_rtol is not None
+                            else spec.contact_rtol if preset is None and rtol is None else None)
     builder = ImpactBuilder(model)
     cycles = 0
     wall0 = time.perf_counter()

@@ -35,13 +35,14 @@ def load(scene_name: str):
 
 
 # --- timed runs -----------------------------------------------------------------------------
-def time_ours(scene, rtol, atol, repeats=3, max_step=None):
+def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
     from ..simulate import run_events
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
-        impacts, t_end, integ, wall = run_events(scene, rtol=rtol, atol=atol, max_step=max_step)
+        impacts, t_end, integ, wall = run_events(scene, rtol=rtol, atol=atol, max_step=max_step,
+                                                 method=method, contact_rtol=contact_rtol)
         if wall < best:
             best = wall
         out = impacts, t_end, integ.stats.rhs_evaluations
@@ -49,7 +50,7 @@ def time_ours(scene, rtol, atol, repeats=3, max_step=None):
     return {'impacts': impacts, 't_end': t_end, 'rhs_evaluations': nfev, 'wall': best}
 
 
-def time_scipy(scene, method, rtol, atol, repeats=3):
+def time_scipy(scene, method, rtol, atol, repeats=3, contact_rtol=None):
     from ..baselines import run_scipy
     best = math.inf
     out = None
@@ -57,7 +58,8 @@ def time_scipy(scene, method, rtol, atol, repeats=3):
         with warnings.catch_warnings():
             # rejected trial steps of the explicit methods overflow harmlessly inside contact
             warnings.simplefilter('ignore', RuntimeWarning)
-            impacts, t_end, nfev, wall = run_scipy(scene, method, rtol, atol)
+            impacts, t_end, nfev, wall = run_scipy(scene, method, rtol, atol,
+                                                   contact_rtol=contact_rtol)
         best = min(best, wall)
         out = impacts, t_end, nfev
     impacts, t_end, nfev = out
