@@ -84,10 +84,12 @@ def search(scene, ref, levels, methods, log=common.progress):
                                  common.first_impact_error(r['impacts'], ref), step=step,
                                  contact_rtol=contact))
     for method in methods:
+        reached_single = reached_split = False
         for rtol in rtol_grid(1e-2, 1e-11):
             log(f'search: solve_ivp {method} rtol {rtol:.2g}')
-            reached = False
             for factor in SCIPY_CONTACT_FACTORS:
+                if (factor == 1.0 and reached_single) or (factor != 1.0 and reached_split):
+                    continue     # that kind of setting already reached the tightest level
                 contact = rtol * factor
                 try:
                     r = common.time_scipy(scene, method, rtol, rtol * ATOL_RATIO, repeats=1,
@@ -102,8 +104,10 @@ def search(scene, ref, levels, methods, log=common.progress):
                 err = common.first_impact_error(r['impacts'], ref)
                 rows.append(_row('scipy', method, rtol, rtol * ATOL_RATIO, r, err,
                                  contact_rtol=contact))
-                reached = reached or err <= tightest
-            if reached:
+                if err <= tightest:
+                    reached_split = True
+                    reached_single = reached_single or factor == 1.0
+            if reached_single and reached_split:
                 break   # tighter tolerances only cost more
     return rows
 
