@@ -83,3 +83,15 @@ def test_bad_integrator_settings_are_refused_by_name(field, value, words):
         scene_from({('integrator', field): value})
     for word in words:
         assert word in str(err.value)
+
+
+def test_a_named_preset_replaces_the_scenes_own_tolerances():
+    """``--preset reference`` on a scene that sets loose tolerances must mean the reference
+    tolerances (the scene's rtol once won silently); the scene's step method still applies."""
+    loose = scene_from({('integrator', 'method'): 'rosenbrock', ('integrator', 'rtol'): 1e-2,
+                        ('integrator', 'atol'): 1e-4, ('integrator', 'contact_rtol'): 3e-4},
+                       cycles=1)
+    reference = run_events(scene_from(cycles=1), preset='reference')[0]
+    again = run_events(loose, preset='reference')[0]
+    assert first_impact_error(again, reference) < 1e-9
+    assert first_impact_error(run(loose, preset='reference').impacts, reference) < 1e-9
