@@ -1,5 +1,8 @@
 """The stepped phase integrator: adaptive Dormand-Prince 5(4) that stops exactly at every
-switch of the contact phase machine and restarts with the next phase's force law.
+switch of the contact phase machine and restarts with the next phase's force law. With
+``method='rosenbrock'`` the free flight takes linearly implicit Rosenbrock 4(3) steps instead
+(it is stiff under the article's controller); ``contact_rtol`` gives contact phases their own
+tolerance.
 
 free --contact--> elastic --δ=1.9δc--> elasto-plastic --δ̇=0--> restitution --δ=δr--> free
 (elastic --δ̇=0--> restitution for gentle impacts or a Hertz-only surface)

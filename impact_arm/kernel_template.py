@@ -6,10 +6,11 @@
 # is available, interpreted otherwise. Module-level constants are compile-time constants for
 # numba, so a scene without contact or friction has no contact code in its hot loop at all.
 #
-# The stepped phase integrator kernel: Dormand-Prince 5(4) with error control; every step is
-# checked for sign changes of the phase's event functions, and a crossing is located by
-# root-finding on real Runge-Kutta steps from the step start (Illinois method), so the state at
-# a switch is as accurate as any step end. The kernel returns at each event with the state at
+# The stepped phase integrator kernel: Dormand-Prince 5(4) with error control (or, in free
+# flight when I_METHOD asks for it, a linearly implicit Rosenbrock 4(3) step: the controller
+# makes the free flight stiff); every step is checked for sign changes of the phase's event
+# functions, and a crossing is located by root-finding on real steps from the step start
+# (Illinois method), so the state at a switch is as accurate as any step end. The kernel returns at each event with the state at
 # the event; the Python wrapper applies the phase switch (rare) and calls it again.
 
 A21 = 1 / 5

@@ -1,6 +1,7 @@
 """``impact-arm bench tradeoff``: the speed/accuracy trade, measured in one run.
 
-Rows: our integrator presets (reference, accurate, balanced, fast) and scipy ``solve_ivp``
+Rows: our integrator presets (reference, accurate, balanced, fast), our Rosenbrock free-flight
+step with a tighter contact tolerance at four settings, and scipy ``solve_ivp``
 (RK45 — MATLAB's ode45 —, DOP853, LSODA, Radau) at several tolerances, all on the same scene
 with events, sharing the compiled right-hand side and the phase machine. Errors are relative to
 the ``reference`` preset: first impact δm, F_max, post-impact tip velocity, kinematic and
@@ -17,6 +18,9 @@ import math
 from . import common
 
 SCIPY_METHODS = ('RK45', 'DOP853', 'LSODA', 'Radau')
+# method 'rosenbrock' (linearly implicit in the stiff free flight) with a tighter contact rtol:
+# (rtol, contact_rtol); atol = rtol * 1e-2
+ROSENBROCK_SETTINGS = ((1e-2, 3e-4), (1e-3, 3e-5), (1e-4, 3e-6), (1e-5, 3e-7))
 SCIPY_RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 CONTROL_RATES = (0.0, 10000.0, 1000.0, 500.0, 100.0)
 
@@ -65,6 +69,12 @@ def measure(scene, methods, rtols, repeats, log=common.progress):
         log(f'ours: preset {name}')
         r = common.time_ours(scene, rtol, atol, repeats=repeats)
         rows.append(_row('preset', name, rtol, atol, r, ref))
+    for rtol, contact in ROSENBROCK_SETTINGS:
+        log(f'ours: rosenbrock rtol {rtol:g} / contact {contact:g}')
+        r = common.time_ours(scene, rtol, rtol * 1e-2, repeats=repeats, method='rosenbrock',
+                             contact_rtol=contact)
+        rows.append(dict(_row('rosenbrock', f'rosenbrock {rtol:g} / {contact:g}', rtol,
+                              rtol * 1e-2, r, ref), contact_rtol=contact))
     for method in methods:
         for rtol in rtols:
             log(f'solve_ivp {method} rtol {rtol:g}')
@@ -121,7 +131,9 @@ def plot(rows, path, scene_name):
     series = {}
     for r in rows:
         if math.isfinite(r['wall']) and math.isfinite(r['worst']):
-            label = 'ours (presets)' if r['kind'] == 'preset' else f"solve_ivp {r['method']}"
+            label = {'preset': 'ours (presets)',
+                     'rosenbrock': 'ours (rosenbrock, rtol / contact rtol)'}.get(
+                         r['kind'], f"solve_ivp {r['method']}")
             series.setdefault(label, []).append(r)
     for label, rs in series.items():
         rs = sorted(rs, key=lambda r: r['wall'])
@@ -129,7 +141,8 @@ def plot(rows, path, scene_name):
                   'o-' if label.startswith('ours') else 's--', label=label, ms=5)
         if label.startswith('ours'):
             for r in rs:
-                note = r['method'] + (' (error 0, drawn at 1e-16)' if r['worst'] == 0 else '')
+                name = r['method'].replace('rosenbrock ', '')
+                note = name + (' (error 0, drawn at 1e-16)' if r['worst'] == 0 else '')
                 ax.annotate(note, (r['wall'], max(r['worst'], floor)), fontsize=8,
                             xytext=(4, 4), textcoords='offset points')
     front = sorted((r for r in rows if r.get('pareto')), key=lambda r: r['wall'])
@@ -165,7 +178,8 @@ def run(args) -> int:
     print()
     front = sorted((r for r in rows if r['pareto']), key=lambda r: r['wall'])
     print('Pareto front (fastest first): ' + ', '.join(
-        f"{r['method']}{'' if r['kind'] == 'preset' else ' ' + format(r['rtol'], 'g')} "
+        f"{r['method']}"
+        f"{'' if r['kind'] in ('preset', 'rosenbrock') else ' ' + format(r['rtol'], 'g')} "
         f"({r['wall'] * 1e3:.1f} ms, {common.fmt_err(r['worst'])})" for r in front))
     print()
     print('Control-rate trade (simulate.run, preset accurate, sampled output at the scene\'s '
