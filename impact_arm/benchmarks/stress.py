@@ -168,7 +168,7 @@ class Outcome:
     t_end: float
 
 
-def check_run(case: Case, scene, deadline=None):
+def check_run(case: Case, scene, deadline=None, method='dopri5'):
     """Run one case event to event, checking every impact. Returns an ``Outcome``."""
     from ..errors import SimulationError
     from ..integrator import PhaseIntegrator
@@ -176,7 +176,7 @@ def check_run(case: Case, scene, deadline=None):
     from ..model import ArmModel
     t0 = time.perf_counter()
     model = ArmModel(scene)
-    integ = PhaseIntegrator(model, preset=case.preset, trace=True)
+    integ = PhaseIntegrator(model, preset=case.preset, trace=True, method=method)
     builder = ImpactBuilder(model)
     n = model.n
     motors_in_contact = scene.actuators_during_contact and scene.controller.law != 'none'
@@ -270,14 +270,14 @@ def check_run(case: Case, scene, deadline=None):
                 + (' (sustained contact)' if phase != 'free' else ''))
 
 
-def run_case(case: Case, deadline=None) -> Outcome:
+def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
     from ..errors import SceneError
     try:
         scene = build(case)
     except SceneError as exc:   # refused at load: a named limit, too
         return Outcome(case.name, STOPPED if case.expect != 'ok' else FAIL, str(exc), 0, 0.0,
                        math.nan, 0.0)
-    return check_run(case, scene, deadline)
+    return check_run(case, scene, deadline, method)
 
 
 def format_matrix(outcomes) -> str:
@@ -295,6 +295,8 @@ def add_arguments(parser):
     parser.add_argument('--deadline', type=float, default=300.0,
                         help='wall seconds allowed per case before it counts as a failure')
     parser.add_argument('--json', metavar='FILE', help='write the matrix as JSON')
+    parser.add_argument('--method', choices=('dopri5', 'rosenbrock'), default='dopri5',
+                        help='step method in free flight (integrator.method)')
 
 
 def run(args) -> int:
@@ -304,7 +306,7 @@ def run(args) -> int:
     outcomes = []
     for i, case in enumerate(selected, 1):
         common.progress(f'[{i}/{len(selected)}] {case.name}')
-        outcomes.append(run_case(case, args.deadline))
+        outcomes.append(run_case(case, args.deadline, args.method))
     common.progress_done()
     print(format_matrix(outcomes))
     failed = [o for o in outcomes if o.outcome == FAIL]
