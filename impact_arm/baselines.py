@@ -42,12 +42,13 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
     ``contact_rtol`` (default rtol) is the tolerance of contact phases, as in PhaseIntegrator;
     the contact atol keeps the atol/rtol ratio."""
     model = ArmModel(scene)
-    integ = PhaseIntegrator(model, control='continuous')
+    atol = rtol * 1e-2 if atol is None else atol
+    # the integrator derives the contact atol exactly as for our own runs
+    integ = PhaseIntegrator(model, control='continuous', rtol=rtol, atol=atol,
+                            contact_rtol=contact_rtol)
+    contact_rtol, contact_atol = integ.contact_rtol, integ.contact_atol
     st = integ.state
     builder = ImpactBuilder(model)
-    atol = rtol * 1e-2 if atol is None else atol
-    contact_rtol = rtol if contact_rtol is None else contact_rtol
-    contact_atol = atol * contact_rtol / rtol
     t_max = scene.t_max if t_max is None else t_max
     g = np.zeros(len(model.surfaces) + 4)
     eq, P, I, surf = model.eq, integ._P, integ._I, model.surface_table

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from .control import to_joint_space
 from .errors import ImpactArmError
-from .integrator import PRESETS, PhaseIntegrator
+from .integrator import PRESETS, PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder
 from .model import ArmModel
 from .scene import Scene
@@ -53,12 +53,10 @@ class SimulatedArm:
         self.rate = float(rate)
         self.max_effort = float(max_effort)
         spec = scene.integrator
+        # the scene's own tolerances apply with its own preset
         self.integrator = PhaseIntegrator(
-            self.model, preset=preset,
-            rtol=spec.rtol if preset == spec.preset else None,
-            atol=spec.atol if preset == spec.preset else None,
-            max_step=spec.max_step, control='held', trace=trace, method=spec.method,
-            contact_rtol=spec.contact_rtol if preset == spec.preset else None)
+            self.model, control='held', trace=trace,
+            **options_from_spec(spec, None if preset == spec.preset else preset))
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n          # the torque being held (after clipping)

@@ -42,6 +42,20 @@ PRESETS = {
 METHODS = {'dopri5': layout.METHOD_DOPRI5, 'rosenbrock': layout.METHOD_ROSENBROCK}
 
 
+def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None) -> dict:
+    """PhaseIntegrator options for a scene's ``integrator`` section (``scene.IntegratorSpec``):
+    its own settings, unless the caller names a preset (then the preset's tolerances, not the
+    scene's rtol/atol/contact_rtol overrides) or tolerances of its own. The scene's step method
+    and max_step always apply."""
+    scene_tolerances = preset is None and rtol is None and atol is None
+    return {'preset': preset or spec.preset,
+            'rtol': rtol if rtol is not None else spec.rtol if scene_tolerances else None,
+            'atol': atol if atol is not None else spec.atol if scene_tolerances else None,
+            'contact_rtol': contact_rtol if contact_rtol is not None
+            else spec.contact_rtol if scene_tolerances else None,
+            'max_step': spec.max_step, 'method': spec.method}
+
+
 @dataclass
 class Event:
     kind: str            # contact | yield | max_compression | separation | switch | sample

@@ -10,8 +10,9 @@
 # flight when I_METHOD asks for it, a linearly implicit Rosenbrock 4(3) step: the controller
 # makes the free flight stiff); every step is checked for sign changes of the phase's event
 # functions, and a crossing is located by root-finding on real steps from the step start
-# (Illinois method), so the state at a switch is as accurate as any step end. The kernel returns at each event with the state at
-# the event; the Python wrapper applies the phase switch (rare) and calls it again.
+# (Illinois method), so the state at a switch is as accurate as any step end. The kernel
+# returns at each event with the state at the event; the Python wrapper applies the phase
+# switch (rare) and calls it again.
 
 A21 = 1 / 5
 A31, A32 = 3 / 40, 9 / 40
@@ -292,12 +293,18 @@ def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held,
     rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats, W)
 
 
+@jit_leaf
+def rosenbrock_now(I, C):
+    """Whether the current phase steps with Rosenbrock (free flight, when chosen)."""
+    return I[I_METHOD] == METHOD_ROSENBROCK and int(C[C_PHASE]) == FREE
+
+
 @jit
 def trial_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W,
                JW):
     """The step of the current phase's method: Rosenbrock in free flight when chosen, else
     Dormand-Prince (contact forces are not smooth enough for a linearly implicit step)."""
-    if I[I_METHOD] == METHOD_ROSENBROCK and int(C[C_PHASE]) == FREE:
+    if rosenbrock_now(I, C):
         ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats,
                  W, JW)
     else:
@@ -506,7 +513,7 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
     event_values(y, P, I, SURF, C, levels, g0)
     eps4 = 4 * 2.220446049250313e-16 * max(1.0, abs(t_end))
     # step-size exponent: 1 / (order of the error estimate + 1)
-    expo = 0.25 if I[I_METHOD] == METHOD_ROSENBROCK and int(C[C_PHASE]) == FREE else 0.2
+    expo = 0.25 if rosenbrock_now(I, C) else 0.2
     jac_valid = JW.shape[0] - 1
     status = DONE
     while t < t_end:

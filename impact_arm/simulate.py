@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .control import CycleController
-from .integrator import PhaseIntegrator
+from .integrator import PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder, settle_index
 from .model import ArmModel
 from .scene import Scene
@@ -74,19 +74,6 @@ class RunResult:
         return settle_index(self.impacts)
 
 
-def _tolerances(spec, preset=None, rtol=None, atol=None, contact_rtol=None) -> dict:
-    """PhaseIntegrator options: the scene's integrator settings, unless the caller names a
-    preset (then the preset's tolerances, not the scene's rtol/atol/contact_rtol overrides)
-    or tolerances of its own. The scene's step method and max_step always apply."""
-    scene_tolerances = preset is None and rtol is None and atol is None
-    return {'preset': preset or spec.preset,
-            'rtol': rtol if rtol is not None else spec.rtol if scene_tolerances else None,
-            'atol': atol if atol is not None else spec.atol if scene_tolerances else None,
-            'contact_rtol': contact_rtol if contact_rtol is not None
-            else spec.contact_rtol if scene_tolerances else None,
-            'max_step': spec.max_step, 'method': spec.method}
-
-
 def run(scene: Scene, *, control_rate: float | None = None, preset: str | None = None,
         rtol=None, atol=None, publish_rate: float | None = None, trace=False,
         observer=None, progress=None, t_max: float | None = None) -> RunResult:
@@ -101,7 +88,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
     spec = scene.integrator
     integ = PhaseIntegrator(
         model, control='held' if control_rate else 'continuous', trace=True,
-        **_tolerances(spec, preset, rtol, atol))
+        **options_from_spec(spec, preset, rtol, atol))
     st = integ.state
     n = model.n
     ctrl = None
@@ -239,7 +226,7 @@ def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None
     from event to event. What benchmarks time. Returns (impacts, t_end, integrator, wall)."""
     model = ArmModel(scene)
     spec = scene.integrator
-    options = _tolerances(spec, preset, rtol, atol, contact_rtol)
+    options = options_from_spec(spec, preset, rtol, atol, contact_rtol)
     if max_step is not None:
         options['max_step'] = max_step
     options['method'] = method or options['method']
