@@ -30,6 +30,7 @@ from ..hardware import CommandError, SimulatedArm
 from ..integrator import PRESETS
 from ..mcap_ros2 import contract_qos
 from ..scene import load_scene, resolve_scene_path
+from ..wire import PatchedMessage, float64_array_data
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
@@ -80,9 +81,20 @@ class PeriodStats:
         self.histogram = np.zeros(20001, dtype=np.int64)
         self.jitter_max = 0.0
         self.jitter_max_t = 0.0
+        # whole-run sums of a period's parts (realtime): commands, physics, publication [s]
+        self.part_sums = [0.0, 0.0, 0.0]
+        self.part_count = 0
 
-    def add(self, published_at, compute, t_sim, overrun):
+    def part_means(self):
         with self.lock:
+            return [s / self.part_count if self.part_count else 0.0 for s in self.part_sums]
+
+    def add(self, published_at, compute, t_sim, overrun, parts=None):
+        with self.lock:
+            if parts is not None:
+                for i, part in enumerate(parts):
+                    self.part_sums[i] += part
+                self.part_count += 1
             if self.last_publish is not None:
                 interval = published_at - self.last_publish
                 self.intervals.append(interval)
@@ -150,13 +162,21 @@ class Simulator(Node):
                                               qos('/diagnostics'))
         self.pub_clock = (self.create_publisher(Clock, '/clock', qos('/clock'))
                           if self.publish_clock else None)
-        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command,
-                                 qos(COMMAND_TOPIC))
+        self.command_reader = self.reader_node = None
+        if self.lockstep:
+            self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command,
+                                     qos(COMMAND_TOPIC), raw=True)
+        else:
+            self.command_reader = self._command_reader(qos(COMMAND_TOPIC))
 
-        # pre-built messages: the loop only fills in numbers
-        self.msg_joints = JointState(name=names)
-        self.msg_wrench = WrenchStamped()
-        self.msg_wrench.header.frame_id = p['frame_id']
+        # pre-serialized messages: each period only writes its numbers into their bytes
+        zeros = [0.0] * self.arm.n
+        self.wire_joints = PatchedMessage(
+            JointState(name=names, position=zeros, velocity=zeros, effort=zeros),
+            ('position', 'velocity', 'effort'))
+        wrench = WrenchStamped()
+        wrench.header.frame_id = p['frame_id']
+        self.wire_wrench = PatchedMessage(wrench, ('wrench.force.x', 'wrench.force.y'))
         self.msg_clock = Clock()
 
         self.stats = PeriodStats()
@@ -199,16 +219,40 @@ class Simulator(Node):
         if 'command_timeout' in values:
             self.p['command_timeout'] = values['command_timeout']
 
+    def _command_reader(self, qos):
+        """The command subscription of the realtime mode, on a helper node no executor spins:
+        the loop thread takes the newest command itself at the start of each period. With the
+        executor delivering commands, the process ran two Python threads per period that
+        contended for the GIL, and the loop could wait for a lower-priority thread that held
+        it."""
+        import rclpy
+        self.reader_node = rclpy.create_node(
+            self.get_name() + '_command_reader', namespace=self.get_namespace(),
+            context=self.context, start_parameter_services=False, enable_rosout=False)
+        return self.reader_node.create_subscription(Float64MultiArray, COMMAND_TOPIC,
+                                                    lambda msg: None, qos, raw=True)
+
+    def _take_commands(self, now):
+        """Every command that arrived since the last period, oldest first (realtime mode)."""
+        handle = self.command_reader.handle
+        while True:
+            with handle:
+                taken = handle.take_message(Float64MultiArray, True)
+            if taken is None:
+                return
+            self._on_command(taken[0], now)
+
     @property
     def done(self):
         return bool(self.failed)
 
     # ------------------------------------------------------------------------ commands
-    def _on_command(self, msg):
-        now = time.monotonic()
+    def _on_command(self, raw, now=None):
+        """One serialized Float64MultiArray command."""
+        now = time.monotonic() if now is None else now
         try:
-            values = self.arm.check_command(msg.data)
-        except CommandError as exc:
+            values = self.arm.check_command(float64_array_data(raw))
+        except (CommandError, ValueError) as exc:
             self.rejected += 1
             self.get_logger().warning(f'command rejected: {exc}', throttle_duration_sec=1.0)
             return
@@ -247,12 +291,18 @@ class Simulator(Node):
         self.arm.apply(pending[0])
 
     # -------------------------------------------------------------------------- stepping
-    def _step_and_publish(self):
+    def _step(self):
+        """One period of physics; None when the simulation had to stop."""
         try:
-            tick = self.arm.step()
+            return self.arm.step()
         except SimulationError as exc:
             self._fail(f'{exc} [state {exc.state.tolist() if exc.state is not None else "?"}, '
                        f'held torque {self.arm.command}]')
+            return None
+
+    def _step_and_publish(self):
+        tick = self._step()
+        if tick is None:
             return False
         self._publish(tick)
         return True
@@ -272,6 +322,7 @@ class Simulator(Node):
                 time.sleep(deadline - now)
             woke = time.monotonic()
             k += 1
+            self._take_commands(woke)
             if self.pending is None and self.arm.periods == 0:
                 # brakes on until the first command: the arm holds its initial state and
                 # simulated time starts at 0 with the first command, as offline. (Timing
@@ -280,11 +331,16 @@ class Simulator(Node):
                 self.stats.published += 1
                 continue
             self._watchdog(woke)
-            if not self._step_and_publish():
+            stepping = time.monotonic()
+            tick = self._step()
+            if tick is None:
                 return
+            stepped = time.monotonic()
+            self._publish(tick)
             done = time.monotonic()
             # late if this period's publication happened after the next one was due
-            self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period)
+            self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period,
+                           (stepping - woke, stepped - stepping, done - stepped))
 
     def _lockstep_period(self, torques):
         self.arm.apply(torques)
@@ -310,14 +366,9 @@ class Simulator(Node):
         # the controller waits for this period's wrench and joint state: they go first, what
         # no control loop waits for (/clock, impact reports) after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-        w = self.msg_wrench
-        w.header.stamp.sec, w.header.stamp.nanosec = sec, nsec
-        w.wrench.force.x, w.wrench.force.y = tick.wrench
-        self.pub_wrench.publish(w)
-        js = self.msg_joints
-        js.header.stamp.sec, js.header.stamp.nanosec = sec, nsec
-        js.position, js.velocity, js.effort = tick.position, tick.velocity, tick.effort
-        self.pub_joints.publish(js)
+        self.pub_wrench.publish(self.wire_wrench.fill(sec, nsec, tick.wrench))
+        self.pub_joints.publish(
+            self.wire_joints.fill(sec, nsec, tick.position + tick.velocity + tick.effort))
         if self.pub_clock is not None:
             self.msg_clock.clock.sec, self.msg_clock.clock.nanosec = sec, nsec
             self.pub_clock.publish(self.msg_clock)
@@ -381,6 +432,10 @@ class Simulator(Node):
             'compute_worst_us': f'{self.stats.worst_compute * 1e6:.1f}',
             'compute_worst_at_s': f'{self.stats.worst_compute_t:.6f}',
             'period_us': f'{nominal * 1e6:.1f}',
+            # where a realtime period's time goes (whole-run means): taking commands,
+            # the physics, publishing the period's messages
+            **{f'compute_{part}_mean_us': f'{mean * 1e6:.1f}' for part, mean in
+               zip(('commands', 'physics', 'publish'), self.stats.part_means())},
             'watchdog': self.watchdog,
             'scheduling': self.scheduling,
             'commands': str(self.commands),
@@ -401,6 +456,11 @@ class Simulator(Node):
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
+
+    def destroy_node(self):
+        if self.reader_node is not None:
+            self.reader_node.destroy_node()
+        super().destroy_node()
 
     def finish(self, executor) -> int:
         self._stop.set()

@@ -1,0 +1,110 @@
+"""The hot path's messages as CDR bytes, for nodes that publish and take at kilohertz rates.
+
+rclpy converts every message between its Python class and C on each publish and take, and
+after a sleep (a realtime period) that costs more than the physics: publishing a joint state
+and a wrench took ~65 us, taking one Float64MultiArray ~60 us (2-vCPU VM, 2026-11-23). rclpy
+also publishes ``bytes`` as an already serialized message and takes raw bytes from a
+subscription created with ``raw=True``; both are public API. So:
+
+* ``PatchedMessage`` serializes a pre-built message once and, each period, writes the header
+  stamp and the float64 fields that change into those bytes in place (the sizes of the other
+  fields, joint names for instance, never change during a run);
+* ``float64_array_data`` reads the torques out of a raw ``std_msgs/Float64MultiArray``.
+
+Subscribers see ordinary messages; the bytes are exactly what ``msgdefs.serialize_cdr`` (and
+DDS) produce, which the tests check against rclpy's own deserializer.
+"""
+from __future__ import annotations
+
+import struct
+
+from .msgdefs import _Reader, serialize_cdr
+
+# values nobody publishes, to find where a field's bytes lie in the serialized template
+_SENTINEL_SEC, _SENTINEL_NANOSEC = 0x5A1E7A3C, 0x3B9AC9FF - 0x2A5
+_SENTINEL_BASE = -1.2345678901234567e+299
+
+
+class PatchedMessage:
+    """``msg`` serialized once; ``fill(sec, nanosec, values)`` updates its stamp and the float64
+    slots named in ``float_fields`` (attribute paths: ``'wrench.force.x'``, or a sequence field
+    such as ``'position'``, whose current length is kept), then ``data`` is ready to publish.
+
+    The message must have ``header.stamp``; ``values`` is flat, in the order of
+    ``float_fields`` (a sequence contributes all its elements)."""
+
+    def __init__(self, msg, float_fields):
+        slots = []                      # (object, attribute, index or None) in fill order
+        for path in float_fields:
+            *parents, last = path.split('.')
+            owner = msg
+            for name in parents:
+                owner = getattr(owner, name)
+            value = getattr(owner, last)
+            if isinstance(value, float):
+                slots.append((owner, last, None))
+            else:
+                slots.extend((owner, last, i) for i in range(len(value)))
+        self.size = len(slots)
+        # stamp the template with sentinels, serialize, and find each sentinel's bytes
+        stamp = msg.header.stamp
+        stamp.sec, stamp.nanosec = _SENTINEL_SEC, _SENTINEL_NANOSEC
+        sentinels = [_SENTINEL_BASE * (1.0 + k * 2.0 ** -20) for k in range(self.size)]
+        for (owner, name, index), sentinel in zip(slots, sentinels):
+            if index is None:
+                setattr(owner, name, sentinel)
+            else:
+                values = list(getattr(owner, name))
+                values[index] = sentinel
+                setattr(owner, name, values)
+        template = serialize_cdr(msg)
+        if template[:2] != b'\x00\x01':
+            raise ValueError('expected little-endian CDR')
+        self._stamp_at = _find(template, struct.pack('<iI', _SENTINEL_SEC, _SENTINEL_NANOSEC))
+        offsets = [_find(template, struct.pack('<d', s)) for s in sentinels]
+        # consecutive slots (a sequence's elements, a vector's x y z) are written in one go
+        self._runs = []
+        start = 0
+        for k in range(1, self.size + 1):
+            if k == self.size or offsets[k] != offsets[k - 1] + 8:
+                self._runs.append((offsets[start], start, k,
+                                   struct.Struct(f'<{k - start}d')))
+                start = k
+        self._buffer = bytearray(template)
+        self._stamp = struct.Struct('<iI')
+        self.fill(0, 0, [0.0] * self.size)
+
+    def fill(self, sec, nanosec, values) -> bytes:
+        """The message with this stamp and these float64 values, serialized."""
+        buf = self._buffer
+        self._stamp.pack_into(buf, self._stamp_at, sec, nanosec)
+        for offset, start, end, packer in self._runs:
+            packer.pack_into(buf, offset, *values[start:end])
+        self.data = bytes(buf)
+        return self.data
+
+
+def _find(data: bytes, needle: bytes) -> int:
+    at = data.find(needle)
+    if at < 0 or data.find(needle, at + 1) >= 0:
+        raise ValueError('template field not found exactly once in the serialized message')
+    return at
+
+
+def float64_array_data(raw: bytes) -> list:
+    """The ``data`` of a serialized ``std_msgs/Float64MultiArray`` (layout skipped)."""
+    r = _Reader(raw)
+    (dims,) = r.unpack('I', 4)
+    for _ in range(dims):           # MultiArrayDimension: label, size, stride
+        r.align(4)
+        (length,) = r.unpack('I', 4)
+        r.pos += length
+        r.align(4)
+        r.unpack('I', 4, 2)
+    r.align(4)
+    r.unpack('I', 4)                # data_offset
+    (n,) = r.unpack('I', 4)
+    if not n:
+        return []
+    r.align(8)
+    return list(r.unpack('d', 8, n))
