@@ -9,7 +9,8 @@ subscription created with ``raw=True``; both are public API. So:
 * ``PatchedMessage`` serializes a pre-built message once and, each period, writes the header
   stamp and the float64 fields that change into those bytes in place (the sizes of the other
   fields, joint names for instance, never change during a run);
-* ``float64_array_data`` reads the torques out of a raw ``std_msgs/Float64MultiArray``.
+* ``float64_array_data``, ``joint_state_fields`` and ``wrench_stamped_fields`` read what a
+  driver or a controller needs straight out of the raw bytes.
 
 Subscribers see ordinary messages; the bytes are exactly what ``msgdefs.serialize_cdr`` (and
 DDS) produce, which the tests check against rclpy's own deserializer.
@@ -26,14 +27,15 @@ _SENTINEL_BASE = -1.2345678901234567e+299
 
 
 class PatchedMessage:
-    """``msg`` serialized once; ``fill(sec, nanosec, values)`` updates its stamp and the float64
-    slots named in ``float_fields`` (attribute paths: ``'wrench.force.x'``, or a sequence field
-    such as ``'position'``, whose current length is kept), then ``data`` is ready to publish.
+    """``msg`` serialized once; ``fill(values, stamp)`` writes the float64 slots named in
+    ``float_fields`` (attribute paths: ``'wrench.force.x'``, or a sequence field such as
+    ``'position'``, whose current length is kept) and the ``builtin_interfaces/Time`` at
+    ``stamp`` (``'header.stamp'``, ``'clock'`` for /clock, None for none) as ``(sec, nanosec)``,
+    and returns the bytes to publish.
 
-    The message must have ``header.stamp``; ``values`` is flat, in the order of
-    ``float_fields`` (a sequence contributes all its elements)."""
+    ``values`` is flat, in the order of ``float_fields`` (a sequence gives all its elements)."""
 
-    def __init__(self, msg, float_fields):
+    def __init__(self, msg, float_fields, stamp='header.stamp'):
         slots = []                      # (object, attribute, index or None) in fill order
         for path in float_fields:
             *parents, last = path.split('.')
@@ -47,8 +49,12 @@ class PatchedMessage:
                 slots.extend((owner, last, i) for i in range(len(value)))
         self.size = len(slots)
         # stamp the template with sentinels, serialize, and find each sentinel's bytes
-        stamp = msg.header.stamp
-        stamp.sec, stamp.nanosec = _SENTINEL_SEC, _SENTINEL_NANOSEC
+        stamped = stamp is not None
+        if stamped:
+            time_of = msg
+            for name in stamp.split('.'):
+                time_of = getattr(time_of, name)
+            time_of.sec, time_of.nanosec = _SENTINEL_SEC, _SENTINEL_NANOSEC
         sentinels = [_SENTINEL_BASE * (1.0 + k * 2.0 ** -20) for k in range(self.size)]
         for (owner, name, index), sentinel in zip(slots, sentinels):
             if index is None:
@@ -60,7 +66,8 @@ class PatchedMessage:
         template = serialize_cdr(msg)
         if template[:2] != b'\x00\x01':
             raise ValueError('expected little-endian CDR')
-        self._stamp_at = _find(template, struct.pack('<iI', _SENTINEL_SEC, _SENTINEL_NANOSEC))
+        self._stamp_at = (_find(template, struct.pack('<iI', _SENTINEL_SEC, _SENTINEL_NANOSEC))
+                          if stamped else None)
         offsets = [_find(template, struct.pack('<d', s)) for s in sentinels]
         # consecutive slots (a sequence's elements, a vector's x y z) are written in one go
         self._runs = []
@@ -72,12 +79,13 @@ class PatchedMessage:
                 start = k
         self._buffer = bytearray(template)
         self._stamp = struct.Struct('<iI')
-        self.fill(0, 0, [0.0] * self.size)
+        self.fill([0.0] * self.size, (0, 0) if stamped else None)
 
-    def fill(self, sec, nanosec, values) -> bytes:
-        """The message with this stamp and these float64 values, serialized."""
+    def fill(self, values, stamp=None) -> bytes:
+        """The message with these float64 values and this stamp (sec, nanosec), serialized."""
         buf = self._buffer
-        self._stamp.pack_into(buf, self._stamp_at, sec, nanosec)
+        if stamp is not None:
+            self._stamp.pack_into(buf, self._stamp_at, *stamp)
         for offset, start, end, packer in self._runs:
             packer.pack_into(buf, offset, *values[start:end])
         self.data = bytes(buf)
@@ -108,3 +116,48 @@ def float64_array_data(raw: bytes) -> list:
         return []
     r.align(8)
     return list(r.unpack('d', 8, n))
+
+
+def _header(r: _Reader):
+    sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
+    (length,) = r.unpack('I', 4)
+    r.pos += length                  # frame_id
+    return sec, nanosec
+
+
+def _strings(r: _Reader) -> list:
+    r.align(4)
+    (n,) = r.unpack('I', 4)
+    out = []
+    for _ in range(n):
+        r.align(4)
+        (length,) = r.unpack('I', 4)
+        out.append(bytes(r.data[r.pos:r.pos + length - 1]).decode() if length else '')
+        r.pos += length
+    return out
+
+
+def _doubles(r: _Reader) -> list:
+    r.align(4)
+    (n,) = r.unpack('I', 4)
+    if not n:
+        return []
+    r.align(8)
+    return list(r.unpack('d', 8, n))
+
+
+def joint_state_fields(raw: bytes):
+    """``(sec, nanosec, names, position, velocity)`` of a serialized ``sensor_msgs/JointState``."""
+    r = _Reader(raw)
+    sec, nanosec = _header(r)
+    names = _strings(r)
+    position = _doubles(r)
+    return sec, nanosec, names, position, _doubles(r)
+
+
+def wrench_stamped_fields(raw: bytes):
+    """``(sec, nanosec, (fx, fy, fz))`` of a serialized ``geometry_msgs/WrenchStamped``."""
+    r = _Reader(raw)
+    sec, nanosec = _header(r)
+    r.align(8)
+    return sec, nanosec, r.unpack('d', 8, 3)

@@ -8,7 +8,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from impact_arm.msgdefs import serialize_cdr
-from impact_arm.wire import PatchedMessage, float64_array_data
+from impact_arm.wire import (PatchedMessage, float64_array_data, joint_state_fields,
+                             wrench_stamped_fields)
 
 
 @pytest.mark.parametrize('n', [1, 2, 3])
@@ -20,7 +21,7 @@ def test_patched_joint_state_deserializes_to_the_filled_values(n):
     for sec, nanosec, values in ((0, 0, [0.0] * 3 * n),
                                  (12, 999_999_999, [0.1 * k - 1.0 for k in range(3 * n)]),
                                  (-5, 1, [math.pi * (k + 1) for k in range(3 * n)])):
-        msg = deserialize_message(wire.fill(sec, nanosec, values), JointState)
+        msg = deserialize_message(wire.fill(values, (sec, nanosec)), JointState)
         assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (sec, nanosec)
         assert list(msg.name) == names and msg.header.frame_id == ''
         assert list(msg.position) == values[:n]
@@ -33,16 +34,24 @@ def test_patched_wrench_keeps_frame_and_unpatched_fields():
     template.header.frame_id = 'surface'
     template.wrench.torque.z = 7.5          # not patched: must survive every fill
     wire = PatchedMessage(template, ('wrench.force.x', 'wrench.force.y'))
-    msg = deserialize_message(wire.fill(3, 4, (1.5, -2.25)), WrenchStamped)
+    msg = deserialize_message(wire.fill((1.5, -2.25), (3, 4)), WrenchStamped)
     assert msg.header.frame_id == 'surface'
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (3, 4)
     assert (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z) == (1.5, -2.25, 0.0)
     assert msg.wrench.torque.z == 7.5
 
 
-def test_patched_message_refuses_a_message_without_a_stamp():
+def test_patched_command_without_header():
+    wire = PatchedMessage(Float64MultiArray(data=[0.0, 0.0]), ('data',), stamp=None)
+    assert list(deserialize_message(wire.fill([2.5, -1.0]), Float64MultiArray).data) == \
+        [2.5, -1.0]
+    assert float64_array_data(wire.data) == [2.5, -1.0]
+
+
+def test_patched_message_refuses_a_field_it_cannot_find():
+    msg = JointState(name=['a'], position=[0.0])
     with pytest.raises(AttributeError):
-        PatchedMessage(Float64MultiArray(data=[0.0]), ('data',))
+        PatchedMessage(msg, ('positions',))
 
 
 @pytest.mark.parametrize('labels', [[], ['joints'], ['ab', 'x' * 7], ['', 'abc', 'defgh']])
@@ -60,3 +69,33 @@ def test_float64_array_data_refuses_truncated_bytes():
     assert float64_array_data(raw) == [1.0, 2.0]
     with pytest.raises(ValueError):
         float64_array_data(raw[:-4])
+
+
+@pytest.mark.parametrize('names', [[], ['joint1'], ['j', 'joint22', 'abc']])
+def test_joint_state_fields_read_rclpy_serialized_states(names):
+    n = len(names)
+    msg = JointState(name=names, position=[0.5 * k for k in range(n)],
+                     velocity=[-1.0 * k for k in range(n)], effort=[9.0] * n)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 41, 123_456_789
+    msg.header.frame_id = 'base_link_x'
+    assert joint_state_fields(serialize_cdr(msg)) == (
+        41, 123_456_789, names, list(msg.position), list(msg.velocity))
+    # a driver that leaves velocities out
+    msg.velocity = []
+    assert joint_state_fields(serialize_message(msg))[4] == []
+
+
+def test_wrench_stamped_fields_read_rclpy_serialized_wrenches():
+    for frame in ('', 'surface', 'abcdefg'):
+        msg = WrenchStamped()
+        msg.header.frame_id = frame
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 7, 8
+        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = 1.0, -2.0, 3.0
+        assert wrench_stamped_fields(serialize_message(msg)) == (7, 8, (1.0, -2.0, 3.0))
+
+
+def test_patched_clock():
+    from rosgraph_msgs.msg import Clock
+    wire = PatchedMessage(Clock(), (), stamp='clock')
+    msg = deserialize_message(wire.fill((), (1_700_000_000, 5)), Clock)
+    assert (msg.clock.sec, msg.clock.nanosec) == (1_700_000_000, 5)

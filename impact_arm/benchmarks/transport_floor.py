@@ -1,6 +1,7 @@
 """The DDS cost of one lockstep period with no physics and no control law in it.
 
-Two processes on the same topics, QoS and executor as the nodes: a *driver* publishes
+Two processes on the same topics, QoS, executor and wire format as the nodes (pre-serialized
+messages published as bytes, raw subscriptions read with ``wire``): a *driver* publishes
 /contact_wrench and /joint_states (and /clock) and waits for a command; a *controller*
 subscribes to both and answers each joint state with a command. The mean period of this
 exchange is the floor under ``impact-arm run --mode lockstep`` on this machine: its real-time
@@ -27,15 +28,21 @@ def _controller(seconds):
     from std_msgs.msg import Float64MultiArray
 
     from ..mcap_ros2 import contract_qos
+    from ..wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
     node = rclpy.create_node('floor_controller')
     pub = node.create_publisher(Float64MultiArray, '/effort_controller/commands',
                                 contract_qos('/effort_controller/commands').to_rclpy())
-    command = Float64MultiArray(data=[0.0, 0.0])
+    command = PatchedMessage(Float64MultiArray(data=[0.0, 0.0]), ('data',), stamp=None)
     latest_only = contract_qos('/joint_states').to_rclpy()
     latest_only.depth = 1
-    node.create_subscription(WrenchStamped, '/contact_wrench', lambda m: None, latest_only)
-    node.create_subscription(JointState, '/joint_states', lambda m: pub.publish(command),
-                             latest_only)
+
+    def on_joint_state(raw):
+        joint_state_fields(raw)
+        pub.publish(command.fill([0.0, 0.0]))
+    node.create_subscription(WrenchStamped, '/contact_wrench', wrench_stamped_fields,
+                             latest_only, raw=True)
+    node.create_subscription(JointState, '/joint_states', on_joint_state, latest_only,
+                             raw=True)
     executor = EventsExecutor()
     executor.add_node(node)
     end = time.monotonic() + seconds
@@ -52,6 +59,7 @@ def _driver(periods, clock):
     from std_msgs.msg import Float64MultiArray
 
     from ..mcap_ros2 import contract_qos
+    from ..wire import PatchedMessage, float64_array_data
     node = rclpy.create_node('floor_driver')
 
     def publisher(msg_type, topic):
@@ -59,25 +67,29 @@ def _driver(periods, clock):
     pub_wrench = publisher(WrenchStamped, '/contact_wrench')
     pub_joints = publisher(JointState, '/joint_states')
     pub_clock = publisher(Clock, '/clock') if clock else None
-    joints = JointState(name=['joint1', 'joint2'], position=[0.1, 0.2], velocity=[0.0, 0.0],
-                        effort=[0.0, 0.0])
-    wrench, tick = WrenchStamped(), Clock()
+    joints = PatchedMessage(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2],
+                                       velocity=[0.0, 0.0], effort=[0.0, 0.0]),
+                            ('position', 'velocity', 'effort'))
+    wrench = PatchedMessage(WrenchStamped(), ('wrench.force.x', 'wrench.force.y'))
+    tick = PatchedMessage(Clock(), (), stamp='clock')
     count, times = [0], []
 
     def send():
-        pub_wrench.publish(wrench)
-        pub_joints.publish(joints)
+        stamp = divmod(count[0], 1000)
+        pub_wrench.publish(wrench.fill((0.0, 0.0), stamp))
+        pub_joints.publish(joints.fill([0.1, 0.2, 0.0, 0.0, 0.0, 0.0], stamp))
         if pub_clock is not None:
-            pub_clock.publish(tick)
+            pub_clock.publish(tick.fill((), stamp))
 
-    def on_command(_msg):
+    def on_command(raw):
+        float64_array_data(raw)
         count[0] += 1
         if count[0] in (WARM_UP, WARM_UP + periods):
             times.append(time.perf_counter())
         if count[0] < WARM_UP + periods:
             send()
     node.create_subscription(Float64MultiArray, '/effort_controller/commands', on_command,
-                             contract_qos('/effort_controller/commands').to_rclpy())
+                             contract_qos('/effort_controller/commands').to_rclpy(), raw=True)
     deadline = time.monotonic() + 30
     while (pub_joints.get_subscription_count() < 1 or pub_wrench.get_subscription_count() < 1
            or node.count_publishers('/effort_controller/commands') < 1):

@@ -23,6 +23,7 @@ from ..control import to_joint_space
 from ..mcap_ros2 import contract_qos
 from ..model import ArmModel
 from ..scene import load_scene, resolve_scene_path
+from ..wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
@@ -122,12 +123,16 @@ class Controller(Node):
         # keep only the newest sample: a controller that fell behind acts on the present
         latest_only = contract_qos('/joint_states').to_rclpy()
         latest_only.depth = 1
+        # raw: the callbacks read the few fields they need from the bytes, which costs a
+        # fraction of rclpy's conversion to message objects (twice per period)
         self.sub_wrench = self.create_subscription(WrenchStamped, '/contact_wrench',
-                                                   self._on_wrench, latest_only)
-        self.create_subscription(JointState, '/joint_states', self._on_joint_state, latest_only)
+                                                   self._on_wrench, latest_only, raw=True)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_state, latest_only,
+                                 raw=True)
         if p['trigger'] == 'timer':
             self.create_timer(self.period, self._on_timer)
-        self.msg = Float64MultiArray()
+        self.wire_command = PatchedMessage(Float64MultiArray(data=[0.0] * self.n), ('data',),
+                                           stamp=None)
         # like a controller manager's update loop: the thread that runs the callbacks
         self.scheduling = realtime_priority(p['thread_priority'])
         self.get_logger().info(f'law {p["law"]} at {p["rate"]:g} Hz ({p["trigger"]}), '
@@ -168,19 +173,21 @@ class Controller(Node):
         self.get_logger().info(f'parameters changed: {", ".join(sorted(values))}')
 
     # ------------------------------------------------------------------------- inputs
-    def _on_wrench(self, msg):
-        self.wrench_stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self.normal_force = msg.wrench.force.y
+    def _on_wrench(self, raw):
+        sec, nanosec, force = wrench_stamped_fields(raw)
+        self.wrench_stamp = sec + nanosec * 1e-9
+        self.normal_force = force[1]
         if self.waiting is not None and self.wrench_stamp >= self.waiting[0] - STAMP_EPS:
             state, self.waiting = self.waiting, None
             self._tick(*state)
 
-    def _on_joint_state(self, msg):
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    def _on_joint_state(self, raw):
+        sec, nanosec, names, position, velocity = joint_state_fields(raw)
+        t = sec + nanosec * 1e-9
         try:
-            index = [list(msg.name).index(j) for j in self.joint_names]
-            pos = [msg.position[k] for k in index]
-            vel = [msg.velocity[k] for k in index]
+            index = [names.index(j) for j in self.joint_names]
+            pos = [position[k] for k in index]
+            vel = [velocity[k] for k in index]
         except (ValueError, IndexError):
             self.get_logger().warning(f'joint state without {self.joint_names} positions and '
                                       f'velocities: ignored', throttle_duration_sec=2.0)
@@ -219,8 +226,7 @@ class Controller(Node):
         self._send([tau[j] for j in self.order])
 
     def _send(self, values):
-        self.msg.data = [float(v) for v in values]
-        self.pub.publish(self.msg)
+        self.pub.publish(self.wire_command.fill([float(v) for v in values]))
         self.sent += 1
 
     def finish(self, executor) -> int:

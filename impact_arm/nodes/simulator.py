@@ -177,7 +177,7 @@ class Simulator(Node):
         wrench = WrenchStamped()
         wrench.header.frame_id = p['frame_id']
         self.wire_wrench = PatchedMessage(wrench, ('wrench.force.x', 'wrench.force.y'))
-        self.msg_clock = Clock()
+        self.wire_clock = PatchedMessage(Clock(), (), stamp='clock')
 
         self.stats = PeriodStats()
         if not self.lockstep:
@@ -366,12 +366,11 @@ class Simulator(Node):
         # the controller waits for this period's wrench and joint state: they go first, what
         # no control loop waits for (/clock, impact reports) after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-        self.pub_wrench.publish(self.wire_wrench.fill(sec, nsec, tick.wrench))
+        self.pub_wrench.publish(self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         self.pub_joints.publish(
-            self.wire_joints.fill(sec, nsec, tick.position + tick.velocity + tick.effort))
+            self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec)))
         if self.pub_clock is not None:
-            self.msg_clock.clock.sec, self.msg_clock.clock.nanosec = sec, nsec
-            self.pub_clock.publish(self.msg_clock)
+            self.pub_clock.publish(self.wire_clock.fill((), (sec, nsec)))
         for record, _rows in tick.impacts:
             self.impacts += 1
             self.pub_impact.publish(String(data=json.dumps(record)))
