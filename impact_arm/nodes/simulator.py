@@ -227,7 +227,7 @@ class Simulator(Node):
         it."""
         import rclpy
         self.reader_node = rclpy.create_node(
-            self.get_name() + '_command_reader', namespace=self.get_namespace(),
+            '_' + self.get_name() + '_command_reader', namespace=self.get_namespace(),
             context=self.context, start_parameter_services=False, enable_rosout=False)
         return self.reader_node.create_subscription(Float64MultiArray, COMMAND_TOPIC,
                                                     lambda msg: None, qos, raw=True)
