@@ -111,11 +111,7 @@ def float64_array_data(raw: bytes) -> list:
         r.unpack('I', 4, 2)
     r.align(4)
     r.unpack('I', 4)                # data_offset
-    (n,) = r.unpack('I', 4)
-    if not n:
-        return []
-    r.align(8)
-    return list(r.unpack('d', 8, n))
+    return _doubles(r)
 
 
 def _header(r: _Reader):
