@@ -183,6 +183,7 @@ class Simulator(Node):
         if not self.lockstep:
             self.stats.nominal = 1.0 / (p['publish_rate'] * p['rate_factor'] or 1.0)
         self.pending = None                # (torques, monotonic time) from the command callback
+        self.applied = None                # the pending command the arm holds (realtime)
         self.last_command = None           # monotonic time of the last valid command
         self.commands = self.rejected = self.clipped = 0
         self.watchdog = 'waiting'          # waiting (no command yet) | ok | timeout
@@ -216,6 +217,7 @@ class Simulator(Node):
     def _set_parameters(self, values):
         if 'max_effort' in values:
             self.arm.max_effort = values['max_effort']
+            self.applied = None           # re-clip the held command with the new limit
         if 'command_timeout' in values:
             self.p['command_timeout'] = values['command_timeout']
 
@@ -284,11 +286,14 @@ class Simulator(Node):
                     f'no command for {self.p["command_timeout"]:g} s: torques zeroed')
             self.watchdog = 'timeout'
             self.arm.release()
+            self.applied = None
             return
         if self.watchdog == 'timeout':
             self.get_logger().info('commands resumed')
         self.watchdog = 'ok'
-        self.arm.apply(pending[0])
+        if pending is not self.applied:    # a held command is not checked again each period
+            self.arm.apply(pending[0])
+            self.applied = pending
 
     # -------------------------------------------------------------------------- stepping
     def _step(self):
