@@ -103,6 +103,7 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'worst_compute_us': float(d.get('compute_worst_us', 'nan')),
         'compute_mean_us': {part: float(d.get(f'compute_{part}_mean_us', 'nan'))
                             for part in ('commands', 'physics', 'publish')},
+        'lockstep_wait_mean_us': float(d.get('lockstep_wait_mean_us', 'nan')),
         'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'period_us': 1e6 / rate,
         'simulator_cpu_percent': 100 * (cpu1 - cpu0) / (wall1 - wall0),
@@ -198,6 +199,9 @@ def run(args) -> int:
         r = rows[-1]
         print(f"lockstep 1 kHz: {r['impacts']} impacts, {r['sim_time_s']:.3f} s simulated, "
               f"real-time factor {r['real_time_factor']:.2f}")
+        print("  a period, mean: " + ', '.join(
+            f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items())
+              + f", waiting for the command {r['lockstep_wait_mean_us']:.0f} us")
     if 'floor' not in args.skip:
         from .transport_floor import measure
         print('  transport floor (lockstep exchange without physics or control) ...',

@@ -81,8 +81,9 @@ class PeriodStats:
         self.histogram = np.zeros(20001, dtype=np.int64)
         self.jitter_max = 0.0
         self.jitter_max_t = 0.0
-        # whole-run sums of a period's parts (realtime): commands, physics, publication [s]
-        self.part_sums = [0.0, 0.0, 0.0]
+        # whole-run sums of a period's parts: commands, physics, publication and (lockstep)
+        # the wait from one publication to the next command [s]
+        self.part_sums = [0.0, 0.0, 0.0, 0.0]
         self.part_count = 0
 
     def part_means(self):
@@ -271,7 +272,7 @@ class Simulator(Node):
             if self._handshake is not None:
                 self.destroy_timer(self._handshake)
                 self._handshake = None
-            self._lockstep_period(torques)
+            self._lockstep_period(torques, now)
 
     def _watchdog(self, now):
         """Hold the latest command, or zero torque when it is too old."""
@@ -304,13 +305,6 @@ class Simulator(Node):
             self._fail(f'{exc} [state {exc.state.tolist() if exc.state is not None else "?"}, '
                        f'held torque {self.arm.command}]')
             return None
-
-    def _step_and_publish(self):
-        tick = self._step()
-        if tick is None:
-            return False
-        self._publish(tick)
-        return True
 
     def _realtime_loop(self):
         # The executor thread (commands, diagnostics) and this one share the GIL; a thread
@@ -347,21 +341,30 @@ class Simulator(Node):
             self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period,
                            (stepping - woke, stepped - stepping, done - stepped))
 
-    def _lockstep_period(self, torques):
+    def _lockstep_period(self, torques, arrived):
         self.arm.apply(torques)
         self.watchdog = 'ok'
         woke = time.monotonic()
         if self.start_wall is None:
             self.start_wall = woke
+        taken = woke - arrived
         factor = self.p['rate_factor']
         if factor > 0:  # paced: never ahead of rate_factor x wall time
             due = self.start_wall + (self.arm.periods + 1) / (self.p['publish_rate'] * factor)
             if due > woke:
                 time.sleep(due - woke)
                 woke = time.monotonic()
-        if self._step_and_publish():
-            done = time.monotonic()
-            self.stats.add(done, done - woke, self.arm.t, False)
+        tick = self._step()
+        if tick is None:
+            return
+        stepped = time.monotonic()
+        self._publish(tick)
+        done = time.monotonic()
+        # the wait is what the controller and the transport take (the exchange's round trip)
+        last = self.stats.last_publish
+        self.stats.add(done, done - woke, self.arm.t, False,
+                       (taken, stepped - woke, done - stepped,
+                        arrived - last if last is not None else 0.0))
 
     def _repeat_initial_state(self):
         if self.commands == 0:
@@ -440,6 +443,8 @@ class Simulator(Node):
             # the physics, publishing the period's messages
             **{f'compute_{part}_mean_us': f'{mean * 1e6:.1f}' for part, mean in
                zip(('commands', 'physics', 'publish'), self.stats.part_means())},
+            **({'lockstep_wait_mean_us': f'{self.stats.part_means()[3] * 1e6:.1f}'}
+               if self.lockstep else {}),
             'watchdog': self.watchdog,
             'scheduling': self.scheduling,
             'commands': str(self.commands),
