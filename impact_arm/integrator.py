@@ -74,6 +74,7 @@ class Stats:
 
 
 TRACE_CAPACITY = 4096
+OUTPUT_CAPACITY = 4096     # output rows per kernel call (advance splits longer spans)
 _KINDS = {layout.EV_SWITCH: 'switch', layout.EV_YIELD: 'yield',
           layout.EV_MAX: 'max_compression', layout.EV_SEP: 'separation'}
 _LAWS = {'held': layout.LAW_HELD, 'q': layout.LAW_Q, 'pid': layout.LAW_PID,
@@ -131,7 +132,42 @@ class PhaseIntegrator:
         self._trace_count = np.zeros(1, dtype=np.int64)
         self._ev = np.zeros(1, dtype=np.int64)
         self._W = np.zeros(model.eq.SCRATCH)
+        self._O = np.zeros(3)                   # next output index k, period dt (0: off), rows
+        self._out = np.zeros((1, self.output_width))
+        self._output = []
         self.events = 0
+
+    # --- output on a time grid, from each step's continuous extension -------------------
+    @property
+    def output_width(self):
+        """Columns of an output row: t, the state, contact impulse (tangential, normal) since
+        the previous row, the torque acting (n), actuators acting (1/0), tip velocity (2)."""
+        return self.model.size + self.model.n + 6
+
+    def start_output(self, dt, next_index):
+        """Record the state at the times k dt, k >= next_index, as the integration passes them:
+        steps are not shortened to land on them in free flight (the step's continuous
+        extension gives the state: Dormand-Prince's quartic, or a cubic Hermite after a
+        Rosenbrock step); contact steps do end on them, so each row's impulse is exact."""
+        if not dt > 0:
+            raise ValueError(f'output period {dt}: must be > 0')
+        if len(self._out) != OUTPUT_CAPACITY:
+            self._out = np.zeros((OUTPUT_CAPACITY, self.output_width))
+        self._O[:] = (next_index, dt, 0.0)
+        self._output = []
+
+    def take_output(self) -> np.ndarray:
+        """The output rows recorded since the last call (one row per grid time, in order)."""
+        rows = np.concatenate(self._output) if self._output else \
+            np.zeros((0, self.output_width))
+        self._output = []
+        return rows
+
+    def _drain_output(self):
+        count = int(self._O[2])
+        if count:
+            self._output.append(self._out[:count].copy())
+            self._O[2] = 0.0
 
     @property
     def stats(self):
@@ -247,17 +283,24 @@ class PhaseIntegrator:
         st = self.state
         model = self.model
         events = []
+        t_end = float(t_end)
+        O = self._O
         while True:
             self._T[0], self._T[1] = st.t, self._h
             self._T[2] = 0.0 if self._f_valid else 1.0
             self._f_valid = True
-            status = model.eq.advance(self._T, float(t_end), st.y, self._f, self._P, self._I,
+            # with output on, no kernel call may pass more grid times than the buffer holds
+            t_call = min(t_end, (O[0] + OUTPUT_CAPACITY - 1) * O[1]) if O[1] > 0 else t_end
+            status = model.eq.advance(self._T, t_call, st.y, self._f, self._P, self._I,
                                       model.surface_table, st.c, st.levels, st.held,
                                       self._stats, self._trace_buffer, self._trace_count,
-                                      self._ev)
+                                      self._ev, O, self._out)
             st.t, self._h = float(self._T[0]), float(self._T[1])
             self._drain_trace()
+            self._drain_output()
             if status == layout.DONE:
+                if t_call < t_end:
+                    continue
                 return events
             if status == layout.TRACE_FULL:
                 continue
@@ -279,6 +322,8 @@ class PhaseIntegrator:
 
     def _raise(self, status):
         st = self.state
+        if status == layout.OUTPUT_FULL:       # advance() splits its calls so this cannot be
+            raise RuntimeError('internal error: the output buffer overflowed')
         if status == layout.ERR_PENETRATION:
             radius = self.model.surfaces[st.surface].constants.R
             raise SimulationError(

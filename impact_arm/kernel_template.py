@@ -27,6 +27,17 @@ E5 = -2187 / 6784 + 92097 / 339200
 E6 = 11 / 84 - 187 / 2100
 E7 = -1 / 40
 C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
+# Dormand-Prince continuous extension of order 4 (Shampine's quartic): over a step of size h,
+# y(t + s h) = y + h sum_j b_j(s) k_j, b_j(s) = s^2 (D_j2 + s (D_j3 + s D_j4)) (+ s for j = 1),
+# for the stages k_1 = f0, k_3 ... k_6 (K[1] ... K[4]), k_7 = f1 (k_2's weights are zero).
+D12, D13, D14 = -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432
+D32, D33, D34 = 131558114200 / 32700410799, -68118460800 / 10900136933, \
+    87487479700 / 32700410799
+D42, D43, D44 = -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072
+D52, D53, D54 = 127303824393 / 49829197408, -318862633887 / 49829197408, \
+    701980252875 / 199316789632
+D62, D63, D64 = -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844
+D72, D73, D74 = 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423
 # Rosenbrock 4(3), Shampine's parameters (Kaps-Rentrop form, as in Numerical Recipes' stiff):
 # four stages, three evaluations, A-stable. The right-hand side has no explicit time
 # dependence (the control law switches at located events), so the dF/dt terms vanish.
@@ -433,6 +444,69 @@ def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C
     return b
 
 
+@jit
+def interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, out, at):
+    """The state at ts in [t0, t0 + h] into out[at:at + size]: the Dormand-Prince quartic
+    when K holds this step's stages (``quartic``), else the cubic Hermite of the two ends."""
+    size = y0.shape[0]
+    s = (ts - t0) / h
+    if quartic:
+        s2 = s * s
+        b1 = s + s2 * (D12 + s * (D13 + s * D14))
+        b3 = s2 * (D32 + s * (D33 + s * D34))
+        b4 = s2 * (D42 + s * (D43 + s * D44))
+        b5 = s2 * (D52 + s * (D53 + s * D54))
+        b6 = s2 * (D62 + s * (D63 + s * D64))
+        b7 = s2 * (D72 + s * (D73 + s * D74))
+        for i in range(size):
+            out[at + i] = y0[i] + h * (b1 * f0[i] + b3 * K[1, i] + b4 * K[2, i]
+                                       + b5 * K[3, i] + b6 * K[4, i] + b7 * f1[i])
+    else:
+        h00 = (1.0 + 2.0 * s) * (1.0 - s) ** 2
+        h10 = s * (1.0 - s) ** 2
+        h01 = s * s * (3.0 - 2.0 * s)
+        h11 = s * s * (s - 1.0)
+        for i in range(size):
+            out[at + i] = h00 * y0[i] + h * h10 * f0[i] + h01 * y1[i] + h * h11 * f1[i]
+
+
+@jit
+def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, scratch):
+    """Output rows for the grid times k dt in (t0, t0 + h] (k = O[0], dt = O[1]; O[2] rows
+    used): t, the state, the contact impulse since the previous row (then reset), the torque
+    acting, whether the actuators act, and the tip velocity. False when ``out`` is full."""
+    size = y0.shape[0]
+    dt = O[1]
+    t1 = t0 + h
+    eps = 4 * 2.220446049250313e-16 * max(1.0, abs(t1))
+    while True:
+        ts = O[0] * dt
+        if ts > t1 + eps:
+            return True
+        row_index = int(O[2])
+        if row_index >= out.shape[0]:
+            return False
+        row = out[row_index]
+        row[0] = ts
+        if abs(ts - t1) <= eps:
+            for i in range(size):
+                row[1 + i] = y1[i]
+        else:
+            interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, row, 1)
+        at = 1 + size
+        row[at], row[at + 1] = C[C_JT], C[C_JN]
+        C[C_JT] = 0.0
+        C[C_JN] = 0.0
+        state = row[1:1 + size]
+        acting = control_torque(state, P, I, C, tau_held, row[at + 2:at + 2 + N],
+                                scratch[:N], scratch[N:2 * N])
+        row[at + 2 + N] = 1.0 if acting else 0.0
+        v = tip(state[:N], state[N:2 * N], P[P_L:P_L + N])
+        row[at + 3 + N], row[at + 4 + N] = v[2], v[3]
+        O[0] += 1.0
+        O[2] += 1.0
+
+
 @jit_leaf
 def phase_tolerances(P, C):
     """(rtol, atol) of the current phase: contact phases have their own (see PhaseIntegrator)."""
@@ -473,12 +547,16 @@ def initial_step(t, y, f0, P, I, SURF, C, levels, tau_held, stats, W, work, f1):
 
 
 @jit_alloc
-def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev):
+def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev, O, out):
     """Integrate from T[0] to t_end with step T[1]; y, f updated in place. T[2] != 0 asks
     for f to be recomputed first (new phase, new command); T[1] <= 0 for a fresh step size.
+    With O[1] = dt > 0, rows of ``out`` are written at the output times k dt (``emit_output``)
+    from each step's continuous extension; contact steps end on those times, so the impulse
+    of each output period is exact.
 
     Returns DONE at t_end, EVENT with the state at a located switch (slot in ev[0]),
-    TRACE_FULL when the trace buffer needs draining, or an ERR_* status."""
+    TRACE_FULL when the trace buffer needs draining, OUTPUT_FULL when ``out`` does, or an
+    ERR_* status."""
     size = y.shape[0]
     ns = SURF.shape[0]
     # the only allocation: scratch for the stepping loop, which itself runs without NRT
@@ -486,7 +564,8 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
                          ev, np.empty(size), np.empty(size), np.empty(size), np.empty(size),
                          np.empty(size), np.empty(size), np.empty((5, size)),
                          np.empty(SCRATCH), np.empty(ns + 4), np.empty(ns + 4),
-                         np.empty(ns + 4), np.zeros((2 * size + 2, size)))
+                         np.empty(ns + 4), np.zeros((2 * size + 2, size)), O, out,
+                         np.empty(size), np.empty(2 * N))
 
 
 @jit_leaf
@@ -498,8 +577,10 @@ def copy_into(dst, src):
 
 @jit
 def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev,
-                  y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp, JW):
+                  y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp, JW, O, out, y_prev,
+                  scratch):
     """``advance`` with its scratch arrays."""
+    output = O[1] > 0.0
     ns = SURF.shape[0]
     rtol, atol = phase_tolerances(P, C)
     max_step = P[P_MAXSTEP]
@@ -522,6 +603,12 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             t = t_end
             break
         step = min(h, max_step)
+        t_stop = t_end
+        if HAS_CONTACT:
+            if output and int(C[C_PHASE]) != FREE:
+                # in contact, steps end on the output times: each period's impulse is exact
+                t_stop = min(t_end, O[0] * O[1])
+                remaining = t_stop - t
         clipped = step >= remaining
         if clipped:
             step = remaining
@@ -551,32 +638,42 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                 if s_k < best_s:
                     best_s, best_k = s_k, k
         if best_k >= 0:
+            copy_into(y_prev, y)
             if best_s < step:
                 trial_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C, levels,
                            tau_held, stats, W, JW)
                 copy_into(y, y_root)
+                end_f = f_tmp
             else:
                 copy_into(y, y1)
+                end_f = f1
+            t_prev = t
             t = t + best_s
             if int(C[C_PHASE]) != FREE:
                 record_point(t, y, P, I, SURF, C, levels, trace, tcount)
+            # the quartic needs this step's stages; locate() overwrote them if best_s == step
+            if output and not emit_output(t_prev, best_s, y_prev, f, y, end_f, K,
+                                          best_s < step and not rosenbrock_now(I, C), P, I, C,
+                                          tau_held, O, out, scratch):
+                status = OUTPUT_FULL
+                break
             ev[0] = best_k
             status = EVENT
             break
+        copy_into(y_prev, y)
+        copy_into(y_root, f)        # the step's start derivative, for the output below
         copy_into(y, y1)
         copy_into(f, f1)
         JW[jac_valid, 0] = 0.0      # a new point: the Jacobian is due again
-        t = t_end if clipped else t + step
+        t_prev = t
+        t = t_stop if clipped else t + step
         copy_into(g0, g1)
+        in_contact = False
+        delta = 0.0
         if HAS_CONTACT:
             if int(C[C_PHASE]) != FREE:
+                in_contact = True
                 delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount)
-                if delta > SURF[int(C[C_SURF]), S_R]:
-                    status = ERR_PENETRATION
-                    break
-                if tcount[0] >= trace.shape[0]:
-                    status = TRACE_FULL
-                    break
             else:
                 # the dent is forgotten once the tip has risen above the surface again
                 y_tip = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])[1]
@@ -584,6 +681,19 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                     if levels[s] != SURF[s, S_H] and y_tip > SURF[s, S_H]:
                         levels[s] = SURF[s, S_H]
                         g0[s] = levels[s] - y_tip
+        # output after the step's impulse is booked, before any early return
+        if output and not emit_output(t_prev, t - t_prev, y_prev, y_root, y, f, K,
+                                      not rosenbrock_now(I, C), P, I, C, tau_held, O, out,
+                                      scratch):
+            status = OUTPUT_FULL
+            break
+        if in_contact:
+            if delta > SURF[int(C[C_SURF]), S_R]:
+                status = ERR_PENETRATION
+                break
+            if tcount[0] >= trace.shape[0]:
+                status = TRACE_FULL
+                break
     T[0] = t
     T[1] = h
     return status

@@ -20,7 +20,8 @@ I_SIZE = 5
 # step methods (I_METHOD): Dormand-Prince everywhere, or a Rosenbrock step in free flight
 METHOD_DOPRI5, METHOD_ROSENBROCK = 0, 1
 # kernel status
-DONE, EVENT, TRACE_FULL, ERR_UNDERFLOW, ERR_PENETRATION, ERR_NONFINITE = 0, 1, 2, 3, 4, 5
+DONE, EVENT, TRACE_FULL, ERR_UNDERFLOW, ERR_PENETRATION, ERR_NONFINITE, OUTPUT_FULL = \
+    0, 1, 2, 3, 4, 5, 6
 # event slots: contact per surface, then switch, yield, max_compression, separation
 EV_SWITCH, EV_YIELD, EV_MAX, EV_SEP = 0, 1, 2, 3
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .control import CycleController
+from .errors import SimulationError
 from .integrator import PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder, settle_index
 from .model import ArmModel
@@ -120,6 +121,40 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
         integ.reset_derivative()
         return mode_before, ctrl.mode
 
+    def feed(events):
+        """Cycles, impact records, observers and progress for the located events."""
+        nonlocal cycles_done
+        for ev in events:
+            if ev.kind == 'switch':
+                cycles_done += 1
+            record = builder.feed(ev)
+            if record is not None:
+                rows = integ.trace[:]
+                integ.trace.clear()
+                if trace:
+                    result.traces.append(rows)
+                if observer is not None and hasattr(observer, 'on_impact'):
+                    observer.on_impact(record, rows)
+                if progress:
+                    progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
+
+    def publish(sample, tip_velocity):
+        result.samples.append(sample)
+        tip_velocities.append(tip_velocity)
+        if observer is not None and hasattr(observer, 'on_sample'):
+            observer.on_sample(sample)
+
+    if not ctrl:
+        # continuous control: nothing happens on the sample grid, so the integrator's own
+        # steps run on and the samples come from each step's continuous extension
+        try:
+            _run_sampled(scene, integ, dt_pub, t_max, feed, publish, result,
+                         lambda: cycles_done)
+        except SimulationError as exc:
+            result.error = str(exc)
+            result.stopped = 'error'
+        return _finish(result, integ, wall0, tip_velocities)
+
     impulse_since_ctl = [0.0, 0.0]
     tau_now = tuple([0.0] * n)
     if ctrl:
@@ -139,19 +174,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
                 impulse[1] += j[1]
                 impulse_since_ctl[0] += j[0]
                 impulse_since_ctl[1] += j[1]
-                for ev in events:
-                    if ev.kind == 'switch':
-                        cycles_done += 1
-                    record = builder.feed(ev)
-                    if record is not None:
-                        rows = integ.trace[:]
-                        integ.trace.clear()
-                        if trace:
-                            result.traces.append(rows)
-                        if observer is not None and hasattr(observer, 'on_impact'):
-                            observer.on_impact(record, rows)
-                        if progress:
-                            progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
+                feed(events)
             if ctrl and t_ctl <= t_next:
                 before, after = apply_control(t_ctl)
                 impulse_since_ctl = [0.0, 0.0]
@@ -167,28 +190,69 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
                 last_publish = t_pub
                 tau = integ.torque(st.t, q, qd, st.y)
                 tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
-                sample = Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench,
-                                ctrl.mode if ctrl else st.mode)
-                result.samples.append(sample)
-                tip_velocities.append(model.tip(q, qd)[2:])
-                if observer is not None and hasattr(observer, 'on_sample'):
-                    observer.on_sample(sample)
+                publish(Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench,
+                               ctrl.mode if ctrl else st.mode), model.tip(q, qd)[2:])
                 k_pub += 1
             if scene.cycles and cycles_done >= scene.cycles:
                 result.stopped = f'{scene.cycles} cycles completed'
                 break
-    except Exception as exc:  # keep what was simulated; the caller reports the error
-        from .errors import SimulationError
-        if not isinstance(exc, SimulationError):
-            raise
+    except SimulationError as exc:  # keep what was simulated; the caller reports the error
         result.error = str(exc)
         result.stopped = 'error'
-    result.t_end = st.t
+    return _finish(result, integ, wall0, tip_velocities)
+
+
+def _finish(result, integ, wall0, tip_velocities):
+    result.t_end = integ.state.t
     result.rhs_evaluations = integ.stats.rhs_evaluations
     result.wall_time = time.perf_counter() - wall0
     result._tip_velocities = tip_velocities
     result.integrator = integ
     return result
+
+
+def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
+    """``run`` with continuous control: samples every ``dt`` from the integrator's output
+    rows (``PhaseIntegrator.start_output``), events fed as they are located."""
+    model, st = integ.model, integ.state
+    n, size = model.n, model.size
+    mode_of = st.mode
+
+    def publish_rows(rows, mode):
+        for row in rows.tolist():
+            q, qd = tuple(row[1:1 + n]), tuple(row[1 + n:1 + 2 * n])
+            tau = tuple(row[3 + size:3 + size + n]) if row[3 + size + n] else (0.0,) * n
+            wrench = (row[1 + size] / dt, row[2 + size] / dt)
+            publish(Sample(row[0], q, qd, tau, wrench, mode), tuple(row[4 + size + n:]))
+
+    # the sample at t = 0, before anything moves (no period yet: the force acting now)
+    q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+    tau = integ.torque()
+    publish(Sample(0.0, tuple(q), tuple(qd), tau if tau is not None else (0.0,) * n,
+                   integ.contact_force_now(), mode_of), model.tip(q, qd)[2:])
+    integ.take_impulse()
+    last_index = math.floor(t_max / dt * (1 + 1e-12))
+    t_final = last_index * dt
+    integ.start_output(dt, 1)
+    try:
+        while st.t < t_final:
+            mode = st.mode
+            events = integ.advance(t_final, stop_at_event=True)
+            publish_rows(integ.take_output(), mode)
+            feed(events)
+            if scene.cycles and cycles_done() >= scene.cycles:
+                # as on the sampled clock: the run ends with the first sample from then on
+                if result.samples[-1].t < st.t:
+                    next_sample = min(t_final, math.ceil(st.t / dt - 1e-9) * dt)
+                    mode = st.mode
+                    feed(integ.advance(next_sample))
+                    publish_rows(integ.take_output(), mode)
+                result.stopped = f'{scene.cycles} cycles completed'
+                return
+        result.stopped = f't_max = {t_max:g} s reached'
+    except SimulationError:
+        publish_rows(integ.take_output(), st.mode)
+        raise
 
 
 def format_table(result: RunResult) -> str:

@@ -297,14 +297,18 @@ class Simulator(Node):
             self.applied = pending
 
     # -------------------------------------------------------------------------- stepping
-    def _step(self):
-        """One period of physics; None when the simulation had to stop."""
+    def _step_and_publish(self):
+        """One period: its physics, then its messages. Returns the monotonic times at which
+        each ended, or None when the simulation had to stop."""
         try:
-            return self.arm.step()
+            tick = self.arm.step()
         except SimulationError as exc:
             self._fail(f'{exc} [state {exc.state.tolist() if exc.state is not None else "?"}, '
                        f'held torque {self.arm.command}]')
             return None
+        stepped = time.monotonic()
+        self._publish(tick)
+        return stepped, time.monotonic()
 
     def _realtime_loop(self):
         # The executor thread (commands, diagnostics) and this one share the GIL; a thread
@@ -331,12 +335,10 @@ class Simulator(Node):
                 continue
             self._watchdog(woke)
             stepping = time.monotonic()
-            tick = self._step()
-            if tick is None:
+            times = self._step_and_publish()
+            if times is None:
                 return
-            stepped = time.monotonic()
-            self._publish(tick)
-            done = time.monotonic()
+            stepped, done = times
             # late if this period's publication happened after the next one was due
             self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period,
                            (stepping - woke, stepped - stepping, done - stepped))
@@ -354,12 +356,10 @@ class Simulator(Node):
             if due > woke:
                 time.sleep(due - woke)
                 woke = time.monotonic()
-        tick = self._step()
-        if tick is None:
+        times = self._step_and_publish()
+        if times is None:
             return
-        stepped = time.monotonic()
-        self._publish(tick)
-        done = time.monotonic()
+        stepped, done = times
         # the wait is what the controller and the transport take (the exchange's round trip)
         last = self.stats.last_publish
         self.stats.add(done, done - woke, self.arm.t, False,
