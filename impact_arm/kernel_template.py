@@ -362,14 +362,18 @@ def event_values(y, P, I, SURF, C, levels, g):
 
 
 @jit
-def record_point(t, y, P, I, SURF, C, levels, trace, tcount):
-    """Peak force, trapezoidal contact impulse and (optionally) a trace row at a contact point."""
+def record_point(t, y, P, I, SURF, C, levels, trace, tcount, y_mid):
+    """Peak force, contact impulse since the previous point and (optionally) a trace row at a
+    contact point. The impulse is Simpson's rule with the force at ``y_mid``, the state midway
+    (from the step's continuous extension): the trapezoid rule read 1 % low on the article's
+    impacts at rtol 1e-5 (the force pulse is concave), Simpson's follows the step's accuracy."""
     delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
     if fn > C[C_PEAK]:
         C[C_PEAK] = fn
     dt = t - C[C_IMP_T]
-    C[C_JT] += 0.5 * (ff + C[C_IMP_FF]) * dt
-    C[C_JN] += 0.5 * (fn + C[C_IMP_FN]) * dt
+    _, fn_mid, ff_mid, _, _ = contact_forces(y_mid, P, SURF, C, levels)
+    C[C_JT] += (ff + 4.0 * ff_mid + C[C_IMP_FF]) * dt / 6.0
+    C[C_JN] += (fn + 4.0 * fn_mid + C[C_IMP_FN]) * dt / 6.0
     C[C_IMP_T], C[C_IMP_FF], C[C_IMP_FN] = t, ff, fn
     if I[I_TRACE] != 0 and tcount[0] < trace.shape[0]:
         row = trace[tcount[0]]
@@ -649,19 +653,21 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                 end_f = f1
             t_prev = t
             t = t + best_s
-            if int(C[C_PHASE]) != FREE:
-                record_point(t, y, P, I, SURF, C, levels, trace, tcount)
             # the quartic needs this step's stages; locate() overwrote them if best_s == step
-            if output and not emit_output(t_prev, best_s, y_prev, f, y, end_f, K,
-                                          best_s < step and not rosenbrock_now(I, C), P, I, C,
-                                          tau_held, O, out, scratch):
+            quartic = best_s < step and not rosenbrock_now(I, C)
+            if int(C[C_PHASE]) != FREE:
+                interpolate(t_prev, best_s, t_prev + 0.5 * best_s, y_prev, f, y, end_f, K,
+                            quartic, work, 0)
+                record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
+            if output and not emit_output(t_prev, best_s, y_prev, f, y, end_f, K, quartic, P,
+                                          I, C, tau_held, O, out, scratch):
                 status = OUTPUT_FULL
                 break
             ev[0] = best_k
             status = EVENT
             break
         copy_into(y_prev, y)
-        copy_into(y_root, f)        # the step's start derivative, for the output below
+        copy_into(y_root, f)        # the step's start derivative, for the midpoint and output
         copy_into(y, y1)
         copy_into(f, f1)
         JW[jac_valid, 0] = 0.0      # a new point: the Jacobian is due again
@@ -673,7 +679,9 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
         if HAS_CONTACT:
             if int(C[C_PHASE]) != FREE:
                 in_contact = True
-                delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount)
+                interpolate(t_prev, t - t_prev, 0.5 * (t_prev + t), y_prev, y_root, y, f, K,
+                            not rosenbrock_now(I, C), work, 0)
+                delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
             else:
                 # the dent is forgotten once the tip has risen above the surface again
                 y_tip = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])[1]

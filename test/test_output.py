@@ -64,12 +64,16 @@ def test_grid_output_is_as_accurate_as_stepping_to_each_grid_time(method, rtol):
     assert np.abs(impulses[:, 1]).max() > 1.0         # the window really holds impacts
 
 
-def test_output_rows_split_an_impact_impulse_without_losing_any():
-    """A 0.5 m/s vertical strike sampled every 20 us: the rows' normal impulses add up to the
-    momentum the impact reverses (at this pose the tip's vertical direction is joint 1's)."""
-    scene = vertical_strike_scene(0.5, law='elastoplastic')
+@pytest.mark.parametrize('law', ['hertz', 'elastoplastic'])
+@pytest.mark.parametrize('preset, rel', [('fast', 1e-4), ('accurate', 5e-6)])
+def test_output_rows_split_an_impact_impulse_without_losing_any(law, preset, rel):
+    """A 0.5 m/s vertical strike sampled every 20 us: the rows' normal impulses (and what
+    remains after the last row) add up to the momentum the impact reverses (at this pose the
+    tip's vertical direction is joint 1's), to the step's accuracy: Simpson's rule over each
+    contact step (the trapezoid rule read ~1 % low at the fast preset)."""
+    scene = vertical_strike_scene(0.5, law=law)
     model = ArmModel(scene)
-    integ = PhaseIntegrator(model, preset='accurate')
+    integ = PhaseIntegrator(model, preset=preset)
     integ.start_output(2e-5, 1)
     states = {}
     while 'separation' not in states:
@@ -80,7 +84,7 @@ def test_output_rows_split_an_impact_impulse_without_losing_any():
     normal = rows[:, 2 + size]
     dp = generalized_momentum(states['separation']) - generalized_momentum(states['contact'])
     assert (normal > 0).sum() >= 5                    # spread over several rows
-    assert normal.sum() == pytest.approx(dp[0], rel=5e-3)
+    assert normal.sum() + integ.take_impulse()[1] == pytest.approx(dp[0], rel=rel)
     assert np.allclose(np.diff(rows[:, 0]), 2e-5, rtol=1e-9, atol=0)
 
 
