@@ -248,7 +248,9 @@ def serialize_cdr(msg) -> bytes:
 
 
 # ----------------------------------------------------------------------- CDR, reading
-class _Reader:
+class CdrReader:
+    """A cursor over CDR bytes (encapsulation header read, alignment relative to the
+    payload)."""
     __slots__ = ('data', 'pos', 'endian')
 
     def __init__(self, data):
@@ -270,7 +272,7 @@ class _Reader:
         return values
 
 
-def _read(r: _Reader, t):
+def _read(r: CdrReader, t):
     from rosidl_parser import definition as d
     if isinstance(t, d.BasicType):
         name = t.typename
@@ -306,7 +308,7 @@ def _read(r: _Reader, t):
     raise NotImplementedError(f'CDR of {type(t).__name__}')
 
 
-def _read_message(r: _Reader, cls):
+def _read_message(r: CdrReader, cls):
     fields = _fields(cls)
     msg = cls()
     if not fields:
@@ -320,4 +322,4 @@ def deserialize_cdr(data, type_name_or_class):
     """The message object of CDR ``data`` (the inverse of ``serialize_cdr``; no rclpy)."""
     cls = type_name_or_class if isinstance(type_name_or_class, type) else \
         message_class(type_name_or_class)
-    return _read_message(_Reader(data), cls)
+    return _read_message(CdrReader(data), cls)

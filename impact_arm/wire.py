@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import struct
 
-from .msgdefs import _Reader, serialize_cdr
+from .msgdefs import CdrReader, serialize_cdr
 
 # values nobody publishes, to find where a field's bytes lie in the serialized template
 _SENTINEL_SEC, _SENTINEL_NANOSEC = 0x5A1E7A3C, 0x3B9AC9FF - 0x2A5
@@ -101,7 +101,7 @@ def _find(data: bytes, needle: bytes) -> int:
 
 def float64_array_data(raw: bytes) -> list:
     """The ``data`` of a serialized ``std_msgs/Float64MultiArray`` (layout skipped)."""
-    r = _Reader(raw)
+    r = CdrReader(raw)
     (dims,) = r.unpack('I', 4)
     for _ in range(dims):           # MultiArrayDimension: label, size, stride
         r.align(4)
@@ -114,14 +114,14 @@ def float64_array_data(raw: bytes) -> list:
     return _doubles(r)
 
 
-def _header(r: _Reader):
+def _header(r: CdrReader):
     sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
     (length,) = r.unpack('I', 4)
     r.pos += length                  # frame_id
     return sec, nanosec
 
 
-def _strings(r: _Reader) -> list:
+def _strings(r: CdrReader) -> list:
     r.align(4)
     (n,) = r.unpack('I', 4)
     out = []
@@ -133,7 +133,7 @@ def _strings(r: _Reader) -> list:
     return out
 
 
-def _doubles(r: _Reader) -> list:
+def _doubles(r: CdrReader) -> list:
     r.align(4)
     (n,) = r.unpack('I', 4)
     if not n:
@@ -144,7 +144,7 @@ def _doubles(r: _Reader) -> list:
 
 def joint_state_fields(raw: bytes):
     """``(sec, nanosec, names, position, velocity)`` of a serialized ``sensor_msgs/JointState``."""
-    r = _Reader(raw)
+    r = CdrReader(raw)
     sec, nanosec = _header(r)
     names = _strings(r)
     position = _doubles(r)
@@ -153,7 +153,7 @@ def joint_state_fields(raw: bytes):
 
 def wrench_stamped_fields(raw: bytes):
     """``(sec, nanosec, (fx, fy, fz))`` of a serialized ``geometry_msgs/WrenchStamped``."""
-    r = _Reader(raw)
+    r = CdrReader(raw)
     sec, nanosec = _header(r)
     r.align(8)
     return sec, nanosec, r.unpack('d', 8, 3)
