@@ -585,6 +585,9 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                   scratch):
     """``advance`` with its scratch arrays."""
     output = O[1] > 0.0
+    # the phase, hence the step method, stays the same through one call (a switch returns)
+    in_contact = HAS_CONTACT and int(C[C_PHASE]) != FREE
+    quartic = not rosenbrock_now(I, C)     # Dormand-Prince steps carry a quartic extension
     ns = SURF.shape[0]
     rtol, atol = phase_tolerances(P, C)
     max_step = P[P_MAXSTEP]
@@ -598,7 +601,7 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
     event_values(y, P, I, SURF, C, levels, g0)
     eps4 = 4 * 2.220446049250313e-16 * max(1.0, abs(t_end))
     # step-size exponent: 1 / (order of the error estimate + 1)
-    expo = 0.25 if rosenbrock_now(I, C) else 0.2
+    expo = 0.2 if quartic else 0.25
     jac_valid = JW.shape[0] - 1
     status = DONE
     while t < t_end:
@@ -608,11 +611,10 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             break
         step = min(h, max_step)
         t_stop = t_end
-        if HAS_CONTACT:
-            if output and int(C[C_PHASE]) != FREE:
-                # in contact, steps end on the output times: each period's impulse is exact
-                t_stop = min(t_end, O[0] * O[1])
-                remaining = t_stop - t
+        if output and in_contact:
+            # in contact, steps end on the output times: each period's impulse is exact
+            t_stop = min(t_end, O[0] * O[1])
+            remaining = t_stop - t
         clipped = step >= remaining
         if clipped:
             step = remaining
@@ -654,33 +656,33 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             t_prev = t
             t = t + best_s
             # the quartic needs this step's stages; locate() overwrote them if best_s == step
-            quartic = best_s < step and not rosenbrock_now(I, C)
-            if int(C[C_PHASE]) != FREE:
+            own_stages = quartic and best_s < step
+            if in_contact:
                 interpolate(t_prev, best_s, t_prev + 0.5 * best_s, y_prev, f, y, end_f, K,
-                            quartic, work, 0)
+                            own_stages, work, 0)
                 record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
-            if output and not emit_output(t_prev, best_s, y_prev, f, y, end_f, K, quartic, P,
-                                          I, C, tau_held, O, out, scratch):
+            if output and not emit_output(t_prev, best_s, y_prev, f, y, end_f, K, own_stages,
+                                          P, I, C, tau_held, O, out, scratch):
                 status = OUTPUT_FULL
                 break
             ev[0] = best_k
             status = EVENT
             break
-        copy_into(y_prev, y)
-        copy_into(y_root, f)        # the step's start derivative, for the midpoint and output
+        if in_contact or output:
+            copy_into(y_prev, y)
+            copy_into(y_root, f)    # the step's start derivative, for the midpoint and output
         copy_into(y, y1)
         copy_into(f, f1)
         JW[jac_valid, 0] = 0.0      # a new point: the Jacobian is due again
         t_prev = t
         t = t_stop if clipped else t + step
         copy_into(g0, g1)
-        in_contact = False
         delta = 0.0
         if HAS_CONTACT:
-            if int(C[C_PHASE]) != FREE:
-                in_contact = True
+            if in_contact:
+                # the midpoint state for Simpson's impulse, from the step's extension
                 interpolate(t_prev, t - t_prev, 0.5 * (t_prev + t), y_prev, y_root, y, f, K,
-                            not rosenbrock_now(I, C), work, 0)
+                            quartic, work, 0)
                 delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
             else:
                 # the dent is forgotten once the tip has risen above the surface again
@@ -690,9 +692,8 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                         levels[s] = SURF[s, S_H]
                         g0[s] = levels[s] - y_tip
         # output after the step's impulse is booked, before any early return
-        if output and not emit_output(t_prev, t - t_prev, y_prev, y_root, y, f, K,
-                                      not rosenbrock_now(I, C), P, I, C, tau_held, O, out,
-                                      scratch):
+        if output and not emit_output(t_prev, t - t_prev, y_prev, y_root, y, f, K, quartic,
+                                      P, I, C, tau_held, O, out, scratch):
             status = OUTPUT_FULL
             break
         if in_contact:

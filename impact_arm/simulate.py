@@ -216,7 +216,6 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     rows (``PhaseIntegrator.start_output``), events fed as they are located."""
     model, st = integ.model, integ.state
     n, size = model.n, model.size
-    mode_of = st.mode
 
     def publish_rows(rows, mode):
         for row in rows.tolist():
@@ -229,7 +228,7 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
     tau = integ.torque()
     publish(Sample(0.0, tuple(q), tuple(qd), tau if tau is not None else (0.0,) * n,
-                   integ.contact_force_now(), mode_of), model.tip(q, qd)[2:])
+                   integ.contact_force_now(), st.mode), model.tip(q, qd)[2:])
     integ.take_impulse()
     last_index = math.floor(t_max / dt * (1 + 1e-12))
     t_final = last_index * dt

@@ -38,10 +38,8 @@ class PatchedMessage:
     def __init__(self, msg, float_fields, stamp='header.stamp'):
         slots = []                      # (object, attribute, index or None) in fill order
         for path in float_fields:
-            *parents, last = path.split('.')
-            owner = msg
-            for name in parents:
-                owner = getattr(owner, name)
+            parent, _, last = path.rpartition('.')
+            owner = _resolve(msg, parent)
             value = getattr(owner, last)
             if isinstance(value, float):
                 slots.append((owner, last, None))
@@ -51,9 +49,7 @@ class PatchedMessage:
         # stamp the template with sentinels, serialize, and find each sentinel's bytes
         stamped = stamp is not None
         if stamped:
-            time_of = msg
-            for name in stamp.split('.'):
-                time_of = getattr(time_of, name)
+            time_of = _resolve(msg, stamp)
             time_of.sec, time_of.nanosec = _SENTINEL_SEC, _SENTINEL_NANOSEC
         sentinels = [_SENTINEL_BASE * (1.0 + k * 2.0 ** -20) for k in range(self.size)]
         for (owner, name, index), sentinel in zip(slots, sentinels):
@@ -90,6 +86,13 @@ class PatchedMessage:
             packer.pack_into(buf, offset, *values[start:end])
         self.data = bytes(buf)
         return self.data
+
+
+def _resolve(msg, path: str):
+    """The sub-message at a dotted attribute path ('' for the message itself)."""
+    for name in filter(None, path.split('.')):
+        msg = getattr(msg, name)
+    return msg
 
 
 def _find(data: bytes, needle: bytes) -> int:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..scene import INTEGRATOR_METHODS
 from . import common
 
 OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
@@ -295,7 +296,7 @@ def add_arguments(parser):
     parser.add_argument('--deadline', type=float, default=300.0,
                         help='wall seconds allowed per case before it counts as a failure')
     parser.add_argument('--json', metavar='FILE', help='write the matrix as JSON')
-    parser.add_argument('--method', choices=('dopri5', 'rosenbrock'), default='dopri5',
+    parser.add_argument('--method', choices=INTEGRATOR_METHODS, default='dopri5',
                         help='step method in free flight (integrator.method)')
 
 
