@@ -130,7 +130,8 @@ def _module_header(n, gravity, contact, friction, n_integral):
              'from impact_arm.jit import jit, jit_alloc, jit_leaf',
              'from impact_arm.layout import *  # noqa: F401,F403',
              'from impact_arm.contact import (hertz_force, jackson_green, restitution_force,',
-             '                                friction_force, YIELD_ONSET_FACTOR as YIELD_ONSET)',
+             '                                friction_force, residual, restitution_radius,',
+             '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
              'from impact_arm.control import add_joint_torques, pid_error, pid_law',
              f'N = {n}', f'NI = {n_integral}', f'HAS_CONTACT = {contact}',
              f'HAS_FRICTION = {friction}']

@@ -65,7 +65,6 @@ class SimulatedArm:
         """Load every compiled function the stepping path may call (numba loads them from its
         cache on first use: ~0.5 s in all), so that the first period, or the first impact,
         of a real-time run does not pay for it."""
-        from .contact import residual_indentation, restitution_radius
         from .model import kinetic_energy_split
         scratch = PhaseIntegrator(self.model, self.integrator.state.copy(),
                                   preset='fast', control='held')
@@ -84,11 +83,6 @@ class SimulatedArm:
         kinetic_energy_split(self.model, y[:n], y[n:2 * n])
         self.model.tip(y[:n], y[n:2 * n])
         self.model.gravity_forces(y[:n])
-        for surface in self.model.surfaces:
-            c = surface.constants
-            dm = 3.0 * c.delta_c
-            dr = residual_indentation(dm, c) if surface.law == 'elastoplastic' else 0.0
-            restitution_radius(dm, dr, 10.0 * c.P_c, c.E)
 
     # ----------------------------------------------------------------------- commands
     def check_command(self, values) -> list:

@@ -13,9 +13,9 @@ from the start of the step that crossed it (not on an interpolant), so the state
 as accurate as any step end. Shaped like scipy's OdeSolver: ``advance(t_end)`` plays the part
 of repeated ``step()`` calls and returns the events it crossed.
 
-The stepping loop is the compiled kernel in ``kernel_template.py`` (appended to each scene
-shape's generated module); this wrapper owns the phase machine's transitions, which happen a
-few times per impact.
+The stepping loop and the phase machine's transitions are the compiled kernel in
+``kernel_template.py`` (appended to each scene shape's generated module): an impact's four
+switches cost no return to Python. This wrapper turns the kernel's event log into ``Event``s.
 """
 from __future__ import annotations
 
@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import layout
-from .contact import residual_indentation, restitution_radius
 from .errors import SimulationError
 from .model import ArmModel, ArmState, Phase
 
@@ -75,8 +74,12 @@ class Stats:
 
 TRACE_CAPACITY = 4096
 OUTPUT_CAPACITY = 4096     # output rows per kernel call (advance splits longer spans)
+EVENT_LOG_CAPACITY = 64    # events one kernel call crosses before Python reads them
 _KINDS = {layout.EV_SWITCH: 'switch', layout.EV_YIELD: 'yield',
           layout.EV_MAX: 'max_compression', layout.EV_SEP: 'separation'}
+KIND_BITS = {'contact': layout.KIND_BIT_CONTACT,
+             **{kind: 1 << (1 + slot) for slot, kind in _KINDS.items()}}
+ALL_KINDS_MASK = sum(KIND_BITS.values())
 _LAWS = {'held': layout.LAW_HELD, 'q': layout.LAW_Q, 'pid': layout.LAW_PID,
          'pd': layout.LAW_PID, 'none': layout.LAW_NONE}
 
@@ -130,7 +133,8 @@ class PhaseIntegrator:
         self._h = 0.0
         self._trace_buffer = np.zeros((TRACE_CAPACITY, 7 + model.n))
         self._trace_count = np.zeros(1, dtype=np.int64)
-        self._ev = np.zeros(1, dtype=np.int64)
+        self._ev = np.zeros(3, dtype=np.int64)      # layout.EV_*: slot, logged, stop mask
+        self._evlog = np.zeros((EVENT_LOG_CAPACITY, layout.E_Y + model.size))
         self._W = np.zeros(model.eq.SCRATCH)
         self._O = np.zeros(3)                   # next output index k, period dt (0: off), rows
         self._out = np.zeros((1, self.output_width))
@@ -217,106 +221,89 @@ class PhaseIntegrator:
         """Call after changing the state or held torque from outside (new command)."""
         self._f_valid = False
 
-    # --- phase machine (Python: runs a few times per impact) --------------------------------
-    def _apply_event(self, slot):
-        """Switch the phase machine at event ``slot``; returns (kind, surface, info)."""
-        st = self.state
+    # --- phase machine (compiled: the kernel applies it without returning) -----------------
+    def _kind(self, slot):
         n_surf = len(self.model.surfaces)
-        info = {}
-        if slot < n_surf:
-            kind, s = 'contact', slot
-            st.phase, st.surface = Phase.ELASTIC, s
-            c = st.c
-            c[layout.C_PEAK] = 0.0
-            c[layout.C_IMP_T], c[layout.C_IMP_FF], c[layout.C_IMP_FN] = st.t, 0.0, 0.0
-            if self._I[layout.I_LAW] in (layout.LAW_Q, layout.LAW_PID) and st.mode == 'down':
-                self._set_mode('up')
-            return kind, s, info
-        kind, s = _KINDS[slot - n_surf], st.surface
-        n = self.model.n
-        if kind == 'yield':
-            st.phase = Phase.ELASTOPLASTIC
-        elif kind == 'max_compression':
-            delta, fn, _, _, _ = self.contact_forces(st.y[:n], st.y[n:2 * n])
-            surf = self.model.surfaces[s]
-            st.delta_m, st.P_m = delta, fn
-            st.delta_r = (residual_indentation(delta, surf.constants)
-                          if surf.law == 'elastoplastic' else 0.0)
-            if not 0.0 <= st.delta_r < delta:
-                ratio = delta / surf.constants.delta_c
-                raise SimulationError(
-                    f'residual indentation fit gives delta_r = {st.delta_r:.4g} m >= delta_m = '
-                    f'{delta:.4g} m at t = {st.t:.9g} s: delta_m / delta_c = {ratio:.3g} is '
-                    f'beyond the fit\'s range (delta_r < delta_m needs delta_m / delta_c < '
-                    f'~9.8e3); the material is far too stiff for its yield strength',
-                    t=st.t, state=st.y.copy())
-            st.R_r = restitution_radius(delta, st.delta_r, fn, surf.constants.E)
-            st.c[layout.C_PEAK] = max(st.c[layout.C_PEAK], fn)
-            st.phase = Phase.RESTITUTION
-            info = {'delta_m': delta, 'P_m': fn, 'delta_r': st.delta_r, 'R_r': st.R_r}
-        elif kind == 'separation':
-            # keep the dent: a re-strike before the tip leaves it meets the dent's floor
-            st.levels[s] -= st.delta_r
-            # The contact event fires when level - y_B rises through zero from below; the
-            # located separation leaves y_B on the new level to rounding, and a +1e-20 there
-            # made the next contact undetectable (the tip of a controller pressing down
-            # tunnelled through the floor). Keep the level strictly below the tip.
-            y_tip = float(self.model.tip(st.y[:n], st.y[n:2 * n])[1])
-            st.levels[s] = min(st.levels[s], y_tip - 4 * float(np.spacing(abs(y_tip))))
-            info = {'F_max': float(st.c[layout.C_PEAK]), 'delta_m': st.delta_m,
-                    'delta_r': st.delta_r}
-            st.phase, st.surface = Phase.FREE, -1
-        elif kind == 'switch':
-            self._set_mode('down')
-        return kind, s, info
+        return 'contact' if slot < n_surf else _KINDS[slot - n_surf]
 
-    def _set_mode(self, mode):
-        self.state.mode = mode
-        if self.model.n_integral:
-            self.state.y[2 * self.model.n:] = 0.0  # integral states reset when the target switches
+    @staticmethod
+    def _info(kind, values):
+        if kind == 'max_compression':
+            return dict(zip(('delta_m', 'P_m', 'delta_r', 'R_r'), map(float, values)))
+        if kind == 'separation':
+            return dict(zip(('F_max', 'delta_m', 'delta_r'), map(float, values[:3])))
+        return {}
+
+    def _apply_event(self, slot):
+        """Switch the phase machine at event ``slot`` with the state where it is now (for
+        integrations that locate events themselves: the scipy baselines); returns
+        (kind, surface, info). The kernel applies the same compiled ``apply_event``."""
+        st = self.state
+        surface = slot if slot < len(self.model.surfaces) else st.surface
+        values = np.zeros(4)
+        if not self.model.eq.apply_event(slot, st.t, st.y, self._P, self._I,
+                                         self.model.surface_table, st.c, st.levels, values):
+            self._raise(layout.ERR_RESIDUAL)
+        kind = self._kind(slot)
+        return kind, surface, self._info(kind, values)
+
+    def _drain_events(self, events):
+        count = int(self._ev[layout.EV_COUNT])
+        if not count:
+            return
+        size = self.model.size
+        for row in self._evlog[:count]:
+            slot = int(row[layout.E_SLOT])
+            kind = self._kind(slot)
+            events.append(Event(kind, float(row[layout.E_T]), int(row[layout.E_SURF]),
+                                row[layout.E_Y:layout.E_Y + size].copy(),
+                                self._info(kind, row[layout.E_INFO:layout.E_Y])))
+        self.events += count
+        self._ev[layout.EV_COUNT] = 0
 
     # --- public API ---------------------------------------------------------------------------
     def advance(self, t_end, stop_at_event=False):
         """Integrate to ``t_end`` (exactly), crossing and reporting every phase switch.
 
-        With ``stop_at_event`` it returns right after the first event instead."""
+        ``stop_at_event`` returns right after the first event (True) or the first event of
+        one of the kinds named (e.g. ``('switch',)``: the others are crossed inside the
+        compiled loop); with a contact trace, a separation stops too, so that the trace rows
+        read at an impact's end are that impact's."""
         st = self.state
         model = self.model
         events = []
         t_end = float(t_end)
         O = self._O
+        if not stop_at_event:
+            mask = 0
+        elif stop_at_event is True:
+            mask = ALL_KINDS_MASK
+        else:
+            mask = sum(KIND_BITS[kind] for kind in stop_at_event)
+        if mask and self.trace is not None:
+            mask |= KIND_BITS['separation']
+        self._ev[layout.EV_MASK] = mask
         while True:
             self._T[0], self._T[1] = st.t, self._h
             self._T[2] = 0.0 if self._f_valid else 1.0
-            self._f_valid = True
             # with output on, no kernel call may pass more grid times than the buffer holds
             t_call = min(t_end, (O[0] + OUTPUT_CAPACITY - 1) * O[1]) if O[1] > 0 else t_end
             status = model.eq.advance(self._T, t_call, st.y, self._f, self._P, self._I,
                                       model.surface_table, st.c, st.levels, st.held,
                                       self._stats, self._trace_buffer, self._trace_count,
-                                      self._ev, O, self._out)
+                                      self._ev, self._evlog, O, self._out)
             st.t, self._h = float(self._T[0]), float(self._T[1])
+            self._f_valid = self._T[2] == 0.0
+            self._drain_events(events)
             self._drain_trace()
             self._drain_output()
             if status == layout.DONE:
                 if t_call < t_end:
                     continue
                 return events
-            if status == layout.TRACE_FULL:
-                continue
             if status == layout.EVENT:
-                kind, surface, info = self._apply_event(int(self._ev[0]))
-                self.events += 1
-                events.append(Event(kind, st.t, surface, st.y.copy(), info))
-                self._f_valid = False        # the right-hand side changed with the phase
-                if kind in ('contact', 'separation', 'switch'):
-                    # and so did its time scale (or, at a switch, the control target jumped):
-                    # choose a new step. Across yield and maximum compression the force is
-                    # (nearly) continuous, so the last step size carries over (saves the
-                    # start-up rejections: ~2-3 % fewer evaluations)
-                    self._h = 0.0
-                if stop_at_event:
-                    return events
+                return events
+            if status in (layout.TRACE_FULL, layout.EVENT_LOG_FULL):
                 continue
             self._raise(status)
 
@@ -324,6 +311,15 @@ class PhaseIntegrator:
         st = self.state
         if status == layout.OUTPUT_FULL:       # advance() splits its calls so this cannot be
             raise RuntimeError('internal error: the output buffer overflowed')
+        if status == layout.ERR_RESIDUAL:
+            surf = self.model.surfaces[st.surface]
+            delta, ratio = st.delta_m, st.delta_m / surf.constants.delta_c
+            raise SimulationError(
+                f'residual indentation fit gives delta_r = {st.delta_r:.4g} m >= delta_m = '
+                f'{delta:.4g} m at t = {st.t:.9g} s: delta_m / delta_c = {ratio:.3g} is '
+                f'beyond the fit\'s range (delta_r < delta_m needs delta_m / delta_c < '
+                f'~9.8e3); the material is far too stiff for its yield strength',
+                t=st.t, state=st.y.copy())
         if status == layout.ERR_PENETRATION:
             radius = self.model.surfaces[st.surface].constants.R
             raise SimulationError(

@@ -10,9 +10,9 @@
 # flight when I_METHOD asks for it, a linearly implicit Rosenbrock 4(3) step: the controller
 # makes the free flight stiff); every step is checked for sign changes of the phase's event
 # functions, and a crossing is located by root-finding on real steps from the step start
-# (Illinois method), so the state at a switch is as accurate as any step end. The kernel
-# returns at each event with the state at the event; the Python wrapper applies the phase
-# switch (rare) and calls it again.
+# (Newton inside an Illinois bracket), so the state at a switch is as accurate as any step
+# end. The kernel applies each switch itself (``apply_event``) and logs it for the Python
+# wrapper, which asks it to return only after the kinds of event it needs to act on.
 
 EPS = 2.220446049250313e-16      # unit roundoff of a double
 A21 = 1 / 5
@@ -554,26 +554,110 @@ def initial_step(t, y, f0, P, I, SURF, C, levels, tau_held, stats, W, work, f1):
     return min(100 * h0, h1, max_step)
 
 
+@jit
+def set_mode(mode, y, C):
+    """Cycle half of the continuous controller (0 down, 1 up); integral states restart with
+    the new target."""
+    C[C_MODE] = mode
+    for i in range(2 * N, y.shape[0]):
+        y[i] = 0.0
+
+
+@jit
+def apply_event(slot, t, y, P, I, SURF, C, levels, info):
+    """Switch the phase machine at event ``slot`` (state y at time t): phase, restitution
+    parameters, the dent, the controller's cycle half. ``info`` gets (δm, Pm, δr, Rr) at
+    maximum compression and (F_max, δm, δr) at separation. Returns False, with δm, Pm, δr in
+    C, when the residual indentation falls outside [0, δm): beyond its fit's range."""
+    ns = SURF.shape[0]
+    for i in range(info.shape[0]):
+        info[i] = 0.0
+    if slot < ns:
+        C[C_PHASE], C[C_SURF], C[C_PEAK] = ELASTIC, slot, 0.0
+        C[C_IMP_T], C[C_IMP_FF], C[C_IMP_FN] = t, 0.0, 0.0
+        if (I[I_LAW] == LAW_Q or I[I_LAW] == LAW_PID) and C[C_MODE] <= 0.5:
+            set_mode(1.0, y, C)             # struck: the cycle turns upward
+        return True
+    kind = slot - ns
+    if kind == EV_SWITCH:
+        set_mode(0.0, y, C)
+        return True
+    if HAS_CONTACT:
+        s = int(C[C_SURF])
+        if kind == EV_YIELD:
+            C[C_PHASE] = ELASTOPLASTIC
+        elif kind == EV_MAX:
+            delta, fn, _, _, _ = contact_forces(y, P, SURF, C, levels)
+            dr = residual(delta, SURF[s, S_DC]) if SURF[s, S_LAW] == 0 else 0.0
+            C[C_DM], C[C_PM], C[C_DR] = delta, fn, dr
+            if not 0.0 <= dr < delta:
+                return False
+            C[C_RR] = restitution_radius(delta, dr, fn, SURF[s, S_E])
+            C[C_PEAK] = max(C[C_PEAK], fn)
+            C[C_PHASE] = RESTITUTION
+            info[0], info[1], info[2], info[3] = delta, fn, dr, C[C_RR]
+        elif kind == EV_SEP:
+            # keep the dent: a re-strike before the tip leaves it meets the dent's floor.
+            # The contact event fires when level - y_B rises through zero from below; the
+            # located separation leaves y_B on the new level to rounding, and a +1e-20 there
+            # made the next contact undetectable (the tip of a controller pressing down
+            # tunnelled through the floor). Keep the level strictly below the tip.
+            y_tip = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])[1]
+            levels[s] = min(levels[s] - C[C_DR], y_tip - 4.0 * np.spacing(abs(y_tip)))
+            info[0], info[1], info[2] = C[C_PEAK], C[C_DM], C[C_DR]
+            C[C_PHASE], C[C_SURF] = FREE, -1.0
+    return True
+
+
 @jit_alloc
-def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev, O, out):
+def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev, evlog,
+            O, out):
     """Integrate from T[0] to t_end with step T[1]; y, f updated in place. T[2] != 0 asks
     for f to be recomputed first (new phase, new command); T[1] <= 0 for a fresh step size.
     With O[1] = dt > 0, rows of ``out`` are written at the output times k dt (``emit_output``)
     from each step's continuous extension; contact steps end on those times, so the impulse
     of each output period is exact.
 
-    Returns DONE at t_end, EVENT with the state at a located switch (slot in ev[0]),
-    TRACE_FULL when the trace buffer needs draining, OUTPUT_FULL when ``out`` does, or an
-    ERR_* status."""
+    Every located switch is applied here (``apply_event``) and logged in ``evlog`` (row
+    ev[EV_COUNT], layout E_*): the phase machine costs no return to Python. Returns DONE at
+    t_end, EVENT right after an event whose kind bit is in ev[EV_MASK], EVENT_LOG_FULL,
+    TRACE_FULL or OUTPUT_FULL when a buffer needs draining, or an ERR_* status (ERR_RESIDUAL
+    at a maximum compression that ``apply_event`` refused, not logged)."""
     size = y.shape[0]
     ns = SURF.shape[0]
     # the only allocation: scratch for the stepping loop, which itself runs without NRT
-    return stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount,
-                         ev, np.empty(size), np.empty(size), np.empty(size), np.empty(size),
-                         np.empty(size), np.empty(size), np.empty((5, size)),
-                         np.empty(SCRATCH), np.empty(ns + 4), np.empty(ns + 4),
-                         np.empty(ns + 4), np.zeros((2 * size + 2, size)), O, out,
-                         np.empty(size), np.empty(2 * N))
+    y1, f1, err, work = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
+    y_root, f_tmp, K = np.empty(size), np.empty(size), np.empty((5, size))
+    W, g0, g1, g_tmp = np.empty(SCRATCH), np.empty(ns + 4), np.empty(ns + 4), np.empty(ns + 4)
+    JW, y_prev, scratch = np.zeros((2 * size + 2, size)), np.empty(size), np.empty(2 * N)
+    while True:
+        status = stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
+                               tcount, ev, y1, f1, err, work, y_root, f_tmp, K, W, g0, g1,
+                               g_tmp, JW, O, out, y_prev, scratch)
+        if status != EVENT:
+            return status
+        slot = ev[EV_SLOT]
+        row = evlog[ev[EV_COUNT]]
+        surface = slot if slot < ns else C[C_SURF]
+        if not apply_event(slot, T[0], y, P, I, SURF, C, levels, row[E_INFO:E_Y]):
+            return ERR_RESIDUAL
+        row[E_SLOT], row[E_SURF], row[E_T] = slot, surface, T[0]
+        for i in range(size):
+            row[E_Y + i] = y[i]
+        ev[EV_COUNT] += 1
+        T[2] = 1.0                          # the right-hand side changed with the phase
+        JW[JW.shape[0] - 1, 0] = 0.0        # and so did its Jacobian (Rosenbrock)
+        kind_bit = KIND_BIT_CONTACT if slot < ns else 1 << (1 + slot - ns)
+        if slot < ns or slot - ns == EV_SEP or slot - ns == EV_SWITCH:
+            # and so did its time scale (or, at a switch, the control target jumped): choose
+            # a new step. Across yield and maximum compression the force is (nearly)
+            # continuous, so the last step size carries over (saves the start-up
+            # rejections: ~2-3 % fewer evaluations)
+            T[1] = 0.0
+        if ev[EV_MASK] & kind_bit:
+            return EVENT
+        if ev[EV_COUNT] >= evlog.shape[0]:
+            return EVENT_LOG_FULL
 
 
 @jit_leaf
@@ -673,7 +757,7 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                                           P, I, C, tau_held, O, out, scratch):
                 status = OUTPUT_FULL
                 break
-            ev[0] = best_k
+            ev[EV_SLOT] = best_k
             status = EVENT
             break
         if in_contact or output:

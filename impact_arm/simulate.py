@@ -236,7 +236,8 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     try:
         while st.t < t_final:
             mode = st.mode
-            events = integ.advance(t_final, stop_at_event=True)
+            # samples carry the cycle half at the call's start: stop where it changes
+            events = integ.advance(t_final, stop_at_event=('contact', 'switch'))
             publish_rows(integ.take_output(), mode)
             feed(events)
             if scene.cycles and cycles_done() >= scene.cycles:
@@ -298,7 +299,8 @@ def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None
     cycles = 0
     wall0 = time.perf_counter()
     while integ.state.t < scene.t_max and (not scene.cycles or cycles < scene.cycles):
-        for event in integ.advance(scene.t_max, stop_at_event=True):
+        # a cycle ends at a switch: the kernel crosses the impact's phases by itself
+        for event in integ.advance(scene.t_max, stop_at_event=('switch',)):
             cycles += event.kind == 'switch'
             builder.feed(event)
     return builder.impacts, integ.state.t, integ, time.perf_counter() - wall0
