@@ -103,6 +103,8 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'worst_compute_us': float(d.get('compute_worst_us', 'nan')),
         'compute_mean_us': {part: float(d.get(f'compute_{part}_mean_us', 'nan'))
                             for part in ('commands', 'physics', 'publish')},
+        'worst_compute_parts_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
+                                   for part in ('commands', 'physics', 'publish')},
         'lockstep_wait_mean_us': float(d.get('lockstep_wait_mean_us', 'nan')),
         'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'period_us': 1e6 / rate,
@@ -184,7 +186,9 @@ def run(args) -> int:
               + ', '.join(f'{k} {v:.0f} MB' for k, v in r['rss_peak_mb'].items())
               + f"; first /joint_states {r['first_joint_state_after_s']:.2f} s after start")
         print("  a period's compute, mean: " + ', '.join(
-            f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items()))
+            f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items())
+            + '; the worst period: ' + ', '.join(
+            f'{part} {us:.0f} us' for part, us in r['worst_compute_parts_us'].items()))
     if 'fast' not in args.skip:
         print('  realtime 5 kHz ...', file=sys.stderr, flush=True)
         rows.append(_run_fast(scene_path, 5000.0, args.fast_seconds))

@@ -74,6 +74,7 @@ class PeriodStats:
         self.overruns = 0
         self.worst_compute = 0.0
         self.worst_compute_t = 0.0
+        self.worst_parts = (0.0, 0.0, 0.0)   # the worst period's commands, physics, publish
         self.last_publish = None
         self.t_published = 0.0     # simulated time of the last period counted in ``published``
         self.nominal = None
@@ -111,6 +112,8 @@ class PeriodStats:
             self.overruns += overrun
             if compute > self.worst_compute:
                 self.worst_compute, self.worst_compute_t = compute, t_sim
+                if parts is not None:
+                    self.worst_parts = tuple(parts[:3])
 
     def run_percentiles(self, *qs):
         """Whole-run jitter percentiles [s] from the histogram."""
@@ -298,8 +301,9 @@ class Simulator(Node):
 
     # -------------------------------------------------------------------------- stepping
     def _step_and_publish(self):
-        """One period: its physics, then its messages. Returns the monotonic times at which
-        each ended, or None when the simulation had to stop."""
+        """One period: its physics, then its sensor messages. Returns the monotonic times at
+        which each ended and the tick (its impact reports are still to be published), or None
+        when the simulation had to stop."""
         try:
             tick = self.arm.step()
         except SimulationError as exc:
@@ -308,7 +312,7 @@ class Simulator(Node):
             return None
         stepped = time.monotonic()
         self._publish(tick)
-        return stepped, time.monotonic()
+        return stepped, time.monotonic(), tick
 
     def _realtime_loop(self):
         # The executor thread (commands, diagnostics) and this one share the GIL; a thread
@@ -338,10 +342,11 @@ class Simulator(Node):
             times = self._step_and_publish()
             if times is None:
                 return
-            stepped, done = times
+            stepped, done, tick = times
             # late if this period's publication happened after the next one was due
             self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period,
                            (stepping - woke, stepped - stepping, done - stepped))
+            self._publish_impacts(tick)
 
     def _lockstep_period(self, torques, arrived):
         self.arm.apply(torques)
@@ -359,26 +364,32 @@ class Simulator(Node):
         times = self._step_and_publish()
         if times is None:
             return
-        stepped, done = times
+        stepped, done, tick = times
         # the wait is what the controller and the transport take (the exchange's round trip)
         last = self.stats.last_publish
         self.stats.add(done, done - woke, self.arm.t, False,
                        (taken, stepped - woke, done - stepped,
                         arrived - last if last is not None else 0.0))
+        self._publish_impacts(tick)
 
     def _repeat_initial_state(self):
         if self.commands == 0:
             self._publish(self.arm.sample())
 
     def _publish(self, tick):
-        # the controller waits for this period's wrench and joint state: they go first, what
-        # no control loop waits for (/clock, impact reports) after them
+        # the controller waits for this period's wrench and joint state: they go first,
+        # /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self.pub_wrench.publish(self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         self.pub_joints.publish(
             self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec)))
         if self.pub_clock is not None:
             self.pub_clock.publish(self.wire_clock.fill((), (sec, nsec)))
+
+    def _publish_impacts(self, tick):
+        """The period's impact reports, once its sensor messages are out: no control loop
+        waits for them, and their JSON (~30 shortest-repr floats) takes 40-200 us, which in
+        the impact's own period made it the slowest period of a run."""
         for record, _rows in tick.impacts:
             self.impacts += 1
             self.pub_impact.publish(String(data=json.dumps(record)))
@@ -445,6 +456,9 @@ class Simulator(Node):
                zip(('commands', 'physics', 'publish'), self.stats.part_means())},
             **({'lockstep_wait_mean_us': f'{self.stats.part_means()[3] * 1e6:.1f}'}
                if self.lockstep else {}),
+            # and the worst period's (is it the physics of an impact, or a stall?)
+            **{f'compute_worst_{part}_us': f'{t * 1e6:.1f}' for part, t in
+               zip(('commands', 'physics', 'publish'), self.stats.worst_parts)},
             'watchdog': self.watchdog,
             'scheduling': self.scheduling,
             'commands': str(self.commands),
