@@ -99,8 +99,13 @@ class SimulatedArm:
 
     def apply(self, values):
         """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
-        tau = self.check_command(values)
-        self._hold([min(max(v, -self.max_effort), self.max_effort) for v in tau])
+        self.apply_checked(self.check_command(values))
+
+    def apply_checked(self, tau: list):
+        """``apply`` for torques ``check_command`` has already passed (a driver checks each
+        command once, when it arrives, and applies it at its next period)."""
+        limit = self.max_effort
+        self._hold([min(max(v, -limit), limit) for v in tau])
 
     def release(self):
         """Zero torque (watchdog expired, controller gone)."""

@@ -102,8 +102,19 @@ def _find(data: bytes, needle: bytes) -> int:
     return at
 
 
+# encapsulation header, layout.dim count, layout.data_offset, data count (little-endian CDR)
+_PLAIN_ARRAY = struct.Struct('<4xIII')
+
+
 def float64_array_data(raw: bytes) -> list:
     """The ``data`` of a serialized ``std_msgs/Float64MultiArray`` (layout skipped)."""
+    if raw[:2] == b'\x00\x01' and len(raw) >= 16:
+        # a command without layout dimensions (the usual one): the doubles start at byte 20
+        dims, _, n = _PLAIN_ARRAY.unpack_from(raw)
+        if dims == 0:
+            if n and len(raw) < 20 + 8 * n:
+                raise ValueError('CDR message too short for its type')
+            return list(struct.unpack_from(f'<{n}d', raw, 20)) if n else []
     r = CdrReader(raw)
     (dims,) = r.unpack('I', 4)
     for _ in range(dims):           # MultiArrayDimension: label, size, stride

@@ -295,8 +295,8 @@ class Simulator(Node):
         if self.watchdog == 'timeout':
             self.get_logger().info('commands resumed')
         self.watchdog = 'ok'
-        if pending is not self.applied:    # a held command is not checked again each period
-            self.arm.apply(pending[0])
+        if pending is not self.applied:    # a held command is not applied again each period
+            self.arm.apply_checked(pending[0])    # checked on arrival (_on_command)
             self.applied = pending
 
     # -------------------------------------------------------------------------- stepping
@@ -349,7 +349,7 @@ class Simulator(Node):
             self._publish_impacts(tick)
 
     def _lockstep_period(self, torques, arrived):
-        self.arm.apply(torques)
+        self.arm.apply_checked(torques)     # checked on arrival (_on_command)
         self.watchdog = 'ok'
         woke = time.monotonic()
         if self.start_wall is None:
