@@ -158,6 +158,41 @@ def stamp_of(entry):
     return stamp(entry[1])
 
 
+def test_lockstep_publishes_an_unanswered_period_again(probe, ros_env, tmp_path):
+    """A joint state lost on the way must not stall lockstep forever: this stand-in
+    controller drops the state of period 3 as if it never arrived; the simulator publishes
+    that period again after a second without a command, and the run goes on."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    pub = probe.publisher(Float64MultiArray, '/effort_controller/commands')
+    seen, answered, dropped = [], set(), []
+
+    def on_state(msg):
+        t = round(stamp(msg), 6)
+        seen.append(t)
+        if t == 0.003 and not dropped:
+            dropped.append(t)          # lost: no answer
+            return
+        if t not in answered:          # a controller answers each stamp once
+            answered.add(t)
+            pub.publish(Float64MultiArray(data=[0.0, 0.0]))
+    with probe.lock:
+        sub = probe.node.create_subscription(JointState, '/joint_states', on_state, 100)
+    diags = probe.listen(DiagnosticArray, '/diagnostics')
+    with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0',
+                                 'diagnostics_period:=0.2'), ros_env, tmp_path, 'sim') as sim:
+        assert wait_for(lambda: 0.01 in answered or not sim.alive(), timeout=60), \
+            f'stalled after {sorted(answered)[-3:]}\n{sim.stderr}'
+        assert seen.count(0.003) == 2 and dropped
+        assert wait_for(lambda: diags and diagnostics_values(diags[-1][1]).get(
+            'lockstep_repeats') == '1', timeout=5)
+        assert 'published it again' in sim.stderr + sim.stdout
+    with probe.lock:
+        probe.node.destroy_subscription(sub)
+    probe.forget(diags)
+
+
 # ------------------------------------------------------------------------------ realtime
 def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray

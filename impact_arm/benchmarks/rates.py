@@ -95,6 +95,7 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'sim_time_s': float(d.get('sim_time', 0)),
         'real_time_factor': float(d.get('real_time_factor', 0)),
         'overruns': int(d.get('overruns', -1)),
+        'publish_failures': int(d.get('publish_failures', -1)),
         'jitter_p50_us': float(d.get('jitter_run_p50_us', 'nan')),
         'jitter_p99_us': float(d.get('jitter_run_p99_us', 'nan')),
         'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
@@ -145,6 +146,9 @@ def _run_fast(scene_path, rate, seconds):
         while not (diagnostics and diagnostics[-1].get('commands', '0') != '0') and \
                 time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
+        if not (diagnostics and diagnostics[-1].get('commands', '0') != '0'):
+            raise RuntimeError(f'realtime {rate:g} Hz: no command reached the simulator within '
+                               f'60 s (logs in {run.logdir})')
         begin, first = len(received), diagnostics[-1]
         end = time.monotonic() + seconds
         while time.monotonic() < end or diagnostics[-1] is first:
@@ -161,7 +165,9 @@ def _run_fast(scene_path, rate, seconds):
             'achieved_hz_simulator': periods / wall if wall > 0 else 0.0,
             'achieved_hz_subscriber': sub_rate,
             'overruns': int(last.get('overruns', -1)),
-            'jitter_p99_us': float(last.get('jitter_run_p99_us', 'nan'))}
+            'jitter_p99_us': float(last.get('jitter_run_p99_us', 'nan')),
+            'publish_failures': int(last.get('publish_failures', -1)),
+            'outcome': 'completed' if periods else 'failed: no period published'}
 
 
 def run(args) -> int:
@@ -191,12 +197,18 @@ def run(args) -> int:
             f'{part} {us:.0f} us' for part, us in r['worst_compute_parts_us'].items()))
     if 'fast' not in args.skip:
         print('  realtime 5 kHz ...', file=sys.stderr, flush=True)
-        rows.append(_run_fast(scene_path, 5000.0, args.fast_seconds))
-        r = rows[-1]
-        print(f"realtime 5 kHz: simulator published {r['achieved_hz_simulator']:.1f} Hz "
-              f"({100 * r['achieved_hz_simulator'] / 5000:.2f} %), a subscriber received "
-              f"{r['achieved_hz_subscriber']:.1f} Hz; {r['overruns']} overruns, jitter p99 "
-              f"{r['jitter_p99_us']:.0f} us")
+        try:
+            rows.append(_run_fast(scene_path, 5000.0, args.fast_seconds))
+        except RuntimeError as exc:
+            rows.append({'mode': 'realtime', 'rate_hz': 5000.0, 'outcome': f'failed: {exc}'})
+            print(f'realtime 5 kHz: FAILED: {exc}')
+        else:
+            r = rows[-1]
+            print(f"realtime 5 kHz: simulator published {r['achieved_hz_simulator']:.1f} Hz "
+                  f"({100 * r['achieved_hz_simulator'] / 5000:.2f} %), a subscriber received "
+                  f"{r['achieved_hz_subscriber']:.1f} Hz; {r['overruns']} overruns, jitter "
+                  f"p99 {r['jitter_p99_us']:.0f} us; {r['publish_failures']} samples the "
+                  f"middleware refused")
     if 'lockstep' not in args.skip:
         print('  lockstep 1 kHz, 15 cycles ...', file=sys.stderr, flush=True)
         rows.append(_run_cycles(scene_path, 'lockstep', 1000.0))

@@ -16,6 +16,7 @@ import json
 import sys
 import threading
 import time
+import traceback
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -35,6 +36,7 @@ from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
+LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
 PARAMS = (
     Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
           'str', read_only=True),
@@ -190,6 +192,8 @@ class Simulator(Node):
         self.applied = None                # the pending command the arm holds (realtime)
         self.last_command = None           # monotonic time of the last valid command
         self.commands = self.rejected = self.clipped = 0
+        self.publish_failures = 0
+        self.lockstep_repeats = 0
         self.watchdog = 'waiting'          # waiting (no command yet) | ok | timeout
         self.failed = ''
         self.impacts = 0
@@ -199,16 +203,18 @@ class Simulator(Node):
         self.diag_published = 0
         self._stop = threading.Event()
         self._thread = None
-        self._handshake = None
         self.scheduling = 'normal'
         self.create_timer(p['diagnostics_period'], self._publish_diagnostics)
 
         self.arm.warm_up()                 # before the clock starts: no compile-cache loads later
-        self._publish(self.arm.sample())   # the state at t = 0, before anything moves
+        initial = self.arm.sample()
+        self._publish(initial)             # the state at t = 0, before anything moves
+        self.last_tick = (initial, time.monotonic())   # (tick, when published): lockstep
         if self.lockstep:
             # until the first command arrives, repeat the initial state so a controller that
-            # starts later still gets one (it answers each stamp once)
-            self._handshake = self.create_timer(0.1, self._repeat_initial_state)
+            # starts later still gets one (it answers each stamp once); later, repeat a
+            # period nobody answered (see _repeat_unanswered)
+            self.create_timer(0.1, self._repeat_unanswered)
         else:
             self._thread = threading.Thread(target=self._realtime_loop, name='sim-loop',
                                             daemon=True)
@@ -272,9 +278,6 @@ class Simulator(Node):
         self.pending = (torques, now)
         self.last_command = now
         if self.lockstep and not self.failed:
-            if self._handshake is not None:
-                self.destroy_timer(self._handshake)
-                self._handshake = None
             self._lockstep_period(torques, now)
 
     def _watchdog(self, now):
@@ -315,6 +318,13 @@ class Simulator(Node):
         return stepped, time.monotonic(), tick
 
     def _realtime_loop(self):
+        try:
+            self._run_periods()
+        except Exception as exc:  # noqa: BLE001 - reported, and the node stops with an error
+            self.get_logger().error(traceback.format_exc())
+            self._fail(f'the stepping thread failed: {type(exc).__name__}: {exc}')
+
+    def _run_periods(self):
         # The executor thread (commands, diagnostics) and this one share the GIL; a thread
         # waking from its sleep would otherwise wait up to the 5 ms default switch interval.
         sys.setswitchinterval(5e-5)
@@ -370,21 +380,52 @@ class Simulator(Node):
         self.stats.add(done, done - woke, self.arm.t, False,
                        (taken, stepped - woke, done - stepped,
                         arrived - last if last is not None else 0.0))
+        self.last_tick = (tick, done)
         self._publish_impacts(tick)
 
-    def _repeat_initial_state(self):
+    def _repeat_unanswered(self):
+        """Lockstep waits for a command after each period. Before the first one, the initial
+        state goes out every 0.1 s; later, a period unanswered for LOCKSTEP_REPEAT_S is
+        published again with its own stamp: a sample lost on the way (a write the middleware
+        refused) must not stall the run forever, and a controller answers each stamp once,
+        so one that was merely slow ignores the repeat."""
+        if self.failed:
+            return
         if self.commands == 0:
             self._publish(self.arm.sample())
+            return
+        tick, published = self.last_tick
+        now = time.monotonic()
+        if now - published > LOCKSTEP_REPEAT_S and now - self.last_command > LOCKSTEP_REPEAT_S:
+            self.lockstep_repeats += 1
+            self.get_logger().warning(
+                f'no command for {now - published:.1f} s after the period ending at t = '
+                f'{tick.t:.6f} s: published it again ({self.lockstep_repeats} so far)')
+            self._publish(tick)
+            self.last_tick = (tick, now)
 
     def _publish(self, tick):
         # the controller waits for this period's wrench and joint state: they go first,
         # /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-        self.pub_wrench.publish(self.wire_wrench.fill(tick.wrench, (sec, nsec)))
-        self.pub_joints.publish(
-            self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec)))
+        self._send(self.pub_wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
+        self._send(self.pub_joints, self.wire_joints.fill(
+            tick.position + tick.velocity + tick.effort, (sec, nsec)))
         if self.pub_clock is not None:
-            self.pub_clock.publish(self.wire_clock.fill((), (sec, nsec)))
+            self._send(self.pub_clock, self.wire_clock.fill((), (sec, nsec)))
+
+    def _send(self, publisher, data):
+        """Publish one sample. A sample the middleware refuses is lost like a dropped packet:
+        counted (/diagnostics ``publish_failures``), logged, and the periods go on. Fast DDS
+        refuses a reliable write when its readers lag too far behind for too long (seen at
+        5 kHz on two cores); before this, the refusal ended the stepping thread."""
+        try:
+            publisher.publish(data)
+        except RuntimeError as exc:        # rclpy's RCLError: the write failed
+            self.publish_failures += 1
+            self.get_logger().warning(
+                f'{publisher.topic_name}: sample not published ({exc}); '
+                f'{self.publish_failures} lost so far', throttle_duration_sec=1.0)
 
     def _publish_impacts(self, tick):
         """The period's impact reports, once its sensor messages are out: no control loop
@@ -392,7 +433,7 @@ class Simulator(Node):
         the impact's own period made it the slowest period of a run."""
         for record, _rows in tick.impacts:
             self.impacts += 1
-            self.pub_impact.publish(String(data=json.dumps(record)))
+            self._send(self.pub_impact, String(data=json.dumps(record)))
 
     def _fail(self, why):
         self.failed = why
@@ -464,6 +505,8 @@ class Simulator(Node):
             'commands': str(self.commands),
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
+            'publish_failures': str(self.publish_failures),
+            **({'lockstep_repeats': str(self.lockstep_repeats)} if self.lockstep else {}),
             'sim_time': f'{self.arm.t:.6f}',
             'real_time_factor': f'{self.arm.t / (now - self.first_command_wall):.3f}'
             if self.first_command_wall and now > self.first_command_wall else '0',
