@@ -228,10 +228,11 @@ class PhaseIntegrator:
 
     @staticmethod
     def _info(kind, values):
+        """The event's numbers by name (``values``: the log's four info floats)."""
         if kind == 'max_compression':
-            return dict(zip(('delta_m', 'P_m', 'delta_r', 'R_r'), map(float, values)))
+            return dict(zip(('delta_m', 'P_m', 'delta_r', 'R_r'), values))
         if kind == 'separation':
-            return dict(zip(('F_max', 'delta_m', 'delta_r'), map(float, values[:3])))
+            return dict(zip(('F_max', 'delta_m', 'delta_r'), values))
         return {}
 
     def _apply_event(self, slot):
@@ -245,19 +246,18 @@ class PhaseIntegrator:
                                          self.model.surface_table, st.c, st.levels, values):
             self._raise(layout.ERR_RESIDUAL)
         kind = self._kind(slot)
-        return kind, surface, self._info(kind, values)
+        return kind, surface, self._info(kind, values.tolist())
 
     def _drain_events(self, events):
         count = int(self._ev[layout.EV_COUNT])
         if not count:
             return
-        size = self.model.size
-        for row in self._evlog[:count]:
-            slot = int(row[layout.E_SLOT])
-            kind = self._kind(slot)
-            events.append(Event(kind, float(row[layout.E_T]), int(row[layout.E_SURF]),
-                                row[layout.E_Y:layout.E_Y + size].copy(),
-                                self._info(kind, row[layout.E_INFO:layout.E_Y])))
+        block = self._evlog[:count].copy()      # each event's state: a row of this copy
+        heads = block[:, :layout.E_Y].tolist()  # slot, surface, t, info as Python numbers
+        for head, y in zip(heads, block[:, layout.E_Y:]):
+            kind = self._kind(int(head[layout.E_SLOT]))
+            events.append(Event(kind, head[layout.E_T], int(head[layout.E_SURF]), y,
+                                self._info(kind, head[layout.E_INFO:])))
         self.events += count
         self._ev[layout.EV_COUNT] = 0
 
