@@ -244,7 +244,10 @@ class Run:
             rclpy.spin_once(self.node, timeout_sec=0.1)
             now = time.monotonic()
             if first is None and self.diagnostics.get('commands', '0') != '0':
-                first = now
+                # diagnostics come once a second: seeing the first command in them can be a
+                # second late (which made the printed real-time factor up to ~30 % high), so
+                # count from the moment the simulator itself reports
+                first = now - float(self.diagnostics.get('wall_time', 0.0))
             if self.impacts:
                 self.sim_time = max(self.sim_time, self.impacts[-1]['t_contact']
                                     + self.impacts[-1]['duration'])
