@@ -127,8 +127,8 @@ class Controller(Node):
         # fraction of rclpy's conversion to message objects (twice per period)
         self.sub_wrench = self.create_subscription(WrenchStamped, '/contact_wrench',
                                                    self._on_wrench, latest_only, raw=True)
-        self.create_subscription(JointState, '/joint_states', self._on_joint_state, latest_only,
-                                 raw=True)
+        self.sub_state = self.create_subscription(JointState, '/joint_states',
+                                                  self._on_joint_state, latest_only, raw=True)
         if p['trigger'] == 'timer':
             self.create_timer(self.period, self._on_timer)
         self.wire_command = PatchedMessage(Float64MultiArray(data=[0.0] * self.n), ('data',),
@@ -180,6 +180,14 @@ class Controller(Node):
         if self.waiting is not None and self.wrench_stamp >= self.waiting[0] - STAMP_EPS:
             state, self.waiting = self.waiting, None
             self._tick(*state)
+            return
+        # the driver publishes the joint state of the same instant right after the wrench:
+        # when it is already here, take it now rather than after another executor wake-up
+        handle = self.sub_state.handle
+        with handle:
+            taken = handle.take_message(JointState, True)
+        if taken is not None:
+            self._on_joint_state(taken[0])
 
     def _on_joint_state(self, raw):
         sec, nanosec, names, position, velocity = joint_state_fields(raw)

@@ -170,8 +170,8 @@ class Simulator(Node):
                           if self.publish_clock else None)
         self.command_reader = self.reader_node = None
         if self.lockstep:
-            self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command,
-                                     qos(COMMAND_TOPIC), raw=True)
+            self.command_sub = self.create_subscription(
+                Float64MultiArray, COMMAND_TOPIC, self._on_command, qos(COMMAND_TOPIC), raw=True)
         else:
             self.command_reader = self._command_reader(qos(COMMAND_TOPIC))
 
@@ -396,7 +396,8 @@ class Simulator(Node):
             return
         tick, published = self.last_tick
         now = time.monotonic()
-        if now - published > LOCKSTEP_REPEAT_S and now - self.last_command > LOCKSTEP_REPEAT_S:
+        if now - published > LOCKSTEP_REPEAT_S and now - self.last_command > LOCKSTEP_REPEAT_S \
+                and self.command_sub.get_publisher_count() > 0:   # not once the controller left
             self.lockstep_repeats += 1
             self.get_logger().warning(
                 f'no command for {now - published:.1f} s after the period ending at t = '
