@@ -148,21 +148,63 @@ def _strings(r: CdrReader) -> list:
 
 
 def _doubles(r: CdrReader) -> list:
-    r.align(4)
-    (n,) = r.unpack('I', 4)
-    if not n:
-        return []
-    r.align(8)
-    return list(r.unpack('d', 8, n))
+    return _doubles_at(r)[0]
+
+
+class _JointStateLayout:
+    """Where one publisher's joint states keep their numbers. A driver sends the same frame,
+    names and sequence lengths every period, so after the first message only the stamp and
+    the doubles need reading: the bytes from the frame up to the first position (the layout)
+    and the velocity count are compared instead of parsed (15 us -> 2 us)."""
+    __slots__ = ('size', 'prefix', 'names', 'position', 'velocity_count_at', 'velocity_count',
+                 'velocity')
+
+    def __init__(self, raw, names, position_at, n_position, velocity_at, n_velocity):
+        self.size = len(raw)
+        self.prefix = raw[12:position_at]
+        self.names = names
+        self.position = (position_at, struct.Struct(f'<{n_position}d'))
+        self.velocity_count_at = position_at + 8 * n_position
+        self.velocity_count = raw[self.velocity_count_at:self.velocity_count_at + 4]
+        self.velocity = (velocity_at, struct.Struct(f'<{n_velocity}d'))
+
+    def matches(self, raw) -> bool:
+        at = self.velocity_count_at
+        return len(raw) == self.size and raw[12:self.position[0]] == self.prefix and \
+            raw[at:at + 4] == self.velocity_count
+
+
+_joint_state_layouts = {}      # message size -> _JointStateLayout (a few at most)
+_STAMP = struct.Struct('<iI')
 
 
 def joint_state_fields(raw: bytes):
     """``(sec, nanosec, names, position, velocity)`` of a serialized ``sensor_msgs/JointState``."""
+    layout = _joint_state_layouts.get(len(raw))
+    if layout is not None and raw[:2] == b'\x00\x01' and layout.matches(raw):
+        (p_at, p_struct), (v_at, v_struct) = layout.position, layout.velocity
+        return (*_STAMP.unpack_from(raw, 4), list(layout.names),
+                list(p_struct.unpack_from(raw, p_at)), list(v_struct.unpack_from(raw, v_at)))
     r = CdrReader(raw)
     sec, nanosec = _header(r)
     names = _strings(r)
-    position = _doubles(r)
-    return sec, nanosec, names, position, _doubles(r)
+    position, position_at = _doubles_at(r)
+    velocity, velocity_at = _doubles_at(r)
+    if r.endian == '<' and position and velocity and len(_joint_state_layouts) < 8:
+        _joint_state_layouts[len(raw)] = _JointStateLayout(
+            bytes(raw), names, position_at, len(position), velocity_at, len(velocity))
+    return sec, nanosec, names, position, velocity
+
+
+def _doubles_at(r: CdrReader):
+    """A float64 sequence and the offset of its first element."""
+    r.align(4)
+    (n,) = r.unpack('I', 4)
+    if not n:
+        return [], r.pos
+    r.align(8)
+    at = r.pos
+    return list(r.unpack('d', 8, n)), at
 
 
 def wrench_stamped_fields(raw: bytes):

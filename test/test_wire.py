@@ -8,6 +8,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from impact_arm.msgdefs import serialize_cdr
+from impact_arm import wire
 from impact_arm.wire import (PatchedMessage, float64_array_data, joint_state_fields,
                              wrench_stamped_fields)
 
@@ -83,6 +84,25 @@ def test_joint_state_fields_read_rclpy_serialized_states(names):
     # a driver that leaves velocities out
     msg.velocity = []
     assert joint_state_fields(serialize_message(msg))[4] == []
+
+
+def test_joint_state_layout_is_reused_only_for_the_same_layout():
+    wire._joint_state_layouts.clear()     # layouts remembered by earlier tests
+    def state(names, position, velocity, effort, sec=1):
+        msg = JointState(name=names, position=position, velocity=velocity, effort=effort)
+        msg.header.stamp.sec = sec
+        return serialize_message(msg)
+    first = state(['ja', 'jb'], [1.0, 2.0], [3.0, 4.0], [0.0, 0.0])
+    assert joint_state_fields(first) == (1, 0, ['ja', 'jb'], [1.0, 2.0], [3.0, 4.0])
+    # the same layout, new stamp and numbers: read at the remembered offsets
+    assert joint_state_fields(state(['ja', 'jb'], [5.0, 6.0], [7.0, 8.0], [0.0, 0.0], 2)) == \
+        (2, 0, ['ja', 'jb'], [5.0, 6.0], [7.0, 8.0])
+    # as long, but other names, or no velocities (the efforts make up the length)
+    same_size = state(['jb', 'ja'], [1.0, 2.0], [3.0, 4.0], [0.0, 0.0])
+    no_velocity = state(['ja', 'jb'], [1.0, 2.0], [], [0.0, 0.0, 0.0, 0.0])
+    assert len(same_size) == len(no_velocity) == len(first)
+    assert joint_state_fields(no_velocity)[3:] == ([1.0, 2.0], [])
+    assert joint_state_fields(same_size)[2] == ['jb', 'ja']
 
 
 def test_wrench_stamped_fields_read_rclpy_serialized_wrenches():
