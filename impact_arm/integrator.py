@@ -279,7 +279,11 @@ class PhaseIntegrator:
         elif stop_at_event is True:
             mask = ALL_KINDS_MASK
         else:
-            mask = sum(KIND_BITS[kind] for kind in stop_at_event)
+            unknown = set(stop_at_event) - set(KIND_BITS)
+            if unknown:
+                raise ValueError(f'stop_at_event: unknown event kind(s) {sorted(unknown)}; '
+                                 f'choose from {", ".join(KIND_BITS)}')
+            mask = sum(KIND_BITS[kind] for kind in set(stop_at_event))
         if mask and self.trace is not None:
             mask |= KIND_BITS['separation']
         self._ev[layout.EV_MASK] = mask

@@ -55,6 +55,8 @@ def test_stopping_at_chosen_kinds_returns_at_those_only():
     info = up_to_switch[2].info
     assert 0 < info['delta_r'] < info['delta_m'] and info['P_m'] > 0 and info['R_r'] > 0
     assert up_to_switch[3].info['F_max'] >= info['P_m']
+    with pytest.raises(ValueError, match='unknown event kind'):
+        first.advance(1.0, stop_at_event=('impact',))
 
 
 def test_residual_indentation_beyond_its_fit_stops_the_run_with_the_reason():
