@@ -24,6 +24,7 @@ from .msgdefs import CdrReader, serialize_cdr
 # values nobody publishes, to find where a field's bytes lie in the serialized template
 _SENTINEL_SEC, _SENTINEL_NANOSEC = 0x5A1E7A3C, 0x3B9AC9FF - 0x2A5
 _SENTINEL_BASE = -1.2345678901234567e+299
+_STAMP = struct.Struct('<iI')        # builtin_interfaces/Time: sec, nanosec
 
 
 class PatchedMessage:
@@ -62,7 +63,7 @@ class PatchedMessage:
         template = serialize_cdr(msg)
         if template[:2] != b'\x00\x01':
             raise ValueError('expected little-endian CDR')
-        self._stamp_at = (_find(template, struct.pack('<iI', _SENTINEL_SEC, _SENTINEL_NANOSEC))
+        self._stamp_at = (_find(template, _STAMP.pack(_SENTINEL_SEC, _SENTINEL_NANOSEC))
                           if stamped else None)
         offsets = [_find(template, struct.pack('<d', s)) for s in sentinels]
         # consecutive slots (a sequence's elements, a vector's x y z) are written in one go
@@ -74,14 +75,13 @@ class PatchedMessage:
                                    struct.Struct(f'<{k - start}d')))
                 start = k
         self._buffer = bytearray(template)
-        self._stamp = struct.Struct('<iI')
         self.fill([0.0] * self.size, (0, 0) if stamped else None)
 
     def fill(self, values, stamp=None) -> bytes:
         """The message with these float64 values and this stamp (sec, nanosec), serialized."""
         buf = self._buffer
         if stamp is not None:
-            self._stamp.pack_into(buf, self._stamp_at, *stamp)
+            _STAMP.pack_into(buf, self._stamp_at, *stamp)
         for offset, start, end, packer in self._runs:
             packer.pack_into(buf, offset, *values[start:end])
         self.data = bytes(buf)
@@ -125,7 +125,7 @@ def float64_array_data(raw: bytes) -> list:
         r.unpack('I', 4, 2)
     r.align(4)
     r.unpack('I', 4)                # data_offset
-    return _doubles(r)
+    return _doubles_at(r)[0]
 
 
 def _header(r: CdrReader):
@@ -147,20 +147,15 @@ def _strings(r: CdrReader) -> list:
     return out
 
 
-def _doubles(r: CdrReader) -> list:
-    return _doubles_at(r)[0]
-
-
 class _JointStateLayout:
     """Where one publisher's joint states keep their numbers. A driver sends the same frame,
     names and sequence lengths every period, so after the first message only the stamp and
     the doubles need reading: the bytes from the frame up to the first position (the layout)
-    and the velocity count are compared instead of parsed (15 us -> 2 us)."""
-    __slots__ = ('size', 'prefix', 'names', 'position', 'velocity_count_at', 'velocity_count',
+    and the velocity count are compared instead of parsed (15 us -> 1 us)."""
+    __slots__ = ('prefix', 'names', 'position', 'velocity_count_at', 'velocity_count',
                  'velocity')
 
     def __init__(self, raw, names, position_at, n_position, velocity_at, n_velocity):
-        self.size = len(raw)
         self.prefix = raw[12:position_at]
         self.names = names
         self.position = (position_at, struct.Struct(f'<{n_position}d'))
@@ -169,13 +164,12 @@ class _JointStateLayout:
         self.velocity = (velocity_at, struct.Struct(f'<{n_velocity}d'))
 
     def matches(self, raw) -> bool:
+        """For a message of the size this layout is kept under."""
         at = self.velocity_count_at
-        return len(raw) == self.size and raw[12:self.position[0]] == self.prefix and \
-            raw[at:at + 4] == self.velocity_count
+        return raw[12:self.position[0]] == self.prefix and raw[at:at + 4] == self.velocity_count
 
 
 _joint_state_layouts = {}      # message size -> _JointStateLayout (a few at most)
-_STAMP = struct.Struct('<iI')
 
 
 def joint_state_fields(raw: bytes):

@@ -23,6 +23,9 @@ import time
 
 GENTLE_GAINS = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
 
+# the parts of a period the simulator's /diagnostics time (compute_<part>_mean_us, ...)
+PERIOD_PARTS = ('commands', 'physics', 'publish')
+
 
 def add_arguments(parser):
     parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
@@ -103,9 +106,9 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'scheduling': d.get('scheduling', '?'),
         'worst_compute_us': float(d.get('compute_worst_us', 'nan')),
         'compute_mean_us': {part: float(d.get(f'compute_{part}_mean_us', 'nan'))
-                            for part in ('commands', 'physics', 'publish')},
+                            for part in PERIOD_PARTS},
         'worst_compute_parts_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
-                                   for part in ('commands', 'physics', 'publish')},
+                                   for part in PERIOD_PARTS},
         'lockstep_wait_mean_us': float(d.get('lockstep_wait_mean_us', 'nan')),
         'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'period_us': 1e6 / rate,

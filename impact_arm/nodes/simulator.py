@@ -5,7 +5,7 @@ object per impact), /diagnostics (~1 Hz) and, on simulated time, /clock; applies
 /effort_controller/commands as a zero-order hold with an effort limit and a watchdog.
 
 mode realtime: a dedicated thread paces the periods by the wall clock (a late period is an
-overrun and the schedule is kept, never stretched); commands are taken by the executor thread.
+overrun and the schedule is kept, never stretched) and takes each period's commands itself.
 Until the first command arrives the arm is held at its initial state (brakes on) and the
 initial state is published with stamp 0: simulated time starts with the first command.
 mode lockstep: each command advances one period, inside the command callback (deterministic).
@@ -37,6 +37,7 @@ from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
+PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute goes
 PARAMS = (
     Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
           'str', read_only=True),
@@ -472,6 +473,7 @@ class Simulator(Node):
             level, message = DiagnosticStatus.OK, 'running'
         elapsed = now - self.start_wall if self.start_wall else 0.0
         run_p50, run_p99 = self.stats.run_percentiles(50, 99)
+        part_means = self.stats.part_means()
         values = {
             'mode': self.p['mode'],
             'publish_rate_requested': f'{self.p["publish_rate"]:g}',
@@ -495,12 +497,11 @@ class Simulator(Node):
             # where a realtime period's time goes (whole-run means): taking commands,
             # the physics, publishing the period's messages
             **{f'compute_{part}_mean_us': f'{mean * 1e6:.1f}' for part, mean in
-               zip(('commands', 'physics', 'publish'), self.stats.part_means())},
-            **({'lockstep_wait_mean_us': f'{self.stats.part_means()[3] * 1e6:.1f}'}
-               if self.lockstep else {}),
+               zip(PERIOD_PARTS, part_means)},
+            **({'lockstep_wait_mean_us': f'{part_means[3] * 1e6:.1f}'} if self.lockstep else {}),
             # and the worst period's (is it the physics of an impact, or a stall?)
             **{f'compute_worst_{part}_us': f'{t * 1e6:.1f}' for part, t in
-               zip(('commands', 'physics', 'publish'), self.stats.worst_parts)},
+               zip(PERIOD_PARTS, self.stats.worst_parts)},
             'watchdog': self.watchdog,
             'scheduling': self.scheduling,
             'commands': str(self.commands),
