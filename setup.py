@@ -29,7 +29,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'impact-arm = impact_arm.cli:main',
+            'impact-arm = impact_arm.tools.cli:main',
             'simulator = impact_arm.nodes.simulator:main',
             'controller = impact_arm.nodes.controller:main',
             'recorder = impact_arm.nodes.recorder:main',

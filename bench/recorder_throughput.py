@@ -35,7 +35,7 @@ def main():
     import rclpy
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
-    from impact_arm.mcap_ros2 import contract_qos, iter_raw
+    from impact_arm.io.mcap_ros2 import contract_qos, iter_raw
 
     rec = subprocess.Popen([sys.executable, '-m', 'impact_arm.nodes.recorder', '--ros-args',
                             '-p', f'output:={out}', '-p', 'param_nodes:=[""]'], env=env,

@@ -5,7 +5,7 @@ import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
-from impact_arm.benchmarks import main  # noqa: E402
+from impact_arm.tools.benchmarks import main  # noqa: E402
 
 if __name__ == '__main__':
     sys.exit(main(['stress'] + sys.argv[1:]))

@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from impact_arm.analysis import limit_cycle, poincare
-from impact_arm.figures import FIGURE_SIZE
+from impact_arm.tools.analysis import limit_cycle, poincare
+from impact_arm.tools.figures import FIGURE_SIZE
 
 FIGURES = ['fig3_controllers.png', 'fig4_link_angles.png', 'fig5_phase_portraits.png',
            'fig6_poincare.png', 'fig7_tip_velocity.png', 'fig8_indentation.png',
@@ -19,7 +19,7 @@ FIGURES = ['fig3_controllers.png', 'fig4_link_angles.png', 'fig5_phase_portraits
 
 
 def cli(*argv, cwd):
-    return subprocess.run([sys.executable, '-m', 'impact_arm.cli', *map(str, argv)],
+    return subprocess.run([sys.executable, '-m', 'impact_arm.tools.cli', *map(str, argv)],
                           capture_output=True, text=True, cwd=cwd, timeout=300)
 
 
@@ -126,7 +126,7 @@ def small_recording(path):
     """Joint states only: no scene, no impacts, no traces (a bare live recording)."""
     from sensor_msgs.msg import JointState
 
-    from impact_arm.mcap_ros2 import Ros2McapWriter
+    from impact_arm.io.mcap_ros2 import Ros2McapWriter
     with Ros2McapWriter(path) as w:
         for i in range(400):
             t = i * 0.005

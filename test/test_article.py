@@ -3,8 +3,8 @@ import json
 
 import pytest
 
-from impact_arm.scene import load_scene
-from impact_arm.simulate import run
+from impact_arm.core.scene import load_scene
+from impact_arm.core.simulate import run
 
 # model.md, "What the article reports for its first impact" (truncated values: 1 % band)
 ARTICLE_FIRST_IMPACT = {
@@ -51,7 +51,7 @@ def test_fifteen_cycles_settle_into_a_limit_cycle(paper_run):
 
 
 def test_cli_json_has_exactly_the_documented_structure(tmp_path):
-    from impact_arm.cli import main
+    from impact_arm.tools.cli import main
     out = tmp_path / 'paper.json'
     assert main(['simulate', '--scene', 'paper', '--json', str(out)]) == 0
     data = json.loads(out.read_text())

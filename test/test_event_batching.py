@@ -4,11 +4,11 @@ be the same integration; errors the phase machine finds must still stop the run 
 import numpy as np
 import pytest
 
-from impact_arm.contact import contact_constants, residual_indentation
-from impact_arm.integrator import PhaseIntegrator
-from impact_arm.model import ArmModel
-from impact_arm.scene import Material
-from impact_arm.simulate import run
+from impact_arm.core.contact import contact_constants, residual_indentation
+from impact_arm.core.integrator import PhaseIntegrator
+from impact_arm.core.model import ArmModel
+from impact_arm.core.scene import Material
+from impact_arm.core.simulate import run
 
 from scenes import scene_from
 

@@ -8,8 +8,8 @@ import re
 
 import pytest
 
-from impact_arm.integrator import PhaseIntegrator
-from impact_arm.model import ArmModel
+from impact_arm.core.integrator import PhaseIntegrator
+from impact_arm.core.model import ArmModel
 
 from scenes import scene_from
 

@@ -14,9 +14,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from impact_arm import mcap_ros2
-from impact_arm.mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
+from impact_arm.io.mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
                                   parse_qos_yaml)
-from impact_arm.msgdefs import message_class, message_definition, serialize_cdr
+from impact_arm.io.msgdefs import message_class, message_definition, serialize_cdr
 
 TYPES = sorted({t for t, _ in CONTRACT_TOPICS.values()} | {'std_msgs/msg/Float64MultiArray'})
 QOS_KEYS = {'history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan',
@@ -256,7 +256,7 @@ def test_bad_arguments_are_refused(tmp_path):
 
 
 def test_cdr_reader_is_the_inverse_and_agrees_with_rosbags():
-    from impact_arm.msgdefs import deserialize_cdr
+    from impact_arm.io.msgdefs import deserialize_cdr
     store = get_typestore(Stores.ROS2_KILTED)
     for topic, msg in _samples().items():
         type_name = mcap_ros2.type_name_of(msg)

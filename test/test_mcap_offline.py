@@ -11,10 +11,10 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from impact_arm import __version__
-from impact_arm.offline_mcap import (OfflineRecorder, TOPICS, TRACE_TOPIC, from_joint_space,
+from impact_arm.io.offline_mcap import (OfflineRecorder, TOPICS, TRACE_TOPIC, from_joint_space,
                                      sim_time_ns, to_joint_space, trace_columns)
-from impact_arm.scene import load_scene
-from impact_arm.simulate import run
+from impact_arm.core.scene import load_scene
+from impact_arm.core.simulate import run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -102,7 +102,7 @@ def test_cli_writes_the_file_and_refuses_an_unwritable_path(tmp_path):
     import sys
     blocker = tmp_path / 'file'
     blocker.write_text('x')
-    proc = subprocess.run([sys.executable, '-m', 'impact_arm.cli', 'simulate', '--mcap',
+    proc = subprocess.run([sys.executable, '-m', 'impact_arm.tools.cli', 'simulate', '--mcap',
                            str(blocker / 'out.mcap')], capture_output=True, text=True,
                           cwd=tmp_path, timeout=120)
     assert proc.returncode == 2

@@ -17,8 +17,8 @@ import pytest
 
 from ros_helpers import PYTHON, ROOT, node_args, ros_env, start_process, wait_for  # noqa: F401
 
-from impact_arm.scene import load_scene, resolve_scene_path
-from impact_arm.simulate import run
+from impact_arm.core.scene import load_scene, resolve_scene_path
+from impact_arm.core.simulate import run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -369,7 +369,7 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     from rosbags.highlevel import AnyReader
     from pathlib import Path
     env = dict(ros_env)
-    proc = subprocess.run([PYTHON, '-m', 'impact_arm.cli', 'run', '--mode', 'lockstep',
+    proc = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--mode', 'lockstep',
                            '--name', 'r', '--out', str(tmp_path / 'runs')],
                           env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -389,7 +389,7 @@ def test_run_command_interrupted_stops_nodes_and_keeps_the_recording(ros_env, tm
     from rosbags.highlevel import AnyReader
     from pathlib import Path
     logs = tmp_path / 'runs' / 'logs'
-    proc = subprocess.Popen([PYTHON, '-m', 'impact_arm.cli', 'run', '--name', 'i', '--out',
+    proc = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--name', 'i', '--out',
                              str(tmp_path / 'runs')], env=ros_env, cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

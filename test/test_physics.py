@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from scipy.special import beta
 
-from impact_arm.contact import (contact_constants, hertz_force, jackson_green_force,
+from impact_arm.core.contact import (contact_constants, hertz_force, jackson_green_force,
                                 residual_indentation, restitution_force, restitution_radius)
-from impact_arm.integrator import PhaseIntegrator
-from impact_arm.model import ArmModel
-from impact_arm.scene import Material
-from impact_arm.simulate import run
+from impact_arm.core.integrator import PhaseIntegrator
+from impact_arm.core.model import ArmModel
+from impact_arm.core.scene import Material
+from impact_arm.core.simulate import run
 
 from scenes import scene_from
 

@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from impact_arm.mcap_ros2 import Ros2McapWriter
-from impact_arm.replay import ReplayError, ReplayPlan
+from impact_arm.io.mcap_ros2 import Ros2McapWriter
+from impact_arm.io.replay_plan import ReplayError, ReplayPlan
 from ros_helpers import helper_args, node_args, ros_env, start_process, wait_for  # noqa: F401
 
 PERIOD_NS = 10_000_000      # recorded joint states every 10 ms
@@ -85,7 +85,7 @@ def test_missing_or_broken_file(tmp_path):
 def test_cli_errors_are_one_line(tmp_path, recording):
     for argv, needle in ([str(tmp_path / 'none.mcap')], 'no such file'),\
             ([str(recording), '--rate', '-2'], 'rate = -2.0'):
-        p = subprocess.run([sys.executable, '-m', 'impact_arm.cli', 'replay'] + argv,
+        p = subprocess.run([sys.executable, '-m', 'impact_arm.tools.cli', 'replay'] + argv,
                            capture_output=True, text=True, timeout=60)
         assert p.returncode == 2 and needle in p.stderr and 'Traceback' not in p.stderr
 

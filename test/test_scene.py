@@ -3,8 +3,8 @@ import math
 
 import pytest
 
-from impact_arm.errors import SceneError
-from impact_arm.scene import load_scene, parse_scene, scene_from_text
+from impact_arm.core.errors import SceneError
+from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
 
 from scenes import PAPER, paper_dict
 
@@ -86,7 +86,7 @@ def test_unreadable_file_is_a_scene_error():
 
 
 def test_cli_reports_bad_scene_without_traceback(tmp_path, capsys):
-    from impact_arm.cli import main
+    from impact_arm.tools.cli import main
     bad = tmp_path / 'bad.yaml'
     bad.write_text(open(PAPER, encoding='utf-8').read().replace('mass: 1.0}', 'mass: -2.0}', 1))
     assert main(['simulate', '--scene', str(bad)]) == 2

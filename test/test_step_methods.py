@@ -3,10 +3,10 @@ Dormand-Prince reference and model.md's first impact, never against their own nu
 import numpy as np
 import pytest
 
-from impact_arm.errors import SceneError
-from impact_arm.integrator import PhaseIntegrator
-from impact_arm.model import ArmModel
-from impact_arm.simulate import run, run_events
+from impact_arm.core.errors import SceneError
+from impact_arm.core.integrator import PhaseIntegrator
+from impact_arm.core.model import ArmModel
+from impact_arm.core.simulate import run, run_events
 
 from scenes import scene_from
 from test_article import ARTICLE_FIRST_IMPACT

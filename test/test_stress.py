@@ -8,7 +8,7 @@ Only scene shapes the rest of the suite already compiles are used.
 """
 import pytest
 
-from impact_arm.benchmarks import stress
+from impact_arm.tools.benchmarks import stress
 
 # cases that must stop, and the words of the limit their message must name
 NAMED_STOPS = {

@@ -7,9 +7,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from impact_arm.msgdefs import serialize_cdr
+from impact_arm.io.msgdefs import serialize_cdr
 from impact_arm import wire
-from impact_arm.wire import (PatchedMessage, float64_array_data, joint_state_fields,
+from impact_arm.io.wire import (PatchedMessage, float64_array_data, joint_state_fields,
                              wrench_stamped_fields)
 
 

@@ -50,7 +50,7 @@ def run(node_factory, args=None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
-    from ..errors import ImpactArmError
+    from ..core.errors import ImpactArmError
 
     # DDS stays on this machine unless the user chose otherwise (multi-machine set-ups set
     # ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET explicitly)

@@ -18,12 +18,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ..control import ANTIWINDUP_STRATEGIES, CycleController, PidIntegrator, to_absolute
-from ..control import to_joint_space
-from ..mcap_ros2 import contract_qos
-from ..model import ArmModel
-from ..scene import load_scene, resolve_scene_path
-from ..wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
+from ..core.control import ANTIWINDUP_STRATEGIES, CycleController, PidIntegrator, to_absolute
+from ..core.control import to_joint_space
+from ..io.mcap_ros2 import contract_qos
+from ..core.model import ArmModel
+from ..core.scene import load_scene, resolve_scene_path
+from ..io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 

@@ -14,7 +14,7 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
-from ..errors import ImpactArmError
+from ..core.errors import ImpactArmError
 
 
 class ParameterError(ImpactArmError, ValueError):

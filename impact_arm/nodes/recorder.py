@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters, ListParameters
 
-from ..mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
+from ..io.mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
                          contract_qos, message_class, package_version, ros_distro)
 from ._runner import run
 
@@ -50,7 +50,7 @@ class Recorder(Node):
             raise ValueError(f'flush_interval = {interval}: must be > 0 s')
         scene_text = None
         if scene:
-            from ..scene import resolve_scene_path
+            from ..core.scene import resolve_scene_path
             scene = resolve_scene_path(scene)   # an installed scene name, as the simulator's
             try:
                 with open(scene, encoding='utf-8') as f:

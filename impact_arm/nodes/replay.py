@@ -4,7 +4,7 @@
 ``impact-arm replay run.mcap --rate 2``. Each topic is published with its recorded type and the
 QoS its publishers offered (from the file), as the recorded serialized bytes (nothing is
 deserialized); timing follows the recorded log times scaled by ``rate``
-(``impact_arm.replay`` computes the schedule). Parameters:
+(``impact_arm.io.replay_plan`` computes the schedule). Parameters:
 
 ==========================  ========  =====================================================
 ``file``                    string    MCAP file to replay (required)
@@ -34,9 +34,9 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..errors import ImpactArmError
-from ..mcap_ros2 import TopicQos, contract_qos, message_class
-from ..replay import ReplayError, ReplayPlan, summarize
+from ..core.errors import ImpactArmError
+from ..io.mcap_ros2 import TopicQos, contract_qos, message_class
+from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
 
 WAIT_SUBSCRIBERS_MAX = 30.0

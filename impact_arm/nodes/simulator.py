@@ -26,12 +26,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
-from ..errors import SimulationError
-from ..hardware import CommandError, SimulatedArm
-from ..integrator import PRESETS
-from ..mcap_ros2 import contract_qos
-from ..scene import load_scene, resolve_scene_path
-from ..wire import PatchedMessage, float64_array_data
+from ..core.errors import SimulationError
+from ..core.driver import CommandError, SimulatedArm
+from ..core.integrator import PRESETS
+from ..io.mcap_ros2 import contract_qos
+from ..core.scene import load_scene, resolve_scene_path
+from ..io.wire import PatchedMessage, float64_array_data
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 

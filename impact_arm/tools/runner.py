@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 
-from .errors import ImpactArmError
+from ..core.errors import ImpactArmError
 
 NODES = ('recorder', 'simulator', 'controller')       # start order (the arm moves with the
 # first command, so the controller comes last, once the recorder listens)
@@ -43,8 +43,8 @@ def add_arguments(parser):
 
 
 def cli(args) -> int:
-    from .scene import load_scene, resolve_scene_path
-    from .simulate import RunResult, format_table
+    from ..core.scene import load_scene, resolve_scene_path
+    from ..core.simulate import RunResult, format_table
 
     if not 1.0 <= args.rate <= 100000.0:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scene import INTEGRATOR_METHODS
+from ...core.scene import INTEGRATOR_METHODS
 from . import common
 
 OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
@@ -47,7 +47,7 @@ class Case:
 
 def paper_dict():
     import yaml
-    from ..scene import _SceneLoader, resolve_scene_path
+    from ...core.scene import _SceneLoader, resolve_scene_path
     with open(resolve_scene_path('paper'), encoding='utf-8') as f:
         return yaml.load(f.read(), Loader=_SceneLoader)
 
@@ -65,7 +65,7 @@ def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):
 
 
 def build(case: Case):
-    from ..scene import parse_scene
+    from ...core.scene import parse_scene
     data = strike_dict(case.strike_speed) if case.base == 'strike' else paper_dict()
     data = copy.deepcopy(data)
     for path, value in case.changes.items():
@@ -171,10 +171,10 @@ class Outcome:
 
 def check_run(case: Case, scene, deadline=None, method='dopri5'):
     """Run one case event to event, checking every impact. Returns an ``Outcome``."""
-    from ..errors import SimulationError
-    from ..integrator import PhaseIntegrator
-    from ..metrics import ImpactBuilder
-    from ..model import ArmModel
+    from ...core.errors import SimulationError
+    from ...core.integrator import PhaseIntegrator
+    from ...core.metrics import ImpactBuilder
+    from ...core.model import ArmModel
     t0 = time.perf_counter()
     model = ArmModel(scene)
     integ = PhaseIntegrator(model, preset=case.preset, trace=True, method=method)
@@ -272,7 +272,7 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
 
 
 def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
-    from ..errors import SceneError
+    from ...core.errors import SceneError
     try:
         scene = build(case)
     except SceneError as exc:   # refused at load: a named limit, too

@@ -61,7 +61,7 @@ def search(scene, ref, levels, methods, log=common.progress):
     """Every setting tried — ours: presets, then each step method with rtol on the grid and a
     tighter contact tolerance; scipy: each method and rtol (and contact rtol) until it reaches
     the tightest level — with its error and a first timing."""
-    from ..integrator import PRESETS
+    from ...core.integrator import PRESETS
     rows = []
     tightest = min(levels)
     for name, (rtol, atol) in PRESETS.items():
@@ -150,7 +150,7 @@ def final_timing(scene, groups, repeats):
 
 
 def run(args) -> int:
-    from ..integrator import PRESETS
+    from ...core.integrator import PRESETS
     scene = common.load(args.scene)
     levels = sorted((float(x) for x in args.levels.split(',')), reverse=True)
     methods = [m.strip() for m in args.methods.split(',') if m.strip()]

@@ -30,14 +30,14 @@ def progress_done() -> None:
 
 
 def load(scene_name: str):
-    from ..scene import load_scene
+    from ...core.scene import load_scene
     return load_scene(scene_name)
 
 
 # --- timed runs -----------------------------------------------------------------------------
 def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
-    from ..simulate import run_events
+    from ...core.simulate import run_events
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
@@ -182,7 +182,7 @@ def machine() -> dict:
         nb = numba.__version__
     except ImportError:
         nb = None
-    from .. import jit
+    from ...core import jit
     return {'python': platform.python_version(), 'numpy': numpy.__version__,
             'scipy': scipy.__version__, 'numba': nb, 'jit': jit.AVAILABLE,
             'cpus': os.cpu_count(), 'time': time.strftime('%Y-%m-%dT%H:%M:%S')}

@@ -41,7 +41,7 @@ import time
 import zlib
 from typing import Iterator, NamedTuple, Optional
 
-from .errors import ImpactArmError
+from ..core.errors import ImpactArmError
 from .msgdefs import message_class, message_definition, serialize_cdr, type_hash, type_name_of
 
 __all__ = ['CONTRACT_TOPICS', 'RawMessage', 'RecordingError', 'Ros2McapWriter', 'TopicInfo',

@@ -57,7 +57,7 @@ def _session(scene_path, mode, rate, rate_factor=None):
 
 
 def _scene(path):
-    from ..scene import load_scene
+    from ...core.scene import load_scene
     return load_scene(path)
 
 
@@ -175,7 +175,7 @@ def _run_fast(scene_path, rate, seconds):
 
 def run(args) -> int:
     from ..runner import dds_environment
-    from ..scene import resolve_scene_path
+    from ...core.scene import resolve_scene_path
     scene_path = resolve_scene_path(args.scene)
     env = dds_environment()
     print(f'bench rates: scene {args.scene}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} '

@@ -112,7 +112,7 @@ class OfflineRecorder:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
-        from . import __version__
+        from .. import __version__
         from .mcap_ros2 import Ros2McapWriter, TopicQos, package_version, ros_distro
 
         self.path = os.fspath(path)

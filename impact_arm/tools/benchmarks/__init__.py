@@ -14,15 +14,15 @@ import importlib
 import sys
 
 SUBCOMMANDS = {
-    'speed': ('impact_arm.benchmarks.speed',
+    'speed': ('impact_arm.tools.benchmarks.speed',
               'offline speed at equal accuracy vs scipy solve_ivp (issue 6)'),
-    'tradeoff': ('impact_arm.benchmarks.tradeoff',
+    'tradeoff': ('impact_arm.tools.benchmarks.tradeoff',
                  'work-precision table and plot: presets and solve_ivp methods vs reference'),
-    'stress': ('impact_arm.benchmarks.stress',
+    'stress': ('impact_arm.tools.benchmarks.stress',
                'stability matrix at the extremes of the parameter space'),
-    'rates': ('impact_arm.benchmarks.rates',
+    'rates': ('impact_arm.tools.benchmarks.rates',
               'nodes over DDS: realtime jitter/overruns at 1 and 5 kHz, lockstep speed'),
-    'features': ('impact_arm.benchmarks.features',
+    'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }
 

@@ -20,7 +20,7 @@ import os
 from dataclasses import dataclass
 from typing import Iterator, Optional
 
-from .errors import ImpactArmError
+from ..core.errors import ImpactArmError
 from .mcap_ros2 import RawMessage, TopicInfo, iter_raw, topics_info
 
 

@@ -70,9 +70,9 @@ def add_arguments(parser):
 
 
 def measure(name, make, preset, repeats):
-    from ..integrator import PRESETS
-    from ..model import ArmModel
-    from ..scene import parse_scene
+    from ...core.integrator import PRESETS
+    from ...core.model import ArmModel
+    from ...core.scene import parse_scene
     data = make(copy.deepcopy(paper_dict()))
     scene = parse_scene(data, origin=f'features:{name}')
     rtol, atol = PRESETS[preset]

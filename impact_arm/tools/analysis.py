@@ -25,9 +25,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .errors import ImpactArmError
-from .metrics import settle_index
-from .offline_mcap import TRACE_TOPIC, from_joint_space
+from ..core.errors import ImpactArmError
+from ..core.metrics import settle_index
+from ..io.offline_mcap import TRACE_TOPIC, from_joint_space
 
 LAWS = ('q', 'pd', 'pid')
 
@@ -56,8 +56,8 @@ def _progress(text):
 
 def load(path, progress=_progress) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
-    from .mcap_ros2 import iter_raw, read_metadata, topics_info
-    from .msgdefs import deserialize_cdr
+    from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
+    from ..io.msgdefs import deserialize_cdr
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise AnalysisError(f'{path}: no such file')
@@ -108,7 +108,7 @@ def _scene(metadata):
     text = metadata.get('scene', {}).get('yaml')
     if not text:
         return None
-    from .scene import scene_from_text
+    from ..core.scene import scene_from_text
     try:
         return scene_from_text(text, origin='scene stored in the recording')
     except ImpactArmError:
@@ -117,7 +117,7 @@ def _scene(metadata):
 
 def simulated(scene, law: str, t_max: float, progress=_progress) -> Run:
     """An offline run of ``scene`` with controller ``law`` (for Figure 3)."""
-    from .simulate import run
+    from ..core.simulate import run
     if law not in LAWS:
         raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(LAWS)}')
     sc = replace(scene, controller=replace(scene.controller, law=law))
@@ -161,7 +161,7 @@ def limit_cycle(impacts) -> dict:
 
 def impact_table(impacts) -> str:
     """The impact rows exactly as ``impact-arm simulate`` prints them."""
-    from .simulate import RunResult, format_table
+    from ..core.simulate import RunResult, format_table
     return format_table(RunResult(scene=None, impacts=impacts)).split('\n\n')[0]
 
 

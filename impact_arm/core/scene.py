@@ -375,7 +375,7 @@ def config_dirs() -> list[str]:
     """Where scene files live: the source tree, the install prefix, the ament share dir."""
     import sys
     here = os.path.dirname(os.path.abspath(__file__))
-    dirs = [os.path.join(os.path.dirname(here), 'config'),
+    dirs = [os.path.join(os.path.dirname(os.path.dirname(here)), 'config'),
             os.path.join(sys.prefix, 'share', 'impact_arm', 'config')]
     try:
         from ament_index_python.packages import get_package_share_directory

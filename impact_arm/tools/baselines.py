@@ -12,11 +12,11 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from . import layout
-from .integrator import Event, PhaseIntegrator
-from .metrics import ImpactBuilder
-from .model import ArmModel, Phase
-from .scene import Scene
+from ..core import layout
+from ..core.integrator import Event, PhaseIntegrator
+from ..core.metrics import ImpactBuilder
+from ..core.model import ArmModel, Phase
+from ..core.scene import Scene
 
 SCIPY_METHODS = ('RK45', 'DOP853', 'LSODA', 'Radau')
 

@@ -11,7 +11,7 @@ import json
 import os
 import sys
 
-from .errors import ImpactArmError
+from ..core.errors import ImpactArmError
 
 DEFAULT_SCENE = 'paper'
 
@@ -31,13 +31,13 @@ def _non_negative(value):
 
 
 def cmd_simulate(args) -> int:
-    from .scene import load_scene
-    from .simulate import format_table, run
+    from ..core.scene import load_scene
+    from ..core.simulate import format_table, run
 
     scene = load_scene(args.scene)
     observer = None
     if args.mcap:
-        from .offline_mcap import OfflineRecorder
+        from ..io.offline_mcap import OfflineRecorder
         observer = OfflineRecorder(args.mcap, scene, control_rate=args.control_rate,
                                    preset=args.preset)
 
@@ -99,7 +99,7 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
 # ``cli(args) -> int``. Only the selected one is imported, so `simulate` never loads rclpy.
 COMMANDS = {
     'run': ('runner', 'start simulator, controller and recorder over DDS; record to MCAP'),
-    'replay': ('nodes.replay', 'republish a recorded MCAP file with its original timing'),
+    'replay': ('..nodes.replay', 'republish a recorded MCAP file with its original timing'),
     'analyze': ('analysis', 'impact table, limit cycle, Poincare sections and figures'),
     'bench': ('benchmarks', 'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
@@ -108,9 +108,9 @@ COMMANDS = {
 def _attach(parser, module):
     import importlib
     try:
-        mod = importlib.import_module(f'.{module}', __package__)
+        mod = importlib.import_module(f'.{module}', __package__)  # '..nodes.replay' too
     except ModuleNotFoundError as exc:
-        if exc.name and exc.name.startswith(__package__):
+        if exc.name and exc.name.startswith('impact_arm'):
             parser.set_defaults(func=lambda args: _missing(parser.prog))
             return
         raise
