@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from impact_arm import mcap_ros2
+from impact_arm.io import mcap_ros2
 from impact_arm.io.mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
                                   parse_qos_yaml)
 from impact_arm.io.msgdefs import message_class, message_definition, serialize_cdr

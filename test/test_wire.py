@@ -8,7 +8,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from impact_arm.io.msgdefs import serialize_cdr
-from impact_arm import wire
+from impact_arm.io import wire
 from impact_arm.io.wire import (PatchedMessage, float64_array_data, joint_state_fields,
                              wrench_stamped_fields)
 
