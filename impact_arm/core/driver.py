@@ -19,6 +19,25 @@ from .model import ArmModel
 from .scene import Scene
 
 
+def advance_period(integ, builder, t_end, on_event=None):
+    """The one period loop of every sampled run (the driver's periods, offline held control):
+    advance ``integ`` to ``t_end``, feed the located events to the impact ``builder``
+    (``on_event`` sees each first). Returns the impacts completed [(record, trace rows)] and
+    the contact impulse (tangential, normal) over the period, which callers divide by the
+    period for the averaged wrench."""
+    impacts = []
+    for event in integ.advance(t_end):
+        if on_event is not None:
+            on_event(event)
+        record = builder.feed(event)
+        if record is not None:
+            rows = []
+            if integ.trace is not None:
+                rows, integ.trace[:] = integ.trace[:], []
+            impacts.append((record, rows))
+    return impacts, integ.take_impulse()
+
+
 class CommandError(ImpactArmError):
     """A torque command that must not be applied (wrong length, non-finite values)."""
 
@@ -125,18 +144,9 @@ class SimulatedArm:
     def step(self) -> Tick:
         """Advance one period under the held command; raises SimulationError when the physics
         leaves its validity (the state stays at the last good point)."""
-        integ = self.integrator
-        t_end = (self.periods + 1) / self.rate
-        impacts = []
-        for event in integ.advance(t_end):
-            record = self.builder.feed(event)
-            if record is not None:
-                rows = []
-                if integ.trace is not None:
-                    rows, integ.trace[:] = integ.trace[:], []
-                impacts.append((record, rows))
+        impacts, (jt, jn) = advance_period(self.integrator, self.builder,
+                                           (self.periods + 1) / self.rate)
         self.periods += 1
-        jt, jn = integ.take_impulse()
         return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
 
     def sample(self, wrench=(0.0, 0.0), impacts=()) -> Tick:

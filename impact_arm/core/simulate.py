@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .control import CycleController
+from .driver import advance_period
 from .errors import SimulationError
 from .integrator import PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder, settle_index
@@ -121,22 +122,30 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
         integ.reset_derivative()
         return mode_before, ctrl.mode
 
+    def count_switch(event):
+        nonlocal cycles_done
+        cycles_done += event.kind == 'switch'
+
+    def report(impacts):
+        """Impact records and their trace rows to the result, observers and progress."""
+        for record, rows in impacts:
+            if trace:
+                result.traces.append(rows)
+            if observer is not None and hasattr(observer, 'on_impact'):
+                observer.on_impact(record, rows)
+            if progress:
+                progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
+
     def feed(events):
         """Cycles, impact records, observers and progress for the located events."""
-        nonlocal cycles_done
-        for ev in events:
-            if ev.kind == 'switch':
-                cycles_done += 1
-            record = builder.feed(ev)
+        impacts = []
+        for event in events:
+            count_switch(event)
+            record = builder.feed(event)
             if record is not None:
-                rows = integ.trace[:]
+                impacts.append((record, integ.trace[:]))
                 integ.trace.clear()
-                if trace:
-                    result.traces.append(rows)
-                if observer is not None and hasattr(observer, 'on_impact'):
-                    observer.on_impact(record, rows)
-                if progress:
-                    progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
+        report(impacts)
 
     def publish(sample, tip_velocity):
         result.samples.append(sample)
@@ -168,13 +177,12 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
                 result.stopped = f't_max = {t_max:g} s reached'
                 break
             if t_next > st.t:
-                events = integ.advance(t_next)
-                j = integ.take_impulse()
+                impacts, j = advance_period(integ, builder, t_next, count_switch)
                 impulse[0] += j[0]
                 impulse[1] += j[1]
                 impulse_since_ctl[0] += j[0]
                 impulse_since_ctl[1] += j[1]
-                feed(events)
+                report(impacts)
             if ctrl and t_ctl <= t_next:
                 before, after = apply_control(t_ctl)
                 impulse_since_ctl = [0.0, 0.0]

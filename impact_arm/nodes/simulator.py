@@ -28,6 +28,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..core.errors import SimulationError
 from ..core.driver import CommandError, SimulatedArm
+from ..core.realtime import PERIOD_PARTS, DriverLoop
 from ..core.integrator import PRESETS
 from ..io.mcap_ros2 import contract_qos
 from ..core.scene import load_scene, resolve_scene_path
@@ -37,7 +38,6 @@ from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 COMMAND_TOPIC = '/effort_controller/commands'
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
-PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute goes
 PARAMS = (
     Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
           'str', read_only=True),
@@ -64,74 +64,6 @@ PARAMS = (
     Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
           read_only=True),
 )
-
-
-class PeriodStats:
-    """Timing of the published periods, kept by the stepping thread, read by diagnostics."""
-
-    def __init__(self):
-        self.lock = threading.Lock()
-        self.intervals = []        # wall time between consecutive publications [s]
-        self.computes = []         # wall time to step and publish one period [s]
-        self.published = 0
-        self.overruns = 0
-        self.worst_compute = 0.0
-        self.worst_compute_t = 0.0
-        self.worst_parts = (0.0, 0.0, 0.0)   # the worst period's commands, physics, publish
-        self.last_publish = None
-        self.t_published = 0.0     # simulated time of the last period counted in ``published``
-        self.nominal = None
-        # whole-run jitter |interval - period| as a 1 us histogram (0 ... 20 ms), plus the max
-        self.histogram = np.zeros(20001, dtype=np.int64)
-        self.jitter_max = 0.0
-        self.jitter_max_t = 0.0
-        # whole-run sums of a period's parts: commands, physics, publication and (lockstep)
-        # the wait from one publication to the next command [s]
-        self.part_sums = [0.0, 0.0, 0.0, 0.0]
-        self.part_count = 0
-
-    def part_means(self):
-        with self.lock:
-            return [s / self.part_count if self.part_count else 0.0 for s in self.part_sums]
-
-    def add(self, published_at, compute, t_sim, overrun, parts=None):
-        with self.lock:
-            if parts is not None:
-                for i, part in enumerate(parts):
-                    self.part_sums[i] += part
-                self.part_count += 1
-            if self.last_publish is not None:
-                interval = published_at - self.last_publish
-                self.intervals.append(interval)
-                if self.nominal is not None:
-                    jitter = abs(interval - self.nominal)
-                    self.histogram[min(int(jitter * 1e6), 20000)] += 1
-                    if jitter > self.jitter_max:
-                        self.jitter_max, self.jitter_max_t = jitter, t_sim
-            self.last_publish = published_at
-            self.computes.append(compute)
-            self.published += 1
-            self.t_published = t_sim
-            self.overruns += overrun
-            if compute > self.worst_compute:
-                self.worst_compute, self.worst_compute_t = compute, t_sim
-                if parts is not None:
-                    self.worst_parts = tuple(parts[:3])
-
-    def run_percentiles(self, *qs):
-        """Whole-run jitter percentiles [s] from the histogram."""
-        with self.lock:
-            total = int(self.histogram.sum())
-            if not total:
-                return [0.0 for _ in qs]
-            cumulative = np.cumsum(self.histogram)
-            return [float(np.searchsorted(cumulative, q / 100 * total)) * 1e-6 for q in qs]
-
-    def take(self):
-        with self.lock:
-            intervals, computes = self.intervals, self.computes
-            self.intervals, self.computes = [], []
-            return intervals, computes
 
 
 class Simulator(Node):
@@ -186,20 +118,19 @@ class Simulator(Node):
         self.wire_wrench = PatchedMessage(wrench, ('wrench.force.x', 'wrench.force.y'))
         self.wire_clock = PatchedMessage(Clock(), (), stamp='clock')
 
-        self.stats = PeriodStats()
-        if not self.lockstep:
-            self.stats.nominal = 1.0 / (p['publish_rate'] * p['rate_factor'] or 1.0)
-        self.pending = None                # (torques, monotonic time) from the command callback
-        self.applied = None                # the pending command the arm holds (realtime)
-        self.last_command = None           # monotonic time of the last valid command
-        self.commands = self.rejected = self.clipped = 0
+        rate = p['publish_rate'] * (p['rate_factor'] or 1.0)
+        self.loop = DriverLoop(self.arm, wall_period=1.0 / rate,
+                               command_timeout=p['command_timeout'],
+                               take_commands=self._take_commands, publish=self._publish,
+                               log=self._log)
+        self.stats = self.loop.stats
+        if self.lockstep:
+            self.stats.nominal = None      # lockstep has no wall period to jitter around
+        self.rejected = self.clipped = 0
         self.publish_failures = 0
         self.lockstep_repeats = 0
-        self.watchdog = 'waiting'          # waiting (no command yet) | ok | timeout
         self.failed = ''
         self.impacts = 0
-        self.start_wall = None
-        self.first_command_wall = None
         self.diag_window_start = time.monotonic()
         self.diag_published = 0
         self._stop = threading.Event()
@@ -228,9 +159,10 @@ class Simulator(Node):
     def _set_parameters(self, values):
         if 'max_effort' in values:
             self.arm.max_effort = values['max_effort']
-            self.applied = None           # re-clip the held command with the new limit
+            self.loop.watchdog.reapply()   # re-clip the held command with the new limit
         if 'command_timeout' in values:
             self.p['command_timeout'] = values['command_timeout']
+            self.loop.watchdog.timeout = values['command_timeout']
 
     def _command_reader(self, qos):
         """The command subscription of the realtime mode, on a helper node no executor spins:
@@ -272,117 +204,43 @@ class Simulator(Node):
         torques = [0.0] * self.arm.n
         for k, joint in enumerate(self.command_order):
             torques[joint] = values[k]
-        if self.commands == 0:
-            self.first_command_wall = now     # simulated time starts here
-        self.commands += 1
         self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
-        self.pending = (torques, now)
-        self.last_command = now
+        self.loop.command(torques, now)
         if self.lockstep and not self.failed:
-            self._lockstep_period(torques, now)
+            self._lockstep_period(now)
 
-    def _watchdog(self, now):
-        """Hold the latest command, or zero torque when it is too old."""
-        pending = self.pending
-        if pending is None:
-            self.watchdog = 'waiting'
-            self.arm.release()
-            return
-        if now - pending[1] > self.p['command_timeout']:
-            if self.watchdog != 'timeout':
-                self.get_logger().warning(
-                    f'no command for {self.p["command_timeout"]:g} s: torques zeroed')
-            self.watchdog = 'timeout'
-            self.arm.release()
-            self.applied = None
-            return
-        if self.watchdog == 'timeout':
-            self.get_logger().info('commands resumed')
-        self.watchdog = 'ok'
-        if pending is not self.applied:    # a held command is not applied again each period
-            self.arm.apply_checked(pending[0])    # checked on arrival (_on_command)
-            self.applied = pending
+    def _log(self, level, text):
+        getattr(self.get_logger(), level)(text)
 
     # -------------------------------------------------------------------------- stepping
-    def _step_and_publish(self):
-        """One period: its physics, then its sensor messages. Returns the monotonic times at
-        which each ended and the tick (its impact reports are still to be published), or None
-        when the simulation had to stop."""
+    def _stepping(self, period):
+        """Run ``period`` (a DriverLoop method); None when the simulation had to stop."""
         try:
-            tick = self.arm.step()
+            return period()
         except SimulationError as exc:
             self._fail(f'{exc} [state {exc.state.tolist() if exc.state is not None else "?"}, '
                        f'held torque {self.arm.command}]')
             return None
-        stepped = time.monotonic()
-        self._publish(tick)
-        return stepped, time.monotonic(), tick
 
     def _realtime_loop(self):
         try:
-            self._run_periods()
+            # The executor thread (diagnostics) and this one share the GIL; a thread waking
+            # from its sleep would otherwise wait up to the 5 ms default switch interval.
+            sys.setswitchinterval(5e-5)
+            self.scheduling = realtime_priority(self.p['thread_priority'])
+            while not self._stop.is_set() and not self.failed:
+                tick = self._stepping(self.loop.realtime_period)
+                if tick is not None:
+                    self._publish_impacts(tick)
         except Exception as exc:  # noqa: BLE001 - reported, and the node stops with an error
             self.get_logger().error(traceback.format_exc())
             self._fail(f'the stepping thread failed: {type(exc).__name__}: {exc}')
 
-    def _run_periods(self):
-        # The executor thread (commands, diagnostics) and this one share the GIL; a thread
-        # waking from its sleep would otherwise wait up to the 5 ms default switch interval.
-        sys.setswitchinterval(5e-5)
-        self.scheduling = realtime_priority(self.p['thread_priority'])
-        wall_period = 1.0 / (self.p['publish_rate'] * self.p['rate_factor'])
-        self.start_wall = start = time.monotonic()
-        k = 0
-        while not self._stop.is_set():
-            deadline = start + (k + 1) * wall_period
-            now = time.monotonic()
-            if deadline > now:
-                time.sleep(deadline - now)
-            woke = time.monotonic()
-            k += 1
-            self._take_commands(woke)
-            if self.pending is None and self.arm.periods == 0:
-                # brakes on until the first command: the arm holds its initial state and
-                # simulated time starts at 0 with the first command, as offline. (Timing
-                # statistics start with the motion: start-up hiccups are not the loop's.)
-                self._publish(self.arm.sample())
-                self.stats.published += 1
-                continue
-            self._watchdog(woke)
-            stepping = time.monotonic()
-            times = self._step_and_publish()
-            if times is None:
-                return
-            stepped, done, tick = times
-            # late if this period's publication happened after the next one was due
-            self.stats.add(done, done - woke, self.arm.t, done > deadline + wall_period,
-                           (stepping - woke, stepped - stepping, done - stepped))
+    def _lockstep_period(self, arrived):
+        tick = self._stepping(lambda: self.loop.lockstep_period(arrived, self.p['rate_factor']))
+        if tick is not None:
+            self.last_tick = (tick, self.stats.last_publish)
             self._publish_impacts(tick)
-
-    def _lockstep_period(self, torques, arrived):
-        self.arm.apply_checked(torques)     # checked on arrival (_on_command)
-        self.watchdog = 'ok'
-        woke = time.monotonic()
-        if self.start_wall is None:
-            self.start_wall = woke
-        taken = woke - arrived
-        factor = self.p['rate_factor']
-        if factor > 0:  # paced: never ahead of rate_factor x wall time
-            due = self.start_wall + (self.arm.periods + 1) / (self.p['publish_rate'] * factor)
-            if due > woke:
-                time.sleep(due - woke)
-                woke = time.monotonic()
-        times = self._step_and_publish()
-        if times is None:
-            return
-        stepped, done, tick = times
-        # the wait is what the controller and the transport take (the exchange's round trip)
-        last = self.stats.last_publish
-        self.stats.add(done, done - woke, self.arm.t, False,
-                       (taken, stepped - woke, done - stepped,
-                        arrived - last if last is not None else 0.0))
-        self.last_tick = (tick, done)
-        self._publish_impacts(tick)
 
     def _repeat_unanswered(self):
         """Lockstep waits for a command after each period. Before the first one, the initial
@@ -392,12 +250,13 @@ class Simulator(Node):
         so one that was merely slow ignores the repeat."""
         if self.failed:
             return
-        if self.commands == 0:
+        if self.loop.commands == 0:
             self._publish(self.arm.sample())
             return
         tick, published = self.last_tick
         now = time.monotonic()
-        if now - published > LOCKSTEP_REPEAT_S and now - self.last_command > LOCKSTEP_REPEAT_S \
+        last_command = self.loop.watchdog.last_command
+        if now - published > LOCKSTEP_REPEAT_S and now - last_command > LOCKSTEP_REPEAT_S \
                 and self.command_sub.get_publisher_count() > 0:   # not once the controller left
             self.lockstep_repeats += 1
             self.get_logger().warning(
@@ -445,12 +304,7 @@ class Simulator(Node):
     # ------------------------------------------------------------------------ diagnostics
     def _publish_diagnostics(self):
         now = time.monotonic()
-        if not self.lockstep and self.watchdog == 'ok' and self.pending is not None and \
-                now - self.pending[1] > self.p['command_timeout']:
-            self.watchdog = 'timeout'   # the loop will zero the torque on its next period
-        if self.lockstep and self.last_command is not None and \
-                now - self.last_command > self.p['command_timeout']:
-            self.watchdog = 'timeout'
+        watchdog = self.loop.watchdog.status(now)
         intervals, computes = self.stats.take()
         window = now - self.diag_window_start
         self.diag_window_start = now
@@ -463,15 +317,16 @@ class Simulator(Node):
         integ = self.arm.integrator.stats
         if self.failed:
             level, message = DiagnosticStatus.ERROR, f'stopped: {self.failed}'
-        elif self.watchdog == 'timeout':
+        elif watchdog == 'timeout':
             level, message = DiagnosticStatus.WARN, (
                 f'no command for more than {self.p["command_timeout"]:g} s: torques zeroed'
                 + (' (lockstep paused)' if self.lockstep else ''))
-        elif self.watchdog == 'waiting':
+        elif watchdog == 'waiting':
             level, message = DiagnosticStatus.WARN, 'waiting for the first command (zero torque)'
         else:
             level, message = DiagnosticStatus.OK, 'running'
-        elapsed = now - self.start_wall if self.start_wall else 0.0
+        start, first_command = self.loop.start_wall, self.loop.first_command_wall
+        elapsed = now - start if start else 0.0
         run_p50, run_p99 = self.stats.run_percentiles(50, 99)
         part_means = self.stats.part_means()
         values = {
@@ -502,16 +357,16 @@ class Simulator(Node):
             # and the worst period's (is it the physics of an impact, or a stall?)
             **{f'compute_worst_{part}_us': f'{t * 1e6:.1f}' for part, t in
                zip(PERIOD_PARTS, self.stats.worst_parts)},
-            'watchdog': self.watchdog,
+            'watchdog': watchdog,
             'scheduling': self.scheduling,
-            'commands': str(self.commands),
+            'commands': str(self.loop.commands),
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
             'publish_failures': str(self.publish_failures),
             **({'lockstep_repeats': str(self.lockstep_repeats)} if self.lockstep else {}),
             'sim_time': f'{self.arm.t:.6f}',
-            'real_time_factor': f'{self.arm.t / (now - self.first_command_wall):.3f}'
-            if self.first_command_wall and now > self.first_command_wall else '0',
+            'real_time_factor': f'{self.arm.t / (now - first_command):.3f}'
+            if first_command and now > first_command else '0',
             'impacts': str(self.impacts),
             'rhs_evaluations': str(integ.rhs_evaluations),
             'steps': str(integ.steps),

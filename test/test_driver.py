@@ -1,0 +1,136 @@
+"""The ROS-free driver loop (core/realtime.py) on a fake clock: pacing, watchdog, statistics.
+
+The arm is the real ``SimulatedArm`` of the article's scene; only the wall clock is fake, so
+every timing below is exact and nothing depends on the machine's load."""
+import pytest
+
+from impact_arm.core.driver import SimulatedArm
+from impact_arm.core.realtime import DriverLoop
+from impact_arm.core.scene import load_scene, resolve_scene_path
+
+RATE = 1000.0
+P = 1.0 / RATE
+
+
+class FakeClock:
+    """Wall time that moves only when the loop sleeps or a step 'costs' time."""
+
+    def __init__(self):
+        self.now = 100.0
+        self.sleeps = []
+        self.cost = {}        # period index -> wall seconds its physics takes
+
+    def __call__(self):
+        return self.now
+
+    def sleep(self, seconds):
+        self.sleeps.append(seconds)
+        self.now += seconds
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return load_scene(resolve_scene_path('paper'))
+
+
+def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.1):
+    """A loop whose queued commands come from ``commands`` (wall time -> torques)."""
+    arm = SimulatedArm(scene, RATE, max_effort=5000.0, trace=False)
+    step = arm.step
+
+    def costly_step():
+        clock.now += clock.cost.get(arm.periods, 0.0)
+        return step()
+    arm.step = costly_step
+
+    def take(now):
+        for when in sorted(k for k in list(commands or {}) if k <= now):
+            loop.command(commands.pop(when), when)
+    loop = DriverLoop(arm, wall_period=P, command_timeout=timeout, take_commands=take,
+                      publish=(published if published is not None else []).append,
+                      log=lambda level, text: (logs if logs is not None else []).append(text),
+                      clock=clock, sleep=clock.sleep)
+    return loop
+
+
+def test_brakes_on_until_the_first_command_then_paced_by_the_wall_clock(scene):
+    clock, published = FakeClock(), []
+    loop = make_loop(scene, clock, {100.0035: [1.0, 0.0]}, published)
+    for _ in range(3):
+        assert loop.realtime_period() is None          # held, stamp 0, not stepped
+    assert [tick.t for tick in published] == [0.0, 0.0, 0.0]
+    assert loop.arm.periods == 0 and loop.watchdog.state == 'waiting'
+    ticks = [loop.realtime_period() for _ in range(5)]
+    # simulated time starts with the first command, one period per wall period
+    assert [round(t.t * RATE) for t in ticks] == [1, 2, 3, 4, 5]
+    assert clock.now == pytest.approx(100.0 + 8 * P)
+    assert all(s == pytest.approx(P) for s in clock.sleeps)
+    assert loop.first_command_wall == 100.0035 and loop.commands == 1
+    assert loop.arm.command == [1.0, 0.0] and loop.watchdog.state == 'ok'
+    assert loop.stats.overruns == 0 and loop.stats.published == 8
+
+
+def test_watchdog_zeroes_the_torque_when_commands_stop_and_resumes(scene):
+    clock, logs = FakeClock(), []
+    loop = make_loop(scene, clock, {100.0: [3.0, -2.0]}, logs=logs, timeout=0.01)
+    for _ in range(9):
+        loop.realtime_period()
+    assert loop.arm.command == [3.0, -2.0]
+    loop.realtime_period()
+    loop.realtime_period()                              # 11 ms after the command
+    assert loop.watchdog.state == 'timeout' and loop.arm.command == [0.0, 0.0]
+    assert logs == ['no command for 0.01 s: torques zeroed']
+    loop.command([1.0, 1.0], clock.now)
+    loop.realtime_period()
+    assert loop.watchdog.state == 'ok' and loop.arm.command == [1.0, 1.0]
+    assert logs[-1] == 'commands resumed'
+
+
+def test_watchdog_status_reports_a_timeout_before_the_loop_runs_again(scene):
+    clock = FakeClock()
+    loop = make_loop(scene, clock, {100.0: [0.0, 0.0]})
+    loop.realtime_period()
+    assert loop.watchdog.status(clock.now + 0.05) == 'ok'
+    assert loop.watchdog.status(clock.now + 0.2) == 'timeout'
+
+
+def test_effort_limit_clips_the_held_command(scene):
+    clock = FakeClock()
+    loop = make_loop(scene, clock, {100.0: [9000.0, -9000.0]})
+    loop.realtime_period()
+    assert loop.arm.command == [5000.0, -5000.0]
+    loop.arm.max_effort = 100.0
+    loop.watchdog.reapply()
+    loop.realtime_period()
+    assert loop.arm.command == [100.0, -100.0]
+
+
+def test_a_slow_period_is_an_overrun_with_its_split(scene):
+    clock = FakeClock()
+    loop = make_loop(scene, clock, {100.0: [0.0, 0.0]})
+    clock.cost[3] = 2.5 * P                             # period 4's physics takes 2.5 ms
+    for _ in range(6):
+        loop.realtime_period()
+    stats = loop.stats
+    # the late period, and the next one, run at once after it (bursting through the schedule)
+    assert stats.overruns == 2
+    assert stats.worst_compute == pytest.approx(2.5 * P)
+    assert stats.worst_compute_t == pytest.approx(4 * P)
+    commands, physics, publish = stats.worst_parts
+    assert physics == pytest.approx(2.5 * P) and commands == publish == 0.0
+    assert stats.jitter_max == pytest.approx(2.5 * P)
+
+
+def test_lockstep_paced_never_ahead_of_the_rate_factor(scene):
+    clock, published = FakeClock(), []
+    loop = make_loop(scene, clock, published=published)
+    for k in range(4):
+        loop.command([0.0, 0.0], clock.now)
+        loop.lockstep_period(clock.now, rate_factor=0.5)   # 2 wall ms per period
+    assert clock.now == pytest.approx(100.0 + 4 * 2 * P)
+    assert [round(t.t * RATE) for t in published] == [1, 2, 3, 4]
+    clock2 = FakeClock()
+    free = make_loop(scene, clock2)
+    free.command([0.0, 0.0], clock2.now)
+    free.lockstep_period(clock2.now, rate_factor=0.0)
+    assert clock2.sleeps == [] and free.arm.periods == 1
