@@ -13,7 +13,7 @@ from impact_arm.core.model import ArmModel
 
 from scenes import scene_from
 
-TEMPLATE = os.path.join(os.path.dirname(__file__), '..', 'impact_arm', 'kernel_template.py')
+TEMPLATE = os.path.join(os.path.dirname(__file__), '..', 'impact_arm', 'core', 'kernel_template.py')
 HERTZ_FLOOR = [{'height': -1.0, 'law': 'hertz', 'mu': 0.0, 'material': 'steel'}]
 
 

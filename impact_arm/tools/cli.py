@@ -98,17 +98,21 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
 # Sub-commands implemented in their own modules: ``add_arguments(parser)`` and
 # ``cli(args) -> int``. Only the selected one is imported, so `simulate` never loads rclpy.
 COMMANDS = {
-    'run': ('runner', 'start simulator, controller and recorder over DDS; record to MCAP'),
-    'replay': ('..nodes.replay', 'republish a recorded MCAP file with its original timing'),
-    'analyze': ('analysis', 'impact table, limit cycle, Poincare sections and figures'),
-    'bench': ('benchmarks', 'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
+    'run': ('impact_arm.tools.runner',
+            'start simulator, controller and recorder over DDS; record to MCAP'),
+    'replay': ('impact_arm.nodes.replay',
+               'republish a recorded MCAP file with its original timing'),
+    'analyze': ('impact_arm.tools.analysis',
+                'impact table, limit cycle, Poincare sections and figures'),
+    'bench': ('impact_arm.tools.benchmarks',
+              'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
 
 
 def _attach(parser, module):
     import importlib
     try:
-        mod = importlib.import_module(f'.{module}', __package__)  # '..nodes.replay' too
+        mod = importlib.import_module(module)
     except ModuleNotFoundError as exc:
         if exc.name and exc.name.startswith('impact_arm'):
             parser.set_defaults(func=lambda args: _missing(parser.prog))
