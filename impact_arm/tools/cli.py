@@ -63,6 +63,13 @@ def cmd_simulate(args) -> int:
     return 1 if result.error else 0
 
 
+def cmd_urdf(args) -> int:
+    from ..core.scene import load_scene
+    from ..io.urdf import robot_description
+    sys.stdout.write(robot_description(load_scene(args.scene)))
+    return 0
+
+
 def _write_json(path, data):
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
@@ -87,6 +94,10 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
     p.add_argument('--json', metavar='FILE', help='write impacts and run summary as JSON')
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser('urdf', help="print the scene's robot description (URDF)")
+    p.add_argument('--scene', default=DEFAULT_SCENE, help='scene file or installed scene name')
+    p.set_defaults(func=cmd_urdf)
 
     for name, (module, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text)
