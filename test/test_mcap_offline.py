@@ -38,20 +38,27 @@ def test_topics_types_and_counts(offline):
         got = {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
     n, k = len(result.samples), len(result.impacts)
     assert n > 1000 and k == 15
+    n_tf = got['/tf'][1]
+    assert n_tf == pytest.approx(result.samples[-1].t * 100, abs=1.5)  # default tf_rate
     assert got == {'/joint_states': (TOPICS['/joint_states'], n),
                    '/contact_wrench': (TOPICS['/contact_wrench'], n),
                    '/impact_report': (TOPICS['/impact_report'], k),
-                   TRACE_TOPIC: (TOPICS[TRACE_TOPIC], k)}
+                   TRACE_TOPIC: (TOPICS[TRACE_TOPIC], k),
+                   '/robot_description': ('std_msgs/msg/String', 1),
+                   '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
+                   '/tf': ('tf2_msgs/msg/TFMessage', n_tf),
+                   '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf)}
 
 
 def test_field_values_equal_what_the_run_computed(offline):
     path, scene, result = offline
     js, ws, reports, traces = [], [], [], []
     with AnyReader([Path(path)]) as reader:
-        for con, t, raw in reader.messages():
-            msg = reader.deserialize(raw, con.msgtype)
-            {'/joint_states': js, '/contact_wrench': ws, '/impact_report': reports,
-             TRACE_TOPIC: traces}[con.topic].append((t, msg))
+        wanted = {'/joint_states': js, '/contact_wrench': ws, '/impact_report': reports,
+                  TRACE_TOPIC: traces}
+        for con, t, raw in reader.messages([c for c in reader.connections
+                                            if c.topic in wanted]):
+            wanted[con.topic].append((t, reader.deserialize(raw, con.msgtype)))
     for (t, m), s in zip(js, result.samples):
         assert t == sim_time_ns(s.t) == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
         assert list(m.name) == ['joint1', 'joint2']
@@ -92,8 +99,10 @@ def test_metadata_scene_and_summary_indexes(offline):
     assert run_summary['impacts'] == 15 and meta['run']['error'] == ''
     assert math.isclose(run_summary['t_end'], result.t_end)
     bag = yaml.safe_load(meta['rosbag2']['serialized_metadata'])
+    n_tf = summary.statistics.channel_message_counts[next(
+        c.id for c in summary.channels.values() if c.topic == '/tf')]
     assert bag['message_count'] == summary.statistics.message_count == \
-        2 * len(result.samples) + 2 * 15
+        2 * len(result.samples) + 2 * 15 + 2 + 2 * n_tf   # + description, static, tf, markers
     assert summary.chunk_indexes and all(c.message_index_offsets for c in summary.chunk_indexes)
 
 

@@ -21,7 +21,8 @@ from typing import Optional
 
 
 def message_class(type_name: str):
-    """The Python class of ``pkg/msg/Type`` (also accepts ``pkg/Type``), imported lazily."""
+    """The Python class of ``pkg/msg/Type`` (also accepts ``pkg/Type``), imported lazily;
+    for a type of ``STAND_INS`` whose package is not installed, the stand-in class."""
     parts = type_name.split('/')
     if len(parts) == 2:
         parts = [parts[0], 'msg', parts[1]]
@@ -30,7 +31,53 @@ def message_class(type_name: str):
     try:
         return getattr(importlib.import_module(f'{parts[0]}.{parts[1]}'), parts[2])
     except (ImportError, AttributeError) as e:
+        stand_in = STAND_INS.get('/'.join(parts))
+        if stand_in is not None:
+            return stand_in()
         raise ValueError(f'message type {type_name!r} is not installed: {e}') from None
+
+
+def has_type_support(cls) -> bool:
+    """Whether rclpy can publish or subscribe ``cls`` (a stand-in class cannot)."""
+    return not getattr(cls, 'STAND_IN', False)
+
+
+_STAND_IN_CLASSES: dict = {}
+
+
+def _tf_message():
+    """tf2_msgs/msg/TFMessage (``geometry_msgs/TransformStamped[] transforms``) for machines
+    without tf2_msgs: there is no PyPI wheel of it, yet every recording must store /tf with
+    its full definition. Its only field's type comes from the installed geometry_msgs, so
+    ``message_definition``, ``serialize_cdr`` and ``deserialize_cdr`` treat it like an
+    installed class; rclpy cannot (no type support), which ``has_type_support`` tells."""
+    cls = _STAND_IN_CLASSES.get('tf2_msgs/msg/TFMessage')
+    if cls is None:
+        from rosidl_parser import definition as d
+
+        class TFMessage:
+            STAND_IN = True
+            __slots__ = ('transforms',)
+            SLOT_TYPES = (d.UnboundedSequence(
+                d.NamespacedType(['geometry_msgs', 'msg'], 'TransformStamped')),)
+
+            @classmethod
+            def get_fields_and_field_types(cls):
+                return {'transforms': 'sequence<geometry_msgs/TransformStamped>'}
+
+            def __init__(self, transforms=()):
+                self.transforms = list(transforms)
+
+            def __eq__(self, other):
+                return type(other) is type(self) and other.transforms == self.transforms
+
+        TFMessage.__module__ = 'tf2_msgs.msg'
+        cls = _STAND_IN_CLASSES.setdefault('tf2_msgs/msg/TFMessage', TFMessage)
+    return cls
+
+
+# types every recording needs whose Python package may be missing (builders of stand-ins)
+STAND_INS = {'tf2_msgs/msg/TFMessage': _tf_message}
 
 
 def type_name_of(msg_or_class) -> str:

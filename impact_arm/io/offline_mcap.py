@@ -37,6 +37,11 @@ t [s]; phase 1 elastic, 2 elasto-plastic, 3 restitution; delta = penetration [m]
 F_f friction force [N]; v_x, v_y tip velocity [m/s]; T1 … TN link kinetic energies [J]. The k-th
 trace belongs to the k-th report.
 
+``/robot_description``, ``/tf_static`` (once, at t = 0), ``/tf`` and ``/impact_markers`` (at
+``tf_rate`` of simulated time, on the joint-state samples): the arm in 3D, see
+io/scene_visuals.py. /tf is tf2_msgs/msg/TFMessage with its full definition even where the
+tf2_msgs package is absent.
+
 Stored with the messages
 ------------------------
 metadata ``impact_arm``: version, ros_distro, node ``offline``, mode ``offline``, control
@@ -54,6 +59,8 @@ from __future__ import annotations
 import json
 import math
 import os
+
+from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 
 TRACE_TOPIC = '/impact_trace'
 TRACE_TYPE = 'std_msgs/msg/Float64MultiArray'
@@ -107,7 +114,8 @@ class OfflineRecorder:
     scene's). ``flush_interval``: seconds of wall time between automatic flushes."""
 
     def __init__(self, path, scene, *, control_rate=None, preset=None,
-                 flush_interval: float = 0.5, compression: str = 'zstd'):
+                 flush_interval: float = 0.5, compression: str = 'zstd',
+                 tf_rate: float = DEFAULT_TF_RATE):
         from geometry_msgs.msg import WrenchStamped
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
@@ -138,7 +146,7 @@ class OfflineRecorder:
             'control_rate_hz': repr(float(rate)), 'publish_rate_hz': repr(scene.publish_rate),
             'preset': preset or scene.integrator.preset, 'scene_name': scene.name,
             'time': 'simulated (log time = header stamp = sim time)',
-            'trace_columns': ','.join(self._columns),
+            'trace_columns': ','.join(self._columns), 'tf_rate_hz': repr(float(tf_rate)),
             'topics': json.dumps(list(TOPICS))})
         text = scene.source_text or ''
         scene_file = os.path.basename(scene.source_path) if scene.source_path else \
@@ -147,6 +155,7 @@ class OfflineRecorder:
                                            if scene.source_path else '', 'yaml': text})
         self.writer.add_attachment(scene_file, text.encode('utf-8'), 'application/yaml',
                                    log_time_ns=0, create_time_ns=0)
+        self.visuals = VisualsWriter(self.writer, scene, tf_rate)
         self.writer.flush()
         self._closed = False
 
@@ -168,6 +177,7 @@ class OfflineRecorder:
         self.writer.write_message('/contact_wrench', ws, t_ns, t_ns)
         self.counts['/joint_states'] += 1
         self.counts['/contact_wrench'] += 1
+        self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record, trace_rows):
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])
@@ -176,6 +186,7 @@ class OfflineRecorder:
         self.writer.write_message(TRACE_TOPIC, self.trace_message(trace_rows), t_ns, t_ns)
         self.counts['/impact_report'] += 1
         self.counts[TRACE_TOPIC] += 1
+        self.visuals.impact(record)
         self.writer.flush()  # an impact is never lost, whatever happens later
 
     def trace_message(self, rows):

@@ -36,6 +36,7 @@ from rclpy.parameter import Parameter
 
 from ..core.errors import ImpactArmError
 from ..io.mcap_ros2 import TopicQos, contract_qos, message_class
+from ..io.msgdefs import has_type_support
 from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
 
@@ -97,8 +98,13 @@ class Replay(Node):
                 (q.reliability, q.durability) == (info.qos[0].reliability,
                                                   info.qos[0].durability)
                 for q in info.qos) else contract_qos(topic, TopicQos())
-            self.publishers_[topic] = self.create_publisher(
-                message_class(info.type_name), topic, qos.to_rclpy(min_depth=10))
+            cls = message_class(info.type_name)
+            if not has_type_support(cls):   # /tf without tf2_msgs: rclpy cannot publish it
+                self.get_logger().info(f'not replaying {topic}: {info.type_name} is not '
+                                       f'installed here')
+                continue
+            self.publishers_[topic] = self.create_publisher(cls, topic,
+                                                            qos.to_rclpy(min_depth=10))
         self.clock_pub = None
         if clock:
             from rosgraph_msgs.msg import Clock

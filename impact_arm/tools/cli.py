@@ -39,7 +39,7 @@ def cmd_simulate(args) -> int:
     if args.mcap:
         from ..io.offline_mcap import OfflineRecorder
         observer = OfflineRecorder(args.mcap, scene, control_rate=args.control_rate,
-                                   preset=args.preset)
+                                   preset=args.preset, tf_rate=args.tf_rate)
 
     def progress(cycle, cycles, impacts, t):
         if sys.stderr.isatty():
@@ -93,6 +93,8 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
                    help="integrator preset (default: the scene's)")
     p.add_argument('--json', metavar='FILE', help='write impacts and run summary as JSON')
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
+    p.add_argument('--tf-rate', type=_positive, default=100.0, metavar='HZ',
+                   help='rate of /tf and /impact_markers in the MCAP file (default 100)')
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser('urdf', help="print the scene's robot description (URDF)")
