@@ -20,6 +20,9 @@ setup(
     # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
     install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib',
                       'numba'],
+    # studies (impact-arm sweep): Parquet tables and the Dask scheduler; imported lazily, so
+    # the nodes and `simulate` never load them
+    extras_require={'studies': ['pyarrow', 'dask[distributed]']},
     zip_safe=True,
     maintainer='impact_arm developers',
     maintainer_email='impact-arm@example.com',

@@ -320,15 +320,20 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
         publish_rate=raw['publish_rate'], integrator=integ, source_text=text, source_path=path)
 
 
-def load_scene(path: str | os.PathLike) -> Scene:
-    """Read and validate a scene file; raises ``SceneError`` with a user-facing message."""
-    path = resolve_scene_path(path)
+def read_scene_file(name: str | os.PathLike) -> tuple[str, str]:
+    """(text, path) of a scene file given by path or installed name."""
+    path = str(resolve_scene_path(name))
     try:
         with open(path, encoding='utf-8') as f:
-            text = f.read()
+            return f.read(), path
     except OSError as exc:
         raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}") from None
-    return scene_from_text(text, origin=str(path), path=str(path))
+
+
+def load_scene(path: str | os.PathLike) -> Scene:
+    """Read and validate a scene file; raises ``SceneError`` with a user-facing message."""
+    text, path = read_scene_file(path)
+    return scene_from_text(text, origin=path, path=path)
 
 
 class _SceneLoader(yaml.SafeLoader):
@@ -344,12 +349,17 @@ _SceneLoader.add_implicit_resolver(
     list('-+0123456789'))
 
 
-def scene_from_text(text: str, origin: str = '<scene>', path: str = '') -> Scene:
+def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
+    """The scene's YAML as plain data, not yet validated (studies change values in it).
+    Also reads sweep specs (``what``), with the same reading of 210e9 as a number."""
     try:
-        data = yaml.load(text, Loader=_SceneLoader)
+        return yaml.load(text, Loader=_SceneLoader)
     except yaml.YAMLError as exc:
-        raise SceneError(f"scene '{origin}': not valid YAML: {exc}") from None
-    return parse_scene(data, origin=origin, text=text, path=path)
+        raise SceneError(f"{what} '{origin}': not valid YAML: {exc}") from None
+
+
+def scene_from_text(text: str, origin: str = '<scene>', path: str = '') -> Scene:
+    return parse_scene(scene_data(text, origin), origin=origin, text=text, path=path)
 
 
 def with_overrides(scene: Scene, **changes) -> Scene:

@@ -51,8 +51,8 @@ class RunResult:
         contact_times = [i['t_contact'] for i in imp]
         q = np.array([s.q for s in self.samples]) if self.samples else np.zeros((0, 2))
         model_tip = getattr(self, '_tip_velocities', None)
-        vx = [v[0] for v in model_tip] if model_tip else [0.0]
-        vy = [v[1] for v in model_tip] if model_tip else [0.0]
+        vx = [v[0] for v in model_tip or ()]
+        vy = [v[1] for v in model_tip or ()]
 
         def deg_range(col):
             return [math.degrees(q[:, col].min()), math.degrees(q[:, col].max())] if len(q) else []
@@ -62,8 +62,8 @@ class RunResult:
             'period_last': contact_times[-1] - contact_times[-2] if len(imp) > 1 else None,
             'q1_range_deg': deg_range(0),
             'q2_range_deg': deg_range(1),
-            'vx_range': [min(vx), max(vx)],
-            'vy_range': [min(vy), max(vy)],
+            'vx_range': [min(vx), max(vx)] if model_tip else [],
+            'vy_range': [min(vy), max(vy)] if model_tip else [],
             'rhs_evaluations': self.rhs_evaluations,
             'wall_time': self.wall_time,
         }
@@ -292,10 +292,25 @@ def format_table(result: RunResult) -> str:
     return '\n'.join(lines)
 
 
-def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None,
-               method=None, contact_rtol=None):
+@dataclass
+class EventRun:
+    """A run on the event-only path: impact records, no samples."""
+    impacts: list
+    t_end: float
+    integrator: PhaseIntegrator
+    wall_time: float
+    exception: SimulationError | None = None    # what ended the run early; impacts before kept
+
+    @property
+    def error(self) -> str:
+        return str(self.exception) if self.exception else ''
+
+
+def run_impacts(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None,
+                method=None, contact_rtol=None) -> EventRun:
     """The scene's cycles with continuous control and no sampled output: the integrator runs
-    from event to event. What benchmarks time. Returns (impacts, t_end, integrator, wall)."""
+    from event to event. A simulation error ends the run and is returned with the impacts
+    completed before it (studies record it as a row, never as the end of the study)."""
     model = ArmModel(scene)
     spec = scene.integrator
     options = options_from_spec(spec, preset, rtol, atol, contact_rtol)
@@ -305,10 +320,37 @@ def run_events(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None
     integ = PhaseIntegrator(model, **options)
     builder = ImpactBuilder(model)
     cycles = 0
+    failure = None
     wall0 = time.perf_counter()
-    while integ.state.t < scene.t_max and (not scene.cycles or cycles < scene.cycles):
-        # a cycle ends at a switch: the kernel crosses the impact's phases by itself
-        for event in integ.advance(scene.t_max, stop_at_event=('switch',)):
-            cycles += event.kind == 'switch'
-            builder.feed(event)
-    return builder.impacts, integ.state.t, integ, time.perf_counter() - wall0
+    try:
+        while integ.state.t < scene.t_max and (not scene.cycles or cycles < scene.cycles):
+            # a cycle ends at a switch: the kernel crosses the impact's phases by itself
+            for event in integ.advance(scene.t_max, stop_at_event=('switch',)):
+                cycles += event.kind == 'switch'
+                builder.feed(event)
+    except SimulationError as exc:
+        failure = exc
+    return EventRun(builder.impacts, integ.state.t, integ, time.perf_counter() - wall0, failure)
+
+
+def run_without_samples(scene: Scene, *, preset=None) -> RunResult:
+    """``run`` on the event-only path (continuous control): impacts and the run's totals, no
+    samples, no traces; what ``simulate --no-samples`` prints."""
+    events = run_impacts(scene, preset=preset)
+    cycles_done = scene.cycles and events.t_end < scene.t_max and not events.error
+    result = RunResult(
+        scene=scene, impacts=events.impacts, t_end=events.t_end,
+        rhs_evaluations=events.integrator.stats.rhs_evaluations, wall_time=events.wall_time,
+        stopped='error' if events.error else f'{scene.cycles} cycles completed' if cycles_done
+        else f't_max = {scene.t_max:g} s reached', error=events.error)
+    result.integrator = events.integrator
+    return result
+
+
+def run_events(scene: Scene, **options):
+    """``run_impacts`` for benchmarks and tests: a simulation error is raised. Returns
+    (impacts, t_end, integrator, wall)."""
+    result = run_impacts(scene, **options)
+    if result.exception:
+        raise result.exception
+    return result.impacts, result.t_end, result.integrator, result.wall_time

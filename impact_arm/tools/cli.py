@@ -35,6 +35,8 @@ def cmd_simulate(args) -> int:
     from ..core.simulate import format_table, run
 
     scene = load_scene(args.scene)
+    if args.no_samples:
+        return _simulate_without_samples(scene, args)
     observer = None
     if args.mcap:
         from ..io.offline_mcap import OfflineRecorder
@@ -70,6 +72,21 @@ def cmd_urdf(args) -> int:
     return 0
 
 
+def _simulate_without_samples(scene, args) -> int:
+    from ..core.simulate import format_table, run_without_samples
+    rate = scene.controller.rate if args.control_rate is None else args.control_rate
+    if rate or args.mcap:
+        what = '--mcap' if args.mcap else f'a sampled controller ({rate:g} Hz)'
+        raise ImpactArmError(f'--no-samples runs from event to event with continuous control: '
+                             f'{what} needs the sampled run (drop --no-samples'
+                             + (', or pass --control-rate 0)' if rate else ')'))
+    result = run_without_samples(scene, preset=args.preset)
+    print(format_table(result))
+    if args.json:
+        _write_json(args.json, result.to_json())
+    return 1 if result.error else 0
+
+
 def _write_json(path, data):
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
@@ -95,6 +112,9 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
     p.add_argument('--tf-rate', type=_positive, default=100.0, metavar='HZ',
                    help='rate of /tf and /impact_markers in the MCAP file (default 100)')
+    p.add_argument('--no-samples', action='store_true',
+                   help='impacts only: integrate from event to event without sampling or '
+                        'tracing (the fast path of studies; continuous control)')
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser('urdf', help="print the scene's robot description (URDF)")
@@ -117,6 +137,8 @@ COMMANDS = {
                'republish a recorded MCAP file with its original timing'),
     'analyze': ('impact_arm.tools.analysis',
                 'impact table, limit cycle, Poincare sections and figures'),
+    'sweep': ('impact_arm.tools.sweep',
+              'many runs of a scene (grid/list/random/LHS) to Parquet; sweep plot'),
     'bench': ('impact_arm.tools.benchmarks',
               'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }

@@ -1,0 +1,194 @@
+"""Studies: overrides by key path, the event-only run API, sweep specs, resumable Parquet
+tables, local worker processes and a real Dask cluster giving the same table."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from impact_arm.core.errors import SceneError
+from impact_arm.core.simulate import run_events
+from impact_arm.core.study import Study, apply_overrides, parse_key_path
+
+from scenes import scene_from
+
+pa = pytest.importorskip('pyarrow')
+from impact_arm.tools import sweep  # noqa: E402  (needs pyarrow: the studies extra)
+
+LOOSE = {'integrator.preset': 'fast', 'integrator.method': 'rosenbrock',
+         'integrator.rtol': 1e-2, 'integrator.atol': 1e-4, 'integrator.contact_rtol': 3e-4}
+LOOSE_NESTED = {('integrator',): {'preset': 'fast', 'method': 'rosenbrock', 'rtol': 1e-2,
+                                  'atol': 1e-4, 'contact_rtol': 3e-4}}
+
+
+def test_key_paths_and_overrides_change_only_their_value():
+    assert parse_key_path('surfaces[0].mu') == ['surfaces', 0, 'mu']
+    assert parse_key_path('materials.steel.E') == ['materials', 'steel', 'E']
+    base = {'surfaces': [{'mu': 0.2, 'law': 'hertz'}], 'controller': {'kp': [1.0, 2.0]}}
+    out = apply_overrides(base, {'surfaces[0].mu': 0.5, 'controller.kp[1]': 7.0,
+                                 'integrator.rtol': 1e-3})
+    assert out == {'surfaces': [{'mu': 0.5, 'law': 'hertz'}], 'controller': {'kp': [1.0, 7.0]},
+                   'integrator': {'rtol': 1e-3}}
+    assert base == {'surfaces': [{'mu': 0.2, 'law': 'hertz'}],
+                    'controller': {'kp': [1.0, 2.0]}}            # the base is not touched
+    for bad, message in (('surfaces[3].mu', 'surfaces has 1 entries'),
+                         ('controller.kp.x', 'controller.kp is not a mapping'),
+                         ('surfaces..mu', 'not a key path')):
+        with pytest.raises(SceneError, match=message.replace('[', r'\[')):
+            apply_overrides(base, {bad: 1.0})
+
+
+def test_a_run_with_overrides_is_the_event_run_of_the_scene_they_describe():
+    study = Study('paper', LOOSE)
+    result = study.run({'surfaces[0].mu': 0.5, 'controller.kp': [800, 300], 'cycles': 4})
+    expected = run_events(scene_from({**LOOSE_NESTED, ('surfaces',): [
+        {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.5, 'v_d': 0.02, 'material': 'steel'}],
+        ('controller', 'kp'): [800.0, 300.0]}, cycles=4))[0]
+    assert not result.error and result.impacts == expected
+    assert result.summary['impacts'] == 4
+    assert result.summary['period'] == expected[3]['t_contact'] - expected[2]['t_contact']
+    assert result.summary['cor_kinematic'] == expected[3]['cor_kinematic']
+    # the override did something: the article's gains give another motion
+    assert study.run({'cycles': 4}).impacts != expected
+
+
+def test_refused_values_and_simulation_errors_are_results_not_exceptions():
+    study = Study('paper', LOOSE)
+    refused = study.run({'surfaces[0].mu': -1.0})
+    assert refused.error_kind == 'scene' and 'surfaces[0].mu = -1' in refused.error
+    assert refused.summary['impacts'] == 0
+    failed = study.run({'materials.steel.E': 1e13, 'cycles': 2})   # beyond the Etsion fit
+    assert failed.error_kind == 'simulation' and 'residual indentation fit' in failed.error
+
+
+def spec(tmp_path, **changes):
+    data = {'scene': 'paper', 'set': {**LOOSE, 'cycles': 3},
+            'parameters': {'surfaces[0].mu': {'grid': [0.1, 0.5, 3]},
+                           'controller.kp[0]': {'lhs': [400.0, 800.0]}},
+            'samples': 4, 'seed': 3}
+    data.update(changes)
+    return sweep.Spec(data, origin='test', base_dir=str(tmp_path))
+
+
+def test_spec_runs_are_the_grid_times_seeded_latin_hypercube_samples(tmp_path):
+    runs = spec(tmp_path).runs
+    assert len(runs) == 12
+    assert [r['surfaces[0].mu'] for r in runs[::4]] == [0.1, 0.30000000000000004, 0.5]
+    kp = [r['controller.kp[0]'] for r in runs[:4]]
+    # Latin hypercube: one draw in each quarter of the range
+    assert sorted(int((k - 400.0) / 100.0) for k in kp) == [0, 1, 2, 3]
+    assert spec(tmp_path).runs == runs and spec(tmp_path, seed=4).runs != runs
+    with pytest.raises(sweep.SpecError, match=r'parameters.cycles grid = \[1, 2\]'):
+        spec(tmp_path, parameters={'cycles': {'grid': [1, 2]}})
+    with pytest.raises(sweep.SpecError, match='seeds is not a known key'):
+        spec(tmp_path, seeds=1)
+
+
+def test_a_failing_run_is_a_row_and_the_sweep_goes_on(tmp_path):
+    s = spec(tmp_path, parameters={'surfaces[0].mu': {'list': [0.2, -1.0, 0.3]}})
+    stats = sweep.execute(s, str(tmp_path / 'out'), workers=0, show_progress=False)
+    assert stats == {**stats, 'runs': 3, 'ran': 3, 'failed': 1}
+    runs = sweep.read_table(str(tmp_path / 'out')).to_pydict()
+    assert runs['run'] == [0, 1, 2] and runs['impacts'] == [3, 0, 3]
+    assert 'surfaces[0].mu = -1' in runs['error'][1] and not runs['error'][0]
+    impacts = sweep.read_table(str(tmp_path / 'out'), 'impacts').to_pydict()
+    assert impacts['run'] == [0, 0, 0, 2, 2, 2] and impacts['surfaces[0].mu'][-1] == 0.3
+
+
+def without_wall(table):
+    return table.drop_columns(['wall_time']) if 'wall_time' in table.column_names else table
+
+
+def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp_path):
+    text = ('scene: paper\nset: {cycles: 3}\nparameters:\n'
+            '  controller.kp[0]: {grid: [400, 800, 40]}\n')
+    path = tmp_path / 'kill.yaml'
+    path.write_text(text)
+    out = tmp_path / 'kill.sweep'
+    child = subprocess.Popen([sys.executable, '-m', 'impact_arm.tools.cli', 'sweep', str(path),
+                              '--workers', '0', '--batch', '3'],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and child.poll() is None:
+        parts = [n for n in os.listdir(out / 'runs')] if (out / 'runs').exists() else []
+        if len([n for n in parts if n.endswith('.parquet')]) >= 2:
+            break
+        time.sleep(0.005)
+    child.send_signal(signal.SIGKILL)
+    child.wait()
+    before = sweep.read_table(str(out)).column('run').to_pylist()
+    assert 0 < len(before) < 40, 'the sweep ended before it could be killed halfway'
+    stats = sweep.execute(sweep.Spec.load(str(path)), str(out), workers=0,
+                          show_progress=False)
+    assert stats['skipped'] == len(before) and stats['ran'] == 40 - len(before)
+    runs = sweep.read_table(str(out))
+    assert runs.column('run').to_pylist() == list(range(40))
+    fresh = tmp_path / 'fresh'
+    sweep.execute(sweep.Spec.load(str(path)), str(fresh), workers=0, show_progress=False)
+    assert without_wall(runs).equals(without_wall(sweep.read_table(str(fresh))))
+    assert sweep.read_table(str(out), 'impacts').equals(
+        sweep.read_table(str(fresh), 'impacts'))
+
+
+def test_an_impacts_part_without_its_runs_part_is_redone_not_duplicated(tmp_path):
+    s = spec(tmp_path)
+    out = str(tmp_path / 'out')
+    sweep.execute(s, out, workers=0, batch=4, show_progress=False)
+    runs_dir = os.path.join(out, 'runs')
+    last = sorted(os.listdir(runs_dir))[-1]
+    os.remove(os.path.join(runs_dir, last))     # killed between the two renames
+    sweep.ResultStore(out, s)                   # opening the store drops the orphan
+    assert sorted(os.listdir(os.path.join(out, 'impacts'))) == sorted(os.listdir(runs_dir))
+    stats = sweep.execute(s, out, workers=0, show_progress=False)
+    assert stats['ran'] == 4
+    impacts = sweep.read_table(out, 'impacts').to_pydict()
+    assert len(impacts['run']) == 12 * 3
+    with pytest.raises(sweep.SpecError, match='another sweep spec'):
+        sweep.execute(spec(tmp_path, seed=9), out, workers=0, show_progress=False)
+
+
+def test_worker_processes_and_a_dask_cluster_give_the_local_table(tmp_path):
+    distributed = pytest.importorskip('distributed')
+    s = spec(tmp_path, samples=2)
+    local, pool, dask = (str(tmp_path / name) for name in ('local', 'pool', 'dask'))
+    sweep.execute(s, local, workers=0, show_progress=False)
+    sweep.execute(s, pool, workers=2, show_progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        sweep.execute(s, dask, cluster=cluster.scheduler_address, show_progress=False)
+    for table in ('runs', 'impacts'):
+        expected = without_wall(sweep.read_table(local, table))
+        assert expected.num_rows >= 6
+        for other in (pool, dask):
+            assert without_wall(sweep.read_table(other, table)).equals(expected), other
+
+
+def test_sweep_plot_writes_a_png(tmp_path):
+    s = spec(tmp_path, samples=2)
+    out = str(tmp_path / 'out')
+    sweep.execute(s, out, workers=0, show_progress=False)
+    path = sweep.plot(out, 'cor_kinematic', 'surfaces[0].mu', 'controller.kp[0]')
+    with open(path, 'rb') as f:
+        assert f.read(8) == b'\x89PNG\r\n\x1a\n'
+    with pytest.raises(sweep.SpecError, match="x 'mu' is not a column"):
+        sweep.plot(out, 'cor_kinematic', 'mu')
+
+
+def test_simulate_no_samples_prints_the_sampled_runs_impacts(tmp_path, capsys):
+    from impact_arm.core.scene import load_scene
+    from impact_arm.core.simulate import run
+    from impact_arm.tools.cli import main
+    out = tmp_path / 'fast.json'
+    assert main(['simulate', '--no-samples', '--preset', 'fast', '--json', str(out)]) == 0
+    import json
+    fast = json.loads(out.read_text())
+    sampled = run(load_scene('paper'), preset='fast')
+    assert fast['run']['impacts'] == 15 and fast['run']['q1_range_deg'] == []
+    for a, b in zip(fast['impacts'], sampled.impacts):
+        assert a['t_contact'] == pytest.approx(b['t_contact'], rel=1e-6)
+        assert a['F_max'] == pytest.approx(b['F_max'], rel=1e-4)   # rtol 1e-5 both
+    assert '15 cycles completed' in capsys.readouterr().out
+    assert main(['simulate', '--no-samples', '--control-rate', '500']) == 2
+    assert 'sampled controller (500 Hz)' in capsys.readouterr().err
