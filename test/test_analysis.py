@@ -47,6 +47,7 @@ def test_impact_table_is_exactly_the_simulated_one(article):
     assert rows in ana.stdout
     with open(d / 'out' / 'impact_table.txt', encoding='utf-8') as f:
         assert f.read().strip('\n') == rows
+    assert (d / 'out' / 'animation.gif').stat().st_size > 0   # analyze animates too
 
 
 def test_limit_cycle_and_poincare_sections(article):
@@ -142,7 +143,8 @@ def small_recording(path):
 def test_what_the_data_allows_compare_and_errors(article, tmp_path):
     d, _, _ = article
     small = small_recording(tmp_path / 'small.mcap')
-    ok = cli('analyze', small, '--out', tmp_path / 'cmp', '--compare', small, cwd=tmp_path)
+    ok = cli('analyze', small, '--out', tmp_path / 'cmp', '--compare', small,
+             '--no-animation', cwd=tmp_path)
     assert ok.returncode == 0, ok.stderr
     made = sorted(p.name for p in (tmp_path / 'cmp').glob('*.png'))
     assert made == sorted(FIGURES[:4])  # no scene: no Fig. 7; no traces: no Figs. 8-11

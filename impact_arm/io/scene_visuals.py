@@ -18,8 +18,8 @@ Each MarkerArray carries the whole picture (every surface, the arrow or its dele
 impact point so far), so a viewer that jumps to any time shows it right from one message.
 The arrow shows the strongest period-averaged contact force (the /contact_wrench value) seen
 since the previous MarkerArray, so a contact shorter than the marker period is never missed;
-its length grows with the force and saturates at the arm's reach (half of it at
-``ARROW_HALF_FORCE``), because impact forces span several decades.
+its length grows with the force towards the arm's reach (half of it at ``ARROW_HALF_FORCE``),
+because impact forces span several decades.
 """
 from __future__ import annotations
 
@@ -47,6 +47,12 @@ def tip_position(lengths, q) -> tuple:
     """(x, y) of the tip centre B for absolute link angles ``q`` (the model's kinematics)."""
     return (math.fsum(L * math.cos(a) for L, a in zip(lengths, q)),
             math.fsum(L * math.sin(a) for L, a in zip(lengths, q)))
+
+
+def arrow_length(force: float, reach: float) -> float:
+    """Length [m] drawn for a contact force [N]: half the reach at ``ARROW_HALF_FORCE``,
+    approaching the reach for far larger forces."""
+    return reach * force / (force + ARROW_HALF_FORCE)
 
 
 def _stamp(header, t_ns: int):
@@ -124,7 +130,7 @@ class SceneVisuals:
         else:
             magnitude, q, (f_t, f_n) = self._strongest
             x, y = tip_position(self.scene.lengths, q)   # the force acts on the tip B
-            length = 0.5 * self.reach * magnitude / (magnitude + ARROW_HALF_FORCE)
+            length = arrow_length(magnitude, self.reach)
             arrow.points = [self._Point(x=x, y=y),
                             self._Point(x=x + length * f_t / magnitude,
                                         y=y + length * f_n / magnitude)]

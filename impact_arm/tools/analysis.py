@@ -190,6 +190,8 @@ def add_arguments(parser):
                         help='simulated seconds per law for --laws (default 1.0, (0, 60])')
     parser.add_argument('--impact', type=int, default=1, metavar='K',
                         help='impact shown in Figures 8-11 (default 1, the first)')
+    parser.add_argument('--no-animation', action='store_true',
+                        help='skip animation.gif (impact-arm animate makes it alone)')
 
 
 def cli(args) -> int:
@@ -214,6 +216,12 @@ def cli(args) -> int:
     except OSError as e:
         raise AnalysisError(f'--out {out}: cannot create ({e.strerror})') from None
     written = write_outputs(run, others, out, args.impact, figures, progress=_progress)
+    if not args.no_animation and run.scene is not None:
+        from .animation import animate, contact_forces
+        gif = os.path.join(out, 'animation.gif')
+        _progress(f'animating to {gif}')
+        frames = animate(run, gif, contact_forces(args.file), progress=_progress)
+        print(f'animation: {gif} ({frames} frames)')
     print(f'impact table ({len(run.impacts)} impacts):')
     print(written['table'])
     lc = written['limit_cycle']

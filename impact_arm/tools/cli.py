@@ -139,6 +139,8 @@ COMMANDS = {
                 'impact table, limit cycle, Poincare sections and figures'),
     'sweep': ('impact_arm.tools.sweep',
               'many runs of a scene (grid/list/random/LHS) to Parquet; sweep plot'),
+    'animate': ('impact_arm.tools.animation',
+                'draw the arm, the surface and the contact force into a GIF or MP4'),
     'bench': ('impact_arm.tools.benchmarks',
               'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
