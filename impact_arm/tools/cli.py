@@ -141,6 +141,8 @@ COMMANDS = {
               'many runs of a scene (grid/list/random/LHS) to Parquet; sweep plot'),
     'animate': ('impact_arm.tools.animation',
                 'draw the arm, the surface and the contact force into a GIF or MP4'),
+    'study': ('impact_arm.tools.contact_study',
+              'shipped studies: contact (the contact laws against published results)'),
     'bench': ('impact_arm.tools.benchmarks',
               'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
