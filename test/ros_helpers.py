@@ -128,7 +128,7 @@ def _publish(args):
     import rclpy
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
-    from impact_arm.io.mcap_ros2 import contract_qos
+    from impact_arm.contract import qos as contract_qos
     rclpy.init()
     node = rclpy.create_node('test_publisher')
     js = node.create_publisher(JointState, '/joint_states',
@@ -170,7 +170,9 @@ def _publish(args):
 def _subscribe(args):
     """Print one JSON line per received message: topic, wall time, a value identifying it."""
     import rclpy
-    from impact_arm.io.mcap_ros2 import CONTRACT_TOPICS, contract_qos, message_class
+    from impact_arm.contract import TOPICS as CONTRACT_TOPICS
+    from impact_arm.contract import qos as contract_qos
+    from impact_arm.io.mcap_ros2 import message_class
     rclpy.init()
     node = rclpy.create_node('test_subscriber')
 

@@ -14,8 +14,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from impact_arm.io import mcap_ros2
-from impact_arm.io.mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
-                                  parse_qos_yaml)
+from impact_arm.contract import TOPICS as CONTRACT_TOPICS
+from impact_arm.contract import TopicQos
+from impact_arm.io.mcap_ros2 import RecordingError, Ros2McapWriter, parse_qos_yaml
 from impact_arm.io.msgdefs import message_class, message_definition, serialize_cdr
 
 TYPES = sorted({t for t, _ in CONTRACT_TOPICS.values()} | {'std_msgs/msg/Float64MultiArray'})

@@ -11,8 +11,10 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from impact_arm import __version__
-from impact_arm.io.offline_mcap import (OfflineRecorder, TOPICS, TRACE_TOPIC, from_joint_space,
-                                     sim_time_ns, to_joint_space, trace_columns)
+from impact_arm.contract import IMPACT_TRACE as TRACE_TOPIC
+from impact_arm.contract import to_absolute, to_joint_space
+from impact_arm.io.offline_mcap import OFFLINE_TOPICS as TOPICS
+from impact_arm.io.offline_mcap import OfflineRecorder, sim_time_ns, trace_columns
 from impact_arm.core.scene import load_scene
 from impact_arm.core.simulate import run
 
@@ -65,7 +67,7 @@ def test_field_values_equal_what_the_run_computed(offline):
         assert list(m.position) == to_joint_space(s.q)
         assert list(m.velocity) == to_joint_space(s.qd)
         assert list(m.effort) == list(s.tau)
-        assert from_joint_space(m.position) == pytest.approx(list(s.q), abs=1e-15)
+        assert to_absolute(m.position) == pytest.approx(list(s.q), abs=1e-15)
     for (t, m), s in zip(ws, result.samples):
         assert (m.wrench.force.x, m.wrench.force.y) == tuple(s.wrench)
         assert m.header.frame_id == 'surface'

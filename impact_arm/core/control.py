@@ -11,9 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..contract import ANTIWINDUP_STRATEGIES
 from .jit import jit_leaf as jit
-
-ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')
 
 
 @jit
@@ -53,19 +52,6 @@ def pid_law(error, rate, integral, kp, kd, ki, out):
     """τ_i = -Kd_i ė_i - Kp_i e_i - Ki_i ∫e_i (article eq. 10; PD when Ki = 0)."""
     for i in range(error.shape[0]):
         out[i] = -kd[i] * rate[i] - kp[i] * error[i] - ki[i] * integral[i]
-
-
-def to_joint_space(q):
-    """Relative (encoder) angles: joint1 = q1, joint_i = q_i - q_{i-1}."""
-    return [q[0]] + [q[i] - q[i - 1] for i in range(1, len(q))]
-
-
-def to_absolute(theta):
-    out, acc = [], 0.0
-    for value in theta:
-        acc += value
-        out.append(acc)
-    return out
 
 
 @dataclass

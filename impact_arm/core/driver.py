@@ -11,7 +11,7 @@ import json
 import math
 from dataclasses import dataclass, field
 
-from .control import to_joint_space
+from ..contract import to_joint_space
 from .errors import ImpactArmError
 from .integrator import PRESETS, PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder

@@ -24,21 +24,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS
 from . import layout
 from .errors import SimulationError
 from .model import ArmModel, ArmState, Phase
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.
-PRESETS = {
-    'reference': (1e-12, 1e-14),
-    'accurate': (1e-10, 1e-12),
-    'balanced': (1e-8, 1e-10),
-    'fast': (1e-5, 1e-8),
-}
+# (the contract's INTEGRATOR_PRESETS, in that order: reference, accurate, balanced, fast)
+PRESETS = dict(zip(INTEGRATOR_PRESETS, ((1e-12, 1e-14), (1e-10, 1e-12), (1e-8, 1e-10),
+                                        (1e-5, 1e-8))))
 
 # step methods: 'dopri5' everywhere, or 'rosenbrock' (linearly implicit 4(3)) in free flight,
 # where the controller's damping makes the motion stiff, and Dormand-Prince in contact
-METHODS = {'dopri5': layout.METHOD_DOPRI5, 'rosenbrock': layout.METHOD_ROSENBROCK}
+METHODS = dict(zip(INTEGRATOR_METHODS, (layout.METHOD_DOPRI5, layout.METHOD_ROSENBROCK)))
 
 
 def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None) -> dict:

@@ -19,13 +19,10 @@ from typing import Any
 
 import yaml
 
+from ..contract import CONTROL_LAWS, INTEGRATOR_METHODS, INTEGRATOR_PRESETS, PID_SPACES
 from .errors import SceneError
 
-INTEGRATOR_PRESETS = ('reference', 'accurate', 'balanced', 'fast')
-INTEGRATOR_METHODS = ('dopri5', 'rosenbrock')
 CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
-CONTROL_LAWS = ('q', 'pid', 'pd', 'none')
-PID_SPACES = ('absolute', 'joint')
 MAX_YIELD_STRAIN = 0.1   # S_y / E* beyond which the Jackson-Green law is meaningless
 
 

@@ -13,26 +13,10 @@ the end of the committed data; the next flush overwrites that tail. A process ki
 (SIGKILL included) leaves everything up to its last flush readable. ``flush_interval`` bounds
 how old that is (the writer checks on each write; a recorder also flushes from a timer).
 
-QoS of the topic contract (design §3), used by publishers, the recorder and replay:
-
-===========================  ===================================  =============================
-topic                        type                                 QoS
-===========================  ===================================  =============================
-/joint_states                sensor_msgs/msg/JointState           reliable, volatile, 100
-/contact_wrench              geometry_msgs/msg/WrenchStamped      reliable, volatile, 100
-/impact_report               std_msgs/msg/String                  reliable, transient_local, 100
-/diagnostics                 diagnostic_msgs/msg/DiagnosticArray  reliable, volatile, 10
-/clock                       rosgraph_msgs/msg/Clock              best_effort, volatile, 1
-/effort_controller/commands  std_msgs/msg/Float64MultiArray       reliable, volatile, 10
-===========================  ===================================  =============================
-
-All keep_last; deadline, lifespan and liveliness lease infinite; liveliness automatic.
-``/impact_report`` is transient_local so a late subscriber (recorder, analysis) still gets
-every impact. ``/clock`` is best effort like rclcpp's ClockQoS.
+Topics, types and QoS are the contract's (``impact_arm.contract``).
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 import re
 import struct
@@ -41,91 +25,21 @@ import time
 import zlib
 from typing import Iterator, NamedTuple, Optional
 
+from .. import contract
+from ..contract import TopicQos
 from ..core.errors import ImpactArmError
 from .msgdefs import message_class, message_definition, serialize_cdr, type_hash, type_name_of
 
-__all__ = ['CONTRACT_TOPICS', 'RawMessage', 'RecordingError', 'Ros2McapWriter', 'TopicInfo',
-           'TopicQos', 'contract_qos', 'iter_raw', 'message_class', 'message_definition',
-           'qos_yaml', 'read_attachments', 'read_messages', 'read_metadata', 'serialize_cdr',
-           'topics_info', 'type_name_of']
+__all__ = ['RawMessage', 'RecordingError', 'Ros2McapWriter', 'TopicInfo', 'iter_raw',
+           'message_class', 'message_definition', 'qos_yaml', 'read_attachments',
+           'read_metadata', 'serialize_cdr', 'topics_info', 'type_name_of']
 
 MAGIC = b'\x89MCAP0\r\n'
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 BagMetadata version whose QoS YAML uses policy names
-_INF_SEC, _INF_NSEC = 9223372036, 854775807  # RMW_DURATION_INFINITE as rosbag2 writes it
-_INFINITE_NS = _INF_SEC * 1_000_000_000 + _INF_NSEC
 
 
 class RecordingError(ImpactArmError, OSError):
     """The MCAP file cannot be written (path, permissions, disk full). Flushed data stays."""
-
-
-# --------------------------------------------------------------------------------------- QoS
-@dataclasses.dataclass(frozen=True)
-class TopicQos:
-    """A QoS profile in rosbag2's terms. Durations in ns; None = infinite."""
-
-    reliability: str = 'reliable'
-    durability: str = 'volatile'
-    depth: int = 10
-    history: str = 'keep_last'
-    deadline_ns: Optional[int] = None
-    lifespan_ns: Optional[int] = None
-    liveliness: str = 'automatic'
-    liveliness_lease_ns: Optional[int] = None
-    avoid_ros_namespace_conventions: bool = False
-
-    def as_dict(self) -> dict:
-        """The mapping rosbag2 serializes (key order as rosbag2 writes it)."""
-        def dur(ns):
-            ns = _INFINITE_NS if ns is None or ns <= 0 or ns >= _INFINITE_NS else ns
-            return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
-        return {'history': self.history, 'depth': int(self.depth),
-                'reliability': self.reliability, 'durability': self.durability,
-                'deadline': dur(self.deadline_ns), 'lifespan': dur(self.lifespan_ns),
-                'liveliness': self.liveliness,
-                'liveliness_lease_duration': dur(self.liveliness_lease_ns),
-                'avoid_ros_namespace_conventions': bool(self.avoid_ros_namespace_conventions)}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> 'TopicQos':
-        def ns(v):
-            t = int(v['sec']) * 1_000_000_000 + int(v['nsec'])
-            return None if t == 0 or t >= _INFINITE_NS else t
-        return cls(str(d['reliability']), str(d['durability']), int(d.get('depth', 0)),
-                   str(d.get('history', 'keep_last')), ns(d['deadline']), ns(d['lifespan']),
-                   str(d['liveliness']), ns(d['liveliness_lease_duration']),
-                   bool(d.get('avoid_ros_namespace_conventions', False)))
-
-    @classmethod
-    def from_rclpy(cls, p) -> 'TopicQos':
-        def ns(d):
-            t = d.nanoseconds
-            return None if t <= 0 or t >= _INFINITE_NS else t
-        return cls(p.reliability.name.lower(), p.durability.name.lower(), int(p.depth),
-                   p.history.name.lower(), ns(p.deadline), ns(p.lifespan),
-                   p.liveliness.name.lower(), ns(p.liveliness_lease_duration),
-                   bool(p.avoid_ros_namespace_conventions))
-
-    def to_rclpy(self, min_depth: int = 1):
-        """An rclpy QoSProfile; 'unknown' policies (as discovery reports them) become defaults."""
-        from rclpy.duration import Duration
-        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
-                               ReliabilityPolicy)
-
-        def pol(enum, name, default):
-            return default if name in ('unknown', '') else enum[name.upper()]
-        kw = {}
-        for key, attr in (('deadline', 'deadline_ns'), ('lifespan', 'lifespan_ns'),
-                          ('liveliness_lease_duration', 'liveliness_lease_ns')):
-            if getattr(self, attr) is not None:
-                kw[key] = Duration(nanoseconds=getattr(self, attr))
-        return QoSProfile(
-            history=pol(HistoryPolicy, self.history, HistoryPolicy.KEEP_LAST),
-            depth=max(int(self.depth), min_depth),
-            reliability=pol(ReliabilityPolicy, self.reliability, ReliabilityPolicy.RELIABLE),
-            durability=pol(DurabilityPolicy, self.durability, DurabilityPolicy.VOLATILE),
-            liveliness=pol(LivelinessPolicy, self.liveliness, LivelinessPolicy.AUTOMATIC),
-            avoid_ros_namespace_conventions=self.avoid_ros_namespace_conventions, **kw)
 
 
 def qos_yaml(profiles) -> str:
@@ -145,24 +59,6 @@ def qos_yaml(profiles) -> str:
 def parse_qos_yaml(text: str) -> list:
     import yaml
     return [TopicQos.from_dict(d) for d in (yaml.safe_load(text) or [])]
-
-
-RELIABLE_100 = TopicQos(depth=100)
-CONTRACT_TOPICS = {  # topic -> (type, QoS); see the module docstring
-    '/joint_states': ('sensor_msgs/msg/JointState', RELIABLE_100),
-    '/contact_wrench': ('geometry_msgs/msg/WrenchStamped', RELIABLE_100),
-    '/impact_report': ('std_msgs/msg/String', TopicQos(durability='transient_local', depth=100)),
-    '/diagnostics': ('diagnostic_msgs/msg/DiagnosticArray', TopicQos(depth=10)),
-    '/clock': ('rosgraph_msgs/msg/Clock', TopicQos(reliability='best_effort', depth=1)),
-    # depth 100 like the joint states: a recorder that is briefly slower than a lockstep loop
-    # must not lose commands the driver already acknowledged
-    '/effort_controller/commands': ('std_msgs/msg/Float64MultiArray', RELIABLE_100),
-}
-
-
-def contract_qos(topic: str, default: TopicQos = TopicQos()) -> TopicQos:
-    """The QoS the contract gives ``topic`` (remapped names fall back to ``default``)."""
-    return CONTRACT_TOPICS.get(topic, (None, default))[1]
 
 
 def ros_distro() -> str:
@@ -281,7 +177,7 @@ class Ros2McapWriter:
             if topic in self._channels:
                 return self._channels[topic].id
             type_name = type_name_of(message_class(type_name))  # validates, normalises
-            qos_list = [contract_qos(topic)] if qos is None else (
+            qos_list = [contract.qos(topic)] if qos is None else (
                 list(qos) if isinstance(qos, (list, tuple)) else [qos])
             thash = type_hash(type_name) if type_hash_str is None else type_hash_str
             if type_name not in self._schema_ids:
@@ -575,17 +471,6 @@ def iter_raw(path, topics=None, start_time_ns: int = None) -> Iterator[RawMessag
                 topics=list(topics) if topics else None, log_time_order=True, **kw):
             yield RawMessage(channel.topic, schema.name if schema else '', message.log_time,
                              message.publish_time, message.data)
-
-
-def read_messages(path, topics=None):
-    """(topic, type name, log time ns, publish time ns, message object) in log-time order."""
-    from rclpy.serialization import deserialize_message
-    classes = {}
-    for m in iter_raw(path, topics):
-        cls = classes.get(m.type_name) or classes.setdefault(m.type_name,
-                                                              message_class(m.type_name))
-        yield m.topic, m.type_name, m.log_time_ns, m.publish_time_ns, deserialize_message(
-            m.data, cls)
 
 
 class TopicInfo(NamedTuple):

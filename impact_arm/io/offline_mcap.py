@@ -60,42 +60,20 @@ import json
 import math
 import os
 
+from ..contract import (CONTACT_WRENCH, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, TOPICS,
+                        TRACE_QOS, TRACE_TYPE, WRENCH_FRAME, joint_names, to_joint_space)
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 
-TRACE_TOPIC = '/impact_trace'
-TRACE_TYPE = 'std_msgs/msg/Float64MultiArray'
-TOPICS = {
-    '/joint_states': 'sensor_msgs/msg/JointState',
-    '/contact_wrench': 'geometry_msgs/msg/WrenchStamped',
-    '/impact_report': 'std_msgs/msg/String',
-    TRACE_TOPIC: TRACE_TYPE,
+OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
+    **{topic: TOPICS[topic][0] for topic in (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT)},
+    IMPACT_TRACE: TRACE_TYPE,
 }
-WRENCH_FRAME = 'surface'
 
 
 def trace_columns(n_links: int) -> list:
     """Column names of an /impact_trace row for an arm of ``n_links`` links."""
     return ['t', 'phase', 'delta', 'F_n', 'F_f', 'v_x', 'v_y'] + [
         f'T{i + 1}' for i in range(n_links)]
-
-
-def joint_names(n_links: int) -> list:
-    return [f'joint{i + 1}' for i in range(n_links)]
-
-
-def to_joint_space(values) -> list:
-    """Absolute link angles (or rates) -> relative joint angles: [a1, a2 - a1, ...]."""
-    values = [float(v) for v in values]
-    return [values[0]] + [values[i] - values[i - 1] for i in range(1, len(values))]
-
-
-def from_joint_space(values) -> list:
-    """Relative joint angles (or rates) -> absolute link angles (cumulative sum)."""
-    out, acc = [], 0.0
-    for v in values:
-        acc += float(v)
-        out.append(acc)
-    return out
 
 
 def sim_time_ns(t: float) -> int:
@@ -121,7 +99,7 @@ class OfflineRecorder:
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
         from .. import __version__
-        from .mcap_ros2 import Ros2McapWriter, TopicQos, package_version, ros_distro
+        from .mcap_ros2 import Ros2McapWriter, package_version, ros_distro
 
         self.path = os.fspath(path)
         self.scene = scene
@@ -130,14 +108,12 @@ class OfflineRecorder:
         self._String, self._Array, self._Dim = String, Float64MultiArray, MultiArrayDimension
         self._names = joint_names(self.n)
         self._columns = trace_columns(self.n)
-        self.counts = {topic: 0 for topic in TOPICS}
+        self.counts = {topic: 0 for topic in OFFLINE_TOPICS}
         self.writer = Ros2McapWriter(self.path, flush_interval=flush_interval,
                                      compression=compression)
-        for topic, type_name in TOPICS.items():
+        for topic, type_name in OFFLINE_TOPICS.items():
             # the contract's QoS for the contract topics; traces like the reports
-            qos = TopicQos(durability='transient_local', depth=100) \
-                if topic == TRACE_TOPIC else None
-            self.writer.add_topic(topic, type_name, qos)
+            self.writer.add_topic(topic, type_name, TRACE_QOS if topic == IMPACT_TRACE else None)
         rate = scene.controller.rate if control_rate is None else float(control_rate)
         version = package_version() or __version__
         self.writer.add_metadata('impact_arm', {
@@ -147,7 +123,7 @@ class OfflineRecorder:
             'preset': preset or scene.integrator.preset, 'scene_name': scene.name,
             'time': 'simulated (log time = header stamp = sim time)',
             'trace_columns': ','.join(self._columns), 'tf_rate_hz': repr(float(tf_rate)),
-            'topics': json.dumps(list(TOPICS))})
+            'topics': json.dumps(list(OFFLINE_TOPICS))})
         text = scene.source_text or ''
         scene_file = os.path.basename(scene.source_path) if scene.source_path else \
             f'{scene.name}.yaml'
@@ -168,24 +144,24 @@ class OfflineRecorder:
         js.position = to_joint_space(sample.q)
         js.velocity = to_joint_space(sample.qd)
         js.effort = [float(x) for x in sample.tau]
-        self.writer.write_message('/joint_states', js, t_ns, t_ns)
+        self.writer.write_message(JOINT_STATES, js, t_ns, t_ns)
         ws = self._WrenchStamped()
         _stamp(ws.header, t_ns)
         ws.header.frame_id = WRENCH_FRAME
         ws.wrench.force.x = float(sample.wrench[0])
         ws.wrench.force.y = float(sample.wrench[1])
-        self.writer.write_message('/contact_wrench', ws, t_ns, t_ns)
-        self.counts['/joint_states'] += 1
-        self.counts['/contact_wrench'] += 1
+        self.writer.write_message(CONTACT_WRENCH, ws, t_ns, t_ns)
+        self.counts[JOINT_STATES] += 1
+        self.counts[CONTACT_WRENCH] += 1
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record, trace_rows):
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])
-        self.writer.write_message('/impact_report', self._String(data=json.dumps(record)),
+        self.writer.write_message(IMPACT_REPORT, self._String(data=json.dumps(record)),
                                   t_ns, t_ns)
-        self.writer.write_message(TRACE_TOPIC, self.trace_message(trace_rows), t_ns, t_ns)
-        self.counts['/impact_report'] += 1
-        self.counts[TRACE_TOPIC] += 1
+        self.writer.write_message(IMPACT_TRACE, self.trace_message(trace_rows), t_ns, t_ns)
+        self.counts[IMPACT_REPORT] += 1
+        self.counts[IMPACT_TRACE] += 1
         self.visuals.impact(record)
         self.writer.flush()  # an impact is never lost, whatever happens later
 

@@ -26,19 +26,10 @@ from __future__ import annotations
 import json
 import math
 
-from .mcap_ros2 import TopicQos
+from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, TF_TYPE, VISUAL_TOPICS
 from .urdf import (SURFACE_THICKNESS_PER_REACH, WORLD, moving_transforms, robot_description,
                    static_transforms, surface_frames)
 
-TF_TYPE = 'tf2_msgs/msg/TFMessage'
-MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
-LATCHED = TopicQos(durability='transient_local', depth=1)
-TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
-    '/robot_description': ('std_msgs/msg/String', LATCHED),
-    '/tf_static': (TF_TYPE, LATCHED),
-    '/tf': (TF_TYPE, TopicQos(depth=100)),
-    '/impact_markers': (MARKERS_TYPE, TopicQos(depth=10)),
-}
 DEFAULT_TF_RATE = 100.0  # Hz: smooth to the eye, a tenth of the joint-state rate
 ARROW_HALF_FORCE = 1000.0  # N at which the arrow is half the reach long
 
@@ -173,11 +164,11 @@ class VisualsWriter:
                  log_time_ns: int = 0):
         self.visuals = SceneVisuals(scene, tf_rate)
         self.writer = writer
-        self.counts = {topic: 0 for topic in TOPICS}
-        for topic, (type_name, qos) in TOPICS.items():
+        self.counts = {topic: 0 for topic in VISUAL_TOPICS}
+        for topic, (type_name, qos) in VISUAL_TOPICS.items():
             writer.add_topic(topic, type_name, qos)
-        self._write('/robot_description', self.visuals.description(), log_time_ns)
-        self._write('/tf_static', self.visuals.tf_static(0), log_time_ns)
+        self._write(ROBOT_DESCRIPTION, self.visuals.description(), log_time_ns)
+        self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
 
     def state(self, t_ns: int, q, wrench, log_time_ns: int = None):
         """One joint state (absolute angles ``q``) and its contact wrench (F_t, F_n)."""
@@ -185,8 +176,8 @@ class VisualsWriter:
         v.observe_force(q, wrench)
         if v.due(t_ns * 1e-9):
             log = t_ns if log_time_ns is None else log_time_ns
-            self._write('/tf', v.tf(q, t_ns), log)
-            self._write('/impact_markers', v.markers(t_ns), log)
+            self._write(TF, v.tf(q, t_ns), log)
+            self._write(IMPACT_MARKERS, v.markers(t_ns), log)
 
     def impact(self, record):
         self.visuals.add_impact(record)

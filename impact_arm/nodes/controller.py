@@ -18,16 +18,16 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ..core.control import ANTIWINDUP_STRATEGIES, CycleController, PidIntegrator, to_absolute
-from ..core.control import to_joint_space
-from ..io.mcap_ros2 import contract_qos
+from .. import contract
+from ..contract import (ANTIWINDUP_STRATEGIES, COMMANDS, CONTACT_WRENCH, FEEDBACK_LAWS,
+                        JOINT_STATES, PID_SPACES, joint_names, to_absolute, to_joint_space)
+from ..core.control import CycleController, PidIntegrator
 from ..core.model import ArmModel
 from ..core.scene import load_scene, resolve_scene_path
 from ..io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
-COMMAND_TOPIC = '/effort_controller/commands'
 STAMP_EPS = 1e-9                 # stamps are integer nanoseconds: ticks compare to 1 ns
 
 
@@ -39,9 +39,9 @@ def parameter_table(scene):
         Param('scene', '', 'scene YAML file or installed scene name (empty: paper): the model '
               'the controller knows (kinematics, gravity) and its default gains', 'str',
               read_only=True),
-        Param('law', c.law if c.law in ('q', 'pid', 'pd') else 'q',
+        Param('law', c.law if c.law in FEEDBACK_LAWS else 'q',
               'q (article eq. 9: PD on link angles + gravity compensation), pid or pd', 'str',
-              choices=('q', 'pid', 'pd')),
+              choices=FEEDBACK_LAWS),
         Param('rate', 1000.0, 'command rate [Hz]', low=0.1, high=100000.0, read_only=True),
         Param('trigger', 'joint_states', 'joint_states: compute on each joint state reaching '
               'the next tick; timer: compute at rate on the node clock', 'str',
@@ -59,7 +59,7 @@ def parameter_table(scene):
         Param('antiwindup_strategy', 'none', 'integral anti-windup', 'str',
               choices=ANTIWINDUP_STRATEGIES),
         Param('space', c.space, 'angles the PID acts on: absolute link angles or relative '
-              'joint angles', 'str', choices=('absolute', 'joint')),
+              'joint angles', 'str', choices=PID_SPACES),
         Param('down_target', to_joint_space(c.down_target), 'joint positions aimed at on the '
               'way down [rad]', 'floats', low=-4 * math.pi, high=4 * math.pi, size=n),
         Param('up_target', to_joint_space(c.up_target), 'joint positions aimed at on the way '
@@ -72,7 +72,7 @@ def parameter_table(scene):
         Param('force_threshold', 1.0, 'contact normal force that means impact [N]', low=0.0),
         Param('reversal_band', 0.01, 'tip velocity reversal within this height above the '
               'surface means impact [m]', low=0.0, high=10.0),
-        Param('joints', [f'joint{k + 1}' for k in range(n)], 'joint order of the command '
+        Param('joints', joint_names(n), 'joint order of the command '
               'array', 'strs', size=n, read_only=True),
         Param('command_readers', 1, 'readers of the command topic (the driver, a recorder) '
               'matched before the first command; the arm is held until then, so nothing of the '
@@ -95,7 +95,7 @@ class Controller(Node):
         p = self.p = declare(self, self.table)
         self.n = scene.n_links
         self.model = ArmModel(scene)
-        self.joint_names = [f'joint{k + 1}' for k in range(self.n)]
+        self.joint_names = joint_names(self.n)
         if sorted(p['joints']) != self.joint_names:
             raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
                                  f'{self.joint_names} once')
@@ -118,16 +118,16 @@ class Controller(Node):
         self.sent = 0
         self.started = False
         self.warned_names = False
-        self.pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC,
-                                         contract_qos(COMMAND_TOPIC).to_rclpy())
+        self.pub = self.create_publisher(Float64MultiArray, COMMANDS,
+                                         contract.qos(COMMANDS).to_rclpy())
         # keep only the newest sample: a controller that fell behind acts on the present
-        latest_only = contract_qos('/joint_states').to_rclpy()
+        latest_only = contract.qos(JOINT_STATES).to_rclpy()
         latest_only.depth = 1
         # raw: the callbacks read the few fields they need from the bytes, which costs a
         # fraction of rclpy's conversion to message objects (twice per period)
-        self.sub_wrench = self.create_subscription(WrenchStamped, '/contact_wrench',
+        self.sub_wrench = self.create_subscription(WrenchStamped, CONTACT_WRENCH,
                                                    self._on_wrench, latest_only, raw=True)
-        self.sub_state = self.create_subscription(JointState, '/joint_states',
+        self.sub_state = self.create_subscription(JointState, JOINT_STATES,
                                                   self._on_joint_state, latest_only, raw=True)
         if p['trigger'] == 'timer':
             self.create_timer(self.period, self._on_timer)
@@ -226,7 +226,7 @@ class Controller(Node):
             # matched: our own view of the graph may not show a recorder yet. The driver
             # repeats its held state, which brings us back here.
             if self.pub.get_subscription_count() < max(self.p['command_readers'],
-                                                       self.count_subscribers(COMMAND_TOPIC)):
+                                                       self.count_subscribers(COMMANDS)):
                 return
             self.started = True
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period

@@ -21,8 +21,10 @@ from rclpy.node import Node
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters, ListParameters
 
-from ..io.mcap_ros2 import (CONTRACT_TOPICS, RecordingError, Ros2McapWriter, TopicQos,
-                         contract_qos, message_class, package_version, ros_distro)
+from .. import contract
+from ..contract import TOPICS, TopicQos
+from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, package_version,
+                            ros_distro)
 from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -38,7 +40,7 @@ class Recorder(Node):
         super().__init__('recorder')
         stamp = time.strftime('%Y%m%d-%H%M%S')
         self.output = _param(self, 'output', f'runs/{stamp}.mcap', 'MCAP file to write')
-        topics = _param(self, 'topics', list(CONTRACT_TOPICS),
+        topics = _param(self, 'topics', list(TOPICS),
                         'topics to record; "name" or "name:pkg/msg/Type" (contract topics and '
                         'published topics need no type)')
         scene = _param(self, 'scene', '', 'scene file or installed scene name to store in the file (optional)')
@@ -75,7 +77,7 @@ class Recorder(Node):
         self.wanted = {}  # topic -> type name ('' until discovered)
         for entry in topics:
             name, _, type_name = entry.partition(':')
-            self.wanted[name] = type_name or CONTRACT_TOPICS.get(name, ('',))[0]
+            self.wanted[name] = type_name or TOPICS.get(name, ('',))[0]
         self.subs = {}
         self.reader = Node('_recorder_reader', context=self.context)
         self._subscribe_known()
@@ -95,7 +97,7 @@ class Recorder(Node):
     def _subscribe_known(self):
         for topic, type_name in self.wanted.items():
             if type_name and topic not in self.subs:
-                qos = contract_qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
+                qos = contract.qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
                 self.subs[topic] = self.reader.create_subscription(
                     message_class(type_name), topic, _never_called, qos, raw=True)
 

@@ -35,7 +35,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core.errors import ImpactArmError
-from ..io.mcap_ros2 import TopicQos, contract_qos, message_class
+from .. import contract
+from ..contract import CLOCK
+from ..io.mcap_ros2 import message_class
 from ..io.msgdefs import has_type_support
 from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
@@ -90,14 +92,14 @@ class Replay(Node):
         self.clock_period = 1.0 / clock if clock else math.inf
         self.publishers_ = {}
         for topic, info in self.plan.topics.items():
-            if topic == '/clock' and clock:
+            if topic == CLOCK and clock:
                 self.get_logger().warning('not replaying the recorded /clock: clock > 0 '
                                           'publishes it from the replay')
                 continue
             qos = info.qos[0] if info.qos and all(
                 (q.reliability, q.durability) == (info.qos[0].reliability,
                                                   info.qos[0].durability)
-                for q in info.qos) else contract_qos(topic, TopicQos())
+                for q in info.qos) else contract.qos(topic)
             cls = message_class(info.type_name)
             if not has_type_support(cls):   # /tf without tf2_msgs: rclpy cannot publish it
                 self.get_logger().info(f'not replaying {topic}: {info.type_name} is not '
@@ -108,8 +110,8 @@ class Replay(Node):
         self.clock_pub = None
         if clock:
             from rosgraph_msgs.msg import Clock
-            self.clock_pub = self.create_publisher(Clock, '/clock',
-                                                   contract_qos('/clock').to_rclpy())
+            self.clock_pub = self.create_publisher(Clock, CLOCK,
+                                                   contract.qos(CLOCK).to_rclpy())
             self._Clock = Clock
         self.published = 0
         self.error = None

@@ -26,17 +26,17 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
-from ..core.errors import SimulationError
+from .. import contract
+from ..contract import (CLOCK, COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, IMPACT_REPORT,
+                        INTEGRATOR_PRESETS, JOINT_STATES, joint_names)
 from ..core.driver import CommandError, SimulatedArm
+from ..core.errors import SimulationError
 from ..core.realtime import PERIOD_PARTS, DriverLoop
-from ..core.integrator import PRESETS
-from ..io.mcap_ros2 import contract_qos
 from ..core.scene import load_scene, resolve_scene_path
 from ..io.wire import PatchedMessage, float64_array_data
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
-COMMAND_TOPIC = '/effort_controller/commands'
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
 PARAMS = (
     Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
@@ -52,10 +52,10 @@ PARAMS = (
           'zeroed (watchdog)', low=0.0, high=3600.0, open_low=True),
     Param('max_effort', 5000.0, 'commanded torques are clipped to +-max_effort [N m]',
           low=0.0, high=1e9, open_low=True),
-    Param('joints', ['joint1', 'joint2'], 'joint order of the command array', 'strs',
+    Param('joints', joint_names(2), 'joint order of the command array', 'strs',
           read_only=True),
     Param('preset', '', "integrator preset (empty: the scene's)", 'str',
-          choices=('',) + tuple(PRESETS), read_only=True),
+          choices=('',) + INTEGRATOR_PRESETS, read_only=True),
     Param('thread_priority', 50, 'SCHED_FIFO priority of the realtime loop thread (0: normal '
           'scheduling; needs CAP_SYS_NICE or an rtprio limit, else it falls back with a note '
           'in /diagnostics)', 'int', low=0, high=99, read_only=True),
@@ -78,7 +78,7 @@ class Simulator(Node):
         # node publishes no trace rows (converting them cost ~0.1 ms in each impact period)
         self.arm = SimulatedArm(self.scene, p['publish_rate'], preset=p['preset'] or None,
                                 max_effort=p['max_effort'], trace=False)
-        names = [f'joint{i + 1}' for i in range(self.arm.n)]
+        names = joint_names(self.arm.n)
         if sorted(p['joints']) != sorted(names):
             raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
                                  f'{names} once (the order of the command array)')
@@ -92,21 +92,21 @@ class Simulator(Node):
                                  '> 0 (use mode lockstep to run as fast as possible)')
 
         def qos(topic):
-            return contract_qos(topic).to_rclpy()
-        self.pub_joints = self.create_publisher(JointState, '/joint_states', qos('/joint_states'))
-        self.pub_wrench = self.create_publisher(WrenchStamped, '/contact_wrench',
-                                                qos('/contact_wrench'))
-        self.pub_impact = self.create_publisher(String, '/impact_report', qos('/impact_report'))
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics',
-                                              qos('/diagnostics'))
-        self.pub_clock = (self.create_publisher(Clock, '/clock', qos('/clock'))
+            return contract.qos(topic).to_rclpy()
+        self.pub_joints = self.create_publisher(JointState, JOINT_STATES, qos(JOINT_STATES))
+        self.pub_wrench = self.create_publisher(WrenchStamped, CONTACT_WRENCH,
+                                                qos(CONTACT_WRENCH))
+        self.pub_impact = self.create_publisher(String, IMPACT_REPORT, qos(IMPACT_REPORT))
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                              qos(DIAGNOSTICS))
+        self.pub_clock = (self.create_publisher(Clock, CLOCK, qos(CLOCK))
                           if self.publish_clock else None)
         self.command_reader = self.reader_node = None
         if self.lockstep:
             self.command_sub = self.create_subscription(
-                Float64MultiArray, COMMAND_TOPIC, self._on_command, qos(COMMAND_TOPIC), raw=True)
+                Float64MultiArray, COMMANDS, self._on_command, qos(COMMANDS), raw=True)
         else:
-            self.command_reader = self._command_reader(qos(COMMAND_TOPIC))
+            self.command_reader = self._command_reader(qos(COMMANDS))
 
         # pre-serialized messages: each period only writes its numbers into their bytes
         zeros = [0.0] * self.arm.n
@@ -174,7 +174,7 @@ class Simulator(Node):
         self.reader_node = rclpy.create_node(
             '_' + self.get_name() + '_command_reader', namespace=self.get_namespace(),
             context=self.context, start_parameter_services=False, enable_rosout=False)
-        return self.reader_node.create_subscription(Float64MultiArray, COMMAND_TOPIC,
+        return self.reader_node.create_subscription(Float64MultiArray, COMMANDS,
                                                     lambda msg: None, qos, raw=True)
 
     def _take_commands(self, now):

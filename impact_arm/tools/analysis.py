@@ -20,16 +20,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..contract import FEEDBACK_LAWS, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, to_absolute
 from ..core.errors import ImpactArmError
 from ..core.metrics import settle_index
-from ..io.offline_mcap import TRACE_TOPIC, from_joint_space
-
-LAWS = ('q', 'pd', 'pid')
 
 
 class AnalysisError(ImpactArmError):
@@ -50,11 +47,11 @@ class Run:
     law: str = ''
 
 
-def _progress(text):
-    print(f'analyze: {text}', file=sys.stderr, flush=True)
+def _quiet(text):
+    pass
 
 
-def load(path, progress=_progress) -> Run:
+def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
     from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
     from ..io.msgdefs import deserialize_cdr
@@ -66,22 +63,22 @@ def load(path, progress=_progress) -> Run:
         metadata = read_metadata(path)
     except Exception as e:  # noqa: BLE001 - any reader failure: not an MCAP file we can use
         raise AnalysisError(f'{path}: not a readable MCAP file ({e})') from None
-    if '/joint_states' not in info:
+    if JOINT_STATES not in info:
         raise AnalysisError(f'{path}: no /joint_states recorded (topics: {sorted(info)})')
     total = sum(i.message_count for i in info.values()) or 1
     progress(f'reading {path} ({total} messages)')
     t, pos, vel, impacts, traces = [], [], [], [], []
-    wanted = ['/joint_states', '/impact_report', TRACE_TOPIC]
+    wanted = [JOINT_STATES, IMPACT_REPORT, IMPACT_TRACE]
     for k, m in enumerate(iter_raw(path, [w for w in wanted if w in info])):
         if k and k % 20000 == 0:
             progress(f'  {100 * k // total} %')
         msg = deserialize_cdr(m.data, m.type_name)
-        if m.topic == '/joint_states':
+        if m.topic == JOINT_STATES:
             t.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
-            pos.append(from_joint_space(msg.position))
-            vel.append(from_joint_space(msg.velocity) if len(msg.velocity) else
+            pos.append(to_absolute(msg.position))
+            vel.append(to_absolute(msg.velocity) if len(msg.velocity) else
                        [math.nan] * len(msg.position))
-        elif m.topic == '/impact_report':
+        elif m.topic == IMPACT_REPORT:
             try:
                 impacts.append(json.loads(msg.data))
             except ValueError as e:
@@ -90,7 +87,7 @@ def load(path, progress=_progress) -> Run:
         else:
             dims = msg.layout.dim
             if len(dims) != 2:
-                raise AnalysisError(f'{path}: {TRACE_TOPIC} message {len(traces) + 1} has '
+                raise AnalysisError(f'{path}: {IMPACT_TRACE} message {len(traces) + 1} has '
                                     f'{len(dims)} dimensions, expected 2')
             columns = dims[1].label.split(',')
             data = np.asarray(msg.data, float)[msg.layout.data_offset:]
@@ -115,11 +112,11 @@ def _scene(metadata):
         return None
 
 
-def simulated(scene, law: str, t_max: float, progress=_progress) -> Run:
+def simulated(scene, law: str, t_max: float, progress=_quiet) -> Run:
     """An offline run of ``scene`` with controller ``law`` (for Figure 3)."""
     from ..core.simulate import run
-    if law not in LAWS:
-        raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(LAWS)}')
+    if law not in FEEDBACK_LAWS:
+        raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
     sc = replace(scene, controller=replace(scene.controller, law=law))
     if law == 'pid' and not any(sc.controller.ki):
         raise AnalysisError('--laws pid: the scene has no integral gains (controller.ki)')
@@ -196,32 +193,39 @@ def add_arguments(parser):
 
 def cli(args) -> int:
     from . import figures
+    from .progress import Progress
+    line = Progress(prefix='analyze: ')
+
+    def say(text):
+        line.show(text, log=True)
     out = args.out or (os.path.splitext(args.file)[0] + '_analysis')
     if not 0 < args.compare_time <= 60:
         raise AnalysisError(f'--compare-time = {args.compare_time}: must be in (0, 60] s')
     laws = [w.strip() for w in args.laws.split(',') if w.strip()]
     for law in laws:
-        if law not in LAWS:
-            raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(LAWS)}')
-    run = load(args.file)
+        if law not in FEEDBACK_LAWS:
+            raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
+    run = load(args.file, progress=say)
     if run.traces and not 1 <= args.impact <= len(run.traces):
         raise AnalysisError(f'--impact = {args.impact}: must be in [1, {len(run.traces)}] '
                             f'(the impacts with a trace in {args.file})')
-    others = [load(f) for f in args.compare]
+    others = [load(f, progress=say) for f in args.compare]
     if laws and run.scene is None:
         raise AnalysisError(f'--laws: {args.file} holds no scene to simulate')
-    others += [simulated(run.scene, law, args.compare_time) for law in laws]
+    others += [simulated(run.scene, law, args.compare_time, say) for law in laws]
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
         raise AnalysisError(f'--out {out}: cannot create ({e.strerror})') from None
-    written = write_outputs(run, others, out, args.impact, figures, progress=_progress)
+    written = write_outputs(run, others, out, args.impact, figures, progress=say)
     if not args.no_animation and run.scene is not None:
         from .animation import animate, contact_forces
         gif = os.path.join(out, 'animation.gif')
-        _progress(f'animating to {gif}')
-        frames = animate(run, gif, contact_forces(args.file), progress=_progress)
+        say(f'animating to {gif}')
+        frames = animate(run, gif, contact_forces(args.file), progress=say)
+        line.end()
         print(f'animation: {gif} ({frames} frames)')
+    line.end()
     print(f'impact table ({len(run.impacts)} impacts):')
     print(written['table'])
     lc = written['limit_cycle']
@@ -246,7 +250,7 @@ def _write(path, text):
     os.replace(tmp, path)
 
 
-def write_outputs(run: Run, others, out, impact_k, figures, progress=_progress) -> dict:
+def write_outputs(run: Run, others, out, impact_k, figures, progress=_quiet) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
     lc = limit_cycle(run.impacts)

@@ -14,6 +14,7 @@ import os
 
 import numpy as np
 
+from ..contract import CONTACT_WRENCH
 from ..core.errors import ImpactArmError
 
 DEFAULT_FPS = 20.0
@@ -42,10 +43,10 @@ def contact_forces(path):
     """(times [s], (N, 2) tangential and normal force) of /contact_wrench, or None."""
     from ..io.mcap_ros2 import iter_raw, topics_info
     from ..io.wire import wrench_stamped_fields
-    if '/contact_wrench' not in topics_info(path):
+    if CONTACT_WRENCH not in topics_info(path):
         return None
     t, f = [], []
-    for m in iter_raw(path, ['/contact_wrench']):
+    for m in iter_raw(path, [CONTACT_WRENCH]):
         sec, nanosec, force = wrench_stamped_fields(m.data)
         t.append(sec + 1e-9 * nanosec)
         f.append(force[:2])
@@ -155,7 +156,14 @@ def add_arguments(parser):
 def cli(args) -> int:
     from .analysis import load
     out = args.out or (os.path.splitext(args.file)[0] + '.gif')
-    run = load(args.file)
-    frames = animate(run, out, contact_forces(args.file), args.fps, args.slow, args.window)
+    from .progress import Progress
+    line = Progress(prefix='animate: ')
+
+    def say(text):
+        line.show(text, log=True)
+    run = load(args.file, progress=say)
+    frames = animate(run, out, contact_forces(args.file), args.fps, args.slow, args.window,
+                     progress=say)
+    line.end()
     print(f'{frames} frames written to {out}')
     return 0

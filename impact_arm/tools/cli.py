@@ -11,7 +11,9 @@ import json
 import os
 import sys
 
+from ..contract import INTEGRATOR_PRESETS
 from ..core.errors import ImpactArmError
+from .progress import Progress
 
 DEFAULT_SCENE = 'paper'
 
@@ -43,10 +45,12 @@ def cmd_simulate(args) -> int:
         observer = OfflineRecorder(args.mcap, scene, control_rate=args.control_rate,
                                    preset=args.preset, tf_rate=args.tf_rate)
 
+    line = Progress(prefix='  ', keep=True)
+
     def progress(cycle, cycles, impacts, t):
-        if sys.stderr.isatty():
-            print(f'\r  cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  '
-                  f't = {t:.3f} s', end='', file=sys.stderr, flush=True)
+        line.total = cycles
+        line.show(f'cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  t = {t:.3f} s',
+                  done=cycle)
 
     result = None
     try:
@@ -55,8 +59,7 @@ def cmd_simulate(args) -> int:
     finally:
         if observer is not None:
             observer.close(result)  # with the result: its summary is stored in the file
-    if sys.stderr.isatty():
-        print(file=sys.stderr)
+        line.end()
     print(format_table(result))
     if args.json:
         _write_json(args.json, result.to_json())
@@ -106,7 +109,7 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
                    help='sample the controller at HZ with zero-order hold (0: continuous, '
                         'as the article; default: the scene\'s controller.rate)')
     p.add_argument('--preset', default=None,
-                   choices=['reference', 'accurate', 'balanced', 'fast'],
+                   choices=INTEGRATOR_PRESETS,
                    help="integrator preset (default: the scene's)")
     p.add_argument('--json', metavar='FILE', help='write impacts and run summary as JSON')
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')

@@ -16,7 +16,10 @@ import subprocess
 import sys
 import time
 
+from .. import contract
+from ..contract import COMMANDS, DIAGNOSTICS, FEEDBACK_LAWS, IMPACT_REPORT, JOINT_STATES
 from ..core.errors import ImpactArmError
+from .progress import Progress
 
 NODES = ('recorder', 'simulator', 'controller')       # start order (the arm moves with the
 # first command, so the controller comes last, once the recorder listens)
@@ -32,7 +35,7 @@ def add_arguments(parser):
                              'machine that keeps every 1 ms deadline)')
     parser.add_argument('--rate', type=float, default=1000.0, metavar='HZ',
                         help='publish and control rate (default 1000)')
-    parser.add_argument('--law', choices=('q', 'pid', 'pd'), default=None,
+    parser.add_argument('--law', choices=FEEDBACK_LAWS, default=None,
                         help="control law (default: the scene's)")
     parser.add_argument('--name', default=None,
                         help='recording name: runs/NAME.mcap (default: scene and time)')
@@ -68,12 +71,9 @@ def cli(args) -> int:
         outcome = run.watch(args.timeout or 3 * scene.t_max + 30)
     except KeyboardInterrupt:
         outcome = 'interrupted'
-        if sys.stderr.isatty():
-            print(file=sys.stderr)
     finally:
+        run.line.end()
         codes = run.stop()
-    if sys.stderr.isatty():
-        print(file=sys.stderr)
     result = RunResult(scene=scene, impacts=run.impacts, t_end=run.sim_time,
                        rhs_evaluations=run.rhs_evaluations, wall_time=run.wall,
                        stopped=outcome)
@@ -154,6 +154,7 @@ class Run:
         self.wall = 0.0
         self.node = None
         self._reported = 0
+        self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
         self.logdir = os.path.join(args.out, 'logs')
 
     def command(self, node):
@@ -175,7 +176,6 @@ class Run:
     def start(self):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import DurabilityPolicy, QoSProfile
         from std_msgs.msg import String
 
         os.makedirs(self.logdir, exist_ok=True)
@@ -186,9 +186,9 @@ class Run:
                    signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node('impact_arm_run')
         self.node.create_subscription(
-            String, '/impact_report', self._on_impact,
-            QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+            String, IMPACT_REPORT, self._on_impact, contract.qos(IMPACT_REPORT).to_rclpy())
+        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics,
+                                      contract.qos(DIAGNOSTICS).to_rclpy())
         for node in NODES:
             if node == 'recorder' and not self.output:
                 continue
@@ -211,9 +211,9 @@ class Run:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             rclpy.spin_once(self.node, timeout_sec=0.05)
-            if self.node.count_publishers('/joint_states') >= 1 and \
-                    self.node.count_subscribers('/joint_states') >= listeners and \
-                    self.node.count_subscribers('/effort_controller/commands') >= 1 + listeners:
+            if self.node.count_publishers(JOINT_STATES) >= 1 and \
+                    self.node.count_subscribers(JOINT_STATES) >= listeners and \
+                    self.node.count_subscribers(COMMANDS) >= 1 + listeners:
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
@@ -270,11 +270,8 @@ class Run:
                 f't = {self.sim_time:7.3f} s')
         if self.diagnostics:
             line += f"  watchdog {self.diagnostics.get('watchdog')}"
-        if sys.stderr.isatty():
-            print('\r  ' + line, end='', file=sys.stderr, flush=True)
-        elif count != self._reported:
-            self._reported = count
-            print('  ' + line, file=sys.stderr, flush=True)
+        self.line.show(line, done=count, log=count != self._reported)
+        self._reported = count
 
     def stop(self) -> dict:
         """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any

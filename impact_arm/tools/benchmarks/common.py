@@ -9,24 +9,30 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 import time
 import warnings
+
+from ..progress import Progress
 
 LEVELS_DOC = 'relative error vs the reference preset'
 
 
-def progress(message: str) -> None:
-    """One status line on stderr (overwritten on a terminal, plain lines otherwise)."""
-    if sys.stderr.isatty():
-        print(f'\r\033[K{message}', end='', file=sys.stderr, flush=True)
-    else:
-        print(message, file=sys.stderr, flush=True)
+_status = []   # the benchmark's status line, made on first use (stderr as it is then)
+
+
+def progress(message: str, done=None, total=None) -> None:
+    """The benchmark's status line (``tools.progress``): rewritten on a terminal, one line
+    per message otherwise; with ``done`` of ``total``, an ETA on a terminal."""
+    if not _status:
+        _status.append(Progress())
+    _status[0].total = total
+    _status[0].show(message, done=done, log=True)
 
 
 def progress_done() -> None:
-    if sys.stderr.isatty():
-        print('\r\033[K', end='', file=sys.stderr, flush=True)
+    """Erase the status line before the results are printed."""
+    if _status:
+        _status.pop().end()
 
 
 def load(scene_name: str):

@@ -20,6 +20,8 @@ import os
 import sys
 import time
 
+from ...contract import DIAGNOSTICS, JOINT_STATES
+
 
 GENTLE_GAINS = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
 
@@ -70,7 +72,7 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
     first_state = []
     run.start()
     probe = run.node.create_subscription(
-        JointState, '/joint_states',
+        JointState, JOINT_STATES,
         lambda m: first_state or first_state.append(time.monotonic()), 10)
     try:
         sim = run.procs['simulator']
@@ -138,9 +140,9 @@ def _run_fast(scene_path, rate, seconds):
     context = Context()
     rclpy.init(context=context, domain_id=int(os.environ['ROS_DOMAIN_ID']))
     node = rclpy.create_node('bench_rates_listener', context=context)
-    node.create_subscription(JointState, '/joint_states',
+    node.create_subscription(JointState, JOINT_STATES,
                              lambda m: received.append(time.monotonic()), 1000)
-    node.create_subscription(DiagnosticArray, '/diagnostics', lambda m: diagnostics.append(
+    node.create_subscription(DiagnosticArray, DIAGNOSTICS, lambda m: diagnostics.append(
         {kv.key: kv.value for kv in m.status[0].values}), 10)
     executor = EventsExecutor(context=context)
     executor.add_node(node)

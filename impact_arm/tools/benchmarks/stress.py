@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...core.scene import INTEGRATOR_METHODS
+from ...contract import INTEGRATOR_METHODS
 from . import common
 
 OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
@@ -306,7 +306,7 @@ def run(args) -> int:
         selected = [c for c in selected if args.only in c.name]
     outcomes = []
     for i, case in enumerate(selected, 1):
-        common.progress(f'[{i}/{len(selected)}] {case.name}')
+        common.progress(f'[{i}/{len(selected)}] {case.name}', i - 1, len(selected))
         outcomes.append(run_case(case, args.deadline, args.method))
     common.progress_done()
     print(format_matrix(outcomes))

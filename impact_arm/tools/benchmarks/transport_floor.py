@@ -17,6 +17,9 @@ import subprocess
 import sys
 import time
 
+from ... import contract
+from ...contract import CLOCK, COMMANDS, CONTACT_WRENCH, JOINT_STATES, joint_names
+
 WARM_UP = 200
 
 
@@ -27,21 +30,20 @@ def _controller(seconds):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from ...io.mcap_ros2 import contract_qos
     from ...io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
     node = rclpy.create_node('floor_controller')
-    pub = node.create_publisher(Float64MultiArray, '/effort_controller/commands',
-                                contract_qos('/effort_controller/commands').to_rclpy())
+    pub = node.create_publisher(Float64MultiArray, COMMANDS,
+                                contract.qos(COMMANDS).to_rclpy())
     command = PatchedMessage(Float64MultiArray(data=[0.0, 0.0]), ('data',), stamp=None)
-    latest_only = contract_qos('/joint_states').to_rclpy()
+    latest_only = contract.qos(JOINT_STATES).to_rclpy()
     latest_only.depth = 1
 
     def on_joint_state(raw):
         joint_state_fields(raw)
         pub.publish(command.fill([0.0, 0.0]))
-    node.create_subscription(WrenchStamped, '/contact_wrench', wrench_stamped_fields,
+    node.create_subscription(WrenchStamped, CONTACT_WRENCH, wrench_stamped_fields,
                              latest_only, raw=True)
-    node.create_subscription(JointState, '/joint_states', on_joint_state, latest_only,
+    node.create_subscription(JointState, JOINT_STATES, on_joint_state, latest_only,
                              raw=True)
     executor = EventsExecutor()
     executor.add_node(node)
@@ -58,16 +60,15 @@ def _driver(periods, clock):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from ...io.mcap_ros2 import contract_qos
     from ...io.wire import PatchedMessage, float64_array_data
     node = rclpy.create_node('floor_driver')
 
     def publisher(msg_type, topic):
-        return node.create_publisher(msg_type, topic, contract_qos(topic).to_rclpy())
-    pub_wrench = publisher(WrenchStamped, '/contact_wrench')
-    pub_joints = publisher(JointState, '/joint_states')
-    pub_clock = publisher(Clock, '/clock') if clock else None
-    joints = PatchedMessage(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2],
+        return node.create_publisher(msg_type, topic, contract.qos(topic).to_rclpy())
+    pub_wrench = publisher(WrenchStamped, CONTACT_WRENCH)
+    pub_joints = publisher(JointState, JOINT_STATES)
+    pub_clock = publisher(Clock, CLOCK) if clock else None
+    joints = PatchedMessage(JointState(name=joint_names(2), position=[0.1, 0.2],
                                        velocity=[0.0, 0.0], effort=[0.0, 0.0]),
                             ('position', 'velocity', 'effort'))
     wrench = PatchedMessage(WrenchStamped(), ('wrench.force.x', 'wrench.force.y'))
@@ -88,11 +89,11 @@ def _driver(periods, clock):
             times.append(time.perf_counter())
         if count[0] < WARM_UP + periods:
             send()
-    node.create_subscription(Float64MultiArray, '/effort_controller/commands', on_command,
-                             contract_qos('/effort_controller/commands').to_rclpy(), raw=True)
+    node.create_subscription(Float64MultiArray, COMMANDS, on_command,
+                             contract.qos(COMMANDS).to_rclpy(), raw=True)
     deadline = time.monotonic() + 30
     while (pub_joints.get_subscription_count() < 1 or pub_wrench.get_subscription_count() < 1
-           or node.count_publishers('/effort_controller/commands') < 1):
+           or node.count_publishers(COMMANDS) < 1):
         rclpy.spin_once(node, timeout_sec=0.05)
         if time.monotonic() > deadline:
             raise SystemExit('no controller matched within 30 s')

@@ -1,0 +1,184 @@
+"""The contract every layer shares: topic names, message types and QoS (design §3), joint names
+and the joint-angle convention, and the names of integrator presets, control laws and
+anti-windup strategies. Nothing here imports ROS or the rest of the package, so core, io, nodes
+and tools all import their names from this one place.
+
+===========================  ===================================  =============================
+topic                        type                                 QoS
+===========================  ===================================  =============================
+/joint_states                sensor_msgs/msg/JointState           reliable, volatile, 100
+/contact_wrench              geometry_msgs/msg/WrenchStamped      reliable, volatile, 100
+/impact_report               std_msgs/msg/String                  reliable, transient_local, 100
+/diagnostics                 diagnostic_msgs/msg/DiagnosticArray  reliable, volatile, 10
+/clock                       rosgraph_msgs/msg/Clock              best_effort, volatile, 1
+/effort_controller/commands  std_msgs/msg/Float64MultiArray       reliable, volatile, 100
+/impact_trace (offline only) std_msgs/msg/Float64MultiArray       reliable, transient_local, 100
+/robot_description           std_msgs/msg/String                  reliable, transient_local, 1
+/tf_static                   tf2_msgs/msg/TFMessage               reliable, transient_local, 1
+/tf                          tf2_msgs/msg/TFMessage               reliable, volatile, 100
+/impact_markers              visualization_msgs/msg/MarkerArray   reliable, volatile, 10
+===========================  ===================================  =============================
+
+All keep_last; deadline, lifespan and liveliness lease infinite; liveliness automatic.
+``/impact_report`` is transient_local so a late subscriber (recorder, analysis) still gets
+every impact. ``/clock`` is best effort like rclcpp's ClockQoS.
+
+Joint angles on the wire are relative (encoder) angles, joint1 = q1, joint_i = q_i - q_{i-1};
+the physics uses absolute link angles q_i. ``to_joint_space``/``to_absolute`` convert.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Optional
+
+# ------------------------------------------------------------------------------- topics
+JOINT_STATES = '/joint_states'
+CONTACT_WRENCH = '/contact_wrench'
+IMPACT_REPORT = '/impact_report'
+DIAGNOSTICS = '/diagnostics'
+CLOCK = '/clock'
+COMMANDS = '/effort_controller/commands'
+IMPACT_TRACE = '/impact_trace'  # written by offline runs only: the contact phase, densely
+ROBOT_DESCRIPTION = '/robot_description'   # the visual topics (io/scene_visuals.py)
+TF_STATIC = '/tf_static'
+TF = '/tf'
+IMPACT_MARKERS = '/impact_markers'
+
+JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
+WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
+STRING_TYPE = 'std_msgs/msg/String'
+DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
+TRACE_TYPE = 'std_msgs/msg/Float64MultiArray'
+TF_TYPE = 'tf2_msgs/msg/TFMessage'
+MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
+WRENCH_FRAME = 'surface'
+
+# RMW_DURATION_INFINITE as rosbag2 writes it
+INFINITE_SEC, INFINITE_NSEC = 9223372036, 854775807
+INFINITE_NS = INFINITE_SEC * 1_000_000_000 + INFINITE_NSEC
+
+
+@dataclasses.dataclass(frozen=True)
+class TopicQos:
+    """A QoS profile in rosbag2's terms. Durations in ns; None = infinite."""
+
+    reliability: str = 'reliable'
+    durability: str = 'volatile'
+    depth: int = 10
+    history: str = 'keep_last'
+    deadline_ns: Optional[int] = None
+    lifespan_ns: Optional[int] = None
+    liveliness: str = 'automatic'
+    liveliness_lease_ns: Optional[int] = None
+    avoid_ros_namespace_conventions: bool = False
+
+    def as_dict(self) -> dict:
+        """The mapping rosbag2 serializes (key order as rosbag2 writes it)."""
+        def dur(ns):
+            ns = INFINITE_NS if ns is None or ns <= 0 or ns >= INFINITE_NS else ns
+            return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+        return {'history': self.history, 'depth': int(self.depth),
+                'reliability': self.reliability, 'durability': self.durability,
+                'deadline': dur(self.deadline_ns), 'lifespan': dur(self.lifespan_ns),
+                'liveliness': self.liveliness,
+                'liveliness_lease_duration': dur(self.liveliness_lease_ns),
+                'avoid_ros_namespace_conventions': bool(self.avoid_ros_namespace_conventions)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> 'TopicQos':
+        def ns(v):
+            t = int(v['sec']) * 1_000_000_000 + int(v['nsec'])
+            return None if t == 0 or t >= INFINITE_NS else t
+        return cls(str(d['reliability']), str(d['durability']), int(d.get('depth', 0)),
+                   str(d.get('history', 'keep_last')), ns(d['deadline']), ns(d['lifespan']),
+                   str(d['liveliness']), ns(d['liveliness_lease_duration']),
+                   bool(d.get('avoid_ros_namespace_conventions', False)))
+
+    @classmethod
+    def from_rclpy(cls, p) -> 'TopicQos':
+        def ns(d):
+            t = d.nanoseconds
+            return None if t <= 0 or t >= INFINITE_NS else t
+        return cls(p.reliability.name.lower(), p.durability.name.lower(), int(p.depth),
+                   p.history.name.lower(), ns(p.deadline), ns(p.lifespan),
+                   p.liveliness.name.lower(), ns(p.liveliness_lease_duration),
+                   bool(p.avoid_ros_namespace_conventions))
+
+    def to_rclpy(self, min_depth: int = 1):
+        """An rclpy QoSProfile; 'unknown' policies (as discovery reports them) become defaults."""
+        from rclpy.duration import Duration
+        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
+                               ReliabilityPolicy)
+
+        def pol(enum, name, default):
+            return default if name in ('unknown', '') else enum[name.upper()]
+        kw = {}
+        for key, attr in (('deadline', 'deadline_ns'), ('lifespan', 'lifespan_ns'),
+                          ('liveliness_lease_duration', 'liveliness_lease_ns')):
+            if getattr(self, attr) is not None:
+                kw[key] = Duration(nanoseconds=getattr(self, attr))
+        return QoSProfile(
+            history=pol(HistoryPolicy, self.history, HistoryPolicy.KEEP_LAST),
+            depth=max(int(self.depth), min_depth),
+            reliability=pol(ReliabilityPolicy, self.reliability, ReliabilityPolicy.RELIABLE),
+            durability=pol(DurabilityPolicy, self.durability, DurabilityPolicy.VOLATILE),
+            liveliness=pol(LivelinessPolicy, self.liveliness, LivelinessPolicy.AUTOMATIC),
+            avoid_ros_namespace_conventions=self.avoid_ros_namespace_conventions, **kw)
+
+
+RELIABLE_100 = TopicQos(depth=100)
+LATCHED_100 = TopicQos(durability='transient_local', depth=100)
+TOPICS = {  # topic -> (type, QoS) of every topic the nodes exchange; see the docstring
+    JOINT_STATES: (JOINT_STATE_TYPE, RELIABLE_100),
+    CONTACT_WRENCH: (WRENCH_TYPE, RELIABLE_100),
+    IMPACT_REPORT: (STRING_TYPE, LATCHED_100),
+    DIAGNOSTICS: (DIAGNOSTICS_TYPE, TopicQos(depth=10)),
+    CLOCK: (CLOCK_TYPE, TopicQos(reliability='best_effort', depth=1)),
+    # depth 100 like the joint states: a recorder that is briefly slower than a lockstep loop
+    # must not lose commands the driver already acknowledged
+    COMMANDS: (COMMAND_TYPE, RELIABLE_100),
+}
+TRACE_QOS = LATCHED_100
+LATCHED_1 = TopicQos(durability='transient_local', depth=1)
+VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
+    ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),
+    TF_STATIC: (TF_TYPE, LATCHED_1),
+    TF: (TF_TYPE, TopicQos(depth=100)),
+    IMPACT_MARKERS: (MARKERS_TYPE, TopicQos(depth=10)),
+}
+
+
+def qos(topic: str, default: TopicQos = TopicQos()) -> TopicQos:
+    """The QoS the contract gives ``topic`` (remapped names fall back to ``default``)."""
+    return TOPICS.get(topic, (None, default))[1]
+
+
+# ------------------------------------------------------------------------------- joints
+def joint_names(n_links: int) -> list:
+    return [f'joint{i + 1}' for i in range(n_links)]
+
+
+def to_joint_space(values) -> list:
+    """Absolute link angles (or rates) -> relative joint angles: [a1, a2 - a1, ...]."""
+    values = [float(v) for v in values]
+    return [values[0]] + [values[i] - values[i - 1] for i in range(1, len(values))]
+
+
+def to_absolute(values) -> list:
+    """Relative joint angles (or rates) -> absolute link angles (cumulative sum)."""
+    out, acc = [], 0.0
+    for v in values:
+        acc += float(v)
+        out.append(acc)
+    return out
+
+
+# ------------------------------------------------------------------------------- names
+INTEGRATOR_PRESETS = ('reference', 'accurate', 'balanced', 'fast')
+INTEGRATOR_METHODS = ('dopri5', 'rosenbrock')
+CONTROL_LAWS = ('q', 'pid', 'pd', 'none')     # 'none': no controller (zero torque)
+FEEDBACK_LAWS = ('q', 'pid', 'pd')            # the laws the controller node runs
+PID_SPACES = ('absolute', 'joint')
+ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')

@@ -1,0 +1,64 @@
+"""The contract module: one spelling of every shared name, joint-space conversion, progress."""
+import io
+import pathlib
+import re
+
+import pytest
+
+from impact_arm import contract
+from impact_arm.tools.progress import Progress
+
+PACKAGE = pathlib.Path(contract.__file__).parent
+
+
+def test_topic_names_are_spelled_only_in_the_contract():
+    names = [contract.JOINT_STATES, contract.CONTACT_WRENCH, contract.IMPACT_REPORT, contract.TF,
+             contract.ROBOT_DESCRIPTION, contract.TF_STATIC, contract.IMPACT_MARKERS,
+             contract.DIAGNOSTICS, contract.CLOCK, contract.COMMANDS, contract.IMPACT_TRACE]
+    spelled = re.compile('|'.join(rf"""['"]{re.escape(n)}['"]""" for n in names))
+    offenders = [f'{p.relative_to(PACKAGE)}:{k}' for p in PACKAGE.rglob('*.py')
+                 if p.name != 'contract.py'
+                 for k, line in enumerate(p.read_text().splitlines(), 1) if spelled.search(line)]
+    assert offenders == []
+
+
+def test_joint_space_round_trip_and_convention():
+    q = [0.3, -1.2, 2.5]
+    assert contract.to_joint_space(q) == pytest.approx([0.3, -1.5, 3.7], abs=1e-15)
+    assert contract.to_absolute(contract.to_joint_space(q)) == pytest.approx(q, abs=1e-15)
+    assert contract.joint_names(3) == ['joint1', 'joint2', 'joint3']
+
+
+def test_every_topic_has_a_type_and_qos():
+    assert contract.qos(contract.IMPACT_REPORT).durability == 'transient_local'
+    assert contract.qos('/remapped', contract.TopicQos(depth=3)).depth == 3
+    assert all(t.count('/') == 2 for t, _ in contract.TOPICS.values())
+
+
+class _Stream(io.StringIO):
+    def __init__(self, tty):
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+
+def test_progress_on_a_terminal_rewrites_one_line_with_an_eta():
+    now = [100.0]
+    out = _Stream(tty=True)
+    line = Progress(total=10, prefix='  ', stream=out, clock=lambda: now[0])
+    now[0] += 8.0
+    line.show('cycle 5/10', done=4)           # 4 of 10 in 8 s: 12 s left
+    assert out.getvalue() == '\r\033[K  cycle 5/10   40 %  ETA 12 s'
+    line.end()
+    assert out.getvalue().endswith('\r\033[K')  # erased, the results follow
+
+
+def test_progress_off_a_terminal_prints_only_marked_lines_without_eta():
+    out = _Stream(tty=False)
+    line = Progress(total=10, stream=out, clock=lambda: 0.0)
+    line.show('tick', done=3)
+    line.show('impact 1', done=3, log=True)
+    line.end()
+    assert out.getvalue() == 'impact 1\n'
