@@ -11,7 +11,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from impact_arm.core.model import ArmModel
 from impact_arm.core.simulate import run
-from impact_arm.io.offline_mcap import OfflineRecorder, from_joint_space
+from impact_arm.contract import to_absolute
+from impact_arm.io.offline_mcap import OfflineRecorder
 from impact_arm.io.urdf import robot_description
 from scenes import scene_from
 
@@ -73,7 +74,7 @@ def test_tf_composes_to_the_model_tip_at_the_joint_state_stamps(recording):
             chain.append(t)
             parent = t.child_frame_id
         assert tip.header.frame_id == parent
-        q = from_joint_space(js.position)
+        q = to_absolute(js.position)
         x_b, y_b = model.tip(np.array(q), np.zeros(len(q)))[:2]
         assert compose(chain + [tip]) == pytest.approx((x_b, y_b), abs=1e-9)
     stamps = [stamp_ns(m.transforms[0].header) for _, m in tfs]
