@@ -23,6 +23,8 @@ import math
 import xml.etree.ElementTree as ET
 from typing import NamedTuple
 
+from ..contract import joint_names
+
 # topic_based_ros2_control's TopicBasedSystem defaults: the simulator listens and publishes
 # there unless told otherwise, so the URDF and the node agree out of the box
 JOINT_COMMANDS_TOPIC = '/robot_joint_commands'
@@ -31,10 +33,6 @@ WORLD = 'world'
 TIP = 'tip'
 ROD_RADIUS_PER_REACH = 0.015   # visual thickness of the rods (the model's rods are lines)
 SURFACE_THICKNESS_PER_REACH = 0.02
-
-
-def joint_names(n_links: int) -> list:
-    return [f'joint{i + 1}' for i in range(n_links)]
 
 
 def link_names(n_links: int) -> list:

@@ -31,11 +31,11 @@ import itertools
 import json
 import math
 import os
-import sys
 import time
 
 from ..core.errors import ImpactArmError
 from ..core.study import Study, load_scene_data, parse_key_path
+from .progress import Progress
 
 KINDS = ('grid', 'list', 'random', 'lhs')
 TABLES = ('runs', 'impacts')
@@ -271,29 +271,6 @@ def read_table(out: str, table: str = 'runs'):
 
 
 # --- execution ---------------------------------------------------------------------------
-class Progress:
-    """One status line on a terminal: runs done, rate, ETA."""
-
-    def __init__(self, total: int, label: str = 'sweep', stream=sys.stderr):
-        self.total, self.label, self.stream = total, label, stream
-        self.done, self.t0 = 0, time.perf_counter()
-        self.live = stream.isatty()
-
-    def advance(self, count: int):
-        self.done += count
-        if self.live:
-            elapsed = time.perf_counter() - self.t0
-            rate = self.done / elapsed if elapsed > 0 else 0.0
-            eta = (self.total - self.done) / rate if rate else math.inf
-            eta_text = f'{eta:5.0f} s' if math.isfinite(eta) else '    ?'
-            print(f'\r{self.label}: {self.done}/{self.total} runs  {rate:7.0f} runs/s  '
-                  f'ETA {eta_text}', end='', file=self.stream, flush=True)
-
-    def close(self):
-        if self.live:
-            print(file=self.stream)
-
-
 def _chunks(items, workers):
     """Chunks small enough to balance the workers, large enough to amortise a hand-over."""
     size = max(1, min(50, len(items) // (8 * max(1, workers))))
@@ -345,7 +322,8 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
         results = _local_pool(workers, task, chunks)
     else:
         results = map(task, chunks)
-    progress = Progress(len(todo)) if show_progress else None
+    progress = Progress(total=len(todo), prefix='sweep: ', keep=True) if show_progress else None
+    done = 0
     pending, pending_runs, last_flush = [], 0, time.perf_counter()
     failed = 0
     try:
@@ -354,8 +332,10 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
             count = tables['runs'].num_rows
             pending_runs += count
             failed += sum(1 for e in tables['runs'].column('error').to_pylist() if e)
+            done += count
             if progress:
-                progress.advance(count)
+                rate = done / max(time.monotonic() - progress.started, 1e-9)
+                progress.show(f'{done}/{len(todo)} runs  {rate:7.0f} runs/s', done=done)
             if pending_runs >= batch or time.perf_counter() - last_flush > flush_seconds:
                 store.write(pending)
                 pending, pending_runs, last_flush = [], 0, time.perf_counter()
@@ -363,7 +343,7 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
         if pending:
             store.write(pending)
         if progress:
-            progress.close()
+            progress.end()
     return {'runs': len(spec.runs), 'skipped': len(spec.runs) - len(todo), 'ran': len(todo),
             'failed': failed, 'wall': time.perf_counter() - wall0}
 

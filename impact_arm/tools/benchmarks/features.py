@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 
+from ...contract import INTEGRATOR_PRESETS
 from . import common
 from .stress import paper_dict
 
@@ -62,7 +63,7 @@ EXTRA = {'free motion, no gravity': _no_gravity}
 
 def add_arguments(parser):
     parser.add_argument('--preset', default='balanced',
-                        choices=['reference', 'accurate', 'balanced', 'fast'])
+                        choices=INTEGRATOR_PRESETS)
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--three-links', action='store_true',
                         help='add a three-link arm (compiles a new scene shape on first use)')
