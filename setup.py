@@ -15,7 +15,6 @@ setup(
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
     ],
-    package_data={PACKAGE: ['scenes/*.yaml']},
     # rclpy and the message packages come from the ROS install (package.xml) or, without ROS,
     # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
     install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib',

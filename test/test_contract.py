@@ -62,3 +62,13 @@ def test_progress_off_a_terminal_prints_only_marked_lines_without_eta():
     line.show('impact 1', done=3, log=True)
     line.end()
     assert out.getvalue() == 'impact 1\n'
+
+
+def test_every_layer_is_a_package_setup_installs():
+    """setup.py's find_packages skips folders without __init__.py: a plain install would
+    lack them."""
+    from setuptools import find_packages
+    found = set(find_packages(str(PACKAGE.parent), include=['impact_arm', 'impact_arm.*']))
+    folders = {'.'.join(p.parent.relative_to(PACKAGE.parent).parts)
+               for p in PACKAGE.rglob('*.py') if '__pycache__' not in p.parts}
+    assert folders <= found
