@@ -36,7 +36,7 @@ def test_missing_key_is_named():
 def test_negative_mass_names_key_value_and_range():
     data = paper_dict()
     data['links'][1]['mass'] = -1.0
-    refused(data, 'links[1].mass', '-1', '> 0', 'kg')
+    refused(data, 'links[1].mass', '-1', '>= 1e-06', 'kg')
 
 
 def test_poisson_ratio_of_half_or_more_is_refused():

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import reprlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,6 +25,15 @@ from .errors import SceneError
 
 CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
 MAX_YIELD_STRAIN = 0.1   # S_y / E* beyond which the Jackson-Green law is meaningless
+MAX_FILE_BYTES = 1 << 20     # a scene is a few hundred bytes; /dev/zero must not be read whole
+MAX_YAML_NODES = 100_000     # after alias expansion: an alias bomb is refused, not expanded
+
+# shown values are cut short: a refusal never prints an unbounded input
+_show = reprlib.Repr()
+_show.maxstring = _show.maxother = 60
+_show.maxlist = _show.maxtuple = _show.maxdict = 6
+_show.maxlevel = 2
+_show.maxlong = 40
 
 
 @dataclass(frozen=True)
@@ -104,35 +114,38 @@ def _choice(options, default=REQUIRED):
 
 
 MATERIAL = {
-    'E': _num(0, None, low_open=True, unit='Pa'),
+    'E': _num(1e5, 1e13, unit='Pa'),
     'nu': _num(0, 0.5, high_open=True),
-    'S_y': _num(0, None, low_open=True, unit='Pa'),
+    'S_y': _num(1e3, 1e12, unit='Pa'),
 }
-LINK = {'length': _num(0, None, low_open=True, unit='m'),
-        'mass': _num(0, None, low_open=True, unit='kg')}
+# Absolute bounds below are physical: the model's tolerances are absolute in metres and
+# radians, the contact laws are fitted on lab-scale metal contact, and the numbers must stay far
+# from float64's range; docs/scene.md ("Physical ranges") gives each reason.
+LINK = {'length': _num(1e-3, 1e3, unit='m'),
+        'mass': _num(1e-6, 1e6, unit='kg')}
 SURFACE = {
-    'height': _num(unit='m'),
+    'height': _num(-1e3, 1e3, unit='m'),
     'law': _choice(CONTACT_LAWS, 'elastoplastic'),
     'mu': _num(0, 10, unit='-', default=0.0),
-    'v_d': _num(0, None, low_open=True, unit='m/s', default=0.02),
+    'v_d': _num(1e-6, 10, unit='m/s', default=0.02),
     'material': ('str', None, '', 'surface'),
 }
 CONTROLLER = {
     'law': _choice(CONTROL_LAWS, 'q'),
     'space': _choice(PID_SPACES, 'absolute'),
-    'kp': ('vec', _num(0, None), 'N m/rad', REQUIRED),
-    'kd': ('vec', _num(0, None), 'N m s/rad', REQUIRED),
-    'ki': ('vec', _num(0, None), 'N m/(rad s)', None),
+    'kp': ('vec', _num(0, 1e9), 'N m/rad', REQUIRED),
+    'kd': ('vec', _num(0, 1e9), 'N m s/rad', REQUIRED),
+    'ki': ('vec', _num(0, 1e9), 'N m/(rad s)', None),
     'down_target_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
     'up_target_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
-    'switch_height': _num(unit='m', default=1.0),
+    'switch_height': _num(-1e3, 1e3, unit='m', default=1.0),
     'rate': _num(0, 1e6, unit='Hz', default=0.0),
 }
 INTEGRATOR = {
     'preset': _choice(INTEGRATOR_PRESETS, 'balanced'),
     'rtol': _num(1e-14, 1e-1, unit='-', default=None),
     'atol': _num(1e-16, 1e-1, unit='-', default=None),
-    'max_step': _num(0, 10, low_open=True, unit='s', default=None),
+    'max_step': _num(1e-8, 10, unit='s', default=None),
     'method': _choice(INTEGRATOR_METHODS, 'dopri5'),
     'contact_rtol': _num(1e-14, 1e-1, unit='-', default=None),
 }
@@ -141,7 +154,7 @@ SCHEMA = {
     'description': ('str', None, '', ''),
     'gravity': _num(0, 1000, unit='m/s^2', default=9.81),
     'links': ('list', LINK, '', REQUIRED),
-    'tip_radius': _num(0, None, low_open=True, unit='m'),
+    'tip_radius': _num(1e-6, 1, unit='m'),
     'materials': ('map', MATERIAL, '', REQUIRED),
     'arm_material': ('str', None, '', 'arm'),
     'surfaces': ('list', SURFACE, '', ()),
@@ -176,8 +189,13 @@ class _Checker:
 
     def number(self, path, value, constraint, unit):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(path, f"= {value!r} is not a number; {_describe_range(constraint, unit)}")
-        value = float(value)
+            self.fail(path, f"= {_show.repr(value)} is not a number; "
+                            f"{_describe_range(constraint, unit)}")
+        try:
+            value = float(value)
+        except OverflowError:   # an integer beyond float64 (> ~1.8e308)
+            self.fail(path, f"= an integer of {len(str(abs(value)))} digits is out of range: "
+                            f"{_describe_range(constraint, unit)}")
         if not math.isfinite(value):
             self.fail(path, f"= {value!r} is not finite; {_describe_range(constraint, unit)}")
         low, high, low_open, high_open = constraint
@@ -193,35 +211,35 @@ class _Checker:
             return self.number(path, value, constraint, unit)
         if kind == 'choice':
             if value not in constraint:
-                self.fail(path, f"= {value!r} is not allowed: choose one of {', '.join(constraint)}")
+                self.fail(path, f"= {_show.repr(value)} is not allowed: choose one of {', '.join(constraint)}")
             return value
         if kind == 'str':
             if not isinstance(value, str):
-                self.fail(path, f"= {value!r} must be a string")
+                self.fail(path, f"= {_show.repr(value)} must be a string")
             return value
         if kind == 'bool':
             if not isinstance(value, bool):
-                self.fail(path, f"= {value!r} must be true or false")
+                self.fail(path, f"= {_show.repr(value)} must be true or false")
             return value
         if kind == 'int':
             low, high = constraint
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-                self.fail(path, f"= {value!r} must be an integer in [{low}, {high}]")
+                self.fail(path, f"= {_show.repr(value)} must be an integer in [{low}, {high}]")
             return value
         if kind == 'vec':
             if not isinstance(value, (list, tuple)) or not value:
-                self.fail(path, f"= {value!r} must be a non-empty list of numbers ({unit})")
+                self.fail(path, f"= {_show.repr(value)} must be a non-empty list of numbers ({unit})")
             return tuple(self.number(f'{path}[{i}]', v, constraint[1], unit)
                          for i, v in enumerate(value))
         if kind == 'dict':
             return self.mapping(path, value, constraint)
         if kind == 'list':
             if not isinstance(value, (list, tuple)):
-                self.fail(path, f"= {value!r} must be a list")
+                self.fail(path, f"= {_show.repr(value)} must be a list")
             return tuple(self.mapping(f'{path}[{i}]', v, constraint) for i, v in enumerate(value))
         if kind == 'map':
             if not isinstance(value, dict) or not value:
-                self.fail(path, f"= {value!r} must be a mapping of names to entries")
+                self.fail(path, f"= {_show.repr(value)} must be a mapping of names to entries")
             return {str(k): self.mapping(f'{path}.{k}', v, constraint) for k, v in value.items()}
         raise AssertionError(kind)
 
@@ -231,7 +249,7 @@ class _Checker:
             self.fail(path or '<top level>', f"must be a mapping, got {type(value).__name__}")
         unknown = sorted(set(map(str, value)) - set(schema))
         if unknown:
-            self.fail(f'{prefix}{unknown[0]}', f"is not a known key; allowed here: {', '.join(schema)}")
+            self.fail(f'{prefix}{unknown[0][:60]}', f"is not a known key; allowed here: {', '.join(schema)}")
         out = {}
         for key, spec in schema.items():
             if key in value:
@@ -307,6 +325,7 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
                        f'{strain:.3g} is out of range: must be <= {MAX_YIELD_STRAIN:g} for the '
                        f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
                        f'E and S_y')
+    _check_physics(check, raw, surfaces, arm)
     integ = IntegratorSpec(**raw['integrator'])
     return Scene(
         name=raw['name'], lengths=tuple(l['length'] for l in raw['links']),
@@ -317,14 +336,81 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
         publish_rate=raw['publish_rate'], integrator=integ, source_text=text, source_path=path)
 
 
+MAX_LENGTH_RATIO = 1e3     # longest / shortest link
+MAX_MASS_RATIO = 1e4       # heaviest / lightest link
+MIN_CONTACT_TIME = 1e-6    # s, Hertz contact duration at 1 m/s
+MAX_LOOP_RATE = 1e6        # 1/s, the control loop's fastest eigenvalue (kd/I, sqrt(kp/I))
+MAX_SAMPLES = 2e7          # publish_rate * t_max: samples an offline run keeps in memory
+
+
+def _check_physics(check, raw, surfaces, arm):
+    """Ranges that involve several keys: each bounds what the model or the numerics can do."""
+    lengths = [l['length'] for l in raw['links']]
+    masses = [l['mass'] for l in raw['links']]
+    if max(lengths) / min(lengths) > MAX_LENGTH_RATIO:
+        check.fail('links', f'= lengths {min(lengths):g} .. {max(lengths):g} m: ratio '
+                   f'{max(lengths) / min(lengths):.3g} is out of range: must be <= '
+                   f'{MAX_LENGTH_RATIO:g} (the absolute tolerances, in m and rad, cannot suit '
+                   f'both ends of the arm)')
+    if max(masses) / min(masses) > MAX_MASS_RATIO:
+        check.fail('links', f'= masses {min(masses):g} .. {max(masses):g} kg: ratio '
+                   f'{max(masses) / min(masses):.3g} is out of range: must be <= '
+                   f'{MAX_MASS_RATIO:g} (the mass matrix becomes too ill-conditioned to solve)')
+    if raw['tip_radius'] > min(lengths):
+        check.fail('tip_radius', f"= {raw['tip_radius']:g} is out of range: must be <= the "
+                   f'shortest link ({min(lengths):g} m): the tip is a sphere on a slender rod')
+    # Hertz contact duration of the lightest link's mass striking at 1 m/s:
+    # t_c = 2.87 (m^2 / (R E*^2 v))^(1/5); the contact phases need steps well below it
+    for i, sfc in enumerate(surfaces):
+        if sfc.law == 'none':
+            continue
+        a, b = arm, sfc.material
+        e_red = a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
+        t_c = 2.87 * (min(masses) ** 2 / (raw['tip_radius'] * e_red ** 2)) ** 0.2
+        if t_c < MIN_CONTACT_TIME:
+            check.fail(f'surfaces[{i}].material',
+                       f'= {raw["surfaces"][i]["material"]!r}: contact lasts ~{t_c:.2g} s '
+                       f'(Hertz, lightest link at 1 m/s), out of range: must be >= '
+                       f'{MIN_CONTACT_TIME:g} s (stiffness E* = {e_red:.3g} Pa against link '
+                       f'masses down to {min(masses):g} kg: steps would fall under the '
+                       f'resolution of t)')
+    c = raw['controller']
+    for k, (length, mass) in enumerate(zip(lengths, masses)):
+        inertia = mass * length ** 2 / 3    # a rod about its joint
+        for key, rate in (('kd', c['kd'][k] / inertia if k < len(c['kd']) else 0.0),
+                          ('kp', math.sqrt(c['kp'][k] / inertia) if k < len(c['kp']) else 0.0)):
+            if rate > MAX_LOOP_RATE:
+                check.fail(f'controller.{key}[{k}]',
+                           f'= {c[key][k]:g} is out of range: gives a closed-loop rate of '
+                           f'{rate:.3g} 1/s on link {k + 1} (inertia {inertia:.3g} kg m^2); must '
+                           f'be <= {MAX_LOOP_RATE:g} 1/s (steps under a microsecond)')
+    if 0 < c['rate'] < 1:
+        check.fail('controller.rate', f"= {c['rate']:g} is out of range: must be 0 "
+                   f'(continuous) or >= 1 (Hz): a slower sampled controller holds one torque '
+                   f'for more than a second')
+    samples = raw['publish_rate'] * raw['t_max']
+    if samples > MAX_SAMPLES:
+        check.fail('publish_rate', f"= {raw['publish_rate']:g} is out of range with t_max = "
+                   f"{raw['t_max']:g} s: {samples:.3g} samples; publish_rate * t_max must be <= "
+                   f'{MAX_SAMPLES:g} (an offline run keeps every sample in memory)')
+
+
 def read_scene_file(name: str | os.PathLike) -> tuple[str, str]:
-    """(text, path) of a scene file given by path or installed name."""
+    """(text, path) of a scene file given by path or installed name; at most
+    ``MAX_FILE_BYTES`` are read (``--scene /dev/zero`` is refused at once)."""
     path = str(resolve_scene_path(name))
     try:
-        with open(path, encoding='utf-8') as f:
-            return f.read(), path
+        with open(path, 'rb') as f:
+            data = f.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise SceneError(f"scene '{path}': larger than {MAX_FILE_BYTES} bytes: not a scene file")
+    try:
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"scene '{path}': not UTF-8 text (byte {exc.start})") from None
+    return text, path
 
 
 def load_scene(path: str | os.PathLike) -> Scene:
@@ -334,25 +420,113 @@ def load_scene(path: str | os.PathLike) -> Scene:
 
 
 class _SceneLoader(yaml.SafeLoader):
-    """SafeLoader that also reads ``210e9`` / ``1.12e9`` as floats.
+    """SafeLoader that reads numbers as YAML 1.2 does, refuses what YAML 1.1 and 1.2 read
+    differently, and refuses duplicate keys.
 
-    YAML 1.1 (PyYAML) demands a dot and a signed exponent, so ``210e9`` would otherwise arrive
-    as a string and be refused as non-numeric, which surprises every user."""
+    PyYAML implements YAML 1.1: ``210e9`` would be a string, ``1:30`` the number 90
+    (sexagesimal), ``017`` the number 15 (octal), ``on``/``no`` booleans. A scene means one
+    thing under either reading or is refused, naming the value."""
+
+    yaml_implicit_resolvers = {
+        first: [(tag, regexp) for tag, regexp in resolvers
+                if tag not in ('tag:yaml.org,2002:int', 'tag:yaml.org,2002:float',
+                               'tag:yaml.org,2002:bool')]
+        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+            if key is not None and key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f'duplicate key {key[:60]!r} (the file would mean only its last '
+                    f'value)', key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+    def construct_ambiguous(self, node):
+        raise yaml.constructor.ConstructorError(
+            None, None, f'{node.value[:60]!r} reads differently in YAML 1.1 and 1.2 '
+            f'(sexagesimal, octal, yes/no/on/off, digit separators): write a plain decimal '
+            f'number, true/false, or quote it as a string', node.start_mark)
 
 
-_SceneLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?(?:[eE][-+]?[0-9]+)$'),
-    list('-+0123456789'))
+_AMBIGUOUS = 'tag:impact_arm,2026:ambiguous'
+_SceneLoader.add_constructor(_AMBIGUOUS, _SceneLoader.construct_ambiguous)
+for _tag, _pattern, _first in (
+        (_AMBIGUOUS, r'^(?:[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?'
+                     r'|[-+]?0[0-9_]+|[-+]?0b[01_]+|[-+]?[0-9][0-9_]*_[0-9_]*(?:\.[0-9_]*)?'
+                     r'|yes|Yes|YES|no|No|NO|on|On|ON|off|Off|OFF|y|Y|n|N)$',
+         list('-+0123456789yYnNoO')),
+        ('tag:yaml.org,2002:bool', r'^(?:true|True|TRUE|false|False|FALSE)$', list('tTfF')),
+        ('tag:yaml.org,2002:int', r'^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$',
+         list('-+0123456789')),
+        ('tag:yaml.org,2002:float',
+         r'^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?'
+         r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$', list('-+0123456789.'))):
+    _SceneLoader.add_implicit_resolver(_tag, re.compile(_pattern), _first)
+
+
+def _construct_int(loader, node):
+    """YAML 1.2 integers: decimal, 0x hex, 0o octal (PyYAML's reader would take 0o as text)."""
+    value = node.value
+    if value.startswith('0x'):
+        return int(value[2:], 16)
+    if value.startswith('0o'):
+        return int(value[2:], 8)
+    return int(value)
+
+
+_SceneLoader.add_constructor('tag:yaml.org,2002:int', _construct_int)
+
+
+def _expanded_size(node, sizes) -> int:
+    """Nodes the document becomes once aliases are expanded (shared nodes counted each time)."""
+    key = id(node)
+    if key not in sizes:
+        sizes[key] = 0       # a recursive alias counts as one node here; it is refused later
+        if isinstance(node, yaml.SequenceNode):
+            total = 1 + sum(_expanded_size(child, sizes) for child in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            total = 1 + sum(_expanded_size(k, sizes) + _expanded_size(v, sizes)
+                            for k, v in node.value)
+        else:
+            total = 1
+        sizes[key] = min(total, MAX_YAML_NODES + 1)
+    return sizes[key]
+
+
+def _near_key(text: str, line: int) -> str:
+    """The key being written at (or just before) a 0-based line, for the one-line message."""
+    lines = text.splitlines()
+    for k in range(min(line, len(lines) - 1), -1, -1):
+        m = re.match(r'\s*(?:-\s*)?\{?\s*([A-Za-z_][\w]*)\s*:', lines[k])
+        if m:
+            return f", near key '{m.group(1)}'"
+    return ''
 
 
 def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
-    """The scene's YAML as plain data, not yet validated (studies change values in it).
-    Also reads sweep specs (``what``), with the same reading of 210e9 as a number."""
+    """The scene's YAML as plain data, not yet validated (studies change values in it), or
+    ``SceneError`` in one line with line, column and key. Also reads sweep specs (``what``)."""
+    loader = _SceneLoader(text)
     try:
-        return yaml.load(text, Loader=_SceneLoader)
-    except yaml.YAMLError as exc:
-        raise SceneError(f"{what} '{origin}': not valid YAML: {exc}") from None
+        node = loader.get_single_node()
+        if node is not None and _expanded_size(node, {}) > MAX_YAML_NODES:
+            raise SceneError(f"{what} '{origin}': more than {MAX_YAML_NODES} YAML nodes once "
+                             f'aliases are expanded: not a scene file')
+        return loader.construct_document(node) if node is not None else None
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = (f' at line {mark.line + 1}, column {mark.column + 1}'
+                 f'{_near_key(text, mark.line)}') if mark else ''
+        problem = ' '.join(str(exc.problem or exc.context or 'unreadable').split())
+        raise SceneError(f"{what} '{origin}': not valid YAML{where}: {problem[:200]}") from None
+    except (yaml.YAMLError, RecursionError, ValueError) as exc:
+        problem = ' '.join(str(exc).split()) or type(exc).__name__
+        raise SceneError(f"{what} '{origin}': not valid YAML: {problem[:200]}") from None
+    finally:
+        loader.dispose()
 
 
 def scene_from_text(text: str, origin: str = '<scene>', path: str = '') -> Scene:

@@ -14,12 +14,36 @@ subscription created with ``raw=True``; both are public API. So:
 
 Subscribers see ordinary messages; the bytes are exactly what ``msgdefs.serialize_cdr`` (and
 DDS) produce, which the tests check against rclpy's own deserializer.
+
+The readers take bytes straight from the network, so any peer can hand them garbage: every
+malformation (short, bad header, absurd sequence length, non-UTF-8 name) ends as one
+``MalformedMessage`` (a ValueError) with a one-line reason, which a node counts and drops.
 """
 from __future__ import annotations
 
+import functools
 import struct
 
 from .msgdefs import CdrReader, serialize_cdr
+
+
+class MalformedMessage(ValueError):
+    """Bytes that are not a well-formed message of the expected type."""
+
+
+def _reader(function):
+    """Any failure while reading hostile bytes becomes one ``MalformedMessage``."""
+    @functools.wraps(function)
+    def read(raw):
+        try:
+            return function(raw)
+        except MalformedMessage:
+            raise
+        except (ValueError, struct.error, IndexError, OverflowError, MemoryError) as exc:
+            reason = ('a name is not UTF-8' if isinstance(exc, UnicodeDecodeError)
+                      else str(exc)[:120] or type(exc).__name__)
+            raise MalformedMessage(f'{len(raw)}-byte payload: {reason}') from None
+    return read
 
 # values nobody publishes, to find where a field's bytes lie in the serialized template
 _SENTINEL_SEC, _SENTINEL_NANOSEC = 0x5A1E7A3C, 0x3B9AC9FF - 0x2A5
@@ -106,6 +130,7 @@ def _find(data: bytes, needle: bytes) -> int:
 _PLAIN_ARRAY = struct.Struct('<4xIII')
 
 
+@_reader
 def float64_array_data(raw: bytes) -> list:
     """The ``data`` of a serialized ``std_msgs/Float64MultiArray`` (layout skipped)."""
     if raw[:2] == b'\x00\x01' and len(raw) >= 16:
@@ -119,8 +144,7 @@ def float64_array_data(raw: bytes) -> list:
     (dims,) = r.unpack('I', 4)
     for _ in range(dims):           # MultiArrayDimension: label, size, stride
         r.align(4)
-        (length,) = r.unpack('I', 4)
-        r.pos += length
+        _skip(r, r.unpack('I', 4)[0])
         r.align(4)
         r.unpack('I', 4, 2)
     r.align(4)
@@ -130,20 +154,30 @@ def float64_array_data(raw: bytes) -> list:
 
 def _header(r: CdrReader):
     sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
-    (length,) = r.unpack('I', 4)
-    r.pos += length                  # frame_id
+    _skip(r, r.unpack('I', 4)[0])    # frame_id
     return sec, nanosec
+
+
+def _skip(r: CdrReader, length: int):
+    """Step over ``length`` bytes that must lie inside the message."""
+    if length > len(r.data) - r.pos:
+        raise MalformedMessage(f'{len(r.data)}-byte payload: a string or sequence of {length} '
+                               f'bytes runs past its end')
+    r.pos += length
 
 
 def _strings(r: CdrReader) -> list:
     r.align(4)
     (n,) = r.unpack('I', 4)
+    if 4 * n > len(r.data) - r.pos:     # each string takes at least its 4-byte length
+        raise MalformedMessage(f'{len(r.data)}-byte payload: {n} strings cannot fit')
     out = []
     for _ in range(n):
         r.align(4)
         (length,) = r.unpack('I', 4)
-        out.append(bytes(r.data[r.pos:r.pos + length - 1]).decode() if length else '')
-        r.pos += length
+        start = r.pos
+        _skip(r, length)
+        out.append(bytes(r.data[start:start + length - 1]).decode() if length else '')
     return out
 
 
@@ -172,6 +206,7 @@ class _JointStateLayout:
 _joint_state_layouts = {}      # message size -> _JointStateLayout (a few at most)
 
 
+@_reader
 def joint_state_fields(raw: bytes):
     """``(sec, nanosec, names, position, velocity)`` of a serialized ``sensor_msgs/JointState``."""
     layout = _joint_state_layouts.get(len(raw))
@@ -201,6 +236,7 @@ def _doubles_at(r: CdrReader):
     return list(r.unpack('d', 8, n)), at
 
 
+@_reader
 def wrench_stamped_fields(raw: bytes):
     """``(sec, nanosec, (fx, fy, fz))`` of a serialized ``geometry_msgs/WrenchStamped``."""
     r = CdrReader(raw)

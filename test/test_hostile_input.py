@@ -1,0 +1,209 @@
+"""Hostile input without ROS: scene files and raw payloads either give finite values or are
+refused in one line (issues 15 and 17). Property-based parts are bounded and derandomized."""
+import copy
+import math
+import os
+import struct
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from impact_arm.core.errors import SceneError
+from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
+from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_fields,
+                                wrench_stamped_fields)
+
+from scenes import PAPER, paper_dict
+
+BOUNDED = settings(max_examples=150, deadline=None, derandomize=True,
+                   suppress_health_check=list(HealthCheck))
+READERS = (float64_array_data, joint_state_fields, wrench_stamped_fields)
+with open(PAPER, encoding='utf-8') as _f:
+    PAPER_TEXT = _f.read()
+
+
+# ------------------------------------------------------------------------ raw payloads
+def joint_state_bytes(names, position, velocity, sec=0, nanosec=0):
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    msg = JointState(name=names, position=position, velocity=velocity)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+    return serialize_message(msg)
+
+
+@BOUNDED
+@given(st.binary(max_size=300))
+def test_random_bytes_give_a_value_or_a_malformed_message(raw):
+    for read in READERS:
+        try:
+            read(raw)
+        except MalformedMessage as exc:
+            assert '\n' not in str(exc)
+
+
+@BOUNDED
+@given(st.data())
+def test_mutated_joint_states_give_a_value_or_a_malformed_message(data):
+    """Valid messages with bytes cut, flipped or overwritten by absurd lengths."""
+    raw = bytearray(joint_state_bytes(['joint1', 'joint2'], [0.1, 0.2], [0.0, 0.0]))
+    action = data.draw(st.sampled_from(('cut', 'flip', 'length')))
+    at = data.draw(st.integers(0, len(raw) - 4))
+    if action == 'cut':
+        raw = raw[:at]
+    elif action == 'flip':
+        raw[at] ^= data.draw(st.integers(1, 255))
+    else:
+        raw[at:at + 4] = struct.pack('<I', data.draw(st.sampled_from((2**31 - 1, 2**32 - 1,
+                                                                      1000, 7))))
+    for read in READERS:
+        try:
+            read(bytes(raw))
+        except MalformedMessage:
+            pass
+
+
+@pytest.mark.parametrize('raw, why', [
+    (b'', 'empty'),
+    (b'\x00\x01\x00\x00', 'header only'),
+    (b'\x07\x01\x00\x00' + bytes(40), 'wrong encapsulation'),
+    (b'\x00\x01\x00\x00' + bytes(8) + struct.pack('<I', 2**31 - 1) + bytes(16), 'huge frame'),
+])
+def test_each_reader_refuses_named_malformations(raw, why):
+    for read in READERS:
+        with pytest.raises(MalformedMessage):
+            read(raw)
+
+
+def test_absurd_sequence_lengths_and_non_utf8_names_are_malformed():
+    good = joint_state_bytes(['joint1', 'joint2'], [0.1, 0.2], [0.0, 0.0])
+    names_at = good.index(b'joint1') - 8          # the name count, then the first length
+    huge = good[:names_at] + struct.pack('<I', 2**31 - 1) + good[names_at + 4:]
+    with pytest.raises(MalformedMessage, match='cannot fit'):
+        joint_state_fields(huge)
+    bad_name = good.replace(b'joint1', b'joi\xffn1')
+    with pytest.raises(MalformedMessage, match='UTF-8'):
+        joint_state_fields(bad_name)
+    assert joint_state_fields(good)[2:4] == (['joint1', 'joint2'], [0.1, 0.2])
+
+
+# ------------------------------------------------------------------------- scene files
+def refusal(text):
+    with pytest.raises(SceneError) as info:
+        scene_from_text(text, origin='t.yaml')
+    message = str(info.value)
+    assert '\n' not in message and len(message) < 600, message
+    return message
+
+
+@pytest.mark.parametrize('old, new, words', [
+    ('gravity: 9.81', 'gravity: 1:30', ['line 5', "'gravity'", '1:30', 'YAML 1.1']),
+    ('cycles: 15', 'cycles: 017', ["'cycles'", '017']),
+    ('actuators_during_contact: false', 'actuators_during_contact: on', ['on']),
+    ('cycles: 15', 'cycles: 15\ncycles: 3', ['duplicate key', "'cycles'"]),
+    ('t_max: 60.0', 't_max: [1, 2', ['line', 'column']),
+    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+     '  - {length: 1.0, mass: 1.0}\n  - {length: 1' + '0' * 400 + ', mass: 1.0}',
+     ['links[1].length', '401 digits']),
+    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+     '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 5e-324}', ['links[1].mass', 'kg']),
+    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+     '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0e-6, mass: 1.0}', ['links[1].length']),
+    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+     '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0e-5}', ['ratio', 'masses']),
+    ('preset: balanced', 'max_step: 1.0e-300', ['integrator.max_step', '1e-08']),
+    ('rate: 0 ', 'rate: 1.0e-300 ', ['controller.rate', 'more than a second']),
+    ('publish_rate: 1000.0', 'publish_rate: 1.0e6', ['publish_rate', 'in memory']),
+    ('kd: [100.0, 100.0]', 'kd: [1.0e9, 100.0]', ['controller.kd[0]', 'closed-loop rate']),
+    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}\n',     # stiff, light
+     '  - {length: 1.0, mass: 1.0e-6}\n  - {length: 1.0, mass: 1.0e-6}\nmaterials: {steel: '
+     '{E: 1.0e13, nu: 0.29, S_y: 1.12e9}}\n', ['contact lasts', 'surfaces[0].material']),
+])
+def test_scene_refusals_name_the_key_in_one_line(old, new, words):
+    assert PAPER_TEXT.count(old) == 1
+    text = PAPER_TEXT.replace(old, new)
+    if new.count('materials:'):     # the replacement brings its own materials
+        text = text.replace('materials:\n  steel: {E: 210.0e9, nu: 0.29, S_y: 1.12e9}\n', '')
+    message = refusal(text)
+    for word in words:
+        assert word in message, message
+
+
+def test_alias_bomb_is_refused_without_expanding_it():
+    levels = ['a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]']
+    levels += [f'a{k}: &a{k} [' + ', '.join([f'*a{k - 1}'] * 10) + ']' for k in range(1, 9)]
+    message = refusal('\n'.join(levels) + '\n')
+    assert 'aliases' in message
+
+
+def test_oversized_and_endless_files_are_refused_quickly(tmp_path):
+    with pytest.raises(SceneError, match='larger than'):
+        load_scene('/dev/zero')
+    binary = tmp_path / 'b.yaml'
+    binary.write_bytes(b'name: \xff\xfe\n')
+    with pytest.raises(SceneError, match='UTF-8'):
+        load_scene(str(binary))
+
+
+def test_yaml_12_numbers_still_read():
+    scene = scene_from_text(PAPER_TEXT.replace('gravity: 9.81', 'gravity: 0x0A')
+                            .replace('cycles: 15', 'cycles: 0o17'))
+    assert scene.gravity == 10.0 and scene.cycles == 15
+    assert math.copysign(1, scene_from_text(PAPER_TEXT.replace(
+        'gravity: 9.81', 'gravity: -0.0')).gravity) == -1   # -0.0 is within [0, 1000]
+
+
+LEAVES = st.one_of(
+    st.none(), st.booleans(), st.text(max_size=8),
+    st.integers(min_value=-2**80, max_value=2**1100),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([5e-324, -0.0, 1e308, 1e-300, 2.0**64]),
+    st.lists(st.floats(), max_size=3), st.dictionaries(st.text(max_size=3), st.integers(),
+                                                       max_size=2))
+
+
+def leaf_paths(node, path=()):
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from leaf_paths(v, path + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from leaf_paths(v, path + (i,))
+    yield path
+
+
+@BOUNDED
+@given(st.data())
+def test_mutated_scenes_are_accepted_finite_or_refused_in_one_line(data):
+    scene = copy.deepcopy(paper_dict())
+    paths = [p for p in leaf_paths(scene) if p]
+    for _ in range(data.draw(st.integers(1, 3))):
+        path = data.draw(st.sampled_from(paths))
+        parent = scene
+        try:
+            for key in path[:-1]:
+                parent = parent[key]
+            if data.draw(st.booleans()) and isinstance(parent, dict):
+                parent.pop(path[-1], None)
+            else:
+                parent[path[-1]] = data.draw(LEAVES)
+        except (KeyError, IndexError, TypeError):
+            continue                      # an earlier mutation removed or replaced the parent
+    try:
+        result = parse_scene(scene, origin='fuzz')
+    except SceneError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 600
+        return
+    numbers = [*result.lengths, *result.masses, result.gravity, result.t_max, *result.q0]
+    assert all(math.isfinite(x) for x in numbers)
+
+
+@BOUNDED
+@given(st.text(alphabet=st.sampled_from(list(' \n:-[]{}&*!|>#"\'0123456789.eE+abcxyz_')),
+               max_size=120))
+def test_arbitrary_yaml_text_is_refused_in_one_line(text):
+    try:
+        scene_from_text(text)
+    except SceneError as exc:
+        assert '\n' not in str(exc)
