@@ -110,6 +110,13 @@ class CycleController:
         self._last_t = None
         self._last_vy = None
 
+    def rearm(self):
+        """Forget the previous sample (its time, tip velocity, integral), as after a reset:
+        for a stamp that went backwards or jumped far ahead."""
+        self._last_t = None
+        self._last_vy = None
+        self.integral.reset()
+
     def _switch(self, mode):
         self.mode = mode
         self.switches += 1

@@ -24,6 +24,34 @@ def realtime_priority(priority):
         return f'normal (SCHED_FIFO refused: {exc.strerror or exc})'
 
 
+def guard_parameter_services(node):
+    """Answer a malformed request to the node's parameter services with a refusal instead of
+    letting it end the node. rclpy converts each requested ``ParameterValue`` inside its
+    service callback, and an invalid ``type`` (e.g. 200) raises ValueError there, which the
+    executor re-raises from spin: one bad request from any peer would stop the node."""
+    from rcl_interfaces.msg import SetParametersResult
+
+    def guarded(callback):
+        def call(request, response):
+            try:
+                return callback(request, response)
+            except (ValueError, TypeError) as exc:
+                reason = f'malformed request refused: {str(exc)[:200]}'
+                node.get_logger().warning(f'parameter service: {reason}',
+                                          throttle_duration_sec=2.0)
+                if hasattr(response, 'results'):        # SetParameters
+                    response.results = [SetParametersResult(successful=False, reason=reason)
+                                        for _ in request.parameters]
+                elif hasattr(response, 'result'):       # SetParametersAtomically
+                    response.result = SetParametersResult(successful=False, reason=reason)
+                return response
+        return call
+
+    for service in node.services:
+        if service.srv_type.__module__.startswith('rcl_interfaces.'):
+            service.callback = guarded(service.callback)
+
+
 def make_executor(context=None, prefer=None):
     """A single-threaded executor. ``IMPACT_ARM_EXECUTOR=events`` picks rclpy's C++ events
     executor instead; it is not the default because in rclpy 9 (Kilted) it cannot call
@@ -62,6 +90,7 @@ def run(node_factory, args=None) -> int:
     node, executor, code = None, None, 0
     try:
         node = node_factory()
+        guard_parameter_services(node)
         # Everything built so far (numba dispatchers, message classes, the model) lives for
         # the whole process: move it out of the collector's sight, so that a periodic full
         # collection cannot stall a period for milliseconds.

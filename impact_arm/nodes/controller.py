@@ -8,27 +8,45 @@ from the scene) and talks only through topics: /joint_states and, if anyone publ
 trigger joint_states (default): one command per joint state whose stamp reaches the next tick
 of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer: a timer at
 ``rate`` on the node's clock uses the latest joint state. On shutdown it sends a zero command.
+
+Its inputs come from any peer on the graph, so each is checked before it can move the arm: a
+malformed payload, a state out of range, a stamp that goes backwards or jumps far ahead, and a
+torque that would not be finite are each dropped (or re-arm the cycle), counted, logged
+throttled and reported on /diagnostics (~1 Hz).
 """
 from __future__ import annotations
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from .. import contract
-from ..contract import (ANTIWINDUP_STRATEGIES, COMMANDS, CONTACT_WRENCH, FEEDBACK_LAWS,
-                        JOINT_STATES, PID_SPACES, joint_names, to_absolute, to_joint_space)
+from ..contract import (ANTIWINDUP_STRATEGIES, COMMANDS, CONTACT_WRENCH, DIAGNOSTICS,
+                        FEEDBACK_LAWS, JOINT_STATES, PID_SPACES, joint_names, to_absolute,
+                        to_joint_space)
 from ..core.control import CycleController, PidIntegrator
 from ..core.model import ArmModel
 from ..core.scene import load_scene, resolve_scene_path
-from ..io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
+from ..io.wire import (MalformedMessage, PatchedMessage, joint_state_fields,
+                       wrench_stamped_fields)
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
 STAMP_EPS = 1e-9                 # stamps are integer nanoseconds: ticks compare to 1 ns
+# A state beyond these is not an arm's: a broken or hostile peer. Angles may wind a few turns;
+# 1e4 rad/s is the scene's own bound on initial rates.
+MAX_ANGLE = 1e3                  # rad
+MAX_RATE = 1e4                   # rad/s
+MAX_FORCE = 1e12                 # N, a contact wrench beyond any scene's
+# samples come at >= 1 Hz (a scene's slowest publish_rate): a longer gap forward, or any step
+# back, is a reset or a bad stamp, and the cycle re-arms at the new time
+MAX_STAMP_GAP = 1.0              # s
+DROPPED = ('malformed_joint_states', 'malformed_wrenches', 'out_of_range_states',
+           'out_of_range_wrenches', 'stamp_jumps', 'unsafe_torques')
 
 
 def parameter_table(scene):
@@ -118,6 +136,10 @@ class Controller(Node):
         self.sent = 0
         self.started = False
         self.warned_names = False
+        self.dropped = dict.fromkeys(DROPPED, 0)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                              contract.qos(DIAGNOSTICS).to_rclpy())
+        self.create_timer(1.0, self._publish_diagnostics)
         self.pub = self.create_publisher(Float64MultiArray, COMMANDS,
                                          contract.qos(COMMANDS).to_rclpy())
         # keep only the newest sample: a controller that fell behind acts on the present
@@ -173,8 +195,21 @@ class Controller(Node):
         self.get_logger().info(f'parameters changed: {", ".join(sorted(values))}')
 
     # ------------------------------------------------------------------------- inputs
+    def _drop(self, counter, why):
+        self.dropped[counter] += 1
+        self.get_logger().warning(f'{why} ({counter}: {self.dropped[counter]})',
+                                  throttle_duration_sec=2.0)
+
     def _on_wrench(self, raw):
-        sec, nanosec, force = wrench_stamped_fields(raw)
+        try:
+            sec, nanosec, force = wrench_stamped_fields(raw)
+        except MalformedMessage as exc:
+            self._drop('malformed_wrenches', f'contact wrench dropped: {exc}')
+            return
+        if not all(abs(f) <= MAX_FORCE for f in force):     # also false for NaN
+            self._drop('out_of_range_wrenches', f'contact wrench dropped: force {force} N not '
+                       f'finite or beyond {MAX_FORCE:g} N')
+            return
         self.wrench_stamp = sec + nanosec * 1e-9
         self.normal_force = force[1]
         if self.waiting is not None and self.wrench_stamp >= self.waiting[0] - STAMP_EPS:
@@ -190,7 +225,11 @@ class Controller(Node):
             self._on_joint_state(taken[0])
 
     def _on_joint_state(self, raw):
-        sec, nanosec, names, position, velocity = joint_state_fields(raw)
+        try:
+            sec, nanosec, names, position, velocity = joint_state_fields(raw)
+        except MalformedMessage as exc:
+            self._drop('malformed_joint_states', f'joint state dropped: {exc}')
+            return
         t = sec + nanosec * 1e-9
         try:
             index = [names.index(j) for j in self.joint_names]
@@ -200,9 +239,20 @@ class Controller(Node):
             self.get_logger().warning(f'joint state without {self.joint_names} positions and '
                                       f'velocities: ignored', throttle_duration_sec=2.0)
             return
-        if not all(math.isfinite(v) for v in pos + vel):
-            self.get_logger().warning('non-finite joint state ignored', throttle_duration_sec=2.0)
+        if not (all(abs(v) <= MAX_ANGLE for v in pos) and all(abs(v) <= MAX_RATE for v in vel)):
+            # also false for NaN
+            self._drop('out_of_range_states', f'joint state dropped: positions {pos} / '
+                       f'velocities {vel} not finite or beyond {MAX_ANGLE:g} rad, '
+                       f'{MAX_RATE:g} rad/s')
             return
+        if self.latest is not None and not (
+                self.latest[0] - STAMP_EPS <= t <= self.latest[0] + MAX_STAMP_GAP):
+            self._drop('stamp_jumps', f'joint state stamp went from {self.latest[0]:.9f} to '
+                       f'{t:.9f} s: cycle re-armed at the new time')
+            self.next_tick = t
+            self.waiting = None
+            self.wrench_stamp = -math.inf
+            self.ctrl.rearm()
         self.latest = (t, to_absolute(pos), to_absolute(vel))
         if self.p['trigger'] != 'joint_states' or t < self.next_tick - STAMP_EPS:
             return
@@ -231,6 +281,11 @@ class Controller(Node):
             self.started = True
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
+        if not all(math.isfinite(v) for v in tau):
+            self._drop('unsafe_torques', f'torques {tau} from the state at {t:.6f} s are not '
+                       f'finite: not sent, cycle re-armed')
+            self.ctrl.rearm()
+            return
         self._send([tau[j] for j in self.order])
 
     def _send(self, values):
@@ -245,8 +300,22 @@ class Controller(Node):
             self.pub.wait_for_all_acked(Duration(seconds=0.5))
         except Exception:  # noqa: BLE001 - best effort once the middleware is shutting down
             self.get_logger().warning('could not send the zero command on exit')
-        self.get_logger().info(f'{self.sent} commands sent; zero command on exit')
+        dropped = ', '.join(f'{k} {v}' for k, v in self.dropped.items() if v)
+        self.get_logger().info(f'{self.sent} commands sent; zero command on exit'
+                               + (f'; dropped: {dropped}' if dropped else ''))
         return 0
+
+    def _publish_diagnostics(self):
+        dropped = sum(self.dropped.values())
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK,
+            name='impact_arm: controller', hardware_id='impact_arm_controller',
+            message=f'{dropped} inputs dropped' if dropped else 'running',
+            values=[KeyValue(key='commands_sent', value=str(self.sent)),
+                    *(KeyValue(key=k, value=str(v)) for k, v in self.dropped.items())])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
 
 
 def main(args=None):
