@@ -119,3 +119,20 @@ def test_patched_clock():
     wire = PatchedMessage(Clock(), (), stamp='clock')
     msg = deserialize_message(wire.fill((), (1_700_000_000, 5)), Clock)
     assert (msg.clock.sec, msg.clock.nanosec) == (1_700_000_000, 5)
+
+
+def test_joint_state_command_matches_efforts_by_name_and_refuses_the_rest():
+    joint_state_command = wire.joint_state_command
+    joints = ['joint1', 'joint2']
+
+    def raw(**fields):
+        return serialize_cdr(JointState(**fields))
+    assert joint_state_command(raw(name=['joint2', 'joint1'], position=[9.0, 9.0],
+                                   effort=[-2.5, 7.0]), joints) == [7.0, -2.5]
+    for bad, why in (({'name': ['joint1', 'jointX'], 'effort': [1.0, 2.0]}, 'unknown'),
+                     ({'name': ['joint1', 'joint2'], 'effort': []}, 'one effort per joint'),
+                     ({'name': ['joint1', 'joint2'], 'effort': [1.0]}, 'one effort per joint'),
+                     ({'name': ['joint1'], 'effort': [1.0]}, 'once'),
+                     ({'name': ['joint1', 'joint1'], 'effort': [1.0, 2.0]}, 'once')):
+        with pytest.raises(ValueError, match=why):
+            joint_state_command(raw(**bad), joints)

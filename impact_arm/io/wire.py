@@ -243,3 +243,26 @@ def wrench_stamped_fields(raw: bytes):
     sec, nanosec = _header(r)
     r.align(8)
     return sec, nanosec, r.unpack('d', 8, 3)
+
+
+def joint_state_command(raw: bytes, joints) -> list:
+    """The efforts of a serialized ``sensor_msgs/JointState`` command, in the order of
+    ``joints`` (matched by name; position and velocity ignored), as topic_based_ros2_control
+    sends them. ValueError names what is wrong: an unknown or repeated joint, a joint left
+    out, or efforts that do not match the names one to one."""
+    r = CdrReader(raw)
+    _header(r)
+    names = _strings(r)
+    _doubles_at(r)                   # position
+    _doubles_at(r)                   # velocity
+    efforts = _doubles_at(r)[0]
+    unknown = [n for n in names if n not in joints]
+    if unknown:
+        raise ValueError(f'unknown joint name(s) {unknown}: expected {list(joints)}')
+    if len(set(names)) != len(names) or len(names) != len(joints):
+        raise ValueError(f'joint names {names}: must name each of {list(joints)} once')
+    if len(efforts) != len(names):
+        raise ValueError(f'{len(efforts)} efforts for {len(names)} joints {names}: '
+                         f'one effort per joint name is required')
+    by_name = dict(zip(names, efforts))
+    return [by_name[j] for j in joints]

@@ -9,6 +9,17 @@ overrun and the schedule is kept, never stretched) and takes each period's comma
 Until the first command arrives the arm is held at its initial state (brakes on) and the
 initial state is published with stamp 0: simulated time starts with the first command.
 mode lockstep: each command advances one period, inside the command callback (deterministic).
+
+Topic hardware (design.md §8, as topic_based_ros2_control's TopicBasedSystem expects): commands
+also arrive as sensor_msgs/JointState on ``joint_commands_topic`` (``effort`` matched by joint
+name, other fields ignored; a command with an unknown joint, a joint left out or no effort per
+name is rejected and counted like a bad array), and the joint states also go out on
+``joint_states_topic`` (only while someone listens there; never /joint_states, which a
+JointStateBroadcaster publishes). 3D view: /robot_description (transient local) at start;
+/tf_static and /tf at ``tf_rate`` where tf2_msgs is installed; /impact_markers at ``tf_rate``.
+/tf and the markers come from a timer of the executor thread that reads the latest published
+period, so they cost the realtime loop nothing but one reference (and, in contact periods,
+noting the force for the arrow).
 """
 from __future__ import annotations
 
@@ -27,13 +38,17 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from .. import contract
-from ..contract import (CLOCK, COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, IMPACT_REPORT,
-                        INTEGRATOR_PRESETS, JOINT_STATES, joint_names)
+from ..contract import (CLOCK, COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, IMPACT_MARKERS,
+                        IMPACT_REPORT, INTEGRATOR_PRESETS, JOINT_STATES, ROBOT_DESCRIPTION, TF,
+                        TF_STATIC, VISUAL_TOPICS, joint_names, to_absolute)
 from ..core.driver import CommandError, SimulatedArm
 from ..core.errors import SimulationError
 from ..core.realtime import PERIOD_PARTS, DriverLoop
 from ..core.scene import load_scene, resolve_scene_path
-from ..io.wire import PatchedMessage, float64_array_data
+from ..io.msgdefs import has_type_support
+from ..io.scene_visuals import DEFAULT_TF_RATE, SceneVisuals
+from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
+from ..io.wire import PatchedMessage, float64_array_data, joint_state_command
 from ._runner import realtime_priority, run
 from .params import Param, ParameterError, declare, refuse_unknown, validator
 
@@ -63,6 +78,13 @@ PARAMS = (
           low=0.05, high=60.0, read_only=True),
     Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
           read_only=True),
+    Param('joint_commands_topic', JOINT_COMMANDS_TOPIC, 'sensor_msgs/JointState commands '
+          '(effort by joint name), as topic_based_ros2_control sends them', 'str',
+          read_only=True),
+    Param('joint_states_topic', JOINT_STATES_TOPIC, 'joint states again, for '
+          'topic_based_ros2_control (not /joint_states)', 'str', read_only=True),
+    Param('tf_rate', DEFAULT_TF_RATE, 'rate of /tf and /impact_markers [Hz] (wall clock)',
+          low=0.0, high=1000.0, open_low=True, read_only=True),
 )
 
 
@@ -83,6 +105,13 @@ class Simulator(Node):
             raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
                                  f'{names} once (the order of the command array)')
         self.command_order = [names.index(j) for j in p['joints']]
+        self.joint_names = names
+        if p['joint_states_topic'] in (JOINT_STATES, JOINT_STATES.lstrip('/')) or \
+                p['joint_commands_topic'] == COMMANDS:
+            raise ParameterError(
+                f'parameter joint_states_topic = {p["joint_states_topic"]!r}, '
+                f'joint_commands_topic = {p["joint_commands_topic"]!r}: the topic hardware '
+                f'needs its own topics (not /joint_states, not {COMMANDS})')
         refuse_unknown(self)
         self.add_on_set_parameters_callback(validator(PARAMS, self._set_parameters))
         self.lockstep = p['mode'] == 'lockstep'
@@ -101,12 +130,18 @@ class Simulator(Node):
                                               qos(DIAGNOSTICS))
         self.pub_clock = (self.create_publisher(Clock, CLOCK, qos(CLOCK))
                           if self.publish_clock else None)
+        self.pub_hw_states = self.create_publisher(JointState, p['joint_states_topic'],
+                                                   qos(JOINT_STATES))
         self.command_reader = self.reader_node = None
         if self.lockstep:
             self.command_sub = self.create_subscription(
                 Float64MultiArray, COMMANDS, self._on_command, qos(COMMANDS), raw=True)
+            self.joint_command_sub = self.create_subscription(
+                JointState, p['joint_commands_topic'], self._on_joint_command,
+                qos(COMMANDS), raw=True)
         else:
-            self.command_reader = self._command_reader(qos(COMMANDS))
+            self.command_reader, self.joint_command_reader = self._command_readers(
+                qos(COMMANDS))
 
         # pre-serialized messages: each period only writes its numbers into their bytes
         zeros = [0.0] * self.arm.n
@@ -137,6 +172,7 @@ class Simulator(Node):
         self._thread = None
         self.scheduling = 'normal'
         self.create_timer(p['diagnostics_period'], self._publish_diagnostics)
+        self._start_visuals()
 
         self.arm.warm_up()                 # before the clock starts: no compile-cache loads later
         initial = self.arm.sample()
@@ -164,28 +200,35 @@ class Simulator(Node):
             self.p['command_timeout'] = values['command_timeout']
             self.loop.watchdog.timeout = values['command_timeout']
 
-    def _command_reader(self, qos):
-        """The command subscription of the realtime mode, on a helper node no executor spins:
-        the loop thread takes the newest command itself at the start of each period. With the
-        executor delivering commands, the process ran two Python threads per period that
-        contended for the GIL, and the loop could wait for a lower-priority thread that held
-        it."""
+    def _command_readers(self, qos):
+        """The command subscriptions of the realtime mode (array, JointState), on a helper
+        node no executor spins: the loop thread takes the newest commands itself at the start
+        of each period. With the executor delivering commands, the process ran two Python
+        threads per period that contended for the GIL, and the loop could wait for a
+        lower-priority thread that held it."""
         import rclpy
         self.reader_node = rclpy.create_node(
             '_' + self.get_name() + '_command_reader', namespace=self.get_namespace(),
             context=self.context, start_parameter_services=False, enable_rosout=False)
-        return self.reader_node.create_subscription(Float64MultiArray, COMMANDS,
-                                                    lambda msg: None, qos, raw=True)
+        return (self.reader_node.create_subscription(Float64MultiArray, COMMANDS,
+                                                     lambda msg: None, qos, raw=True),
+                self.reader_node.create_subscription(JointState, self.p['joint_commands_topic'],
+                                                     lambda msg: None, qos, raw=True))
 
     def _take_commands(self, now):
-        """Every command that arrived since the last period, oldest first (realtime mode)."""
-        handle = self.command_reader.handle
-        while True:
-            with handle:
-                taken = handle.take_message(Float64MultiArray, True)
-            if taken is None:
-                return
-            self._on_command(taken[0], now)
+        """Every command that arrived since the last period, oldest first per topic (arrays,
+        then JointState commands: one controller uses one of them)."""
+        for reader, msg_type, apply in ((self.command_reader, Float64MultiArray,
+                                         self._on_command),
+                                        (self.joint_command_reader, JointState,
+                                         self._on_joint_command)):
+            handle = reader.handle
+            while True:
+                with handle:
+                    taken = handle.take_message(msg_type, True)
+                if taken is None:
+                    break
+                apply(taken[0], now)
 
     @property
     def done(self):
@@ -193,17 +236,30 @@ class Simulator(Node):
 
     # ------------------------------------------------------------------------ commands
     def _on_command(self, raw, now=None):
-        """One serialized Float64MultiArray command."""
-        now = time.monotonic() if now is None else now
+        """One serialized Float64MultiArray command (joint order: parameter ``joints``)."""
         try:
             values = self.arm.check_command(float64_array_data(raw))
         except (CommandError, ValueError) as exc:
-            self.rejected += 1
-            self.get_logger().warning(f'command rejected: {exc}', throttle_duration_sec=1.0)
-            return
+            return self._reject(exc)
         torques = [0.0] * self.arm.n
         for k, joint in enumerate(self.command_order):
             torques[joint] = values[k]
+        self._apply(torques, now)
+
+    def _on_joint_command(self, raw, now=None):
+        """One serialized JointState command of the topic hardware (efforts by name)."""
+        try:
+            torques = self.arm.check_command(joint_state_command(raw, self.joint_names))
+        except (CommandError, ValueError) as exc:
+            return self._reject(exc)
+        self._apply(torques, now)
+
+    def _reject(self, exc):
+        self.rejected += 1
+        self.get_logger().warning(f'command rejected: {exc}', throttle_duration_sec=1.0)
+
+    def _apply(self, torques, now):
+        now = time.monotonic() if now is None else now
         self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
         self.loop.command(torques, now)
         if self.lockstep and not self.failed:
@@ -270,8 +326,14 @@ class Simulator(Node):
         # /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self._send(self.pub_wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
-        self._send(self.pub_joints, self.wire_joints.fill(
-            tick.position + tick.velocity + tick.effort, (sec, nsec)))
+        states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
+        self._send(self.pub_joints, states)
+        if self.pub_hw_states.get_subscription_count():
+            self._send(self.pub_hw_states, states)
+        self.latest_tick = tick            # for /tf and the markers (executor thread)
+        if tick.wrench[0] or tick.wrench[1]:
+            with self.visual_lock:
+                self.visuals.observe_force(to_absolute(tick.position), tick.wrench)
         if self.pub_clock is not None:
             self._send(self.pub_clock, self.wire_clock.fill((), (sec, nsec)))
 
@@ -295,6 +357,50 @@ class Simulator(Node):
         for record, _rows in tick.impacts:
             self.impacts += 1
             self._send(self.pub_impact, String(data=json.dumps(record)))
+            with self.visual_lock:
+                self.visuals.add_impact(record)
+
+    # --------------------------------------------------------------------------- 3D view
+    def _start_visuals(self):
+        """/robot_description and /tf_static once (transient local), then a timer for /tf
+        and /impact_markers. Without tf2_msgs rclpy has no type support for TFMessage, so no
+        live TF: recordings still hold it (the recorder derives it from /joint_states)."""
+        from visualization_msgs.msg import MarkerArray
+
+        def qos(topic):
+            return VISUAL_TOPICS[topic][1].to_rclpy()
+        self.visuals = SceneVisuals(self.scene, self.p['tf_rate'])
+        self.visual_lock = threading.Lock()
+        self.latest_tick = None
+        self._visual_stamp = None
+        description = self.create_publisher(String, ROBOT_DESCRIPTION,
+                                            qos(ROBOT_DESCRIPTION))
+        description.publish(self.visuals.description())
+        self.pub_markers = self.create_publisher(MarkerArray, IMPACT_MARKERS,
+                                                 qos(IMPACT_MARKERS))
+        tf_class = type(self.visuals.tf_static())
+        self.pub_tf = None
+        if has_type_support(tf_class):
+            self.create_publisher(tf_class, TF_STATIC, qos(TF_STATIC)).publish(
+                self.visuals.tf_static())
+            self.pub_tf = self.create_publisher(tf_class, TF, qos(TF))
+        else:
+            self.get_logger().info('tf2_msgs is not installed: no live /tf or /tf_static '
+                                   '(recordings still hold them; launch with tf:=rsp on a '
+                                   'ROS install)')
+        self.create_timer(1.0 / self.p['tf_rate'], self._publish_visuals)
+
+    def _publish_visuals(self):
+        tick = self.latest_tick
+        if tick is None or tick.t == self._visual_stamp:
+            return                         # nothing new (paused lockstep, waiting)
+        self._visual_stamp = tick.t
+        t_ns = round(tick.t * 1e9)
+        if self.pub_tf is not None:
+            self.pub_tf.publish(self.visuals.tf(to_absolute(tick.position), t_ns))
+        with self.visual_lock:
+            markers = self.visuals.markers(t_ns)
+        self.pub_markers.publish(markers)
 
     def _fail(self, why):
         self.failed = why

@@ -1,0 +1,134 @@
+"""The simulator as ros2_control topic hardware, over DDS: JointState commands by name, states
+on their own topic, the robot description and markers (real node processes, random domain)."""
+import math
+import threading
+import time
+
+import pytest
+
+from ros_helpers import node_args, ros_env, start_process, wait_for  # noqa: F401
+
+PERIODS = 150
+
+
+class Driver:
+    """A test participant that answers every new joint state with the next command."""
+
+    def __init__(self, domain):
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        self.rclpy, self.context = rclpy, Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node('test_driver', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - shutting down
+                pass
+
+    def close(self):
+        self.rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=2)
+
+
+@pytest.fixture(scope='module')
+def driver(ros_env):
+    d = Driver(int(ros_env['ROS_DOMAIN_ID']))
+    yield d
+    d.close()
+
+
+def torques(k):
+    return [30.0 * math.sin(0.05 * k), -10.0 * math.cos(0.03 * k)]
+
+
+def stamp(msg):
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def drive(driver, env, workdir, kind):
+    """A lockstep run commanded by ``kind`` ('array' or 'joint_state'); returns the joint
+    states by stamp, the topic-hardware states by stamp, and the final diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray, String
+    from visualization_msgs.msg import MarkerArray
+    node = driver.node
+    states, hw_states, diags, descriptions, markers = {}, {}, [], [], []
+    if kind == 'array':
+        pub = node.create_publisher(Float64MultiArray, '/effort_controller/commands', 10)
+    else:
+        pub = node.create_publisher(JointState, '/robot_joint_commands', 10)
+
+    def send(k):
+        tau = torques(k)
+        if kind == 'array':
+            pub.publish(Float64MultiArray(data=tau))
+        else:   # names out of order, positions that must be ignored
+            pub.publish(JointState(name=['joint2', 'joint1'], position=[123.0, -4.0],
+                                   effort=[tau[1], tau[0]]))
+
+    def on_state(msg):
+        s = stamp(msg)
+        if s not in states and go.is_set() and len(states) < PERIODS:
+            states[s] = (tuple(msg.position), tuple(msg.velocity), tuple(msg.effort))
+            send(len(states))
+    go = threading.Event()
+    subs = [node.create_subscription(JointState, '/joint_states', on_state, 1000),
+            node.create_subscription(JointState, '/robot_joint_states',
+                                     lambda m: hw_states.setdefault(stamp(m), tuple(m.position)),
+                                     1000),
+            node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10),
+            node.create_subscription(String, '/robot_description', descriptions.append,
+                                     QoSProfile(depth=1,
+                                                durability=DurabilityPolicy.TRANSIENT_LOCAL)),
+            node.create_subscription(MarkerArray, '/impact_markers', markers.append, 10)]
+    params = ('mode:=lockstep', 'rate_factor:=0.0', 'diagnostics_period:=0.2')
+    with start_process(node_args('impact_arm.nodes.simulator', *params), env, workdir,
+                       f'sim_{kind}') as sim:
+        assert wait_for(lambda: pub.get_subscription_count() > 0 or not sim.alive(),
+                        timeout=60) and sim.alive(), sim.stderr
+        time.sleep(0.3)   # the initial state's subscribers matched too
+        if kind == 'joint_state':   # refused: unknown name; no efforts. Nothing moves.
+            pub.publish(JointState(name=['joint1', 'elbow'], effort=[1.0, 2.0]))
+            pub.publish(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2]))
+            assert wait_for(lambda: diags and rejected(diags[-1]) == 2, timeout=10), sim.stderr
+            assert 'command rejected' in sim.stderr + sim.stdout
+        go.set()
+        send(0)
+        assert wait_for(lambda: len(states) >= PERIODS or not sim.alive(), timeout=120), \
+            f'{len(states)} periods\n{sim.stderr}'
+        time.sleep(0.5)
+    for sub in subs:
+        node.destroy_subscription(sub)
+    node.destroy_publisher(pub)
+    assert descriptions and descriptions[0].data.startswith('<?xml')
+    assert markers and any(m.ns == 'surface' for m in markers[-1].markers)
+    return states, hw_states, diags
+
+
+def rejected(diag):
+    return int({kv.key: kv.value for kv in diag.status[0].values}['commands_rejected'])
+
+
+def test_joint_state_commands_move_the_arm_exactly_as_array_commands(driver, ros_env,
+                                                                     tmp_path):
+    by_array, hw_array, _ = drive(driver, ros_env, tmp_path, 'array')
+    by_name, hw_name, diags = drive(driver, ros_env, tmp_path, 'joint_state')
+    assert len(by_array) == len(by_name) == PERIODS
+    assert by_name == by_array                    # bit-identical lockstep runs
+    moved = [v[0] for v in by_array.values()]
+    assert moved[-1] != moved[0]
+    # the topic-hardware states are the joint states, on their own topic
+    common = set(hw_name) & set(by_name)
+    assert len(common) > PERIODS // 2
+    assert all(hw_name[s] == by_name[s][0] for s in common)
+    assert rejected(diags[-1]) == 2
