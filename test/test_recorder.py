@@ -2,11 +2,13 @@
 was published is what the file holds; SIGKILL keeps everything up to the last flush; an
 unwritable output is a clear error and a non-zero exit."""
 import json
+import math
 import os
 import signal
 import time
 from pathlib import Path
 
+import pytest
 import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
@@ -56,8 +58,11 @@ def test_records_what_was_published(ros_env, tmp_path):
         assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), \
             pub.stderr + rec.stderr
         assert [e for e in pub.lines() if e.get('event') == 'matched'][0]['subs'] >= 1
-        # everything published has reached a flushed file before the recorder is stopped
-        assert wait_for(lambda: count_messages(out) == 2 * n, 10), rec.stderr
+        # everything published has reached a flushed file before the recorder is stopped;
+        # with the scene, the file also holds the derived description, static frames and,
+        # for each 10 ms of stamps (0 ... 140 ms), /tf and /impact_markers
+        n_tf = 15
+        assert wait_for(lambda: count_messages(out) == 2 * n + 2 + 2 * n_tf, 10), rec.stderr
         # the publisher's parameters are asked once its services are discovered
         assert wait_for(lambda: 'parameters/test_publisher/start' in metadata(out), 20)
         pub.stop()
@@ -67,7 +72,23 @@ def test_records_what_was_published(ros_env, tmp_path):
     got = read(out)
     assert {t: (ty, len(m)) for t, (ty, m) in got.items()} == {
         '/joint_states': ('sensor_msgs/msg/JointState', n),
-        '/contact_wrench': ('geometry_msgs/msg/WrenchStamped', n)}
+        '/contact_wrench': ('geometry_msgs/msg/WrenchStamped', n),
+        '/robot_description': ('std_msgs/msg/String', 1),
+        '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
+        '/tf': ('tf2_msgs/msg/TFMessage', n_tf),
+        '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf)}
+    for k, tf in enumerate(got['/tf'][1]):   # joint state 10 k: q1 = 10 k ms, q2 - q1 = -q1
+        link1, link2 = tf.transforms
+        assert (link1.header.stamp.sec, link1.header.stamp.nanosec) == (0, k * 10**7)
+        assert 2 * math.atan2(link1.transform.rotation.z, link1.transform.rotation.w) == \
+            pytest.approx(k * 1e-2, abs=1e-12)
+        assert 2 * math.atan2(link2.transform.rotation.z, link2.transform.rotation.w) == \
+            pytest.approx(-k * 1e-2, abs=1e-12)
+        assert link2.transform.translation.x == 1.0     # at the end of link 1 (L1 = 1 m)
+    # the published wrenches (i, 2 i) N: the arrow of the strongest since the last markers
+    arrows = [next(m for m in ma.markers if m.ns == 'contact_force')
+              for ma in got['/impact_markers'][1]]
+    assert all(a.action == a.ADD for a in arrows[1:])
     for i, m in enumerate(got['/joint_states'][1]):
         assert list(m.name) == ['joint1', 'joint2']
         assert list(m.position) == [i * 1e-3, -i * 1e-3]

@@ -179,6 +179,10 @@ class VisualsWriter:
             self._write(TF, v.tf(q, t_ns), log)
             self._write(IMPACT_MARKERS, v.markers(t_ns), log)
 
+    def force(self, q, wrench):
+        """A contact wrench (F_t, F_n) that arrived apart from its joint state."""
+        self.visuals.observe_force(q, wrench)
+
     def impact(self, record):
         self.visuals.add_impact(record)
 

@@ -1,9 +1,17 @@
 """recorder: subscribes to topics as serialized data and writes a crash-safe ROS 2 MCAP file.
 
-Parameters: output, topics, scene, param_nodes, flush_interval (see their descriptions).
-Messages are stored as received (no deserialization): log time = reception time, publish
-time = the publisher's source timestamp. The file also holds the scene YAML (attachment and
-metadata), the parameters of ``param_nodes`` at start and at shutdown, and the package version.
+Parameters: output, topics, scene, param_nodes, flush_interval, tf_rate (see their
+descriptions). Messages are stored as received (no deserialization): log time = reception
+time, publish time = the publisher's source timestamp. The file also holds the scene YAML
+(attachment and metadata), the parameters of ``param_nodes`` at start and at shutdown, and the
+package version.
+
+With a ``scene``, the file also shows the arm in 3D by itself (design.md §9): the recorder
+derives /robot_description and /tf_static (once, at the start), /tf and /impact_markers (at
+``tf_rate`` of the joint-state stamps) from the scene and the recorded /joint_states,
+/contact_wrench and /impact_report, exactly as ``simulate --mcap`` does (io/scene_visuals.py).
+It does not subscribe to those topics: /tf needs tf2_msgs, which PyPI does not provide, and a
+derived stream does not depend on the simulator's tf settings.
 
 The subscriptions live on a second node, ``_recorder_reader``, that no executor waits on: the
 recording loop takes whatever has arrived every ``POLL_PERIOD``. One executor cycle per message
@@ -25,6 +33,9 @@ from .. import contract
 from ..contract import TOPICS, TopicQos
 from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, package_version,
                             ros_distro)
+from ..io.msgdefs import deserialize_cdr
+from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
+from ..io.wire import joint_state_fields, wrench_stamped_fields
 from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -48,6 +59,9 @@ class Recorder(Node):
                                   'nodes whose parameters are stored at start and at shutdown')
         interval = _param(self, 'flush_interval', 0.5,
                           'seconds between flushes: at most this much is lost if killed')
+        tf_rate = _param(self, 'tf_rate', DEFAULT_TF_RATE,
+                         'rate of the derived /tf and /impact_markers [Hz of sim time] '
+                         '(with a scene)')
         if not interval > 0:
             raise ValueError(f'flush_interval = {interval}: must be > 0 s')
         scene_text = None
@@ -78,6 +92,20 @@ class Recorder(Node):
         for entry in topics:
             name, _, type_name = entry.partition(':')
             self.wanted[name] = type_name or TOPICS.get(name, ('',))[0]
+        self.visuals = None
+        if scene_text is not None:
+            from ..core.scene import scene_from_text
+            if not tf_rate > 0:
+                raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')
+            self.visuals = VisualsWriter(self.writer, scene_from_text(scene_text, scene),
+                                         tf_rate, log_time_ns=time.time_ns())
+            derived = sorted(set(self.wanted) & set(contract.VISUAL_TOPICS))
+            if derived:
+                self.get_logger().info(f'not subscribing to {derived}: derived from the scene')
+            for topic in derived:
+                del self.wanted[topic]
+            self._q = None                   # absolute link angles of the latest joint state
+            self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
         self.subs = {}
         self.reader = Node('_recorder_reader', context=self.context)
         self._subscribe_known()
@@ -158,8 +186,30 @@ class Recorder(Node):
                                       None if thash in (None, 'INVALID') else thash)
             self.writer.write(topic, data, received, published)
             self.received += 1
+            if self.visuals is not None:
+                self._derive_visuals(topic, data, received)
         except RecordingError as e:
             self._fail(e)
+
+    def _derive_visuals(self, topic, data, received):
+        """Feed the recorded state to the visuals; a wrench may arrive before or after the
+        joint state of its period, so it is drawn at the latest known arm pose."""
+        if topic == '/contact_wrench':
+            if self._q is not None:
+                self.visuals.force(self._q, wrench_stamped_fields(data)[2][:2])
+        elif topic == '/joint_states':
+            sec, nanosec, names, position, _ = joint_state_fields(data)
+            by_name = dict(zip(names, position))
+            try:
+                self._q = contract.to_absolute([by_name[j] for j in self._joints])
+            except KeyError:
+                return                       # not this scene's joints: nothing to draw
+            self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
+        elif topic == '/impact_report':
+            try:
+                self.visuals.impact(deserialize_cdr(data, 'std_msgs/msg/String').data)
+            except (ValueError, KeyError) as e:
+                self.get_logger().warning(f'impact report not drawn: {e}')
 
     def _flush(self):
         try:
