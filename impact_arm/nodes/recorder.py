@@ -194,10 +194,10 @@ class Recorder(Node):
     def _derive_visuals(self, topic, data, received):
         """Feed the recorded state to the visuals; a wrench may arrive before or after the
         joint state of its period, so it is drawn at the latest known arm pose."""
-        if topic == '/contact_wrench':
+        if topic == contract.CONTACT_WRENCH:
             if self._q is not None:
                 self.visuals.force(self._q, wrench_stamped_fields(data)[2][:2])
-        elif topic == '/joint_states':
+        elif topic == contract.JOINT_STATES:
             sec, nanosec, names, position, _ = joint_state_fields(data)
             by_name = dict(zip(names, position))
             try:
@@ -205,9 +205,9 @@ class Recorder(Node):
             except KeyError:
                 return                       # not this scene's joints: nothing to draw
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
-        elif topic == '/impact_report':
+        elif topic == contract.IMPACT_REPORT:
             try:
-                self.visuals.impact(deserialize_cdr(data, 'std_msgs/msg/String').data)
+                self.visuals.impact(deserialize_cdr(data, contract.STRING_TYPE).data)
             except (ValueError, KeyError) as e:
                 self.get_logger().warning(f'impact report not drawn: {e}')
 
