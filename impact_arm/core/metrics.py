@@ -93,7 +93,10 @@ def settle_index(impacts, rel_tol=1e-3, keys=('q_contact_deg', 'v_before')):
                 if abs(x - y) > rel_tol * max(1.0, abs(y)):
                     return False
         return True
-    for k in range(1, len(impacts)):
-        if all(close(impacts[j], impacts[j - 1]) for j in range(k, len(impacts))):
-            return k
-    return None
+    # one pass from the end: the earliest k from which every pair still repeats
+    settled = len(impacts)
+    for j in range(len(impacts) - 1, 0, -1):
+        if not close(impacts[j], impacts[j - 1]):
+            break
+        settled = j
+    return settled if settled < len(impacts) else None

@@ -158,15 +158,18 @@ def _column_value(value):
     return value if isinstance(value, str) else json.dumps(value)
 
 
-def _flatten(record: dict) -> dict:
-    """An impact record with its lists spread over columns named by key path: v_before[1]."""
-    row = {}
-    for key, value in record.items():
-        if isinstance(value, (list, tuple)):
-            row.update({f'{key}[{i}]': float(v) for i, v in enumerate(value)})
-        else:
-            row[key] = value
-    return row
+def _add_impacts(columns: dict, fixed: dict, records: list):
+    """Append impact records to ``columns`` (name -> list), their lists spread over columns
+    named by key path (v_before[1]); ``fixed`` (run index, overrides) repeated per impact."""
+    for record in records:
+        for key, value in fixed.items():
+            columns.setdefault(key, []).append(value)
+        for key, value in record.items():
+            if isinstance(value, list):
+                for i, v in enumerate(value):
+                    columns.setdefault(f'{key}[{i}]', []).append(v)
+            else:
+                columns.setdefault(key, []).append(value)
 
 
 _STUDIES = {}     # spec hash -> Study, kept by each worker process between chunks
@@ -179,18 +182,18 @@ def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, ite
     study = _STUDIES.get(spec_hash)
     if study is None:
         study = _STUDIES[spec_hash] = Study(scene_data, fixed)
-    runs, impacts = [], []
+    runs, impacts = [], {}
     for index, overrides in items:
         result = study.run(overrides)
         columns = {'run': index, **{k: _column_value(v) for k, v in overrides.items()}}
         runs.append({**columns, **result.summary, 'error': result.error,
                      'error_kind': result.error_kind})
         if 'impacts' in outputs:
-            impacts.extend({**columns, **_flatten(i)} for i in result.impacts)
+            _add_impacts(impacts, columns, result.impacts)
     # the runs table is always written: it is also the record of which runs are finished
     tables = {'runs': pa.Table.from_pylist(runs)}
-    if 'impacts' in outputs and impacts:
-        tables['impacts'] = pa.Table.from_pylist(impacts)
+    if impacts:
+        tables['impacts'] = pa.Table.from_pydict(impacts)
     return tables
 
 
@@ -325,11 +328,15 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
     progress = Progress(total=len(todo), prefix='sweep: ', keep=True) if show_progress else None
     done = 0
     pending, pending_runs, last_flush = [], 0, time.perf_counter()
-    failed = 0
+    failed, first_result, after_first = 0, None, 0
     try:
         for tables in results:
             pending.append(tables)
             count = tables['runs'].num_rows
+            if first_result is None:
+                first_result = time.perf_counter()
+            else:
+                after_first += count
             pending_runs += count
             failed += sum(1 for e in tables['runs'].column('error').to_pylist() if e)
             done += count
@@ -344,8 +351,12 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
             store.write(pending)
         if progress:
             progress.end()
+    end = time.perf_counter()
+    # start-up: until the first chunk is back (worker start, imports, kernels); then the rate
     return {'runs': len(spec.runs), 'skipped': len(spec.runs) - len(todo), 'ran': len(todo),
-            'failed': failed, 'wall': time.perf_counter() - wall0}
+            'failed': failed, 'wall': end - wall0,
+            'startup': (first_result or end) - wall0,
+            'rate': after_first / (end - first_result) if after_first else math.nan}
 
 
 # --- plots -------------------------------------------------------------------------------
@@ -437,7 +448,8 @@ def cli(args) -> int:
     out = args.out or os.path.splitext(args.target)[0] + '.sweep'
     stats = execute(spec, out, workers=args.workers, cluster=args.cluster, batch=args.batch)
     print(f"{stats['runs']} runs: {stats['ran']} run now, {stats['skipped']} already done, "
-          f"{stats['failed']} failed (error column) in {stats['wall']:.1f} s -> {out}")
+          f"{stats['failed']} failed (error column) in {stats['wall']:.1f} s (first results "
+          f"after {stats['startup']:.1f} s, then {stats['rate']:.0f} runs/s) -> {out}")
     if args.csv:
         import pyarrow.csv as pcsv
         for table in TABLES:

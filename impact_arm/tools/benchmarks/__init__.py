@@ -22,6 +22,8 @@ SUBCOMMANDS = {
                'stability matrix at the extremes of the parameter space'),
     'rates': ('impact_arm.tools.benchmarks.rates',
               'nodes over DDS: realtime jitter/overruns at 1 and 5 kHz, lockstep speed'),
+    'sweep': ('impact_arm.tools.benchmarks.sweep',
+              'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }
