@@ -10,9 +10,10 @@ of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer
 ``rate`` on the node's clock uses the latest joint state. On shutdown it sends a zero command.
 
 Its inputs come from any peer on the graph, so each is checked before it can move the arm: a
-malformed payload, a state out of range, a stamp that goes backwards or jumps far ahead, and a
-torque that would not be finite are each dropped (or re-arm the cycle), counted, logged
-throttled and reported on /diagnostics (~1 Hz).
+malformed payload, a state out of range, a stamp that goes backwards or jumps far ahead (unless
+the next sample confirms it: then the cycle re-arms there, as after a reset), and a torque
+that would not be finite are each dropped, counted, logged throttled and reported on
+/diagnostics (~1 Hz).
 """
 from __future__ import annotations
 
@@ -46,7 +47,12 @@ MAX_FORCE = 1e12                 # N, a contact wrench beyond any scene's
 # back, is a reset or a bad stamp, and the cycle re-arms at the new time
 MAX_STAMP_GAP = 1.0              # s
 DROPPED = ('malformed_joint_states', 'malformed_wrenches', 'out_of_range_states',
-           'out_of_range_wrenches', 'stamp_jumps', 'unsafe_torques')
+           'out_of_range_wrenches', 'missing_wrenches', 'stamp_jumps', 'unsafe_torques')
+
+
+def _follows(before, t):
+    """Whether a stamp t continues a stream whose previous sample had stamp ``before``."""
+    return before - STAMP_EPS <= t <= before + MAX_STAMP_GAP
 
 
 def parameter_table(scene):
@@ -137,6 +143,7 @@ class Controller(Node):
         self.started = False
         self.warned_names = False
         self.dropped = dict.fromkeys(DROPPED, 0)
+        self.jump_from = None              # stamp of a sample that jumped, until confirmed
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
                                               contract.qos(DIAGNOSTICS).to_rclpy())
         self.create_timer(1.0, self._publish_diagnostics)
@@ -245,22 +252,37 @@ class Controller(Node):
                        f'velocities {vel} not finite or beyond {MAX_ANGLE:g} rad, '
                        f'{MAX_RATE:g} rad/s')
             return
-        if self.latest is not None and not (
-                self.latest[0] - STAMP_EPS <= t <= self.latest[0] + MAX_STAMP_GAP):
-            self._drop('stamp_jumps', f'joint state stamp went from {self.latest[0]:.9f} to '
-                       f'{t:.9f} s: cycle re-armed at the new time')
+        if self.latest is not None and not _follows(self.latest[0], t):
+            # a reset, or one bad stamp: a second sample that follows the new one confirms a
+            # reset; until then the sample is dropped (one stamp of 2^31 s must not silence
+            # the controller, nor stamps alternating between two clocks make it tick on each)
+            confirmed = self.jump_from is not None and _follows(self.jump_from, t)
+            self.jump_from = None if confirmed else t
+            if not confirmed:
+                self._drop('stamp_jumps', f'joint state stamp went from {self.latest[0]:.9f} '
+                           f'to {t:.9f} s: dropped unless the next one follows it')
+                return
+            self.get_logger().warning(f'joint state stamps restarted at {t:.9f} s: cycle '
+                                      f're-armed', throttle_duration_sec=2.0)
             self.next_tick = t
             self.waiting = None
             self.wrench_stamp = -math.inf
             self.ctrl.rearm()
+        self.jump_from = None
         self.latest = (t, to_absolute(pos), to_absolute(vel))
         if self.p['trigger'] != 'joint_states' or t < self.next_tick - STAMP_EPS:
             return
         # the wrench of the same instant is published just before the joint state: wait for
-        # it when someone publishes wrenches, so the decision never depends on arrival order
-        if self.wrench_stamp < t - STAMP_EPS and self.sub_wrench.get_publisher_count() > 0:
+        # it when someone publishes wrenches, so the decision never depends on arrival order.
+        # Wait for one state only: a wrench publisher that sends no valid wrench (broken, or
+        # hostile) must not hold the arm at its last torque; the next state ticks without it.
+        if self.wrench_stamp < t - STAMP_EPS and self.waiting is None and \
+                self.sub_wrench.get_publisher_count() > 0:
             self.waiting = self.latest
             return
+        if self.waiting is not None and self.waiting[0] < t - STAMP_EPS:
+            self._drop('missing_wrenches', f'no contact wrench for the state at '
+                       f'{self.waiting[0]:.6f} s: ticking on the next state without it')
         self.waiting = None
         self._tick(*self.latest)
 
