@@ -37,6 +37,9 @@ def load_launch_with_stubs(share):
         'launch.substitutions': types.ModuleType('launch.substitutions'),
         'launch_ros': types.ModuleType('launch_ros'),
         'launch_ros.actions': types.ModuleType('launch_ros.actions'),
+        'launch.conditions': types.ModuleType('launch.conditions'),
+        'launch_ros.parameter_descriptions': types.ModuleType(
+            'launch_ros.parameter_descriptions'),
     }
     stubs['ament_index_python.packages'].get_package_share_directory = lambda pkg: share
     stubs['launch'].LaunchDescription = lambda actions: actions
@@ -44,6 +47,10 @@ def load_launch_with_stubs(share):
     stubs['launch.substitutions'].LaunchConfiguration = type('LaunchConfiguration', (Action,), {})
     stubs['launch.substitutions'].PythonExpression = type('PythonExpression', (Action,), {})
     stubs['launch_ros.actions'].Node = type('Node', (Action,), {})
+    stubs['launch.conditions'].IfCondition = type('IfCondition', (Action,), {})
+    stubs['launch.substitutions'].Command = type('Command', (Action,), {})
+    stubs['launch_ros.parameter_descriptions'].ParameterValue = type('ParameterValue',
+                                                                     (Action,), {})
     saved = {k: sys.modules.get(k) for k in stubs}
     sys.modules.update(stubs)
     try:
@@ -61,15 +68,56 @@ def load_launch_with_stubs(share):
 
 def test_launch_file_starts_the_three_nodes_with_their_parameter_files():
     actions = load_launch_with_stubs(ROOT)
-    nodes = [a for a in actions if type(a).__name__ == 'Node']
+    nodes = [a for a in actions if type(a).__name__ == 'Node'
+             and a.kwargs['package'] == 'impact_arm']
     arguments = {a.args[0] for a in actions if type(a).__name__ == 'DeclareLaunchArgument'}
-    assert {'scene', 'law', 'rate', 'mode'} <= arguments
+    assert {'scene', 'law', 'rate', 'mode', 'tf', 'rviz'} <= arguments
     assert sorted(n.kwargs['executable'] for n in nodes) == sorted(NODES)
     assert {n.kwargs['executable'] for n in nodes} <= console_scripts()
     for n in nodes:
         files = [p for p in n.kwargs['parameters'] if isinstance(p, str)]
         assert files == [os.path.join(ROOT, 'config', n.kwargs['executable'] + '.yaml')]
         assert os.path.exists(files[0])
+
+
+def test_tf_rsp_starts_robot_state_publisher_with_the_urdf_and_rviz_its_shipped_config():
+    """tf:=rsp: robot_state_publisher gets the output of `impact-arm urdf` for the launched
+    scene and the simulator stops publishing TF; rviz:=true opens config/impact_arm.rviz."""
+    actions = load_launch_with_stubs(ROOT)
+    by_package = {a.kwargs['package']: a for a in actions if type(a).__name__ == 'Node'}
+    rsp, rviz, sim = by_package['robot_state_publisher'], by_package['rviz2'], [
+        a for a in actions if type(a).__name__ == 'Node'
+        and a.kwargs.get('executable') == 'simulator'][0]
+
+    def text(sub):   # a stub substitution tree flattened to the text it would evaluate
+        if isinstance(sub, str):
+            return sub
+        if isinstance(sub, (list, tuple)):
+            return ''.join(text(s) for s in sub)
+        return type(sub).__name__ + '(' + ''.join(text(a) for a in sub.args) + ')'
+    rsp_condition = text(rsp.kwargs['condition'])
+    assert "' == 'rsp'" in rsp_condition and 'LaunchConfiguration(tf)' in rsp_condition
+    command = rsp.kwargs['parameters'][0]['robot_description'].args[0]
+    assert text(command) == ('Command(python3 -m impact_arm.tools.cli urdf --scene '
+                             'LaunchConfiguration(scene))')
+    assert text(rsp.kwargs['condition'].args[0]) in text(sim.kwargs['parameters'][1]
+                                                         ['publish_tf'])
+    assert text(rviz.kwargs['condition']) == 'IfCondition(LaunchConfiguration(rviz))'
+    config = rviz.kwargs['arguments'][1]
+    assert config == os.path.join(ROOT, 'config', 'impact_arm.rviz')
+    rviz_config = yaml.safe_load(open(config))
+    displays = {d['Class']: d for d in rviz_config['Visualization Manager']['Displays']}
+    assert displays['rviz_default_plugins/RobotModel']['Description Topic']['Value'] == \
+        '/robot_description'
+    assert displays['rviz_default_plugins/MarkerArray']['Topic']['Value'] == '/impact_markers'
+    assert rviz_config['Visualization Manager']['Global Options']['Fixed Frame'] == 'world'
+
+
+def test_urdf_command_prints_the_robot_description(tmp_path):
+    out = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'urdf', '--scene', 'paper'],
+                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith('<?xml') and '<robot name="impact_arm">' in out.stdout
 
 
 @pytest.mark.parametrize('node', ['simulator', 'controller'])

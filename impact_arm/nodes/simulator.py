@@ -85,6 +85,8 @@ PARAMS = (
           'topic_based_ros2_control (not /joint_states)', 'str', read_only=True),
     Param('tf_rate', DEFAULT_TF_RATE, 'rate of /tf and /impact_markers [Hz] (wall clock)',
           low=0.0, high=1000.0, open_low=True, read_only=True),
+    Param('publish_tf', True, 'publish /tf and /tf_static (false when robot_state_publisher '
+          'does, launch tf:=rsp)', 'bool', read_only=True),
 )
 
 
@@ -380,11 +382,11 @@ class Simulator(Node):
                                                  qos(IMPACT_MARKERS))
         tf_class = type(self.visuals.tf_static())
         self.pub_tf = None
-        if has_type_support(tf_class):
+        if self.p['publish_tf'] and has_type_support(tf_class):
             self.create_publisher(tf_class, TF_STATIC, qos(TF_STATIC)).publish(
                 self.visuals.tf_static())
             self.pub_tf = self.create_publisher(tf_class, TF, qos(TF))
-        else:
+        elif self.p['publish_tf']:   # (false: robot_state_publisher owns /tf, tf:=rsp)
             self.get_logger().info('tf2_msgs is not installed: no live /tf or /tf_static '
                                    '(recordings still hold them; launch with tf:=rsp on a '
                                    'ROS install)')
