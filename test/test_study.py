@@ -101,6 +101,33 @@ def without_wall(table):
     return table.drop_columns(['wall_time']) if 'wall_time' in table.column_names else table
 
 
+def descendants(pid):
+    """Live (not zombie) processes below ``pid``."""
+    parents = {}
+    for entry in filter(str.isdigit, os.listdir('/proc')):
+        try:
+            with open(f'/proc/{entry}/stat', encoding='ascii') as f:
+                fields = f.read().rsplit(')', 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if fields[0] != 'Z':
+            parents.setdefault(int(fields[1]), []).append(int(entry))
+    found, stack = [], [pid]
+    while stack:
+        for child in parents.get(stack.pop(), []):
+            found.append(child)
+            stack.append(child)
+    return found
+
+
+def alive(pid):
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii') as f:
+            return f.read().rsplit(')', 1)[1].split()[0] != 'Z'
+    except OSError:
+        return False
+
+
 def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp_path):
     text = ('scene: paper\nset: {cycles: 3}\nparameters:\n'
             '  controller.kp[0]: {grid: [400, 800, 40]}\n')
@@ -108,7 +135,7 @@ def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp
     path.write_text(text)
     out = tmp_path / 'kill.sweep'
     child = subprocess.Popen([sys.executable, '-m', 'impact_arm.tools.cli', 'sweep', str(path),
-                              '--workers', '0', '--batch', '3'],
+                              '--workers', '2', '--batch', '3'],
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and child.poll() is None:
@@ -116,8 +143,17 @@ def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp
         if len([n for n in parts if n.endswith('.parquet')]) >= 2:
             break
         time.sleep(0.005)
+    workers = descendants(child.pid)
     child.send_signal(signal.SIGKILL)
     child.wait()
+    # its worker processes follow it instead of computing runs nobody records
+    deadline = time.monotonic() + 15
+    while any(alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [pid for pid in workers if alive(pid)]
+    for pid in left:             # don't leave them running if the check fails
+        os.kill(pid, signal.SIGKILL)
+    assert workers and not left, 'worker processes outlived the killed sweep'
     before = sweep.read_table(str(out)).column('run').to_pylist()
     assert 0 < len(before) < 40, 'the sweep ended before it could be killed halfway'
     stats = sweep.execute(sweep.Spec.load(str(path)), str(out), workers=0,
@@ -174,6 +210,11 @@ def test_sweep_plot_writes_a_png(tmp_path):
         assert f.read(8) == b'\x89PNG\r\n\x1a\n'
     with pytest.raises(sweep.SpecError, match="x 'mu' is not a column"):
         sweep.plot(out, 'cor_kinematic', 'mu')
+    from impact_arm.tools.cli import main
+    png = str(tmp_path / 'f_max.png')
+    assert main(['sweep', 'plot', out, '--table', 'impacts', '--impact', '1', '--metric',
+                 'F_max', '--x', 'controller.kp[0]', '-o', png]) == 0
+    assert os.path.getsize(png) > 1000
 
 
 def test_simulate_no_samples_prints_the_sampled_runs_impacts(tmp_path, capsys):

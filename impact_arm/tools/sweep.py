@@ -280,11 +280,25 @@ def _chunks(items, workers):
     return [items[i:i + size] for i in range(0, len(items), size)]
 
 
+def _exit_with_parent():
+    """Pool worker initializer: when the sweep dies (SIGKILL included), its workers stop
+    too instead of computing runs that nobody will record."""
+    import threading
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+    threading.Thread(target=watch, daemon=True).start()
+
+
 def _local_pool(workers, task, chunks):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
     # spawn, not fork: the parent may hold pyarrow's threads, which fork does not copy
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context('spawn'))
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context('spawn'),
+                               initializer=_exit_with_parent)
     try:
         futures = [pool.submit(task, chunk) for chunk in chunks]
         for future in as_completed(futures):
