@@ -85,6 +85,12 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
     path = os.path.join(directory, f'{label}.yaml')
     with open(path, 'w', encoding='utf-8') as f:
         f.write(spec_text(runs))
+    import resource
+
+    def cpu():
+        usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return usage.ru_utime + usage.ru_stime
+    cpu0 = cpu()
     t0 = time.perf_counter()
     child = subprocess.Popen([sys.executable, '-m', 'impact_arm.tools.cli', 'sweep', path,
                               '--workers', str(workers)], stdout=subprocess.PIPE,
@@ -102,6 +108,9 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
     watcher.start()
     out, err = child.communicate()
     wall = time.perf_counter() - t0
+    # CPU of the sweep and its workers (waited for, so counted): on a machine shared with
+    # other jobs, cores used = CPU / wall tells a scaling limit from a lack of free cores
+    cpu_used = cpu() - cpu0
     done.set()
     watcher.join()
     if child.returncode:
@@ -110,6 +119,8 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
     rate = float(summary.split('then ')[1].split(' runs/s')[0]) if 'then ' in summary else 0.0
     # memory at a third of each worker's life (past start-up), two thirds, the end
     return {'runs': runs, 'workers': workers, 'wall': wall, 'runs_per_s': runs / wall,
+            'cpu': cpu_used, 'cpu_ms_per_run': cpu_used / runs * 1e3,
+            'cores_used': cpu_used / wall,
             'steady_runs_per_s': rate, 'summary': summary,
             'worker_rss_mb': [{'third': s[len(s) // 3], 'two_thirds': s[2 * len(s) // 3],
                                'last': s[-1], 'peak': max(s)} for s in samples.values()]}
@@ -178,9 +189,11 @@ def run(args) -> int:
         result['scaling'] = rows
         print(f'\nimpact-arm sweep, {args.scaling_runs} runs, fresh process (wall includes '
               f'start-up):')
-        print(common.table(['workers', 'wall [s]', 'runs/s overall', 'runs/s after start-up'],
+        print(common.table(['workers', 'wall [s]', 'runs/s overall', 'runs/s after start-up',
+                            'CPU ms per run', 'cores used'],
                            [[r['workers'], f"{r['wall']:.2f}", f"{r['runs_per_s']:.0f}",
-                             f"{r['steady_runs_per_s']:.0f}"] for r in rows]))
+                             f"{r['steady_runs_per_s']:.0f}", f"{r['cpu_ms_per_run']:.2f}",
+                             f"{r['cores_used']:.2f}"] for r in rows]))
         print(f"2 workers / 1 worker: {rows[1]['runs_per_s'] / rows[0]['runs_per_s']:.2f}x "
               f"overall, {rows[1]['steady_runs_per_s'] / rows[0]['steady_runs_per_s']:.2f}x "
               f"after start-up")
@@ -188,7 +201,8 @@ def run(args) -> int:
         big = result['big'] = sweep_process(args.runs, 2, directory, 'big')
         common.progress_done()
     print(f"\n{args.runs} runs, 2 workers: {big['wall']:.1f} s wall including start-up "
-          f"({big['runs_per_s']:.0f} runs/s); {big['summary']}")
+          f"({big['runs_per_s']:.0f} runs/s, {big['cores_used']:.2f} cores used); "
+          f"{big['summary']}")
     for i, rss in enumerate(big['worker_rss_mb']):
         print(f"  worker {i + 1}: resident {rss['third']:.0f} MB at a third of the run, "
               f"{rss['two_thirds']:.0f} MB at two thirds, {rss['last']:.0f} MB at the end, "
