@@ -73,9 +73,13 @@ class SimulatedArm:
         self.max_effort = float(max_effort)
         spec = scene.integrator
         # the scene's own tolerances apply with its own preset
-        self.integrator = PhaseIntegrator(
-            self.model, control='held', trace=trace,
-            **options_from_spec(spec, None if preset == spec.preset else preset))
+        self._options = dict(control='held', trace=trace,
+                             **options_from_spec(spec, None if preset == spec.preset else preset))
+        self.reset()
+
+    def reset(self):
+        """Back to the scene's initial state at t = 0, zero torque, no impact in progress."""
+        self.integrator = PhaseIntegrator(self.model, **self._options)
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n          # the torque being held (after clipping)

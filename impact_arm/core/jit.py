@@ -31,15 +31,20 @@ def _load_numba_without_blas():
         del sys.modules['scipy.linalg']
 
 
+UNAVAILABLE = ''     # why the kernel runs interpreted (empty when compiled)
+FIX = ''             # what the user does about it
 try:
     if not ENABLED:
-        raise ImportError
+        raise ImportError('IMPACT_ARM_JIT=0 is set')
     from numba import njit as _njit
     _load_numba_without_blas()
     AVAILABLE = True
-except ImportError:  # interpreter fallback: identical code, slower
+except ImportError as exc:  # interpreter fallback: identical code, ~100x slower
     _njit = None
     AVAILABLE = False
+    UNAVAILABLE = str(exc) if not ENABLED else f'numba cannot be imported ({exc})'
+    FIX = ('unset IMPACT_ARM_JIT' if not ENABLED else
+           'install numba (rosdep install --from-paths src -y, or pip install numba)')
 
 
 # No numba reference counting (NRT) in the hot path: with it, every array a compiled function

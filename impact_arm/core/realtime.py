@@ -135,45 +135,134 @@ class Watchdog:
 
 
 class DriverLoop:
-    """Runs the arm's periods. ``take_commands(now)`` delivers the commands queued since the
-    last period (through ``command``); ``publish(tick)`` sends a period's sensor messages;
-    ``log(level, text)`` reports watchdog changes. ``clock`` and ``sleep`` are the wall clock
-    (``time.monotonic``, ``time.sleep``; fakes in tests)."""
+    """Runs the arm's periods. ``take_command()`` returns the next queued serialized command
+    or None; ``accept(raw, now)`` checks one and, when valid, hands it to ``command``;
+    ``publish(tick)`` sends a period's sensor messages; ``log(level, text)`` reports state
+    changes. ``clock`` and ``sleep`` are the wall clock (``time.monotonic``, ``time.sleep``;
+    fakes in tests).
 
-    def __init__(self, arm, *, wall_period, command_timeout, take_commands=None,
-                 publish=None, log=None, clock=time.monotonic, sleep=time.sleep):
+    After a stall (a period published after the next one was due) the missed periods are
+    skipped, as ros2_control's controller manager does: the loop resumes at the next deadline
+    of its unchanged schedule, and simulated time advances one period per period run, so it
+    falls behind the wall clock by the skipped periods (``skipped``; the real-time factor
+    dips) instead of bursting through them back to back with a stale command.
+
+    Simulation control, set from any thread and applied at the next period: ``paused``
+    (physics and the watchdog's clock frozen, the held state published each period),
+    ``request_steps(n)`` (while paused: n periods, one per wall period), ``request_reset()``
+    (initial state at t = 0, brakes on until the next command, statistics and counts reset),
+    ``e_stop`` (zero torque whatever the commands, until cleared)."""
+
+    def __init__(self, arm, *, wall_period, command_timeout, take_command=None, accept=None,
+                 publish=None, log=None, clock=time.monotonic, sleep=time.sleep,
+                 max_takes=100):
         self.arm = arm
         self.wall_period = wall_period          # realtime: wall seconds per period
         self.watchdog = Watchdog(command_timeout)
         self.stats = PeriodStats(wall_period)
-        self.take_commands = take_commands or (lambda now: None)
+        self.take_command = take_command or (lambda: None)
+        self.accept = accept or (lambda raw, now: None)
+        # the most commands taken in one period: a keep-last queue never holds more, so a
+        # flood cannot make one period drain forever (what arrives meanwhile waits)
+        self.max_takes = max_takes
         self.publish = publish or (lambda tick: None)
         self.log = log or (lambda level, text: None)
         self.clock, self.sleep = clock, sleep
-        self.start_wall = None                  # wall time of the first period
+        self.start_wall = None                  # wall time the schedule is counted from
         self.first_command_wall = None          # simulated time starts here
         self.commands = 0
-        self._k = 0                             # realtime periods since start_wall
+        self.impacts = 0
+        self.skipped = 0                        # periods skipped after stalls
+        self.flooded = 0                        # periods that left commands queued
+        self.paused = False
+        self.e_stop = False
+        self._steps = 0
+        self._reset = threading.Event()
+        self._reset_done = threading.Event()
+        self._frozen = 0.0                      # wall time spent paused [s]
+        self._paused_at = None
+        self._k = 0                             # index of the next period's deadline
 
+    # -------------------------------------------------------------------- commands in
     def command(self, torques, now):
-        """A valid command (already checked by ``arm.check_command``) arrived at ``now``."""
-        if self.commands == 0:
+        """A valid command (already checked by ``arm.check_command``) arrived at ``now``
+        (wall time)."""
+        if self.first_command_wall is None:
             self.first_command_wall = now
         self.commands += 1
-        self.watchdog.command(torques, now)
+        self.watchdog.command(torques, self._run_time(now))
+
+    def _take_commands(self, now):
+        for _ in range(self.max_takes):
+            raw = self.take_command()
+            if raw is None:
+                return
+            self.accept(raw, now)
+        self.flooded += 1
+
+    def _run_time(self, now):
+        """Wall time with the paused intervals taken out: the watchdog's clock."""
+        return (self._paused_at if self._paused_at is not None else now) - self._frozen
 
     def _hold(self, now):
-        change = self.watchdog.hold(self.arm, now)
+        if self.e_stop:
+            self.arm.release()
+            self.watchdog.reapply()
+            return
+        change = self.watchdog.hold(self.arm, self._run_time(now))
         if change == 'timeout':
             self.log('warning', f'no command for {self.watchdog.timeout:g} s: torques zeroed')
         elif change == 'resumed':
             self.log('info', 'commands resumed')
 
-    # ---------------------------------------------------------------------------- realtime
+    # -------------------------------------------------------------------- control
+    def request_steps(self, n):
+        self._steps += n
+
+    def take_step(self):
+        """Lockstep while paused: True (and one step fewer to go) when a period may run."""
+        if self._steps > 0:
+            self._steps -= 1
+            return True
+        return False
+
+    def request_reset(self, timeout=None):
+        """Ask the loop for a reset; True once it is done (realtime: at the next period;
+        ``timeout`` None means the caller runs the periods itself, e.g. lockstep)."""
+        self._reset_done.clear()
+        self._reset.set()
+        if timeout is None:
+            self._apply_controls(self.clock())
+            return True
+        return self._reset_done.wait(timeout)
+
+    def _apply_controls(self, now):
+        if self._reset.is_set():
+            self._reset.clear()
+            self.arm.reset()
+            self.watchdog = Watchdog(self.watchdog.timeout)
+            self.stats = PeriodStats(self.stats.nominal)
+            self.commands = self.impacts = self.skipped = self.flooded = 0
+            self.first_command_wall = None
+            self._steps = 0
+            self._reset_done.set()
+        if self.paused and self._paused_at is None:
+            self._paused_at = now
+        elif not self.paused and self._paused_at is not None:
+            self._frozen += now - self._paused_at
+            self._paused_at = None
+            self._steps = 0
+
+    def _count(self, tick):
+        self.impacts += len(tick.impacts)
+        return tick
+
+    # -------------------------------------------------------------------- realtime
     def realtime_period(self):
         """Wait for the next period's deadline, take its commands, step and publish it.
-        Returns the period's tick (its impact reports still to be sent), or None while the
-        brakes are on (before the first command). SimulationError propagates."""
+        Returns the period's tick (its impact reports still to be sent), or None when no
+        physics ran (brakes on before the first command, paused). SimulationError
+        propagates."""
         if self.start_wall is None:
             self.start_wall = self.clock()
         period = self.wall_period
@@ -182,15 +271,20 @@ class DriverLoop:
         if deadline > now:
             self.sleep(deadline - now)
         woke = self.clock()
-        self._k += 1
-        self.take_commands(woke)
-        if self.watchdog.pending is None and self.arm.periods == 0:
+        self._take_commands(woke)
+        self._apply_controls(woke)
+        held = self.watchdog.pending is None and self.arm.periods == 0
+        if held or (self.paused and not self._steps):
             # brakes on until the first command: the arm holds its initial state and
-            # simulated time starts at 0 with the first command, as offline. (Timing
-            # statistics start with the motion: start-up hiccups are not the loop's.)
+            # simulated time starts at 0 with the first command, as offline (timing
+            # statistics start with the motion); paused: the held state, its time frozen
+            self._hold(woke)
             self.publish(self.arm.sample())
             self.stats.published += 1
+            self._next_deadline(self.clock(), deadline, count=False)
             return None
+        if self.paused:
+            self._steps -= 1
         self._hold(woke)
         stepping = self.clock()
         tick = self.arm.step()
@@ -198,15 +292,30 @@ class DriverLoop:
         self.publish(tick)
         done = self.clock()
         # late if this period's publication happened after the next one was due
-        self.stats.add(done, done - woke, self.arm.t, done > deadline + period,
+        late = done > deadline + period
+        self.stats.add(done, done - woke, self.arm.t, late,
                        (stepping - woke, stepped - stepping, done - stepped))
-        return tick
+        self._next_deadline(done, deadline, count=True)
+        return self._count(tick)
+
+    def _next_deadline(self, done, deadline, count):
+        """The next period is due at the first deadline of the schedule after ``done``."""
+        self._k += 1
+        if done > deadline + self.wall_period:
+            missed = int((done - self.start_wall) / self.wall_period) - self._k
+            self._k += missed
+            if count:
+                self.skipped += missed
 
     # ---------------------------------------------------------------------------- lockstep
     def lockstep_period(self, arrived, rate_factor):
         """The period a command that arrived at ``arrived`` starts (lockstep); paced so that
         simulated time never runs ahead of ``rate_factor`` x wall time (0: unpaced)."""
-        self.watchdog.hold(self.arm, arrived)
+        if self.e_stop:
+            self.arm.release()
+            self.watchdog.reapply()
+        else:
+            self.watchdog.hold(self.arm, arrived)
         woke = self.clock()
         if self.start_wall is None:
             self.start_wall = woke
@@ -225,4 +334,4 @@ class DriverLoop:
         self.stats.add(done, done - woke, self.arm.t, False,
                        (taken, stepped - woke, done - stepped,
                         arrived - last if last is not None else 0.0))
-        return tick
+        return self._count(tick)

@@ -98,6 +98,8 @@ def run(node_factory, args=None) -> int:
         gc.freeze()
         executor = make_executor(prefer=getattr(node, 'executor_kind', None))
         executor.add_node(node)
+        if hasattr(node, 'start'):    # a node with periods of its own starts them now, not
+            node.start()              # under the collection above (it holds the GIL)
         if hasattr(node, 'spin'):     # a node with its own loop (the realtime simulator)
             node.spin(executor, lambda: bool(stopped) or node.done or not rclpy.ok())
         else:

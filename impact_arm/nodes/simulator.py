@@ -24,6 +24,7 @@ noting the force for the arrow).
 from __future__ import annotations
 
 import json
+import math
 import sys
 import threading
 import time
@@ -41,6 +42,7 @@ from .. import contract
 from ..contract import (CLOCK, COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, IMPACT_MARKERS,
                         IMPACT_REPORT, INTEGRATOR_PRESETS, JOINT_STATES, ROBOT_DESCRIPTION, TF,
                         TF_STATIC, VISUAL_TOPICS, joint_names, to_absolute)
+from ..core import jit
 from ..core.driver import CommandError, SimulatedArm
 from ..core.errors import SimulationError
 from ..core.realtime import PERIOD_PARTS, DriverLoop
@@ -158,16 +160,16 @@ class Simulator(Node):
         rate = p['publish_rate'] * (p['rate_factor'] or 1.0)
         self.loop = DriverLoop(self.arm, wall_period=1.0 / rate,
                                command_timeout=p['command_timeout'],
-                               take_commands=self._take_commands, publish=self._publish,
-                               log=self._log)
-        self.stats = self.loop.stats
+                               take_command=self._take_command, accept=self._accept,
+                               publish=self._publish, log=self._log,
+                               max_takes=contract.qos(COMMANDS).depth)
         if self.lockstep:
-            self.stats.nominal = None      # lockstep has no wall period to jitter around
+            self.loop.stats.nominal = None   # lockstep has no wall period to jitter around
         self.rejected = self.clipped = 0
         self.publish_failures = 0
         self.lockstep_repeats = 0
         self.failed = ''
-        self.impacts = 0
+        self.last_reject_log = -math.inf
         self.diag_window_start = time.monotonic()
         self.diag_published = 0
         self._stop = threading.Event()
@@ -176,10 +178,22 @@ class Simulator(Node):
         self.create_timer(p['diagnostics_period'], self._publish_diagnostics)
         self._start_visuals()
 
+        self._control_interfaces()
+        if not jit.AVAILABLE:
+            self.get_logger().warning(f'running the INTERPRETED kernel: {jit.UNAVAILABLE}; '
+                                      f'realtime periods will overrun. Fix: {jit.FIX}')
         self.arm.warm_up()                 # before the clock starts: no compile-cache loads later
         initial = self.arm.sample()
         self._publish(initial)             # the state at t = 0, before anything moves
         self.last_tick = (initial, time.monotonic())   # (tick, when published): lockstep
+        self.get_logger().info(
+            f'scene {self.scene.name!r} ({scene_path}), {p["mode"]} at '
+            f'{p["publish_rate"]:g} Hz, preset {self.arm.integrator.rtol:g} rtol')
+
+    def start(self):
+        """Start the periods; the runner calls this once the process has settled (its last
+        full garbage collection held the GIL for 120-170 ms and stalled a loop started in
+        the constructor)."""
         if self.lockstep:
             # until the first command arrives, repeat the initial state so a controller that
             # starts later still gets one (it answers each stamp once); later, repeat a
@@ -189,9 +203,63 @@ class Simulator(Node):
             self._thread = threading.Thread(target=self._realtime_loop, name='sim-loop',
                                             daemon=True)
             self._thread.start()
-        self.get_logger().info(
-            f'scene {self.scene.name!r} ({scene_path}), {p["mode"]} at '
-            f'{p["publish_rate"]:g} Hz, preset {self.arm.integrator.rtol:g} rtol')
+
+    # ------------------------------------------------------------ simulation control
+    def _control_interfaces(self):
+        """~/reset, ~/pause, ~/step and /e_stop (design.md section 8)."""
+        from std_msgs.msg import Bool
+        from std_srvs.srv import SetBool, Trigger
+        self.declare_parameter('step_periods', 1)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(SetBool, '~/pause', self._on_pause)
+        self.create_service(Trigger, '~/step', self._on_step)
+        self.create_subscription(Bool, '/e_stop', self._on_e_stop, 10)
+
+    def _on_reset(self, request, response):
+        if self.failed:
+            response.success, response.message = False, f'stopped: {self.failed}'
+            return response
+        done = self.loop.request_reset(None if self.lockstep else 1.0)
+        if done and self.lockstep:
+            self._publish(self.arm.sample())
+        response.success = done
+        response.message = 'reset to the initial state at t = 0; brakes on until the next ' \
+            'command' if done else 'the loop did not answer within 1 s'
+        self.get_logger().info(f'reset: {response.message}')
+        return response
+
+    def _on_pause(self, request, response):
+        was = self.loop.paused
+        self.loop.paused = bool(request.data)
+        if self.lockstep and was and not self.loop.paused and self.loop.watchdog.pending:
+            self._lockstep_period(time.monotonic())   # the exchange waits for a period
+        response.success = True
+        response.message = 'paused' if self.loop.paused else 'running'
+        self.get_logger().info(f'simulation {response.message} at t = {self.arm.t:.6f} s')
+        return response
+
+    def _on_step(self, request, response):
+        if not self.loop.paused:
+            response.success, response.message = False, 'not paused: ~/pause true first'
+            return response
+        n = self.get_parameter('step_periods').value
+        if not isinstance(n, int) or n < 1:
+            response.success = False
+            response.message = f'parameter step_periods = {n!r}: must be an integer >= 1'
+            return response
+        self.loop.request_steps(n)
+        if self.lockstep and self.loop.watchdog.pending and self.loop.take_step():
+            self._lockstep_period(time.monotonic())   # the exchange waits for a period
+        response.success, response.message = True, f'{n} period(s) requested'
+        return response
+
+    def _on_e_stop(self, msg):
+        if bool(msg.data) != self.loop.e_stop:
+            self.loop.e_stop = bool(msg.data)
+            if self.loop.e_stop:
+                self.get_logger().error('e-stop: zero torque until /e_stop false')
+            else:
+                self.get_logger().warning('e-stop released: commands apply again')
 
     # ---------------------------------------------------------------------- parameters
     def _set_parameters(self, values):
@@ -217,20 +285,25 @@ class Simulator(Node):
                 self.reader_node.create_subscription(JointState, self.p['joint_commands_topic'],
                                                      lambda msg: None, qos, raw=True))
 
-    def _take_commands(self, now):
-        """Every command that arrived since the last period, oldest first per topic (arrays,
-        then JointState commands: one controller uses one of them)."""
-        for reader, msg_type, apply in ((self.command_reader, Float64MultiArray,
-                                         self._on_command),
-                                        (self.joint_command_reader, JointState,
-                                         self._on_joint_command)):
+    def _take_command(self):
+        """The oldest queued command of the two command topics (arrays first, then JointState
+        commands: one controller uses one of them), with what accepts it; None when both
+        queues are empty (realtime mode)."""
+        for reader, msg_type, accept in ((self.command_reader, Float64MultiArray,
+                                          self._on_command),
+                                         (self.joint_command_reader, JointState,
+                                          self._on_joint_command)):
             handle = reader.handle
-            while True:
-                with handle:
-                    taken = handle.take_message(msg_type, True)
-                if taken is None:
-                    break
-                apply(taken[0], now)
+            with handle:
+                taken = handle.take_message(msg_type, True)
+            if taken is not None:
+                return taken[0], accept
+        return None
+
+    @staticmethod
+    def _accept(taken, now):
+        raw, accept = taken
+        accept(raw, now)
 
     @property
     def done(self):
@@ -242,7 +315,7 @@ class Simulator(Node):
         try:
             values = self.arm.check_command(float64_array_data(raw))
         except (CommandError, ValueError) as exc:
-            return self._reject(exc)
+            return self._reject(exc, now)
         torques = [0.0] * self.arm.n
         for k, joint in enumerate(self.command_order):
             torques[joint] = values[k]
@@ -253,18 +326,26 @@ class Simulator(Node):
         try:
             torques = self.arm.check_command(joint_state_command(raw, self.joint_names))
         except (CommandError, ValueError) as exc:
-            return self._reject(exc)
+            return self._reject(exc, now)
         self._apply(torques, now)
 
-    def _reject(self, exc):
+    def _reject(self, exc, now):
+        """Counted; logged at most once a second, and only then formatted: a flood of garbage
+        must cost the loop as little as possible per message."""
         self.rejected += 1
-        self.get_logger().warning(f'command rejected: {exc}', throttle_duration_sec=1.0)
+        now = time.monotonic() if now is None else now
+        if now - self.last_reject_log >= 1.0:
+            self.last_reject_log = now
+            self.get_logger().warning(f'command rejected: {exc} ({self.rejected} so far)')
 
     def _apply(self, torques, now):
         now = time.monotonic() if now is None else now
         self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
         self.loop.command(torques, now)
         if self.lockstep and not self.failed:
+            if self.loop.paused:
+                if not self.loop.take_step():
+                    return                 # held until resumed or stepped
             self._lockstep_period(now)
 
     def _log(self, level, text):
@@ -295,9 +376,11 @@ class Simulator(Node):
             self._fail(f'the stepping thread failed: {type(exc).__name__}: {exc}')
 
     def _lockstep_period(self, arrived):
+        if self.failed:
+            return
         tick = self._stepping(lambda: self.loop.lockstep_period(arrived, self.p['rate_factor']))
         if tick is not None:
-            self.last_tick = (tick, self.stats.last_publish)
+            self.last_tick = (tick, self.loop.stats.last_publish)
             self._publish_impacts(tick)
 
     def _repeat_unanswered(self):
@@ -357,7 +440,6 @@ class Simulator(Node):
         waits for them, and their JSON (~30 shortest-repr floats) takes 40-200 us, which in
         the impact's own period made it the slowest period of a run."""
         for record, _rows in tick.impacts:
-            self.impacts += 1
             self._send(self.pub_impact, String(data=json.dumps(record)))
             with self.visual_lock:
                 self.visuals.add_impact(record)
@@ -413,11 +495,13 @@ class Simulator(Node):
     def _publish_diagnostics(self):
         now = time.monotonic()
         watchdog = self.loop.watchdog.status(now)
-        intervals, computes = self.stats.take()
+        intervals, computes = self.loop.stats.take()
         window = now - self.diag_window_start
         self.diag_window_start = now
-        with self.stats.lock:   # a consistent pair: periods counted up to this simulated time
-            published, t_published = self.stats.published, self.stats.t_published
+        with self.loop.stats.lock:   # a consistent pair: periods counted up to this simulated time
+            published, t_published = self.loop.stats.published, self.loop.stats.t_published
+        if published < self.diag_published:   # a reset
+            self.diag_published = 0
         achieved = (published - self.diag_published) / window if window > 0 else 0.0
         self.diag_published = published
         nominal = 1.0 / self.p['publish_rate'] / (self.p['rate_factor'] or 1.0)
@@ -425,18 +509,23 @@ class Simulator(Node):
         integ = self.arm.integrator.stats
         if self.failed:
             level, message = DiagnosticStatus.ERROR, f'stopped: {self.failed}'
+        elif self.loop.e_stop:
+            level, message = DiagnosticStatus.ERROR, 'e-stop: zero torque until /e_stop false'
         elif watchdog == 'timeout':
             level, message = DiagnosticStatus.WARN, (
                 f'no command for more than {self.p["command_timeout"]:g} s: torques zeroed'
                 + (' (lockstep paused)' if self.lockstep else ''))
         elif watchdog == 'waiting':
             level, message = DiagnosticStatus.WARN, 'waiting for the first command (zero torque)'
+        elif not jit.AVAILABLE:
+            level, message = DiagnosticStatus.WARN, (
+                f'interpreted kernel ({jit.UNAVAILABLE}): periods overrun; {jit.FIX}')
         else:
-            level, message = DiagnosticStatus.OK, 'running'
+            level, message = DiagnosticStatus.OK, 'paused' if self.loop.paused else 'running'
         start, first_command = self.loop.start_wall, self.loop.first_command_wall
         elapsed = now - start if start else 0.0
-        run_p50, run_p99 = self.stats.run_percentiles(50, 99)
-        part_means = self.stats.part_means()
+        run_p50, run_p99 = self.loop.stats.run_percentiles(50, 99)
+        part_means = self.loop.stats.part_means()
         values = {
             'mode': self.p['mode'],
             'publish_rate_requested': f'{self.p["publish_rate"]:g}',
@@ -447,15 +536,22 @@ class Simulator(Node):
             'jitter_max_us': f'{jitter.max() * 1e6:.1f}',
             'jitter_run_p50_us': f'{run_p50 * 1e6:.0f}',
             'jitter_run_p99_us': f'{run_p99 * 1e6:.0f}',
-            'jitter_run_max_us': f'{self.stats.jitter_max * 1e6:.1f}',
-            'jitter_run_max_at_s': f'{self.stats.jitter_max_t:.6f}',
+            'jitter_run_max_us': f'{self.loop.stats.jitter_max * 1e6:.1f}',
+            'jitter_run_max_at_s': f'{self.loop.stats.jitter_max_t:.6f}',
             'periods_published': str(published),
             'periods_published_until_s': f'{t_published:.6f}',
             'wall_time': f'{elapsed:.6f}',
-            'overruns': str(self.stats.overruns),
+            'overruns': str(self.loop.stats.overruns),
+            # periods skipped after stalls (simulated time fell behind by as many periods)
+            'periods_skipped': str(self.loop.skipped),
+            # periods that left commands queued (a flood): the rest waited a period
+            'commands_flooded': str(self.loop.flooded),
+            'paused': str(self.loop.paused).lower(),
+            'e_stop': str(self.loop.e_stop).lower(),
+            'kernel': 'compiled (numba)' if jit.AVAILABLE else f'interpreted ({jit.UNAVAILABLE})',
             'compute_max_us': f'{(max(computes) if computes else 0.0) * 1e6:.1f}',
-            'compute_worst_us': f'{self.stats.worst_compute * 1e6:.1f}',
-            'compute_worst_at_s': f'{self.stats.worst_compute_t:.6f}',
+            'compute_worst_us': f'{self.loop.stats.worst_compute * 1e6:.1f}',
+            'compute_worst_at_s': f'{self.loop.stats.worst_compute_t:.6f}',
             'period_us': f'{nominal * 1e6:.1f}',
             # where a realtime period's time goes (whole-run means): taking commands,
             # the physics, publishing the period's messages
@@ -464,7 +560,7 @@ class Simulator(Node):
             **({'lockstep_wait_mean_us': f'{part_means[3] * 1e6:.1f}'} if self.lockstep else {}),
             # and the worst period's (is it the physics of an impact, or a stall?)
             **{f'compute_worst_{part}_us': f'{t * 1e6:.1f}' for part, t in
-               zip(PERIOD_PARTS, self.stats.worst_parts)},
+               zip(PERIOD_PARTS, self.loop.stats.worst_parts)},
             'watchdog': watchdog,
             'scheduling': self.scheduling,
             'commands': str(self.loop.commands),
@@ -475,7 +571,7 @@ class Simulator(Node):
             'sim_time': f'{self.arm.t:.6f}',
             'real_time_factor': f'{self.arm.t / (now - first_command):.3f}'
             if first_command and now > first_command else '0',
-            'impacts': str(self.impacts),
+            'impacts': str(self.loop.impacts),
             'rhs_evaluations': str(integ.rhs_evaluations),
             'steps': str(integ.steps),
             'rejected_steps': str(integ.rejected),
@@ -500,7 +596,7 @@ class Simulator(Node):
         if executor is not None:
             self._publish_diagnostics()
         self.get_logger().info(
-            f'{self.arm.periods} periods, {self.impacts} impacts, {self.stats.overruns} '
+            f'{self.arm.periods} periods, {self.loop.impacts} impacts, {self.loop.stats.overruns} '
             f'overruns, t = {self.arm.t:.3f} s')
         return 1 if self.failed else 0
 

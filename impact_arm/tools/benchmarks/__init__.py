@@ -24,6 +24,8 @@ SUBCOMMANDS = {
               'nodes over DDS: realtime jitter/overruns at 1 and 5 kHz, lockstep speed'),
     'sweep': ('impact_arm.tools.benchmarks.sweep',
               'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
+    'starts': ('impact_arm.tools.benchmarks.starts',
+               'realtime simulator + controller started N times as a user does (issue 12)'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }

@@ -1,0 +1,204 @@
+"""``impact-arm bench starts [--runs N]``: does the realtime mode survive being started the
+way a user starts it (issue 12)?
+
+Each run starts the simulator (realtime, 1 kHz, defaults) and the controller as two separate
+processes at the same moment, as from two shells (``python -m impact_arm.nodes.simulator``
+is what ``ros2 run impact_arm simulator`` runs), with no warm-up and no waiting between them,
+and lets them run for the article's 15 cycles (15 impacts, or 7 simulated seconds when
+impacts go missing). A listener in this process takes only /impact_report and /diagnostics.
+Per start it prints: stopped or not, the cycle period against the article's 0.397 s, impacts
+per simulated second, overruns and skipped periods, the worst period and its split; then the
+summary the issue's targets are stated in.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+ARTICLE_PERIOD = 0.397       # s, the article's limit cycle
+CYCLES = 15
+PERIOD_TOLERANCE = 0.05      # a cycle period further off than this means a missed impact
+SIM_TIME_LIMIT = 7.0         # s simulated: the 15th impact is due at ~5.8 s
+START_TIMEOUT = 120.0        # wall s for the first command (a cold numba cache compiles)
+
+
+def add_arguments(parser):
+    parser.add_argument('--runs', type=int, default=5, metavar='N',
+                        help='number of starts (default 5; the issue measures 30)')
+    parser.add_argument('--json', metavar='FILE', help='write the per-start rows as JSON')
+    parser.add_argument('--keep-logs', action='store_true',
+                        help='keep the nodes\' logs (else removed unless a start failed)')
+
+
+def _listener(domain):
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import String
+    from ...io.mcap_ros2 import contract_qos
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('bench_starts_listener', context=context)
+    seen = {'impacts': [], 'diagnostics': []}
+    node.create_subscription(String, '/impact_report',
+                             lambda m: seen['impacts'].append(json.loads(m.data)),
+                             contract_qos('/impact_report').to_rclpy())
+
+    def on_diagnostics(msg):
+        for status in msg.status:
+            if status.name == 'impact_arm: simulator':
+                level = status.level
+                values = {kv.key: kv.value for kv in status.values}
+                values['level'] = level[0] if isinstance(level, (bytes, bytearray)) \
+                    else int(level)
+                values['message'] = status.message
+                seen['diagnostics'].append(values)
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    return rclpy, context, node, executor, seen
+
+
+def one_start(index, env, logdir):
+    """One user-like start; returns its row."""
+    domain = int(env['ROS_DOMAIN_ID'])
+    rclpy, context, node, executor, seen = _listener(domain)
+    procs = {}
+    try:
+        for name in ('simulator', 'controller'):
+            log = open(os.path.join(logdir, f'{index:02d}_{name}.log'), 'wb')
+            procs[name] = subprocess.Popen(
+                [sys.executable, '-m', f'impact_arm.nodes.{name}'], env=env,
+                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+            log.close()
+        started = time.monotonic()
+        sim = procs['simulator']
+        outcome = ''
+        while not outcome:
+            executor.spin_once(timeout_sec=0.05)
+            d = seen['diagnostics'][-1] if seen['diagnostics'] else {}
+            if sim.poll() is not None:
+                outcome = f'simulator exited ({sim.returncode})'
+            elif d.get('level') == 2:
+                outcome = 'stopped: ' + d.get('message', '')
+            elif len(seen['impacts']) >= CYCLES:
+                outcome = 'completed'
+            elif float(d.get('sim_time', 0)) > SIM_TIME_LIMIT:
+                outcome = f'{SIM_TIME_LIMIT:g} s simulated'
+            elif d.get('commands', '0') == '0' and time.monotonic() - started > START_TIMEOUT:
+                outcome = f'no command within {START_TIMEOUT:g} s'
+        # one more report, covering the last impact
+        last = seen['diagnostics'][-1] if seen['diagnostics'] else None
+        deadline = time.monotonic() + 2.5
+        while sim.poll() is None and time.monotonic() < deadline and \
+                (not seen['diagnostics'] or seen['diagnostics'][-1] is last):
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in procs.values():
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(5)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return _row(index, outcome, seen)
+
+
+def _row(index, outcome, seen):
+    d = seen['diagnostics'][-1] if seen['diagnostics'] else {}
+    times = sorted(i['t_contact'] for i in seen['impacts'])
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    period = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else float('nan')
+    worst_gap = max((abs(g / ARTICLE_PERIOD - 1) for g in gaps), default=float('inf'))
+    sim_time = float(d.get('sim_time', 0.0))
+    periods = int(d.get('periods_published', 0))
+    missed = len(times) < CYCLES or worst_gap > PERIOD_TOLERANCE
+    return {
+        'start': index, 'outcome': outcome,
+        'stopped': not outcome.startswith(('completed', f'{SIM_TIME_LIMIT:g}')),
+        'impacts': len(times), 'sim_time_s': sim_time,
+        'impacts_per_sim_s': len(times) / sim_time if sim_time else 0.0,
+        'cycle_period_s': period, 'worst_cycle_deviation': worst_gap, 'missed_impact': missed,
+        'periods': periods, 'overruns': int(d.get('overruns', -1)),
+        'periods_skipped': int(d.get('periods_skipped', 0)),
+        'worst_period_us': float(d.get('compute_worst_us', 'nan')),
+        'worst_period_at_s': float(d.get('compute_worst_at_s', 'nan')),
+        'worst_split_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
+                           for part in ('commands', 'physics', 'publish')},
+        'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
+        'kernel': d.get('kernel', '?'),
+    }
+
+
+def _print_row(r):
+    split = ', '.join(f'{k} {v:.0f}' for k, v in r['worst_split_us'].items())
+    print(f"start {r['start']:2d}: {'STOPPED' if r['stopped'] else 'ran'} ({r['outcome']}); "
+          f"{r['impacts']} impacts in {r['sim_time_s']:.2f} s simulated = "
+          f"{r['impacts_per_sim_s']:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), cycle "
+          f"{r['cycle_period_s']:.4f} s{' MISSED IMPACT' if r['missed_impact'] else ''}; "
+          f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods; "
+          f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
+          f"({split} us)", flush=True)
+
+
+def summary(rows):
+    """The issue's target figures over all starts."""
+    periods = sum(max(r['periods'], 0) for r in rows)
+    overruns = sum(max(r['overruns'], 0) for r in rows)
+    worst = [r['worst_period_us'] for r in rows]
+    return {
+        'starts': len(rows),
+        'stopped': sum(r['stopped'] for r in rows),
+        'missed_impact': sum(r['missed_impact'] for r in rows),
+        'overruns': overruns, 'periods': periods,
+        'overrun_percent': 100.0 * overruns / periods if periods else float('nan'),
+        'worst_period_us_median': statistics.median(worst) if worst else float('nan'),
+        'worst_period_us_max': max(worst) if worst else float('nan'),
+        'runs_worst_period_within_1ms_percent':
+            100.0 * sum(w <= 1000.0 for w in worst) / len(worst) if worst else float('nan'),
+        'cycle_period_s_median': statistics.median(r['cycle_period_s'] for r in rows),
+    }
+
+
+def run(args) -> int:
+    from ..runner import dds_environment
+    if args.runs < 1:
+        print(f'--runs = {args.runs}: must be >= 1', file=sys.stderr)
+        return 2
+    env = dds_environment()
+    logdir = tempfile.mkdtemp(prefix='impact_arm_bench_starts_')
+    print(f'bench starts: {args.runs} starts of simulator (realtime 1 kHz) + controller, '
+          f'ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} (localhost); {os.cpu_count()} cores; '
+          f'logs in {logdir}', file=sys.stderr, flush=True)
+    rows = []
+    for index in range(1, args.runs + 1):
+        rows.append(one_start(index, env, logdir))
+        _print_row(rows[-1])
+    s = summary(rows)
+    print(f"summary: {s['stopped']} of {s['starts']} starts stopped (target 0), "
+          f"{s['missed_impact']} with a missed impact (target 0); overruns {s['overruns']} of "
+          f"{s['periods']} periods = {s['overrun_percent']:.3f} % (target <= 0.1 %); worst "
+          f"period median {s['worst_period_us_median']:.0f} us, worst "
+          f"{s['worst_period_us_max']:.0f} us; runs with worst period <= 1 ms: "
+          f"{s['runs_worst_period_within_1ms_percent']:.0f} % (target >= 95 %); cycle period "
+          f"median {s['cycle_period_s_median']:.4f} s (article {ARTICLE_PERIOD} s)")
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump({'starts': rows, 'summary': s}, f, indent=1)
+    failed = s['stopped'] or s['missed_impact']
+    if not (failed or args.keep_logs):
+        import shutil
+        shutil.rmtree(logdir, ignore_errors=True)
+    return 1 if failed else 0
