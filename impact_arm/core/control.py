@@ -110,12 +110,15 @@ class CycleController:
         self._last_t = None
         self._last_vy = None
 
-    def rearm(self):
+    def rearm(self, restart=False):
         """Forget the previous sample (its time, tip velocity, integral), as after a reset:
-        for a stamp that went backwards or jumped far ahead."""
+        for a stamp that went backwards or jumped far ahead. ``restart`` also starts the cycle
+        again from its down half (time went back: the arm was reset)."""
         self._last_t = None
         self._last_vy = None
         self.integral.reset()
+        if restart:
+            self.mode = 'down'
 
     def _switch(self, mode):
         self.mode = mode

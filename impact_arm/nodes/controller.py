@@ -138,7 +138,8 @@ class Controller(Node):
         self.latest = None                 # (t, q, qd) in absolute angles
         self.waiting = None                # a joint state waiting for its wrench
         self.wrench_stamp = -math.inf
-        self.normal_force = None
+        self.normal_force = None           # the largest normal force since the last tick
+        self.wrench_flowing = True         # wait for each state's wrench (see _on_joint_state)
         self.sent = 0
         self.started = False
         self.warned_names = False
@@ -218,7 +219,11 @@ class Controller(Node):
                        f'finite or beyond {MAX_FORCE:g} N')
             return
         self.wrench_stamp = sec + nanosec * 1e-9
-        self.normal_force = force[1]
+        # latched until the next tick: an impact is seen even when the wrench sample of its
+        # period comes late or after a newer one (the largest force counts)
+        self.normal_force = force[1] if self.normal_force is None else \
+            max(self.normal_force, force[1])
+        self.wrench_flowing = True
         if self.waiting is not None and self.wrench_stamp >= self.waiting[0] - STAMP_EPS:
             state, self.waiting = self.waiting, None
             self._tick(*state)
@@ -267,22 +272,29 @@ class Controller(Node):
             self.next_tick = t
             self.waiting = None
             self.wrench_stamp = -math.inf
-            self.ctrl.rearm()
+            self.normal_force = None
+            # time went back (a simulator ~/reset, a replay restarted): the cycle starts
+            # again from its down half
+            self.ctrl.rearm(restart=t < self.latest[0])
         self.jump_from = None
         self.latest = (t, to_absolute(pos), to_absolute(vel))
         if self.p['trigger'] != 'joint_states' or t < self.next_tick - STAMP_EPS:
             return
         # the wrench of the same instant is published just before the joint state: wait for
         # it when someone publishes wrenches, so the decision never depends on arrival order.
-        # Wait for one state only: a wrench publisher that sends no valid wrench (broken, or
-        # hostile) must not hold the arm at its last torque; the next state ticks without it.
-        if self.wrench_stamp < t - STAMP_EPS and self.waiting is None and \
-                self.sub_wrench.get_publisher_count() > 0:
-            self.waiting = self.latest
-            return
+        # A wrench publisher that sends no valid wrench (broken, a relay losing samples,
+        # hostile) must not hold the arm at its last torque: a state still waiting when the
+        # next one arrives is dropped and the newer one ticks without its wrench; states then
+        # stop waiting until a wrench arrives again, so the loop keeps its rate.
         if self.waiting is not None and self.waiting[0] < t - STAMP_EPS:
             self._drop('missing_wrenches', f'no contact wrench for the state at '
-                       f'{self.waiting[0]:.6f} s: ticking on the next state without it')
+                       f'{self.waiting[0]:.6f} s: ticking on the next state without it, '
+                       f'without waiting until a wrench arrives')
+            self.wrench_flowing = False
+        elif self.wrench_flowing and self.wrench_stamp < t - STAMP_EPS and \
+                self.waiting is None and self.sub_wrench.get_publisher_count() > 0:
+            self.waiting = self.latest
+            return
         self.waiting = None
         self._tick(*self.latest)
 
@@ -303,6 +315,7 @@ class Controller(Node):
             self.started = True
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
+        self.normal_force = None           # the latch covers one tick
         if not all(math.isfinite(v) for v in tau):
             self._drop('unsafe_torques', f'torques {tau} from the state at {t:.6f} s are not '
                        f'finite: not sent, cycle re-armed')

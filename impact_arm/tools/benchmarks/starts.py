@@ -139,6 +139,7 @@ def _row(index, outcome, seen):
                            for part in ('commands', 'physics', 'publish')},
         'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
         'kernel': d.get('kernel', '?'),
+        'impact_times_s': times,
     }
 
 
@@ -151,6 +152,10 @@ def _print_row(r):
           f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods; "
           f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
           f"({split} us)", flush=True)
+    if r['missed_impact'] and r['impact_times_s']:
+        gaps = [b - a for a, b in zip(r['impact_times_s'], r['impact_times_s'][1:])]
+        print('          impacts at ' + ', '.join(f'{t:.3f}' for t in r['impact_times_s'])
+              + ' s; gaps ' + ', '.join(f'{g:.3f}' for g in gaps), flush=True)
 
 
 def summary(rows):
