@@ -78,6 +78,8 @@ PARAMS = (
           'in /diagnostics)', 'int', low=0, high=99, read_only=True),
     Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages',
           low=0.05, high=60.0, read_only=True),
+    Param('step_periods', 1, 'periods one ~/step call advances while paused', 'int', low=1,
+          high=1000000),
     Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
           read_only=True),
     Param('joint_commands_topic', JOINT_COMMANDS_TOPIC, 'sensor_msgs/JointState commands '
@@ -209,7 +211,6 @@ class Simulator(Node):
         """~/reset, ~/pause, ~/step and /e_stop (design.md section 8)."""
         from std_msgs.msg import Bool
         from std_srvs.srv import SetBool, Trigger
-        self.declare_parameter('step_periods', 1)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
@@ -242,11 +243,7 @@ class Simulator(Node):
         if not self.loop.paused:
             response.success, response.message = False, 'not paused: ~/pause true first'
             return response
-        n = self.get_parameter('step_periods').value
-        if not isinstance(n, int) or n < 1:
-            response.success = False
-            response.message = f'parameter step_periods = {n!r}: must be an integer >= 1'
-            return response
+        n = self.p['step_periods']
         self.loop.request_steps(n)
         if self.lockstep and self.loop.watchdog.pending and self.loop.take_step():
             self._lockstep_period(time.monotonic())   # the exchange waits for a period
@@ -266,6 +263,8 @@ class Simulator(Node):
         if 'max_effort' in values:
             self.arm.max_effort = values['max_effort']
             self.loop.watchdog.reapply()   # re-clip the held command with the new limit
+        if 'step_periods' in values:
+            self.p['step_periods'] = values['step_periods']
         if 'command_timeout' in values:
             self.p['command_timeout'] = values['command_timeout']
             self.loop.watchdog.timeout = values['command_timeout']
@@ -349,7 +348,11 @@ class Simulator(Node):
             self._lockstep_period(now)
 
     def _log(self, level, text):
-        getattr(self.get_logger(), level)(text)
+        # rclpy fixes each call site's severity at its first call: one site per level
+        if level == 'warning':
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     # -------------------------------------------------------------------------- stepping
     def _stepping(self, period):

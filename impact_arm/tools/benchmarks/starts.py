@@ -88,7 +88,7 @@ def one_start(index, env, logdir):
                 outcome = f'simulator exited ({sim.returncode})'
             elif d.get('level') == 2:
                 outcome = 'stopped: ' + d.get('message', '')
-            elif len(seen['impacts']) >= CYCLES:
+            elif len(cycles_of(sorted(i['t_contact'] for i in seen['impacts']))) >= CYCLES:
                 outcome = 'completed'
             elif float(d.get('sim_time', 0)) > SIM_TIME_LIMIT:
                 outcome = f'{SIM_TIME_LIMIT:g} s simulated'
@@ -116,19 +116,35 @@ def one_start(index, env, logdir):
     return _row(index, outcome, seen)
 
 
+def cycles_of(times):
+    """Impact times grouped into cycles: an impact within half a period of the previous one
+    is a re-strike of the same cycle (the arm bounced before it rose), not a new cycle."""
+    cycles = []
+    for t in times:
+        if cycles and t - cycles[-1][-1] < 0.5 * ARTICLE_PERIOD:
+            cycles[-1].append(t)
+        else:
+            cycles.append([t])
+    return cycles
+
+
 def _row(index, outcome, seen):
     d = seen['diagnostics'][-1] if seen['diagnostics'] else {}
     times = sorted(i['t_contact'] for i in seen['impacts'])
-    gaps = [b - a for a, b in zip(times, times[1:])]
-    period = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else float('nan')
+    starts = [c[0] for c in cycles_of(times)]
+    gaps = [b - a for a, b in zip(starts, starts[1:])]
+    period = (starts[-1] - starts[0]) / (len(starts) - 1) if len(starts) > 1 else float('nan')
     worst_gap = max((abs(g / ARTICLE_PERIOD - 1) for g in gaps), default=float('inf'))
     sim_time = float(d.get('sim_time', 0.0))
     periods = int(d.get('periods_published', 0))
-    missed = len(times) < CYCLES or worst_gap > PERIOD_TOLERANCE
+    # a missed down-up switch leaves the arm on the surface: a cycle too long or too short
+    missed = len(starts) < min(CYCLES, sim_time / ARTICLE_PERIOD - 1) or \
+        worst_gap > PERIOD_TOLERANCE
     return {
         'start': index, 'outcome': outcome,
         'stopped': not outcome.startswith(('completed', f'{SIM_TIME_LIMIT:g}')),
-        'impacts': len(times), 'sim_time_s': sim_time,
+        'impacts': len(times), 'cycles': len(starts), 're_strikes': len(times) - len(starts),
+        'sim_time_s': sim_time,
         'impacts_per_sim_s': len(times) / sim_time if sim_time else 0.0,
         'cycle_period_s': period, 'worst_cycle_deviation': worst_gap, 'missed_impact': missed,
         'periods': periods, 'overruns': int(d.get('overruns', -1)),
@@ -147,12 +163,13 @@ def _print_row(r):
     split = ', '.join(f'{k} {v:.0f}' for k, v in r['worst_split_us'].items())
     print(f"start {r['start']:2d}: {'STOPPED' if r['stopped'] else 'ran'} ({r['outcome']}); "
           f"{r['impacts']} impacts in {r['sim_time_s']:.2f} s simulated = "
-          f"{r['impacts_per_sim_s']:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), cycle "
+          f"{r['impacts_per_sim_s']:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), "
+          f"{r['cycles']} cycles, {r['re_strikes']} re-strikes, cycle "
           f"{r['cycle_period_s']:.4f} s{' MISSED IMPACT' if r['missed_impact'] else ''}; "
           f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods; "
           f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
           f"({split} us)", flush=True)
-    if r['missed_impact'] and r['impact_times_s']:
+    if (r['missed_impact'] or r['re_strikes']) and r['impact_times_s']:
         gaps = [b - a for a, b in zip(r['impact_times_s'], r['impact_times_s'][1:])]
         print('          impacts at ' + ', '.join(f'{t:.3f}' for t in r['impact_times_s'])
               + ' s; gaps ' + ', '.join(f'{g:.3f}' for g in gaps), flush=True)
@@ -167,6 +184,7 @@ def summary(rows):
         'starts': len(rows),
         'stopped': sum(r['stopped'] for r in rows),
         'missed_impact': sum(r['missed_impact'] for r in rows),
+        're_strikes': sum(r['re_strikes'] for r in rows),
         'overruns': overruns, 'periods': periods,
         'overrun_percent': 100.0 * overruns / periods if periods else float('nan'),
         'worst_period_us_median': statistics.median(worst) if worst else float('nan'),
@@ -193,7 +211,7 @@ def run(args) -> int:
         _print_row(rows[-1])
     s = summary(rows)
     print(f"summary: {s['stopped']} of {s['starts']} starts stopped (target 0), "
-          f"{s['missed_impact']} with a missed impact (target 0); overruns {s['overruns']} of "
+          f"{s['missed_impact']} with a missed impact (target 0), {s['re_strikes']} re-strikes; overruns {s['overruns']} of "
           f"{s['periods']} periods = {s['overrun_percent']:.3f} % (target <= 0.1 %); worst "
           f"period median {s['worst_period_us_median']:.0f} us, worst "
           f"{s['worst_period_us_max']:.0f} us; runs with worst period <= 1 ms: "
