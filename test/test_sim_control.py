@@ -161,3 +161,12 @@ def test_start_up_in_any_order_never_stops_the_simulator(probe, ros_env, tmp_pat
     times = reports_of(reports)
     assert times[1] - times[0] == pytest.approx(ARTICLE_PERIOD, rel=0.05), times
     probe.forget(reports, diags)
+
+
+def test_interpreted_kernel_is_announced_at_start(ros_env, tmp_path):
+    env = dict(ros_env, IMPACT_ARM_JIT='0')
+    with start_process(simulator(), env, tmp_path, 'interpreted') as sim:
+        assert wait_for(lambda: 'INTERPRETED kernel' in sim.stderr or not sim.alive(),
+                        timeout=60), sim.stderr
+        line = next(ln for ln in sim.stderr.splitlines() if 'INTERPRETED' in ln)
+    assert line.startswith('[WARN]') and 'IMPACT_ARM_JIT=0' in line and 'Fix:' in line

@@ -37,6 +37,10 @@ def cmd_simulate(args) -> int:
     from ..core.simulate import format_table, run
 
     scene = load_scene(args.scene)
+    from ..core import jit
+    if not jit.AVAILABLE:
+        print(f'impact-arm simulate: warning: interpreted kernel ({jit.UNAVAILABLE}), about '
+              f'100x slower. Fix: {jit.FIX}', file=sys.stderr)
     if args.no_samples:
         return _simulate_without_samples(scene, args)
     observer = None
