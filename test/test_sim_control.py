@@ -8,7 +8,7 @@ import time
 import pytest
 
 from ros_helpers import ros_env, start_process, wait_for  # noqa: F401 (fixture)
-from test_nodes import Probe, controller, diagnostics_values, simulator, stamp  # noqa: F401
+from test_nodes import Probe, controller, diagnostics_values, from_simulator, simulator, stamp
 
 ARTICLE_PERIOD = 0.397
 
@@ -45,7 +45,7 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
     from std_msgs.msg import Bool, Float64MultiArray
     from std_srvs.srv import SetBool, Trigger
     states = probe.listen(JointState, '/joint_states', depth=5000)
-    diags = probe.listen(DiagnosticArray, '/diagnostics')
+    diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
     commands = probe.publisher(Float64MultiArray, '/effort_controller/commands')
     e_stop = probe.publisher(Bool, '/e_stop')
     # a small constant torque (the arm swings slowly) from a stand-in controller at ~200 Hz
@@ -146,7 +146,7 @@ def test_start_up_in_any_order_never_stops_the_simulator(probe, ros_env, tmp_pat
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
     reports = probe.listen(String, '/impact_report', transient=True)
-    diags = probe.listen(DiagnosticArray, '/diagnostics')
+    diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
     first, second = (controller(), simulator()) if order == 'controller_first' else \
         (simulator(), controller())
     with start_process(first, ros_env, tmp_path, f'{order}_1') as a:
