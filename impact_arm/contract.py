@@ -43,6 +43,7 @@ ROBOT_DESCRIPTION = '/robot_description'   # the visual topics (io/scene_visuals
 TF_STATIC = '/tf_static'
 TF = '/tf'
 IMPACT_MARKERS = '/impact_markers'
+E_STOP = '/e_stop'                # std_msgs/msg/Bool: true = zero torque, latched (simulator)
 
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'

@@ -214,7 +214,7 @@ class Simulator(Node):
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
-        self.create_subscription(Bool, '/e_stop', self._on_e_stop, 10)
+        self.create_subscription(Bool, contract.E_STOP, self._on_e_stop, 10)
 
     def _on_reset(self, request, response):
         if self.failed:

@@ -42,14 +42,14 @@ def _listener(domain):
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
-    from ...io.mcap_ros2 import contract_qos
+    from ... import contract
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('bench_starts_listener', context=context)
     seen = {'impacts': [], 'diagnostics': []}
-    node.create_subscription(String, '/impact_report',
+    node.create_subscription(String, contract.IMPACT_REPORT,
                              lambda m: seen['impacts'].append(json.loads(m.data)),
-                             contract_qos('/impact_report').to_rclpy())
+                             contract.qos(contract.IMPACT_REPORT).to_rclpy())
 
     def on_diagnostics(msg):
         for status in msg.status:
@@ -60,7 +60,7 @@ def _listener(domain):
                     else int(level)
                 values['message'] = status.message
                 seen['diagnostics'].append(values)
-    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS, on_diagnostics, 10)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     return rclpy, context, node, executor, seen
