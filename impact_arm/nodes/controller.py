@@ -284,9 +284,10 @@ class Controller(Node):
         # it when someone publishes wrenches, so the decision never depends on arrival order.
         # A wrench publisher that sends no valid wrench (broken, a relay losing samples,
         # hostile) must not hold the arm at its last torque: a state still waiting when the
-        # next one arrives is dropped and the newer one ticks without its wrench; states then
-        # stop waiting until a wrench arrives again, so the loop keeps its rate.
-        if self.waiting is not None and self.waiting[0] < t - STAMP_EPS:
+        # next one (or its repetition) arrives is dropped and the newer one ticks without its
+        # wrench; states then stop waiting until a wrench arrives again (the loop keeps its
+        # rate).
+        if self.waiting is not None:       # (a lockstep driver repeats the same state)
             self._drop('missing_wrenches', f'no contact wrench for the state at '
                        f'{self.waiting[0]:.6f} s: ticking on the next state without it, '
                        f'without waiting until a wrench arrives')
