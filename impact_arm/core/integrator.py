@@ -14,7 +14,7 @@ as accurate as any step end. Shaped like scipy's OdeSolver: ``advance(t_end)`` p
 of repeated ``step()`` calls and returns the events it crossed.
 
 The stepping loop and the phase machine's transitions are the compiled kernel in
-``kernel_template.py`` (appended to each scene shape's generated module): an impact's four
+``core/kernel/`` (appended to each scene shape's generated module): an impact's four
 switches cost no return to Python. This wrapper turns the kernel's event log into ``Event``s.
 """
 from __future__ import annotations
@@ -129,7 +129,7 @@ class PhaseIntegrator:
         self._f = np.zeros(model.size)
         self._f_valid = False
         self._h = 0.0
-        self._trace_buffer = np.zeros((TRACE_CAPACITY, 7 + model.n))
+        self._trace_buffer = np.zeros((TRACE_CAPACITY, model.eq.TR_SIZE))
         self._trace_count = np.zeros(1, dtype=np.int64)
         self._ev = np.zeros(3, dtype=np.int64)      # layout.EV_*: slot, logged, stop mask
         self._evlog = np.zeros((EVENT_LOG_CAPACITY, layout.E_Y + model.size))
@@ -142,9 +142,10 @@ class PhaseIntegrator:
     # --- output on a time grid, from each step's continuous extension -------------------
     @property
     def output_width(self):
-        """Columns of an output row: t, the state, contact impulse (tangential, normal) since
-        the previous row, the torque acting (n), actuators acting (1/0), tip velocity (2)."""
-        return self.model.size + self.model.n + 6
+        """Columns of an output row (layout R_*): t, the state, contact impulse (tangential,
+        normal) since the previous row, the torque acting (n), actuators acting (1/0), tip
+        velocity (2)."""
+        return self.model.eq.R_SIZE
 
     def start_output(self, dt, next_index):
         """Record the state at the times k dt, k >= next_index, as the integration passes them:
@@ -155,7 +156,7 @@ class PhaseIntegrator:
             raise ValueError(f'output period {dt}: must be > 0')
         if len(self._out) != OUTPUT_CAPACITY:
             self._out = np.zeros((OUTPUT_CAPACITY, self.output_width))
-        self._O[:] = (next_index, dt, 0.0)
+        self._O[layout.O_NEXT], self._O[layout.O_DT], self._O[layout.O_ROWS] = next_index, dt, 0.0
         self._output = []
 
     def take_output(self) -> np.ndarray:
@@ -166,14 +167,16 @@ class PhaseIntegrator:
         return rows
 
     def _drain_output(self):
-        count = int(self._O[2])
+        count = int(self._O[layout.O_ROWS])
         if count:
             self._output.append(self._out[:count].copy())
-            self._O[2] = 0.0
+            self._O[layout.O_ROWS] = 0.0
 
     @property
     def stats(self):
-        return Stats(int(self._stats[0]), int(self._stats[1]), int(self._stats[2]), self.events)
+        s = self._stats
+        return Stats(int(s[layout.ST_RHS]), int(s[layout.ST_STEPS]), int(s[layout.ST_REJECTED]),
+                     self.events)
 
     # --- evaluation helpers (Python side; the kernel has its own compiled copies) ---------
     def rhs(self, t, y):
@@ -286,16 +289,17 @@ class PhaseIntegrator:
             mask |= KIND_BITS['separation']
         self._ev[layout.EV_MASK] = mask
         while True:
-            self._T[0], self._T[1] = st.t, self._h
-            self._T[2] = 0.0 if self._f_valid else 1.0
+            self._T[layout.T_TIME], self._T[layout.T_STEP] = st.t, self._h
+            self._T[layout.T_STALE] = 0.0 if self._f_valid else 1.0
             # with output on, no kernel call may pass more grid times than the buffer holds
-            t_call = min(t_end, (O[0] + OUTPUT_CAPACITY - 1) * O[1]) if O[1] > 0 else t_end
+            k, dt = O[layout.O_NEXT], O[layout.O_DT]
+            t_call = min(t_end, (k + OUTPUT_CAPACITY - 1) * dt) if dt > 0 else t_end
             status = model.eq.advance(self._T, t_call, st.y, self._f, self._P, self._I,
                                       model.surface_table, st.c, st.levels, st.held,
                                       self._stats, self._trace_buffer, self._trace_count,
                                       self._ev, self._evlog, O, self._out)
-            st.t, self._h = float(self._T[0]), float(self._T[1])
-            self._f_valid = self._T[2] == 0.0
+            st.t, self._h = float(self._T[layout.T_TIME]), float(self._T[layout.T_STEP])
+            self._f_valid = self._T[layout.T_STALE] == 0.0
             self._drain_events(events)
             self._drain_trace()
             self._drain_output()

@@ -34,3 +34,37 @@ EV_SLOT, EV_COUNT, EV_MASK = 0, 1, 2
 # separation: F_max, δm, δr), then the state after the switch
 E_SLOT, E_SURF, E_T, E_INFO, E_Y = 0, 1, 2, 3, 7
 
+# time array T of ``advance``: time, next step size (<= 0: choose one), derivative stale flag
+T_TIME, T_STEP, T_STALE = 0, 1, 2
+# output control array O: next grid index k, grid period dt (0: no output), rows written
+O_NEXT, O_DT, O_ROWS = 0, 1, 2
+# counters ``stats``: right-hand side evaluations, accepted steps, rejected steps
+ST_RHS, ST_STEPS, ST_REJECTED = 0, 1, 2
+# a trace row (one per contact step): t, phase, δ, F_n, F_f, tip velocity, then the N link
+# kinetic energies
+TR_T, TR_PHASE, TR_DELTA, TR_FN, TR_FF, TR_VX, TR_VY, TR_ENERGY = 0, 1, 2, 3, 4, 5, 6, 7
+
+
+def shape_offsets(n: int, n_integral: int) -> dict:
+    """Offsets that depend on the scene shape (n links, n_integral PID integral states).
+    The generator writes them into each kernel module as compile-time constants; Python code
+    reads them from that module (``model.eq``) or from here.
+
+    P_*: the flat parameter array (lengths, masses, g, gains, targets, switch height,
+    tolerances, maximum step). R_*: an output row (``emit_output``): t, the state, the contact
+    impulse since the previous row (tangential, normal), the torque acting, actuators acting
+    (1/0), the tip velocity (x, y). W_*: the right-hand side's scratch (generalized forces,
+    torques, PID error and rate, then N*N for the mass matrix factor)."""
+    size = 2 * n + n_integral
+    return {
+        'SIZE': size,
+        'P_L': 0, 'P_M': n, 'P_G': 2 * n, 'P_KP': 2 * n + 1, 'P_KD': 3 * n + 1,
+        'P_KI': 4 * n + 1, 'P_TDOWN': 5 * n + 1, 'P_TUP': 6 * n + 1, 'P_SWITCH': 7 * n + 1,
+        'P_RTOL': 7 * n + 2, 'P_ATOL': 7 * n + 3, 'P_MAXSTEP': 7 * n + 4,
+        'P_CRTOL': 7 * n + 5, 'P_CATOL': 7 * n + 6, 'P_SIZE': 7 * n + 7,
+        'R_T': 0, 'R_Y': 1, 'R_JT': 1 + size, 'R_JN': 2 + size, 'R_TAU': 3 + size,
+        'R_ACT': 3 + size + n, 'R_VTIP': 4 + size + n, 'R_SIZE': 6 + size + n,
+        'W_GEN': 0, 'W_TAU': n, 'W_ERR': 2 * n, 'W_RATE': 3 * n, 'W_MASS': 4 * n,
+        'SCRATCH': 4 * n + n * n,
+        'TR_SIZE': TR_ENERGY + n,
+    }

@@ -223,14 +223,15 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     """``run`` with continuous control: samples every ``dt`` from the integrator's output
     rows (``PhaseIntegrator.start_output``), events fed as they are located."""
     model, st = integ.model, integ.state
-    n, size = model.n, model.size
+    n, eq = model.n, model.eq
 
     def publish_rows(rows, mode):
         for row in rows.tolist():
-            q, qd = tuple(row[1:1 + n]), tuple(row[1 + n:1 + 2 * n])
-            tau = tuple(row[3 + size:3 + size + n]) if row[3 + size + n] else (0.0,) * n
-            wrench = (row[1 + size] / dt, row[2 + size] / dt)
-            publish(Sample(row[0], q, qd, tau, wrench, mode), tuple(row[4 + size + n:]))
+            q, qd = tuple(row[eq.R_Y:eq.R_Y + n]), tuple(row[eq.R_Y + n:eq.R_Y + 2 * n])
+            tau = tuple(row[eq.R_TAU:eq.R_TAU + n]) if row[eq.R_ACT] else (0.0,) * n
+            wrench = (row[eq.R_JT] / dt, row[eq.R_JN] / dt)
+            publish(Sample(row[eq.R_T], q, qd, tau, wrench, mode),
+                    tuple(row[eq.R_VTIP:eq.R_VTIP + 2]))
 
     # the sample at t = 0, before anything moves (no period yet: the force acting now)
     q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()

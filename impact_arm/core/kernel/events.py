@@ -1,0 +1,105 @@
+# Kernel part: event functions of the current phase and the location of their zero crossings
+# (Newton on real steps inside an Illinois bracket).
+# Template text (see kernel/__init__.py): the imports above the marker are for
+# linters and editors only: the generated module's header provides those names.
+# flake8: noqa: F401,F403,F405
+from ..contact import YIELD_ONSET_FACTOR as YIELD_ONSET  # the header's name for it
+from ..jit import jit
+from ..layout import *
+from .injected import *
+from .steps import EPS, trial_step
+# --- template: equations.py copies what follows into the generated module ---
+
+@jit
+def event_values(y, P, I, SURF, C, levels, g):
+    """Event functions of the current phase; a switch happens when one rises through zero.
+    Slots that are not armed in this phase hold -1."""
+    ns = SURF.shape[0]
+    for k in range(g.shape[0]):
+        g[k] = -1.0
+    tip_state = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])
+    y_tip = tip_state[1]
+    phase = int(C[C_PHASE])
+    if phase == FREE:
+        if HAS_CONTACT:
+            for s in range(ns):
+                g[s] = levels[s] - y_tip
+        if (I[I_LAW] == LAW_Q or I[I_LAW] == LAW_PID) and C[C_MODE] > 0.5:
+            g[ns + EV_SWITCH] = y_tip - P[P_SWITCH]
+        return
+    s = int(C[C_SURF])
+    delta = levels[s] - y_tip
+    if phase == ELASTIC:
+        if SURF[s, S_LAW] == 0:
+            g[ns + EV_YIELD] = delta - YIELD_ONSET * SURF[s, S_DC]
+        g[ns + EV_MAX] = tip_state[3]       # δ̇ = -ẏ_B turns from + to -
+    elif phase == ELASTOPLASTIC:
+        g[ns + EV_MAX] = tip_state[3]
+    else:
+        g[ns + EV_SEP] = C[C_DR] - delta    # δ falls through δr
+
+
+@jit
+def event_rate(y, f, k, P, SURF):
+    """Time derivative of event function k at state y with derivative f (for Newton)."""
+    ns = SURF.shape[0]
+    L = P[P_L:P_L + N]
+    vy = tip(y[:N], y[N:2 * N], L)[3]
+    if k < ns or k == ns + EV_YIELD:
+        return -vy                       # δ grows as the tip moves down
+    if k == ns + EV_MAX:
+        return tip_acceleration(y[:N], y[N:2 * N], f[N:2 * N], L)[1]
+    return vy                            # switch height, separation
+
+
+@jit
+def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels,
+           tau_held, stats, W, JW):
+    """Smallest s in (0, h] with g_k(RK step of size s) >= 0; y_out holds the state there.
+
+    Newton's method on real Runge-Kutta steps (the step's FSAL derivative gives ġ for free),
+    kept inside a shrinking bracket and falling back to Illinois regula falsi when a Newton
+    step would leave it."""
+    a, b = 0.0, h
+    fa, fb = ga, gb
+    side = 0
+    # below a few ulps of t the switch time cannot be told apart (t + s rounds) and the event
+    # function sits at its rounding floor: iterating further only bisected noise (5-8 extra
+    # real steps at each yield and separation of the article's impacts)
+    tol = max(h * 1e-12, 2.0 * EPS * abs(t), 1e-18)
+    c = (a * fb - b * fa) / (fb - fa)
+    for _ in range(100):
+        if not (a < c < b):
+            c = 0.5 * (a + b)
+        trial_step(t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
+                   stats, W, JW)
+        event_values(y_out, P, I, SURF, C, levels, g)
+        fc = g[k]
+        if fc >= 0.0:
+            b, fb = c, fc
+            if side == -1:
+                fa *= 0.5
+            side = -1
+        else:
+            a, fa = c, fc
+            if side == 1:
+                fb *= 0.5
+            side = 1
+        if fc == 0.0 or b - a <= tol:
+            break
+        rate = event_rate(y_out, f_tmp, k, P, SURF)
+        newton = c - fc / rate if rate != 0.0 else -1.0
+        if abs(newton - c) <= tol:
+            # converged: step just past the root so the event has really happened
+            c = min(b, newton + tol)
+            if c == b:
+                break
+            continue
+        if a < newton < b:
+            c = newton
+        else:
+            c = (a * fb - b * fa) / (fb - fa)
+    if b != c:
+        trial_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
+                   stats, W, JW)
+    return b

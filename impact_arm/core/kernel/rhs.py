@@ -1,0 +1,130 @@
+# Kernel part: the right-hand side ẏ = f(y): equations of motion, contact forces of the current
+# phase, the continuous control law or the held torque.
+# Template text (see kernel/__init__.py): the imports above the marker are for
+# linters and editors only: the generated module's header provides those names.
+# flake8: noqa: F401,F403,F405
+import math
+
+from ..contact import friction_force, hertz_force, jackson_green, restitution_force
+from ..control import add_joint_torques, pid_error, pid_law, q_law
+from ..jit import jit, jit_leaf
+from ..layout import *
+from .injected import *
+# --- template: equations.py copies what follows into the generated module ---
+
+@jit_leaf
+def accelerations(q, qd, generalized, P, out, S):
+    """q̈ into ``out``; S is N*N scratch for the general case (no allocation here)."""
+    L = P[P_L:P_L + N]
+    m = P[P_M:P_M + N]
+    if HAS_ACCEL:
+        values = accel(q, qd, generalized, L, m, P[P_G])
+        for i in range(N):
+            out[i] = values[i]
+    else:
+        # M q̈ = b with M symmetric positive definite (it is a kinetic energy): Cholesky
+        # M = G G^T into S (row-major, lower triangle), then two triangular solves
+        values = mass_and_rhs(q, qd, generalized, L, m, P[P_G])
+        for i in range(N):
+            for j in range(i + 1):
+                s = values[i * N + j]
+                for k in range(j):
+                    s -= S[i * N + k] * S[j * N + k]
+                if i == j:
+                    S[i * N + i] = math.sqrt(s)
+                else:
+                    S[i * N + j] = s / S[j * N + j]
+        for i in range(N):
+            s = values[N * N + i]
+            for k in range(i):
+                s -= S[i * N + k] * out[k]
+            out[i] = s / S[i * N + i]
+        for i in range(N - 1, -1, -1):
+            s = out[i]
+            for k in range(i + 1, N):
+                s -= S[k * N + i] * out[k]
+            out[i] = s / S[i * N + i]
+
+
+@jit_leaf
+def contact_forces(y, P, SURF, C, levels):
+    """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
+    L = P[P_L:P_L + N]
+    tip_state = tip(y[:N], y[N:2 * N], L)
+    s = int(C[C_SURF])
+    phase = int(C[C_PHASE])
+    delta = levels[s] - tip_state[1]
+    if phase == ELASTIC:
+        fn = hertz_force(delta, SURF[s, S_E], SURF[s, S_R])
+    elif phase == ELASTOPLASTIC:
+        fn = jackson_green(delta, SURF[s, S_DC], SURF[s, S_R], SURF[s, S_SY], SURF[s, S_CJ],
+                           SURF[s, S_PC], SURF[s, S_B])
+    else:
+        fn = restitution_force(delta, C[C_DR], SURF[s, S_E], C[C_RR])
+    ff = 0.0
+    if HAS_FRICTION:
+        if SURF[s, S_MU] > 0:
+            ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])
+    return delta, fn, ff, tip_state[2], tip_state[3]
+
+
+@jit_leaf
+def control_torque(y, P, I, C, tau_held, tau, error, rate):
+    """Joint torques acting now into ``tau``; False when the actuators are off."""
+    if HAS_CONTACT:
+        if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
+            return False
+    law = I[I_LAW]
+    if law == LAW_NONE:
+        return False
+    if law == LAW_HELD:
+        for i in range(N):
+            tau[i] = tau_held[i]
+        return True
+    q = y[:N]
+    qd = y[N:2 * N]
+    target = P[P_TUP:P_TUP + N] if C[C_MODE] > 0.5 else P[P_TDOWN:P_TDOWN + N]
+    if law == LAW_Q:
+        q_law(q, qd, target, P[P_KP:P_KP + N], P[P_KD:P_KD + N],
+              gravity_forces(q, P[P_L:P_L + N], P[P_M:P_M + N], P[P_G]), tau)
+        return True
+    pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
+    if NI > 0:
+        pid_law(error, rate, y[2 * N:2 * N + NI], P[P_KP:P_KP + N], P[P_KD:P_KD + N],
+                P[P_KI:P_KI + N], tau)
+    else:
+        for i in range(N):   # no integral state: PD (the Ki term has nothing to act on)
+            tau[i] = -P[P_KD + i] * rate[i] - P[P_KP + i] * error[i]
+    return True
+
+
+@jit
+def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
+    """ẏ into ``out``. W is scratch space (SCRATCH, layout W_*) so the hot loop never
+    allocates."""
+    stats[ST_RHS] += 1
+    q = y[:N]
+    qd = y[N:2 * N]
+    generalized = W[W_GEN:W_GEN + N]
+    tau = W[W_TAU:W_TAU + N]
+    error = W[W_ERR:W_ERR + N]
+    rate = W[W_RATE:W_RATE + N]
+    for i in range(N):
+        generalized[i] = 0.0
+    if HAS_CONTACT:
+        if int(C[C_PHASE]) != FREE:
+            delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
+            jac = tip_jacobian(q, P[P_L:P_L + N])
+            for i in range(N):
+                generalized[i] += jac[i] * ff + jac[N + i] * fn
+    acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
+    if acting:
+        add_joint_torques(tau, generalized)
+    for i in range(N):
+        out[i] = qd[i]
+    accelerations(q, qd, generalized, P, out[N:2 * N], W[W_MASS:])
+    if NI > 0:
+        # the integral runs only while the controller acts (it is off during contact);
+        # control_torque left the PID error in ``error``
+        for i in range(NI):
+            out[2 * N + i] = error[i] if acting else 0.0
