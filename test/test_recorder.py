@@ -60,7 +60,8 @@ def test_records_what_was_published(ros_env, tmp_path):
         assert [e for e in pub.lines() if e.get('event') == 'matched'][0]['subs'] >= 1
         # everything published has reached a flushed file before the recorder is stopped;
         # with the scene, the file also holds the derived description, static frames and,
-        # for each 10 ms of stamps (0 ... 140 ms), /tf and /impact_markers
+        # for each 10 ms of stamps (0 ... 140 ms), /tf and /impact_markers (and, once the
+        # recorder stops, at the last stamp)
         n_tf = 15
         assert wait_for(lambda: count_messages(out) == 2 * n + 2 + 2 * n_tf, 10), rec.stderr
         # the publisher's parameters are asked once its services are discovered
@@ -75,8 +76,10 @@ def test_records_what_was_published(ros_env, tmp_path):
         '/contact_wrench': ('geometry_msgs/msg/WrenchStamped', n),
         '/robot_description': ('std_msgs/msg/String', 1),
         '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
-        '/tf': ('tf2_msgs/msg/TFMessage', n_tf),
-        '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf)}
+        '/tf': ('tf2_msgs/msg/TFMessage', n_tf + 1),
+        '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf + 1)}
+    last = got['/tf'][1].pop()               # the final pose, joint state 149
+    assert last.transforms[0].header.stamp.nanosec == 149 * 10**6
     for k, tf in enumerate(got['/tf'][1]):   # joint state 10 k: q1 = 10 k ms, q2 - q1 = -q1
         link1, link2 = tf.transforms
         assert (link1.header.stamp.sec, link1.header.stamp.nanosec) == (0, k * 10**7)

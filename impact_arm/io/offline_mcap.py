@@ -187,6 +187,7 @@ class OfflineRecorder:
         if self._closed:
             return
         try:
+            self.visuals.finish()
             if result is not None:
                 self.writer.add_metadata('run', run_metadata(result))
         finally:

@@ -169,15 +169,28 @@ class VisualsWriter:
             writer.add_topic(topic, type_name, qos)
         self._write(ROBOT_DESCRIPTION, self.visuals.description(), log_time_ns)
         self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
+        self._last = None                # (stamp, q, log time) of the latest state
+        self._shown = None               # stamp of the latest /tf written
 
     def state(self, t_ns: int, q, wrench, log_time_ns: int = None):
         """One joint state (absolute angles ``q``) and its contact wrench (F_t, F_n)."""
         v = self.visuals
         v.observe_force(q, wrench)
+        log = t_ns if log_time_ns is None else log_time_ns
+        self._last = (t_ns, q, log)
         if v.due(t_ns * 1e-9):
-            log = t_ns if log_time_ns is None else log_time_ns
-            self._write(TF, v.tf(q, t_ns), log)
-            self._write(IMPACT_MARKERS, v.markers(t_ns), log)
+            self._frame(t_ns, q, log)
+
+    def finish(self):
+        """The last state, if /tf has not shown it yet: the file ends on the final pose and
+        every impact point (the last report comes after the last paced frame)."""
+        if self._last is not None and self._last[0] != self._shown:
+            self._frame(*self._last)
+
+    def _frame(self, t_ns, q, log):
+        self._write(TF, self.visuals.tf(q, t_ns), log)
+        self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
+        self._shown = t_ns
 
     def force(self, q, wrench):
         """A contact wrench (F_t, F_n) that arrived apart from its joint state."""

@@ -262,6 +262,8 @@ class Recorder(Node):
         if not self.failed:
             self._drain()
         try:
+            if self.visuals is not None and not self.failed:
+                self.visuals.finish()
             self.writer.close()
         except RecordingError as e:
             self._fail(e)
