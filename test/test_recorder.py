@@ -13,6 +13,7 @@ import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
+from impact_arm.io.scene_visuals import arrow_length
 from ros_helpers import helper_args, node_args, ros_env, start_process, wait_for  # noqa: F401
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -88,10 +89,14 @@ def test_records_what_was_published(ros_env, tmp_path):
         assert 2 * math.atan2(link2.transform.rotation.z, link2.transform.rotation.w) == \
             pytest.approx(-k * 1e-2, abs=1e-12)
         assert link2.transform.translation.x == 1.0     # at the end of link 1 (L1 = 1 m)
-    # the published wrenches (i, 2 i) N: the arrow of the strongest since the last markers
+    # the published wrenches (i, 2 i) N: each frame's arrow is the strongest since the
+    # previous frame, whenever the wrench arrived, so the last, strongest one is drawn once
     arrows = [next(m for m in ma.markers if m.ns == 'contact_force')
               for ma in got['/impact_markers'][1]]
-    assert all(a.action == a.ADD for a in arrows[1:])
+    lengths = [math.dist((a.points[0].x, a.points[0].y), (a.points[1].x, a.points[1].y))
+               for a in arrows if a.action == a.ADD]
+    strongest = arrow_length(math.hypot(n - 1, 2 * (n - 1)), 2.0)   # reach of the paper arm
+    assert max(lengths) == pytest.approx(strongest, rel=1e-12)
     for i, m in enumerate(got['/joint_states'][1]):
         assert list(m.name) == ['joint1', 'joint2']
         assert list(m.position) == [i * 1e-3, -i * 1e-3]

@@ -68,19 +68,23 @@ def drive(driver, env, workdir, kind):
     else:
         pub = node.create_publisher(JointState, '/robot_joint_commands', 10)
 
-    def send(k):
-        tau = torques(k)
+    sent = [0]
+
+    def send():
+        tau = torques(sent[0])
+        sent[0] += 1
         if kind == 'array':
             pub.publish(Float64MultiArray(data=tau))
         else:   # names out of order, positions that must be ignored
             pub.publish(JointState(name=['joint2', 'joint1'], position=[123.0, -4.0],
                                    effort=[tau[1], tau[0]]))
 
-    def on_state(msg):
+    def on_state(msg):   # each new period answered once, after the start (like a controller)
         s = stamp(msg)
-        if s not in states and go.is_set() and len(states) < PERIODS:
+        if s not in states and len(states) <= PERIODS:
             states[s] = (tuple(msg.position), tuple(msg.velocity), tuple(msg.effort))
-            send(len(states))
+            if go.is_set() and s > 0 and len(states) <= PERIODS:
+                send()
     go = threading.Event()
     subs = [node.create_subscription(JointState, '/joint_states', on_state, 1000),
             node.create_subscription(JointState, '/robot_joint_states',
@@ -103,8 +107,8 @@ def drive(driver, env, workdir, kind):
             assert wait_for(lambda: diags and rejected(diags[-1]) == 2, timeout=10), sim.stderr
             assert 'command rejected' in sim.stderr + sim.stdout
         go.set()
-        send(0)
-        assert wait_for(lambda: len(states) >= PERIODS or not sim.alive(), timeout=120), \
+        send()
+        assert wait_for(lambda: len(states) > PERIODS or not sim.alive(), timeout=120), \
             f'{len(states)} periods\n{sim.stderr}'
         time.sleep(0.5)
     for sub in subs:
@@ -123,7 +127,7 @@ def test_joint_state_commands_move_the_arm_exactly_as_array_commands(driver, ros
                                                                      tmp_path):
     by_array, hw_array, _ = drive(driver, ros_env, tmp_path, 'array')
     by_name, hw_name, diags = drive(driver, ros_env, tmp_path, 'joint_state')
-    assert len(by_array) == len(by_name) == PERIODS
+    assert len(by_array) == len(by_name) == PERIODS + 1     # the initial state and PERIODS
     assert by_name == by_array                    # bit-identical lockstep runs
     moved = [v[0] for v in by_array.values()]
     assert moved[-1] != moved[0]

@@ -14,7 +14,8 @@ Topic hardware (design.md §8, as topic_based_ros2_control's TopicBasedSystem ex
 also arrive as sensor_msgs/JointState on ``joint_commands_topic`` (``effort`` matched by joint
 name, other fields ignored; a command with an unknown joint, a joint left out or no effort per
 name is rejected and counted like a bad array), and the joint states also go out on
-``joint_states_topic`` (only while someone listens there; never /joint_states, which a
+``joint_states_topic`` (while someone listens there, as checked at ``tf_rate``; never
+/joint_states, which a
 JointStateBroadcaster publishes). 3D view: /robot_description (transient local) at start;
 /tf_static and /tf at ``tf_rate`` where tf2_msgs is installed; /impact_markers at ``tf_rate``.
 /tf and the markers come from a timer of the executor thread that reads the latest published
@@ -138,6 +139,7 @@ class Simulator(Node):
                           if self.publish_clock else None)
         self.pub_hw_states = self.create_publisher(JointState, p['joint_states_topic'],
                                                    qos(JOINT_STATES))
+        self.hw_states_wanted = False   # someone listens there (updated at tf_rate)
         self.command_reader = self.reader_node = None
         if self.lockstep:
             self.command_sub = self.create_subscription(
@@ -416,7 +418,7 @@ class Simulator(Node):
         self._send(self.pub_wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
         self._send(self.pub_joints, states)
-        if self.pub_hw_states.get_subscription_count():
+        if self.hw_states_wanted:
             self._send(self.pub_hw_states, states)
         self.latest_tick = tick            # for /tf and the markers (executor thread)
         if tick.wrench[0] or tick.wrench[1]:
@@ -478,6 +480,8 @@ class Simulator(Node):
         self.create_timer(1.0 / self.p['tf_rate'], self._publish_visuals)
 
     def _publish_visuals(self):
+        # asking DDS for the subscription count costs ~3 us: here at tf_rate, not each period
+        self.hw_states_wanted = self.pub_hw_states.get_subscription_count() > 0
         tick = self.latest_tick
         if tick is None or tick.t == self._visual_stamp:
             return                         # nothing new (paused lockstep, waiting)
