@@ -112,7 +112,7 @@ def refusal(text):
      '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0e-6, mass: 1.0}', ['links[1].length']),
     ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
      '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0e-5}', ['ratio', 'masses']),
-    ('preset: balanced', 'max_step: 1.0e-300', ['integrator.max_step', '1e-08']),
+    ('preset: balanced', 'max_step: 1.0e-300', ['integrator.max_step', '1e-05']),
     ('rate: 0 ', 'rate: 1.0e-300 ', ['controller.rate', 'more than a second']),
     ('publish_rate: 1000.0', 'publish_rate: 1.0e6', ['publish_rate', 'in memory']),
     ('kd: [100.0, 100.0]', 'kd: [1.0e9, 100.0]', ['controller.kd[0]', 'closed-loop rate']),
@@ -207,3 +207,69 @@ def test_arbitrary_yaml_text_is_refused_in_one_line(text):
         scene_from_text(text)
     except SceneError as exc:
         assert '\n' not in str(exc)
+
+
+# ------------------------------------------------------------------------- run budget
+def test_a_run_that_cannot_progress_stops_with_the_run_budget(monkeypatch):
+    """max_step 1e-300 (refused in a scene file, possible through the API) stepped forever:
+    the kernel now returns every STEPS_PER_CALL steps and the run stops by name."""
+    from dataclasses import replace
+    from impact_arm.core import integrator
+    from impact_arm.core.simulate import run
+    from scenes import scene_from
+    monkeypatch.setattr(integrator, 'STEPS_PER_CALL', 1000)
+    monkeypatch.setattr(integrator, 'MIN_STEP_BUDGET', 5000)
+    scene = scene_from(cycles=1)
+    result = run(replace(scene, integrator=replace(scene.integrator, max_step=1e-300)))
+    assert result.stopped == 'error' and 'run budget exceeded' in result.error, result.error
+
+
+# --------------------------------------------------------------------- CLI output paths
+def short_scene(tmp_path):
+    path = tmp_path / 'short.yaml'
+    path.write_text(PAPER_TEXT.replace('cycles: 15', 'cycles: 1'))
+    return str(path)
+
+
+@pytest.mark.parametrize('flag', ['--json', '--mcap'])
+def test_output_paths_are_refused_before_the_run(tmp_path, capsys, flag):
+    from impact_arm.tools.cli import main
+    fifo = tmp_path / 'fifo'
+    os.mkfifo(fifo)
+    for target, words in ((tmp_path, 'is a directory'),
+                          (tmp_path / 'missing' / 'x', 'does not exist'),
+                          (fifo / 'x', 'is not a directory'),
+                          (fifo, 'not a regular file')):
+        assert main(['simulate', '--scene', short_scene(tmp_path), flag, str(target)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and err.count('\n') == 1, err
+    assert not (tmp_path / 'missing').exists() and fifo.is_fifo()
+
+
+def test_json_through_a_symlink_keeps_the_link_and_writes_no_nan(tmp_path, capsys):
+    import json
+    from impact_arm.tools.cli import _write_json, main
+    real = tmp_path / 'real.json'
+    real.write_text('{}')
+    link = tmp_path / 'link.json'
+    link.symlink_to(real)
+    assert main(['simulate', '--scene', short_scene(tmp_path), '--no-samples',
+                 '--json', str(link)]) == 0
+    assert link.is_symlink() and 'impacts' in json.loads(real.read_text())
+    assert 'link is kept' in capsys.readouterr().out
+    _write_json(str(real), {'a': float('nan'), 'b': [float('inf'), 1.0]})
+    assert json.loads(real.read_text()) == {'a': None, 'b': [None, 1.0]}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['link.json', 'real.json', 'short.yaml']
+
+
+def test_a_lone_surrogate_in_a_name_is_refused():
+    message = refusal(PAPER_TEXT.replace('name: paper', 'name: "a\\ud800b"'))
+    assert 'name' in message and 'surrogate' in message
+
+
+def test_bench_stress_fuzz_classifies_each_scene():
+    """A smoke run of ``bench stress --fuzz``: a worker process, seeded scenes, a tally."""
+    from impact_arm.tools.benchmarks.fuzz import GOOD, run_fuzz
+    tally, bad = run_fuzz(4, seed=1, timeout=60.0)
+    assert sum(tally.values()) == 4 and not bad, bad
+    assert set(k for k, v in tally.items() if v) <= set(GOOD)

@@ -311,6 +311,8 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
     ('simulator', 'joints:=[joint1,jointX]', 'joints'),
     ('simulator', 'scene:=/no/such/scene.yaml', 'scene'),
     ('simulator', 'publish_rat:=5.0', 'publish_rat'),
+    ('simulator', 'command_timeout:=5e-324', 'command_timeout'),    # would disable control
+    ('simulator', 'max_effort:=5e-324', 'max_effort'),
     ('controller', 'law:=lqr', 'law'),
     ('controller', 'p:=[1.0]', 'p'),
     ('controller', 'rate:=0.0', 'rate'),

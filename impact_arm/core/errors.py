@@ -16,3 +16,7 @@ class SimulationError(ImpactArmError):
         super().__init__(message)
         self.t = t
         self.state = state
+
+
+class RunBudgetError(SimulationError):
+    """A run took far more steps per simulated second than any meaningful scene needs."""

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS
 from . import layout
-from .errors import SimulationError
+from .errors import RunBudgetError, SimulationError
 from .model import ArmModel, ArmState, Phase
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.
@@ -73,6 +73,12 @@ class Stats:
 TRACE_CAPACITY = 4096
 OUTPUT_CAPACITY = 4096     # output rows per kernel call (advance splits longer spans)
 EVENT_LOG_CAPACITY = 64    # events one kernel call crosses before Python reads them
+# A kernel call returns after this many steps (tens of ms), so Ctrl-C and the run budget are
+# honoured while it integrates. The budget allows a burst plus a mean step of 5 us: the
+# article's scene takes ~6 000 steps per simulated second at the reference preset.
+STEPS_PER_CALL = 20_000
+MIN_STEP_BUDGET = 500_000
+STEPS_PER_SIMULATED_SECOND = 200_000
 _KINDS = {layout.EV_SWITCH: 'switch', layout.EV_YIELD: 'yield',
           layout.EV_MAX: 'max_compression', layout.EV_SEP: 'separation'}
 KIND_BITS = {'contact': layout.KIND_BIT_CONTACT,
@@ -131,7 +137,8 @@ class PhaseIntegrator:
         self._h = 0.0
         self._trace_buffer = np.zeros((TRACE_CAPACITY, model.eq.TR_SIZE))
         self._trace_count = np.zeros(1, dtype=np.int64)
-        self._ev = np.zeros(3, dtype=np.int64)      # layout.EV_*: slot, logged, stop mask
+        self._ev = np.zeros(4, dtype=np.int64)      # layout.EV_*: slot, logged, stop mask, steps
+        self._ev[layout.EV_STEPS] = STEPS_PER_CALL
         self._evlog = np.zeros((EVENT_LOG_CAPACITY, layout.E_Y + model.size))
         self._W = np.zeros(model.eq.SCRATCH)
         self._O = np.zeros(3)                   # next output index k, period dt (0: off), rows
@@ -311,7 +318,22 @@ class PhaseIntegrator:
                 return events
             if status in (layout.TRACE_FULL, layout.EVENT_LOG_FULL):
                 continue
+            if status == layout.STEP_BUDGET:
+                self._check_budget()
+                continue
             self._raise(status)
+
+    def _check_budget(self):
+        """Stop a run whose steps outgrow what any meaningful scene needs per simulated second
+        (a hang otherwise: the kernel would step for hours)."""
+        steps = int(self._stats[1] + self._stats[2])
+        allowed = MIN_STEP_BUDGET + STEPS_PER_SIMULATED_SECOND * self.state.t
+        if steps > allowed:
+            raise RunBudgetError(
+                f'run budget exceeded: {steps} steps by t = {self.state.t:.6g} s (allowed '
+                f'{MIN_STEP_BUDGET:g} + {STEPS_PER_SIMULATED_SECOND:g} per simulated second; '
+                f'h = {self._h:.3g} s): the scene is too stiff or too small for its tolerances',
+                t=self.state.t, state=self.state.y.copy())
 
     def _raise(self, status):
         st = self.state

@@ -23,13 +23,16 @@ METHOD_DOPRI5, METHOD_ROSENBROCK = 0, 1
 DONE, EVENT, TRACE_FULL, ERR_UNDERFLOW, ERR_PENETRATION, ERR_NONFINITE, OUTPUT_FULL = \
     0, 1, 2, 3, 4, 5, 6
 EVENT_LOG_FULL, ERR_RESIDUAL = 7, 8
+# STEP_BUDGET: the call took ev[EV_STEPS] steps and returns, so that a caller regains control
+# (Ctrl-C, its run budget) within a bounded time
+STEP_BUDGET = 9
 # event slots: contact per surface, then switch, yield, max_compression, separation
 EV_SWITCH, EV_YIELD, EV_MAX, EV_SEP = 0, 1, 2, 3
 # event kinds as bits of the stop mask (the kernel returns after an event whose bit is set
 # and crosses the others itself): contact on any surface, then 1 << (1 + EV_*)
 KIND_BIT_CONTACT = 1
 # integer array ev: slot of the event just located, events logged, stop mask
-EV_SLOT, EV_COUNT, EV_MASK = 0, 1, 2
+EV_SLOT, EV_COUNT, EV_MASK, EV_STEPS = 0, 1, 2, 3
 # a row of the event log: slot, surface, t, four values (max_compression: δm, Pm, δr, Rr;
 # separation: F_max, δm, δr), then the state after the switch
 E_SLOT, E_SURF, E_T, E_INFO, E_Y = 0, 1, 2, 3, 7

@@ -66,10 +66,12 @@ PARAMS = (
     Param('rate_factor', 1.0, 'simulated seconds per wall second (lockstep: 0 = as fast as '
           'commands arrive); /clock is published unless realtime at 1.0',
           low=0.0, high=1000.0, read_only=True),
+    # lower bounds: a watchdog under 1 ms fires between 1 kHz commands and a torque limit
+    # under 1 mN m clips every command to nothing; either would silently disable control
     Param('command_timeout', 0.1, 'seconds without a valid command before the torques are '
-          'zeroed (watchdog)', low=0.0, high=3600.0, open_low=True),
+          'zeroed (watchdog)', low=1e-3, high=3600.0),
     Param('max_effort', 5000.0, 'commanded torques are clipped to +-max_effort [N m]',
-          low=0.0, high=1e9, open_low=True),
+          low=1e-3, high=1e9),
     Param('joints', joint_names(2), 'joint order of the command array', 'strs',
           read_only=True),
     Param('preset', '', "integrator preset (empty: the scene's)", 'str',

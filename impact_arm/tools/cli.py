@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -41,6 +42,9 @@ def cmd_simulate(args) -> int:
     if not jit.AVAILABLE:
         print(f'impact-arm simulate: warning: interpreted kernel ({jit.UNAVAILABLE}), about '
               f'100x slower. Fix: {jit.FIX}', file=sys.stderr)
+    # refused now, not after a long run whose results would then be lost
+    args.json = args.json and writable_output(args.json, '--json')
+    args.mcap = args.mcap and writable_output(args.mcap, '--mcap')
     if args.no_samples:
         return _simulate_without_samples(scene, args)
     observer = None
@@ -94,13 +98,56 @@ def _simulate_without_samples(scene, args) -> int:
     return 1 if result.error else 0
 
 
+def writable_output(path, flag) -> str:
+    """The file to write for ``flag``, checked before any work: its directory must exist and
+    be writable (none is created), and it must be absent, a regular file, or a symlink to one
+    (then its target is written and the link kept). Directories, FIFOs and devices are refused."""
+    target = os.path.realpath(path)
+    if os.path.isdir(target):
+        raise ImpactArmError(f'{flag} {path}: is a directory')
+    if os.path.exists(target) and not os.path.isfile(target):
+        raise ImpactArmError(f'{flag} {path}: not a regular file (a FIFO or device is not '
+                             f'replaced)')
+    directory = os.path.dirname(target)
+    if not os.path.isdir(directory):
+        raise ImpactArmError(f'{flag} {path}: {directory} ' + (
+            'is not a directory' if os.path.exists(directory) else 'does not exist'))
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise ImpactArmError(f'{flag} {path}: directory {directory} is not writable')
+    if os.path.exists(target) and not os.access(target, os.W_OK):
+        raise ImpactArmError(f'{flag} {path}: file is not writable')
+    if target != os.path.abspath(path):
+        print(f'{flag}: {path} is a symlink: writing its target {target}, the link is kept')
+    return target
+
+
+def _finite_or_null(value):
+    """JSON has no NaN or infinity: such a number is written as null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_null(v) for v in value]
+    return value
+
+
 def _write_json(path, data):
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    tmp = path + '.tmp'
-    with open(tmp, 'w', encoding='utf-8') as f:
-        json.dump(data, f, indent=1)
-    os.replace(tmp, path)
+    """Written to a temporary file next to ``path`` and renamed over it: a reader never sees
+    half a file, and a failure leaves no temporary file behind."""
+    import tempfile
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), prefix='.' + os.path.basename(path),
+                               suffix='.tmp')
+    umask = os.umask(0)
+    os.umask(umask)
+    os.fchmod(fd, 0o666 & ~umask)     # as open() would create it, not mkstemp's 0600
+    try:
+        with os.fdopen(fd, 'w', encoding='utf-8') as f:
+            json.dump(_finite_or_null(data), f, indent=1, allow_nan=False)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
 
 
 def build_parser(selected=None) -> argparse.ArgumentParser:

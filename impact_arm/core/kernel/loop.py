@@ -29,8 +29,9 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
     Every located switch is applied here (``apply_event``) and logged in ``evlog`` (row
     ev[EV_COUNT], layout E_*): the phase machine costs no return to Python. Returns DONE at
     t_end, EVENT right after an event whose kind bit is in ev[EV_MASK], EVENT_LOG_FULL,
-    TRACE_FULL or OUTPUT_FULL when a buffer needs draining, or an ERR_* status (ERR_RESIDUAL
-    at a maximum compression that ``apply_event`` refused, not logged)."""
+    TRACE_FULL or OUTPUT_FULL when a buffer needs draining, STEP_BUDGET after ev[EV_STEPS]
+    steps (the caller regains control: Ctrl-C, its run budget), or an ERR_* status
+    (ERR_RESIDUAL at a maximum compression that ``apply_event`` refused, not logged)."""
     size = y.shape[0]
     ns = SURF.shape[0]
     # the only allocation: scratch for the stepping loop, which itself runs without NRT
@@ -100,7 +101,12 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
     expo = 0.2 if quartic else 0.25
     jac_valid = JW.shape[0] - 1
     status = DONE
+    steps_left = ev[EV_STEPS]
     while t < t_end:
+        steps_left -= 1
+        if steps_left < 0:
+            status = STEP_BUDGET
+            break
         remaining = t_end - t
         if remaining <= eps4:
             t = t_end
@@ -176,6 +182,9 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
         JW[jac_valid, 0] = 0.0      # a new point: the Jacobian is due again
         t_prev = t
         t = t_stop if clipped else t + step
+        if t == t_prev:         # a step below the resolution of t (max_step ~ 1e-300)
+            status = ERR_UNDERFLOW
+            break
         copy_into(g0, g1)
         delta = 0.0
         if HAS_CONTACT:

@@ -298,9 +298,18 @@ def add_arguments(parser):
     parser.add_argument('--json', metavar='FILE', help='write the matrix as JSON')
     parser.add_argument('--method', choices=INTEGRATOR_METHODS, default='dopri5',
                         help='step method in free flight (integrator.method)')
+    parser.add_argument('--fuzz', type=int, metavar='N', default=0,
+                        help='instead of the matrix: N scenes mutated from paper.yaml, each '
+                             'classified (benchmarks/fuzz.py)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of --fuzz')
+    parser.add_argument('--fuzz-timeout', type=float, default=20.0, metavar='S',
+                        help='seconds a fuzzed scene may run before it counts as a hang')
 
 
 def run(args) -> int:
+    if args.fuzz:
+        from .fuzz import report
+        return report(args)
     selected = cases(full=not args.quick)
     if args.only:
         selected = [c for c in selected if args.only in c.name]
