@@ -75,6 +75,7 @@ def test_brakes_on_until_the_first_command_then_paced_by_the_wall_clock(scene):
     assert loop.first_command_wall == pytest.approx(100.004) and loop.commands == 1
     assert loop.arm.command == [1.0, 0.0] and loop.watchdog.state == 'ok'
     assert loop.stats.overruns == 0 and loop.stats.published == 8
+    assert loop.stale == 4            # one command for five periods: four held an old one
 
 
 def test_watchdog_zeroes_the_torque_when_commands_stop_and_resumes(scene):

@@ -174,6 +174,10 @@ class DriverLoop:
         self.impacts = 0
         self.skipped = 0                        # periods skipped after stalls
         self.flooded = 0                        # periods that left commands queued
+        # periods run without a command newer than the previous period's: the controller did
+        # not answer within the period (the zero-order hold then holds an older command)
+        self.stale = 0
+        self._last_pending = None
         self.paused = False
         self.e_stop = False
         self._steps = 0
@@ -242,7 +246,7 @@ class DriverLoop:
             self.arm.reset()
             self.watchdog = Watchdog(self.watchdog.timeout)
             self.stats = PeriodStats(self.stats.nominal)
-            self.commands = self.impacts = self.skipped = self.flooded = 0
+            self.commands = self.impacts = self.skipped = self.flooded = self.stale = 0
             self.first_command_wall = None
             self._steps = 0
             self._reset_done.set()
@@ -285,6 +289,9 @@ class DriverLoop:
             return None
         if self.paused:
             self._steps -= 1
+        pending = self.watchdog.pending
+        self.stale += pending is self._last_pending
+        self._last_pending = pending
         self._hold(woke)
         stepping = self.clock()
         tick = self.arm.step()

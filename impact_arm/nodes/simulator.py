@@ -555,6 +555,8 @@ class Simulator(Node):
             'periods_skipped': str(self.loop.skipped),
             # periods that left commands queued (a flood): the rest waited a period
             'commands_flooded': str(self.loop.flooded),
+            # realtime periods run with no command newer than the previous period's
+            'periods_without_new_command': str(self.loop.stale),
             'paused': str(self.loop.paused).lower(),
             'e_stop': str(self.loop.e_stop).lower(),
             'kernel': 'compiled (numba)' if jit.AVAILABLE else f'interpreted ({jit.UNAVAILABLE})',

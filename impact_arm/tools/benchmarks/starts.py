@@ -149,6 +149,7 @@ def _row(index, outcome, seen):
         'cycle_period_s': period, 'worst_cycle_deviation': worst_gap, 'missed_impact': missed,
         'periods': periods, 'overruns': int(d.get('overruns', -1)),
         'periods_skipped': int(d.get('periods_skipped', 0)),
+        'periods_without_new_command': int(d.get('periods_without_new_command', 0)),
         'worst_period_us': float(d.get('compute_worst_us', 'nan')),
         'worst_period_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'worst_split_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
@@ -166,7 +167,8 @@ def _print_row(r):
           f"{r['impacts_per_sim_s']:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), "
           f"{r['cycles']} cycles, {r['re_strikes']} re-strikes, cycle "
           f"{r['cycle_period_s']:.4f} s{' MISSED IMPACT' if r['missed_impact'] else ''}; "
-          f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods; "
+          f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods, "
+          f"{r['periods_without_new_command']} without a new command; "
           f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
           f"({split} us)", flush=True)
     if (r['missed_impact'] or r['re_strikes']) and r['impact_times_s']:
@@ -186,6 +188,7 @@ def summary(rows):
         'missed_impact': sum(r['missed_impact'] for r in rows),
         're_strikes': sum(r['re_strikes'] for r in rows),
         'overruns': overruns, 'periods': periods,
+        'periods_without_new_command': sum(r['periods_without_new_command'] for r in rows),
         'overrun_percent': 100.0 * overruns / periods if periods else float('nan'),
         'worst_period_us_median': statistics.median(worst) if worst else float('nan'),
         'worst_period_us_max': max(worst) if worst else float('nan'),
@@ -212,7 +215,8 @@ def run(args) -> int:
     s = summary(rows)
     print(f"summary: {s['stopped']} of {s['starts']} starts stopped (target 0), "
           f"{s['missed_impact']} with a missed impact (target 0), {s['re_strikes']} re-strikes; overruns {s['overruns']} of "
-          f"{s['periods']} periods = {s['overrun_percent']:.3f} % (target <= 0.1 %); worst "
+          f"{s['periods']} periods = {s['overrun_percent']:.3f} % (target <= 0.1 %); periods without a "
+          f"new command (controller late) {s['periods_without_new_command']}; worst "
           f"period median {s['worst_period_us_median']:.0f} us, worst "
           f"{s['worst_period_us_max']:.0f} us; runs with worst period <= 1 ms: "
           f"{s['runs_worst_period_within_1ms_percent']:.0f} % (target >= 95 %); cycle period "
