@@ -56,18 +56,34 @@ def pid_law(error, rate, integral, kp, kd, ki, out):
 
 @dataclass
 class PidIntegrator:
-    """Discrete integral state with control_toolbox-style clamping of the integral term."""
+    """Discrete integral state and output limits of the PID, as control_toolbox names them:
+    ``i_clamp_*`` clamp the integral term (strategy 'legacy'), ``u_clamp_*`` the output; with
+    'conditional_integration' a joint's integral is frozen while its output is at a limit
+    (so it never winds up against a saturated actuator); 'none' integrates regardless."""
     n: int
     i_clamp_max: float = math.inf
     i_clamp_min: float = -math.inf
     antiwindup: str = 'none'
+    u_clamp_max: float = math.inf
+    u_clamp_min: float = -math.inf
     value: list = field(default_factory=list)
 
     def __post_init__(self):
         if self.antiwindup not in ANTIWINDUP_STRATEGIES:
             raise ValueError(f'antiwindup_strategy = {self.antiwindup!r}: choose one of '
                              f'{", ".join(ANTIWINDUP_STRATEGIES)}')
+        if not self.u_clamp_min <= self.u_clamp_max:
+            raise ValueError(f'u_clamp_min = {self.u_clamp_min:g} > u_clamp_max = '
+                             f'{self.u_clamp_max:g}')
         self.reset()
+
+    def saturated(self, output) -> list:
+        """Per joint: is this output at (or beyond) a limit?"""
+        return [not self.u_clamp_min < u < self.u_clamp_max for u in output]
+
+    def clamp(self, output):
+        """Limit ``output`` (a float array) to [u_clamp_min, u_clamp_max] in place."""
+        np.clip(output, self.u_clamp_min, self.u_clamp_max, out=output)
 
     def reset(self):
         self.value = [0.0] * self.n
@@ -156,12 +172,15 @@ class CycleController:
         error, rate = np.zeros(n), np.zeros(n)
         pid_error(q, qd, target, self.space == 'joint', error, rate)
         ki = self.ki if self.law == 'pid' else [0.0] * n
+        gains = np.asarray(self.kp, float), np.asarray(self.kd, float), np.asarray(ki, float)
         if self.law == 'pid' and dt > 0:
-            self.integral.update(error, dt, ki)
-        pid_law(error, rate, np.asarray(self.integral.value, float), np.asarray(self.kp, float),
-                np.asarray(self.kd, float), np.asarray(ki, float), out)
+            saturated = None
+            if self.integral.antiwindup == 'conditional_integration':
+                # the output the actuator gets before this sample's integration
+                pid_law(error, rate, np.asarray(self.integral.value, float), *gains, out)
+                saturated = self.integral.saturated(out)
+            self.integral.update(error, dt, ki, saturated)
+        pid_law(error, rate, np.asarray(self.integral.value, float), *gains, out)
+        self.integral.clamp(out)
         return out.tolist()
 
-
-def clip_torques(tau, max_effort):
-    return np.clip(np.asarray(tau, dtype=float), -max_effort, max_effort)

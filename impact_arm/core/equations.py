@@ -42,7 +42,7 @@ def cache_dir() -> str:
     return base
 
 
-def _derive_source(n: int, gravity: bool, contact: bool) -> str:
+def _derive_source(n: int, gravity: bool) -> str:
     """Generate Python source for the chain's numeric functions (runs sympy)."""
     import sympy as sp
 
@@ -153,7 +153,7 @@ def _derivation(n, gravity):
             text = f.read()
         if text:
             return text
-    text = _derive_source(n, gravity, True)
+    text = _derive_source(n, gravity)
     _write_atomically(path, text)
     return text
 

@@ -201,7 +201,7 @@ class PhaseIntegrator:
         return self.model.eq.contact_forces(y, self._P, self.model.surface_table, st.c,
                                             st.levels)
 
-    def torque(self, t=None, q=None, qd=None, y=None):
+    def torque(self):
         """Joint torques acting at the current state, or None when the actuators are off."""
         st = self.state
         tau = np.zeros(self.model.n)

@@ -8,9 +8,6 @@ import numpy as np
 
 from .model import ArmModel, kinetic_energy_split
 
-IMPACT_FIELDS = ('index', 't_contact', 'q_contact_deg', 'duration', 'delta_m', 'delta_r',
-                 'F_max', 'v_before', 'v_after', 'cor_kinematic', 'T_before', 'T_after',
-                 'cor_energetic', 'phase_durations')
 PHASE_ORDER = ('contact', 'yield', 'max_compression', 'separation')
 
 

@@ -538,12 +538,6 @@ def scene_from_text(text: str, origin: str = '<scene>', path: str = '') -> Scene
     return parse_scene(scene_data(text, origin), origin=origin, text=text, path=path)
 
 
-def with_overrides(scene: Scene, **changes) -> Scene:
-    """A copy of ``scene`` with top-level fields replaced (used by benchmarks and tests)."""
-    from dataclasses import replace
-    return replace(scene, **changes)
-
-
 def resolve_scene_path(name: str | os.PathLike) -> str:
     """Accept a path, or a bare scene name ('paper') found in the installed config directory."""
     name = os.fspath(name)

@@ -196,7 +196,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
                     integ.contact_force_now()
                 impulse = [0.0, 0.0]
                 last_publish = t_pub
-                tau = integ.torque(st.t, q, qd, st.y)
+                tau = integ.torque()
                 tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
                 publish(Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench,
                                ctrl.mode if ctrl else st.mode), model.tip(q, qd)[2:])

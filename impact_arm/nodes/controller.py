@@ -35,7 +35,7 @@ from ..core.scene import load_scene, resolve_scene_path
 from ..io.wire import (MalformedMessage, PatchedMessage, joint_state_fields,
                        wrench_stamped_fields)
 from ._runner import realtime_priority, run
-from .params import Param, ParameterError, declare, refuse_unknown, validator
+from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
 STAMP_EPS = 1e-9                 # stamps are integer nanoseconds: ticks compare to 1 ns
 # A state beyond these is not an arm's: a broken or hostile peer. Angles may wind a few turns;
@@ -80,7 +80,13 @@ def parameter_table(scene):
               high=math.inf),
         Param('i_clamp_min', -math.inf, 'lower clamp of the integral term [N m] (legacy)',
               low=-math.inf),
-        Param('antiwindup_strategy', 'none', 'integral anti-windup', 'str',
+        Param('u_clamp_max', math.inf, 'upper limit of each joint\'s PID output [N m]',
+              high=math.inf),
+        Param('u_clamp_min', -math.inf, 'lower limit of each joint\'s PID output [N m]',
+              low=-math.inf),
+        Param('antiwindup_strategy', 'none', 'integral anti-windup: none, legacy (i_clamp on '
+              'the integral term), conditional_integration (integral frozen while the output '
+              'is at a u_clamp limit)', 'str',
               choices=ANTIWINDUP_STRATEGIES),
         Param('space', c.space, 'angles the PID acts on: absolute link angles or relative '
               'joint angles', 'str', choices=PID_SPACES),
@@ -111,10 +117,10 @@ class Controller(Node):
     executor_kind = 'events'   # see _runner.make_executor
 
     def __init__(self):
-        super().__init__('controller')
-        name = self.declare_parameter('scene', '').value
-        scene = load_scene(resolve_scene_path(name or 'paper'))
-        self.undeclare_parameter('scene')
+        super().__init__('controller', **NODE_OPTIONS)
+        # the scene (given at start-up, hence already declared) sets the table's defaults
+        name = self.get_parameter('scene').value if self.has_parameter('scene') else ''
+        scene = load_scene(resolve_scene_path(str(name) or 'paper'))
         self.table = parameter_table(scene)
         p = self.p = declare(self, self.table)
         self.n = scene.n_links
@@ -124,7 +130,7 @@ class Controller(Node):
             raise ParameterError(f'parameter joints = {p["joints"]}: must name each of '
                                  f'{self.joint_names} once')
         self.order = [self.joint_names.index(j) for j in p['joints']]
-        refuse_unknown(self)
+        refuse_unknown(self, self.table)
         self.ctrl = CycleController(self.model, p['law'], p['p'], p['d'], p['i'],
                                     to_absolute(p['down_target']), to_absolute(p['up_target']),
                                     p['switch_height'], p['surface_height'], space=p['space'],
@@ -182,17 +188,18 @@ class Controller(Node):
     @staticmethod
     def _integrator(p):
         return PidIntegrator(len(p['p']), p['i_clamp_max'], p['i_clamp_min'],
-                             p['antiwindup_strategy'])
+                             p['antiwindup_strategy'], p['u_clamp_max'], p['u_clamp_min'])
 
     def _set_parameters(self, values):
         p = dict(self.p, **values)
-        if p['i_clamp_min'] > p['i_clamp_max']:
-            raise ParameterError(f'i_clamp_min = {p["i_clamp_min"]:g} > i_clamp_max = '
-                                 f'{p["i_clamp_max"]:g}')
+        for name in ('i_clamp', 'u_clamp'):
+            if p[f'{name}_min'] > p[f'{name}_max']:
+                raise ParameterError(f'{name}_min = {p[f"{name}_min"]:g} > {name}_max = '
+                                     f'{p[f"{name}_max"]:g}')
         c = self.ctrl
-        if p['law'] != c.law or p['antiwindup_strategy'] != self.p['antiwindup_strategy'] or \
-                p['i_clamp_max'] != self.p['i_clamp_max'] or \
-                p['i_clamp_min'] != self.p['i_clamp_min']:
+        settings = ('antiwindup_strategy', 'i_clamp_max', 'i_clamp_min', 'u_clamp_max',
+                    'u_clamp_min')
+        if p['law'] != c.law or any(p[k] != self.p[k] for k in settings):
             c.integral = self._integrator(p)   # a new law or clamp starts a fresh integral
         c.law, c.space = p['law'], p['space']
         c.kp, c.ki, c.kd = list(p['p']), list(p['i']), list(p['d'])

@@ -112,18 +112,30 @@ class Param:
             fail('out of range')
 
 
+# Node options of a node whose parameters ``declare`` and ``refuse_unknown`` handle: every
+# value given at start-up (command line, parameter file) arrives as a parameter, so both can
+# see what was given through rclpy's public API.
+NODE_OPTIONS = dict(automatically_declare_parameters_from_overrides=True)
+
+
 def declare(node, table) -> dict:
-    """Declare every parameter of ``table``; returns {name: checked value}. Raises
-    ParameterError for the first bad value, naming it and its range."""
+    """Declare every parameter of ``table`` on a node made with ``NODE_OPTIONS``; returns
+    {name: checked value}. Raises ParameterError for the first bad value, naming it and its
+    range."""
     values = {}
     for p in table:
         default = list(p.default) if isinstance(p.default, tuple) else p.default
+        given = None
+        if node.has_parameter(p.name):
+            # declared from the start-up value without our descriptor: declare it again
+            # with the descriptor (rclpy then takes the start-up value again)
+            given = node.get_parameter(p.name).value
+            node.undeclare_parameter(p.name)
         try:
             value = node.declare_parameter(p.name, default, p.descriptor()).value
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             # rclpy checks the descriptor's range itself; say it the way the rest of us do
-            given = node._parameter_overrides.get(p.name)
-            shown = given.value if given is not None else '?'
+            shown = given if given is not None else '?'
             raise ParameterError(f'parameter {p.name} = {shown!r}: out of range; allowed: '
                                  f'{p.allowed()}') from exc
         values[p.name] = p.check(value)
@@ -157,11 +169,25 @@ def validator(table, apply):
     return callback
 
 
-def refuse_unknown(node):
+def refuse_unknown(node, table):
     """ROS ignores parameters a node never declares; a typo in a parameter file or on the
-    command line would then silently change nothing. Refuse them instead."""
-    unknown = sorted(set(node._parameter_overrides) - set(node._parameters))
+    command line would then silently change nothing. Refuse them instead (``node`` made with
+    ``NODE_OPTIONS``, ``table`` declared)."""
+    declared = set(node.get_parameters_by_prefix(''))
+    known_names = {p.name for p in table} | _declared_by_ros(node.context)
+    unknown = sorted(declared - known_names)
     if unknown:
-        known = ', '.join(sorted(node._parameters))
+        known = ', '.join(sorted(known_names))
         raise ParameterError(f'unknown parameter(s) {", ".join(unknown)} for node '
                              f'{node.get_name()}; known: {known}')
+
+
+def _declared_by_ros(context) -> set:
+    """The parameters rclpy declares on every node (use_sim_time, ...): those of a bare node."""
+    from rclpy.node import Node
+    bare = Node('_impact_arm_parameter_probe', context=context, start_parameter_services=False,
+                enable_rosout=False)
+    try:
+        return set(bare.get_parameters_by_prefix(''))
+    finally:
+        bare.destroy_node()

@@ -53,7 +53,7 @@ from ..io.scene_visuals import DEFAULT_TF_RATE, SceneVisuals
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from ..io.wire import PatchedMessage, float64_array_data, joint_state_command
 from ._runner import realtime_priority, run
-from .params import Param, ParameterError, declare, refuse_unknown, validator
+from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
 PARAMS = (
@@ -101,7 +101,7 @@ class Simulator(Node):
     executor_kind = 'events'   # see _runner.make_executor
 
     def __init__(self):
-        super().__init__('simulator')
+        super().__init__('simulator', **NODE_OPTIONS)
         p = self.p = declare(self, PARAMS)
         scene_path = resolve_scene_path(p['scene'] or 'paper')
         self.scene = load_scene(scene_path)
@@ -121,7 +121,7 @@ class Simulator(Node):
                 f'parameter joint_states_topic = {p["joint_states_topic"]!r}, '
                 f'joint_commands_topic = {p["joint_commands_topic"]!r}: the topic hardware '
                 f'needs its own topics (not /joint_states, not {COMMANDS})')
-        refuse_unknown(self)
+        refuse_unknown(self, PARAMS)
         self.add_on_set_parameters_callback(validator(PARAMS, self._set_parameters))
         self.lockstep = p['mode'] == 'lockstep'
         self.publish_clock = self.lockstep or p['rate_factor'] != 1.0

@@ -1,0 +1,57 @@
+"""The sampled PID's anti-windup and output limits (core/control.py), against hand values."""
+import math
+
+import pytest
+
+from impact_arm.core.control import CycleController, PidIntegrator
+from impact_arm.core.model import ArmModel
+from scenes import scene_from
+
+TARGET = [0.0, 0.0]
+
+
+def controller(strategy, limit, kp=100.0):
+    model = ArmModel(scene_from({('controller', 'law'): 'pid'}))
+    integral = PidIntegrator(2, antiwindup=strategy, u_clamp_max=limit, u_clamp_min=-limit)
+    return CycleController(model, 'pid', [kp, kp], [0.0, 0.0], [5.0, 5.0], TARGET, TARGET,
+                           switch_height=10.0, surface_height=None, integrator=integral)
+
+
+def run(c, q, samples=10, dt=1e-3):
+    for _ in range(samples):
+        tau = c.torque(q, [0.0, 0.0], dt)
+    return tau
+
+
+def test_conditional_integration_freezes_the_integral_while_the_output_saturates():
+    # error 0.5 rad: P alone asks -50 N m against a 10 N m limit
+    c = controller('conditional_integration', 10.0)
+    tau = run(c, [0.5, 0.5])
+    assert tau == [-10.0, -10.0]
+    assert c.integral.value == [0.0, 0.0]
+
+
+def test_none_integrates_into_the_saturation():
+    c = controller('none', 10.0)
+    tau = run(c, [0.5, 0.5])
+    assert tau == [-10.0, -10.0]
+    assert c.integral.value == pytest.approx([10 * 0.5e-3] * 2, rel=1e-12)
+
+
+def test_conditional_integration_integrates_like_none_below_the_limits():
+    # error 0.01 rad: -1 N m, well inside ±10 N m
+    free, cond = controller('none', 10.0), controller('conditional_integration', 10.0)
+    assert run(free, [0.01, 0.01]) == run(cond, [0.01, 0.01])
+    assert cond.integral.value == pytest.approx([10 * 0.01e-3] * 2, rel=1e-12)
+    expected = -100.0 * 0.01 - 5.0 * 10 * 0.01e-3
+    assert run(cond, [0.01, 0.01], samples=1, dt=0.0) == pytest.approx([expected] * 2)
+
+
+def test_default_limits_leave_the_output_alone():
+    c = controller('none', math.inf, kp=1e6)
+    assert run(c, [0.5, 0.5], samples=1, dt=0.0) == pytest.approx([-5e5, -5e5])
+
+
+def test_refuses_crossed_output_limits():
+    with pytest.raises(ValueError, match='u_clamp_min = 1 > u_clamp_max = -1'):
+        PidIntegrator(2, u_clamp_max=-1.0, u_clamp_min=1.0)
