@@ -70,7 +70,7 @@ def cmd_simulate(args) -> int:
         line.end()
     print(format_table(result))
     if args.json:
-        _write_json(args.json, result.to_json())
+        write_json(args.json, result.to_json())
     if args.mcap:
         print(f'recorded to {args.mcap}')
     return 1 if result.error else 0
@@ -94,7 +94,7 @@ def _simulate_without_samples(scene, args) -> int:
     result = run_without_samples(scene, preset=args.preset)
     print(format_table(result))
     if args.json:
-        _write_json(args.json, result.to_json())
+        write_json(args.json, result.to_json())
     return 1 if result.error else 0
 
 
@@ -121,18 +121,18 @@ def writable_output(path, flag) -> str:
     return target
 
 
-def _finite_or_null(value):
+def finite_or_null(value):
     """JSON has no NaN or infinity: such a number is written as null."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
-        return {k: _finite_or_null(v) for k, v in value.items()}
+        return {k: finite_or_null(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite_or_null(v) for v in value]
+        return [finite_or_null(v) for v in value]
     return value
 
 
-def _write_json(path, data):
+def write_json(path, data):
     """Written to a temporary file next to ``path`` and renamed over it: a reader never sees
     half a file, and a failure leaves no temporary file behind."""
     import tempfile
@@ -143,7 +143,7 @@ def _write_json(path, data):
     os.fchmod(fd, 0o666 & ~umask)     # as open() would create it, not mkstemp's 0600
     try:
         with os.fdopen(fd, 'w', encoding='utf-8') as f:
-            json.dump(_finite_or_null(data), f, indent=1, allow_nan=False)
+            json.dump(finite_or_null(data), f, indent=1, allow_nan=False)
         os.replace(tmp, path)
     except BaseException:
         os.unlink(tmp)

@@ -64,17 +64,24 @@ def fig3_controllers(runs, out):
     return fig
 
 
-def fig4_link_angles(run, out):
+def _two_time_series(t, series, ylabels, titles):
+    """Two panels over t, one above the other: (a) and (b)."""
     plt = _plt()
     fig, axes = plt.subplots(2, 1, figsize=FIGURE_INCHES, sharex=True)
-    for k, ax in enumerate(axes):
-        ax.plot(run.t, _deg(run.q[:, k]), lw=0.8)
-        ax.set_ylabel(f'q{k + 1} [deg]')
-        ax.set_title(f'({"ab"[k]}) angle q{k + 1}(t)', fontsize=9)
+    for ax, y, ylabel, title in zip(axes, series, ylabels, titles):
+        ax.plot(t, y, lw=0.8)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel('t [s]')
     _layout(fig)
     return fig
+
+
+def fig4_link_angles(run, out):
+    return _two_time_series(run.t, [_deg(run.q[:, k]) for k in (0, 1)],
+                            [f'q{k + 1} [deg]' for k in (0, 1)],
+                            [f'({"ab"[k]}) angle q{k + 1}(t)' for k in (0, 1)])
 
 
 def fig5_phase_portraits(run, out):
@@ -109,16 +116,9 @@ def fig6_poincare(run, sections, out):
 
 
 def fig7_tip_velocity(run, v_tip, out):
-    plt = _plt()
-    fig, axes = plt.subplots(2, 1, figsize=FIGURE_INCHES, sharex=True)
-    for k, ax in enumerate(axes):
-        ax.plot(run.t, v_tip[:, k], lw=0.8)
-        ax.set_ylabel(f'v{"xy"[k]} [m/s]')
-        ax.set_title(f'({"ab"[k]}) tip velocity along {"xy"[k]}', fontsize=9)
-        ax.grid(alpha=0.3)
-    axes[-1].set_xlabel('t [s]')
-    _layout(fig)
-    return fig
+    return _two_time_series(run.t, [v_tip[:, k] for k in (0, 1)],
+                            [f'v{"xy"[k]} [m/s]' for k in (0, 1)],
+                            [f'({"ab"[k]}) tip velocity along {"xy"[k]}' for k in (0, 1)])
 
 
 def _trace(run, k):

@@ -6,7 +6,6 @@ benchmark compare like with like on the same machine at the same moment.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -159,23 +158,11 @@ def table(header, rows, align=None) -> str:
     return '\n'.join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
 
 
-def _clean(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
-
-
 def write_json(path, data) -> None:
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    tmp = path + '.tmp'
-    with open(tmp, 'w', encoding='utf-8') as f:
-        json.dump(_clean(data), f, indent=1)
-    os.replace(tmp, path)
+    """The CLI's atomic JSON writer (non-finite numbers as null), creating the directory."""
+    from ..cli import write_json as write_atomically
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    write_atomically(path, data)
     print(f'wrote {path}')
 
 
