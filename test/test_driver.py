@@ -150,7 +150,7 @@ def test_pause_freezes_physics_and_watchdog_and_step_advances_one_period_each(sc
     loop = make_loop(scene, clock, {100.0: [1.0, 2.0]}, published, timeout=0.01)
     for _ in range(3):
         loop.realtime_period()
-    loop.paused = True
+    loop.set_paused(True)
     for _ in range(50):                                 # 50 ms paused: longer than the timeout
         assert loop.realtime_period() is None
     assert {round(t.t * RATE) for t in published[3:]} == {3}
@@ -159,7 +159,7 @@ def test_pause_freezes_physics_and_watchdog_and_step_advances_one_period_each(sc
     ticks = [loop.realtime_period() for _ in range(3)]
     assert [round(t.t * RATE) for t in ticks[:2]] == [4, 5] and ticks[2] is None
     assert loop.arm.command == [1.0, 2.0] and loop.watchdog.state == 'ok'
-    loop.paused = False
+    loop.set_paused(False)
     loop.realtime_period()
     assert loop.arm.periods == 6 and loop.arm.command == [1.0, 2.0]
 
@@ -178,6 +178,26 @@ def test_reset_returns_to_the_initial_state_with_brakes_on(scene):
     assert published[-1].t == 0.0 and published[-1].position == initial.position
     loop.command([1.0, 0.0], clock.now)
     assert round(loop.realtime_period().t * RATE) == 1
+
+
+def test_lockstep_pacing_restarts_after_a_reset_and_leaves_pauses_out(scene):
+    clock = FakeClock()
+    loop = make_loop(scene, clock)
+    for _ in range(3):
+        loop.command([0.0, 0.0], clock.now)
+        loop.lockstep_period(clock.now, rate_factor=1.0)
+    loop.set_paused(True)
+    clock.now += 5.0                                    # 5 s paused
+    loop.set_paused(False)
+    clock.sleeps.clear()
+    loop.command([0.0, 0.0], clock.now)
+    loop.lockstep_period(clock.now, rate_factor=1.0)
+    assert clock.sleeps == pytest.approx([P])           # paced, no catching up on the pause
+    clock.now += 2.0
+    loop.request_reset(timeout=None)
+    loop.command([0.0, 0.0], clock.now)
+    loop.lockstep_period(clock.now, rate_factor=1.0)
+    assert loop.arm.periods == 1 and clock.sleeps == pytest.approx([P, P])
 
 
 def test_e_stop_zeroes_the_torque_at_the_next_period_until_cleared(scene):

@@ -220,6 +220,18 @@ class DriverLoop:
             self.log('info', 'commands resumed')
 
     # -------------------------------------------------------------------- control
+    def set_paused(self, paused):
+        """Freeze (True) or resume the physics; the watchdog's and lockstep's clocks leave
+        the paused time out, so nothing times out or catches up on resume."""
+        now = self.clock()
+        if paused and self._paused_at is None:
+            self._paused_at = now
+        elif not paused and self._paused_at is not None:
+            self._frozen += now - self._paused_at
+            self._paused_at = None
+            self._steps = 0
+        self.paused = paused
+
     def request_steps(self, n):
         self._steps += n
 
@@ -249,13 +261,10 @@ class DriverLoop:
             self.commands = self.impacts = self.skipped = self.flooded = self.stale = 0
             self.first_command_wall = None
             self._steps = 0
+            # a new schedule from now on: the next period is due one period later
+            self.start_wall, self._k, self._frozen = now, -1, 0.0
+            self._paused_at = now if self.paused else None
             self._reset_done.set()
-        if self.paused and self._paused_at is None:
-            self._paused_at = now
-        elif not self.paused and self._paused_at is not None:
-            self._frozen += now - self._paused_at
-            self._paused_at = None
-            self._steps = 0
 
     def _count(self, tick):
         self.impacts += len(tick.impacts)
@@ -328,7 +337,8 @@ class DriverLoop:
             self.start_wall = woke
         taken = woke - arrived
         if rate_factor > 0:
-            due = self.start_wall + (self.arm.periods + 1) / (self.arm.rate * rate_factor)
+            due = self.start_wall + self._frozen + \
+                (self.arm.periods + 1) / (self.arm.rate * rate_factor)
             if due > woke:
                 self.sleep(due - woke)
                 woke = self.clock()

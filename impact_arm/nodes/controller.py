@@ -278,8 +278,9 @@ class Controller(Node):
                                       f're-armed', throttle_duration_sec=2.0)
             self.next_tick = t
             self.waiting = None
-            self.wrench_stamp = -math.inf
-            self.normal_force = None
+            if self.wrench_stamp > t + STAMP_EPS:   # of the old time line (the new one's
+                self.wrench_stamp = -math.inf         # wrench may be here already)
+                self.normal_force = None
             # time went back (a simulator ~/reset, a replay restarted): the cycle starts
             # again from its down half
             self.ctrl.rearm(restart=t < self.latest[0])

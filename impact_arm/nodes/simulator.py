@@ -235,7 +235,7 @@ class Simulator(Node):
 
     def _on_pause(self, request, response):
         was = self.loop.paused
-        self.loop.paused = bool(request.data)
+        self.loop.set_paused(bool(request.data))
         if self.lockstep and was and not self.loop.paused and self.loop.watchdog.pending:
             self._lockstep_period(time.monotonic())   # the exchange waits for a period
         response.success = True
