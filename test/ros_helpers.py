@@ -13,6 +13,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -20,6 +21,67 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PYTHON = sys.executable
 HERE = os.path.abspath(__file__)
+
+
+class Probe:
+    """Subscriptions that store (receive time, message) and publishers, on one node."""
+
+    def __init__(self, domain):
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        self.rclpy = rclpy
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node('test_probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.lock = threading.Lock()
+        self.subscriptions = {}
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception as exc:  # noqa: BLE001 - keep spinning unless shutting down
+                if self.context.ok():
+                    print(f'probe executor: {exc!r}', file=sys.stderr)
+
+    def listen(self, msg_type, topic, depth=1000, transient=False, keep=None):
+        """Messages of ``topic`` as they arrive, those ``keep(msg)`` accepts when given."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+        store = []
+        qos = QoSProfile(depth=depth, durability=DurabilityPolicy.TRANSIENT_LOCAL
+                         if transient else DurabilityPolicy.VOLATILE)
+        with self.lock:
+            self.subscriptions[id(store)] = self.node.create_subscription(
+                msg_type, topic, lambda m: (keep is None or keep(m))
+                and store.append((time.monotonic(), m)), qos)
+        return store
+
+    def forget(self, *stores):
+        """Stop filling these stores (a busy probe must not lag behind later tests)."""
+        with self.lock:
+            for store in stores:
+                self.node.destroy_subscription(self.subscriptions.pop(id(store)))
+
+    def publisher(self, msg_type, topic):
+        with self.lock:
+            return self.node.create_publisher(msg_type, topic, 10)
+
+    def close(self):
+        self.rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=2)
+
+
+@pytest.fixture(scope='module')
+def probe(ros_env):
+    """A Probe in the test module's domain."""
+    p = Probe(int(ros_env['ROS_DOMAIN_ID']))
+    yield p
+    p.close()
 
 
 def make_env(domain=None, **extra) -> dict:

@@ -4,45 +4,10 @@ import math
 import threading
 import time
 
-import pytest
 
-from ros_helpers import node_args, ros_env, start_process, wait_for  # noqa: F401
+from ros_helpers import node_args, probe, ros_env, start_process, wait_for  # noqa: F401
 
 PERIODS = 150
-
-
-class Driver:
-    """A test participant that answers every new joint state with the next command."""
-
-    def __init__(self, domain):
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
-        self.rclpy, self.context = rclpy, Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node('test_driver', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:  # noqa: BLE001 - shutting down
-                pass
-
-    def close(self):
-        self.rclpy.try_shutdown(context=self.context)
-        self.thread.join(timeout=2)
-
-
-@pytest.fixture(scope='module')
-def driver(ros_env):
-    d = Driver(int(ros_env['ROS_DOMAIN_ID']))
-    yield d
-    d.close()
 
 
 def torques(k):
@@ -53,7 +18,7 @@ def stamp(msg):
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
-def drive(driver, env, workdir, kind):
+def drive(probe, env, workdir, kind):
     """A lockstep run commanded by ``kind`` ('array' or 'joint_state'); returns the joint
     states by stamp, the topic-hardware states by stamp, and the final diagnostics."""
     from diagnostic_msgs.msg import DiagnosticArray
@@ -61,7 +26,7 @@ def drive(driver, env, workdir, kind):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, String
     from visualization_msgs.msg import MarkerArray
-    node = driver.node
+    node = probe.node   # answers every new joint state with the next command
     states, hw_states, diags, descriptions, markers = {}, {}, [], [], []
     if kind == 'array':
         pub = node.create_publisher(Float64MultiArray, '/effort_controller/commands', 10)
@@ -123,10 +88,10 @@ def rejected(diag):
     return int({kv.key: kv.value for kv in diag.status[0].values}['commands_rejected'])
 
 
-def test_joint_state_commands_move_the_arm_exactly_as_array_commands(driver, ros_env,
+def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_env,
                                                                      tmp_path):
-    by_array, hw_array, _ = drive(driver, ros_env, tmp_path, 'array')
-    by_name, hw_name, diags = drive(driver, ros_env, tmp_path, 'joint_state')
+    by_array, hw_array, _ = drive(probe, ros_env, tmp_path, 'array')
+    by_name, hw_name, diags = drive(probe, ros_env, tmp_path, 'joint_state')
     assert len(by_array) == len(by_name) == PERIODS + 1     # the initial state and PERIODS
     assert by_name == by_array                    # bit-identical lockstep runs
     moved = [v[0] for v in by_array.values()]
