@@ -4,7 +4,6 @@ import math
 import threading
 import time
 
-
 from ros_helpers import node_args, probe, ros_env, start_process, wait_for  # noqa: F401
 
 PERIODS = 150

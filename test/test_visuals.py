@@ -124,3 +124,18 @@ def test_stored_definitions_equal_the_official_ones(recording):
         assert name in types and len(types) > 3
         for type_name, fields in types.items():
             assert fields == official.fielddefs[type_name], type_name
+
+
+def test_marker_bytes_built_from_a_kept_prefix_equal_whole_message_serialization():
+    """The markers' CDR is a cached prefix (surfaces, impact points) plus the arrow: it must be
+    byte for byte what serializing the whole MarkerArray gives, whatever the prefix length
+    does to the arrow's alignment."""
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    from impact_arm.io.msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
+    for n in range(5):
+        items = [Marker(ns='x' * k, id=k, text='t' * (3 * k)) for k in range(n)]
+        last = Marker(ns='arrow', frame_locked=True)
+        last.points = [last.pose.position] * (n % 3)
+        data = append_cdr(sequence_cdr_prefix(items, n + 1), last)
+        assert data == serialize_cdr(MarkerArray(markers=items + [last]))

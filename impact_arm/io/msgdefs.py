@@ -294,6 +294,24 @@ def serialize_cdr(msg) -> bytes:
     return bytes(buf)
 
 
+def sequence_cdr_prefix(items: list, count: int) -> bytes:
+    """The start of the CDR of a message whose only field is a sequence of ``count``
+    messages: encapsulation, ``count`` and the first ``items``. ``append_cdr`` adds the
+    others; the result is exactly ``serialize_cdr`` of the whole message (alignment counts
+    from the payload, so a prefix that does not change can be kept as bytes)."""
+    buf = bytearray(b'\x00\x01\x00\x00') + struct.pack('<I', count)
+    for item in items:
+        _write_message(buf, item)
+    return bytes(buf)
+
+
+def append_cdr(prefix: bytes, msg) -> bytes:
+    """``prefix`` (CDR so far, encapsulation included) followed by ``msg``'s CDR."""
+    buf = bytearray(prefix)
+    _write_message(buf, msg)
+    return bytes(buf)
+
+
 # ----------------------------------------------------------------------- CDR, reading
 class CdrReader:
     """A cursor over CDR bytes (encapsulation header read, alignment relative to the

@@ -27,6 +27,7 @@ import json
 import math
 
 from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, TF_TYPE, VISUAL_TOPICS
+from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (SURFACE_THICKNESS_PER_REACH, WORLD, moving_transforms, robot_description,
                    static_transforms, surface_frames)
 
@@ -62,13 +63,16 @@ class SceneVisuals:
         self._TF = message_class(TF_TYPE)   # the stand-in where tf2_msgs is missing
         from geometry_msgs.msg import Point, TransformStamped
         from std_msgs.msg import String
-        from visualization_msgs.msg import Marker, MarkerArray
+        from visualization_msgs.msg import Marker
         self._TransformStamped, self._String, self._Point = TransformStamped, String, Point
-        self._Marker, self._MarkerArray = Marker, MarkerArray
+        self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
         self._next_tf = 0           # index k of the next /tf time k / tf_rate
         self._strongest = None      # (|F|, q, (F_t, F_n)) since the last markers
         self.impact_points = []     # (x, y) where each impact touched the surface
+        self._fixed_markers = []   # surfaces, then impact points, as drawn so far
+        self._drawn_points = 0
+        self._prefix = None        # their CDR, the start of every MarkerArray
 
     # ------------------------------------------------------------------ once per run
     def description(self):
@@ -106,15 +110,29 @@ class SceneVisuals:
         self.impact_points.append(tip_position(self.scene.lengths, [
             math.radians(a) for a in record['q_contact_deg']]))
 
-    def markers(self, t_ns: int):
+    def markers(self, t_ns: int) -> bytes:
+        """The serialized MarkerArray at ``t_ns``: surfaces, impact points, then the arrow.
+        Surfaces and impact points sit in fixed frames, so their markers are built and
+        serialized once (stamp 0: the latest transform) and only the arrow is added: building
+        and serializing every marker each time took 0.7 + 2.9 ms with 15 impacts, at tf_rate
+        in the simulator and the recorder."""
         M = self._Marker
-        out = self._MarkerArray()
-        thickness = SURFACE_THICKNESS_PER_REACH * self.reach
-        for i, frame in enumerate(surface_frames(self.scene)):
-            m = self._marker('surface', i, M.CUBE, frame, t_ns, (0.6, 0.6, 0.6, 0.5))
-            m.pose.position.y = -thickness / 2
-            m.scale.x, m.scale.y, m.scale.z = 2 * self.reach, thickness, self.reach / 2
-            out.markers.append(m)
+        if self._prefix is None:
+            thickness = SURFACE_THICKNESS_PER_REACH * self.reach
+            for i, frame in enumerate(surface_frames(self.scene)):
+                m = self._marker('surface', i, M.CUBE, frame, 0, (0.6, 0.6, 0.6, 0.5))
+                m.pose.position.y = -thickness / 2
+                m.scale.x, m.scale.y, m.scale.z = 2 * self.reach, thickness, self.reach / 2
+                self._fixed_markers.append(m)
+        if self._prefix is None or self._drawn_points < len(self.impact_points):
+            for k in range(self._drawn_points, len(self.impact_points)):
+                x, y = self.impact_points[k]
+                m = self._marker('impact_points', k, M.SPHERE, WORLD, 0, (1.0, 0.8, 0.0, 1.0))
+                m.pose.position.x, m.pose.position.y = x, y
+                m.scale.x = m.scale.y = m.scale.z = 0.02 * self.reach
+                self._fixed_markers.append(m)
+            self._drawn_points = len(self.impact_points)
+            self._prefix = sequence_cdr_prefix(self._fixed_markers, len(self._fixed_markers) + 1)
         arrow = self._marker('contact_force', 0, M.ARROW, WORLD, t_ns, (1.0, 0.2, 0.1, 1.0))
         if self._strongest is None:
             arrow.action = M.DELETE
@@ -126,14 +144,8 @@ class SceneVisuals:
                             self._Point(x=x + length * f_t / magnitude,
                                         y=y + length * f_n / magnitude)]
             arrow.scale.x, arrow.scale.y = 0.01 * self.reach, 0.02 * self.reach  # shaft, head
-        out.markers.append(arrow)
-        for k, (x, y) in enumerate(self.impact_points):
-            m = self._marker('impact_points', k, M.SPHERE, WORLD, t_ns, (1.0, 0.8, 0.0, 1.0))
-            m.pose.position.x, m.pose.position.y = x, y
-            m.scale.x = m.scale.y = m.scale.z = 0.02 * self.reach
-            out.markers.append(m)
         self._strongest = None
-        return out
+        return append_cdr(self._prefix, arrow)
 
     # ------------------------------------------------------------------ helpers
     def _transform(self, t, t_ns):
@@ -200,7 +212,8 @@ class VisualsWriter:
         self.visuals.add_impact(record)
 
     def _write(self, topic, msg, log_time_ns):
-        from .msgdefs import serialize_cdr
-        self.writer.write(topic, serialize_cdr(msg), log_time_ns, log_time_ns)
+        """``msg``: a message, or its CDR bytes."""
+        data = msg if isinstance(msg, bytes) else serialize_cdr(msg)
+        self.writer.write(topic, data, log_time_ns, log_time_ns)
         self.counts[topic] += 1
 
