@@ -7,17 +7,10 @@ import time
 
 import pytest
 
-from ros_helpers import ros_env, start_process, wait_for  # noqa: F401 (fixture)
-from test_nodes import Probe, controller, diagnostics_values, from_simulator, simulator, stamp
+from ros_helpers import probe, ros_env, start_process, wait_for  # noqa: F401 (fixtures)
+from test_nodes import controller, diagnostics_values, from_simulator, simulator, stamp
 
 ARTICLE_PERIOD = 0.397
-
-
-@pytest.fixture(scope='module')
-def probe(ros_env):
-    p = Probe(int(ros_env['ROS_DOMAIN_ID']))
-    yield p
-    p.close()
 
 
 def call(probe, srv_type, name, request, timeout=10.0):
