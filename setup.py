@@ -18,7 +18,7 @@ setup(
     # rclpy and the message packages come from the ROS install (package.xml) or, without ROS,
     # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
     install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib',
-                      'numba'],
+                      'numba', 'rosbags'],
     # studies (impact-arm sweep): Parquet tables and the Dask scheduler; imported lazily, so
     # the nodes and `simulate` never load them
     extras_require={'studies': ['pyarrow', 'dask[distributed]']},

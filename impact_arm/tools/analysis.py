@@ -1,6 +1,7 @@
 """``impact-arm analyze FILE.mcap [--out DIR]``: impact table, limit cycle, Poincaré sections,
 the article's figures and a markdown report, from a recording alone (no rclpy; CDR is decoded
-by ``msgdefs.deserialize_cdr``).
+by ``rosbags``' typestore for ROS 2 Kilted: speed does not matter here, and it is the
+reference decoder the tests already trust; ``io/wire.py`` stays the hot path's codec).
 
 What is read (docs/topics.md): ``/joint_states`` (relative joint angles → absolute link angles
 q1, q2 = joint1 + joint2 and their rates; time = header stamp), ``/impact_report`` (one JSON
@@ -54,7 +55,8 @@ def _quiet(text):
 def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
     from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
-    from ..io.msgdefs import deserialize_cdr
+    from rosbags.typesys import Stores, get_typestore
+    deserialize_cdr = get_typestore(Stores.ROS2_KILTED).deserialize_cdr
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise AnalysisError(f'{path}: no such file')
