@@ -248,7 +248,7 @@ def test_output_paths_are_refused_before_the_run(tmp_path, capsys, flag):
 
 def test_json_through_a_symlink_keeps_the_link_and_writes_no_nan(tmp_path, capsys):
     import json
-    from impact_arm.tools.cli import _write_json, main
+    from impact_arm.tools.cli import write_json, main
     real = tmp_path / 'real.json'
     real.write_text('{}')
     link = tmp_path / 'link.json'
@@ -257,7 +257,7 @@ def test_json_through_a_symlink_keeps_the_link_and_writes_no_nan(tmp_path, capsy
                  '--json', str(link)]) == 0
     assert link.is_symlink() and 'impacts' in json.loads(real.read_text())
     assert 'link is kept' in capsys.readouterr().out
-    _write_json(str(real), {'a': float('nan'), 'b': [float('inf'), 1.0]})
+    write_json(str(real), {'a': float('nan'), 'b': [float('inf'), 1.0]})
     assert json.loads(real.read_text()) == {'a': None, 'b': [None, 1.0]}
     assert sorted(p.name for p in tmp_path.iterdir()) == ['link.json', 'real.json', 'short.yaml']
 
