@@ -128,10 +128,9 @@ def _finite(value) -> bool:
     return True
 
 
-def classify(text: str, warm_up=lambda model: None) -> dict:
+def classify(text: str, warm_up=lambda scene: None) -> dict:
     """Load and run one scene text; the class and a one-line detail."""
     from ...core.errors import SceneError
-    from ...core.model import ArmModel
     from ...core.scene import scene_from_text
     from ...core.simulate import run
     try:
@@ -142,7 +141,7 @@ def classify(text: str, warm_up=lambda model: None) -> dict:
         return {'class': 'refused' if one_line else 'traceback',
                 'detail': message[:300].replace('\n', '\\n')}
     try:
-        warm_up(ArmModel(scene))
+        warm_up(scene)
         result = run(scene)
         if result.error:
             return {'class': 'stopped-at-limit', 'detail': result.error[:300]}
@@ -156,10 +155,14 @@ def classify(text: str, warm_up=lambda model: None) -> dict:
 def worker():
     """Reads one JSON-encoded scene text per line; writes 'start' once the scene's kernel is
     compiled and loaded, then the result (both JSON lines)."""
-    from ...core.integrator import PhaseIntegrator
+    from ...core.errors import SimulationError
+    from ...core.simulate import run
 
-    def ready(model):
-        PhaseIntegrator(model).advance(1e-9)       # compile / load this shape's kernel
+    def ready(scene):
+        try:        # compile or load everything this scene shape runs (minutes, once)
+            run(scene, t_max=1e-6)
+        except SimulationError:
+            pass
         print(json.dumps({'start': True}), flush=True)
     for line in sys.stdin:
         text = json.loads(line)
@@ -187,7 +190,7 @@ class Worker:
             if line.startswith('{'):
                 return json.loads(line)
 
-    def classify(self, text, timeout, compile_timeout=120.0):
+    def classify(self, text, timeout, compile_timeout=300.0):
         self.proc.stdin.write(json.dumps(text) + '\n')
         self.proc.stdin.flush()
         first = self._line(time.monotonic() + compile_timeout)
