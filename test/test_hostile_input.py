@@ -12,14 +12,15 @@ from hypothesis import strategies as st
 
 from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
-from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_fields,
-                                wrench_stamped_fields)
+from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_command,
+                                joint_state_fields, wrench_stamped_fields)
 
 from scenes import PAPER, paper_dict
 
 BOUNDED = settings(max_examples=150, deadline=None, derandomize=True,
                    suppress_health_check=list(HealthCheck))
-READERS = (float64_array_data, joint_state_fields, wrench_stamped_fields)
+READERS = (float64_array_data, joint_state_fields, wrench_stamped_fields,
+           lambda raw: joint_state_command(raw, ('joint1', 'joint2')))
 with open(PAPER, encoding='utf-8') as _f:
     PAPER_TEXT = _f.read()
 

@@ -34,9 +34,9 @@ class MalformedMessage(ValueError):
 def _reader(function):
     """Any failure while reading hostile bytes becomes one ``MalformedMessage``."""
     @functools.wraps(function)
-    def read(raw):
+    def read(raw, *args):
         try:
-            return function(raw)
+            return function(raw, *args)
         except MalformedMessage:
             raise
         except (ValueError, struct.error, IndexError, OverflowError, MemoryError) as exc:
@@ -245,6 +245,7 @@ def wrench_stamped_fields(raw: bytes):
     return sec, nanosec, r.unpack('d', 8, 3)
 
 
+@_reader
 def joint_state_command(raw: bytes, joints) -> list:
     """The efforts of a serialized ``sensor_msgs/JointState`` command, in the order of
     ``joints`` (matched by name; position and velocity ignored), as topic_based_ros2_control

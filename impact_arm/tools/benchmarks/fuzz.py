@@ -158,11 +158,20 @@ def worker():
     from ...core.errors import SimulationError
     from ...core.simulate import run
 
+    shapes = set()
+
     def ready(scene):
-        try:        # compile or load everything this scene shape runs (minutes, once)
-            run(scene, t_max=1e-6)
-        except SimulationError:
-            pass
+        # compile or load everything a scene of this shape runs (minutes, once per shape):
+        # the kernel, and the laws and metrics first called at an impact, so 1 s of the run
+        shape = (scene.n_links, scene.gravity == 0, scene.controller.law,
+                 scene.controller.rate > 0, scene.integrator.method,
+                 tuple((s.law, s.mu > 0) for s in scene.surfaces))
+        if shape not in shapes:
+            shapes.add(shape)
+            try:
+                run(scene, t_max=min(scene.t_max, 1.0))
+            except SimulationError:
+                pass
         print(json.dumps({'start': True}), flush=True)
     for line in sys.stdin:
         text = json.loads(line)
