@@ -7,8 +7,10 @@ import signal
 import struct
 import time
 
-from ros_helpers import PYTHON, node_args, ros_env, start_process, wait_for  # noqa: F401
-from test_nodes import HERE, probe  # noqa: F401
+from ros_helpers import (PYTHON, node_args, probe, ros_env, start_process,  # noqa: F401
+                         wait_for)
+
+HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def garbage_payloads(good, rng, count):
