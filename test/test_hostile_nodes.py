@@ -57,6 +57,9 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
         rng = random.Random(17)
         # (only now: while a wrench publisher exists the controller waits for wrenches)
         wrenches = probe.publisher(WrenchStamped, '/contact_wrench')
+        assert wait_for(lambda: states.get_subscription_count() >= 1 and
+                        wrenches.get_subscription_count() >= 1, timeout=20), \
+            (states.get_subscription_count(), wrenches.get_subscription_count())
         # other joints' names: a mutation that still parses is ignored, not a state to act on
         good = serialize_message(JointState(name=['jointA', 'jointB'], position=[0.1, 0.2],
                                             velocity=[0.0, 0.0]))
