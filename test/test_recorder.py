@@ -170,3 +170,23 @@ def test_bad_parameter_names_the_parameter(ros_env, tmp_path):
         code = rec.wait(30)
     assert code == 2 and 'flush_interval' in rec.stderr and '> 0' in rec.stderr
     time.sleep(0)  # nothing left running: start_process ends it by PID
+
+
+def test_impact_reports_are_read_as_dds_sends_them():
+    """The recorder draws each impact from the report's CDR: rclpy's bytes, with or without
+    the wire's padding to 4 bytes, give the text back; garbage is refused with an error the
+    node catches (SerdeError), never drawn."""
+    from rclpy.serialization import serialize_message
+    from rosbags.serde import SerdeError
+    from std_msgs.msg import String
+
+    from impact_arm.nodes.recorder import _string_reader
+    read = _string_reader()
+    for text in ('', 'ab', json.dumps({'q_contact_deg': [30.0, -12.5]})):
+        raw = serialize_message(String(data=text))
+        assert read(raw).data == text
+        assert read(raw + bytes(-len(raw) % 4)).data == text
+    header = b'\x00\x01\x00\x00'
+    for garbage in (b'', header + b'\xff\xff\xff\x7fab', header + b'\x02\0\0\0\xff\0'):
+        with pytest.raises(SerdeError):
+            read(garbage)

@@ -49,8 +49,8 @@ def _tf_message():
     """tf2_msgs/msg/TFMessage (``geometry_msgs/TransformStamped[] transforms``) for machines
     without tf2_msgs: there is no PyPI wheel of it, yet every recording must store /tf with
     its full definition. Its only field's type comes from the installed geometry_msgs, so
-    ``message_definition``, ``serialize_cdr`` and ``deserialize_cdr`` treat it like an
-    installed class; rclpy cannot (no type support), which ``has_type_support`` tells."""
+    ``message_definition`` and ``serialize_cdr`` treat it like an installed class; rclpy
+    cannot (no type support), which ``has_type_support`` tells."""
     cls = _STAND_IN_CLASSES.get('tf2_msgs/msg/TFMessage')
     if cls is None:
         from rosidl_parser import definition as d
@@ -78,6 +78,19 @@ def _tf_message():
 
 # types every recording needs whose Python package may be missing (builders of stand-ins)
 STAND_INS = {'tf2_msgs/msg/TFMessage': _tf_message}
+
+
+def typestore():
+    """rosbags' Kilted type store: its CDR (de)serialization, where speed does not matter
+    (offline writing, reading files back); the live hot path uses io/wire.py."""
+    global _TYPESTORE
+    if _TYPESTORE is None:
+        from rosbags.typesys import Stores, get_typestore
+        _TYPESTORE = get_typestore(Stores.ROS2_KILTED)
+    return _TYPESTORE
+
+
+_TYPESTORE = None
 
 
 def type_name_of(msg_or_class) -> str:
@@ -310,81 +323,3 @@ def append_cdr(prefix: bytes, msg) -> bytes:
     buf = bytearray(prefix)
     _write_message(buf, msg)
     return bytes(buf)
-
-
-# ----------------------------------------------------------------------- CDR, reading
-class CdrReader:
-    """A cursor over CDR bytes (encapsulation header read, alignment relative to the
-    payload)."""
-    __slots__ = ('data', 'pos', 'endian')
-
-    def __init__(self, data):
-        self.data = memoryview(data)
-        if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
-            raise ValueError('not a CDR message (bad encapsulation header)')
-        self.endian = '<' if data[1] == 1 else '>'
-        self.pos = 4
-
-    def align(self, n):
-        self.pos += -(self.pos - 4) % n
-
-    def unpack(self, fmt, size, count=1):
-        end = self.pos + size * count
-        if end > len(self.data):
-            raise ValueError('CDR message too short for its type')
-        values = struct.unpack_from(f'{self.endian}{count}{fmt}', self.data, self.pos)
-        self.pos = end
-        return values
-
-
-def _read(r: CdrReader, t):
-    from rosidl_parser import definition as d
-    if isinstance(t, d.BasicType):
-        name = t.typename
-        if name not in _FORMATS:
-            raise NotImplementedError(f'CDR of {name}')
-        r.align(_SIZES[name])
-        v = r.unpack(_FORMATS[name], _SIZES[name])[0]
-        return bytes([v]) if name == 'octet' else (chr(v) if name == 'char' else v)
-    if isinstance(t, (d.UnboundedString, d.BoundedString)):
-        r.align(4)
-        n = r.unpack('I', 4)[0]
-        raw = r.data[r.pos:r.pos + n]
-        r.pos += n
-        return bytes(raw[:-1] if n else raw).decode()
-    if isinstance(t, d.NamespacedType):
-        return _read_message(r, message_class('/'.join(t.namespaces + [t.name])))
-    if isinstance(t, d.AbstractNestedType):
-        if isinstance(t, d.AbstractSequence):
-            r.align(4)
-            n = r.unpack('I', 4)[0]
-        else:
-            n = t.size
-        et = t.value_type
-        if isinstance(et, d.BasicType) and et.typename in _FORMATS:
-            if not n:
-                return bytes() if et.typename == 'octet' else []
-            r.align(_SIZES[et.typename])
-            values = r.unpack(_FORMATS[et.typename], _SIZES[et.typename], n)
-            if et.typename == 'octet':
-                return bytes(values)
-            return [chr(v) for v in values] if et.typename == 'char' else list(values)
-        return [_read(r, et) for _ in range(n)]
-    raise NotImplementedError(f'CDR of {type(t).__name__}')
-
-
-def _read_message(r: CdrReader, cls):
-    fields = _fields(cls)
-    msg = cls()
-    if not fields:
-        r.unpack('B', 1)
-    for name, t in fields:
-        setattr(msg, name, _read(r, t))
-    return msg
-
-
-def deserialize_cdr(data, type_name_or_class):
-    """The message object of CDR ``data`` (the inverse of ``serialize_cdr``; no rclpy)."""
-    cls = type_name_or_class if isinstance(type_name_or_class, type) else \
-        message_class(type_name_or_class)
-    return _read_message(CdrReader(data), cls)

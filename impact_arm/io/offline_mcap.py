@@ -60,8 +60,11 @@ import json
 import math
 import os
 
+import numpy as np
+
 from ..contract import (CONTACT_WRENCH, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, TOPICS,
                         TRACE_QOS, TRACE_TYPE, WRENCH_FRAME, joint_names, to_joint_space)
+from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 
 OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
@@ -80,11 +83,6 @@ def sim_time_ns(t: float) -> int:
     return int(round(t * 1e9))
 
 
-def _stamp(msg_header, t_ns: int):
-    msg_header.stamp.sec = t_ns // 1_000_000_000
-    msg_header.stamp.nanosec = t_ns % 1_000_000_000
-
-
 class OfflineRecorder:
     """Observer of ``simulate.run`` writing the live system's topics to an MCAP file.
 
@@ -94,18 +92,14 @@ class OfflineRecorder:
     def __init__(self, path, scene, *, control_rate=None, preset=None,
                  flush_interval: float = 0.5, compression: str = 'zstd',
                  tf_rate: float = DEFAULT_TF_RATE):
-        from geometry_msgs.msg import WrenchStamped
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
-
         from .. import __version__
         from .mcap_ros2 import Ros2McapWriter, package_version, ros_distro
 
         self.path = os.fspath(path)
         self.scene = scene
         self.n = scene.n_links
-        self._JointState, self._WrenchStamped = JointState, WrenchStamped
-        self._String, self._Array, self._Dim = String, Float64MultiArray, MultiArrayDimension
+        self._store = typestore()
+        self._types = self._store.types
         self._names = joint_names(self.n)
         self._columns = trace_columns(self.n)
         self.counts = {topic: 0 for topic in OFFLINE_TOPICS}
@@ -138,48 +132,58 @@ class OfflineRecorder:
     # --- observer interface of simulate.run -----------------------------------------------
     def on_sample(self, sample):
         t_ns = sim_time_ns(sample.t)
-        js = self._JointState()
-        _stamp(js.header, t_ns)
-        js.name = list(self._names)
-        js.position = to_joint_space(sample.q)
-        js.velocity = to_joint_space(sample.qd)
-        js.effort = [float(x) for x in sample.tau]
-        self.writer.write_message(JOINT_STATES, js, t_ns, t_ns)
-        ws = self._WrenchStamped()
-        _stamp(ws.header, t_ns)
-        ws.header.frame_id = WRENCH_FRAME
-        ws.wrench.force.x = float(sample.wrench[0])
-        ws.wrench.force.y = float(sample.wrench[1])
-        self.writer.write_message(CONTACT_WRENCH, ws, t_ns, t_ns)
-        self.counts[JOINT_STATES] += 1
-        self.counts[CONTACT_WRENCH] += 1
+        T = self._types
+        js = T['sensor_msgs/msg/JointState'](
+            header=self._header(t_ns, ''), name=self._names,
+            position=np.array(to_joint_space(sample.q)),
+            velocity=np.array(to_joint_space(sample.qd)),
+            effort=np.array(sample.tau, dtype=np.float64))
+        self._write(JOINT_STATES, js, t_ns)
+        Vector3 = T['geometry_msgs/msg/Vector3']
+        ws = T['geometry_msgs/msg/WrenchStamped'](
+            header=self._header(t_ns, WRENCH_FRAME),
+            wrench=T['geometry_msgs/msg/Wrench'](
+                force=Vector3(x=float(sample.wrench[0]), y=float(sample.wrench[1]), z=0.0),
+                torque=Vector3(x=0.0, y=0.0, z=0.0)))
+        self._write(CONTACT_WRENCH, ws, t_ns)
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record, trace_rows):
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])
-        self.writer.write_message(IMPACT_REPORT, self._String(data=json.dumps(record)),
-                                  t_ns, t_ns)
-        self.writer.write_message(IMPACT_TRACE, self.trace_message(trace_rows), t_ns, t_ns)
-        self.counts[IMPACT_REPORT] += 1
-        self.counts[IMPACT_TRACE] += 1
+        self._write(IMPACT_REPORT, self._types['std_msgs/msg/String'](data=json.dumps(record)),
+                    t_ns)
+        self._write(IMPACT_TRACE, self.trace_message(trace_rows), t_ns)
         self.visuals.impact(record)
         self.writer.flush()  # an impact is never lost, whatever happens later
 
     def trace_message(self, rows):
         """Float64MultiArray holding ``rows`` row-major (layout in the module docstring)."""
         cols = len(self._columns)
-        msg = self._Array()
-        flat = []
         for row in rows:
             if len(row) != cols:
                 raise ValueError(f'trace row of {len(row)} values, expected {cols} '
                                  f'({",".join(self._columns)})')
-            flat.extend(float(v) for v in row)
-        msg.layout.dim = [self._Dim(label='row', size=len(rows), stride=len(rows) * cols),
-                          self._Dim(label=','.join(self._columns), size=cols, stride=cols)]
-        msg.layout.data_offset = 0
-        msg.data = flat
-        return msg
+        T = self._types
+        Dim = T['std_msgs/msg/MultiArrayDimension']
+        return T['std_msgs/msg/Float64MultiArray'](
+            layout=T['std_msgs/msg/MultiArrayLayout'](
+                dim=[Dim(label='row', size=len(rows), stride=len(rows) * cols),
+                     Dim(label=','.join(self._columns), size=cols, stride=cols)],
+                data_offset=0),
+            data=np.array(rows, dtype=np.float64).reshape(len(rows) * cols))
+
+    def _header(self, t_ns: int, frame_id: str):
+        sec, nanosec = divmod(t_ns, 1_000_000_000)
+        T = self._types
+        return T['std_msgs/msg/Header'](
+            stamp=T['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+    def _write(self, topic: str, msg, t_ns: int):
+        # rosbags' CDR (a dataclass per type): faster here than building rclpy messages for
+        # msgdefs.serialize_cdr, and the same bytes
+        self.writer.write(topic, self._store.serialize_cdr(msg, OFFLINE_TOPICS[topic]),
+                          t_ns, t_ns)
+        self.counts[topic] += 1
 
     def close(self, result=None):
         """Flush and close (idempotent). With the run's ``RunResult``, also store its summary

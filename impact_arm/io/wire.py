@@ -24,11 +24,35 @@ from __future__ import annotations
 import functools
 import struct
 
-from .msgdefs import CdrReader, serialize_cdr
+from .msgdefs import serialize_cdr
 
 
 class MalformedMessage(ValueError):
     """Bytes that are not a well-formed message of the expected type."""
+
+
+class CdrReader:
+    """A cursor over CDR bytes (encapsulation header read, alignment relative to the
+    payload)."""
+    __slots__ = ('data', 'pos', 'endian')
+
+    def __init__(self, data):
+        self.data = memoryview(data)
+        if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
+            raise ValueError('not a CDR message (bad encapsulation header)')
+        self.endian = '<' if data[1] == 1 else '>'
+        self.pos = 4
+
+    def align(self, n):
+        self.pos += -(self.pos - 4) % n
+
+    def unpack(self, fmt, size, count=1):
+        end = self.pos + size * count
+        if end > len(self.data):
+            raise ValueError('CDR message too short for its type')
+        values = struct.unpack_from(f'{self.endian}{count}{fmt}', self.data, self.pos)
+        self.pos = end
+        return values
 
 
 def _reader(function):

@@ -28,18 +28,29 @@ import time
 from rclpy.node import Node
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters, ListParameters
+from rosbags.serde import SerdeError
 
 from .. import contract
 from ..contract import TOPICS, TopicQos
 from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, package_version,
                             ros_distro)
-from ..io.msgdefs import deserialize_cdr
+from ..io.msgdefs import typestore
 from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 from ..io.wire import joint_state_fields, wrench_stamped_fields
 from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 RECORDER_MIN_DEPTH = 1000  # reader history: absorbs bursts while a chunk is compressed/written
+
+
+def _string_reader():
+    """CDR of a std_msgs/msg/String -> the message, by rosbags; built here because its first
+    use loads the type store and generates the reader (~1 s on a loaded machine), which the
+    drain loop must not spend at the first impact."""
+    store = typestore()
+    read = functools.partial(store.deserialize_cdr, typename=contract.STRING_TYPE)
+    read(store.serialize_cdr(store.types[contract.STRING_TYPE](data=''), contract.STRING_TYPE))
+    return read
 
 
 def _param(node, name, default, description):
@@ -106,6 +117,7 @@ class Recorder(Node):
                 del self.wanted[topic]
             self._q = None                   # absolute link angles of the latest joint state
             self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
+            self._read_string = _string_reader()
         self.subs = {}
         self.reader = Node('_recorder_reader', context=self.context)
         self._subscribe_known()
@@ -207,8 +219,8 @@ class Recorder(Node):
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
         elif topic == contract.IMPACT_REPORT:
             try:
-                self.visuals.impact(deserialize_cdr(data, contract.STRING_TYPE).data)
-            except (ValueError, KeyError) as e:
+                self.visuals.impact(self._read_string(data).data)
+            except (SerdeError, ValueError, KeyError) as e:
                 self.get_logger().warning(f'impact report not drawn: {e}')
 
     def _flush(self):

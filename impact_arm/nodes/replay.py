@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import threading
 import time
 
@@ -43,6 +42,7 @@ from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
 
 WAIT_SUBSCRIBERS_MAX = 30.0
+PROGRESS_PERIOD = 5.0  # s of wall time between progress lines in the log
 
 PARAMETERS = {  # name: (default, description, check -> converted value or raise)
     'file': ('', 'MCAP file to replay'),
@@ -141,8 +141,8 @@ class Replay(Node):
             self._wait_for_subscribers()
             if self._stop.wait(self.delay):
                 return
-            progress = sys.stderr.isatty()
             wall0 = time.monotonic()
+            next_progress = PROGRESS_PERIOD
             next_clock = 0.0 if self.clock_pub else math.inf
             for due, m in self.plan.events():
                 while True:
@@ -160,9 +160,10 @@ class Replay(Node):
                 if pub is not None:
                     pub.publish(m.data)
                     self.published += 1
-                    if progress and self.published % 500 == 0:
-                        print(f'\r  {self.published} messages, {due:.1f} s', end='',
-                              file=sys.stderr, flush=True)
+                    if now >= next_progress:  # the node's log, not a terminal line of its own
+                        self.get_logger().info(f'{self.published} messages replayed, '
+                                               f'{due:.1f} s of the schedule')
+                        next_progress = now + PROGRESS_PERIOD
         except Exception as e:  # noqa: BLE001 - reported by finish(), exit code 1
             self.error = e
 

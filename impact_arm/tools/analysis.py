@@ -55,8 +55,8 @@ def _quiet(text):
 def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
     from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
-    from rosbags.typesys import Stores, get_typestore
-    deserialize_cdr = get_typestore(Stores.ROS2_KILTED).deserialize_cdr
+    from ..io.msgdefs import typestore
+    deserialize_cdr = typestore().deserialize_cdr
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise AnalysisError(f'{path}: no such file')
