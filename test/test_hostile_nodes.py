@@ -1,6 +1,7 @@
 """Hostile peers on the graph (issue 17 items 1-4): garbage on the controller's raw inputs,
 absurd states, stamp jumps and a malformed SetParameters request must not stop a node nor
 make the controller send a non-finite or absurd torque."""
+import math
 import os
 import random
 import signal
@@ -108,3 +109,116 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
     # what it SENT: every command finite and of the size a PD on this error gives
     assert all(abs(v) < 1e3 for cmd in sent for v in cmd), max(max(map(abs, c)) for c in sent)
     assert 'Traceback' not in ctl.stderr
+
+
+def malformed_commands(rng, count, n=2):
+    """Float64MultiArray payloads the simulator must refuse, each certainly invalid: shorter
+    than any n-double message (not empty: see the test below; and short by 4 bytes at least:
+    the middleware pads a payload to a multiple of 4 with zeros), truncated, absurd or wrong lengths, an unknown encapsulation,
+    non-finite values."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    def array(values):
+        return serialize_message(Float64MultiArray(data=values))
+    good = array([0.5] * n)
+    shortest = len(good)
+    out = []
+    while len(out) < count:
+        kind = rng.randrange(6)
+        if kind == 0:
+            out.append(rng.randbytes(rng.randrange(1, shortest - 3)))
+        elif kind == 1:
+            out.append(good[:rng.randrange(1, shortest - 3)])
+        elif kind == 2:     # the data length (bytes 12-15 of a layout-free array) absurd
+            out.append(good[:12] + struct.pack('<I', rng.choice((2**31 - 1, 2**32 - 1, n + 1)))
+                       + good[16:])
+        elif kind == 3:
+            out.append(b'\x07\x01\x00\x00' + good[4:])
+        elif kind == 4:
+            out.append(array([0.25] * rng.choice([k for k in range(6) if k != n])))
+        else:
+            values = [0.25] * n
+            values[rng.randrange(n)] = rng.choice((math.nan, math.inf, -math.inf))
+            out.append(array(values))
+    return out
+
+
+def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_env, tmp_path):  # noqa: F811,E501
+    """Issue 15 item 4: >= 1 000 malformed raw payloads mixed with valid commands on the
+    realtime simulator's command topic: it keeps running and publishing every period, holds
+    only the valid commands' torques, and counts the rest. Counts and values only: no
+    wall-clock rate is asserted.
+
+    A zero-length payload is sent by a publisher of its own: with rmw_fastrtps it blocks every
+    later sample of the publisher that sent it (reliable, in order: the receiver waits for a
+    sample that never comes, until it leaves the writer's history), so mixed into the garbage
+    stream it would hide the rest. It harms only its sender: the valid stream must go on."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from rclpy.serialization import serialize_message
+    from impact_arm.contract import COMMANDS
+    states = probe.listen(JointState, '/joint_states', depth=5000)
+    diags = probe.listen(DiagnosticArray, '/diagnostics',
+                         keep=lambda m: bool(m.status) and m.status[0].name.endswith('simulator'))
+    with probe.lock:    # deep writer histories: the test's own bursts must not overwrite them
+        commands, hostile, empty = (probe.node.create_publisher(
+            Float64MultiArray, COMMANDS, QoSProfile(depth=1000)) for _ in range(3))
+    valid = ([1.5, -0.75], [-0.5, 0.25])
+    garbage = malformed_commands(random.Random(15), 1200)
+    sim_args = node_args('impact_arm.nodes.simulator', 'mode:=realtime', 'publish_rate:=1000.0',
+                         'command_timeout:=30.0')
+    try:
+        with start_process(sim_args, ros_env, tmp_path, 'sim') as sim:
+            assert wait_for(lambda: states and all(
+                p.get_subscription_count() >= 1 for p in (commands, hostile, empty))
+                or not sim.alive(), timeout=60) and sim.alive(), sim.stderr
+            for _ in range(3):
+                empty.publish(b'')
+            valid_sent = 0
+            for k in range(0, len(garbage), 4):
+                for raw in garbage[k:k + 4]:
+                    hostile.publish(raw)
+                commands.publish(serialize_message(
+                    Float64MultiArray(data=valid[valid_sent % 2])))
+                valid_sent += 1
+                time.sleep(0.003)    # about the pace a 1 kHz controller sends at
+            flood_end = len(states)
+
+            def settled():    # two diagnostics after the flood with the same counts
+                values = [diagnostic(m) for _, m in diags]
+                return len(values) >= 2 and values[-1]['commands_rejected'] == \
+                    values[-2]['commands_rejected'] != '0' and values[-1]['commands'] == \
+                    values[-2]['commands'] and values
+            running = wait_for(settled, timeout=15)
+            assert running, [{k: v for k, v in diagnostic(m).items() if k.startswith("command") or k == "level"} for _, m in diags][-4:]
+            assert wait_for(lambda: len(states) > flood_end + 500, timeout=15), sim.stderr
+            assert sim.alive(), sim.stderr
+    finally:
+        probe.forget(states, diags)
+        with probe.lock:
+            for publisher in (commands, hostile, empty):
+                probe.node.destroy_publisher(publisher)
+    last = running[-1]
+    rejected, accepted = int(last['commands_rejected']), int(last['commands'])
+    # a queue overflow on a stalled machine may drop some of either kind, never add any
+    assert len(garbage) // 2 <= rejected <= len(garbage), (rejected, len(garbage))
+    assert 0 < accepted <= valid_sent, (accepted, valid_sent)
+    # every period of the run was published (the simulator's own count against sim time)
+    running = [v for v in running if float(v['periods_published_until_s']) > 0.2]
+    first = running[0]
+    periods = round((float(last['periods_published_until_s'])
+                     - float(first['periods_published_until_s'])) / 1e-3)
+    assert periods > 1000 and int(last['periods_published']) - int(first['periods_published']) \
+        == periods, (first, last)
+    # the torques held: zero before the first command, then only ever a valid command's
+    held = {tuple(m.effort) for _, m in states}
+    assert held <= {(0.0, 0.0), *map(tuple, valid)}, held - {(0.0, 0.0), *map(tuple, valid)}
+    assert held & set(map(tuple, valid)), held
+    assert 'Traceback' not in sim.stderr
+
+
+def diagnostic(msg):
+    return {kv.key: kv.value for kv in msg.status[0].values}
