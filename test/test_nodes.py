@@ -335,6 +335,16 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert counts.get('/impact_report') == 15
     assert counts.get('/joint_states', 0) > 5000
     assert counts.get('/effort_controller/commands', 0) > 5000
+    # nothing lost at the start (issue 17 item 10: the runner starts the controller once the
+    # recorder has matched the simulator's publishers): the held initial state (stamp 0) and
+    # then every period, 1 ms apart, to the end
+    from mcap.reader import make_reader
+    from impact_arm.io.wire import joint_state_fields
+    with open(mcap, 'rb') as f:
+        stamps = {round((sec + nanosec * 1e-9) * 1000) for sec, nanosec, *_ in (
+            joint_state_fields(m.data) for _, c, m in make_reader(f).iter_messages(
+                topics=['/joint_states']))}
+    assert set(range(max(stamps) + 1)) - stamps == set(), sorted(stamps)[:5]
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 

@@ -190,3 +190,31 @@ def test_impact_reports_are_read_as_dds_sends_them():
     for garbage in (b'', header + b'\xff\xff\xff\x7fab', header + b'\x02\0\0\0\xff\0'):
         with pytest.raises(SerdeError):
             read(garbage)
+
+
+def test_says_recording_once_every_topic_has_a_publisher(ros_env, tmp_path):
+    """Issue 17 item 10: a subscription is not a matched reader. The recorder names the topics
+    without a publisher after its grace period, logs each topic as its reader matches one,
+    and says "recording" only once all have: then nothing published is lost."""
+    from impact_arm.nodes.recorder import MATCHED_LINE
+    out = tmp_path / 'matched.mcap'
+    n = 100
+    rec_args = node_args(RECORDER, f'output:={out}', 'topics:=[/joint_states,/contact_wrench]',
+                         'flush_interval:=0.2')
+    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec:
+        assert wait_for(lambda: 'no publisher yet on /contact_wrench /joint_states'
+                        in rec.stderr, 20), rec.stderr
+        assert not [line for line in rec.stderr.splitlines()
+                    if ']: recording' in line and 'no publisher yet' not in line], rec.stderr
+        with start_process(helper_args('pub', '--count', n, '--rate', 200, '--wrench'),
+                           ros_env, tmp_path, 'pub') as pub:
+            assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 20), \
+                rec.stderr + pub.stderr
+            assert wait_for(lambda: count_messages(out) == 2 * n, 10), rec.stderr
+        rec.stop()
+        assert rec.popen.returncode == 0, rec.stderr
+    lines = rec.stderr.splitlines()
+    said = next(i for i, line in enumerate(lines) if 'every topic has a publisher' in line)
+    matched = {t for line in lines[:said] if MATCHED_LINE in line
+               for t in line.partition(MATCHED_LINE)[2].split()}
+    assert matched == {'/joint_states', '/contact_wrench'}, lines

@@ -41,6 +41,8 @@ from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 RECORDER_MIN_DEPTH = 1000  # reader history: absorbs bursts while a chunk is compressed/written
+MATCH_GRACE = 2.0  # s after the start: then name the topics no publisher is matched on yet
+MATCHED_LINE = 'publishers matched on'   # the log line `impact-arm run` waits for
 
 
 def _string_reader():
@@ -123,11 +125,16 @@ class Recorder(Node):
         self._subscribe_known()
         self.create_timer(interval, self._flush)
         self.create_timer(0.5, self._discover)
+        self.matched = set()     # topics whose subscription has matched a publisher
+        self.named_unmatched = False
+        self.started = time.monotonic()
+        self.match_timer = self.create_timer(0.05, self._check_matched)
         self.params = {}  # node -> 'start'/'end' state; queries never block the recording
         self.param_clients = {n: (self.create_client(ListParameters, f'{n}/list_parameters'),
                                   self.create_client(GetParameters, f'{n}/get_parameters'))
                               for n in self.param_nodes}
-        self.get_logger().info(f'recording {len(self.wanted)} topics to {self.output}')
+        self.get_logger().info(f'subscribed to {len(self.wanted)} topics, writing '
+                               f'{self.output}; waiting for their publishers')
 
     @property
     def done(self):
@@ -140,6 +147,27 @@ class Recorder(Node):
                 qos = contract.qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
                 self.subs[topic] = self.reader.create_subscription(
                     message_class(type_name), topic, _never_called, qos, raw=True)
+
+    def _check_matched(self):
+        """Say "recording" only once a publisher is matched on every topic: a subscription
+        in the graph is not yet a matched reader, and what is published before the match is
+        lost (1-2.4 s at the start of a run). After MATCH_GRACE, name the topics still
+        without one; each newly matched topic is logged (`impact-arm run` waits for those of
+        the simulator before the first command)."""
+        now = {t for t, sub in self.subs.items() if sub.get_publisher_count() > 0}
+        new = sorted(now - self.matched)
+        self.matched |= now
+        if new:
+            self.get_logger().info(f'{MATCHED_LINE} {" ".join(new)}')
+        missing = sorted(set(self.wanted) - self.matched)
+        if not missing:
+            self.get_logger().info(f'recording {len(self.wanted)} topics to {self.output}: '
+                                   f'every topic has a publisher')
+            self.destroy_timer(self.match_timer)
+        elif not self.named_unmatched and time.monotonic() - self.started >= MATCH_GRACE:
+            self.named_unmatched = True
+            self.get_logger().warning(f'recording to {self.output}; no publisher yet on '
+                                      f'{" ".join(missing)}')
 
     def _offered_default(self, topic) -> TopicQos:
         """For a topic outside the contract: a QoS every current publisher is compatible with."""

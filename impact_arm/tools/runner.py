@@ -17,13 +17,17 @@ import sys
 import time
 
 from .. import contract
-from ..contract import COMMANDS, DIAGNOSTICS, FEEDBACK_LAWS, IMPACT_REPORT, JOINT_STATES
+from ..contract import (COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, FEEDBACK_LAWS, IMPACT_REPORT,
+                        JOINT_STATES)
 from ..core.errors import ImpactArmError
 from .progress import Progress
 
 NODES = ('recorder', 'simulator', 'controller')       # start order (the arm moves with the
 # first command, so the controller comes last, once the recorder listens)
 STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, recorder last
+# what the recorder must have matched before the first command (the commands themselves: the
+# controller waits for its two readers)
+SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT, DIAGNOSTICS)
 
 
 def add_arguments(parser):
@@ -204,22 +208,35 @@ class Run:
               f'logs in {self.logdir}', file=sys.stderr)
 
     def _await_graph(self, timeout=60.0):
-        """Until the recorder (if any) subscribes to the simulator's joint states: the arm
-        starts moving with the controller's first command and nothing must go unrecorded."""
+        """Until the recorder (if any) has matched the simulator's publishers: the arm
+        starts moving with the controller's first command and nothing must go unrecorded. A
+        subscription in the graph is not enough (its reader may match the writer seconds
+        later): the recorder logs each topic once its reader has matched a publisher."""
         import rclpy
         listeners = 1 if self.output else 0
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             rclpy.spin_once(self.node, timeout_sec=0.05)
             if self.node.count_publishers(JOINT_STATES) >= 1 and \
-                    self.node.count_subscribers(JOINT_STATES) >= listeners and \
-                    self.node.count_subscribers(COMMANDS) >= 1 + listeners:
+                    self.node.count_subscribers(COMMANDS) >= 1 + listeners and \
+                    (not self.output or set(SIMULATOR_TOPICS) <= self._recorder_matched()):
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
                     return                      # watch() reports it
-        raise ImpactArmError(f'the simulator and recorder did not appear within {timeout:g} s;'
+        raise ImpactArmError(f'the simulator did not appear or the recorder did not match its '
+                             f'publishers within {timeout:g} s;'
                              f' see {self.logdir}')
+
+    def _recorder_matched(self) -> set:
+        """The topics the recorder says it has matched a publisher on (its log)."""
+        from ..nodes.recorder import MATCHED_LINE
+        try:
+            with open(self.logs['recorder'], encoding='utf-8', errors='replace') as f:
+                return {topic for line in f if MATCHED_LINE in line
+                        for topic in line.partition(MATCHED_LINE)[2].split()}
+        except OSError:
+            return set()
 
     def _on_impact(self, msg):
         self.impacts.append(json.loads(msg.data))
