@@ -56,6 +56,7 @@ from ._runner import realtime_priority, run
 from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
+ACK_WAIT = 2.0   # s at most, at exit, for the readers to acknowledge the last samples
 PARAMS = (
     Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
           'str', read_only=True),
@@ -606,10 +607,25 @@ class Simulator(Node):
             self._thread.join(timeout=2.0)
         if executor is not None:
             self._publish_diagnostics()
+            self._await_acknowledgements()
         self.get_logger().info(
             f'{self.arm.periods} periods, {self.loop.impacts} impacts, {self.loop.stats.overruns} '
             f'overruns, t = {self.arm.t:.3f} s')
         return 1 if self.failed else 0
+
+
+    def _await_acknowledgements(self):
+        """Samples a reader has not acknowledged yet die with this process: a recorder
+        lagging on a loaded machine lost the last impact reports of a run (12 of 15). Give
+        the readers up to ACK_WAIT to take them."""
+        from rclpy.duration import Duration
+        end = time.monotonic() + ACK_WAIT
+        for pub in (self.pub_impact, self.pub_wrench, self.pub_joints, self.pub_diag):
+            left = end - time.monotonic()
+            if left <= 0 or not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                self.get_logger().warning(f'{pub.topic_name}: not every reader acknowledged '
+                                          f'the last samples within {ACK_WAIT:g} s')
+                return
 
 
 def main(args=None):
