@@ -4,6 +4,7 @@ unwritable output is a clear error and a non-zero exit."""
 import json
 import math
 import os
+import re
 import signal
 import time
 from pathlib import Path
@@ -218,3 +219,35 @@ def test_says_recording_once_every_topic_has_a_publisher(ros_env, tmp_path):
     matched = {t for line in lines[:said] if MATCHED_LINE in line
                for t in line.partition(MATCHED_LINE)[2].split()}
     assert matched == {'/joint_states', '/contact_wrench'}, lines
+
+
+def test_simulator_exit_waits_for_a_lagging_recorder(ros_env, tmp_path):
+    """The end of a run: the simulator exits right after the last impact report, while a
+    recorder on a loaded machine may not have taken the last samples yet (stopped here with
+    SIGSTOP). The simulator waits for its readers' acknowledgements, so a recorder that
+    resumes within that wait still gets every report."""
+    out = tmp_path / 'lag.mcap'
+    rec_args = node_args(RECORDER, f'output:={out}', 'topics:=[/impact_report,/joint_states]')
+    sim_args = node_args('impact_arm.nodes.simulator', 'mode:=lockstep', 'rate_factor:=0.0')
+    ctl_args = node_args('impact_arm.nodes.controller', 'command_readers:=1')
+    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
+            start_process(sim_args, ros_env, tmp_path, 'sim') as sim:
+        assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 60), \
+            rec.stderr + sim.stderr
+        with start_process(ctl_args, ros_env, tmp_path, 'ctl') as ctl:
+            # the recorder stops taking anything (and acknowledging) while the run goes on
+            time.sleep(3.0)
+            rec.signal(signal.SIGSTOP)
+            time.sleep(2.0)
+            ctl.stop()
+            sim.signal(signal.SIGINT)
+            time.sleep(0.5)
+            rec.signal(signal.SIGCONT)
+            assert sim.wait(10) == 0, sim.stderr
+        time.sleep(0.5)
+        rec.stop()
+        assert rec.popen.returncode == 0, rec.stderr
+    impacts = int(re.findall(r'(\d+) impacts', sim.stderr)[-1])
+    assert impacts >= 1, sim.stderr
+    recorded = len(read(out).get('/impact_report', (None, []))[1])
+    assert recorded == impacts, (recorded, impacts)
