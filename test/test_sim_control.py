@@ -118,15 +118,18 @@ def test_controller_that_loses_every_wrench_sample_still_cycles(probe, ros_env, 
     from geometry_msgs.msg import WrenchStamped
     from std_msgs.msg import String
     reports = probe.listen(String, '/impact_report', transient=True)
-    probe.publisher(WrenchStamped, '/relayed_wrench')            # never publishes
+    relay = probe.publisher(WrenchStamped, '/relayed_wrench')    # never publishes
     relayed = controller() + ['-r', '/contact_wrench:=/relayed_wrench']
-    with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path,
-                       'sim') as sim, \
-            start_process(relayed, ros_env, tmp_path, 'ctl') as ctl:
-        assert wait_for(lambda: len(reports) >= 5 or not sim.alive() or not ctl.alive(),
-                        timeout=120), f'{len(reports)} impacts\n{ctl.stderr[-2000:]}'
-        assert sim.alive() and ctl.alive(), sim.stderr + ctl.stderr
-        assert 'ticking on the next state without it' in ctl.stderr
+    with start_process(relayed, ros_env, tmp_path, 'ctl') as ctl:
+        # the controller must know the relay before the run starts: a publisher it has not
+        # discovered yet is no wrench source (it would tick without waiting, as it should)
+        assert wait_for(lambda: relay.get_subscription_count() > 0, timeout=30), ctl.stderr
+        with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env,
+                           tmp_path, 'sim') as sim:
+            assert wait_for(lambda: len(reports) >= 5 or not sim.alive() or not ctl.alive(),
+                            timeout=120), f'{len(reports)} impacts\n{ctl.stderr[-2000:]}'
+            assert sim.alive() and ctl.alive(), sim.stderr + ctl.stderr
+            assert 'ticking on the next state without it' in ctl.stderr
     times = reports_of(reports)[:5]
     gaps = [b - a for a, b in zip(times, times[1:])]
     # one impact per cycle, at the article's period (a missed switch re-strikes at once)
