@@ -2,7 +2,6 @@
 the limit cycle, Poincaré sections, every figure (opened and measured) and the report."""
 import json
 import math
-import os
 import struct
 import subprocess
 import sys

@@ -11,7 +11,6 @@ Prints both tables, writes ``cor.csv`` and ``cor.png`` to ``--out``. Discussion:
 """
 from __future__ import annotations
 
-import math
 import os
 
 from ..core.contact import contact_constants
