@@ -16,6 +16,7 @@ from scenes import scene_from
 
 pa = pytest.importorskip('pyarrow')
 from impact_arm.tools import sweep  # noqa: E402  (needs pyarrow: the studies extra)
+from impact_arm.tools.benchmarks.sweep import live_descendants  # noqa: E402
 
 LOOSE = {'integrator.preset': 'fast', 'integrator.method': 'rosenbrock',
          'integrator.rtol': 1e-2, 'integrator.atol': 1e-4, 'integrator.contact_rtol': 3e-4}
@@ -101,25 +102,6 @@ def without_wall(table):
     return table.drop_columns(['wall_time']) if 'wall_time' in table.column_names else table
 
 
-def descendants(pid):
-    """Live (not zombie) processes below ``pid``."""
-    parents = {}
-    for entry in filter(str.isdigit, os.listdir('/proc')):
-        try:
-            with open(f'/proc/{entry}/stat', encoding='ascii') as f:
-                fields = f.read().rsplit(')', 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if fields[0] != 'Z':
-            parents.setdefault(int(fields[1]), []).append(int(entry))
-    found, stack = [], [pid]
-    while stack:
-        for child in parents.get(stack.pop(), []):
-            found.append(child)
-            stack.append(child)
-    return found
-
-
 def alive(pid):
     try:
         with open(f'/proc/{pid}/stat', encoding='ascii') as f:
@@ -143,7 +125,7 @@ def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp
         if len([n for n in parts if n.endswith('.parquet')]) >= 2:
             break
         time.sleep(0.005)
-    workers = descendants(child.pid)
+    workers = live_descendants(child.pid)
     child.send_signal(signal.SIGKILL)
     child.wait()
     # its worker processes follow it instead of computing runs nobody records

@@ -76,7 +76,7 @@ def per_run_costs(count: int) -> dict:
 
 def common_spec(runs: int) -> dict:
     import yaml
-    return yaml.safe_load(spec_text(runs).replace('e+11', 'e11'))
+    return yaml.safe_load(spec_text(runs))
 
 
 def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
@@ -100,7 +100,7 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
 
     def watch():
         while not done.wait(0.25):
-            for pid in _descendants(child.pid):
+            for pid in live_descendants(child.pid):
                 rss = _rss_mb(pid)
                 if rss and _is_worker(pid):
                     samples.setdefault(pid, []).append(rss)
@@ -126,19 +126,20 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
                                'last': s[-1], 'peak': max(s)} for s in samples.values()]}
 
 
-def _descendants(pid):
-    children = {}
-    for entry in os.listdir('/proc'):
-        if entry.isdigit():
-            try:
-                with open(f'/proc/{entry}/stat', encoding='ascii') as f:
-                    parent = int(f.read().rsplit(')', 1)[1].split()[1])
-            except (OSError, ValueError, IndexError):
-                continue
-            children.setdefault(parent, []).append(int(entry))
+def live_descendants(pid):
+    """Live (not zombie) processes below ``pid``, from ``/proc``."""
+    parents = {}
+    for entry in filter(str.isdigit, os.listdir('/proc')):
+        try:
+            with open(f'/proc/{entry}/stat', encoding='ascii') as f:
+                fields = f.read().rsplit(')', 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if fields[0] != 'Z':
+            parents.setdefault(int(fields[1]), []).append(int(entry))
     found, stack = [], [pid]
     while stack:
-        for child in children.get(stack.pop(), []):
+        for child in parents.get(stack.pop(), []):
             found.append(child)
             stack.append(child)
     return found
