@@ -6,7 +6,6 @@ import os
 import struct
 
 import pytest
-import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -14,6 +13,7 @@ from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
 from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_command,
                                 joint_state_fields, wrench_stamped_fields)
+from impact_arm.tools.benchmarks.fuzz import key_paths
 
 from scenes import PAPER, paper_dict
 
@@ -164,21 +164,11 @@ LEAVES = st.one_of(
                                                        max_size=2))
 
 
-def leaf_paths(node, path=()):
-    if isinstance(node, dict):
-        for k, v in node.items():
-            yield from leaf_paths(v, path + (k,))
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            yield from leaf_paths(v, path + (i,))
-    yield path
-
-
 @BOUNDED
 @given(st.data())
 def test_mutated_scenes_are_accepted_finite_or_refused_in_one_line(data):
     scene = copy.deepcopy(paper_dict())
-    paths = [p for p in leaf_paths(scene) if p]
+    paths = list(key_paths(scene))
     for _ in range(data.draw(st.integers(1, 3))):
         path = data.draw(st.sampled_from(paths))
         parent = scene

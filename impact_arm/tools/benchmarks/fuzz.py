@@ -39,13 +39,14 @@ YAML_SNIPPETS = ('1:30', '017', '0b101', '1_000', 'yes', 'off', '.nan', '-.inf',
 
 
 # ----------------------------------------------------------------------------- mutation
-def _paths(node, path=()):
+def key_paths(node, path=()):
+    """Every key/index path inside a nested dict/list, leaves and inner nodes, not the root."""
     if isinstance(node, dict):
         for k, v in node.items():
-            yield from _paths(v, path + (k,))
+            yield from key_paths(v, path + (k,))
     elif isinstance(node, list):
         for i, v in enumerate(node):
-            yield from _paths(v, path + (i,))
+            yield from key_paths(v, path + (i,))
     if path:
         yield path
 
@@ -78,7 +79,7 @@ def mutate(base: dict, rng: random.Random) -> str:
     if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:
         data['surfaces'][0]['height'] = rng.choice((-3.0, -2.0, -50.0, 1e6))   # out of reach
     for _ in range(rng.choice((0, 1, 1, 2, 3))):   # 0: only the links or surfaces changed
-        paths = list(_paths(data))
+        paths = list(key_paths(data))
         if not paths:
             break
         path = rng.choice(paths)
