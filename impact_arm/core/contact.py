@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from .jit import jit_leaf as jit
-from .scene import Material
+from .scene import Material, reduced_modulus
 
 YIELD_ONSET_FACTOR = 1.9   # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
 
@@ -35,7 +35,7 @@ class ContactConstants:
 
 
 def contact_constants(arm: Material, surface: Material, tip_radius: float) -> ContactConstants:
-    E = arm.E * surface.E / (surface.E * (1 - arm.nu ** 2) + arm.E * (1 - surface.nu ** 2))
+    E = reduced_modulus(arm, surface)
     weaker = arm if arm.S_y <= surface.S_y else surface
     S_y, nu = weaker.S_y, weaker.nu
     R = tip_radius

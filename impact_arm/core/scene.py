@@ -43,6 +43,11 @@ class Material:
     S_y: float    # yield strength [Pa]
 
 
+def reduced_modulus(a: Material, b: Material) -> float:
+    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (model.md)."""
+    return a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
+
+
 @dataclass(frozen=True)
 class Surface:
     height: float            # y of the horizontal surface [m]; the tip strikes it from above
@@ -321,9 +326,7 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
             continue
         # the Jackson-Green fit (B = 0.14 exp(23 S_y/E)) holds for metals-like yield strains;
         # far beyond it B overflows and the force law means nothing
-        a, b = arm, s.material
-        e_red = a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
-        strain = min(a.S_y, b.S_y) / e_red
+        strain = min(arm.S_y, s.material.S_y) / reduced_modulus(arm, s.material)
         if strain > MAX_YIELD_STRAIN:
             check.fail(f'surfaces[{i}].material',
                        f'= {raw["surfaces"][i]["material"]!r}: yield strain S_y/E* = '
@@ -369,8 +372,7 @@ def _check_physics(check, raw, surfaces, arm):
     for i, sfc in enumerate(surfaces):
         if sfc.law == 'none':
             continue
-        a, b = arm, sfc.material
-        e_red = a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
+        e_red = reduced_modulus(arm, sfc.material)
         t_c = 2.87 * (min(masses) ** 2 / (raw['tip_radius'] * e_red ** 2)) ** 0.2
         if t_c < MIN_CONTACT_TIME:
             check.fail(f'surfaces[{i}].material',
