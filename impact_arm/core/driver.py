@@ -19,14 +19,11 @@ from .model import ArmModel
 from .scene import Scene
 
 
-def advance_period(integ, builder, t_end, on_event=None):
-    """The one period loop of every sampled run (the driver's periods, offline held control):
-    advance ``integ`` to ``t_end``, feed the located events to the impact ``builder``
-    (``on_event`` sees each first). Returns the impacts completed [(record, trace rows)] and
-    the contact impulse (tangential, normal) over the period, which callers divide by the
-    period for the averaged wrench."""
+def feed_events(integ, builder, events, on_event=None):
+    """Feed located ``events`` to the impact ``builder`` (``on_event`` sees each first).
+    Returns the impacts completed [(record, trace rows)], each taking the trace so far."""
     impacts = []
-    for event in integ.advance(t_end):
+    for event in events:
         if on_event is not None:
             on_event(event)
         record = builder.feed(event)
@@ -35,6 +32,15 @@ def advance_period(integ, builder, t_end, on_event=None):
             if integ.trace is not None:
                 rows, integ.trace[:] = integ.trace[:], []
             impacts.append((record, rows))
+    return impacts
+
+
+def advance_period(integ, builder, t_end, on_event=None):
+    """The one period loop of every sampled run (the driver's periods, offline held control):
+    advance ``integ`` to ``t_end`` and ``feed_events``. Returns the impacts completed and the
+    contact impulse (tangential, normal) over the period, which callers divide by the period
+    for the averaged wrench."""
+    impacts = feed_events(integ, builder, integ.advance(t_end), on_event)
     return impacts, integ.take_impulse()
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .control import CycleController
-from .driver import advance_period
+from .driver import advance_period, feed_events
 from .errors import SimulationError
 from .integrator import PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder, settle_index
@@ -138,14 +138,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
 
     def feed(events):
         """Cycles, impact records, observers and progress for the located events."""
-        impacts = []
-        for event in events:
-            count_switch(event)
-            record = builder.feed(event)
-            if record is not None:
-                impacts.append((record, integ.trace[:]))
-                integ.trace.clear()
-        report(impacts)
+        report(feed_events(integ, builder, events, count_switch))
 
     def publish(sample, tip_velocity):
         result.samples.append(sample)
