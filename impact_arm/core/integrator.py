@@ -326,7 +326,7 @@ class PhaseIntegrator:
     def _check_budget(self):
         """Stop a run whose steps outgrow what any meaningful scene needs per simulated second
         (a hang otherwise: the kernel would step for hours)."""
-        steps = int(self._stats[1] + self._stats[2])
+        steps = int(self._stats[layout.ST_STEPS] + self._stats[layout.ST_REJECTED])
         allowed = MIN_STEP_BUDGET + STEPS_PER_SIMULATED_SECOND * self.state.t
         if steps > allowed:
             raise RunBudgetError(
