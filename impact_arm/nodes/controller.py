@@ -148,7 +148,6 @@ class Controller(Node):
         self.wrench_flowing = True         # wait for each state's wrench (see _on_joint_state)
         self.sent = 0
         self.started = False
-        self.warned_names = False
         self.dropped = dict.fromkeys(DROPPED, 0)
         self.jump_from = None              # stamp of a sample that jumped, until confirmed
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
@@ -301,7 +300,7 @@ class Controller(Node):
                        f'without waiting until a wrench arrives')
             self.wrench_flowing = False
         elif self.wrench_flowing and self.wrench_stamp < t - STAMP_EPS and \
-                self.waiting is None and self.sub_wrench.get_publisher_count() > 0:
+                self.sub_wrench.get_publisher_count() > 0:
             self.waiting = self.latest
             return
         self.waiting = None
