@@ -170,6 +170,34 @@ def node_args(module, *params, ros_args=()):
     return args + list(ros_args)
 
 
+def simulator(*params, ros_args=()):
+    return node_args('impact_arm.nodes.simulator', *params, ros_args=ros_args)
+
+
+def controller(*params, ros_args=()):
+    return node_args('impact_arm.nodes.controller', *params, ros_args=ros_args)
+
+
+def stamp(msg):
+    """A message's header stamp in seconds."""
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def from_simulator(msg):
+    """A /diagnostics message of the simulator (the controller publishes its own)."""
+    return bool(msg.status) and msg.status[0].name == 'impact_arm: simulator'
+
+
+def diagnostics_values(msg):
+    """The key/values of a /diagnostics message's first status, with its level and message."""
+    status = msg.status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    level = status.level
+    values['level'] = level[0] if isinstance(level, (bytes, bytearray)) else int(level)
+    values['message'] = status.message
+    return values
+
+
 def helper_args(*args):
     return [PYTHON, HERE] + [str(a) for a in args]
 

@@ -8,8 +8,8 @@ import signal
 import struct
 import time
 
-from ros_helpers import (PYTHON, node_args, probe, ros_env, start_process,  # noqa: F401
-                         wait_for)
+from ros_helpers import (PYTHON, controller, diagnostics_values, from_simulator,  # noqa: F401
+                         probe, ros_env, simulator, start_process, wait_for)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -49,8 +49,7 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
               'rate:=200.0')
     states = probe.publisher(JointState, '/joint_states')
     with start_process(standin, ros_env, tmp_path, 'standin') as driver, \
-            start_process(node_args('impact_arm.nodes.controller', *params,
-                                    ros_args=['-r', '__node:=hostile_controller']),
+            start_process(controller(*params, ros_args=['-r', '__node:=hostile_controller']),
                           ros_env, tmp_path, 'ctl') as ctl:
         def commands():
             return [x['cmd'] for x in driver.lines() if 'cmd' in x]
@@ -162,14 +161,13 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
     from impact_arm.contract import COMMANDS
     states = probe.listen(JointState, '/joint_states', depth=5000)
     diags = probe.listen(DiagnosticArray, '/diagnostics',
-                         keep=lambda m: bool(m.status) and m.status[0].name.endswith('simulator'))
+                         keep=from_simulator)
     with probe.lock:    # deep writer histories: the test's own bursts must not overwrite them
         commands, hostile, empty = (probe.node.create_publisher(
             Float64MultiArray, COMMANDS, QoSProfile(depth=1000)) for _ in range(3))
     valid = ([1.5, -0.75], [-0.5, 0.25])
     garbage = malformed_commands(random.Random(15), 1200)
-    sim_args = node_args('impact_arm.nodes.simulator', 'mode:=realtime', 'publish_rate:=1000.0',
-                         'command_timeout:=30.0')
+    sim_args = simulator('mode:=realtime', 'publish_rate:=1000.0', 'command_timeout:=30.0')
     try:
         with start_process(sim_args, ros_env, tmp_path, 'sim') as sim:
             assert wait_for(lambda: states and all(
@@ -188,12 +186,12 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
             flood_end = len(states)
 
             def settled():    # two diagnostics after the flood with the same counts
-                values = [diagnostic(m) for _, m in diags]
+                values = [diagnostics_values(m) for _, m in diags]
                 return len(values) >= 2 and values[-1]['commands_rejected'] == \
                     values[-2]['commands_rejected'] != '0' and values[-1]['commands'] == \
                     values[-2]['commands'] and values
             running = wait_for(settled, timeout=15)
-            assert running, [{k: v for k, v in diagnostic(m).items() if k.startswith("command") or k == "level"} for _, m in diags][-4:]
+            assert running, [{k: v for k, v in diagnostics_values(m).items() if k.startswith("command") or k == "level"} for _, m in diags][-4:]
             assert wait_for(lambda: len(states) > flood_end + 500, timeout=15), sim.stderr
             assert sim.alive(), sim.stderr
     finally:
@@ -220,7 +218,3 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
     assert held <= {(0.0, 0.0), *map(tuple, valid)}, held - {(0.0, 0.0), *map(tuple, valid)}
     assert held & set(map(tuple, valid)), held
     assert 'Traceback' not in sim.stderr
-
-
-def diagnostic(msg):
-    return {kv.key: kv.value for kv in msg.status[0].values}

@@ -13,39 +13,14 @@ import time
 
 import pytest
 
-from ros_helpers import (PYTHON, ROOT, node_args, probe, ros_env,  # noqa: F401
+from ros_helpers import (PYTHON, ROOT, controller, diagnostics_values,  # noqa: F401
+                         from_simulator, node_args, probe, ros_env, simulator, stamp,
                          start_process, wait_for)
 
 from impact_arm.core.scene import load_scene, resolve_scene_path
 from impact_arm.core.simulate import run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-
-
-def stamp(msg):
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-
-
-def from_simulator(msg):
-    """A /diagnostics message of the simulator (the controller publishes its own)."""
-    return bool(msg.status) and msg.status[0].name == 'impact_arm: simulator'
-
-
-def diagnostics_values(msg):
-    status = msg.status[0]
-    values = {kv.key: kv.value for kv in status.values}
-    level = status.level
-    values['level'] = level[0] if isinstance(level, (bytes, bytearray)) else int(level)
-    values['message'] = status.message
-    return values
-
-
-def simulator(*params):
-    return node_args('impact_arm.nodes.simulator', *params)
-
-
-def controller(*params):
-    return node_args('impact_arm.nodes.controller', *params)
 
 
 # ------------------------------------------------------------------------------- lockstep
@@ -287,8 +262,7 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
               'down_target:=[-0.5,0.3]', 'switch_height:=100.0', 'surface_height:=-100.0',
               'rate:=200.0')
     with start_process(standin, ros_env, tmp_path, 'standin') as driver, \
-            start_process(node_args('impact_arm.nodes.controller', *params,
-                                    ros_args=['-r', '__node:=standin_controller']),
+            start_process(controller(*params, ros_args=['-r', '__node:=standin_controller']),
                           ros_env, tmp_path, 'ctl') as ctl:
         def position():
             lines = [x for x in driver.lines() if 'q' in x]

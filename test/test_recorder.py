@@ -15,7 +15,8 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from impact_arm.io.scene_visuals import arrow_length
-from ros_helpers import helper_args, node_args, ros_env, start_process, wait_for  # noqa: F401
+from ros_helpers import (controller, helper_args, node_args, ros_env, simulator,  # noqa: F401
+                         start_process, wait_for)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAPER = os.path.join(ROOT, 'config', 'paper.yaml')
@@ -228,8 +229,8 @@ def test_simulator_exit_waits_for_a_lagging_recorder(ros_env, tmp_path):
     resumes within that wait still gets every report."""
     out = tmp_path / 'lag.mcap'
     rec_args = node_args(RECORDER, f'output:={out}', 'topics:=[/impact_report,/joint_states]')
-    sim_args = node_args('impact_arm.nodes.simulator', 'mode:=lockstep', 'rate_factor:=0.0')
-    ctl_args = node_args('impact_arm.nodes.controller', 'command_readers:=1')
+    sim_args = simulator('mode:=lockstep', 'rate_factor:=0.0')
+    ctl_args = controller('command_readers:=1')
     with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
             start_process(sim_args, ros_env, tmp_path, 'sim') as sim:
         assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 60), \

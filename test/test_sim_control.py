@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from ros_helpers import probe, ros_env, start_process, wait_for  # noqa: F401 (fixtures)
-from test_nodes import controller, diagnostics_values, from_simulator, simulator, stamp
+from ros_helpers import (controller, diagnostics_values, from_simulator,  # noqa: F401
+                         probe, ros_env, simulator, stamp, start_process, wait_for)
 
 ARTICLE_PERIOD = 0.397
 

@@ -4,7 +4,8 @@ import math
 import threading
 import time
 
-from ros_helpers import node_args, probe, ros_env, start_process, wait_for  # noqa: F401
+from ros_helpers import (diagnostics_values, probe, ros_env, simulator,  # noqa: F401
+                         start_process, wait_for)
 
 PERIODS = 150
 
@@ -60,7 +61,7 @@ def drive(probe, env, workdir, kind):
                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)),
             node.create_subscription(MarkerArray, '/impact_markers', markers.append, 10)]
     params = ('mode:=lockstep', 'rate_factor:=0.0', 'diagnostics_period:=0.2')
-    with start_process(node_args('impact_arm.nodes.simulator', *params), env, workdir,
+    with start_process(simulator(*params), env, workdir,
                        f'sim_{kind}') as sim:
         assert wait_for(lambda: pub.get_subscription_count() > 0 or not sim.alive(),
                         timeout=60) and sim.alive(), sim.stderr
@@ -84,7 +85,7 @@ def drive(probe, env, workdir, kind):
 
 
 def rejected(diag):
-    return int({kv.key: kv.value for kv in diag.status[0].values}['commands_rejected'])
+    return int(diagnostics_values(diag)['commands_rejected'])
 
 
 def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_env,
