@@ -8,7 +8,7 @@ import signal
 import struct
 import time
 
-from ros_helpers import (PYTHON, controller, diagnostics_values, from_simulator,  # noqa: F401
+from ros_helpers import (PYTHON, controller, diagnostics_values, from_simulator, node_args,  # noqa: F401,E501
                          probe, ros_env, simulator, start_process, wait_for)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -218,3 +218,40 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
     assert held <= {(0.0, 0.0), *map(tuple, valid)}, held - {(0.0, 0.0), *map(tuple, valid)}
     assert held & set(map(tuple, valid)), held
     assert 'Traceback' not in sim.stderr
+
+
+def test_recorder_with_a_scene_stores_garbage_without_dying(probe, ros_env, tmp_path):  # noqa: F811,E501
+    """With a scene the recorder reads /joint_states and /contact_wrench to draw the arm: a
+    malformed sample is stored as it came and not drawn; the recorder keeps recording."""
+    from mcap.reader import make_reader
+    from rclpy.serialization import serialize_message
+    from geometry_msgs.msg import WrenchStamped
+    from sensor_msgs.msg import JointState
+    out = tmp_path / 'garbage.mcap'
+    paper = os.path.join(os.path.dirname(HERE), 'config', 'paper.yaml')
+    states = probe.publisher(JointState, '/joint_states')
+    wrenches = probe.publisher(WrenchStamped, '/contact_wrench')
+    rec = node_args('impact_arm.nodes.recorder', f'output:={out}', f'scene:={paper}',
+                    'topics:=[/joint_states,/contact_wrench]', 'flush_interval:=0.2')
+    with start_process(rec, ros_env, tmp_path, 'recorder') as recorder:
+        assert wait_for(lambda: states.get_subscription_count() >= 1 and
+                        wrenches.get_subscription_count() >= 1, timeout=20), recorder.stderr
+        good = serialize_message(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2],
+                                            velocity=[0.0, 0.0]))
+        for raw in garbage_payloads(good, random.Random(5), 100):
+            states.publish(raw)
+            wrenches.publish(raw[:60])
+            time.sleep(0.002)
+        states.publish(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2]))
+        time.sleep(1.0)
+        assert recorder.alive(), recorder.stderr
+        recorder.stop()
+        assert recorder.popen.returncode == 0, recorder.stderr
+    assert 'malformed sample not drawn' in recorder.stderr
+    assert 'Traceback' not in recorder.stderr
+    with open(out, 'rb') as f:
+        counts = {c.topic: 0 for c in make_reader(f).get_summary().channels.values()}
+        f.seek(0)
+        for _, channel, _ in make_reader(f).iter_messages():
+            counts[channel.topic] += 1
+    assert counts['/joint_states'] >= 50 and counts.get('/tf', 0) >= 1, counts

@@ -36,7 +36,7 @@ from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, packa
                             ros_distro)
 from ..io.msgdefs import typestore
 from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
-from ..io.wire import joint_state_fields, wrench_stamped_fields
+from ..io.wire import MalformedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -101,6 +101,7 @@ class Recorder(Node):
                                                'yaml': scene_text})
         self.failed = False
         self.received = 0
+        self.malformed = 0        # samples stored but not drawn (malformed payloads)
         self.wanted = {}  # topic -> type name ('' until discovered)
         for entry in topics:
             name, _, type_name = entry.partition(':')
@@ -230,6 +231,11 @@ class Recorder(Node):
                 self._derive_visuals(topic, data, received)
         except RecordingError as e:
             self._fail(e)
+        except MalformedMessage as e:
+            # stored as it came (a recording keeps what was on the wire), not drawn
+            self.malformed += 1
+            self.get_logger().warning(f'{topic}: malformed sample not drawn ({e}); '
+                                      f'{self.malformed} so far', throttle_duration_sec=2.0)
 
     def _derive_visuals(self, topic, data, received):
         """Feed the recorded state to the visuals; a wrench may arrive before or after the
