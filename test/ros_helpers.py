@@ -237,6 +237,10 @@ def _publish(args):
                                                < 1)) and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
     print(json.dumps({'event': 'matched', 'subs': js.get_subscription_count()}), flush=True)
+    # Our writer matching a reader is not the reader matching us: a volatile reader drops what
+    # was written before its own match. --go-file: start once the test saw the reader's side.
+    while args.go_file and not os.path.exists(args.go_file) and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
     period = 1.0 / args.rate
     start = time.monotonic()
     for i in range(args.count):
@@ -299,6 +303,7 @@ if __name__ == '__main__':
     p.add_argument('--wrench', action='store_true')
     p.add_argument('--batch', type=int, default=10)
     p.add_argument('--wait-sub', type=float, default=10.0)
+    p.add_argument('--go-file', default='')
     p.add_argument('--linger', type=float, default=0.5)
     s = sub.add_parser('sub')
     s.add_argument('topics', nargs='+')

@@ -138,9 +138,15 @@ def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
     out = tmp_path / 'killed.mcap'
     rec_args = node_args(RECORDER, f'output:={out}', 'flush_interval:=0.2',
                          'param_nodes:=[""]')
+    go = tmp_path / 'go'
     with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
-            start_process(helper_args('pub', '--count', 3000, '--rate', 200, '--wait-sub', 30),
-                          ros_env, tmp_path, 'pub') as pub:
+            start_process(helper_args('pub', '--count', 3000, '--rate', 200, '--wait-sub', 30,
+                                      '--go-file', go), ros_env, tmp_path, 'pub') as pub:
+        # the recorder's reader has matched the publisher: nothing published from now on is
+        # dropped at the start (the file must hold a prefix of what was published)
+        assert wait_for(lambda: 'publishers matched on /joint_states' in rec.stderr, 30), \
+            rec.stderr
+        go.touch()
         seen = wait_for(lambda: (count_messages(out) or 0) >= 60 and count_messages(out), 30)
         assert seen, rec.stderr + pub.stderr
         rec.signal(signal.SIGKILL)
