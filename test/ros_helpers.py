@@ -87,7 +87,14 @@ def probe(ros_env):
 # Test modules draw their domains from one shuffled list, so two modules of a session never
 # share one: a participant a killed node leaves behind lingers for its lease (seconds) and,
 # on a shared domain, looks like a reader to the next module's publishers.
-_DOMAINS = iter(random.sample(range(1, 101), 100))
+# IMPACT_ARM_TEST_DOMAINS=LOW-HIGH narrows the draw, so that test sessions run side by side
+# (several worktrees on one machine) never meet either.
+def _domain_range():
+    low, _, high = os.environ.get('IMPACT_ARM_TEST_DOMAINS', '1-100').partition('-')
+    return range(int(low), int(high) + 1)
+
+
+_DOMAINS = iter(random.sample(_domain_range(), len(_domain_range())))
 
 
 def make_env(domain=None, **extra) -> dict:
