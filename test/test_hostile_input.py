@@ -115,7 +115,6 @@ def refusal(text):
      '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0e-5}', ['ratio', 'masses']),
     ('preset: balanced', 'max_step: 1.0e-300', ['integrator.max_step', '1e-05']),
     ('rate: 0 ', 'rate: 1.0e-300 ', ['controller.rate', 'more than a second']),
-    ('publish_rate: 1000.0', 'publish_rate: 1.0e6', ['publish_rate', 'in memory']),
     ('kd: [100.0, 100.0]', 'kd: [1.0e9, 100.0]', ['controller.kd[0]', 'closed-loop rate']),
     ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}\n',     # stiff, light
      '  - {length: 1.0, mass: 1.0e-6}\n  - {length: 1.0, mass: 1.0e-6}\nmaterials: {steel: '

@@ -144,6 +144,7 @@ class PhaseIntegrator:
         self._O = np.zeros(3)                   # next output index k, period dt (0: off), rows
         self._out = np.zeros((1, self.output_width))
         self._output = []
+        self._output_sink = None
         self.events = 0
 
     # --- output on a time grid, from each step's continuous extension -------------------
@@ -154,17 +155,22 @@ class PhaseIntegrator:
         velocity (2)."""
         return self.model.eq.R_SIZE
 
-    def start_output(self, dt, next_index):
+    def start_output(self, dt, next_index, sink=None):
         """Record the state at the times k dt, k >= next_index, as the integration passes them:
         steps are not shortened to land on them in free flight (the step's continuous
         extension gives the state: Dormand-Prince's quartic, or a cubic Hermite after a
-        Rosenbrock step); contact steps do end on them, so each row's impulse is exact."""
+        Rosenbrock step); contact steps do end on them, so each row's impulse is exact.
+
+        ``sink(rows)`` is handed the rows after each kernel call (at most OUTPUT_CAPACITY,
+        valid during the call only) instead of collecting them for ``take_output``: memory
+        stays bounded however many rows an ``advance`` passes."""
         if not dt > 0:
             raise ValueError(f'output period {dt}: must be > 0')
         if len(self._out) != OUTPUT_CAPACITY:
             self._out = np.zeros((OUTPUT_CAPACITY, self.output_width))
         self._O[layout.O_NEXT], self._O[layout.O_DT], self._O[layout.O_ROWS] = next_index, dt, 0.0
         self._output = []
+        self._output_sink = sink
 
     def take_output(self) -> np.ndarray:
         """The output rows recorded since the last call (one row per grid time, in order)."""
@@ -176,8 +182,11 @@ class PhaseIntegrator:
     def _drain_output(self):
         count = int(self._O[layout.O_ROWS])
         if count:
-            self._output.append(self._out[:count].copy())
             self._O[layout.O_ROWS] = 0.0
+            if self._output_sink is not None:
+                self._output_sink(self._out[:count])
+            else:
+                self._output.append(self._out[:count].copy())
 
     @property
     def stats(self):

@@ -12,11 +12,9 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from .control import CycleController
 from .driver import advance_period, feed_events
-from .errors import SimulationError
+from .errors import SceneError, SimulationError
 from .integrator import PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder, settle_index
 from .model import ArmModel
@@ -33,11 +31,44 @@ class Sample:
     mode: str
 
 
+MAX_KEPT_SAMPLES = 2e7    # publish_rate * t_max of a run that keeps its samples in memory
+
+
+class SampleRanges:
+    """Running ranges of the samples for the run summary (joint angles, tip velocity), so a
+    run that streams its samples to an observer holds none of them."""
+
+    def __init__(self):
+        self.q_min = self.q_max = self.v_min = self.v_max = None
+
+    def add(self, q, tip_velocity):
+        if self.q_min is None:
+            self.q_min, self.q_max = list(q), list(q)
+            self.v_min, self.v_max = list(tip_velocity), list(tip_velocity)
+            return
+        for lo, hi, values in ((self.q_min, self.q_max, q),
+                               (self.v_min, self.v_max, tip_velocity)):
+            for k, x in enumerate(values):
+                if x < lo[k]:
+                    lo[k] = x
+                if x > hi[k]:
+                    hi[k] = x
+
+    def q_range_deg(self, k):
+        if self.q_min is None or k >= len(self.q_min):
+            return []
+        return [math.degrees(self.q_min[k]), math.degrees(self.q_max[k])]
+
+    def v_range(self, k):
+        return [] if self.v_min is None else [self.v_min[k], self.v_max[k]]
+
+
 @dataclass
 class RunResult:
     scene: Scene
     impacts: list
-    samples: list = field(default_factory=list)
+    samples: list = field(default_factory=list)    # empty when run(keep_samples=False)
+    ranges: SampleRanges = field(default_factory=SampleRanges)
     traces: list = field(default_factory=list)     # one list of trace rows per impact
     t_end: float = 0.0
     rhs_evaluations: int = 0
@@ -49,21 +80,15 @@ class RunResult:
         """The "run" object of the JSON output (SI units, angles in degrees)."""
         imp = self.impacts
         contact_times = [i['t_contact'] for i in imp]
-        q = np.array([s.q for s in self.samples]) if self.samples else np.zeros((0, 2))
-        model_tip = getattr(self, '_tip_velocities', None)
-        vx = [v[0] for v in model_tip or ()]
-        vy = [v[1] for v in model_tip or ()]
-
-        def deg_range(col):
-            return [math.degrees(q[:, col].min()), math.degrees(q[:, col].max())] if len(q) else []
+        ranges = self.ranges
         return {
             'impacts': len(imp),
             't_end': self.t_end,
             'period_last': contact_times[-1] - contact_times[-2] if len(imp) > 1 else None,
-            'q1_range_deg': deg_range(0),
-            'q2_range_deg': deg_range(1),
-            'vx_range': [min(vx), max(vx)] if model_tip else [],
-            'vy_range': [min(vy), max(vy)] if model_tip else [],
+            'q1_range_deg': ranges.q_range_deg(0),
+            'q2_range_deg': ranges.q_range_deg(1),
+            'vx_range': ranges.v_range(0),
+            'vy_range': ranges.v_range(1),
             'rhs_evaluations': self.rhs_evaluations,
             'wall_time': self.wall_time,
         }
@@ -78,14 +103,24 @@ class RunResult:
 
 def run(scene: Scene, *, control_rate: float | None = None, preset: str | None = None,
         rtol=None, atol=None, publish_rate: float | None = None, trace=False,
-        observer=None, progress=None, t_max: float | None = None) -> RunResult:
+        observer=None, progress=None, t_max: float | None = None,
+        keep_samples=True) -> RunResult:
     """Simulate ``scene`` for its number of cycles (or until ``t_max``).
 
     ``observer`` may have ``on_sample(sample)``, ``on_impact(record, trace_rows)``; ``progress``
-    is called as progress(cycle, cycles, impacts, t)."""
+    is called as progress(cycle, cycles, impacts, t). The samples go to the observer as they
+    are produced (at most ``integrator.OUTPUT_CAPACITY`` at once); ``keep_samples`` also keeps
+    them all in ``result.samples``, refused beyond ``MAX_KEPT_SAMPLES`` (publish_rate * t_max).
+    With ``keep_samples=False`` memory stays bounded whatever the sample count."""
     control_rate = scene.controller.rate if control_rate is None else control_rate
     publish_rate = publish_rate or scene.publish_rate
     t_max = scene.t_max if t_max is None else t_max
+    if keep_samples and publish_rate * t_max > MAX_KEPT_SAMPLES:
+        raise SceneError(
+            f'publish_rate = {publish_rate:g} is out of range with t_max = {t_max:g} s for a '
+            f'run that keeps its samples in memory: {publish_rate * t_max:.3g} samples; '
+            f'publish_rate * t_max must be <= {MAX_KEPT_SAMPLES:g} (impact-arm simulate '
+            f'streams them: no limit there)')
     model = ArmModel(scene)
     spec = scene.integrator
     integ = PhaseIntegrator(
@@ -102,7 +137,6 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
                                space=c.space)
     builder = ImpactBuilder(model)
     result = RunResult(scene=scene, impacts=builder.impacts)
-    tip_velocities = []
     cycles_done = 0
     impulse = [0.0, 0.0]
     last_publish = 0.0
@@ -141,8 +175,9 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
         report(feed_events(integ, builder, events, count_switch))
 
     def publish(sample, tip_velocity):
-        result.samples.append(sample)
-        tip_velocities.append(tip_velocity)
+        if keep_samples:
+            result.samples.append(sample)
+        result.ranges.add(sample.q, tip_velocity)
         if observer is not None and hasattr(observer, 'on_sample'):
             observer.on_sample(sample)
 
@@ -155,7 +190,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
         except SimulationError as exc:
             result.error = str(exc)
             result.stopped = 'error'
-        return _finish(result, integ, wall0, tip_velocities)
+        return _finish(result, integ, wall0)
 
     impulse_since_ctl = [0.0, 0.0]
     tau_now = tuple([0.0] * n)
@@ -200,31 +235,35 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
     except SimulationError as exc:  # keep what was simulated; the caller reports the error
         result.error = str(exc)
         result.stopped = 'error'
-    return _finish(result, integ, wall0, tip_velocities)
+    return _finish(result, integ, wall0)
 
 
-def _finish(result, integ, wall0, tip_velocities):
+def _finish(result, integ, wall0):
     result.t_end = integ.state.t
     result.rhs_evaluations = integ.stats.rhs_evaluations
     result.wall_time = time.perf_counter() - wall0
-    result._tip_velocities = tip_velocities
     result.integrator = integ
     return result
 
 
 def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     """``run`` with continuous control: samples every ``dt`` from the integrator's output
-    rows (``PhaseIntegrator.start_output``), events fed as they are located."""
+    rows (``PhaseIntegrator.start_output``), handed on as each kernel call ends (at most
+    ``OUTPUT_CAPACITY`` rows held), events fed as they are located."""
     model, st = integ.model, integ.state
     n, eq = model.n, model.eq
+    mode = st.mode           # samples carry the cycle half at the advance's start
+    last_t = 0.0
 
-    def publish_rows(rows, mode):
+    def publish_rows(rows):
+        nonlocal last_t
         for row in rows.tolist():
             q, qd = tuple(row[eq.R_Y:eq.R_Y + n]), tuple(row[eq.R_Y + n:eq.R_Y + 2 * n])
             tau = tuple(row[eq.R_TAU:eq.R_TAU + n]) if row[eq.R_ACT] else (0.0,) * n
             wrench = (row[eq.R_JT] / dt, row[eq.R_JN] / dt)
             publish(Sample(row[eq.R_T], q, qd, tau, wrench, mode),
                     tuple(row[eq.R_VTIP:eq.R_VTIP + 2]))
+            last_t = row[eq.R_T]
 
     # the sample at t = 0, before anything moves (no period yet: the force acting now)
     q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
@@ -234,27 +273,21 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     integ.take_impulse()
     last_index = math.floor(t_max / dt * (1 + 1e-12))
     t_final = last_index * dt
-    integ.start_output(dt, 1)
-    try:
-        while st.t < t_final:
-            mode = st.mode
-            # samples carry the cycle half at the call's start: stop where it changes
-            events = integ.advance(t_final, stop_at_event=('contact', 'switch'))
-            publish_rows(integ.take_output(), mode)
-            feed(events)
-            if scene.cycles and cycles_done() >= scene.cycles:
-                # as on the sampled clock: the run ends with the first sample from then on
-                if result.samples[-1].t < st.t:
-                    next_sample = min(t_final, math.ceil(st.t / dt - 1e-9) * dt)
-                    mode = st.mode
-                    feed(integ.advance(next_sample))
-                    publish_rows(integ.take_output(), mode)
-                result.stopped = f'{scene.cycles} cycles completed'
-                return
-        result.stopped = f't_max = {t_max:g} s reached'
-    except SimulationError:
-        publish_rows(integ.take_output(), st.mode)
-        raise
+    integ.start_output(dt, 1, sink=publish_rows)
+    while st.t < t_final:
+        mode = st.mode
+        # stop where the cycle half changes: the samples after it carry the new mode
+        events = integ.advance(t_final, stop_at_event=('contact', 'switch'))
+        feed(events)
+        if scene.cycles and cycles_done() >= scene.cycles:
+            # as on the sampled clock: the run ends with the first sample from then on
+            if last_t < st.t:
+                next_sample = min(t_final, math.ceil(st.t / dt - 1e-9) * dt)
+                mode = st.mode
+                feed(integ.advance(next_sample))
+            result.stopped = f'{scene.cycles} cycles completed'
+            return
+    result.stopped = f't_max = {t_max:g} s reached'
 
 
 def format_table(result: RunResult) -> str:

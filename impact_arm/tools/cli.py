@@ -62,8 +62,9 @@ def cmd_simulate(args) -> int:
 
     result = None
     try:
+        # streamed: the samples go to the MCAP file as they come, none is kept
         result = run(scene, control_rate=args.control_rate, preset=args.preset,
-                     observer=observer, progress=progress)
+                     observer=observer, progress=progress, keep_samples=False)
     finally:
         if observer is not None:
             observer.close(result)  # with the result: its summary is stored in the file

@@ -143,7 +143,7 @@ def classify(text: str, warm_up=lambda scene: None) -> dict:
                 'detail': message[:300].replace('\n', '\\n')}
     try:
         warm_up(scene)
-        result = run(scene)
+        result = run(scene, keep_samples=False)     # as the command runs it
         if result.error:
             return {'class': 'stopped-at-limit', 'detail': result.error[:300]}
         if not _finite(result.to_json()):
@@ -170,7 +170,7 @@ def worker():
         if shape not in shapes:
             shapes.add(shape)
             try:
-                run(scene, t_max=min(scene.t_max, 1.0))
+                run(scene, t_max=min(scene.t_max, 1.0), keep_samples=False)
             except SimulationError:
                 pass
         print(json.dumps({'start': True}), flush=True)

@@ -97,7 +97,7 @@ def control_rate_trade(scene, rates, ref, log=common.progress):
     rows = []
     for rate in rates:
         log(f'control rate {rate:g} Hz')
-        result = run(scene, control_rate=rate, preset='accurate')
+        result = run(scene, control_rate=rate, preset='accurate', keep_samples=False)
         errors = common.tradeoff_errors(result.impacts, ref)
         rows.append({'kind': 'control_rate', 'method': 'continuous' if rate == 0 else
                      f'{rate:g} Hz', 'control_rate': rate, 'wall': result.wall_time,
