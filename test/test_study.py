@@ -98,6 +98,27 @@ def test_a_failing_run_is_a_row_and_the_sweep_goes_on(tmp_path):
     assert impacts['run'] == [0, 0, 0, 2, 2, 2] and impacts['surfaces[0].mu'][-1] == 0.3
 
 
+def test_impact_rows_are_the_runs_records_whatever_their_overrides():
+    """A chunk's impacts table holds each run's impact records, lists spread over key[i]
+    columns, also when runs override different keys (their tables are joined by name)."""
+    study = Study('paper', {**LOOSE, 'cycles': 2})
+    items = [(0, {'surfaces[0].mu': 0.2}), (1, {'controller.kp': [700, 250]}),
+             (2, {'surfaces[0].mu': 0.4})]
+    rows = sweep.run_chunk('rows-test', study.data, {}, ('runs', 'impacts'), items)
+    rows = rows['impacts'].sort_by([('run', 'ascending'), ('index', 'ascending')]).to_pylist()
+    expected = []
+    for index, overrides in items:
+        for record in study.run(overrides).impacts:
+            row = {'run': index, **{k: sweep._column_value(v) for k, v in overrides.items()}}
+            for key, value in record.items():
+                row.update({f'{key}[{i}]': v for i, v in enumerate(value)}
+                           if isinstance(value, list) else {key: value})
+            expected.append(row)
+    assert len(rows) == len(expected) == 6
+    for row, want in zip(rows, expected):
+        assert {k: v for k, v in row.items() if v is not None} == want
+
+
 def without_wall(table):
     return table.drop_columns(['wall_time']) if 'wall_time' in table.column_names else table
 

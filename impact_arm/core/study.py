@@ -20,6 +20,7 @@ process (``equations.load_equations``), so a run costs its integration plus ~0.1
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import os
 import re
@@ -36,6 +37,12 @@ _TOKEN = re.compile(r'\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]')
 
 def parse_key_path(path: str) -> list:
     """'surfaces[0].mu' -> ['surfaces', 0, 'mu']."""
+    return list(_key_path(path))
+
+
+@functools.lru_cache(maxsize=1024)
+def _key_path(path: str) -> tuple:
+    # a sweep applies the same few paths to every run: parsed once per process
     parts, pos = [], 0
     while pos < len(path):
         match = _TOKEN.match(path, pos)
@@ -47,7 +54,7 @@ def parse_key_path(path: str) -> list:
         pos = match.end()
     if not parts:
         raise SceneError('override key \'\': empty key path')
-    return parts
+    return tuple(parts)
 
 
 def _plain(value):
@@ -65,18 +72,20 @@ def apply_overrides(data: dict, overrides: dict) -> dict:
     then refuses keys it does not know."""
     out = dict(data)
     for path, value in overrides.items():
-        parts = parse_key_path(path)
+        parts = _key_path(path)
         node = out
         for depth, key in enumerate(parts):
-            where = path if depth == 0 else _render(parts[:depth])
             last = depth == len(parts) - 1
             if isinstance(key, int):
                 if not isinstance(node, list):
-                    raise SceneError(f'override {path!r}: {where} is not a list')
+                    raise SceneError(f'override {path!r}: {_where(path, parts, depth)} is '
+                                     f'not a list')
                 if key >= len(node):
-                    raise SceneError(f'override {path!r}: {where} has {len(node)} entries')
+                    raise SceneError(f'override {path!r}: {_where(path, parts, depth)} has '
+                                     f'{len(node)} entries')
             elif not isinstance(node, dict):
-                raise SceneError(f'override {path!r}: {where} is not a mapping')
+                raise SceneError(f'override {path!r}: {_where(path, parts, depth)} is not a '
+                                 f'mapping')
             if last:
                 node[key] = _plain(value)
                 break
@@ -87,6 +96,11 @@ def apply_overrides(data: dict, overrides: dict) -> dict:
             node[key] = child
             node = child
     return out
+
+
+def _where(path, parts, depth) -> str:
+    """The container an override failed at, for its error message (rendered only then)."""
+    return path if depth == 0 else _render(parts[:depth])
 
 
 def _render(parts) -> str:

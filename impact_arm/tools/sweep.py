@@ -158,18 +158,45 @@ def _column_value(value):
     return value if isinstance(value, str) else json.dumps(value)
 
 
-def _add_impacts(columns: dict, fixed: dict, records: list):
-    """Append impact records to ``columns`` (name -> list), their lists spread over columns
-    named by key path (v_before[1]); ``fixed`` (run index, overrides) repeated per impact."""
-    for record in records:
-        for key, value in fixed.items():
-            columns.setdefault(key, []).append(value)
-        for key, value in record.items():
-            if isinstance(value, list):
-                for i, v in enumerate(value):
-                    columns.setdefault(f'{key}[{i}]', []).append(v)
-            else:
-                columns.setdefault(key, []).append(value)
+def _layout(fixed: dict, record: dict) -> tuple:
+    """What decides an impact row's columns: the override keys and the record's list
+    lengths (the number of links, which an override may change)."""
+    return tuple(fixed), tuple(len(v) if isinstance(v, list) else -1 for v in record.values())
+
+
+def _add_impacts(tables: dict, fixed: dict, records: list):
+    """Append one run's impact records to ``tables`` (layout -> {column: values}): ``fixed``
+    (run index, overrides) repeated per impact, the records' lists spread over columns
+    named by key path (v_before[1]). Filled a column at a time while the records are
+    fresh: per-value appends, or columns gathered from the whole chunk's records at the
+    end, cost a sweep worker several % of a run."""
+    if not records:
+        return
+    first = records[0]
+    layout = _layout(fixed, first)
+    if layout not in tables:
+        names = list(fixed)
+        for key, length in zip(first, layout[1]):
+            names += [key] if length < 0 else [f'{key}[{i}]' for i in range(length)]
+        tables[layout] = {name: [] for name in names}
+    columns = iter(tables[layout].values())
+    for value in fixed.values():
+        next(columns).extend([value] * len(records))
+    for key, length in zip(first, layout[1]):
+        if length < 0:
+            next(columns).extend([r[key] for r in records])
+        for i in range(length):
+            next(columns).extend([r[key][i] for r in records])
+
+
+def _impacts_table(tables: dict):
+    """The impact rows collected by ``_add_impacts`` as one table (None without impacts);
+    runs of different layouts make tables joined by column name."""
+    import pyarrow as pa
+    parts = [pa.table(columns) for columns in tables.values()]
+    if len(parts) > 1:
+        return pa.concat_tables(parts, promote_options='default')
+    return parts[0] if parts else None
 
 
 _STUDIES = {}     # spec hash -> Study, kept by each worker process between chunks
@@ -192,8 +219,9 @@ def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, ite
             _add_impacts(impacts, columns, result.impacts)
     # the runs table is always written: it is also the record of which runs are finished
     tables = {'runs': pa.Table.from_pylist(runs)}
-    if impacts:
-        tables['impacts'] = pa.Table.from_pydict(impacts)
+    table = _impacts_table(impacts)
+    if table is not None:
+        tables['impacts'] = table
     return tables
 
 
