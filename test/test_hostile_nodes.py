@@ -1,7 +1,6 @@
 """Hostile peers on the graph (issue 17 items 1-4): garbage on the controller's raw inputs,
 absurd states, stamp jumps and a malformed SetParameters request must not stop a node nor
 make the controller send a non-finite or absurd torque."""
-import math
 import os
 import random
 import signal
@@ -10,6 +9,8 @@ import time
 
 from ros_helpers import (PYTHON, controller, diagnostics_values, from_simulator, node_args,  # noqa: F401,E501
                          probe, ros_env, simulator, start_process, wait_for)
+
+from impact_arm.tools.benchmarks.flood import malformed_commands
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -108,39 +109,6 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
     # what it SENT: every command finite and of the size a PD on this error gives
     assert all(abs(v) < 1e3 for cmd in sent for v in cmd), max(max(map(abs, c)) for c in sent)
     assert 'Traceback' not in ctl.stderr
-
-
-def malformed_commands(rng, count, n=2):
-    """Float64MultiArray payloads the simulator must refuse, each certainly invalid: shorter
-    than any n-double message (not empty: see the test below; and short by 4 bytes at least:
-    the middleware pads a payload to a multiple of 4 with zeros), truncated, absurd or wrong lengths, an unknown encapsulation,
-    non-finite values."""
-    from rclpy.serialization import serialize_message
-    from std_msgs.msg import Float64MultiArray
-
-    def array(values):
-        return serialize_message(Float64MultiArray(data=values))
-    good = array([0.5] * n)
-    shortest = len(good)
-    out = []
-    while len(out) < count:
-        kind = rng.randrange(6)
-        if kind == 0:
-            out.append(rng.randbytes(rng.randrange(1, shortest - 3)))
-        elif kind == 1:
-            out.append(good[:rng.randrange(1, shortest - 3)])
-        elif kind == 2:     # the data length (bytes 12-15 of a layout-free array) absurd
-            out.append(good[:12] + struct.pack('<I', rng.choice((2**31 - 1, 2**32 - 1, n + 1)))
-                       + good[16:])
-        elif kind == 3:
-            out.append(b'\x07\x01\x00\x00' + good[4:])
-        elif kind == 4:
-            out.append(array([0.25] * rng.choice([k for k in range(6) if k != n])))
-        else:
-            values = [0.25] * n
-            values[rng.randrange(n)] = rng.choice((math.nan, math.inf, -math.inf))
-            out.append(array(values))
-    return out
 
 
 def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_env, tmp_path):  # noqa: F811,E501

@@ -304,11 +304,16 @@ def add_arguments(parser):
     parser.add_argument('--seed', type=int, default=0, help='seed of --fuzz')
     parser.add_argument('--fuzz-timeout', type=float, default=20.0, metavar='S',
                         help='seconds a fuzzed scene may run before it counts as a hang')
+    from .flood import add_arguments as flood_arguments
+    flood_arguments(parser)
 
 
 def run(args) -> int:
     if args.fuzz:
         from .fuzz import report
+        return report(args)
+    if args.flood:
+        from .flood import report
         return report(args)
     selected = cases(full=not args.quick)
     if args.only:
