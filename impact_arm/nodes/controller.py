@@ -107,8 +107,10 @@ def parameter_table(scene):
         Param('command_readers', 1, 'readers of the command topic (the driver, a recorder) '
               'matched before the first command; the arm is held until then, so nothing of the '
               'run goes unrecorded', 'int', low=1, high=100, read_only=True),
-        Param('thread_priority', 0, 'SCHED_FIFO priority of the control thread (0: normal '
-              'scheduling; falls back when the system refuses)', 'int', low=0, high=99,
+        Param('thread_priority', 49, 'SCHED_FIFO priority of the control thread and of the '
+              'middleware threads that deliver its samples (0: normal scheduling; falls back '
+              'when the system refuses); one below the simulator loop\'s default, as a '
+              'controller manager sits below its hardware driver', 'int', low=0, high=99,
               read_only=True),
     )
 
@@ -170,6 +172,7 @@ class Controller(Node):
                                            stamp=None)
         # like a controller manager's update loop: the thread that runs the callbacks
         self.scheduling = realtime_priority(p['thread_priority'])
+        self.middleware_priority = p['thread_priority']    # for the runner (_runner.run)
         self.get_logger().info(f'law {p["law"]} at {p["rate"]:g} Hz ({p["trigger"]}), '
                                f'scene {scene.name!r}, scheduling {self.scheduling}')
 

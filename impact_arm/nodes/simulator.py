@@ -77,9 +77,10 @@ PARAMS = (
           read_only=True),
     Param('preset', '', "integrator preset (empty: the scene's)", 'str',
           choices=('',) + INTEGRATOR_PRESETS, read_only=True),
-    Param('thread_priority', 50, 'SCHED_FIFO priority of the realtime loop thread (0: normal '
-          'scheduling; needs CAP_SYS_NICE or an rtprio limit, else it falls back with a note '
-          'in /diagnostics)', 'int', low=0, high=99, read_only=True),
+    Param('thread_priority', 50, 'SCHED_FIFO priority of the realtime loop thread and of the '
+          'middleware threads that deliver its commands (0: normal scheduling; needs '
+          'CAP_SYS_NICE or an rtprio limit, else it falls back with a note in /diagnostics)',
+          'int', low=0, high=99, read_only=True),
     Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages',
           low=0.05, high=60.0, read_only=True),
     Param('step_periods', 1, 'periods one ~/step call advances while paused', 'int', low=1,
@@ -125,6 +126,8 @@ class Simulator(Node):
         refuse_unknown(self, PARAMS)
         self.add_on_set_parameters_callback(validator(PARAMS, self._set_parameters))
         self.lockstep = p['mode'] == 'lockstep'
+        # for the runner (_runner.run): lockstep runs in the executor thread, unprioritized
+        self.middleware_priority = 0 if self.lockstep else p['thread_priority']
         self.publish_clock = self.lockstep or p['rate_factor'] != 1.0
         if not self.lockstep and p['rate_factor'] == 0.0:
             raise ParameterError('parameter rate_factor = 0.0: realtime mode needs a pace '
