@@ -262,7 +262,7 @@ def test_simulator_exit_waits_for_a_lagging_recorder(ros_env, tmp_path):
             ctl.stop()
             sim.signal(signal.SIGINT)
             # resumed at once (was 0.5 s; the test failed 2 of 4 runs under load): the
-            # simulator's 2 s wait is for the recorder to catch up, not for this test's sleeps,
+            # simulator's ACK_WAIT is for the recorder to catch up, not for this test's sleeps,
             # which load stretches. A simulator that exits without waiting is gone still sooner
             time.sleep(0.1)
             rec.signal(signal.SIGCONT)

@@ -56,7 +56,13 @@ from ._runner import realtime_priority, run
 from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
-ACK_WAIT = 2.0   # s at most, at exit, for the readers to acknowledge the last samples
+# s at most, at exit, for the readers to acknowledge the last samples. A reader that missed
+# samples (stalled, loaded) asks for them again only when the writer's periodic heartbeat
+# reaches it, every 3 s with Fast DDS's defaults (no new data piggybacks one at exit): a wait
+# shorter than that (2 s) let the test of a lagging recorder lose reports in about one run
+# of three under load. It ends as soon as every reader has acknowledged, so an exit without
+# lagging readers does not wait.
+ACK_WAIT = 4.0
 PARAMS = (
     Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
           'str', read_only=True),
