@@ -2,6 +2,7 @@
 import os
 import random
 
+from ros_helpers import domain_range
+
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-_low, _, _high = os.environ.get('IMPACT_ARM_TEST_DOMAINS', '1-100').partition('-')
-os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(int(_low), int(_high))))
+os.environ.setdefault('ROS_DOMAIN_ID', str(random.choice(domain_range())))

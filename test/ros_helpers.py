@@ -89,12 +89,12 @@ def probe(ros_env):
 # on a shared domain, looks like a reader to the next module's publishers.
 # IMPACT_ARM_TEST_DOMAINS=LOW-HIGH narrows the draw, so that test sessions run side by side
 # (several worktrees on one machine) never meet either.
-def _domain_range():
+def domain_range():
     low, _, high = os.environ.get('IMPACT_ARM_TEST_DOMAINS', '1-100').partition('-')
     return range(int(low), int(high) + 1)
 
 
-_DOMAINS = iter(random.sample(_domain_range(), len(_domain_range())))
+_DOMAINS = iter(random.sample(domain_range(), len(domain_range())))
 
 
 def make_env(domain=None, **extra) -> dict:

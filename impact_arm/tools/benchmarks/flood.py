@@ -21,7 +21,6 @@ import json
 import math
 import os
 import random
-import signal
 import struct
 import subprocess
 import sys
@@ -125,16 +124,12 @@ def _wait_diagnostics(executor, seen, since, timeout):
 
 
 def measure(args, env, logdir) -> dict:
-    from .starts import START_TIMEOUT, _listener
+    from .starts import START_TIMEOUT, _listener, start_nodes, stop_all
     domain = int(env['ROS_DOMAIN_ID'])
     rclpy, context, node, executor, seen = _listener(domain)
     procs, flooders = {}, []
     try:
-        for name in ('simulator', 'controller'):
-            with open(os.path.join(logdir, f'{name}.log'), 'wb') as log:
-                procs[name] = subprocess.Popen(
-                    [sys.executable, '-m', f'impact_arm.nodes.{name}'], env=env, stdout=log,
-                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        start_nodes(procs, env, logdir)
         end = time.monotonic() + START_TIMEOUT
         while _values_now(seen).get('commands', '0') == '0':
             executor.spin_once(timeout_sec=0.05)
@@ -160,18 +155,7 @@ def measure(args, env, logdir) -> dict:
             if p.poll() is None:
                 p.kill()
                 p.wait()
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(5)
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        stop_all(procs, rclpy, context, node, executor)
     return _figures(before, after, sent, alive)
 
 

@@ -66,18 +66,40 @@ def _listener(domain):
     return rclpy, context, node, executor, seen
 
 
+def start_nodes(procs, env, logdir, prefix=''):
+    """Start simulator and controller into ``procs`` as a user does (``python -m`` is what
+    ``ros2 run`` runs), each logging to LOGDIR/PREFIX<node>.log; filled one by one, so
+    ``stop_all`` ends whatever started even if the second start fails."""
+    for name in ('simulator', 'controller'):
+        with open(os.path.join(logdir, f'{prefix}{name}.log'), 'wb') as log:
+            procs[name] = subprocess.Popen(
+                [sys.executable, '-m', f'impact_arm.nodes.{name}'], env=env,
+                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+
+
+def stop_all(procs, rclpy, context, node, executor):
+    """SIGINT every node still running (by PID; SIGKILL after 10 s), then the listener."""
+    for p in procs.values():
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs.values():
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(5)
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
 def one_start(index, env, logdir):
     """One user-like start; returns its row."""
     domain = int(env['ROS_DOMAIN_ID'])
     rclpy, context, node, executor, seen = _listener(domain)
     procs = {}
     try:
-        for name in ('simulator', 'controller'):
-            log = open(os.path.join(logdir, f'{index:02d}_{name}.log'), 'wb')
-            procs[name] = subprocess.Popen(
-                [sys.executable, '-m', f'impact_arm.nodes.{name}'], env=env,
-                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-            log.close()
+        start_nodes(procs, env, logdir, f'{index:02d}_')
         started = time.monotonic()
         sim = procs['simulator']
         outcome = ''
@@ -101,18 +123,7 @@ def one_start(index, env, logdir):
                 (not seen['diagnostics'] or seen['diagnostics'][-1] is last):
             executor.spin_once(timeout_sec=0.05)
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(5)
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        stop_all(procs, rclpy, context, node, executor)
     return _row(index, outcome, seen)
 
 
