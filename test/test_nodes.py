@@ -327,6 +327,76 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 
+def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_env, tmp_path):
+    """Issue 17 item 10, the runner's side: the first command waits for the recorder to match
+    the simulator's publishers and receive joint states, not only for its readers to be in the
+    graph. The recorder is
+    frozen (SIGSTOP) once its readers are known, before the simulator exists, and thawed 3 s
+    after the simulator publishes; a stand-in controller, already matched with both command
+    readers, sends its commands the moment the runner's predicate allows. The recording must
+    hold every period from stamp 0. (With the real controller its own matching hides the gap:
+    it cannot match a frozen recorder.)"""
+    import threading
+    from pathlib import Path
+    from rosbags.highlevel import AnyReader
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from impact_arm import contract
+    from impact_arm.nodes.recorder import MATCHED_LINE
+    from impact_arm.tools.runner import SIMULATOR_TOPICS, ready_for_commands, recorder_says
+    mcap = tmp_path / 'slow.mcap'
+    states = probe.listen(JointState, contract.JOINT_STATES, depth=20000)
+    with probe.lock:
+        command = probe.node.create_publisher(Float64MultiArray, contract.COMMANDS,
+                                              contract.qos(contract.COMMANDS).to_rclpy())
+    with start_process(node_args('impact_arm.nodes.recorder', f'output:={mcap}', 'scene:=paper'),
+                       ros_env, tmp_path, 'slow_rec') as rec:
+        assert wait_for(lambda: not rec.alive() or (
+            'waiting for their publishers' in rec.stderr and command.get_subscription_count() >= 1
+            and probe.node.count_subscribers(contract.COMMANDS) >= 1), timeout=60), rec.stderr
+        assert rec.alive(), rec.stderr
+        rec.signal(signal.SIGSTOP)
+        thaw = threading.Timer(3.0, rec.signal, (signal.SIGCONT,))
+        try:
+            with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path,
+                               'slow_sim') as sim:
+                assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), \
+                    sim.stderr
+                thaw.start()
+                assert wait_for(lambda: ready_for_commands(probe.node, rec.err_path), timeout=60), \
+                    rec.stderr
+                assert command.get_subscription_count() >= 2
+
+                def advance(periods):                  # lockstep: a period per command
+                    for _ in range(periods):
+                        command.publish(Float64MultiArray(data=[0.0, 0.0]))
+                        time.sleep(0.002)
+                advance(200)
+                # then, thawed and matched for sure, more: the recording goes on after a gap
+                thaw.join()
+                assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_says(
+                    rec.err_path, MATCHED_LINE), timeout=60), rec.stderr
+                reached = max(stamp(m) for _, m in states)
+                advance(100)
+                assert wait_for(lambda: stamp(states[-1][1]) > reached, timeout=30), sim.stderr
+                time.sleep(0.5)
+                sent = max(stamp(m) for _, m in states)
+        finally:
+            thaw.cancel()
+            rec.signal(signal.SIGCONT)
+            probe.forget(states)
+            with probe.lock:
+                probe.node.destroy_publisher(command)
+        rec.signal(signal.SIGINT)
+        assert rec.wait(20) == 0, rec.stderr
+    with AnyReader([Path(mcap)]) as reader:
+        joint_states = [c for c in reader.connections if c.topic == contract.JOINT_STATES]
+        stamps = {round(stamp(reader.deserialize(raw, c.msgtype)) * 1000)
+                  for c, _, raw in reader.messages(joint_states)} if joint_states else set()
+    missing = set(range(round(sent * 1000) + 1)) - stamps
+    assert not missing, f'{len(missing)} periods not recorded, from stamp {min(missing)} ms'
+
+
 def test_run_command_interrupted_stops_nodes_and_keeps_the_recording(ros_env, tmp_path):
     from rosbags.highlevel import AnyReader
     from pathlib import Path

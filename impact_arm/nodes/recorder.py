@@ -42,7 +42,8 @@ from ._runner import run
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 RECORDER_MIN_DEPTH = 1000  # reader history: absorbs bursts while a chunk is compressed/written
 MATCH_GRACE = 2.0  # s after the start: then name the topics no publisher is matched on yet
-MATCHED_LINE = 'publishers matched on'   # the log line `impact-arm run` waits for
+MATCHED_LINE = 'publishers matched on'   # the log lines `impact-arm run` waits for
+FLOWING_LINE = 'first samples on'
 
 
 def _string_reader():
@@ -127,6 +128,7 @@ class Recorder(Node):
         self.create_timer(interval, self._flush)
         self.create_timer(0.5, self._discover)
         self.matched = set()     # topics whose subscription has matched a publisher
+        self.flowing = set()     # topics a sample has arrived on
         self.named_unmatched = False
         self.started = time.monotonic()
         self.match_timer = self.create_timer(0.05, self._check_matched)
@@ -211,6 +213,11 @@ class Recorder(Node):
                     received = info.get('received_timestamp') or time.time_ns()
                     taken.append((received, topic, data, info.get('source_timestamp') or received))
             per_topic.append(taken)
+            if taken and topic not in self.flowing:
+                # matched is not yet flowing: the writer may match our reader later than we
+                # match it, and what it sends before that is not for us
+                self.flowing.add(topic)
+                self.get_logger().info(f'{FLOWING_LINE} {topic}')
         for received, topic, data, published in heapq.merge(*per_topic, key=lambda m: m[0]):
             if self.failed:
                 break

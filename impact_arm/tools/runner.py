@@ -146,6 +146,32 @@ def _die_with_parent():
     os.setpgrp()   # Ctrl-C reaches the runner only; it stops the nodes in order
 
 
+def ready_for_commands(node, recorder_log=None) -> bool:
+    """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
+    its command reader (and the recorder's) are known and, with a recorder (``recorder_log``:
+    its log file), the recorder has matched every simulator publisher and received joint
+    states (the simulator publishes its held initial state until the first command). The arm
+    starts moving with the first command and nothing must go unrecorded: a subscription in the
+    graph is not a matched reader (it may match seconds later), and the reader matching a
+    writer is not the writer matching the reader."""
+    from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
+    listeners = 1 if recorder_log else 0
+    return node.count_publishers(JOINT_STATES) >= 1 and \
+        node.count_subscribers(COMMANDS) >= 1 + listeners and \
+        (not recorder_log or set(SIMULATOR_TOPICS) <= recorder_says(recorder_log, MATCHED_LINE)
+         and JOINT_STATES in recorder_says(recorder_log, FLOWING_LINE))
+
+
+def recorder_says(log_path, line) -> set:
+    """The topics the recorder's log names after ``line`` (MATCHED_LINE, FLOWING_LINE)."""
+    try:
+        with open(log_path, encoding='utf-8', errors='replace') as f:
+            return {topic for text in f if line in text
+                    for topic in text.partition(line)[2].split()}
+    except OSError:
+        return set()
+
+
 class Run:
     def __init__(self, scene, scene_path, args, output, env):
         self.scene, self.scene_path, self.args, self.output, self.env = \
@@ -208,18 +234,13 @@ class Run:
               f'logs in {self.logdir}', file=sys.stderr)
 
     def _await_graph(self, timeout=60.0):
-        """Until the recorder (if any) has matched the simulator's publishers: the arm
-        starts moving with the controller's first command and nothing must go unrecorded. A
-        subscription in the graph is not enough (its reader may match the writer seconds
-        later): the recorder logs each topic once its reader has matched a publisher."""
+        """Until the controller may start (``ready_for_commands``)."""
         import rclpy
-        listeners = 1 if self.output else 0
+        recorder_log = self.logs.get('recorder')
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             rclpy.spin_once(self.node, timeout_sec=0.05)
-            if self.node.count_publishers(JOINT_STATES) >= 1 and \
-                    self.node.count_subscribers(COMMANDS) >= 1 + listeners and \
-                    (not self.output or set(SIMULATOR_TOPICS) <= self._recorder_matched()):
+            if ready_for_commands(self.node, recorder_log):
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
@@ -227,16 +248,6 @@ class Run:
         raise ImpactArmError(f'the simulator did not appear or the recorder did not match its '
                              f'publishers within {timeout:g} s;'
                              f' see {self.logdir}')
-
-    def _recorder_matched(self) -> set:
-        """The topics the recorder says it has matched a publisher on (its log)."""
-        from ..nodes.recorder import MATCHED_LINE
-        try:
-            with open(self.logs['recorder'], encoding='utf-8', errors='replace') as f:
-                return {topic for line in f if MATCHED_LINE in line
-                        for topic in line.partition(MATCHED_LINE)[2].split()}
-        except OSError:
-            return set()
 
     def _on_impact(self, msg):
         self.impacts.append(json.loads(msg.data))
