@@ -7,12 +7,16 @@ import sys
 import time
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from impact_arm.core.errors import SceneError
+from impact_arm.core.scene import parse_scene
 from impact_arm.core.simulate import run_events
 from impact_arm.core.study import Study, apply_overrides, parse_key_path
+from impact_arm.tools.benchmarks.fuzz import key_paths
 
-from scenes import scene_from
+from scenes import paper_dict, scene_from
 
 pa = pytest.importorskip('pyarrow')
 from impact_arm.tools import sweep  # noqa: E402  (needs pyarrow: the studies extra)
@@ -62,6 +66,77 @@ def test_refused_values_and_simulation_errors_are_results_not_exceptions():
     assert refused.summary['impacts'] == 0
     failed = study.run({'materials.steel.E': 1e13, 'cycles': 2})   # beyond the Etsion fit
     assert failed.error_kind == 'simulation' and 'residual indentation fit' in failed.error
+
+
+def test_a_studys_runs_leave_nothing_behind_for_the_next():
+    """A study validates what the runs' overrides leave alone once; a run after refused,
+    failed and other runs is the run a fresh study gives, and each refusal its own."""
+    def fresh(overrides):
+        return Study('paper', {**LOOSE, 'cycles': 2}).run(overrides)
+
+    def same(a, b):
+        assert (a.impacts, a.error, a.error_kind) == (b.impacts, b.error, b.error_kind)
+        assert {**a.summary, 'wall_time': 0} == {**b.summary, 'wall_time': 0}
+    study = Study('paper', {**LOOSE, 'cycles': 2})
+    a = {'surfaces[0].mu': 0.4, 'controller.kp[0]': 700.0}
+    first = study.run(a)
+    assert first.summary['impacts'] == 2
+    surface = {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.3, 'v_d': 0.02,
+               'material': 'steel'}
+    runs = [{'gravity': 1},                       # valid: an int where a number is expected
+            {'gravity': True},                    # equal to 1, but not a number
+            {'controller.kd[0]': 5e4},            # a range across keys (closed-loop rate)
+            {'controller.kp': [600.0]},           # one gain for two links
+            {'materials.steel.E': 1e13},          # accepted; the simulation fails
+            {'surfaces[0]': surface}]
+    for overrides in runs:
+        same(study.run(overrides), fresh(overrides))
+    surface['mu'] = -1.0         # the caller's own mapping, changed after it was run
+    refused = study.run({'surfaces[0]': surface})
+    assert 'surfaces[0].mu = -1' in refused.error
+    same(refused, fresh({'surfaces[0]': surface}))
+    same(study.run(a), first)
+    same(first, fresh(a))
+
+
+PATHS = [''.join(f'[{k}]' if isinstance(k, int) else f'.{k}' if i else k
+                 for i, k in enumerate(path)) for path in key_paths(paper_dict())]
+HOSTILE = st.one_of(st.none(), st.booleans(), st.text(max_size=4), st.integers(-3, 3),
+                    st.floats(allow_nan=True, allow_infinity=True),
+                    st.lists(st.floats(-1e3, 1e3), max_size=3), st.just({}))
+
+
+@settings(max_examples=100, deadline=None, derandomize=True,
+          suppress_health_check=list(HealthCheck))
+@given(st.data())
+def test_a_studys_scenes_are_those_of_a_fresh_parse(data):
+    """Whatever sequence of overrides, a study builds the scene, or gives the refusal, that
+    validating the whole overridden data from scratch gives."""
+    study = Study('paper')
+    base = paper_dict()
+
+    def outcome(build):
+        try:
+            return build()
+        except SceneError as exc:
+            return str(exc)
+    for _ in range(data.draw(st.integers(1, 5), label='runs')):
+        overrides = {}
+        for _ in range(data.draw(st.integers(1, 3))):
+            path = data.draw(st.sampled_from(PATHS))
+            value = base
+            for key in parse_key_path(path):
+                value = value[key]
+            if isinstance(value, float) and data.draw(st.booleans()):
+                value *= data.draw(st.floats(0.5, 1.5))        # most runs are accepted
+            elif data.draw(st.integers(0, 3)) == 0:
+                value = data.draw(HOSTILE)
+            overrides[path] = value
+        expected = outcome(lambda: parse_scene(apply_overrides(study.data, overrides),
+                                               origin=f'{study.origin} with overrides',
+                                               path=study.path))
+        got = outcome(lambda: study.scene(overrides))
+        assert got == expected
 
 
 def spec(tmp_path, **changes):

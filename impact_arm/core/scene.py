@@ -186,8 +186,18 @@ def _describe_range(constraint, unit):
 
 
 class _Checker:
-    def __init__(self, origin):
+    """Checks scene data against the schema.
+
+    With ``checked`` (a dict kept between calls) each container that passes is remembered
+    by its key path with its checked value: the very same object met there again is not
+    checked again, nor are the entries a copy of a remembered mapping shares with it. A
+    subtree's check depends on nothing but the subtree and its key path (which fixes its
+    schema), and only what passed is remembered, so the first failure and its message are
+    those of a full walk. The objects must not change in place between the calls."""
+
+    def __init__(self, origin, checked=None):
         self.origin = origin
+        self.checked = checked
 
     def fail(self, path, message):
         raise SceneError(f"scene '{self.origin}': {path} {message}")
@@ -236,34 +246,55 @@ class _Checker:
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 self.fail(path, f"= {_show.repr(value)} must be an integer in [{low}, {high}]")
             return value
+        if self.checked is None:
+            return self.container(path, value, kind, constraint, unit)
+        known = self.checked.get(path)
+        if known is not None and known[0] is value:
+            return known[1]
+        result = self.container(path, value, kind, constraint, unit, known)
+        self.checked[path] = (value, result)      # holding the object keeps its identity
+        return result
+
+    def container(self, path, value, kind, constraint, unit, known=None):
         if kind == 'vec':
             if not isinstance(value, (list, tuple)) or not value:
                 self.fail(path, f"= {_show.repr(value)} must be a non-empty list of numbers ({unit})")
             return tuple(self.number(f'{path}[{i}]', v, constraint[1], unit)
                          for i, v in enumerate(value))
         if kind == 'dict':
-            return self.mapping(path, value, constraint)
+            return self.mapping(path, value, constraint, known)
         if kind == 'list':
             if not isinstance(value, (list, tuple)):
                 self.fail(path, f"= {_show.repr(value)} must be a list")
-            return tuple(self.mapping(f'{path}[{i}]', v, constraint) for i, v in enumerate(value))
+            entry = ('dict', constraint, '', REQUIRED)
+            return tuple(self.leaf(f'{path}[{i}]', v, entry) for i, v in enumerate(value))
         if kind == 'map':
             if not isinstance(value, dict) or not value:
                 self.fail(path, f"= {_show.repr(value)} must be a mapping of names to entries")
-            return {str(k): self.mapping(f'{path}.{k}', v, constraint) for k, v in value.items()}
+            entry = ('dict', constraint, '', REQUIRED)
+            return {str(k): self.leaf(f'{path}.{k}', v, entry) for k, v in value.items()}
         raise AssertionError(kind)
 
-    def mapping(self, path, value, schema):
+    def mapping(self, path, value, schema, known=None):
+        """``known``: (mapping, checked value) remembered at ``path``; the entries that
+        ``value`` shares with it (the same objects: a copy with one entry changed) keep
+        their checked values."""
         prefix = f'{path}.' if path else ''
         if not isinstance(value, dict):
             self.fail(path or '<top level>', f"must be a mapping, got {type(value).__name__}")
-        unknown = sorted(set(map(str, value)) - set(schema))
+        unknown = () if value.keys() <= schema.keys() else \
+            sorted(set(map(str, value)) - set(schema))
         if unknown:
             self.fail(f'{prefix}{unknown[0][:60]}', f"is not a known key; allowed here: {', '.join(schema)}")
+        before, checked = known if known else ({}, None)
         out = {}
         for key, spec in schema.items():
             if key in value:
-                out[key] = self.leaf(prefix + key, value[key], spec)
+                entry = value[key]
+                if key in before and before[key] is entry:
+                    out[key] = checked[key]
+                else:
+                    out[key] = self.leaf(prefix + key, entry, spec)
             elif spec[3] is REQUIRED:
                 self.fail(prefix + key, 'is missing (required)')
             else:
@@ -271,10 +302,16 @@ class _Checker:
         return out
 
 
-def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = '') -> Scene:
-    """Validate a scene already parsed from YAML and build the frozen ``Scene``."""
-    check = _Checker(origin)
-    raw = check.mapping('', data, SCHEMA)
+def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = '', *,
+                checked: dict | None = None) -> Scene:
+    """Validate a scene already parsed from YAML and build the frozen ``Scene``.
+
+    ``checked``: for many variants of one scene's data that share their unchanged parts
+    and are never changed in place (a study's runs, ``study.apply_overrides``), a dict
+    kept between the calls: a shared part already checked is not checked again. The
+    checks across keys always run; a variant is refused exactly as without it."""
+    check = _Checker(origin, checked)
+    raw = check.leaf('', data, ('dict', SCHEMA, '', REQUIRED))
     n = len(raw['links'])
     if n < 2:
         check.fail('links', f'has {n} entries: an arm needs at least 2 links')

@@ -14,8 +14,9 @@ a refused scene or a simulation error is part of the result, never an exception:
     result = study.run({'surfaces[0].mu': 0.5, 'controller.kp': [800, 300]})
     result.summary['cor_kinematic'], result.impacts[0]['F_max'], result.error
 
-The YAML is parsed once per study; the compiled kernel of a scene shape is loaded once per
-process (``equations.load_equations``), so a run costs its integration plus ~0.1 ms.
+The YAML is parsed once per study, and what a run's overrides leave alone is validated once
+(``parse_scene(checked=...)``; the checks across keys run for every run); the compiled kernel
+of a scene shape is loaded once per process (``equations.load_equations``).
 """
 from __future__ import annotations
 
@@ -58,11 +59,15 @@ def _key_path(path: str) -> tuple:
 
 
 def _plain(value):
-    """numpy numbers and arrays as the Python numbers and lists the schema checks."""
+    """numpy numbers and arrays as the Python numbers and lists the schema checks; lists and
+    mappings copied, so that a study's data never changes in place (the caller may change
+    its own after a run: the study remembers what it has validated)."""
     if hasattr(value, 'tolist'):
         return value.tolist()
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
     return value
 
 
@@ -152,18 +157,21 @@ def summarize(impacts, t_end=math.nan, stats=None, wall=math.nan) -> dict:
 
 class Study:
     """A base scene (path, installed name, ``Scene`` or YAML data) and fixed overrides; each
-    ``run(overrides)`` integrates one variant on the event-only path."""
+    ``run(overrides)`` integrates one variant on the event-only path. ``data`` is the base's
+    YAML data, a copy of the caller's: change it through overrides, never in place."""
 
     def __init__(self, scene='paper', overrides: dict | None = None):
         self.data, self.origin = load_scene_data(scene)
         self.path = self.origin if os.path.exists(self.origin) else ''
         if overrides:
             self.data = apply_overrides(self.data, overrides)
+        # the parts of the data a run's overrides leave alone are checked once per study
+        self._checked = {}
 
     def scene(self, overrides: dict | None = None) -> Scene:
         data = apply_overrides(self.data, overrides) if overrides else self.data
         origin = self.origin if not overrides else f'{self.origin} with overrides'
-        return parse_scene(data, origin=origin, path=self.path)
+        return parse_scene(data, origin=origin, path=self.path, checked=self._checked)
 
     def run(self, overrides: dict | None = None) -> StudyRun:
         overrides = dict(overrides or {})
