@@ -135,7 +135,10 @@ class PhaseIntegrator:
         self._f = np.zeros(model.size)
         self._f_valid = False
         self._h = 0.0
-        self._trace_buffer = np.zeros((TRACE_CAPACITY, model.eq.TR_SIZE))
+        # without a trace the kernel writes no row (I_TRACE is 0) but checks the buffer's
+        # length after each contact step: one row will do, not 4096 (290 kB zeroed for
+        # each run of a study)
+        self._trace_buffer = np.zeros((TRACE_CAPACITY if trace else 1, model.eq.TR_SIZE))
         self._trace_count = np.zeros(1, dtype=np.int64)
         self._ev = np.zeros(4, dtype=np.int64)      # layout.EV_*: slot, logged, stop mask, steps
         self._ev[layout.EV_STEPS] = STEPS_PER_CALL
