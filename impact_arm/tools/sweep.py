@@ -185,8 +185,11 @@ def _add_impacts(tables: dict, fixed: dict, records: list):
     for key, length in zip(first, layout[1]):
         if length < 0:
             next(columns).extend([r[key] for r in records])
-        for i in range(length):
-            next(columns).extend([r[key][i] for r in records])
+            continue
+        # the records' lists, transposed: one column per entry (every record of a run has
+        # the first's lengths)
+        for column in zip(*[r[key] for r in records]):
+            next(columns).extend(column)
 
 
 def _impacts_table(tables: dict):
