@@ -25,6 +25,16 @@ def realtime_priority(priority, thread=0):
         return f'normal (SCHED_FIFO refused: {exc.strerror or exc})'
 
 
+def name_thread(name):
+    """Give the calling thread an OS name (``ps -T``, ``top -H``, /proc/PID/task/*/comm):
+    Python names its threads for itself only."""
+    try:
+        import ctypes
+        ctypes.CDLL('libc.so.6', use_errno=True).prctl(15, name.encode()[:15])  # PR_SET_NAME
+    except OSError:
+        pass
+
+
 def _threads():
     try:
         return {int(t) for t in os.listdir('/proc/self/task')}

@@ -52,7 +52,7 @@ from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import DEFAULT_TF_RATE, SceneVisuals
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from ..io.wire import PatchedMessage, float64_array_data, joint_state_command
-from ._runner import realtime_priority, run
+from ._runner import name_thread, realtime_priority, run
 from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
 LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
@@ -383,6 +383,7 @@ class Simulator(Node):
             # The executor thread (diagnostics) and this one share the GIL; a thread waking
             # from its sleep would otherwise wait up to the 5 ms default switch interval.
             sys.setswitchinterval(5e-5)
+            name_thread('sim-loop')
             self.scheduling = realtime_priority(self.p['thread_priority'])
             while not self._stop.is_set() and not self.failed:
                 tick = self._stepping(self.loop.realtime_period)

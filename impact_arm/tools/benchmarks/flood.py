@@ -42,6 +42,10 @@ def add_arguments(parser):
                         help='length of the flood (default 15)')
     parser.add_argument('--flood-processes', type=int, default=4, metavar='N',
                         help='flooder processes sharing RATE (default 4)')
+    parser.add_argument('--flooders-idle', action='store_true',
+                        help='run the flooders under SCHED_IDLE: they get only the CPU nobody '
+                             'else wants, which separates "the flooders take the cores" from '
+                             '"the simulator\'s own work under a flood"')
 
 
 def malformed_commands(rng, count, n=2):
@@ -78,12 +82,14 @@ def malformed_commands(rng, count, n=2):
 
 
 def flooder():
-    """A flooder process: argv rate, seconds, seed. Publishes until the time is up, then
+    """A flooder process: argv rate, seconds, seed, go file. Once matched, creates GO.SEED
+    and waits for GO (every flooder started, the statistics taken); publishes until the time
+    is up, then
     prints {"sent": N, "seconds": S} (S from its first to its last burst)."""
     import rclpy
     from std_msgs.msg import Float64MultiArray
     from ... import contract
-    rate, seconds, seed = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
+    rate, seconds, seed, go = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
     rclpy.init()
     node = rclpy.create_node(f'bench_flooder_{seed}')
     pub = node.create_publisher(Float64MultiArray, contract.COMMANDS,
@@ -92,6 +98,10 @@ def flooder():
     end = time.monotonic() + 30.0
     while pub.get_subscription_count() < 1 and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
+    ready = go + f'.{seed}'
+    open(ready, 'w').close()
+    while not os.path.exists(go) and time.monotonic() < end:    # all flooders start together
+        time.sleep(0.01)
     per_burst = max(1, round(rate * BURST_PERIOD))
     sent, k = 0, 0
     start = time.monotonic()
@@ -107,6 +117,35 @@ def flooder():
     print(json.dumps({'sent': sent, 'seconds': time.monotonic() - start}), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
+
+
+def _idle():
+    """In a flooder child: SCHED_IDLE."""
+    os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+def thread_cpu(pid) -> dict:
+    """CPU seconds so far of a process's threads, by role: the realtime loop ('sim-loop'),
+    the middleware's threads ('dds.*') and the rest (the executor), each with its scheduling
+    (``SCHED_FIFO 50``) as a second key."""
+    tick = os.sysconf('SC_CLK_TCK')
+    roles = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            with open(f'/proc/{pid}/task/{tid}/stat') as f:
+                stat = f.read()
+            policy = os.sched_getscheduler(int(tid))
+            priority = os.sched_getparam(int(tid)).sched_priority
+        except OSError:
+            continue                       # the thread ended meanwhile
+        comm, fields = stat[stat.index('(') + 1:stat.rindex(')')], stat[stat.rindex(')') + 2:]
+        role = 'loop' if comm == 'sim-loop' else 'middleware' if comm.startswith('dds.') \
+            else 'other'
+        seconds = (int(fields.split()[11]) + int(fields.split()[12])) / tick   # utime + stime
+        cpu, schedules = roles.get(role, (0.0, set()))
+        roles[role] = (cpu + seconds, schedules | {
+            f'SCHED_FIFO {priority}' if policy == os.SCHED_FIFO else 'normal'})
+    return roles
 
 
 def _values_now(seen):
@@ -136,17 +175,26 @@ def measure(args, env, logdir) -> dict:
             if time.monotonic() > end or procs['simulator'].poll() is not None:
                 return {'error': 'the controller\'s commands did not reach the simulator; '
                                  f'logs in {logdir}'}
-        before = _wait_diagnostics(executor, seen, _values_now(seen), 5.0) or _values_now(seen)
         count = max(1, args.flood_processes)
+        go = os.path.join(logdir, 'flood-go')
         for k in range(count):
             flooders.append(subprocess.Popen(
                 [sys.executable, '-c', 'from impact_arm.tools.benchmarks.flood import '
                  'flooder; flooder()', repr(args.flood / count), repr(args.flood_seconds),
-                 str(k)], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                text=True))
+                 str(k), go], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                text=True, preexec_fn=_idle if args.flooders_idle else None))
+        # the window starts when every flooder is ready (their start-up is not the flood)
+        end = time.monotonic() + START_TIMEOUT
+        while not all(os.path.exists(f'{go}.{k}') for k in range(count)) and \
+                time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        before = _wait_diagnostics(executor, seen, _values_now(seen), 5.0) or _values_now(seen)
+        cpu_before, wall_before = thread_cpu(procs['simulator'].pid), time.monotonic()
+        open(go, 'w').close()
         end = time.monotonic() + args.flood_seconds + 30.0
         while any(f.poll() is None for f in flooders) and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
+        cpu_after, wall = thread_cpu(procs['simulator'].pid), time.monotonic() - wall_before
         after = _wait_diagnostics(executor, seen, _values_now(seen), 5.0) or _values_now(seen)
         sent = [json.loads(f.communicate(timeout=10)[0] or '{}') for f in flooders]
         alive = {name: p.poll() is None for name, p in procs.items()}
@@ -156,7 +204,11 @@ def measure(args, env, logdir) -> dict:
                 p.kill()
                 p.wait()
         stop_all(procs, rclpy, context, node, executor)
-    return _figures(before, after, sent, alive)
+    figures = _figures(before, after, sent, alive)
+    figures['simulator_cpu'] = {
+        role: (100.0 * (cpu - cpu_before.get(role, (0.0,))[0]) / wall, sorted(schedules))
+        for role, (cpu, schedules) in cpu_after.items()}
+    return figures
 
 
 def _figures(before, after, sent, alive) -> dict:
@@ -180,7 +232,17 @@ def _figures(before, after, sent, alive) -> dict:
         'impacts': delta('impacts'), 'sim_time_s': delta('sim_time', float),
         'watchdog': after.get('watchdog', '?'), 'level': after.get('level', '?'),
         'message': after.get('message', ''), 'alive': alive,
+        # the flood window's mean period parts [us], from the whole-run means before and after
+        'period_parts_us': {part: _window_mean(before, after, f'compute_{part}_mean_us')
+                            for part in ('commands', 'physics', 'publish')},
     }
+
+
+def _window_mean(before, after, key):
+    """The mean of ``key`` over the periods between two diagnostics of whole-run means."""
+    n0, n1 = int(before.get('periods_published', 0)), int(after.get('periods_published', 0))
+    m0, m1 = float(before.get(key, 0.0)), float(after.get(key, 0.0))
+    return (m1 * n1 - m0 * n0) / (n1 - n0) if n1 > n0 else float('nan')
 
 
 def report(args) -> int:
@@ -210,6 +272,12 @@ def report(args) -> int:
           f"{f['overrun_percent']:.3f} % (target <= {OVERRUN_TARGET:g} %), "
           f"{f['periods_skipped']} periods skipped, {f['periods_flooded']} periods left "
           f"commands queued, {f['periods_without_new_command']} without a new command")
+    parts = f['period_parts_us']
+    print(f"period parts during the flood (means): commands {parts['commands']:.1f} us, "
+          f"physics {parts['physics']:.1f} us, publish {parts['publish']:.1f} us; simulator "
+          f"CPU " + ', '.join(f'{role} {cpu:.0f} % ({"/".join(sched)})' for role, (cpu, sched)
+                             in sorted(f['simulator_cpu'].items()))
+          + ('; flooders at SCHED_IDLE' if args.flooders_idle else ''))
     print(f"controller: {f['impacts']} impacts in {f['sim_time_s']:.2f} s simulated during the "
           f"flood; watchdog {f['watchdog']}; still running: "
           + ', '.join(f'{k} {"yes" if v else "NO"}' for k, v in f['alive'].items()))
