@@ -19,6 +19,7 @@ class FakeClock:
         self.now = 100.0
         self.sleeps = []
         self.cost = {}        # period index -> wall seconds its physics takes
+        self.take_cost = 0.0  # wall seconds one take of a queued command takes
 
     def __call__(self):
         return self.now
@@ -47,6 +48,7 @@ def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.
 
     def take_command():
         due = [k for k in sorted(commands) if k <= clock.now]
+        clock.now += clock.take_cost
         return commands.pop(due[0]) if due else None
 
     def accept(raw, now):
@@ -227,3 +229,19 @@ def test_lockstep_paced_never_ahead_of_the_rate_factor(scene):
     free.command([0.0, 0.0], clock2.now)
     free.lockstep_period(clock2.now, rate_factor=0.0)
     assert clock2.sleeps == [] and free.arm.periods == 1
+
+
+def test_taking_commands_stops_at_a_quarter_of_the_period(scene):
+    """A flood whose messages cost 60 us each to take: a period takes 5 (0.3 ms, the first
+    past the 0.25 ms budget), not the 10 its count bound allows, and does not overrun."""
+    clock = FakeClock()
+    clock.take_cost = 60e-6
+    queue = {100.0 + i * 1e-7: 'garbage' for i in range(30)}
+    queue[100.0 + 31e-7] = [7.0, 0.0]
+    loop = make_loop(scene, clock, queue)
+    loop.realtime_period()
+    assert loop.flooded == 1 and len(queue) == 26
+    for _ in range(6):
+        loop.realtime_period()
+    assert loop.arm.command == [7.0, 0.0] and not queue
+    assert loop.stats.overruns == 0

@@ -155,7 +155,7 @@ class DriverLoop:
 
     def __init__(self, arm, *, wall_period, command_timeout, take_command=None, accept=None,
                  publish=None, log=None, clock=time.monotonic, sleep=time.sleep,
-                 max_takes=100):
+                 max_takes=100, take_budget=0.25):
         self.arm = arm
         self.wall_period = wall_period          # realtime: wall seconds per period
         self.watchdog = Watchdog(command_timeout)
@@ -165,6 +165,11 @@ class DriverLoop:
         # the most commands taken in one period: a keep-last queue never holds more, so a
         # flood cannot make one period drain forever (what arrives meanwhile waits)
         self.max_takes = max_takes
+        # and the most wall time spent taking them, as a fraction of the period: a refused
+        # message costs ~10 us (the middleware's take alone ~6 us on the project's VM), so a
+        # full queue of garbage would overrun a 1 ms period by itself. What is left stays
+        # queued; a keep-last queue drops its oldest, and a ZOH needs only the newest command
+        self.take_budget = take_budget
         self.publish = publish or (lambda tick: None)
         self.log = log or (lambda level, text: None)
         self.clock, self.sleep = clock, sleep
@@ -197,11 +202,14 @@ class DriverLoop:
         self.watchdog.command(torques, self._run_time(now))
 
     def _take_commands(self, now):
+        end = now + self.take_budget * self.wall_period
         for _ in range(self.max_takes):
             raw = self.take_command()
             if raw is None:
                 return
             self.accept(raw, now)
+            if self.clock() >= end:
+                break
         self.flooded += 1
 
     def _run_time(self, now):
