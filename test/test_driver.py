@@ -231,17 +231,17 @@ def test_lockstep_paced_never_ahead_of_the_rate_factor(scene):
     assert clock2.sleeps == [] and free.arm.periods == 1
 
 
-def test_taking_commands_stops_at_a_quarter_of_the_period(scene):
-    """A flood whose messages cost 60 us each to take: a period takes 5 (0.3 ms, the first
-    past the 0.25 ms budget), not the 10 its count bound allows, and does not overrun."""
+def test_taking_commands_stops_at_half_the_period(scene):
+    """A flood whose messages cost 150 us each to take: a period takes 4 (0.6 ms, the first
+    past the 0.5 ms budget), not the 10 its count bound allows (1.5 ms: an overrun)."""
     clock = FakeClock()
-    clock.take_cost = 60e-6
+    clock.take_cost = 150e-6
     queue = {100.0 + i * 1e-7: 'garbage' for i in range(30)}
     queue[100.0 + 31e-7] = [7.0, 0.0]
     loop = make_loop(scene, clock, queue)
     loop.realtime_period()
-    assert loop.flooded == 1 and len(queue) == 26
-    for _ in range(6):
+    assert loop.flooded == 1 and len(queue) == 27
+    for _ in range(8):
         loop.realtime_period()
     assert loop.arm.command == [7.0, 0.0] and not queue
     assert loop.stats.overruns == 0
