@@ -375,7 +375,7 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                 # then, thawed and matched for sure, more: the recording goes on after a gap
                 thaw.join()
                 assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_says(
-                    rec.err_path, MATCHED_LINE), timeout=60), rec.stderr
+                    rec.err_path)[MATCHED_LINE], timeout=60), rec.stderr
                 reached = max(stamp(m) for _, m in states)
                 advance(100)
                 assert wait_for(lambda: stamp(states[-1][1]) > reached, timeout=30), sim.stderr

@@ -156,20 +156,29 @@ def ready_for_commands(node, recorder_log=None) -> bool:
     writer is not the writer matching the reader."""
     from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
     listeners = 1 if recorder_log else 0
-    return node.count_publishers(JOINT_STATES) >= 1 and \
-        node.count_subscribers(COMMANDS) >= 1 + listeners and \
-        (not recorder_log or set(SIMULATOR_TOPICS) <= recorder_says(recorder_log, MATCHED_LINE)
-         and JOINT_STATES in recorder_says(recorder_log, FLOWING_LINE))
+    if not (node.count_publishers(JOINT_STATES) >= 1
+            and node.count_subscribers(COMMANDS) >= 1 + listeners):
+        return False
+    if not recorder_log:
+        return True
+    says = recorder_says(recorder_log)
+    return set(SIMULATOR_TOPICS) <= says[MATCHED_LINE] and JOINT_STATES in says[FLOWING_LINE]
 
 
-def recorder_says(log_path, line) -> set:
-    """The topics the recorder's log names after ``line`` (MATCHED_LINE, FLOWING_LINE)."""
+def recorder_says(log_path) -> dict:
+    """The topics the recorder's log names after each of its lines (MATCHED_LINE,
+    FLOWING_LINE -> set of topics), from one read of the log."""
+    from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
+    says = {MATCHED_LINE: set(), FLOWING_LINE: set()}
     try:
         with open(log_path, encoding='utf-8', errors='replace') as f:
-            return {topic for text in f if line in text
-                    for topic in text.partition(line)[2].split()}
+            for text in f:
+                for line, topics in says.items():
+                    if line in text:
+                        topics.update(text.partition(line)[2].split())
     except OSError:
-        return set()
+        pass
+    return says
 
 
 class Run:

@@ -179,3 +179,10 @@ def machine() -> dict:
     return {'python': platform.python_version(), 'numpy': numpy.__version__,
             'scipy': scipy.__version__, 'numba': nb, 'jit': jit.AVAILABLE,
             'cpus': os.cpu_count(), 'time': time.strftime('%Y-%m-%dT%H:%M:%S')}
+
+
+def cpu_seconds(stat_path) -> float:
+    """User + system CPU seconds from a /proc ``stat`` file (a process's or a thread's)."""
+    with open(stat_path) as f:
+        fields = f.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')

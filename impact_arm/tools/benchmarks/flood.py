@@ -128,20 +128,19 @@ def thread_cpu(pid) -> dict:
     """CPU seconds so far of a process's threads, by role: the realtime loop ('sim-loop'),
     the middleware's threads ('dds.*') and the rest (the executor), each with its scheduling
     (``SCHED_FIFO 50``) as a second key."""
-    tick = os.sysconf('SC_CLK_TCK')
+    from .common import cpu_seconds
     roles = {}
     for tid in os.listdir(f'/proc/{pid}/task'):
         try:
-            with open(f'/proc/{pid}/task/{tid}/stat') as f:
-                stat = f.read()
+            with open(f'/proc/{pid}/task/{tid}/comm') as f:
+                comm = f.read().strip()
+            seconds = cpu_seconds(f'/proc/{pid}/task/{tid}/stat')
             policy = os.sched_getscheduler(int(tid))
             priority = os.sched_getparam(int(tid)).sched_priority
         except OSError:
             continue                       # the thread ended meanwhile
-        comm, fields = stat[stat.index('(') + 1:stat.rindex(')')], stat[stat.rindex(')') + 2:]
         role = 'loop' if comm == 'sim-loop' else 'middleware' if comm.startswith('dds.') \
             else 'other'
-        seconds = (int(fields.split()[11]) + int(fields.split()[12])) / tick   # utime + stime
         cpu, schedules = roles.get(role, (0.0, set()))
         roles[role] = (cpu + seconds, schedules | {
             f'SCHED_FIFO {priority}' if policy == os.SCHED_FIFO else 'normal'})

@@ -21,6 +21,7 @@ import sys
 import time
 
 from ...contract import DIAGNOSTICS, JOINT_STATES
+from .common import cpu_seconds
 
 
 GENTLE_GAINS = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
@@ -36,12 +37,6 @@ def add_arguments(parser):
                         help='duration of the 5 kHz run (default 5)')
     parser.add_argument('--skip', nargs='*', default=[],
                         choices=('realtime', 'fast', 'lockstep', 'floor'))
-
-
-def _cpu_seconds(pid):
-    with open(f'/proc/{pid}/stat') as f:
-        fields = f.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def _memory_mb(pid, key='VmHWM'):
@@ -84,9 +79,9 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
             # a 1 kHz reader in this process would load the machine and the simulator
             # beyond what a user's run (controller, recorder) does
             run.node.destroy_subscription(probe)
-        cpu0, wall0 = _cpu_seconds(sim.pid), time.monotonic()
+        cpu0, wall0 = cpu_seconds(f'/proc/{sim.pid}/stat'), time.monotonic()
         outcome = run.watch(timeout)
-        cpu1, wall1 = _cpu_seconds(sim.pid), time.monotonic()
+        cpu1, wall1 = cpu_seconds(f'/proc/{sim.pid}/stat'), time.monotonic()
         final = run.diagnostics
         deadline = time.monotonic() + 2.5          # one more report, covering the last impact
         while run.diagnostics is final and time.monotonic() < deadline:
