@@ -14,6 +14,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from .. import contract
@@ -63,13 +64,16 @@ def cli(args) -> int:
         os.makedirs(args.out, exist_ok=True)
     env = dds_environment()
 
+    run = Run(scene, scene_path, args, output, env)
+
     def interrupt(signum, frame):
-        raise KeyboardInterrupt
+        # raised here, KeyboardInterrupt can land inside an rclpy call, whose pybind11 layer
+        # turns it into a RuntimeError traceback: flag it, the run's loops stop between calls
+        run.interrupted.set()
     # Ctrl-C and SIGTERM stop the run the same orderly way (even if SIGINT was ignored, as
     # for a background job of a non-interactive shell)
     signal.signal(signal.SIGINT, interrupt)
     signal.signal(signal.SIGTERM, interrupt)
-    run = Run(scene, scene_path, args, output, env)
     try:
         run.start()
         outcome = run.watch(args.timeout or 3 * scene.t_max + 30)
@@ -192,6 +196,7 @@ class Run:
         self.rhs_evaluations = 0
         self.wall = 0.0
         self.node = None
+        self.interrupted = threading.Event()    # set by the CLI's SIGINT/SIGTERM handler
         self._reported = 0
         self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
         self.logdir = os.path.join(args.out, 'logs')
@@ -244,11 +249,10 @@ class Run:
 
     def _await_graph(self, timeout=60.0):
         """Until the controller may start (``ready_for_commands``)."""
-        import rclpy
         recorder_log = self.logs.get('recorder')
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            rclpy.spin_once(self.node, timeout_sec=0.05)
+            self._spin_once(0.05)
             if ready_for_commands(self.node, recorder_log):
                 return
             for name, proc in self.procs.items():
@@ -257,6 +261,13 @@ class Run:
         raise ImpactArmError(f'the simulator did not appear or the recorder did not match its '
                              f'publishers within {timeout:g} s;'
                              f' see {self.logdir}')
+
+    def _spin_once(self, timeout):
+        """One spin of the run's node; KeyboardInterrupt once the CLI was interrupted."""
+        import rclpy
+        rclpy.spin_once(self.node, timeout_sec=timeout)
+        if self.interrupted.is_set():
+            raise KeyboardInterrupt
 
     def _on_impact(self, msg):
         self.impacts.append(json.loads(msg.data))
@@ -273,12 +284,11 @@ class Run:
 
     def watch(self, timeout) -> str:
         """Spin until the scene's cycles are done; returns why the run ended."""
-        import rclpy
         cycles = self.scene.cycles or 1
         start = time.monotonic()
         first = None
         while True:
-            rclpy.spin_once(self.node, timeout_sec=0.1)
+            self._spin_once(0.1)
             now = time.monotonic()
             if first is None and self.diagnostics.get('commands', '0') != '0':
                 # diagnostics come once a second: seeing the first command in them can be a
