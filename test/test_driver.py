@@ -34,9 +34,11 @@ def scene():
     return load_scene(resolve_scene_path('paper'))
 
 
-def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.1):
+def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.1,
+              checked=None):
     """A loop whose queued commands come from ``commands`` (wall time of arrival ->
-    torques; the string 'garbage' is a message that fails its check)."""
+    torques; the string 'garbage' is a message that fails its check); ``checked`` collects
+    every message the loop checks, in order."""
     arm = SimulatedArm(scene, RATE, max_effort=5000.0, trace=False)
     step = arm.step
     commands = commands if commands is not None else {}
@@ -52,8 +54,12 @@ def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.
         return commands.pop(due[0]) if due else None
 
     def accept(raw, now):
-        if raw != 'garbage':
-            loop.command(raw, now)
+        if checked is not None:
+            checked.append(raw)
+        if raw == 'garbage':
+            return False
+        loop.command(raw, now)
+        return True
     loop = DriverLoop(arm, wall_period=P, command_timeout=timeout, take_command=take_command,
                       accept=accept,
                       publish=(published if published is not None else []).append,
@@ -245,3 +251,23 @@ def test_taking_commands_stops_at_half_the_period(scene):
         loop.realtime_period()
     assert loop.arm.command == [7.0, 0.0] and not queue
     assert loop.stats.overruns == 0
+
+
+def test_only_the_newest_valid_command_of_a_period_is_checked_and_applied(scene):
+    """Queued [A, garbage x3, B, garbage]: checked from the newest back, the last garbage is
+    refused, B applied, and A and the garbage before B are never parsed (superseded)."""
+    clock, checked = FakeClock(), []
+    a, b = [1.0, 0.0], [2.0, 0.0]
+    queue = dict(zip((100.0 + i * 1e-7 for i in range(6)),
+                     (a, 'garbage', 'garbage', 'garbage', b, 'garbage')))
+    loop = make_loop(scene, clock, queue, checked=checked)
+    loop.realtime_period()
+    assert not queue and loop.flooded == 0
+    assert checked == ['garbage', b]
+    assert loop.superseded == 4 and loop.commands == 1
+    assert loop.arm.command == b and loop.watchdog.pending[0] is b
+    # a period of garbage only: every message is checked and refused, none superseded
+    queue.update({clock.now + i * 1e-7: 'garbage' for i in range(3)})
+    checked.clear()
+    loop.realtime_period()
+    assert checked == ['garbage'] * 3 and loop.superseded == 4 and loop.arm.command == b

@@ -301,7 +301,9 @@ class Simulator(Node):
     def _take_command(self):
         """The oldest queued command of the two command topics (arrays first, then JointState
         commands: one controller uses one of them), with what accepts it; None when both
-        queues are empty (realtime mode)."""
+        queues are empty (realtime mode). So across the topics "newest" is the last taken: in
+        a period where both sent, a valid JointState command wins over the arrays, as it did
+        when every command was applied in taking order."""
         for reader, msg_type, accept in ((self.command_reader, Float64MultiArray,
                                           self._on_command),
                                          (self.joint_command_reader, JointState,
@@ -316,7 +318,7 @@ class Simulator(Node):
     @staticmethod
     def _accept(taken, now):
         raw, accept = taken
-        accept(raw, now)
+        return accept(raw, now)
 
     @property
     def done(self):
@@ -324,7 +326,8 @@ class Simulator(Node):
 
     # ------------------------------------------------------------------------ commands
     def _on_command(self, raw, now=None):
-        """One serialized Float64MultiArray command (joint order: parameter ``joints``)."""
+        """One serialized Float64MultiArray command (joint order: parameter ``joints``);
+        True when applied, False when refused."""
         try:
             values = self.arm.check_command(float64_array_data(raw))
         except (CommandError, ValueError) as exc:
@@ -333,14 +336,17 @@ class Simulator(Node):
         for k, joint in enumerate(self.command_order):
             torques[joint] = values[k]
         self._apply(torques, now)
+        return True
 
     def _on_joint_command(self, raw, now=None):
-        """One serialized JointState command of the topic hardware (efforts by name)."""
+        """One serialized JointState command of the topic hardware (efforts by name); True
+        when applied, False when refused."""
         try:
             torques = self.arm.check_command(joint_state_command(raw, self.joint_names))
         except (CommandError, ValueError) as exc:
             return self._reject(exc, now)
         self._apply(torques, now)
+        return True
 
     def _reject(self, exc, now):
         """Counted; logged at most once a second, and only then formatted: a flood of garbage
@@ -350,6 +356,7 @@ class Simulator(Node):
         if now - self.last_reject_log >= 1.0:
             self.last_reject_log = now
             self.get_logger().warning(f'command rejected: {exc} ({self.rejected} so far)')
+        return False
 
     def _apply(self, torques, now):
         now = time.monotonic() if now is None else now
