@@ -573,6 +573,8 @@ class Simulator(Node):
             'periods_skipped': str(self.loop.skipped),
             # periods that left commands queued (a flood): the rest waited a period
             'commands_flooded': str(self.loop.flooded),
+            # commands taken but not checked: a newer valid one of the same period held
+            'commands_superseded': str(self.loop.superseded),
             # realtime periods run with no command newer than the previous period's
             'periods_without_new_command': str(self.loop.stale),
             'paused': str(self.loop.paused).lower(),

@@ -226,6 +226,7 @@ def _figures(before, after, sent, alive) -> dict:
         'overruns': delta('overruns'), 'periods_skipped': delta('periods_skipped'),
         'overrun_percent': 100.0 * delta('overruns') / periods if periods else float('nan'),
         'commands': delta('commands'), 'commands_rejected': delta('commands_rejected'),
+        'commands_superseded': delta('commands_superseded'),
         'periods_flooded': delta('commands_flooded'),
         'periods_without_new_command': delta('periods_without_new_command'),
         'impacts': delta('impacts'), 'sim_time_s': delta('sim_time', float),
@@ -264,7 +265,8 @@ def report(args) -> int:
     share = f['rate_achieved'] / f['rate_nominal']
     print(f"flood: {f['flood_sent']} garbage messages from {f['flooders']} processes, "
           f"{f['flood_rate_reached']:.0f} msg/s reached (asked {args.flood:g}); the simulator "
-          f"refused {f['commands_rejected']} and took {f['commands']} valid commands")
+          f"refused {f['commands_rejected']}, left {f['commands_superseded']} unchecked behind "
+          f"a newer valid one and applied {f['commands']} valid commands")
     print(f"simulator: {f['periods']} periods in {f['window_s']:.2f} s = "
           f"{f['rate_achieved']:.1f} Hz ({100 * share:.2f} % of {f['rate_nominal']:g}, target "
           f">= {100 * RATE_TARGET:g} %); {f['overruns']} overruns = "
