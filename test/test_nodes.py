@@ -127,7 +127,12 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
             start_process(controller(*gentle), ros_env, tmp_path, 'ctl') as ctl:
         assert wait_for(lambda: states and stamp(states[-1][1]) > 0.1, timeout=30), sim.stderr
         begin = len(states)
-        time.sleep(3.5)
+        # a window of 3 s of stamps, however late this probe receives them (a loaded machine
+        # starves its normal-priority thread behind the nodes' realtime ones): its pace is
+        # judged below from the promptest deliveries, not from how long we waited
+        assert wait_for(lambda: len(states) > begin and
+                        stamp(states[-1][1]) - stamp(states[begin][1]) >= 3.2, timeout=60), \
+            sim.stderr
         window = states[begin:]
         stamps = [stamp(m) for _, m in window]
         # Every period published once, in order: consecutive stamps lie on the 1 ms grid and

@@ -15,6 +15,15 @@ import numpy as np
 
 PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute goes
 
+# How long the driver holds the last command before it zeroes the torques [s]: 20 periods at
+# 1 kHz. Holding longer is what crashes a stiff loop. The middleware sometimes delivers
+# nothing for ~0.33 s (docs/benchmarks.md); the article's controller has just switched to a
+# large "up" torque right after an impact, and held 0.1 s that torque swings the arm over
+# and through the floor. A fake-clock test (test_driver.py) replays that silence after an
+# impact: 0.1 s crashes the arm, 0.02 s does not. A slower controller needs a longer
+# timeout: a few of its periods.
+DEFAULT_COMMAND_TIMEOUT = 0.02
+
 
 class PeriodStats:
     """Timing of the published periods, kept by the stepping thread, read by diagnostics."""

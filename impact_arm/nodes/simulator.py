@@ -46,7 +46,7 @@ from ..contract import (CLOCK, COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, IMPACT_MAR
 from ..core import jit
 from ..core.driver import CommandError, SimulatedArm
 from ..core.errors import SimulationError
-from ..core.realtime import PERIOD_PARTS, DriverLoop
+from ..core.realtime import DEFAULT_COMMAND_TIMEOUT, PERIOD_PARTS, DriverLoop
 from ..core.scene import load_scene, resolve_scene_path
 from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import DEFAULT_TF_RATE, SceneVisuals
@@ -75,8 +75,9 @@ PARAMS = (
           low=0.0, high=1000.0, read_only=True),
     # lower bounds: a watchdog under 1 ms fires between 1 kHz commands and a torque limit
     # under 1 mN m clips every command to nothing; either would silently disable control
-    Param('command_timeout', 0.1, 'seconds without a valid command before the torques are '
-          'zeroed (watchdog)', low=1e-3, high=3600.0),
+    Param('command_timeout', DEFAULT_COMMAND_TIMEOUT, 'seconds without a valid command '
+          'before the torques are zeroed (watchdog; a few control periods)',
+          low=1e-3, high=3600.0),
     Param('max_effort', 5000.0, 'commanded torques are clipped to +-max_effort [N m]',
           low=1e-3, high=1e9),
     Param('joints', joint_names(2), 'joint order of the command array', 'strs',
