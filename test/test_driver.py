@@ -282,10 +282,7 @@ def _silence_after_the_first_impact(scene, timeout, silence_from, silence=0.333)
     from impact_arm.core.control import CycleController
     clock, published, commands = FakeClock(), [], {}
     loop = make_loop(scene, clock, commands, published, timeout=timeout)
-    c = scene.controller
-    ctrl = CycleController(loop.arm.model, c.law, c.kp, c.kd, c.ki, c.down_target,
-                           c.up_target, c.switch_height,
-                           min(s.height for s in loop.arm.model.surfaces), space=c.space)
+    ctrl = CycleController.for_scene(loop.arm.model, scene.controller)
     answered, impacts = None, 0
     while loop.arm.t < 1.5:
         loop.realtime_period()

@@ -126,6 +126,14 @@ class CycleController:
         self._last_t = None
         self._last_vy = None
 
+    @classmethod
+    def for_scene(cls, model, spec):
+        """The controller a scene's ``controller`` section (``spec``) describes, switching on
+        its lowest surface (offline runs and tests; the node builds its own from parameters)."""
+        return cls(model, spec.law, spec.kp, spec.kd, spec.ki, spec.down_target,
+                   spec.up_target, spec.switch_height,
+                   min((s.height for s in model.surfaces), default=None), space=spec.space)
+
     def rearm(self, restart=False):
         """Forget the previous sample (its time, tip velocity, integral), as after a reset:
         for a stamp that went backwards or jumped far ahead. ``restart`` also starts the cycle

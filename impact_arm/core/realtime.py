@@ -147,8 +147,8 @@ class DriverLoop:
     """Runs the arm's periods. ``take_command()`` returns the next queued serialized command
     (oldest first) or None; ``accept(raw, now)`` checks one and, when valid, hands it to
     ``command`` and returns True (False when refused); ``publish(tick)`` sends a period's
-    sensor messages; ``log(level, text)`` reports state changes. ``clock`` and ``sleep`` are the wall clock (``time.monotonic``, ``time.sleep``;
-    fakes in tests).
+    sensor messages; ``log(level, text)`` reports state changes. ``clock`` and ``sleep`` are
+    the wall clock (``time.monotonic``, ``time.sleep``; fakes in tests).
 
     After a stall (a period published after the next one was due) the missed periods are
     skipped, as ros2_control's controller manager does: the loop resumes at the next deadline
@@ -297,8 +297,8 @@ class DriverLoop:
             self.arm.reset()
             self.watchdog = Watchdog(self.watchdog.timeout)
             self.stats = PeriodStats(self.stats.nominal)
-            self.commands = self.impacts = self.skipped = self.flooded = self.stale = 0
-            self.superseded = 0
+            self.commands = self.impacts = self.skipped = self.flooded = self.stale = \
+                self.superseded = 0
             self.first_command_wall = None
             self._steps = 0
             # a new schedule from now on: the next period is due one period later

@@ -130,11 +130,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
     n = model.n
     ctrl = None
     if control_rate:
-        c = scene.controller
-        ctrl = CycleController(model, c.law, c.kp, c.kd, c.ki, c.down_target, c.up_target,
-                               c.switch_height,
-                               min((s.height for s in model.surfaces), default=None),
-                               space=c.space)
+        ctrl = CycleController.for_scene(model, scene.controller)
     builder = ImpactBuilder(model)
     result = RunResult(scene=scene, impacts=builder.impacts)
     cycles_done = 0
