@@ -156,7 +156,7 @@ class Controller(Node):
                                               contract.qos(DIAGNOSTICS).to_rclpy())
         self.create_timer(1.0, self._publish_diagnostics)
         self.pub = self.create_publisher(Float64MultiArray, COMMANDS,
-                                         contract.qos(COMMANDS).to_rclpy())
+                                         contract.writer_qos(COMMANDS))
         # keep only the newest sample: a controller that fell behind acts on the present
         latest_only = contract.qos(JOINT_STATES).to_rclpy()
         latest_only.depth = 1

@@ -40,7 +40,9 @@ from ..io.wire import MalformedMessage, joint_state_fields, wrench_stamped_field
 from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
-RECORDER_MIN_DEPTH = 1000  # reader history: absorbs bursts while a chunk is compressed/written
+# reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
+# repair after the recorder was descheduled (contract.WRITER_REPAIR_DEPTH)
+RECORDER_MIN_DEPTH = contract.WRITER_REPAIR_DEPTH
 MATCH_GRACE = 2.0  # s after the start: then name the topics no publisher is matched on yet
 MATCHED_LINE = 'publishers matched on'   # the log lines `impact-arm run` waits for
 FLOWING_LINE = 'first samples on'

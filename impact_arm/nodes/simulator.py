@@ -142,16 +142,18 @@ class Simulator(Node):
 
         def qos(topic):
             return contract.qos(topic).to_rclpy()
-        self.pub_joints = self.create_publisher(JointState, JOINT_STATES, qos(JOINT_STATES))
+        writer_qos = contract.writer_qos
+        self.pub_joints = self.create_publisher(JointState, JOINT_STATES,
+                                                writer_qos(JOINT_STATES))
         self.pub_wrench = self.create_publisher(WrenchStamped, CONTACT_WRENCH,
-                                                qos(CONTACT_WRENCH))
+                                                writer_qos(CONTACT_WRENCH))
         self.pub_impact = self.create_publisher(String, IMPACT_REPORT, qos(IMPACT_REPORT))
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
                                               qos(DIAGNOSTICS))
         self.pub_clock = (self.create_publisher(Clock, CLOCK, qos(CLOCK))
                           if self.publish_clock else None)
         self.pub_hw_states = self.create_publisher(JointState, p['joint_states_topic'],
-                                                   qos(JOINT_STATES))
+                                                   writer_qos(JOINT_STATES))
         self.hw_states_wanted = False   # someone listens there (updated at tf_rate)
         self.command_reader = self.reader_node = None
         if self.lockstep:
