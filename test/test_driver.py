@@ -103,11 +103,27 @@ def test_watchdog_zeroes_the_torque_when_commands_stop_and_resumes(scene):
 
 
 def test_watchdog_status_reports_a_timeout_before_the_loop_runs_again(scene):
-    clock = FakeClock()
-    loop = make_loop(scene, clock, {100.0: [0.0, 0.0]})
+    clock, logs = FakeClock(), []
+    loop = make_loop(scene, clock, {100.0: [0.0, 0.0]}, logs=logs)
     loop.realtime_period()
     assert loop.watchdog.status(clock.now + 0.05) == 'ok'
     assert loop.watchdog.status(clock.now + 0.2) == 'timeout'
+    # the diagnostics asked first, yet the loop still logs and counts the change
+    clock.now += 0.2
+    loop.realtime_period()
+    assert loop.watchdog.timeouts == 1 and logs == ['no command for 0.1 s: torques zeroed']
+
+
+def test_watchdog_counts_each_silence_once(scene):
+    clock = FakeClock()
+    commands = {100.0 + 0.05 * k: [1.0, 0.0] for k in range(4)}   # a command every 50 ms
+    loop = make_loop(scene, clock, commands, timeout=0.01)
+    for _ in range(200):
+        loop.realtime_period()
+    assert loop.watchdog.timeouts == 4      # the silence after each of the four commands
+    loop.request_reset()
+    loop.realtime_period()
+    assert loop.watchdog.timeouts == 0      # statistics start again after ~/reset
 
 
 def test_effort_limit_clips_the_held_command(scene):

@@ -96,11 +96,13 @@ class PeriodStats:
 class Watchdog:
     """Zero-order hold of the newest command, zero torque once it is older than ``timeout``.
 
-    ``state``: waiting (no command yet: brakes on) | ok | timeout."""
+    ``state``: waiting (no command yet: brakes on) | ok | timeout; ``timeouts`` counts the
+    changes to timeout (each one a silence of the controller longer than ``timeout``)."""
 
     def __init__(self, timeout):
         self.timeout = timeout
         self.state = 'waiting'
+        self.timeouts = 0
         self.pending = None        # (torques, arrival time) of the newest valid command
         self.applied = None        # the pending command the arm holds
         self.last_command = None   # arrival time of the newest valid command
@@ -120,6 +122,7 @@ class Watchdog:
         if now - pending[1] > self.timeout:
             changed = self.state != 'timeout'
             self.state = 'timeout'
+            self.timeouts += changed
             arm.release()
             self.applied = None
             return 'timeout' if changed else None
@@ -136,10 +139,11 @@ class Watchdog:
 
     def status(self, now):
         """The state as of ``now``: a loop that has not run since the timeout elapsed will
-        zero the torque on its next period."""
+        zero the torque on its next period. Only reads: the change itself (its log line and
+        count) is the loop's, in ``hold``."""
         if self.state == 'ok' and self.last_command is not None and \
                 now - self.last_command > self.timeout:
-            self.state = 'timeout'
+            return 'timeout'
         return self.state
 
 

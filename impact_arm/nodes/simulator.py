@@ -578,6 +578,7 @@ class Simulator(Node):
             'commands_flooded': str(self.loop.flooded),
             # commands taken but not checked: a newer valid one of the same period held
             'commands_superseded': str(self.loop.superseded),
+            'watchdog_timeouts': str(self.loop.watchdog.timeouts),
             # realtime periods run with no command newer than the previous period's
             'periods_without_new_command': str(self.loop.stale),
             'paused': str(self.loop.paused).lower(),

@@ -192,6 +192,9 @@ def _row(index, outcome, seen):
         'periods': periods, 'overruns': int(d.get('overruns', -1)),
         'periods_skipped': int(d.get('periods_skipped', 0)),
         'periods_without_new_command': int(d.get('periods_without_new_command', 0)),
+        # a silence of the controller longer than the watchdog zeroes the torque and the arm
+        # falls: a cycle lost that way is the transport's, not a missed down-up switch
+        'watchdog_timeouts': int(d.get('watchdog_timeouts', 0)),
         'worst_period_us': float(d.get('compute_worst_us', 'nan')),
         'worst_period_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'worst_split_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
@@ -202,15 +205,23 @@ def _row(index, outcome, seen):
     }
 
 
+def _missed_label(r):
+    if not r['missed_impact']:
+        return ''
+    return ' MISSED IMPACT' + (' (after a watchdog timeout: the commands stopped and the arm '
+                               'fell)' if r['watchdog_timeouts'] else '')
+
+
 def _print_row(r):
     split = ', '.join(f'{k} {v:.0f}' for k, v in r['worst_split_us'].items())
     print(f"start {r['start']:2d}: {'STOPPED' if r['stopped'] else 'ran'} ({r['outcome']}); "
           f"{r['impacts']} impacts in {r['sim_time_s']:.2f} s simulated = "
           f"{r['impacts_per_sim_s']:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), "
           f"{r['cycles']} cycles, {r['re_strikes']} re-strikes, cycle "
-          f"{r['cycle_period_s']:.4f} s{' MISSED IMPACT' if r['missed_impact'] else ''}; "
+          f"{r['cycle_period_s']:.4f} s{_missed_label(r)}; "
           f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods, "
-          f"{r['periods_without_new_command']} without a new command; "
+          f"{r['periods_without_new_command']} without a new command, "
+          f"{r['watchdog_timeouts']} watchdog timeouts; "
           f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
           f"({split} us)", flush=True)
     floor = r.get('machine_floor')
@@ -233,6 +244,9 @@ def summary(rows):
         'starts': len(rows),
         'stopped': sum(r['stopped'] for r in rows),
         'missed_impact': sum(r['missed_impact'] for r in rows),
+        'missed_after_watchdog_timeout': sum(r['missed_impact'] and r['watchdog_timeouts'] > 0
+                                             for r in rows),
+        'watchdog_timeouts': sum(r['watchdog_timeouts'] for r in rows),
         're_strikes': sum(r['re_strikes'] for r in rows),
         'overruns': overruns, 'periods': periods,
         'periods_without_new_command': sum(r['periods_without_new_command'] for r in rows),
@@ -266,7 +280,10 @@ def run(args) -> int:
         _print_row(rows[-1])
     s = summary(rows)
     print(f"summary: {s['stopped']} of {s['starts']} starts stopped (target 0), "
-          f"{s['missed_impact']} with a missed impact (target 0), {s['re_strikes']} re-strikes; overruns {s['overruns']} of "
+          f"{s['missed_impact']} with a missed impact (target 0; "
+          f"{s['missed_after_watchdog_timeout']} of them after a watchdog timeout), "
+          f"{s['re_strikes']} re-strikes, {s['watchdog_timeouts']} watchdog timeouts; "
+          f"overruns {s['overruns']} of "
           f"{s['periods']} periods = {s['overrun_percent']:.3f} % (target <= 0.1 %); periods without a "
           f"new command (controller late) {s['periods_without_new_command']}; worst "
           f"period median {s['worst_period_us_median']:.0f} us, worst "
