@@ -20,7 +20,7 @@ topic                        type                                 QoS
 ===========================  ===================================  =============================
 
 All keep_last; deadline, lifespan and liveliness lease infinite; liveliness automatic.
-The depth is what readers ask for; the writers of the per-period streams keep
+The depth is what readers ask for; in lockstep the writers of the per-period streams keep
 ``WRITER_REPAIR_DEPTH`` samples (see there).
 ``/impact_report`` is transient_local so a late subscriber (recorder, analysis) still gets
 every impact. ``/clock`` is best effort like rclcpp's ClockQoS.
@@ -144,13 +144,15 @@ TOPICS = {  # topic -> (type, QoS) of every topic the nodes exchange; see the do
     COMMANDS: (COMMAND_TYPE, RELIABLE_100),
 }
 TRACE_QOS = LATCHED_100
-# History of the writers of the per-period streams (joint states, wrench, commands). A reliable
-# keep-last writer can resend only what its history still holds: a recorder descheduled for
-# 0.5 s under load (a lockstep run makes ~2 400 periods a second) lost ~1 000 joint states with
-# a history of 100 and none with 2 000. Readers keep their own depth: the simulator's command
-# reader takes at most its depth a period and must stay at 100.
+# History of the lockstep writers of the per-period streams (joint states, wrench, commands).
+# A reliable keep-last writer can resend only what its history still holds: a recorder
+# descheduled for 0.5 s under load (a lockstep run makes ~2 400 periods a second) lost ~1 000
+# joint states with a history of 100 and none with 2 000. Realtime keeps 100: Fast DDS
+# settles a batch of acknowledgements under the writer's lock, ~1 us per sample, and with
+# 2 000 a publish then took ~1.1 ms once or more per run (bench starts: worst periods
+# <= 1 ms in 0 of 10 starts, 62 % with 100). Readers keep their own depth: the simulator's
+# command reader takes at most its depth a period and must stay at 100.
 WRITER_REPAIR_DEPTH = 2000
-STREAMS = (JOINT_STATES, CONTACT_WRENCH, COMMANDS)
 LATCHED_1 = TopicQos(durability='transient_local', depth=1)
 VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
     ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),
@@ -164,12 +166,6 @@ def qos(topic: str, default: TopicQos = TopicQos()) -> TopicQos:
     """The QoS the contract gives ``topic`` (remapped names fall back to ``default``)."""
     return TOPICS.get(topic, (None, default))[1]
 
-
-def writer_qos(topic: str):
-    """The rclpy profile a node publishes ``topic`` with: the contract's, with a history of
-    ``WRITER_REPAIR_DEPTH`` for a per-period stream (``STREAMS``; a remapped stream passes
-    the contract's name)."""
-    return qos(topic).to_rclpy(WRITER_REPAIR_DEPTH if topic in STREAMS else 1)
 
 
 # ------------------------------------------------------------------------------- joints

@@ -55,7 +55,10 @@ def generate_launch_description():
         Node(package='impact_arm', executable='controller', name='controller', output='screen',
              parameters=[os.path.join(config, 'controller.yaml'),
                          {'scene': scene, 'law': law, 'rate': rate,
-                          'command_readers': 2}]),   # simulator and recorder hear the start
+                          'command_readers': 2,   # simulator and recorder hear the start
+                          # lockstep: history to resend what a starved recorder missed
+                          'command_history': PythonExpression(['2000 if ', lockstep,
+                                                               ' else 100'])}]),
         Node(package='impact_arm', executable='recorder', name='recorder', output='screen',
              parameters=[os.path.join(config, 'recorder.yaml'),
                          {'scene': scene, 'output': LaunchConfiguration('output')}]),

@@ -107,6 +107,11 @@ def parameter_table(scene):
         Param('command_readers', 1, 'readers of the command topic (the driver, a recorder) '
               'matched before the first command; the arm is held until then, so nothing of the '
               'run goes unrecorded', 'int', low=1, high=100, read_only=True),
+        Param('command_history', contract.qos(COMMANDS).depth, 'commands the writer keeps to '
+              'resend to a reader that fell behind (a recorder); impact-arm run sets '
+              f'{contract.WRITER_REPAIR_DEPTH} in lockstep. Realtime keeps the default: a '
+              'deep history makes a publish stall ~1 us per sample when acknowledgements '
+              'arrive', 'int', low=1, high=100000, read_only=True),
         Param('thread_priority', 49, 'SCHED_FIFO priority of the control thread and of the '
               'middleware threads that deliver its samples (0: normal scheduling; falls back '
               'when the system refuses); one below the simulator loop\'s default, as a '
@@ -155,8 +160,8 @@ class Controller(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
                                               contract.qos(DIAGNOSTICS).to_rclpy())
         self.create_timer(1.0, self._publish_diagnostics)
-        self.pub = self.create_publisher(Float64MultiArray, COMMANDS,
-                                         contract.writer_qos(COMMANDS))
+        self.pub = self.create_publisher(Float64MultiArray, COMMANDS, contract.qos(
+            COMMANDS).to_rclpy(p['command_history']))
         # keep only the newest sample: a controller that fell behind acts on the present
         latest_only = contract.qos(JOINT_STATES).to_rclpy()
         latest_only.depth = 1

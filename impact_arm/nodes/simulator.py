@@ -142,7 +142,9 @@ class Simulator(Node):
 
         def qos(topic):
             return contract.qos(topic).to_rclpy()
-        writer_qos = contract.writer_qos
+        def writer_qos(topic):    # lockstep: enough history to repair a starved recorder
+            return contract.qos(topic).to_rclpy(
+                contract.WRITER_REPAIR_DEPTH if self.lockstep else 1)
         self.pub_joints = self.create_publisher(JointState, JOINT_STATES,
                                                 writer_qos(JOINT_STATES))
         self.pub_wrench = self.create_publisher(WrenchStamped, CONTACT_WRENCH,

@@ -210,6 +210,8 @@ class Run:
                                  f'rate:={getattr(a, "control_rate", None) or a.rate}']
                   + ([f'law:={a.law}'] if a.law else [])
                   + (['command_readers:=2'] if self.output else [])    # simulator + recorder
+                  + ([f'command_history:={contract.WRITER_REPAIR_DEPTH}']
+                     if self.output and a.mode == 'lockstep' else [])
                   + list(getattr(a, 'controller_params', None) or []),
                   'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
         cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']
