@@ -167,7 +167,6 @@ def qos(topic: str, default: TopicQos = TopicQos()) -> TopicQos:
     return TOPICS.get(topic, (None, default))[1]
 
 
-
 # ------------------------------------------------------------------------------- joints
 def joint_names(n_links: int) -> list:
     return [f'joint{i + 1}' for i in range(n_links)]

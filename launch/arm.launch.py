@@ -19,6 +19,8 @@ from launch.substitutions import Command, LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
+from impact_arm import contract
+
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory('impact_arm'), 'config')
@@ -57,8 +59,9 @@ def generate_launch_description():
                          {'scene': scene, 'law': law, 'rate': rate,
                           'command_readers': 2,   # simulator and recorder hear the start
                           # lockstep: history to resend what a starved recorder missed
-                          'command_history': PythonExpression(['2000 if ', lockstep,
-                                                               ' else 100'])}]),
+                          'command_history': PythonExpression([
+                              f'{contract.WRITER_REPAIR_DEPTH} if ', lockstep,
+                              f' else {contract.qos(contract.COMMANDS).depth}'])}]),
         Node(package='impact_arm', executable='recorder', name='recorder', output='screen',
              parameters=[os.path.join(config, 'recorder.yaml'),
                          {'scene': scene, 'output': LaunchConfiguration('output')}]),

@@ -140,22 +140,21 @@ class Simulator(Node):
             raise ParameterError('parameter rate_factor = 0.0: realtime mode needs a pace '
                                  '> 0 (use mode lockstep to run as fast as possible)')
 
-        def qos(topic):
-            return contract.qos(topic).to_rclpy()
-        def writer_qos(topic):    # lockstep: enough history to repair a starved recorder
-            return contract.qos(topic).to_rclpy(
-                contract.WRITER_REPAIR_DEPTH if self.lockstep else 1)
+        def qos(topic, min_depth=1):
+            return contract.qos(topic).to_rclpy(min_depth)
+        # lockstep: enough history on the per-period streams to repair a starved recorder
+        stream_depth = contract.WRITER_REPAIR_DEPTH if self.lockstep else 1
         self.pub_joints = self.create_publisher(JointState, JOINT_STATES,
-                                                writer_qos(JOINT_STATES))
+                                                qos(JOINT_STATES, stream_depth))
         self.pub_wrench = self.create_publisher(WrenchStamped, CONTACT_WRENCH,
-                                                writer_qos(CONTACT_WRENCH))
+                                                qos(CONTACT_WRENCH, stream_depth))
         self.pub_impact = self.create_publisher(String, IMPACT_REPORT, qos(IMPACT_REPORT))
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
                                               qos(DIAGNOSTICS))
         self.pub_clock = (self.create_publisher(Clock, CLOCK, qos(CLOCK))
                           if self.publish_clock else None)
         self.pub_hw_states = self.create_publisher(JointState, p['joint_states_topic'],
-                                                   writer_qos(JOINT_STATES))
+                                                   qos(JOINT_STATES, stream_depth))
         self.hw_states_wanted = False   # someone listens there (updated at tf_rate)
         self.command_reader = self.reader_node = None
         if self.lockstep:
