@@ -99,7 +99,8 @@ def test_watchdog_zeroes_the_torque_when_commands_stop_and_resumes(scene):
     loop.command([1.0, 1.0], clock.now)
     loop.realtime_period()
     assert loop.watchdog.state == 'ok' and loop.arm.command == [1.0, 1.0]
-    assert logs[-1] == 'commands resumed'
+    assert logs[-1] == 'commands resumed after 0.011 s without one'
+    assert loop.watchdog.longest_silence == pytest.approx(0.011)
 
 
 def test_watchdog_status_reports_a_timeout_before_the_loop_runs_again(scene):
@@ -121,9 +122,11 @@ def test_watchdog_counts_each_silence_once(scene):
     for _ in range(200):
         loop.realtime_period()
     assert loop.watchdog.timeouts == 4      # the silence after each of the four commands
+    assert loop.watchdog.longest_silence == pytest.approx(0.05)
     loop.request_reset()
     loop.realtime_period()
     assert loop.watchdog.timeouts == 0      # statistics start again after ~/reset
+    assert loop.watchdog.longest_silence == 0.0
 
 
 def test_effort_limit_clips_the_held_command(scene):

@@ -97,7 +97,9 @@ class Watchdog:
     """Zero-order hold of the newest command, zero torque once it is older than ``timeout``.
 
     ``state``: waiting (no command yet: brakes on) | ok | timeout; ``timeouts`` counts the
-    changes to timeout (each one a silence of the controller longer than ``timeout``)."""
+    changes to timeout (each one a silence of the controller longer than ``timeout``);
+    ``silence`` is the wait before the newest command and ``longest_silence`` the longest
+    one of the run (s): a middleware stall shows there with its length."""
 
     def __init__(self, timeout):
         self.timeout = timeout
@@ -106,8 +108,12 @@ class Watchdog:
         self.pending = None        # (torques, arrival time) of the newest valid command
         self.applied = None        # the pending command the arm holds
         self.last_command = None   # arrival time of the newest valid command
+        self.silence = self.longest_silence = 0.0
 
     def command(self, torques, now):
+        if self.last_command is not None:
+            self.silence = now - self.last_command
+            self.longest_silence = max(self.longest_silence, self.silence)
         self.pending = (torques, now)
         self.last_command = now
 
@@ -260,7 +266,7 @@ class DriverLoop:
         if change == 'timeout':
             self.log('warning', f'no command for {self.watchdog.timeout:g} s: torques zeroed')
         elif change == 'resumed':
-            self.log('info', 'commands resumed')
+            self.log('info', f'commands resumed after {self.watchdog.silence:.3f} s without one')
 
     # -------------------------------------------------------------------- control
     def set_paused(self, paused):

@@ -580,6 +580,8 @@ class Simulator(Node):
             # commands taken but not checked: a newer valid one of the same period held
             'commands_superseded': str(self.loop.superseded),
             'watchdog_timeouts': str(self.loop.watchdog.timeouts),
+            # the longest wait between two commands taken (s): a stall of the transport
+            'longest_command_silence_s': f'{self.loop.watchdog.longest_silence:.6f}',
             # realtime periods run with no command newer than the previous period's
             'periods_without_new_command': str(self.loop.stale),
             'paused': str(self.loop.paused).lower(),

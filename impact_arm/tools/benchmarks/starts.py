@@ -195,6 +195,8 @@ def _row(index, outcome, seen):
         # a silence of the controller longer than the watchdog zeroes the torque and the arm
         # falls: a cycle lost that way is the transport's, not a missed down-up switch
         'watchdog_timeouts': int(d.get('watchdog_timeouts', 0)),
+        # ~0.333 s here is Fast DDS's shared-memory health check (docs/benchmarks.md)
+        'longest_command_silence_s': float(d.get('longest_command_silence_s', 'nan')),
         'worst_period_us': float(d.get('compute_worst_us', 'nan')),
         'worst_period_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'worst_split_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
@@ -221,7 +223,8 @@ def _print_row(r):
           f"{r['cycle_period_s']:.4f} s{_missed_label(r)}; "
           f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods, "
           f"{r['periods_without_new_command']} without a new command, "
-          f"{r['watchdog_timeouts']} watchdog timeouts; "
+          f"{r['watchdog_timeouts']} watchdog timeouts (longest silence "
+          f"{r['longest_command_silence_s'] * 1e3:.0f} ms); "
           f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
           f"({split} us)", flush=True)
     floor = r.get('machine_floor')
