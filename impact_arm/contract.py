@@ -38,6 +38,9 @@ JOINT_STATES = '/joint_states'
 CONTACT_WRENCH = '/contact_wrench'
 IMPACT_REPORT = '/impact_report'
 DIAGNOSTICS = '/diagnostics'
+# the names of the nodes' DiagnosticStatus (both publish on /diagnostics)
+SIMULATOR_STATUS = 'impact_arm: simulator'
+CONTROLLER_STATUS = 'impact_arm: controller'
 CLOCK = '/clock'
 COMMANDS = '/effort_controller/commands'
 IMPACT_TRACE = '/impact_trace'  # written by offline runs only: the contact phase, densely

@@ -360,7 +360,7 @@ class Controller(Node):
         dropped = sum(self.dropped.values())
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK,
-            name='impact_arm: controller', hardware_id='impact_arm_controller',
+            name=contract.CONTROLLER_STATUS, hardware_id='impact_arm_controller',
             message=f'{dropped} inputs dropped' if dropped else 'running',
             values=[KeyValue(key='commands_sent', value=str(self.sent)),
                     *(KeyValue(key=k, value=str(v)) for k, v in self.dropped.items())])

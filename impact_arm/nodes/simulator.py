@@ -615,7 +615,7 @@ class Simulator(Node):
             'rejected_steps': str(integ.rejected),
             'events': str(integ.events),
         }
-        status = DiagnosticStatus(level=level, name='impact_arm: simulator', message=message,
+        status = DiagnosticStatus(level=level, name=contract.SIMULATOR_STATUS, message=message,
                                   hardware_id='impact_arm_simulated_arm',
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])

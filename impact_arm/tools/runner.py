@@ -276,7 +276,7 @@ class Run:
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name.endswith('simulator'):
+            if status.name == contract.SIMULATOR_STATUS:
                 self.diagnostics = {kv.key: kv.value for kv in status.values}
                 self.diagnostics['level'] = int.from_bytes(bytes(status.level), 'little') \
                     if isinstance(status.level, (bytes, bytearray)) else int(status.level)

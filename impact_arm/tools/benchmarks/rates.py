@@ -20,7 +20,7 @@ import os
 import sys
 import time
 
-from ...contract import DIAGNOSTICS, JOINT_STATES
+from ...contract import DIAGNOSTICS, JOINT_STATES, SIMULATOR_STATUS
 from .common import cpu_seconds
 
 
@@ -141,7 +141,7 @@ def _run_fast(scene_path, rate, seconds):
     def on_diagnostics(msg):
         # the controller publishes on /diagnostics too: only the simulator's status counts
         for status in msg.status:
-            if status.name == 'impact_arm: simulator':
+            if status.name == SIMULATOR_STATUS:
                 diagnostics.append({kv.key: kv.value for kv in status.values})
     node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
     executor = EventsExecutor(context=context)

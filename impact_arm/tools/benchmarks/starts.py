@@ -53,7 +53,7 @@ def _listener(domain):
 
     def on_diagnostics(msg):
         for status in msg.status:
-            if status.name == 'impact_arm: simulator':
+            if status.name == contract.SIMULATOR_STATUS:
                 level = status.level
                 values = {kv.key: kv.value for kv in status.values}
                 values['level'] = level[0] if isinstance(level, (bytes, bytearray)) \
