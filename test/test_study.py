@@ -207,8 +207,11 @@ def alive(pid):
 
 
 def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp_path):
+    # 400 runs: once warm, two workers finish ~120 runs/s here, so a test process that a
+    # loaded CI machine deschedules for 0.3 s no longer finds 40 runs all done at the kill
+    count = 400
     text = ('scene: paper\nset: {cycles: 3}\nparameters:\n'
-            '  controller.kp[0]: {grid: [400, 800, 40]}\n')
+            f'  controller.kp[0]: {{grid: [400, 800, {count}]}}\n')
     path = tmp_path / 'kill.yaml'
     path.write_text(text)
     out = tmp_path / 'kill.sweep'
@@ -233,12 +236,12 @@ def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp
         os.kill(pid, signal.SIGKILL)
     assert workers and not left, 'worker processes outlived the killed sweep'
     before = sweep.read_table(str(out)).column('run').to_pylist()
-    assert 0 < len(before) < 40, 'the sweep ended before it could be killed halfway'
+    assert 0 < len(before) < count, 'the sweep ended before it could be killed halfway'
     stats = sweep.execute(sweep.Spec.load(str(path)), str(out), workers=0,
                           show_progress=False)
-    assert stats['skipped'] == len(before) and stats['ran'] == 40 - len(before)
+    assert stats['skipped'] == len(before) and stats['ran'] == count - len(before)
     runs = sweep.read_table(str(out))
-    assert runs.column('run').to_pylist() == list(range(40))
+    assert runs.column('run').to_pylist() == list(range(count))
     fresh = tmp_path / 'fresh'
     sweep.execute(sweep.Spec.load(str(path)), str(fresh), workers=0, show_progress=False)
     assert without_wall(runs).equals(without_wall(sweep.read_table(str(fresh))))
