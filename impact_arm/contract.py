@@ -156,6 +156,13 @@ TRACE_QOS = LATCHED_100
 # <= 1 ms in 0 of 10 starts, 62 % with 100). Readers keep their own depth: the simulator's
 # command reader takes at most its depth a period and must stay at 100.
 WRITER_REPAIR_DEPTH = 2000
+# Seconds the controller waits after its start before its first command (realtime), so the
+# arm starts moving only after DDS discovery has settled: when a participant discovers
+# another one late (Fast DDS announces every 3 s, and a participant started before ours is
+# often heard only then), Fast DDS's shared-memory health check can stop all of a process's
+# reception for 0.33 s (eProsima/Fast-DDS#6535; docs/nodes.md). Lockstep needs no hold: a
+# stall there only delays the next period.
+STARTUP_HOLD = 4.0
 LATCHED_1 = TopicQos(durability='transient_local', depth=1)
 VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
     ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),

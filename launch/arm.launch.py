@@ -61,7 +61,10 @@ def generate_launch_description():
                           # lockstep: history to resend what a starved recorder missed
                           'command_history': PythonExpression([
                               f'{contract.WRITER_REPAIR_DEPTH} if ', lockstep,
-                              f' else {contract.qos(contract.COMMANDS).depth}'])}]),
+                              f' else {contract.qos(contract.COMMANDS).depth}']),
+                          # realtime: the arm moves once DDS discovery has settled
+                          'startup_hold': PythonExpression([
+                              '0.0 if ', lockstep, f' else {contract.STARTUP_HOLD}'])}]),
         Node(package='impact_arm', executable='recorder', name='recorder', output='screen',
              parameters=[os.path.join(config, 'recorder.yaml'),
                          {'scene': scene, 'output': LaunchConfiguration('output')}]),

@@ -26,7 +26,8 @@ def main():
         values = list(msg.data)
         if len(values) == 2:
             tau[:] = values
-        print(json.dumps({'cmd': values, 'q': list(q), 't': clock['t']}), flush=True)
+        print(json.dumps({'cmd': values, 'q': list(q), 't': clock['t'], 'wall': time.time()}),
+              flush=True)
     node.create_subscription(Float64MultiArray, '/effort_controller/commands', on_command,
                              QoSProfile(depth=10))
     duration = float(sys.argv[1]) if len(sys.argv) > 1 else 30.0

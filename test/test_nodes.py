@@ -306,6 +306,26 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
         assert 'Traceback' not in ctl.stderr
 
 
+def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
+    """Realtime start-up: the controller sends nothing until ``startup_hold`` has passed since
+    it started (DDS discovery settles meanwhile), then drives the arm as usual."""
+    import re
+    standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '30']
+    params = ('law:=pd', 'space:=joint', 'rate:=200.0', 'startup_hold:=2.5')
+    with start_process(standin, ros_env, tmp_path, 'standin') as driver, \
+            start_process(controller(*params, ros_args=['-r', '__node:=held_controller']),
+                          ros_env, tmp_path, 'ctl') as ctl:
+        def commands():
+            return [x for x in driver.lines() if 'cmd' in x]
+        assert wait_for(lambda: len(commands()) > 10, timeout=60), ctl.stderr
+        held = re.search(r'\[(\d+\.\d+)\] \[held_controller\]: first command held 2\.5 s',
+                         ctl.stderr)
+        assert held, ctl.stderr
+        first = commands()[0]['wall']
+        # the log line is written right after the hold starts (both are wall-clock times)
+        assert first - float(held.group(1)) >= 2.5 - 0.05, (first, held.group(1))
+
+
 # ------------------------------------------------------------------------------ runner
 def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     """``impact-arm run`` in lockstep records every period, even though its recorder is

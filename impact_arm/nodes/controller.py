@@ -18,6 +18,7 @@ that would not be finite are each dropped, counted, logged throttled and reporte
 from __future__ import annotations
 
 import math
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
@@ -107,6 +108,11 @@ def parameter_table(scene):
         Param('command_readers', 1, 'readers of the command topic (the driver, a recorder) '
               'matched before the first command; the arm is held until then, so nothing of the '
               'run goes unrecorded', 'int', low=1, high=100, read_only=True),
+        Param('startup_hold', contract.STARTUP_HOLD, 'seconds after start before the first '
+              'command: the arm is held while DDS discovery settles, because Fast DDS can '
+              'stop a process\'s reception for 0.33 s when it discovers a participant late '
+              '(docs/nodes.md); impact-arm run and the launch file set 0 in lockstep',
+              low=0.0, high=60.0, read_only=True),
         Param('command_history', contract.qos(COMMANDS).depth, 'commands the writer keeps to '
               'resend to a reader that fell behind (a recorder); impact-arm run sets '
               f'{contract.WRITER_REPAIR_DEPTH} in lockstep. Realtime keeps the default: a '
@@ -155,6 +161,10 @@ class Controller(Node):
         self.wrench_flowing = True         # wait for each state's wrench (see _on_joint_state)
         self.sent = 0
         self.started = False
+        self.hold_until = time.monotonic() + p['startup_hold']
+        if p['startup_hold'] > 0:
+            self.get_logger().info(f'first command held {p["startup_hold"]:g} s after start '
+                                   f'while DDS discovery settles (startup_hold)')
         self.dropped = dict.fromkeys(DROPPED, 0)
         self.jump_from = None              # stamp of a sample that jumped, until confirmed
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
@@ -321,6 +331,8 @@ class Controller(Node):
     # ------------------------------------------------------------------------ output
     def _tick(self, t, q, qd):
         if not self.started:
+            if time.monotonic() < self.hold_until:
+                return         # the driver repeats its held state, which brings us back here
             # The arm is held until our first command, so send it only once the readers we
             # were told of (command_readers) and every one the graph already knows of are
             # matched: our own view of the graph may not show a recorder yet. The driver

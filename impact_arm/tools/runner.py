@@ -212,6 +212,7 @@ class Run:
                   + (['command_readers:=2'] if self.output else [])    # simulator + recorder
                   + ([f'command_history:={contract.WRITER_REPAIR_DEPTH}']
                      if self.output and a.mode == 'lockstep' else [])
+                  + (['startup_hold:=0.0'] if a.mode == 'lockstep' else [])
                   + list(getattr(a, 'controller_params', None) or []),
                   'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
         cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']
