@@ -6,6 +6,8 @@ processes at the same moment, as from two shells (``python -m impact_arm.nodes.s
 is what ``ros2 run impact_arm simulator`` runs), with no warm-up and no waiting between them,
 and lets them run for the article's 15 cycles (15 impacts, or 7 simulated seconds when
 impacts go missing). A listener in this process takes only /impact_report and /diagnostics.
+The controller's start-up hold (``startup_hold``, 4 s before its first command) is the node's
+own default, so it counts here exactly as it does for a user.
 Per start it prints: stopped or not, the cycle period against the article's 0.397 s, impacts
 per simulated second, overruns and skipped periods, the worst period and its split; then the
 summary the issue's targets are stated in.
