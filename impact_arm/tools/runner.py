@@ -150,6 +150,19 @@ def _die_with_parent():
     os.setpgrp()   # Ctrl-C reaches the runner only; it stops the nodes in order
 
 
+def simulator_diagnostics(msg):
+    """The simulator's /diagnostics values in ``msg`` (a DiagnosticArray) with its ``level``
+    and ``message``, or None: the controller publishes its own status there too."""
+    for status in msg.status:
+        if status.name == contract.SIMULATOR_STATUS:
+            values = {kv.key: kv.value for kv in status.values}
+            level = status.level
+            values['level'] = level[0] if isinstance(level, (bytes, bytearray)) else int(level)
+            values['message'] = status.message
+            return values
+    return None
+
+
 def ready_for_commands(node, recorder_log=None) -> bool:
     """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
     its command reader (and the recorder's) are known and, with a recorder (``recorder_log``:
@@ -276,14 +289,11 @@ class Run:
         self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
-        for status in msg.status:
-            if status.name == contract.SIMULATOR_STATUS:
-                self.diagnostics = {kv.key: kv.value for kv in status.values}
-                self.diagnostics['level'] = int.from_bytes(bytes(status.level), 'little') \
-                    if isinstance(status.level, (bytes, bytearray)) else int(status.level)
-                self.diagnostics['message'] = status.message
-                self.sim_time = float(self.diagnostics.get('sim_time', self.sim_time))
-                self.rhs_evaluations = int(self.diagnostics.get('rhs_evaluations', 0))
+        values = simulator_diagnostics(msg)
+        if values is not None:
+            self.diagnostics = values
+            self.sim_time = float(values.get('sim_time', self.sim_time))
+            self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
 
     def watch(self, timeout) -> str:
         """Spin until the scene's cycles are done; returns why the run ended."""

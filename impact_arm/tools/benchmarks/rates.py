@@ -20,7 +20,7 @@ import os
 import sys
 import time
 
-from ...contract import DIAGNOSTICS, JOINT_STATES, SIMULATOR_STATUS
+from ...contract import DIAGNOSTICS, JOINT_STATES
 from .common import cpu_seconds
 
 
@@ -123,6 +123,8 @@ def _run_fast(scene_path, rate, seconds):
     from rclpy.context import Context
     from rclpy.experimental import EventsExecutor
     from sensor_msgs.msg import JointState
+
+    from ..runner import simulator_diagnostics
     run = _session(scene_path, 'realtime', rate)
     run.args.control_rate = 1000.0        # the controller keeps its 1 kHz
     # This measures the simulator's clock, not the control loop: a Python controller taking
@@ -139,10 +141,9 @@ def _run_fast(scene_path, rate, seconds):
                              lambda m: received.append(time.monotonic()), 1000)
 
     def on_diagnostics(msg):
-        # the controller publishes on /diagnostics too: only the simulator's status counts
-        for status in msg.status:
-            if status.name == SIMULATOR_STATUS:
-                diagnostics.append({kv.key: kv.value for kv in status.values})
+        values = simulator_diagnostics(msg)
+        if values is not None:
+            diagnostics.append(values)
     node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
     executor = EventsExecutor(context=context)
     executor.add_node(node)

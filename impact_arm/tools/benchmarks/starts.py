@@ -45,6 +45,7 @@ def _listener(domain):
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
     from ... import contract
+    from ..runner import simulator_diagnostics
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('bench_starts_listener', context=context)
@@ -54,14 +55,9 @@ def _listener(domain):
                              contract.qos(contract.IMPACT_REPORT).to_rclpy())
 
     def on_diagnostics(msg):
-        for status in msg.status:
-            if status.name == contract.SIMULATOR_STATUS:
-                level = status.level
-                values = {kv.key: kv.value for kv in status.values}
-                values['level'] = level[0] if isinstance(level, (bytes, bytearray)) \
-                    else int(level)
-                values['message'] = status.message
-                seen['diagnostics'].append(values)
+        values = simulator_diagnostics(msg)
+        if values is not None:
+            seen['diagnostics'].append(values)
     node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS, on_diagnostics, 10)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
