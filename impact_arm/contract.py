@@ -49,6 +49,12 @@ TF_STATIC = '/tf_static'
 TF = '/tf'
 IMPACT_MARKERS = '/impact_markers'
 E_STOP = '/e_stop'                # std_msgs/msg/Bool: true = zero torque, latched (simulator)
+# builtin_interfaces/msg/Time: the stamp of the newest /joint_states the recorder has written.
+# In lockstep the simulator stays at most ``recorder_window`` periods ahead of it, so a
+# recording is complete however long the recorder stalls (docs/nodes.md, "Recording in
+# lockstep").
+RECORDER_PROGRESS = '/recorder/progress'
+RECORDER_PROGRESS_TYPE = 'builtin_interfaces/msg/Time'
 
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
@@ -163,6 +169,12 @@ WRITER_REPAIR_DEPTH = 2000
 # reception for 0.33 s (eProsima/Fast-DDS#6535; docs/nodes.md). Lockstep needs no hold: a
 # stall there only delays the next period.
 STARTUP_HOLD = 4.0
+# Periods a lockstep simulator may run ahead of the recorder's progress when a run is
+# recorded (``impact-arm run``, the launch file). Well inside WRITER_REPAIR_DEPTH, so every
+# sample not yet taken by the recorder is still in its writer's history and is resent; large
+# enough that the recorder's 10 ms polls never hold the loop back (~30 periods a poll).
+RECORDER_WINDOW = 500
+PROGRESS_QOS = TopicQos(depth=1)
 LATCHED_1 = TopicQos(durability='transient_local', depth=1)
 VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
     ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),

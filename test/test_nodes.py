@@ -328,13 +328,15 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
 
 # ------------------------------------------------------------------------------ runner
 def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
-    """``impact-arm run`` in lockstep records every period, even though its recorder is
-    frozen for 0.6 s (SIGSTOP) while the commands flow, as a recorder starved by a busy machine
-    is: the simulator's and the controller's writers keep enough history
-    (contract.WRITER_REPAIR_DEPTH) to resend what the recorder missed. With a history of 100
-    about a thousand periods were lost."""
-    from rosbags.highlevel import AnyReader
+    """``impact-arm run`` in lockstep records every period, command and impact report, in
+    stamp order, although its recorder is frozen (SIGSTOP) for 3 s while the commands flow:
+    the simulator waits for the recorder's progress (``recorder_window``) instead of running
+    past what the writers' history can resend. Without the wait, a recorder frozen for 1 s
+    lost 1 300-1 700 periods."""
     from pathlib import Path
+    from mcap.reader import make_reader
+    from rosbags.highlevel import AnyReader
+    from impact_arm.io.wire import joint_state_fields
     from impact_arm.nodes.recorder import FLOWING_LINE
     env = dict(ros_env)
     recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
@@ -356,7 +358,7 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
                         if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
             assert len(recorder) == 1, recorder
             os.kill(recorder[0], signal.SIGSTOP)
-            time.sleep(0.6)
+            time.sleep(3.0)
             os.kill(recorder[0], signal.SIGCONT)
         out, _ = run.communicate(timeout=300)
     finally:
@@ -368,24 +370,26 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
     assert len(rows) == 15
     assert 'real-time factor' in out
+    assert ': complete' in out, out
     mcap = tmp_path / 'runs' / 'r.mcap'
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-    assert counts.get('/impact_report') == 15
-    # nothing lost at the start (issue 17 item 10: the runner starts the controller once the
-    # recorder has matched the simulator's publishers) nor while the recorder was frozen: the
-    # held initial state (stamp 0) and then every period, 1 ms apart, to the end. (Commands
-    # are not counted against the periods: one CI run recorded 24 fewer, cause not pinned;
-    # a recorder that matches the controller's writer only after the writer matched it
-    # would miss the first ones.)
-    from mcap.reader import make_reader
-    from impact_arm.io.wire import joint_state_fields
+        reports = [json.loads(reader.deserialize(raw, c.msgtype).data)['index']
+                   for c, _, raw in reader.messages(
+                       [c for c in reader.connections if c.topic == '/impact_report'])]
+    assert reports == list(range(1, 16)), reports
+    # the held initial state (stamp 0) and then every period, 1 ms apart, to the end, in
+    # the order they were written; a command started each period after the first
     with open(mcap, 'rb') as f:
-        stamps = {round((sec + nanosec * 1e-9) * 1000) for sec, nanosec, *_ in (
+        stamps = [round((sec + nanosec * 1e-9) * 1000) for sec, nanosec, *_ in (
             joint_state_fields(m.data) for _, c, m in make_reader(f).iter_messages(
-                topics=['/joint_states']))}
-    missing = sorted(set(range(max(stamps) + 1)) - stamps)
+                topics=['/joint_states'], log_time_order=False))]
+    distinct = sorted(set(stamps))
+    missing = sorted(set(range(distinct[-1] + 1)) - set(distinct))
     assert not missing, f'{len(missing)} periods not recorded, from {missing[0]} ms'
+    later = [s for s in stamps if s > 0]
+    assert later == sorted(later), 'joint states written out of stamp order'
+    assert counts.get(contract.COMMANDS, 0) >= distinct[-1], (counts, distinct[-1])
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 

@@ -176,6 +176,15 @@ def float64_array_data(raw: bytes) -> list:
     return _doubles_at(r)[0]
 
 
+@_reader
+def header_stamp_ns(raw: bytes) -> int:
+    """The header stamp [ns] of a stamped message (std_msgs/Header first), read from its
+    first bytes without parsing the rest."""
+    r = CdrReader(raw)
+    sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
+    return sec * 1_000_000_000 + nanosec
+
+
 def _header(r: CdrReader):
     sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
     _skip(r, r.unpack('I', 4)[0])    # frame_id

@@ -36,7 +36,8 @@ from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, packa
                             ros_distro)
 from ..io.msgdefs import typestore
 from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
-from ..io.wire import MalformedMessage, joint_state_fields, wrench_stamped_fields
+from ..io.wire import (MalformedMessage, header_stamp_ns, joint_state_fields,
+                       wrench_stamped_fields)
 from ._runner import run
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -125,6 +126,11 @@ class Recorder(Node):
             self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
             self._read_string = _string_reader()
         self.subs = {}
+        # what has been written, for a lockstep simulator that waits for the recording
+        from builtin_interfaces.msg import Time
+        self.progress = self.create_publisher(Time, contract.RECORDER_PROGRESS,
+                                              contract.PROGRESS_QOS.to_rclpy())
+        self.written_until = self.announced = None   # ns: newest /joint_states stamp written
         self.reader = Node('_recorder_reader', context=self.context)
         self._subscribe_known()
         self.create_timer(interval, self._flush)
@@ -224,6 +230,11 @@ class Recorder(Node):
             if self.failed:
                 break
             self._store(topic, data, received, published)
+        if self.written_until != self.announced and not self.failed:
+            from builtin_interfaces.msg import Time
+            self.announced = self.written_until
+            sec, nanosec = divmod(self.written_until, 1_000_000_000)
+            self.progress.publish(Time(sec=sec, nanosec=nanosec))
 
     def _store(self, topic, data, received, published):
         try:
@@ -236,6 +247,8 @@ class Recorder(Node):
                                       None if thash in (None, 'INVALID') else thash)
             self.writer.write(topic, data, received, published)
             self.received += 1
+            if topic == contract.JOINT_STATES:
+                self.written_until = header_stamp_ns(data)
             if self.visuals is not None:
                 self._derive_visuals(topic, data, received)
         except RecordingError as e:

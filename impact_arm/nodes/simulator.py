@@ -101,6 +101,10 @@ PARAMS = (
           'topic_based_ros2_control (not /joint_states)', 'str', read_only=True),
     Param('tf_rate', DEFAULT_TF_RATE, 'rate of /tf and /impact_markers [Hz] (wall clock)',
           low=0.0, high=1000.0, open_low=True, read_only=True),
+    Param('recorder_window', 0, 'lockstep: periods simulated time may run ahead of what the '
+          f'recorder reports written on {contract.RECORDER_PROGRESS}, so a stalled recorder '
+          'holds the run instead of losing samples (0: do not wait for a recorder)', 'int',
+          low=0, high=contract.WRITER_REPAIR_DEPTH // 2, read_only=True),
     Param('publish_tf', True, 'publish /tf and /tf_static (false when robot_state_publisher '
           'does, launch tf:=rsp)', 'bool', read_only=True),
 )
@@ -166,6 +170,7 @@ class Simulator(Node):
         else:
             self.command_reader, self.joint_command_reader = self._command_readers(
                 qos(COMMANDS))
+        self._follow_recorder(p['recorder_window'] if self.lockstep else 0)
 
         # pre-serialized messages: each period only writes its numbers into their bytes
         zeros = [0.0] * self.arm.n
@@ -240,6 +245,8 @@ class Simulator(Node):
             return response
         done = self.loop.request_reset(None if self.lockstep else 1.0)
         if done and self.lockstep:
+            self.deferred = None
+            self.recorded_until = None     # the recorder's next progress is after the reset
             self._publish(self.arm.sample())
         response.success = done
         response.message = 'reset to the initial state at t = 0; brakes on until the next ' \
@@ -251,7 +258,7 @@ class Simulator(Node):
         was = self.loop.paused
         self.loop.set_paused(bool(request.data))
         if self.lockstep and was and not self.loop.paused and self.loop.watchdog.pending:
-            self._lockstep_period(time.monotonic())   # the exchange waits for a period
+            self._advance(time.monotonic())   # the exchange waits for a period
         response.success = True
         response.message = 'paused' if self.loop.paused else 'running'
         self.get_logger().info(f'simulation {response.message} at t = {self.arm.t:.6f} s')
@@ -264,7 +271,7 @@ class Simulator(Node):
         n = self.p['step_periods']
         self.loop.request_steps(n)
         if self.lockstep and self.loop.watchdog.pending and self.loop.take_step():
-            self._lockstep_period(time.monotonic())   # the exchange waits for a period
+            self._advance(time.monotonic())   # the exchange waits for a period
         response.success, response.message = True, f'{n} period(s) requested'
         return response
 
@@ -370,7 +377,7 @@ class Simulator(Node):
             if self.loop.paused:
                 if not self.loop.take_step():
                     return                 # held until resumed or stepped
-            self._lockstep_period(now)
+            self._advance(now)
 
     def _log(self, level, text):
         # rclpy fixes each call site's severity at its first call: one site per level
@@ -404,6 +411,53 @@ class Simulator(Node):
             self.get_logger().error(traceback.format_exc())
             self._fail(f'the stepping thread failed: {type(exc).__name__}: {exc}')
 
+    # ------------------------------------------------------------- recording in lockstep
+    def _follow_recorder(self, window):
+        """With ``window`` > 0 (lockstep), a period starts only while simulated time is at
+        most ``window`` periods ahead of the newest joint state the recorder has written: a
+        recorder frozen for seconds holds the run instead of losing what the writers' history
+        (WRITER_REPAIR_DEPTH > window) could no longer resend."""
+        self.window_ns = round(window * 1e9 / self.p['publish_rate'])
+        self.recorded_until = None         # ns, from /recorder/progress
+        self.deferred = None               # arrival time of a command waiting for the recorder
+        self.waits_for_recorder = 0        # periods that waited
+        self.recorder_seen = False
+        self.progress_sub = None
+        if window:
+            from builtin_interfaces.msg import Time
+            self.progress_sub = self.create_subscription(
+                Time, contract.RECORDER_PROGRESS, self._on_recorder_progress,
+                contract.PROGRESS_QOS.to_rclpy())
+
+    def _behind_recorder(self) -> bool:
+        if not self.window_ns:
+            return False
+        if self.progress_sub.get_publisher_count() == 0 and self.recorder_seen:
+            return False                   # the recorder left: the run goes on without it
+        return self.recorded_until is None or \
+            round(self.arm.t * 1e9) - self.recorded_until >= self.window_ns
+
+    def _on_recorder_progress(self, msg):
+        self.recorder_seen = True
+        self.recorded_until = msg.sec * 1_000_000_000 + msg.nanosec
+        if self.deferred is not None and not self._behind_recorder():
+            arrived, self.deferred = self.deferred, None
+            self._lockstep_period(arrived)
+
+    def _on_recorder_progress_lost(self):
+        self.get_logger().warning('the recorder left: the run goes on without it')
+        arrived, self.deferred = self.deferred, None
+        self._lockstep_period(arrived)
+
+    def _advance(self, arrived):
+        """The lockstep period a command starts, now or once the recorder has caught up."""
+        if self._behind_recorder():
+            if self.deferred is None:
+                self.waits_for_recorder += 1
+            self.deferred = arrived
+            return
+        self._lockstep_period(arrived)
+
     def _lockstep_period(self, arrived):
         if self.failed:
             return
@@ -422,6 +476,15 @@ class Simulator(Node):
             return
         if self.loop.commands == 0:
             self._publish(self.arm.sample())
+            return
+        if self.deferred is not None:
+            if self.recorder_seen and self.progress_sub.get_publisher_count() == 0:
+                self._on_recorder_progress_lost()
+            else:
+                self.get_logger().warning(
+                    f'waiting for the recorder: written up to t = '
+                    f'{(self.recorded_until or 0) * 1e-9:.3f} s, simulated {self.arm.t:.3f} s '
+                    f'(recorder_window {self.p["recorder_window"]})', throttle_duration_sec=2.0)
             return
         tick, published = self.last_tick
         now = time.monotonic()
@@ -605,7 +668,9 @@ class Simulator(Node):
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
             'publish_failures': str(self.publish_failures),
-            **({'lockstep_repeats': str(self.lockstep_repeats)} if self.lockstep else {}),
+            **({'lockstep_repeats': str(self.lockstep_repeats),
+                'periods_waiting_for_recorder': str(self.waits_for_recorder)}
+               if self.lockstep else {}),
             'sim_time': f'{self.arm.t:.6f}',
             'real_time_factor': f'{self.arm.t / (now - first_command):.3f}'
             if first_command and now > first_command else '0',

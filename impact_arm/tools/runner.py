@@ -93,13 +93,22 @@ def cli(args) -> int:
         d = run.diagnostics
         print(f"realtime: {d.get('overruns', '?')} overruns; worst period compute "
               f"{d.get('compute_worst_us', '?')} us of {d.get('period_us', '?')} us")
-    if output:
-        print(f'recorded to {output}' if os.path.exists(output) else
-              f'no recording: {output} was not written')
+    incomplete = False
+    if output and os.path.exists(output):
+        from ..io.recording_check import check_recording
+        check = check_recording(output, args.rate)
+        print(f'recorded to {output}: {check.summary()}')
+        # lockstep waits for the recorder: a gap there is a defect, not load
+        incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
+    elif output:
+        print(f'no recording: {output} was not written')
     failed = {n: c for n, c in codes.items() if c not in (0, None)}
     if outcome == 'interrupted':
         print('interrupted: nodes stopped, recording closed', file=sys.stderr)
         return 130
+    if incomplete:
+        print('the lockstep recording is incomplete', file=sys.stderr)
+        return 1
     if failed or outcome not in ('completed',):
         for node, code in failed.items():
             print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
@@ -218,7 +227,10 @@ class Run:
         a = self.args
         params = {'simulator': [f'scene:={self.scene_path}', f'publish_rate:={a.rate}',
                                 f'mode:={a.mode}',
-                                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}'],
+                                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}']
+                  # lockstep: the simulator waits for the recorder, so nothing is lost
+                  + ([f'recorder_window:={contract.RECORDER_WINDOW}']
+                     if self.output and a.mode == 'lockstep' else []),
                   'controller': [f'scene:={self.scene_path}',
                                  f'rate:={getattr(a, "control_rate", None) or a.rate}']
                   + ([f'law:={a.law}'] if a.law else [])
