@@ -87,6 +87,9 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
         future = client.call_async(bad)
         assert wait_for(future.done, timeout=10)
         assert not any(r.successful for r in future.result().results)
+        future = client.call_async(SetParameters.Request(parameters=[Parameter(name='')]))
+        assert wait_for(future.done, timeout=10)
+        assert [r.successful for r in future.result().results] == [False]
 
         # still alive and still controlling on the driver's own states after all of that
         assert wait_for(lambda: len(commands()) > sent_before + 50, timeout=30), ctl.stderr

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 
 from ..contract import to_joint_space
@@ -124,6 +125,12 @@ class SimulatedArm:
         bad = [i for i, v in enumerate(out) if not math.isfinite(v)]
         if bad:
             raise CommandError(f'command value(s) {out} not finite (index {bad})')
+        # a subnormal torque (< 2.2e-308 N m) is no controller's output but the mark of a
+        # message cut short and zero-padded on the way: its last bytes were zeroed
+        tiny = [i for i, v in enumerate(out) if v and abs(v) < sys.float_info.min]
+        if tiny:
+            raise CommandError(f'command value(s) {out} subnormal (index {tiny}): a corrupted '
+                               f'or truncated message')
         return out
 
     def apply(self, values):

@@ -547,8 +547,10 @@ def _near_key(text: str, line: int) -> str:
 def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
     """The scene's YAML as plain data, not yet validated (studies change values in it), or
     ``SceneError`` in one line with line, column and key. Also reads sweep specs (``what``)."""
-    loader = _SceneLoader(text)
+    loader = None
     try:
+        # the reader checks the characters as it is built: a NUL byte fails here already
+        loader = _SceneLoader(text)
         node = loader.get_single_node()
         if node is not None and _expanded_size(node, {}) > MAX_YAML_NODES:
             raise SceneError(f"{what} '{origin}': more than {MAX_YAML_NODES} YAML nodes once "
@@ -564,7 +566,8 @@ def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
         problem = ' '.join(str(exc).split()) or type(exc).__name__
         raise SceneError(f"{what} '{origin}': not valid YAML: {problem[:200]}") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def scene_from_text(text: str, origin: str = '<scene>', path: str = '') -> Scene:

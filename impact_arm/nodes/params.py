@@ -150,6 +150,10 @@ def validator(table, apply):
     def callback(parameters):
         checked = {}
         for param in parameters:
+            if not param.name.strip():
+                # rclpy would store it as an undeclared parameter nobody can read back
+                return SetParametersResult(successful=False,
+                                           reason='a parameter name must not be empty')
             spec = by_name.get(param.name)
             if spec is None:
                 continue

@@ -47,6 +47,7 @@ def cmd_simulate(args) -> int:
     args.mcap = args.mcap and writable_output(args.mcap, '--mcap')
     if args.no_samples:
         return _simulate_without_samples(scene, args)
+    _check_run_size(scene, args)
     observer = None
     if args.mcap:
         from ..io.offline_mcap import OfflineRecorder
@@ -75,6 +76,28 @@ def cmd_simulate(args) -> int:
     if args.mcap:
         print(f'recorded to {args.mcap}')
     return 1 if result.error else 0
+
+
+# A sampled run's cost grows with publish_rate x t_max: measured on a 2-core VM, ~3 us and
+# (with --mcap) ~120 bytes of compressed MCAP per sample. Beyond this many samples (~30 s,
+# ~1.2 GB; counted up to t_max, which the scene's cycles may end sooner) `simulate` says what
+# the run may cost and runs it only with --yes.
+RUN_SIZE_LIMIT = 1e7
+SECONDS_PER_SAMPLE, MCAP_BYTES_PER_SAMPLE = 3e-6, 120
+
+
+def _check_run_size(scene, args):
+    samples = scene.publish_rate * scene.t_max
+    if samples <= RUN_SIZE_LIMIT / 10:
+        return
+    estimate = (f'publish_rate {scene.publish_rate:g} Hz x t_max {scene.t_max:g} s = '
+                f'{samples:.3g} samples: up to about {samples * SECONDS_PER_SAMPLE:.0f} s'
+                + (f' and {samples * MCAP_BYTES_PER_SAMPLE / 1e9:.1f} GB of MCAP'
+                   if args.mcap else ''))
+    if samples > RUN_SIZE_LIMIT and not args.yes:
+        raise ImpactArmError(f'{estimate}; more than {RUN_SIZE_LIMIT:.0e} samples run only '
+                             f'with --yes (or lower publish_rate or t_max)')
+    print(f'impact-arm simulate: {estimate}', file=sys.stderr)
 
 
 def cmd_urdf(args) -> int:
@@ -167,6 +190,8 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
     p.add_argument('--tf-rate', type=_positive, default=100.0, metavar='HZ',
                    help='rate of /tf and /impact_markers in the MCAP file (default 100)')
+    p.add_argument('--yes', action='store_true',
+                   help=f'run even past {RUN_SIZE_LIMIT:.0e} samples (publish_rate x t_max)')
     p.add_argument('--no-samples', action='store_true',
                    help='impacts only: integrate from event to event without sampling or '
                         'tracing (the fast path of studies; continuous control)')
