@@ -41,6 +41,10 @@ DIAGNOSTICS = '/diagnostics'
 # the names of the nodes' DiagnosticStatus (both publish on /diagnostics)
 SIMULATOR_STATUS = 'impact_arm: simulator'
 CONTROLLER_STATUS = 'impact_arm: controller'
+RECORDER_STATUS = 'impact_arm: recorder'
+# MCAP metadata record where the recorder writes the samples lost per topic
+# ('lost:/joint_states': '12', 'before_first:/joint_states': '0', ...)
+LOSSES_METADATA = 'recording/losses'
 CLOCK = '/clock'
 COMMANDS = '/effort_controller/commands'
 IMPACT_TRACE = '/impact_trace'  # written by offline runs only: the contact phase, densely

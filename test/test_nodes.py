@@ -393,6 +393,68 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 
+def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
+    """Realtime cannot wait for a recorder: one frozen (SIGSTOP) for 3 s loses samples, and
+    the loss is counted exactly per topic (from the writers' sequence numbers), in the file's
+    metadata and in the run's summary: recorded + lost + published before the recorder's
+    first sample = what the simulator says it sent. The file has one clock: each joint
+    state's log time is its header stamp (simulated time), and the run ends paused where the
+    cycles completed (no falling arm after the last cycle)."""
+    from pathlib import Path
+    from mcap.reader import make_reader
+    from impact_arm.io.mcap_ros2 import read_metadata
+    from impact_arm.io.wire import header_stamp_ns
+    env = dict(ros_env)
+    scene = tmp_path / 'short.yaml'
+    scene.write_text(Path(resolve_scene_path('paper')).read_text().replace('cycles: 15',
+                                                                           'cycles: 12'))
+    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--mode', 'realtime',
+                            '--scene', str(scene), '--name', 'rt', '--out',
+                            str(tmp_path / 'runs')], env=env, cwd=tmp_path,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    sim_log = tmp_path / 'runs' / 'logs' / 'simulator.log'
+    recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
+    try:
+        def moving():
+            try:
+                return f'first samples on {contract.COMMANDS}' in recorder_log.read_text() \
+                    or run.poll() is not None
+            except OSError:
+                return False
+        assert wait_for(moving, timeout=240), 'the arm never started'
+        time.sleep(1.0)
+        froze = run.poll() is None
+        if froze:
+            recorder = [int(pid) for pid in node_processes(env['ROS_DOMAIN_ID'])
+                        if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
+            assert len(recorder) == 1, recorder
+            os.kill(recorder[0], signal.SIGSTOP)
+            time.sleep(3.0)
+            os.kill(recorder[0], signal.SIGCONT)
+        out, _ = run.communicate(timeout=300)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert froze, out
+    assert run.returncode == 0, out
+    mcap = tmp_path / 'runs' / 'rt.mcap'
+    losses = read_metadata(mcap)[contract.LOSSES_METADATA]
+    sent = dict(re.findall(r'(/\w+) (\d+)', sim_log.read_text().partition('samples sent:')[2]))
+    with open(mcap, 'rb') as f:
+        records = [(m.log_time, header_stamp_ns(m.data)) for _, _, m in
+                   make_reader(f).iter_messages(topics=[contract.JOINT_STATES])]
+    lost = int(losses[f'lost:{contract.JOINT_STATES}'])
+    assert lost > 1000, losses                  # ~3 000 periods of 1 ms
+    assert len(records) + lost + int(losses[f'before_first:{contract.JOINT_STATES}']) == \
+        int(sent[contract.JOINT_STATES]), (len(records), losses, sent)
+    assert f'{contract.JOINT_STATES} {lost}' in out, out
+    assert all(log == stamp for log, stamp in records)
+    rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
+    assert len(rows) >= 12, out
+    assert not node_processes(env['ROS_DOMAIN_ID'])
+
+
 def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_env, tmp_path):
     """Issue 17 item 10, the runner's side: the first command waits for the recorder to match
     the simulator's publishers and receive joint states, not only for its readers to be in the

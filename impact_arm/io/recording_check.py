@@ -10,8 +10,8 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-from ..contract import COMMANDS, IMPACT_REPORT, JOINT_STATES
-from .mcap_ros2 import iter_raw
+from ..contract import COMMANDS, IMPACT_REPORT, JOINT_STATES, LOSSES_METADATA
+from .mcap_ros2 import iter_raw, read_metadata
 from .msgdefs import typestore
 from .wire import MalformedMessage, header_stamp_ns
 
@@ -24,6 +24,7 @@ class RecordingCheck:
     impact_reports: int
     missing_reports: list = field(default_factory=list)   # impact indices absent
     out_of_order: int = 0              # messages whose log time precedes the one before
+    lost: dict = field(default_factory=dict)   # topic -> samples the recorder never got
 
     @property
     def complete(self) -> bool:
@@ -42,7 +43,11 @@ class RecordingCheck:
             problems.append(f'{self.periods - 1 - self.commands} commands missing')
         if self.missing_reports:
             problems.append(f'impact reports missing: {self.missing_reports[:10]}')
-        return text + (': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems))
+        text += ': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems)
+        # what the recorder counted as never received (a best-effort /clock may lose samples
+        # while the periods themselves are all there)
+        lost = ', '.join(f'{t} {n}' for t, n in sorted(self.lost.items()) if n)
+        return text + (f'; lost on the way (counted by the recorder): {lost}' if lost else '')
 
 
 def check_recording(path, rate: float) -> RecordingCheck:
@@ -74,5 +79,8 @@ def check_recording(path, rate: float) -> RecordingCheck:
     missing = sorted(set(range(last + 1)) - stamps)
     known = {i for i in indices if i is not None}
     missing_reports = sorted(set(range(1, max(known, default=0) + 1)) - known)
+    losses = read_metadata(path).get(LOSSES_METADATA, {})
+    lost = {key.partition(':')[2]: int(n) for key, n in losses.items()
+            if key.startswith('lost:')}
     return RecordingCheck(len(stamps), missing, commands, len(indices), missing_reports,
-                          out_of_order)
+                          out_of_order, lost)

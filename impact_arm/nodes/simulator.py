@@ -24,6 +24,7 @@ noting the force for the arrow).
 """
 from __future__ import annotations
 
+import collections
 import json
 import math
 import sys
@@ -192,6 +193,7 @@ class Simulator(Node):
             self.loop.stats.nominal = None   # lockstep has no wall period to jitter around
         self.rejected = self.clipped = 0
         self.publish_failures = 0
+        self.sent = collections.Counter()  # topic -> samples published (for loss accounting)
         self.lockstep_repeats = 0
         self.failed = ''
         self.last_reject_log = -math.inf
@@ -521,6 +523,7 @@ class Simulator(Node):
         5 kHz on two cores); before this, the refusal ended the stepping thread."""
         try:
             publisher.publish(data)
+            self.sent[publisher.topic_name] += 1
         except RuntimeError as exc:        # rclpy's RCLError: the write failed
             self.publish_failures += 1
             self.get_logger().warning(
@@ -701,7 +704,8 @@ class Simulator(Node):
             self._await_acknowledgements()
         self.get_logger().info(
             f'{self.arm.periods} periods, {self.loop.impacts} impacts, {self.loop.stats.overruns} '
-            f'overruns, t = {self.arm.t:.3f} s')
+            f'overruns, t = {self.arm.t:.3f} s; samples sent: '
+            + ', '.join(f'{t} {n}' for t, n in sorted(self.sent.items())))
         return 1 if self.failed else 0
 
 

@@ -96,11 +96,21 @@ def load(path, progress=_quiet) -> Run:
             traces.append((columns, data.reshape(dims[0].size, dims[1].size)))
     if not t:
         raise AnalysisError(f'{path}: /joint_states has no messages')
+    # stamp order, never file order: a recorder that stalled writes what it received late
+    # after newer messages (impact reports by their contact time, joint states by stamp)
+    impacts.sort(key=lambda record: _number(record.get('t_contact')))
     order = np.argsort(t, kind='stable')
     scene = _scene(metadata)
     law = scene.controller.law if scene is not None else ''
     return Run(os.path.basename(path), np.asarray(t)[order], np.asarray(pos, float)[order],
                np.asarray(vel, float)[order], impacts, traces, scene, metadata, law)
+
+
+def _number(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.inf
 
 
 def _scene(metadata):

@@ -326,6 +326,8 @@ class Run:
             self.wall = now - (first or start)
             self._progress(cycles)
             if len(self.impacts) >= cycles:
+                if self.args.mode == 'realtime':
+                    self._pause_simulator()
                 return 'completed'
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
@@ -334,6 +336,22 @@ class Run:
                 return f'simulator stopped: {self.diagnostics.get("message")}'
             if now - start > timeout:
                 return f'timeout after {timeout:g} s'
+
+    def _pause_simulator(self, timeout=2.0):
+        """Realtime: freeze the arm where the run completed. Stopping the controller first
+        let the arm fall and chatter on the surface until the simulator stopped too (41 extra
+        impacts in one recording); paused, the simulator holds the state."""
+        from std_srvs.srv import SetBool
+        client = self.node.create_client(SetBool, '/simulator/pause')
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                return
+            future = client.call_async(SetBool.Request(data=True))
+            end = time.monotonic() + timeout
+            while not future.done() and time.monotonic() < end:
+                self._spin_once(0.05)
+        finally:
+            self.node.destroy_client(client)
 
     def _progress(self, cycles):
         """One refreshed line on a terminal; otherwise a line per impact (logs stay short)."""
