@@ -15,7 +15,7 @@ import sys
 
 SUBCOMMANDS = {
     'speed': ('impact_arm.tools.benchmarks.speed',
-              'offline speed at equal accuracy vs scipy solve_ivp (issue 6)'),
+              'offline speed at equal accuracy vs scipy solve_ivp'),
     'tradeoff': ('impact_arm.tools.benchmarks.tradeoff',
                  'work-precision table and plot: presets and solve_ivp methods vs reference'),
     'stress': ('impact_arm.tools.benchmarks.stress',
