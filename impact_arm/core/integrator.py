@@ -170,7 +170,11 @@ class PhaseIntegrator:
         vector = typeof(st.y)
         eq.tip.compile((vector, vector, vector))           # the impact records' kinematics
         eq.link_energies.compile((vector, vector, vector, vector))
-        return time.perf_counter() - t0
+        seconds = time.perf_counter() - t0
+        if eq.__name__ in jit.COMPILED:
+            import sys
+            sys.stderr.write(f'impact_arm: kernel compiled in {seconds:.1f} s\n')
+        return seconds
 
     # --- output on a time grid, from each step's continuous extension -------------------
     @property

@@ -31,6 +31,25 @@ def _load_numba_without_blas():
         del sys.modules['scipy.linalg']
 
 
+COMPILED = set()     # generated kernel modules compiled (not loaded from cache) in this process
+
+
+def _announce_compilation(func):
+    """One line on stderr when a scene shape's kernel is compiled rather than loaded: the
+    first run of a new arm shape otherwise sits silent for tens of seconds."""
+    module = sys.modules.get(getattr(func, '__module__', ''))
+    if module is None or not module.__name__.startswith('impact_arm_kernel_') \
+            or module.__name__ in COMPILED:
+        return
+    COMPILED.add(module.__name__)
+    features = [name for flag, name in ((module.HAS_CONTACT, 'contact'),
+                                        (module.HAS_FRICTION, 'friction')) if flag]
+    sys.stderr.write(f'impact_arm: compiling the simulation kernel for a {module.N}-link arm'
+                     f'{" with " + " and ".join(features) if features else ""} (first use of '
+                     f'this shape: ~10-30 s; cached in {os.path.dirname(module.__file__)})\n')
+    sys.stderr.flush()
+
+
 def _load_cached_without_refresh():
     """Let numba load a cached compiled function without first loading everything it would
     need to *compile* one.
@@ -58,6 +77,7 @@ def _load_cached_without_refresh():
             loaded = self._load_overload(sig, target_context)
         if loaded is None:      # a compilation follows
             _load_numba_without_blas()
+            _announce_compilation(self._py_func)
         return loaded
     load_overload._impact_arm = True
     caching.Cache.load_overload = load_overload

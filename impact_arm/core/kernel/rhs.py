@@ -69,6 +69,14 @@ def contact_forces(y, P, SURF, C, levels):
 
 
 @jit
+def solve_accelerations(q, qd, generalized, P, out, S):
+    """``accelerations`` compiled once and called: for ``contact_frequency``, which needs it
+    twice per contact step only; each inlined copy of the equations of motion costs
+    seconds of compilation for a new arm shape."""
+    accelerations(q, qd, generalized, P, out, S)
+
+
+@jit
 def contact_frequency(y, P, SURF, C, levels, work):
     """ω [1/s] of the contact's normal oscillation at state y: sqrt(k / m_eff), with the
     stiffness k = dF_n/dδ bounded by 1.5 F_n / (δ - δ_0) (every force law here grows like
@@ -85,10 +93,10 @@ def contact_frequency(y, P, SURF, C, levels, work):
     for i in range(N):
         zero[i] = 0.0
         gen[i] = jac[N + i]
-    accelerations(q, zero, gen, P, a1, work[4 * N:])
+    solve_accelerations(q, zero, gen, P, a1, work[4 * N:])
     for i in range(N):
         gen[i] = 0.0
-    accelerations(q, zero, gen, P, a0, work[4 * N:])
+    solve_accelerations(q, zero, gen, P, a0, work[4 * N:])
     inverse_mass = 0.0
     for i in range(N):
         inverse_mass += jac[N + i] * (a1[i] - a0[i])
