@@ -84,25 +84,6 @@ def _rel_vec(value, ref):
     return num / den if den else num
 
 
-# the first impact's metrics, each component's own relative error; the level is their maximum
-SPEED_KEYS = ('duration', 'delta_m', 'delta_r', 'F_max', 'v_after', 'T_before', 'T_after')
-
-
-def first_impact_error(impacts, ref_impacts):
-    """Worst relative error, component by component, of the first impact's metrics."""
-    if not impacts:
-        return math.inf
-    a, b = impacts[0], ref_impacts[0]
-    worst = 0.0
-    for key in SPEED_KEYS:
-        va, vb = a[key], b[key]
-        if isinstance(vb, list):
-            worst = max([worst] + [_rel(x, y) for x, y in zip(va, vb)])
-        else:
-            worst = max(worst, _rel(va, vb))
-    return worst
-
-
 # The trade-off metrics, each the worst over EVERY impact of the run (a sweep or a fit reads the
 # limit-cycle impacts, not only the first): relative errors of δm, F_max, duration, post-impact
 # tip velocity (vector norm), kinematic CoR, energetic CoRs (worst of links and total); each
@@ -157,10 +138,9 @@ def tradeoff_errors(impacts, ref_impacts):
     return out
 
 
-def worst_impact(impacts, ref_impacts, key):
-    """The 1-based index of the impact with the worst error in ``key``."""
-    rows = per_impact_errors(impacts, ref_impacts)
-    return 1 + max(range(len(rows)), key=lambda i: rows[i][key]) if rows else None
+def every_impact_error(impacts, ref_impacts):
+    """The worst of ``tradeoff_errors``: the level a setting reaches."""
+    return worst(tradeoff_errors(impacts, ref_impacts))
 
 
 def worst(errors: dict) -> float:
