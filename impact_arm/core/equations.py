@@ -123,6 +123,133 @@ def _derive_source(n: int, gravity: bool) -> str:
     return '\n\n\n'.join(funcs) + '\n'
 
 
+# Up to this many links the equations come from the symbolic derivation above; beyond it from
+# the chain's closed-form recursion below (``_chain_source``): the symbolic expansion grows
+# steeply with n (5 links: 5 s, 8 links: ~1 min) while the recursion's straight-line code
+# is O(n²) lines, written in milliseconds and compiled in seconds.
+SYMBOLIC_LINKS = 4
+
+
+def _chain_source(n: int, gravity: bool) -> str:
+    """The same functions as ``_derive_source`` for a planar chain of uniform rods, written
+    from the chain's closed form instead of a symbolic expansion.
+
+    With absolute angles, link k's centre moves with ∂c_k/∂q_i = a_ik e_i⊥ (a_ik = L_i for
+    i < k, L_k / 2 for i = k, 0 beyond), so T = ½ Σ_ij C_ij cos(q_i - q_j) q̇_i q̇_j with
+    C_ij = L_i L_j (m_j / 2 + S_{j+1}) for i < j (S_k: the mass of links k, k+1, ...) and
+    C_ii = L_i² (m_i / 3 + S_{i+1}) (the rod's own inertia m L² / 12 included). Lagrange's
+    equations then give M_ij = C_ij cos(q_i - q_j) and the velocity terms
+    b_i = Σ_j C_ij sin(q_i - q_j) q̇_j²; gravity's generalized force is
+    Q_g,i = -g L_i cos q_i (m_i / 2 + S_{i+1}). Checked against the symbolic derivation for
+    2-4 links (test_equations.py)."""
+    r = range(n)
+
+    def head(name, args):
+        return ['@jit_leaf', f'def {name}({", ".join(args)}):']
+
+    def trig(lines, rows=r):
+        for i in rows:
+            lines.append(f'    c{i} = cos(q[{i}])')
+            lines.append(f'    s{i} = sin(q[{i}])')
+
+    def tail_masses(lines):
+        # S{k}: mass of links k .. n-1 (S{n} = 0)
+        lines.append(f'    S{n} = 0.0')
+        for k in reversed(r):
+            lines.append(f'    S{k} = S{k + 1} + m[{k}]')
+
+    def coefficient(i, j):
+        if i == j:
+            return f'L[{i}] * L[{i}] * (m[{i}] / 3.0 + S{i + 1})'
+        a, b = min(i, j), max(i, j)
+        return f'L[{a}] * L[{b}] * (0.5 * m[{b}] + S{b + 1})'
+
+    funcs = []
+    lines = head('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'])
+    trig(lines)
+    tail_masses(lines)
+    for i in r:
+        for j in range(i, n):
+            lines.append(f'    C{i}_{j} = {coefficient(i, j)}')
+    for i in r:
+        for j in range(i + 1, n):
+            lines.append(f'    M{i}_{j} = C{i}_{j} * (c{i} * c{j} + s{i} * s{j})')
+            lines.append(f'    sn{i}_{j} = s{i} * c{j} - c{i} * s{j}')   # sin(q_i - q_j)
+    for i in r:
+        terms = []
+        for j in r:
+            if j == i:
+                continue
+            lo, hi = min(i, j), max(i, j)
+            sign = '' if i < j else '-'
+            terms.append(f'{sign}C{lo}_{hi} * sn{lo}_{hi} * qd[{j}] * qd[{j}]')
+        b = ' + '.join(terms).replace('+ -', '- ') or '0.0'
+        grav = f' - g * L[{i}] * c{i} * (0.5 * m[{i}] + S{i + 1})' if gravity else ''
+        lines.append(f'    r{i} = Qx[{i}]{grav} - ({b})')
+    entries = []
+    for i in r:
+        for j in r:
+            entries.append(f'C{i}_{i}' if i == j else f'M{min(i, j)}_{max(i, j)}')
+    entries += [f'r{i}' for i in r]
+    lines.append(f'    return ({", ".join(entries)},)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('tip', ['q', 'qd', 'L'])
+    trig(lines)
+    lines.append('    return (' + ' + '.join(f'L[{i}] * c{i}' for i in r) + ', '
+                 + ' + '.join(f'L[{i}] * s{i}' for i in r) + ', '
+                 + ' + '.join(f'-L[{i}] * s{i} * qd[{i}]' for i in r) + ', '
+                 + ' + '.join(f'L[{i}] * c{i} * qd[{i}]' for i in r) + ',)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
+    trig(lines)
+    lines.append('    return (' + ' + '.join(
+        f'L[{i}] * (-s{i} * qdd[{i}] - c{i} * qd[{i}] * qd[{i}])' for i in r) + ', '
+        + ' + '.join(f'L[{i}] * (c{i} * qdd[{i}] - s{i} * qd[{i}] * qd[{i}])' for i in r)
+        + ',)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('tip_jacobian', ['q', 'L'])
+    trig(lines)
+    lines.append('    return (' + ', '.join([f'-L[{i}] * s{i}' for i in r]
+                                          + [f'L[{i}] * c{i}' for i in r]) + ',)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('gravity_forces', ['q', 'L', 'm', 'g'])
+    tail_masses(lines)
+    lines.append('    return (' + ', '.join(f'-g * L[{i}] * cos(q[{i}]) * (0.5 * m[{i}] + S{i + 1})'
+                                          for i in r) + ',)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('link_energies', ['q', 'qd', 'L', 'm'])
+    trig(lines)
+    # centre velocity of link k: the joint's velocity (sum over the links before it) plus
+    # half of its own link's
+    lines.append('    jx = 0.0')
+    lines.append('    jy = 0.0')
+    for k in r:
+        lines.append(f'    vx = jx - 0.5 * L[{k}] * s{k} * qd[{k}]')
+        lines.append(f'    vy = jy + 0.5 * L[{k}] * c{k} * qd[{k}]')
+        lines.append(f'    T{k} = 0.5 * m[{k}] * (vx * vx + vy * vy) '
+                     f'+ m[{k}] * L[{k}] * L[{k}] / 24.0 * qd[{k}] * qd[{k}]')
+        lines.append(f'    jx = jx - L[{k}] * s{k} * qd[{k}]')
+        lines.append(f'    jy = jy + L[{k}] * c{k} * qd[{k}]')
+    lines.append('    return (' + ', '.join(f'T{k}' for k in r) + ',)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('potential', ['q', 'L', 'm', 'g'])
+    lines.append('    y = 0.0')
+    lines.append('    V = 0.0')
+    for k in r:
+        lines.append(f'    V += m[{k}] * g * (y + 0.5 * L[{k}] * sin(q[{k}]))')
+        lines.append(f'    y += L[{k}] * sin(q[{k}])')
+    lines.append('    return (V,)')
+    funcs.append('\n'.join(lines))
+    funcs.append('HAS_ACCEL = False')
+    return '\n\n\n'.join(funcs) + '\n'
+
+
 def _module_header(n, gravity, contact, friction, n_integral):
     """Constants the kernel template reads as compile-time constants."""
     from .layout import shape_offsets
@@ -133,6 +260,10 @@ def _module_header(n, gravity, contact, friction, n_integral):
              f'# compiled with {jit_options()}',
              'import math', 'from math import sin, cos, sqrt', 'import numpy as np',
              'from impact_arm.core.jit import jit, jit_alloc, jit_leaf',
+             *(['# a long chain: the kernel\'s helpers are compiled once and called instead',
+                '# of inlined at every call site (numba\'s inlining copies and re-types their',
+                '# code each time: a 30 s cold start, growing with the links)',
+                'jit_leaf = jit'] if n > SYMBOLIC_LINKS else []),
              'from impact_arm.core.layout import *  # noqa: F401,F403',
              'from impact_arm.core.contact import (hertz_force, jackson_green, restitution_force,',
              '                                friction_force, residual, restitution_radius,',
@@ -145,7 +276,10 @@ def _module_header(n, gravity, contact, friction, n_integral):
 
 
 def _derivation(n, gravity):
-    """The sympy part (slow), cached on its own: it does not depend on the scene's features."""
+    """The sympy part (slow), cached on its own: it does not depend on the scene's features.
+    Beyond ``SYMBOLIC_LINKS`` the chain's closed form, which needs no cache."""
+    if n > SYMBOLIC_LINKS:
+        return _chain_source(n, gravity)
     key = hashlib.sha256(f'{GENERATOR_VERSION}-{n}-{gravity}'.encode()).hexdigest()[:16]
     path = os.path.join(cache_dir(), f'derivation_{n}_{key}.py.txt')
     if os.path.exists(path):
@@ -153,6 +287,9 @@ def _derivation(n, gravity):
             text = f.read()
         if text:
             return text
+    sys.stderr.write(f'impact_arm: deriving the equations of motion of a {n}-link arm '
+                     f'(sympy; first use of this shape only)\n')
+    sys.stderr.flush()
     text = _derive_source(n, gravity)
     _write_atomically(path, text)
     return text

@@ -149,6 +149,32 @@ class PhaseIntegrator:
         self._output = []
         self._output_sink = None
         self.events = 0
+        self.load_time = self._load_kernel()
+
+    def _load_kernel(self):
+        """Load the compiled kernel (from numba's cache, or compile it) before the first
+        step, so that timings of the integration do not include it; returns the seconds it
+        took in this process (0 once loaded). Without numba: 0."""
+        from . import jit
+        eq = self.model.eq
+        if not jit.AVAILABLE or eq.advance.overloads:
+            return 0.0
+        import time
+        from numba import typeof
+        t0 = time.perf_counter()
+        st = self.state
+        args = (self._T, 0.0, st.y, self._f, self._P, self._I, self.model.surface_table, st.c,
+                st.levels, st.held, self._stats, self._trace_buffer, self._trace_count,
+                self._ev, self._evlog, self._O, self._out)
+        eq.advance.compile(tuple(typeof(a) for a in args))
+        vector = typeof(st.y)
+        eq.tip.compile((vector, vector, vector))           # the impact records' kinematics
+        eq.link_energies.compile((vector, vector, vector, vector))
+        seconds = time.perf_counter() - t0
+        if eq.__name__ in jit.COMPILED:
+            import sys
+            sys.stderr.write(f'impact_arm: kernel compiled in {seconds:.1f} s\n')
+        return seconds
 
     # --- output on a time grid, from each step's continuous extension -------------------
     @property

@@ -31,13 +31,65 @@ def _load_numba_without_blas():
         del sys.modules['scipy.linalg']
 
 
+COMPILED = set()     # generated kernel modules compiled (not loaded from cache) in this process
+
+
+def _announce_compilation(func):
+    """One line on stderr when a scene shape's kernel is compiled rather than loaded: the
+    first run of a new arm shape otherwise sits silent for tens of seconds."""
+    module = sys.modules.get(getattr(func, '__module__', ''))
+    if module is None or not module.__name__.startswith('impact_arm_kernel_') \
+            or module.__name__ in COMPILED:
+        return
+    COMPILED.add(module.__name__)
+    features = [name for flag, name in ((module.HAS_CONTACT, 'contact'),
+                                        (module.HAS_FRICTION, 'friction')) if flag]
+    sys.stderr.write(f'impact_arm: compiling the simulation kernel for a {module.N}-link arm'
+                     f'{" with " + " and ".join(features) if features else ""} (first use of '
+                     f'this shape: ~10-30 s; cached in {os.path.dirname(module.__file__)})\n')
+    sys.stderr.flush()
+
+
+def _load_cached_without_refresh():
+    """Let numba load a cached compiled function without first loading everything it would
+    need to *compile* one.
+
+    ``Cache.load_overload`` refreshes the target context before each load: it imports and
+    registers numba's whole typing and lowering library (numba.cpython, np.linalg, the typed
+    containers, ...): 0.09-0.14 s of a fresh process's first kernel call, for a load that
+    only links machine code from the cache file. Loading needs the runtime (NRT: the
+    kernel's entry point allocates its scratch), which is initialised here. A cache miss
+    still compiles with everything: numba's compiler refreshes the context itself, after
+    ``_load_numba_without_blas`` (only then: a process that just loads never imports
+    numba's array library, 27 ms). Only this package's functions are loaded this way."""
+    from numba.core import caching
+    from numba.core.runtime import rtsys
+    original = caching.Cache.load_overload
+    if getattr(original, '_impact_arm', False):
+        return
+
+    def load_overload(self, sig, target_context):
+        if not getattr(self._py_func, '__module__', '').startswith('impact_arm'):
+            return original(self, sig, target_context)    # other packages' functions
+        rtsys.initialize(target_context)
+        loaded = None
+        with self._guard_against_spurious_io_errors():
+            loaded = self._load_overload(sig, target_context)
+        if loaded is None:      # a compilation follows
+            _load_numba_without_blas()
+            _announce_compilation(self._py_func)
+        return loaded
+    load_overload._impact_arm = True
+    caching.Cache.load_overload = load_overload
+
+
 UNAVAILABLE = ''     # why the kernel runs interpreted (empty when compiled)
 FIX = ''             # what the user does about it
 try:
     if not ENABLED:
         raise ImportError('IMPACT_ARM_JIT=0 is set')
     from numba import njit as _njit
-    _load_numba_without_blas()
+    _load_cached_without_refresh()
     AVAILABLE = True
 except ImportError as exc:  # interpreter fallback: identical code, ~100x slower
     _njit = None

@@ -68,6 +68,41 @@ def contact_forces(y, P, SURF, C, levels):
     return delta, fn, ff, tip_state[2], tip_state[3]
 
 
+@jit
+def solve_accelerations(q, qd, generalized, P, out, S):
+    """``accelerations`` compiled once and called: for ``contact_frequency``, which needs it
+    twice per contact step only; each inlined copy of the equations of motion costs
+    seconds of compilation for a new arm shape."""
+    accelerations(q, qd, generalized, P, out, S)
+
+
+@jit
+def contact_frequency(y, P, SURF, C, levels, work):
+    """ω [1/s] of the contact's normal oscillation at state y: sqrt(k / m_eff), with the
+    stiffness k = dF_n/dδ bounded by 1.5 F_n / (δ - δ_0) (every force law here grows like
+    (δ - δ_0)^p, p <= 1.5; δ_0 = δr in restitution) and 1/m_eff = J_y M⁻¹ J_yᵀ, the tip's
+    vertical acceleration per newton (two solves with the mass matrix). 0 without force.
+    ``work``: 4 N + N * N scratch."""
+    delta, fn, _, _, _ = contact_forces(y, P, SURF, C, levels)
+    base = C[C_DR] if int(C[C_PHASE]) == RESTITUTION else 0.0
+    if not fn > 0.0 or not delta > base:
+        return 0.0
+    q = y[:N]
+    jac = tip_jacobian(q, P[P_L:P_L + N])
+    zero, gen, a1, a0 = work[:N], work[N:2 * N], work[2 * N:3 * N], work[3 * N:4 * N]
+    for i in range(N):
+        zero[i] = 0.0
+        gen[i] = jac[N + i]
+    solve_accelerations(q, zero, gen, P, a1, work[4 * N:])
+    for i in range(N):
+        gen[i] = 0.0
+    solve_accelerations(q, zero, gen, P, a0, work[4 * N:])
+    inverse_mass = 0.0
+    for i in range(N):
+        inverse_mass += jac[N + i] * (a1[i] - a0[i])
+    return math.sqrt(max(0.0, 1.5 * fn / (delta - base) * inverse_mass))
+
+
 @jit_leaf
 def control_torque(y, P, I, C, tau_held, tau, error, rate):
     """Joint torques acting now into ``tau``; False when the actuators are off."""

@@ -15,7 +15,7 @@ import sys
 
 SUBCOMMANDS = {
     'speed': ('impact_arm.tools.benchmarks.speed',
-              'offline speed at equal accuracy vs scipy solve_ivp (issue 6)'),
+              'offline speed at equal accuracy vs scipy solve_ivp'),
     'tradeoff': ('impact_arm.tools.benchmarks.tradeoff',
                  'work-precision table and plot: presets and solve_ivp methods vs reference'),
     'stress': ('impact_arm.tools.benchmarks.stress',
@@ -26,6 +26,8 @@ SUBCOMMANDS = {
               'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
     'starts': ('impact_arm.tools.benchmarks.starts',
                'realtime simulator + controller started N times as a user does (issue 12)'),
+    'coldstart': ('impact_arm.tools.benchmarks.coldstart',
+                  'first run of a new arm shape by link count: equations, compile, warm load'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }

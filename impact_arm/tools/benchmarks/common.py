@@ -84,56 +84,68 @@ def _rel_vec(value, ref):
     return num / den if den else num
 
 
-# issue 6: "the first impact's metrics (duration, δm, δr, F_max, post-impact tip velocity,
-# energies)": each component's own relative error, the level is their maximum
-SPEED_KEYS = ('duration', 'delta_m', 'delta_r', 'F_max', 'v_after', 'T_before', 'T_after')
-
-
-def first_impact_error(impacts, ref_impacts):
-    """Worst relative error, component by component, of the first impact's metrics."""
-    if not impacts:
-        return math.inf
-    a, b = impacts[0], ref_impacts[0]
-    worst = 0.0
-    for key in SPEED_KEYS:
-        va, vb = a[key], b[key]
-        if isinstance(vb, list):
-            worst = max([worst] + [_rel(x, y) for x, y in zip(va, vb)])
-        else:
-            worst = max(worst, _rel(va, vb))
-    return worst
-
-
-# issue 5: the trade-off metrics, each a relative error (t15: as a fraction of the period)
-TRADEOFF_METRICS = ('delta_m', 'F_max', 'v_after', 'cor_kin', 'cor_energy', 'v15_contact',
-                    't15')
+# The trade-off metrics, each the worst over EVERY impact of the run (a sweep or a fit reads the
+# limit-cycle impacts, not only the first): relative errors of δm, F_max, duration, post-impact
+# tip velocity (vector norm), kinematic CoR, energetic CoRs (worst of links and total); each
+# impact's time as a fraction of the reference's limit-cycle period; and that period (the last
+# interval between impacts), relative. A run with another number of impacts than the
+# reference misses (inf).
+TRADEOFF_METRICS = ('delta_m', 'F_max', 'duration', 'v_after', 'cor_kin', 'cor_energy',
+                    't_impact', 'period')
 METRIC_LABELS = {
-    'delta_m': 'δm #1', 'F_max': 'Fmax #1', 'v_after': 'v after #1', 'cor_kin': 'e #1',
-    'cor_energy': 'e_energy #1', 'v15_contact': 'v contact #15', 't15': 't #15 / period'}
+    'delta_m': 'δm', 'F_max': 'F_max', 'duration': 'duration', 'v_after': 'v after',
+    'cor_kin': 'e', 'cor_energy': 'e_energy', 't_impact': 't / period', 'period': 'period'}
+
+
+def _impact_errors(a, b):
+    """One impact's relative errors against its reference (keys of TRADEOFF_METRICS)."""
+    return {'delta_m': _rel(a['delta_m'], b['delta_m']), 'F_max': _rel(a['F_max'], b['F_max']),
+            'duration': _rel(a['duration'], b['duration']),
+            'v_after': _rel_vec(a['v_after'], b['v_after']),
+            'cor_kin': _rel(a['cor_kinematic'], b['cor_kinematic']),
+            'cor_energy': max(_rel(x, y) for x, y in zip(a['cor_energetic'],
+                                                         b['cor_energetic']))}
+
+
+def _period(impacts):
+    return impacts[-1]['t_contact'] - impacts[-2]['t_contact'] if len(impacts) > 1 else math.nan
+
+
+def per_impact_errors(impacts, ref_impacts):
+    """One dict of errors per impact (``TRADEOFF_METRICS`` but the period), in order."""
+    period = _period(ref_impacts)
+    rows = []
+    for a, b in zip(impacts, ref_impacts):
+        row = _impact_errors(a, b)
+        row['t_impact'] = abs(a['t_contact'] - b['t_contact']) / period \
+            if math.isfinite(period) else math.nan
+        rows.append(row)
+    return rows
 
 
 def tradeoff_errors(impacts, ref_impacts):
-    """Relative errors of the issue-5 metrics; inf where the run lacks the impact."""
+    """Each metric's worst error over every impact (and the limit-cycle period's error);
+    inf everywhere when the run has another number of impacts than the reference."""
     out = {k: math.inf for k in TRADEOFF_METRICS}
-    if impacts:
-        a, b = impacts[0], ref_impacts[0]
-        out['delta_m'] = _rel(a['delta_m'], b['delta_m'])
-        out['F_max'] = _rel(a['F_max'], b['F_max'])
-        out['v_after'] = _rel_vec(a['v_after'], b['v_after'])
-        out['cor_kin'] = _rel(a['cor_kinematic'], b['cor_kinematic'])
-        out['cor_energy'] = max(_rel(x, y) for x, y in zip(a['cor_energetic'],
-                                                            b['cor_energetic']))
-    k = len(ref_impacts) - 1
-    if len(impacts) > k >= 1:
-        a, b = impacts[k], ref_impacts[k]
-        period = b['t_contact'] - ref_impacts[k - 1]['t_contact']
-        out['v15_contact'] = _rel_vec(a['v_before'], b['v_before'])
-        out['t15'] = abs(a['t_contact'] - b['t_contact']) / period
+    if not impacts or len(impacts) != len(ref_impacts):
+        return out
+    rows = per_impact_errors(impacts, ref_impacts)
+    for key in TRADEOFF_METRICS[:-1]:
+        values = [r[key] for r in rows if not math.isnan(r[key])]
+        out[key] = max(values) if values else math.nan
+    out['period'] = _rel(_period(impacts), _period(ref_impacts)) if len(impacts) > 1 \
+        else math.nan
     return out
 
 
+def every_impact_error(impacts, ref_impacts):
+    """The worst of ``tradeoff_errors``: the level a setting reaches."""
+    return worst(tradeoff_errors(impacts, ref_impacts))
+
+
 def worst(errors: dict) -> float:
-    return max(errors.values()) if errors else math.inf
+    values = [v for v in errors.values() if not math.isnan(v)]
+    return max(values) if values else math.inf
 
 
 # --- output ---------------------------------------------------------------------------------

@@ -1,0 +1,95 @@
+"""The chain's closed-form equations (used past ``SYMBOLIC_LINKS`` links) against the symbolic
+derivation for 2-4 links, and against mechanics itself (kinetic energy = ½ q̇ᵀ M q̇, energy
+conserved along an undamped motion) for a long chain the symbolic path cannot reach cheaply."""
+import math
+
+import numpy as np
+import pytest
+
+from impact_arm.core import equations
+
+FUNCTIONS = ('mass_and_rhs', 'tip', 'tip_acceleration', 'tip_jacobian', 'gravity_forces',
+             'link_energies', 'potential')
+
+
+def functions(source):
+    """The generated functions as plain Python (no compilation)."""
+    namespace = {'jit_leaf': lambda f: f, 'sin': math.sin, 'cos': math.cos,
+                 'sqrt': math.sqrt, 'math': math}
+    exec(source, namespace)
+    return namespace
+
+
+def arguments(rng, n):
+    q, qd, qdd, Qx = (rng.uniform(-3, 3, n) for _ in range(4))
+    L, m = rng.uniform(0.2, 1.5, n), rng.uniform(0.3, 2.0, n)
+    g = 9.81
+    return {'mass_and_rhs': (q, qd, Qx, L, m, g), 'tip': (q, qd, L),
+            'tip_acceleration': (q, qd, qdd, L), 'tip_jacobian': (q, L),
+            'gravity_forces': (q, L, m, g), 'link_energies': (q, qd, L, m),
+            'potential': (q, L, m, g)}
+
+
+@pytest.mark.parametrize('n', [2, 3, 4])
+@pytest.mark.parametrize('gravity', [True, False])
+def test_closed_form_matches_the_symbolic_derivation(n, gravity):
+    symbolic = functions(equations._derive_source(n, gravity) if n > equations.SYMBOLIC_LINKS
+                         else equations._derivation(n, gravity))
+    chain = functions(equations._chain_source(n, gravity))
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        args = arguments(rng, n)
+        for name in FUNCTIONS:
+            want = np.array(symbolic[name](*args[name]))
+            got = np.array(chain[name](*args[name]))
+            assert got.shape == want.shape, name
+            scale = max(1.0, np.max(np.abs(want)))
+            assert np.max(np.abs(got - want)) <= 1e-12 * scale, (name, got, want)
+
+
+def kinetic_energy(f, q, qd, L, m):
+    n = len(q)
+    M = np.array(f['mass_and_rhs'](q, qd, np.zeros(n), L, m, 9.81)[:n * n]).reshape(n, n)
+    return 0.5 * qd @ M @ qd, M
+
+
+def test_long_chain_kinetic_energy_is_the_mass_matrix_form():
+    n = 9
+    f = functions(equations._chain_source(n, True))
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        q, qd = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+        L, m = rng.uniform(0.2, 1.5, n), rng.uniform(0.3, 2.0, n)
+        T, M = kinetic_energy(f, q, qd, L, m)
+        assert sum(f['link_energies'](q, qd, L, m)) == pytest.approx(T, rel=1e-12)
+        assert np.allclose(M, M.T) and np.all(np.linalg.eigvalsh(M) > 0)
+
+
+def test_long_chain_conserves_energy_in_free_swing():
+    """No torque, no contact: T + V stays constant to the integration error (RK4, fixed
+    step), which fails if the velocity terms or gravity's forces disagree with T and V."""
+    n, dt = 7, 2e-4
+    f = functions(equations._chain_source(n, True))
+    L, m = np.linspace(0.3, 0.6, n), np.linspace(1.0, 0.4, n)
+
+    def rate(y):
+        q, qd = y[:n], y[n:]
+        values = f['mass_and_rhs'](q, qd, np.zeros(n), L, m, 9.81)
+        M = np.array(values[:n * n]).reshape(n, n)
+        return np.concatenate([qd, np.linalg.solve(M, np.array(values[n * n:]))])
+
+    def energy(y):
+        q, qd = y[:n], y[n:]
+        return sum(f['link_energies'](q, qd, L, m)) + f['potential'](q, L, m, 9.81)[0]
+
+    y = np.concatenate([np.linspace(0.2, 1.4, n), np.zeros(n)])
+    e0 = energy(y)
+    swing = max(abs(energy(np.concatenate([y[:n], np.ones(n)])) - e0), 1.0)
+    for _ in range(2500):       # 0.5 s
+        k1 = rate(y)
+        k2 = rate(y + 0.5 * dt * k1)
+        k3 = rate(y + 0.5 * dt * k2)
+        k4 = rate(y + dt * k3)
+        y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    assert abs(np.max(np.abs(y[n:]))) > 1.0          # it did swing
+    assert abs(energy(y) - e0) < 1e-6 * swing
