@@ -17,10 +17,11 @@ name is rejected and counted like a bad array), and the joint states also go out
 ``joint_states_topic`` (while someone listens there, as checked at ``tf_rate``; never
 /joint_states, which a
 JointStateBroadcaster publishes). 3D view: /robot_description (transient local) at start;
-/tf_static and /tf at ``tf_rate`` where tf2_msgs is installed; /impact_markers at ``tf_rate``.
-/tf and the markers come from a timer of the executor thread that reads the latest published
-period, so they cost the realtime loop nothing but one reference (and, in contact periods,
-noting the force for the arrow).
+/tf_static and /tf at ``tf_rate`` where tf2_msgs is installed; /impact_markers at ``tf_rate``;
+both also at each impact's first contact, maximum compression and separation (from the impact
+report, io/scene_visuals.py). /tf and the markers come from a timer of the executor thread
+that reads the latest published period, so they cost the realtime loop nothing but one
+reference.
 """
 from __future__ import annotations
 
@@ -92,8 +93,8 @@ PARAMS = (
           low=0.05, high=60.0, read_only=True),
     Param('step_periods', 1, 'periods one ~/step call advances while paused', 'int', low=1,
           high=1000000),
-    Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
-          read_only=True),
+    Param('frame_id', contract.WRENCH_FRAME, 'TF frame of /contact_wrench (x tangential, '
+          'y normal)', 'str', read_only=True),
     Param('joint_commands_topic', JOINT_COMMANDS_TOPIC, 'sensor_msgs/JointState commands '
           '(effort by joint name), as topic_based_ros2_control sends them', 'str',
           read_only=True),
@@ -101,6 +102,8 @@ PARAMS = (
           'topic_based_ros2_control (not /joint_states)', 'str', read_only=True),
     Param('tf_rate', DEFAULT_TF_RATE, 'rate of /tf and /impact_markers [Hz] (wall clock)',
           low=0.0, high=1000.0, open_low=True, read_only=True),
+    Param('rod_radius', 0.0, 'radius the rods are drawn with [m] (0: 1 % of the shortest '
+          'link)', low=0.0, high=1e3, read_only=True),
     Param('publish_tf', True, 'publish /tf and /tf_static (false when robot_state_publisher '
           'does, launch tf:=rsp)', 'bool', read_only=True),
 )
@@ -445,9 +448,6 @@ class Simulator(Node):
         if self.hw_states_wanted:
             self._send(self.pub_hw_states, states)
         self.latest_tick = tick            # for /tf and the markers (executor thread)
-        if tick.wrench[0] or tick.wrench[1]:
-            with self.visual_lock:
-                self.visuals.observe_force(to_absolute(tick.position), tick.wrench)
         if self.pub_clock is not None:
             self._send(self.pub_clock, self.wire_clock.fill((), (sec, nsec)))
 
@@ -482,7 +482,7 @@ class Simulator(Node):
 
         def qos(topic):
             return VISUAL_TOPICS[topic][1].to_rclpy()
-        self.visuals = SceneVisuals(self.scene, self.p['tf_rate'])
+        self.visuals = SceneVisuals(self.scene, self.p['tf_rate'], self.p['rod_radius'])
         self.visual_lock = threading.Lock()
         self.latest_tick = None
         self._visual_stamp = None
@@ -506,6 +506,13 @@ class Simulator(Node):
     def _publish_visuals(self):
         # asking DDS for the subscription count costs ~3 us: here at tf_rate, not each period
         self.hw_states_wanted = self.pub_hw_states.get_subscription_count() > 0
+        with self.visual_lock:   # each impact's events first: their stamps are older
+            events = [(self.visuals.tf(q, t_ns), self.visuals.markers(t_ns))
+                      for t_ns, q in self.visuals.take_events()]
+        for tf, markers in events:
+            if self.pub_tf is not None:
+                self.pub_tf.publish(tf)
+            self.pub_markers.publish(markers)
         tick = self.latest_tick
         if tick is None or tick.t == self._visual_stamp:
             return                         # nothing new (paused lockstep, waiting)
