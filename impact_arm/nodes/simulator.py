@@ -53,6 +53,7 @@ from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import DEFAULT_TF_RATE, SceneVisuals
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from ..io.wire import PatchedMessage, float64_array_data, joint_state_command
+from . import sim_services
 from ._runner import name_thread, realtime_priority, run
 from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
@@ -236,6 +237,21 @@ class Simulator(Node):
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
         self.create_subscription(Bool, contract.E_STOP, self._on_e_stop, 10)
+        sim_services.attach(self, self._simulation_controls())   # where the package is
+
+    def _simulation_controls(self):
+        """The actions of ~/reset, ~/pause and ~/step for simulation_interfaces."""
+        from std_srvs.srv import SetBool, Trigger
+
+        def outcome(handler, request, response):
+            response = handler(request, response)
+            return response.success, response.message
+        return sim_services.SimulationControls(
+            reset=lambda: outcome(self._on_reset, None, Trigger.Response()),
+            pause=lambda paused: outcome(self._on_pause, SetBool.Request(data=paused),
+                                         SetBool.Response()),
+            step=lambda n: self._run_steps(n, wait=True),
+            is_paused=lambda: self.loop.paused, failure=lambda: self.failed)
 
     def _on_reset(self, request, response):
         if self.failed:
@@ -261,15 +277,27 @@ class Simulator(Node):
         return response
 
     def _on_step(self, request, response):
+        response.success, response.message = self._run_steps(self.p['step_periods'])
+        return response
+
+    def _run_steps(self, n, wait=False):
+        """While paused, let ``n`` periods run; ``wait``: realtime answers once they ran."""
         if not self.loop.paused:
-            response.success, response.message = False, 'not paused: ~/pause true first'
-            return response
-        n = self.p['step_periods']
+            return False, 'not paused: ~/pause true first'
+        target = self.arm.periods + n
         self.loop.request_steps(n)
         if self.lockstep and self.loop.watchdog.pending and self.loop.take_step():
             self._lockstep_period(time.monotonic())   # the exchange waits for a period
-        response.success, response.message = True, f'{n} period(s) requested'
-        return response
+        if not wait or self.lockstep:
+            return True, f'{n} period(s) requested'
+        limit = 1.0 + 2 * n * self.loop.wall_period
+        end = time.monotonic() + limit
+        while self.arm.periods < target and time.monotonic() < end and not self.failed:
+            time.sleep(min(self.loop.wall_period, 0.01))
+        if self.arm.periods < target:
+            return False, (f'{target - self.arm.periods} of {n} period(s) not run within '
+                           f'{limit:.3g} s (brakes stay on until the first command)')
+        return True, f'{n} period(s) run, t = {self.arm.t:.6f} s'
 
     def _on_e_stop(self, msg):
         if bool(msg.data) != self.loop.e_stop:
