@@ -248,3 +248,55 @@ def test_marker_bytes_built_from_a_kept_prefix_equal_whole_message_serialization
         last.points = [last.pose.position] * (n % 3)
         data = append_cdr(sequence_cdr_prefix(items, n + 1), last)
         assert data == serialize_cdr(MarkerArray(markers=items + [last]))
+
+
+class ListWriter:
+    """An MCAP writer stand-in keeping (topic, CDR, log time)."""
+
+    def __init__(self):
+        self.written = []
+
+    def add_topic(self, *args):
+        pass
+
+    def write(self, topic, data, log_time_ns, publish_time_ns):
+        self.written.append((topic, data, log_time_ns))
+
+
+def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
+    """As the recorder node feeds it: states with their log (receive) times and no wrench,
+    then the report's text. The event frames are stamped at the events and logged at the
+    stamps shifted as the latest state's log time is from its stamp."""
+    from rosbags.typesys import Stores, get_typestore
+    from impact_arm.io.scene_visuals import VisualsWriter, event_states
+    store = get_typestore(Stores.ROS2_KILTED)
+    scene = scene_from(cycles=1)
+    result = run(scene, control_rate=1000.0)
+    report = result.impacts[0]
+    writer = ListWriter()
+    visuals = VisualsWriter(writer, scene, TF_RATE)
+    offset = 1_700_000_000 * 10**9          # wall-clock log times
+    for s in result.samples:     # up to the first state after the separation
+        t_ns = round(s.t * 1e9)
+        visuals.state(t_ns, s.q, (0.0, 0.0), t_ns + offset + 123)
+        if s.t > report['t_contact'] + report['duration']:
+            break
+    before = len(writer.written)
+    visuals.impact(json.dumps(report))
+    events = writer.written[before:]
+    assert [topic for topic, _, _ in events] == ['/tf', '/impact_markers'] * 3
+    stamps = [t for _, t, _ in event_states(report)]
+    assert stamps[0] <= stamps[1] <= stamps[2] and stamps[0] >= report['t_contact'] * 1e9
+    assert [log for _, _, log in events[::2]] == [t + offset + 123 for t in stamps]
+    tf = store.deserialize_cdr(events[0][1], 'tf2_msgs/msg/TFMessage')
+    assert [stamp_ns(t.header) for t in tf.transforms] == [stamps[0]] * scene.n_links
+    # and a later paced frame within ARROW_HOLD still shows the arrow, with the time left
+    t_later = stamps[0] + 100_000_000
+    marker_bytes = visuals.visuals.markers(t_later)
+    arrow = next(m for m in store.deserialize_cdr(
+        marker_bytes, 'visualization_msgs/msg/MarkerArray').markers if m.ns == 'contact_force')
+    left = arrow.lifetime.sec * 10**9 + arrow.lifetime.nanosec
+    assert left == stamps[0] + round(ARROW_HOLD * 1e9) - t_later
+    after = store.deserialize_cdr(visuals.visuals.markers(stamps[0] + round(ARROW_HOLD * 1e9)),
+                                  'visualization_msgs/msg/MarkerArray')
+    assert not any(m.ns == 'contact_force' for m in after.markers)   # its time is over
