@@ -300,3 +300,19 @@ def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
     after = store.deserialize_cdr(visuals.visuals.markers(stamps[0] + round(ARROW_HOLD * 1e9)),
                                   'visualization_msgs/msg/MarkerArray')
     assert not any(m.ns == 'contact_force' for m in after.markers)   # its time is over
+
+
+@pytest.mark.parametrize('bad', [
+    {}, {'t_contact': 0.1}, {'t_contact': 0.1, 'q_contact_deg': 'ab', 'F_max': 1.0},
+    {'t_contact': float('nan'), 'q_contact_deg': [1.0, 2.0], 'F_max': 1.0},
+    {'t_contact': 0.1, 'q_contact_deg': [1.0], 'F_max': 1.0},
+    {'t_contact': 0.1, 'q_contact_deg': [1.0, 2.0], 'F_max': None},
+    {'t_contact': 0.1, 'q_contact_deg': [1.0, float('inf')], 'F_max': 1.0}, [1, 2]])
+def test_a_malformed_report_is_refused_with_a_value_error_and_draws_nothing(bad):
+    """The recorder draws reports from the wire: anything malformed must raise ValueError
+    (which it catches and logs), never another error, and leave nothing queued."""
+    from impact_arm.io.scene_visuals import SceneVisuals
+    visuals = SceneVisuals(scene_from())
+    with pytest.raises(ValueError, match='impact report'):
+        visuals.add_impact(json.dumps(bad))
+    assert visuals.impacts == [] and visuals.take_events() == []

@@ -139,11 +139,21 @@ class SceneVisuals:
         marker, its force the arrow, and its event frames are queued (``take_events``)."""
         if isinstance(record, (str, bytes)):
             record = json.loads(record)
-        events = event_states(record)
-        _, t_contact, q_contact = events[0]
-        # the model's contact begins when the tip centre B reaches the surface plane
-        x, _, z = plane_to_world(*tip_position(self.scene.lengths, q_contact))
-        self.impacts.append((t_contact, (x, z), float(record['F_max'])))
+        try:
+            events = event_states(record)
+            force = float(record['F_max'])
+            _, t_contact, q_contact = events[0]
+            # the model's contact begins when the tip centre B reaches the surface plane
+            x, _, z = plane_to_world(*tip_position(self.scene.lengths, q_contact))
+            n = self.scene.n_links
+            numbers = [force, x, z] + [a for _, _, q in events for a in q]
+        except (KeyError, TypeError, IndexError, AttributeError, OverflowError,
+                ValueError) as e:   # ValueError: NaN or infinite numbers in the maths
+            raise ValueError(f'impact report not usable: {type(e).__name__} {e}') from None
+        if not all(math.isfinite(v) for v in numbers) or \
+                any(len(q) != n for _, _, q in events):
+            raise ValueError(f'impact report not usable: non-finite values or not {n} angles')
+        self.impacts.append((t_contact, (x, z), force))
         self._events.extend((t, q) for _, t, q in events)
 
     def take_events(self) -> list:
