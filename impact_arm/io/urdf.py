@@ -72,8 +72,9 @@ def rod_radius_of(scene, rod_radius=None) -> float:
         return default_rod_radius(scene)
     rod_radius = float(rod_radius)
     if not (math.isfinite(rod_radius) and 0 < rod_radius <= min(scene.lengths)):
-        raise VisualSettingError(f'rod_radius = {rod_radius!r}: must be > 0 and <= the shortest link '
-                         f'({min(scene.lengths):g} m), or 0 for the default')
+        raise VisualSettingError(f'rod_radius = {rod_radius!r}: must be > 0 and <= the '
+                                 f'shortest link ({min(scene.lengths):g} m), or 0 for the '
+                                 f'default')
     return rod_radius
 
 
