@@ -59,7 +59,7 @@ def test_cli_json_has_exactly_the_documented_structure(tmp_path):
     assert set(data['impacts'][0]) == {
         'index', 't_contact', 'q_contact_deg', 'duration', 'delta_m', 'delta_r', 'F_max',
         'v_before', 'v_after', 'cor_kinematic', 'T_before', 'T_after', 'cor_energetic',
-        'phase_durations'}
+        'phase_durations', 'q_max_compression_deg', 'q_separation_deg'}
     assert set(data['run']) == {'impacts', 't_end', 'period_last', 'q1_range_deg',
                                 'q2_range_deg', 'vx_range', 'vy_range', 'rhs_evaluations',
                                 'wall_time'}

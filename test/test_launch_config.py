@@ -114,6 +114,77 @@ def test_tf_rsp_starts_robot_state_publisher_with_the_urdf_and_rviz_its_shipped_
     assert rviz_config['Visualization Manager']['Global Options']['Fixed Frame'] == 'world'
 
 
+def test_rviz_view_looks_along_y_onto_the_arms_x_z_plane():
+    """REP 103: z up, the arm moves in x-z. RViz's orbit camera sits at focal + distance *
+    (cos yaw cos pitch, sin yaw cos pitch, sin pitch): here on -y, level, so it looks along
+    +y with x to the right and z up."""
+    import math
+    config = yaml.safe_load(open(os.path.join(ROOT, 'config', 'impact_arm.rviz')))
+    view = config['Visualization Manager']['Views']['Current']
+    assert view['Class'] == 'rviz_default_plugins/Orbit'
+    yaw, pitch = view['Yaw'], view['Pitch']
+    direction = (math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch),
+                 math.sin(pitch))
+    assert direction == pytest.approx((0, -1, 0), abs=1e-6)
+    grid = next(d for d in config['Visualization Manager']['Displays']
+                if d['Class'] == 'rviz_default_plugins/Grid')
+    assert grid['Plane'] == 'XZ'
+
+
+def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
+    """config/impact_arm.foxglove.json: every panel in the layout tree is configured, the 3D
+    camera looks along +y onto the x-z plane, and every topic a panel reads is in a
+    recording."""
+    import json
+    import math
+    import re
+
+    from impact_arm.core.simulate import run
+    from impact_arm.io.offline_mcap import OfflineRecorder
+    from scenes import scene_from
+    layout = json.load(open(os.path.join(ROOT, 'config', 'impact_arm.foxglove.json')))
+
+    def panels(node):
+        return [node] if isinstance(node, str) else panels(node['first']) + \
+            panels(node['second'])
+    shown = panels(layout['layout'])
+    assert sorted(shown) == sorted(layout['configById'])
+    kinds = {panel.split('!')[0] for panel in shown}
+    assert kinds == {'3D', 'Plot', 'Table'}
+    three_d = layout['configById']['3D!arm']
+    camera = three_d['cameraState']
+    # the 3D panel's camera: spherical (distance, phi from +z, theta = -thetaOffset)
+    phi, theta = math.radians(camera['phi']), -math.radians(camera['thetaOffset'])
+    position = (math.sin(phi) * math.sin(theta), -math.sin(phi) * math.cos(theta),
+                math.cos(phi))
+    assert position == pytest.approx((0, -1, 0), abs=1e-9) and camera['perspective']
+    assert three_d['followTf'] == 'world'
+    assert three_d['topics']['/robot_description']['visible']
+    assert three_d['topics']['/impact_markers']['visible']
+    # the topics the panels and the table's script read are in a recording
+    path = tmp_path / 'run.mcap'
+    scene = scene_from(cycles=1)
+    rec = OfflineRecorder(path, scene)
+    rec.close(run(scene, observer=rec))
+    from rosbags.highlevel import AnyReader
+    from pathlib import Path
+    with AnyReader([Path(path)]) as reader:
+        recorded = {c.topic: c.msgtype for c in reader.connections}
+    script, = layout['userNodes'].values()
+    inputs = re.search(r'inputs = \[([^]]*)\]', script['sourceCode']).group(1)
+    output = re.search(r'output = "([^"]+)"', script['sourceCode']).group(1)
+    assert [t.strip().strip('"') for t in inputs.split(',')] == ['/impact_report']
+    used = set()
+    for panel, config in layout['configById'].items():
+        for entry in config.get('paths', []):
+            used.add(entry['value'].split('.')[0])
+        if 'topicPath' in config:
+            assert config['topicPath'].startswith(output + '.')
+    used |= set(three_d['topics'])
+    assert used <= set(recorded), used - set(recorded)
+    assert recorded['/joint_states'] == 'sensor_msgs/msg/JointState'
+
+
 def test_urdf_command_prints_the_robot_description(tmp_path):
     out = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'urdf', '--scene', 'paper'],
                          capture_output=True, text=True, timeout=60, cwd=tmp_path)

@@ -47,6 +47,8 @@ class ImpactBuilder:
                                f'or no contact)')
         impact['times'][kind] = event.t
         impact.update(event.info)
+        if kind == 'max_compression':   # where a viewer draws the impact (io/scene_visuals)
+            impact['q_max'] = np.asarray(event.y[:self.model.n], dtype=float).tolist()
         if kind != 'separation':
             return None
         self._open = None
@@ -77,6 +79,8 @@ class ImpactBuilder:
             'cor_energetic': [math.sqrt(a / b) if b > 0 else math.nan
                               for a, b in zip(T_after, T_before)],
             'phase_durations': [t_yield - t0, t_max - t_yield, t_sep - t_max],
+            'q_max_compression_deg': [math.degrees(a) for a in impact['q_max']],
+            'q_separation_deg': [math.degrees(a) for a in event.y[:self.model.n]],
         }
 
 

@@ -17,10 +17,11 @@ name is rejected and counted like a bad array), and the joint states also go out
 ``joint_states_topic`` (while someone listens there, as checked at ``tf_rate``; never
 /joint_states, which a
 JointStateBroadcaster publishes). 3D view: /robot_description (transient local) at start;
-/tf_static and /tf at ``tf_rate`` where tf2_msgs is installed; /impact_markers at ``tf_rate``.
-/tf and the markers come from a timer of the executor thread that reads the latest published
-period, so they cost the realtime loop nothing but one reference (and, in contact periods,
-noting the force for the arrow).
+/tf_static and /tf at ``tf_rate`` where tf2_msgs is installed; /impact_markers at ``tf_rate``;
+both also at each impact's first contact, maximum compression and separation (from the impact
+report, io/scene_visuals.py). /tf and the markers come from a timer of the executor thread
+that reads the latest published period, so they cost the realtime loop nothing but one
+reference.
 """
 from __future__ import annotations
 
@@ -53,6 +54,7 @@ from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import DEFAULT_TF_RATE, SceneVisuals
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from ..io.wire import PatchedMessage, float64_array_data, joint_state_command
+from . import sim_services
 from ._runner import name_thread, realtime_priority, run
 from .params import NODE_OPTIONS, Param, ParameterError, declare, refuse_unknown, validator
 
@@ -93,8 +95,8 @@ PARAMS = (
           low=0.05, high=60.0, read_only=True),
     Param('step_periods', 1, 'periods one ~/step call advances while paused', 'int', low=1,
           high=1000000),
-    Param('frame_id', 'surface', 'frame of /contact_wrench (x tangential, y normal)', 'str',
-          read_only=True),
+    Param('frame_id', contract.WRENCH_FRAME, 'TF frame of /contact_wrench (x tangential, '
+          'y normal)', 'str', read_only=True),
     Param('joint_commands_topic', JOINT_COMMANDS_TOPIC, 'sensor_msgs/JointState commands '
           '(effort by joint name), as topic_based_ros2_control sends them', 'str',
           read_only=True),
@@ -106,6 +108,8 @@ PARAMS = (
           f'recorder reports written on {contract.RECORDER_PROGRESS}, so a stalled recorder '
           'holds the run instead of losing samples (0: do not wait for a recorder)', 'int',
           low=0, high=contract.WRITER_REPAIR_DEPTH // 2, read_only=True),
+    Param('rod_radius', 0.0, 'radius the rods are drawn with [m] (0: 1 % of the shortest '
+          'link)', low=0.0, high=1e3, read_only=True),
     Param('publish_tf', True, 'publish /tf and /tf_static (false when robot_state_publisher '
           'does, launch tf:=rsp)', 'bool', read_only=True),
 )
@@ -240,6 +244,21 @@ class Simulator(Node):
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
         self.create_subscription(Bool, contract.E_STOP, self._on_e_stop, 10)
+        sim_services.attach(self, self._simulation_controls())   # where the package is
+
+    def _simulation_controls(self):
+        """The actions of ~/reset, ~/pause and ~/step for simulation_interfaces."""
+        from std_srvs.srv import SetBool, Trigger
+
+        def outcome(handler, request, response):
+            response = handler(request, response)
+            return response.success, response.message
+        return sim_services.SimulationControls(
+            reset=lambda: outcome(self._on_reset, None, Trigger.Response()),
+            pause=lambda paused: outcome(self._on_pause, SetBool.Request(data=paused),
+                                         SetBool.Response()),
+            step=lambda n: self._run_steps(n, wait=True),
+            is_paused=lambda: self.loop.paused, failure=lambda: self.failed)
 
     def _on_reset(self, request, response):
         if self.failed:
@@ -267,15 +286,27 @@ class Simulator(Node):
         return response
 
     def _on_step(self, request, response):
+        response.success, response.message = self._run_steps(self.p['step_periods'])
+        return response
+
+    def _run_steps(self, n, wait=False):
+        """While paused, let ``n`` periods run; ``wait``: realtime answers once they ran."""
         if not self.loop.paused:
-            response.success, response.message = False, 'not paused: ~/pause true first'
-            return response
-        n = self.p['step_periods']
+            return False, 'not paused: ~/pause true first'
+        target = self.arm.periods + n
         self.loop.request_steps(n)
         if self.lockstep and self.loop.watchdog.pending and self.loop.take_step():
             self._advance(time.monotonic())   # the exchange waits for a period
-        response.success, response.message = True, f'{n} period(s) requested'
-        return response
+        if not wait or self.lockstep:
+            return True, f'{n} period(s) requested'
+        limit = 1.0 + 2 * n * self.loop.wall_period
+        end = time.monotonic() + limit
+        while self.arm.periods < target and time.monotonic() < end and not self.failed:
+            time.sleep(min(self.loop.wall_period, 0.01))
+        if self.arm.periods < target:
+            return False, (f'{target - self.arm.periods} of {n} period(s) not run within '
+                           f'{limit:.3g} s (brakes stay on until the first command)')
+        return True, f'{n} period(s) run, t = {self.arm.t:.6f} s'
 
     def _on_e_stop(self, msg):
         if bool(msg.data) != self.loop.e_stop:
@@ -510,9 +541,6 @@ class Simulator(Node):
         if self.hw_states_wanted:
             self._send(self.pub_hw_states, states)
         self.latest_tick = tick            # for /tf and the markers (executor thread)
-        if tick.wrench[0] or tick.wrench[1]:
-            with self.visual_lock:
-                self.visuals.observe_force(to_absolute(tick.position), tick.wrench)
         if self.pub_clock is not None:
             self._send(self.pub_clock, self.wire_clock.fill((), (sec, nsec)))
 
@@ -548,7 +576,7 @@ class Simulator(Node):
 
         def qos(topic):
             return VISUAL_TOPICS[topic][1].to_rclpy()
-        self.visuals = SceneVisuals(self.scene, self.p['tf_rate'])
+        self.visuals = SceneVisuals(self.scene, self.p['tf_rate'], self.p['rod_radius'])
         self.visual_lock = threading.Lock()
         self.latest_tick = None
         self._visual_stamp = None
@@ -572,6 +600,13 @@ class Simulator(Node):
     def _publish_visuals(self):
         # asking DDS for the subscription count costs ~3 us: here at tf_rate, not each period
         self.hw_states_wanted = self.pub_hw_states.get_subscription_count() > 0
+        with self.visual_lock:   # each impact's events first: their stamps are older
+            events = [(self.visuals.tf(q, t_ns), self.visuals.markers(t_ns))
+                      for t_ns, q in self.visuals.take_events()]
+        for tf, markers in events:
+            if self.pub_tf is not None:
+                self.pub_tf.publish(tf)
+            self.pub_markers.publish(markers)
         tick = self.latest_tick
         if tick is None or tick.t == self._visual_stamp:
             return                         # nothing new (paused lockstep, waiting)

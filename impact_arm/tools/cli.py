@@ -103,7 +103,7 @@ def _check_run_size(scene, args):
 def cmd_urdf(args) -> int:
     from ..core.scene import load_scene
     from ..io.urdf import robot_description
-    sys.stdout.write(robot_description(load_scene(args.scene)))
+    sys.stdout.write(robot_description(load_scene(args.scene), rod_radius=args.rod_radius))
     return 0
 
 
@@ -199,6 +199,9 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
 
     p = sub.add_parser('urdf', help="print the scene's robot description (URDF)")
     p.add_argument('--scene', default=DEFAULT_SCENE, help='scene file or installed scene name')
+    p.add_argument('--rod-radius', type=float, default=0.0, metavar='M',
+                   help='radius the rods are drawn with [m] (default 0: 1 %% of the shortest '
+                        'link)')
     p.set_defaults(func=cmd_urdf)
 
     for name, (module, help_text) in COMMANDS.items():
