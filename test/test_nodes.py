@@ -372,7 +372,7 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts.get('/impact_report') == 15
-    # nothing lost at the start (issue 17 item 10: the runner starts the controller once the
+    # nothing lost at the start (the runner starts the controller once the
     # recorder has matched the simulator's publishers) nor while the recorder was frozen: the
     # held initial state (stamp 0) and then every period, 1 ms apart, to the end. (Commands
     # are not counted against the periods: one CI run recorded 24 fewer, cause not pinned;
@@ -390,7 +390,7 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
 
 
 def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_env, tmp_path):
-    """Issue 17 item 10, the runner's side: the first command waits for the recorder to match
+    """The runner's side: the first command waits for the recorder to match
     the simulator's publishers and receive joint states, not only for its readers to be in the
     graph. The recorder is
     frozen (SIGSTOP) once its readers are known, before the simulator exists, and thawed 3 s

@@ -2,7 +2,7 @@
 
 Generalized coordinates are the *absolute* link angles q_i (from +x). Lagrange's equations
 d/dt(dT/dq̇) - dT/dq = Q give  M(q) q̈ = Q - b(q, q̇)  with b the velocity-product terms.
-Gravity enters through its generalized forces Q_g = Σ G_j · ∂r_Cj/∂q_i (model.md), never
+Gravity enters through its generalized forces Q_g = Σ G_j · ∂r_Cj/∂q_i (docs/model.md), never
 through a hand-typed formula.
 
 The derivation keeps lengths, masses and g as symbols, so one derivation serves every scene

@@ -44,7 +44,7 @@ class Material:
 
 
 def reduced_modulus(a: Material, b: Material) -> float:
-    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (model.md)."""
+    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (docs/model.md)."""
     return a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
 
 

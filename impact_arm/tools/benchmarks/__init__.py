@@ -15,7 +15,7 @@ import sys
 
 SUBCOMMANDS = {
     'speed': ('impact_arm.tools.benchmarks.speed',
-              'offline speed at equal accuracy vs scipy solve_ivp (issue 6)'),
+              'offline speed at equal accuracy vs scipy solve_ivp'),
     'tradeoff': ('impact_arm.tools.benchmarks.tradeoff',
                  'work-precision table and plot: presets and solve_ivp methods vs reference'),
     'stress': ('impact_arm.tools.benchmarks.stress',
@@ -25,7 +25,7 @@ SUBCOMMANDS = {
     'sweep': ('impact_arm.tools.benchmarks.sweep',
               'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
     'starts': ('impact_arm.tools.benchmarks.starts',
-               'realtime simulator + controller started N times as a user does (issue 12)'),
+               'realtime simulator + controller started N times as a user does'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }

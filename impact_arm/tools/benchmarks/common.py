@@ -84,7 +84,7 @@ def _rel_vec(value, ref):
     return num / den if den else num
 
 
-# issue 6: "the first impact's metrics (duration, δm, δr, F_max, post-impact tip velocity,
+# "the first impact's metrics (duration, δm, δr, F_max, post-impact tip velocity,
 # energies)": each component's own relative error, the level is their maximum
 SPEED_KEYS = ('duration', 'delta_m', 'delta_r', 'F_max', 'v_after', 'T_before', 'T_after')
 
@@ -104,7 +104,7 @@ def first_impact_error(impacts, ref_impacts):
     return worst
 
 
-# issue 5: the trade-off metrics, each a relative error (t15: as a fraction of the period)
+# the trade-off metrics, each a relative error (t15: as a fraction of the period)
 TRADEOFF_METRICS = ('delta_m', 'F_max', 'v_after', 'cor_kin', 'cor_energy', 'v15_contact',
                     't15')
 METRIC_LABELS = {
@@ -113,7 +113,7 @@ METRIC_LABELS = {
 
 
 def tradeoff_errors(impacts, ref_impacts):
-    """Relative errors of the issue-5 metrics; inf where the run lacks the impact."""
+    """Relative errors of the trade-off metrics; inf where the run lacks the impact."""
     out = {k: math.inf for k in TRADEOFF_METRICS}
     if impacts:
         a, b = impacts[0], ref_impacts[0]

@@ -236,7 +236,7 @@ def run(args) -> int:
               f"factor at 1 kHz can never exceed {1e-3 / floor:.2f} here")
         lockstep = next((r for r in rows if r['mode'] == 'lockstep'), None)
         if lockstep and lockstep['real_time_factor'] > 0:
-            # issue 12's target: a lockstep period within 1.25x the bare exchange of this run
+            # target: a lockstep period within 1.25x the bare exchange of this run
             period = 1e-3 / lockstep['real_time_factor']
             print(f"lockstep period {period * 1e6:.0f} us = {period / floor:.2f}x the transport "
                   f"floor measured in this run (target <= 1.25x)")
