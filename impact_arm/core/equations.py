@@ -153,7 +153,12 @@ def _derivation(n, gravity):
             text = f.read()
         if text:
             return text
-    text = _derive_source(n, gravity)
+    from .jit import compile_ended, compile_started
+    compile_started()           # sympy: part of the one-time cost the tools announce
+    try:
+        text = _derive_source(n, gravity)
+    finally:
+        compile_ended()
     _write_atomically(path, text)
     return text
 

@@ -82,3 +82,54 @@ def jit_alloc(func):
     if _njit is None:
         return func
     return _njit(**ALLOC_OPTIONS)(func)
+
+
+# ------------------------------------------------------------------ compile notifications
+# Compiling a scene shape's kernel takes ~30 s once; the tools tell the user so. The core
+# only notifies (no printing policy here): ``add_compile_hook(on_start, on_end)`` registers
+# callbacks that run when the first compile (numba, or the sympy derivation) starts while none
+# is running, and when the last one ends. Loads from numba's on-disk cache are not compiles.
+_hooks = []
+_depth = [0]
+
+
+def add_compile_hook(on_start, on_end):
+    """Register ``on_start()``/``on_end()`` around every outermost compile; returns a function
+    that removes them."""
+    _install_numba_listener()
+    pair = (on_start, on_end)
+    _hooks.append(pair)
+    return lambda: pair in _hooks and _hooks.remove(pair)
+
+
+def compile_started():
+    _depth[0] += 1
+    if _depth[0] == 1:
+        for on_start, _ in list(_hooks):
+            on_start()
+
+
+def compile_ended():
+    _depth[0] = max(0, _depth[0] - 1)
+    if _depth[0] == 0:
+        for _, on_end in list(_hooks):
+            on_end()
+
+
+_listener = []
+
+
+def _install_numba_listener():
+    if _listener or _njit is None:
+        return
+    from numba.core import event
+
+    class _CompileListener(event.Listener):
+        def on_start(self, ev):
+            compile_started()
+
+        def on_end(self, ev):
+            compile_ended()
+
+    _listener.append(_CompileListener())
+    event.register('numba:compile', _listener[0])

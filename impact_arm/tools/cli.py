@@ -14,7 +14,7 @@ import sys
 
 from ..contract import INTEGRATOR_PRESETS
 from ..core.errors import ImpactArmError
-from .progress import Progress
+from .progress import CompileNotice, Progress
 
 DEFAULT_SCENE = 'paper'
 
@@ -228,7 +228,8 @@ def main(argv=None) -> int:
     selected = next((a for a in argv if not a.startswith('-')), None)
     args = build_parser(selected).parse_args(argv)
     try:
-        return args.func(args)
+        with CompileNotice(prefix=f'impact-arm {args.command}: '):
+            return args.func(args)
     except ImpactArmError as exc:
         print(f'impact-arm {args.command}: error: {exc}', file=sys.stderr)
         return 2

@@ -8,6 +8,7 @@ per line, without ETA noise.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 
@@ -60,3 +61,91 @@ def _duration(seconds: float) -> str:
     if minutes < 60:
         return f'{minutes} min {seconds:02d} s'
     return f'{minutes // 60} h {minutes % 60:02d} min'
+
+
+COMPILE_NOTICE = 'compiling the kernel for this scene shape (one time, ~30 s)'
+
+
+class CompileNotice:
+    """Says on stderr when the core compiles (numba, sympy) instead of loading its cache: one
+    line ``compiling the kernel ... (one time, ~30 s)`` with the elapsed seconds (rewritten in
+    place on a terminal, every 10 s elsewhere) and ``compiled in N s`` when it is done. A
+    compile that is over within a second says nothing. Use as a context manager."""
+
+    QUIET = 1.0         # s: shorter compiles are not worth a line
+    LOG_EVERY = 10.0    # s between lines off a terminal
+
+    def __init__(self, stream=None, clock=time.monotonic, prefix=''):
+        self.stream = sys.stderr if stream is None else stream
+        self.clock = clock
+        self.prefix = prefix
+        self.tty = self.stream.isatty()
+        self.total = 0.0            # s compiled so far in this process
+        self._started = None
+        self._shown = False
+        self._logged = 0.0
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._thread = None
+        self._remove = None
+
+    def __enter__(self):
+        from ..core import jit
+        self._remove = jit.add_compile_hook(self._start, self._end)
+        return self
+
+    def __exit__(self, *exc):
+        if self._remove is not None:
+            self._remove()
+        self._end()
+        return False
+
+    def _start(self):
+        with self._lock:
+            if self._started is not None:
+                return
+            self._started = self.clock()
+            self._logged = 0.0
+            self._wake.clear()
+            self._thread = threading.Thread(target=self._tick, daemon=True)
+            self._thread.start()
+
+    def _end(self):
+        with self._lock:
+            if self._started is None:
+                return
+            elapsed = self.clock() - self._started
+            self.total += elapsed
+            self._started = None
+            self._wake.set()
+            shown = self._shown
+            self._shown = False
+        if shown:
+            self._write(f'{COMPILE_NOTICE}: compiled in {elapsed:.0f} s, cached for next time',
+                        final=True)
+
+    def _tick(self):
+        while not self._wake.wait(0.5 if self.tty else 1.0):
+            with self._lock:
+                if self._started is None:
+                    return
+                elapsed = self.clock() - self._started
+                if elapsed < self.QUIET:
+                    continue
+                if not self._shown:
+                    self._shown = True
+                    self._write(f'{COMPILE_NOTICE} ...' + (f' {elapsed:.0f} s' if self.tty
+                                                            else ''))
+                    self._logged = elapsed
+                elif self.tty:
+                    self._write(f'{COMPILE_NOTICE} ... {elapsed:.0f} s')
+                elif elapsed - self._logged >= self.LOG_EVERY:
+                    self._logged = elapsed
+                    self._write(f'  ... {elapsed:.0f} s')
+
+    def _write(self, text, final=False):
+        if self.tty:
+            self.stream.write(f'\r\033[K{self.prefix}{text}' + ('\n' if final else ''))
+        else:
+            self.stream.write(f'{self.prefix}{text}\n')
+        self.stream.flush()
