@@ -121,7 +121,7 @@ STEP_LAWS = ('q', 'pd', 'pid')
 LAW_NAMES = {'q': 'Q controller (eq. 9)', 'pd': 'PD (eq. 10, Ki = 0)', 'pid': 'PID (eq. 10)'}
 
 
-def step_response(scene, law: str, t_max: float = 3.0, progress=_quiet) -> Run:
+def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     """The article's Figure 3 for one law: the arm driven from the scene's initial position
     to its down target with the surfaces taken away (no impact: a step response), the
     controller evaluated continuously. ``run.target`` holds the target (rad)."""
@@ -304,8 +304,8 @@ def add_arguments(parser):
                         help='the control laws of Figure 3, comma separated (default q,pd,pid; '
                              'empty: no Figure 3): step responses of the file\'s scene '
                              'without its surface, simulated offline')
-    parser.add_argument('--compare-time', type=float, default=3.0, metavar='S',
-                        help='simulated seconds of each step response (default 3, (0, 60])')
+    parser.add_argument('--compare-time', type=float, default=5.0, metavar='S',
+                        help='simulated seconds of each step response (default 5, (0, 60])')
     parser.add_argument('--impact', type=int, default=1, metavar='K',
                         help='impact shown in Figures 8-11 (default 1, the first); from '
                              '/impact_trace, or re-integrated from /impact_report in a live '

@@ -36,7 +36,7 @@ def _save(fig, out, name):
 
 def _layout(fig):
     """Fixed margins (tight_layout measures every text and costs seconds per figure)."""
-    fig.subplots_adjust(left=0.08, right=0.97, bottom=0.1, top=0.92, wspace=0.3, hspace=0.35)
+    fig.subplots_adjust(left=0.08, right=0.97, bottom=0.12, top=0.92, wspace=0.3, hspace=0.35)
 
 
 def _deg(a):
@@ -200,8 +200,11 @@ def _by_phase(ax, tus, y, phase, scale=1.0, x=None, legend=True, last_is_end=Tru
 
 
 def _note(ax, impact):
+    """Where the impact's points come from, when not from /impact_trace: in the figure's
+    bottom-left corner, below the axis labels."""
     if impact[3]:
-        ax.text(0.01, 0.01, impact[3], transform=ax.transAxes, fontsize=7, color='0.35')
+        ax.figure.text(0.005, 0.004, impact[3], ha='left', va='bottom', fontsize=7,
+                       color='0.35')
 
 
 def fig8_indentation(impact, out):
@@ -349,7 +352,7 @@ def fig11_kinetic_energy(impact, out):
     fig.legend(*axes[0].get_legend_handles_labels(), loc='upper center', ncol=4, fontsize=7,
                bbox_to_anchor=(0.5, 1.0))
     _note(axes[0], impact)
-    fig.subplots_adjust(left=0.08, right=0.97, bottom=0.1, top=0.86, wspace=0.4)
+    fig.subplots_adjust(left=0.08, right=0.97, bottom=0.13, top=0.86, wspace=0.4)
     return fig
 
 
