@@ -95,7 +95,7 @@ def cli(args) -> int:
         print(f"realtime: {d.get('overruns', '?')} overruns; worst period compute "
               f"{d.get('compute_worst_us', '?')} us of {d.get('period_us', '?')} us")
     if output:
-        print(f'recorded to {output}' if os.path.exists(output) else
+        print(f'wrote {output}' if os.path.exists(output) else
               f'no recording: {output} was not written')
     failed = {n: c for n, c in codes.items() if c not in (0, None)}
     if outcome == 'interrupted':
