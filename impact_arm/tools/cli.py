@@ -130,8 +130,14 @@ def _simulate_without_samples(scene, args, load_s=0.0) -> int:
 def writable_output(path, flag) -> str:
     """The file to write for ``flag``, checked before any work: its directory must exist and
     be writable (none is created), and it must be absent, a regular file, or a symlink to one
-    (then its target is written and the link kept). Directories, FIFOs and devices are refused."""
+    (then its target is written and the link kept). Directories, FIFOs and devices are refused.
+    The one exception to "none is created": ``runs/``, where every command's outputs go by
+    default, is made when its parent exists (a fresh clone has none)."""
     target = os.path.realpath(path)
+    runs = os.path.dirname(target)
+    if os.path.basename(runs) == 'runs' and not os.path.exists(runs) \
+            and os.path.isdir(os.path.dirname(runs)):
+        os.makedirs(runs, exist_ok=True)
     if os.path.isdir(target):
         raise ImpactArmError(f'{flag} {path}: is a directory')
     if os.path.exists(target) and not os.path.isfile(target):

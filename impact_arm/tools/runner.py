@@ -228,6 +228,7 @@ class Run:
         self.node = None
         self.interrupted = threading.Event()    # set by the CLI's SIGINT/SIGTERM handler
         self._reported = 0
+        self.stopping = False
         self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
         self.logdir = os.path.join(args.out, 'logs')
 
@@ -303,7 +304,8 @@ class Run:
             raise KeyboardInterrupt
 
     def _on_impact(self, msg):
-        self.impacts.append(json.loads(msg.data))
+        if not self.stopping:   # the arm released by the stopped controller falls: not the run
+            self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
         values = simulator_diagnostics(msg)
@@ -372,6 +374,7 @@ class Run:
     def stop(self) -> dict:
         """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any
         that does not exit; returns exit codes by node."""
+        self.stopping = True
         codes = {}
         for name in STOP_ORDER:
             proc = self.procs.get(name)
