@@ -6,7 +6,7 @@ import pytest
 from impact_arm.core.scene import load_scene
 from impact_arm.core.simulate import run
 
-# docs/model.md, "What the article reports, and what the package gives" (truncated values: 1 % band)
+# docs/model.md, "What the article reports, and what the package gives" (truncated: 1 % band)
 ARTICLE_FIRST_IMPACT = {
     'duration': 1.44e-4, 'delta_m': 3.53e-4, 'delta_r': 2.84e-4, 'F_max': 2.77e4,
     'v_before': [-3.66, -5.54], 'v_after': [-2.43, 2.23], 'cor_kinematic': 0.40,

@@ -69,10 +69,12 @@ COMPILE_NOTICE = 'compiling the kernel for this scene shape (one time, ~30 s)'
 class CompileNotice:
     """Says on stderr when the core compiles (numba, sympy) instead of loading its cache: one
     line ``compiling the kernel ... (one time, ~30 s)`` with the elapsed seconds (rewritten in
-    place on a terminal, every 10 s elsewhere) and ``compiled in N s`` when it is done. A
-    compile that is over within a second says nothing. Use as a context manager."""
+    place on a terminal, every 10 s elsewhere) and ``compiled in N s`` once no compile has
+    followed for ``SETTLE`` seconds (a first run compiles in a few bursts: one notice for
+    all). A compile that is over within a second says nothing. Use as a context manager."""
 
     QUIET = 1.0         # s: shorter compiles are not worth a line
+    SETTLE = 1.5        # s without a compile before the notice ends
     LOG_EVERY = 10.0    # s between lines off a terminal
 
     def __init__(self, stream=None, clock=time.monotonic, prefix=''):
@@ -80,12 +82,14 @@ class CompileNotice:
         self.clock = clock
         self.prefix = prefix
         self.tty = self.stream.isatty()
-        self.total = 0.0            # s compiled so far in this process
-        self._started = None
+        self.total = 0.0            # s compiled in this process so far
+        self._burst_start = None    # start of the compile running now
+        self._first = None          # start of the first compile of this notice
+        self._idle_since = None     # end of the last compile (None while one runs)
+        self._compiled = 0.0        # s compiled within this notice
         self._shown = False
         self._logged = 0.0
         self._lock = threading.Lock()
-        self._wake = threading.Event()
         self._thread = None
         self._remove = None
 
@@ -97,46 +101,61 @@ class CompileNotice:
     def __exit__(self, *exc):
         if self._remove is not None:
             self._remove()
-        self._end()
+        with self._lock:
+            if self._burst_start is not None:
+                self._close_burst()
+            self._finish()
         return False
 
     def _start(self):
         with self._lock:
-            if self._started is not None:
-                return
-            self._started = self.clock()
-            self._logged = 0.0
-            self._wake.clear()
-            self._thread = threading.Thread(target=self._tick, daemon=True)
-            self._thread.start()
+            self._burst_start = self.clock()
+            self._idle_since = None
+            if self._first is None:
+                self._first = self._burst_start
+                self._compiled, self._shown, self._logged = 0.0, False, 0.0
+                self._thread = threading.Thread(target=self._tick, daemon=True)
+                self._thread.start()
 
     def _end(self):
         with self._lock:
-            if self._started is None:
-                return
-            elapsed = self.clock() - self._started
-            self.total += elapsed
-            self._started = None
-            self._wake.set()
-            shown = self._shown
-            self._shown = False
-        if shown:
-            self._write(f'{COMPILE_NOTICE}: compiled in {elapsed:.0f} s, cached for next time',
-                        final=True)
+            if self._burst_start is not None:
+                self._close_burst()
+
+    def _close_burst(self):
+        elapsed = self.clock() - self._burst_start
+        self._compiled += elapsed
+        self.total += elapsed
+        self._burst_start = None
+        self._idle_since = self.clock()
+
+    def _finish(self):
+        """End the notice (lock held): the closing line if the opening one was shown."""
+        if self._first is None:
+            return
+        if self._shown:
+            self._write(f'{COMPILE_NOTICE}: compiled in {self._compiled:.0f} s, cached for '
+                        f'next time', final=True)
+        self._first, self._idle_since, self._shown = None, None, False
 
     def _tick(self):
-        while not self._wake.wait(0.5 if self.tty else 1.0):
+        while True:
+            time.sleep(0.5 if self.tty else 1.0)
             with self._lock:
-                if self._started is None:
+                if self._first is None:
                     return
-                elapsed = self.clock() - self._started
-                if elapsed < self.QUIET:
+                now = self.clock()
+                if self._idle_since is not None and now - self._idle_since >= self.SETTLE:
+                    self._finish()
+                    return
+                elapsed = now - self._first
+                if self._idle_since is not None or elapsed < self.QUIET:
                     continue
                 if not self._shown:
                     self._shown = True
+                    self._logged = elapsed
                     self._write(f'{COMPILE_NOTICE} ...' + (f' {elapsed:.0f} s' if self.tty
                                                             else ''))
-                    self._logged = elapsed
                 elif self.tty:
                     self._write(f'{COMPILE_NOTICE} ... {elapsed:.0f} s')
                 elif elapsed - self._logged >= self.LOG_EVERY:
