@@ -495,10 +495,11 @@ def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) ->
                   'of the target):', '']
         for step in steps:
             for k, m in enumerate(step_metrics(step)):
-                lines.append(f'- {step.label}, link {k + 1}: overshoot '
-                             f'{m["overshoot_deg"]:.3f}°, error at the end '
-                             f'{m["final_error_deg"]:+.3f}°, settles at '
-                             f'{m["settle_s"]:.3f} s')
+                settle = (f'settles at {m["settle_s"]:.3f} s' if math.isfinite(m['settle_s'])
+                          else f'does not settle within {step.t[-1]:g} s')
+                lines.append(f'- {step.label}, link {k + 1}: {m["overshoot_deg"]:.3f}° past '
+                             f'the target at most, error at the end '
+                             f'{round(m["final_error_deg"], 3) + 0.0:+.3f}°, {settle}')
         lines.append('')
     for line in missing:
         lines += [f'**{line}**', '']

@@ -92,7 +92,7 @@ def cli(args) -> int:
     ax.set_xlabel('impact velocity / yield velocity, V / V_y [-]')
     ax.set_ylabel('coefficient of restitution e [-]')
     ax.set_title('steel sphere on steel, normal impact')
-    ax.legend()
+    ax.legend(loc='upper right', fontsize=8)     # the curves fall to the lower right
     path = os.path.join(args.out, 'cor.png')
     fig.savefig(path, dpi=120)
     plt.close(fig)
