@@ -368,6 +368,9 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
     assert len(rows) == 15
     assert 'real-time factor' in out
+    # the progress shows no stale 1 Hz watchdog state once the arm is being driven
+    assert not [line for line in out.splitlines()
+                if 'watchdog waiting' in line and 'impacts 0' not in line]
     mcap = tmp_path / 'runs' / 'r.mcap'
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
