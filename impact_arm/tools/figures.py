@@ -346,7 +346,7 @@ def fig11_kinetic_energy(impact, out):
         ax.set_xlabel('t since contact [µs]')
         ax.set_ylabel('kinetic energy T [J]')
         ratio = math.sqrt(y[-1] / y[0]) if y[0] > 0 and y[-1] >= 0 else math.nan
-        ax.set_title(f'({"abcdefgh"[i]}) {name}: {y[0]:.3g} → {y[-1]:.3g} J, '
+        ax.set_title(f'({"abcdefgh"[i]}) {name}: {y[0]:.2f} → {y[-1]:.2f} J, '
                      f'e = {ratio:.3f}', fontsize=8)
         ax.grid(alpha=0.3)
     fig.legend(*axes[0].get_legend_handles_labels(), loc='upper center', ncol=4, fontsize=7,
