@@ -88,7 +88,8 @@ def cli(args) -> int:
                        stopped=outcome)
     print(format_table(result))
     if args.mode == 'lockstep' and run.wall > 0:
-        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall, '
+        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
+              f'first command to the last impact; the nodes\' start-up not included), '
               f'real-time factor {run.sim_time / run.wall:.2f}')
     elif run.diagnostics:
         d = run.diagnostics
