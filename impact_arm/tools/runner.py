@@ -312,7 +312,8 @@ class Run:
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
-            self.sim_time = float(values.get('sim_time', self.sim_time))
+            if not self.stopping:   # the run's time ends with it; the counters with the node
+                self.sim_time = float(values.get('sim_time', self.sim_time))
             self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
 
     def watch(self, timeout) -> str:
