@@ -390,6 +390,16 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     missing = sorted(set(range(max(stamps) + 1)) - stamps)
     assert not missing, f'{len(missing)} periods not recorded, from {missing[0]} ms'
     assert not node_processes(env['ROS_DOMAIN_ID'])
+    # the live recording (no /impact_trace) still gives Figures 8-11: the impact integrated
+    # again from its /impact_report, as the command says
+    ana = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'analyze', str(mcap), '--out',
+                          str(tmp_path / 'analysis'), '--laws', '', '--no-animation'],
+                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert ana.returncode == 0, ana.stderr
+    assert 'impact 1 re-integrated from /impact_report' in ana.stdout
+    for name in ('fig8_indentation.png', 'fig9_impact_velocity.png', 'fig10_contact_force.png',
+                 'fig11_kinetic_energy.png'):
+        assert (tmp_path / 'analysis' / name).stat().st_size > 10_000, name
 
 
 def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_env, tmp_path):
