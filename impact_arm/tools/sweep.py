@@ -93,14 +93,21 @@ class Spec:
         from ..core.errors import SceneError
         first = self.runs[0] if self.runs else {}
         errors = []
-        for key in list(self.fixed) + list(self.parameters):
-            value = self.fixed[key] if key in self.fixed else first.get(key)
+
+        def check(base, key, value):
             try:
-                Study(self.scene_data, self.fixed).scene({key: value})
+                Study(self.scene_data, base).scene({key: value})
             except SceneError as exc:
                 text = str(exc)
                 if 'is not a known key' in text or text.startswith('override '):
                     errors.append(f'{key}: {text}')
+        # the fixed overrides alone first (a parameter's path may need one of them, e.g. a
+        # second surface), then each parameter on top of them
+        for key, value in self.fixed.items():
+            check({}, key, value)
+        if not errors:
+            for key in self.parameters:
+                check(self.fixed, key, first.get(key))
         if errors:
             raise SpecError(f"sweep '{origin}': {len(errors)} key path(s) the scene does not "
                             f"have, nothing was run:\n  " + '\n  '.join(errors))
