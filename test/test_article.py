@@ -1,4 +1,4 @@
-"""The article's scene: first impact against model.md's reading, limit cycle, CLI JSON."""
+"""The article's scene: first impact against docs/model.md's reading, limit cycle, CLI JSON."""
 import json
 
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from impact_arm.core.scene import load_scene
 from impact_arm.core.simulate import run
 
-# model.md, "What the article reports for its first impact" (truncated values: 1 % band)
+# docs/model.md, "What the article reports, and what the package gives" (truncated: 1 % band)
 ARTICLE_FIRST_IMPACT = {
     'duration': 1.44e-4, 'delta_m': 3.53e-4, 'delta_r': 2.84e-4, 'F_max': 2.77e4,
     'v_before': [-3.66, -5.54], 'v_after': [-2.43, 2.23], 'cor_kinematic': 0.40,

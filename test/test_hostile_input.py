@@ -1,5 +1,5 @@
 """Hostile input without ROS: scene files and raw payloads either give finite values or are
-refused in one line (issues 15 and 17). Property-based parts are bounded and derandomized."""
+refused in one line. Property-based parts are bounded and derandomized."""
 import copy
 import math
 import os

@@ -1,4 +1,4 @@
-"""Hostile peers on the graph (issue 17 items 1-4): garbage on the controller's raw inputs,
+"""Hostile peers on the graph: garbage on the controller's raw inputs,
 absurd states, stamp jumps and a malformed SetParameters request must not stop a node nor
 make the controller send a non-finite or absurd torque."""
 import os
@@ -120,7 +120,7 @@ def not_applied(values):
 
 
 def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_env, tmp_path):  # noqa: F811,E501
-    """Issue 15 item 4: >= 1 000 malformed raw payloads mixed with valid commands on the
+    """>= 1 000 malformed raw payloads mixed with valid commands on the
     realtime simulator's command topic: it keeps running and publishing every period, holds
     only the valid commands' torques, and counts the rest (refused, or superseded: not
     checked because a newer valid command of the same period was). Counts and values only:

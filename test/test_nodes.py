@@ -371,6 +371,9 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert len(rows) == 15
     assert 'real-time factor' in out
     assert ': complete' in out, out
+    # the progress shows no stale 1 Hz watchdog state once the arm is being driven
+    assert not [line for line in out.splitlines()
+                if 'watchdog waiting' in line and 'impacts 0' not in line]
     mcap = tmp_path / 'runs' / 'r.mcap'
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
@@ -453,10 +456,20 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
     assert len(rows) >= 12, out
     assert not node_processes(env['ROS_DOMAIN_ID'])
+    # the live recording (no /impact_trace) still gives Figures 8-11: the impact integrated
+    # again from its /impact_report, as the command says
+    ana = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'analyze', str(mcap), '--out',
+                          str(tmp_path / 'analysis'), '--laws', '', '--no-animation'],
+                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert ana.returncode == 0, ana.stderr
+    assert 'impact 1 re-integrated from /impact_report' in ana.stdout
+    for name in ('fig8_indentation.png', 'fig9_impact_velocity.png', 'fig10_contact_force.png',
+                 'fig11_kinetic_energy.png'):
+        assert (tmp_path / 'analysis' / name).stat().st_size > 10_000, name
 
 
 def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_env, tmp_path):
-    """Issue 17 item 10, the runner's side: the first command waits for the recorder to match
+    """The runner's side: the first command waits for the recorder to match
     the simulator's publishers and receive joint states, not only for its readers to be in the
     graph. The recorder is
     frozen (SIGSTOP) once its readers are known, before the simulator exists, and thawed 3 s

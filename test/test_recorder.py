@@ -217,7 +217,7 @@ def test_impact_reports_are_read_as_dds_sends_them():
 
 
 def test_says_recording_once_every_topic_has_a_publisher(ros_env, tmp_path):
-    """Issue 17 item 10: a subscription is not a matched reader. The recorder names the topics
+    """A subscription is not a matched reader. The recorder names the topics
     without a publisher after its grace period, logs each topic as its reader matches one,
     and says "recording" only once all have: then nothing published is lost."""
     from impact_arm.nodes.recorder import MATCHED_LINE

@@ -1,5 +1,5 @@
 """The Rosenbrock free-flight step and the separate contact tolerance, checked against the
-Dormand-Prince reference and model.md's first impact, never against their own numbers."""
+Dormand-Prince reference and docs/model.md's first impact, never against their own numbers."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Stability at the extremes (issue 5): the fast cases of the stress matrix.
+"""Stability at the extremes: the fast cases of the stress matrix.
 
 Each case must finish with finite, physically consistent impacts (phases in order, δm > 0,
 0 <= δr < δm, δ >= 0, contact adds no energy, the impacts the geometry forces all found) or

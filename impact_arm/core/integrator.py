@@ -170,11 +170,7 @@ class PhaseIntegrator:
         vector = typeof(st.y)
         eq.tip.compile((vector, vector, vector))           # the impact records' kinematics
         eq.link_energies.compile((vector, vector, vector, vector))
-        seconds = time.perf_counter() - t0
-        if eq.__name__ in jit.COMPILED:
-            import sys
-            sys.stderr.write(f'impact_arm: kernel compiled in {seconds:.1f} s\n')
-        return seconds
+        return time.perf_counter() - t0
 
     # --- output on a time grid, from each step's continuous extension -------------------
     @property

@@ -1,4 +1,4 @@
-"""Impact metrics (model.md): assembled from the integrator's located events, so every number
+"""Impact metrics (docs/model.md): assembled from the integrator's located events, so every number
 comes from the state at an exactly located phase switch, not from a sampled signal."""
 from __future__ import annotations
 

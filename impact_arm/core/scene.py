@@ -44,7 +44,7 @@ class Material:
 
 
 def reduced_modulus(a: Material, b: Material) -> float:
-    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (model.md)."""
+    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (docs/model.md)."""
     return a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
 
 
@@ -441,7 +441,12 @@ def read_scene_file(name: str | os.PathLike) -> tuple[str, str]:
         with open(path, 'rb') as f:
             data = f.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
-        raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}") from None
+        hint = ''
+        if isinstance(exc, FileNotFoundError) and not os.path.dirname(path):
+            names = installed_scenes()
+            hint = (f"; installed scenes: {', '.join(names)} (or give a path to a scene file)"
+                    if names else '')
+        raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}{hint}") from None
     if len(data) > MAX_FILE_BYTES:
         raise SceneError(f"scene '{path}': larger than {MAX_FILE_BYTES} bytes: not a scene file")
     try:
@@ -585,6 +590,23 @@ def resolve_scene_path(name: str | os.PathLike) -> str:
             if os.path.exists(full):
                 return full
     return name  # load_scene reports it as unreadable
+
+
+def installed_scenes() -> list[str]:
+    """Names of the scene files in the installed config directories (the node parameter
+    files there are not scenes: a scene has a top-level ``links:``)."""
+    names = set()
+    for directory in config_dirs():
+        for entry in os.listdir(directory):
+            if not entry.endswith('.yaml'):
+                continue
+            try:
+                with open(os.path.join(directory, entry), encoding='utf-8') as f:
+                    if any(line.startswith('links:') for line in f):
+                        names.add(entry[:-len('.yaml')])
+            except (OSError, UnicodeDecodeError):
+                continue
+    return sorted(names)
 
 
 def config_dirs() -> list[str]:

@@ -1,7 +1,7 @@
 """Record an offline run (``impact-arm simulate --mcap FILE``) as a ROS 2 MCAP file.
 
 ``OfflineRecorder(path, scene)`` is an observer for ``simulate.run``: it writes, as the run goes,
-the topics and types the live simulator publishes (design.md §3, docs/topics.md), so
+the topics and types the live simulator publishes (docs/topics.md), so
 ``impact-arm analyze``, ``rosbags``, ``ros2 bag play`` and the replay node treat an offline file
 like a live recording. Every time below is *simulated* time: header stamps, and also the MCAP
 log and publish times (t = 0 at the start of the run), so time-ordered readers see the run in

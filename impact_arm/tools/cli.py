@@ -11,10 +11,14 @@ import json
 import math
 import os
 import sys
+import time
+
+STARTED = time.perf_counter()      # the command's start, for the timings it prints
+NOTICE = []                        # the command's CompileNotice (how long it compiled)
 
 from ..contract import INTEGRATOR_PRESETS
 from ..core.errors import ImpactArmError
-from .progress import Progress
+from .progress import CompileNotice, Progress
 
 DEFAULT_SCENE = 'paper'
 
@@ -45,8 +49,9 @@ def cmd_simulate(args) -> int:
     # refused now, not after a long run whose results would then be lost
     args.json = args.json and writable_output(args.json, '--json')
     args.mcap = args.mcap and writable_output(args.mcap, '--mcap')
+    load_s = _load_kernel(scene)
     if args.no_samples:
-        return _simulate_without_samples(scene, args)
+        return _simulate_without_samples(scene, args, load_s)
     _check_run_size(scene, args)
     observer = None
     if args.mcap:
@@ -71,10 +76,13 @@ def cmd_simulate(args) -> int:
             observer.close(result)  # with the result: its summary is stored in the file
         line.end()
     print(format_table(result))
+    print(_timing(result, load_s, f'integration, {round(result.t_end * scene.publish_rate)} '
+                                  f'samples' + (', MCAP writing' if args.mcap else '')))
     if args.json:
         write_json(args.json, result.to_json())
+        print(f'wrote {args.json}')
     if args.mcap:
-        print(f'recorded to {args.mcap}')
+        print(f'wrote {args.mcap}')
     return 1 if result.error else 0
 
 
@@ -107,7 +115,29 @@ def cmd_urdf(args) -> int:
     return 0
 
 
-def _simulate_without_samples(scene, args) -> int:
+def _load_kernel(scene) -> float:
+    """Load (or compile, announced) the scene's kernel before the run is timed: the first
+    call in a process reads numba's cache (~0.1-0.3 s), which is start-up, not integration.
+    Returns the seconds it took."""
+    from ..core.driver import SimulatedArm
+    t0 = time.perf_counter()
+    SimulatedArm(scene, scene.publish_rate, trace=False).warm_up()
+    return time.perf_counter() - t0
+
+
+def _timing(result, load_s, what) -> str:
+    """What the printed times include, in one line."""
+    total = time.perf_counter() - STARTED
+    compiled = NOTICE[-1].total if NOTICE else 0.0
+    loading = ('compiling the kernel (first use of this scene shape)' if compiled > 1.0
+               else 'loading the compiled kernel')
+    return (f'timing: {result.t_end:.3f} s simulated in {result.wall_time * 1e3:.1f} ms wall '
+            f'({what}); before that {load_s:.2f} s {loading}; '
+            f'{total:.2f} s for the whole command with start-up. Repeated warm runs: '
+            f'impact-arm bench speed')
+
+
+def _simulate_without_samples(scene, args, load_s=0.0) -> int:
     from ..core.simulate import format_table, run_without_samples
     rate = scene.controller.rate if args.control_rate is None else args.control_rate
     if rate or args.mcap:
@@ -117,16 +147,24 @@ def _simulate_without_samples(scene, args) -> int:
                              + (', or pass --control-rate 0)' if rate else ')'))
     result = run_without_samples(scene, preset=args.preset)
     print(format_table(result))
+    print(_timing(result, load_s, 'integration only, no samples'))
     if args.json:
         write_json(args.json, result.to_json())
+        print(f'wrote {args.json}')
     return 1 if result.error else 0
 
 
 def writable_output(path, flag) -> str:
     """The file to write for ``flag``, checked before any work: its directory must exist and
     be writable (none is created), and it must be absent, a regular file, or a symlink to one
-    (then its target is written and the link kept). Directories, FIFOs and devices are refused."""
+    (then its target is written and the link kept). Directories, FIFOs and devices are refused.
+    The one exception to "none is created": ``runs/``, where every command's outputs go by
+    default, is made when its parent exists (a fresh clone has none)."""
     target = os.path.realpath(path)
+    runs = os.path.dirname(target)
+    if os.path.basename(runs) == 'runs' and not os.path.exists(runs) \
+            and os.path.isdir(os.path.dirname(runs)):
+        os.makedirs(runs, exist_ok=True)
     if os.path.isdir(target):
         raise ImpactArmError(f'{flag} {path}: is a directory')
     if os.path.exists(target) and not os.path.isfile(target):
@@ -256,7 +294,9 @@ def main(argv=None) -> int:
     selected = next((a for a in argv if not a.startswith('-')), None)
     args = build_parser(selected).parse_args(argv)
     try:
-        return args.func(args)
+        with CompileNotice(prefix=f'impact-arm {args.command}: ') as notice:
+            NOTICE.append(notice)
+            return args.func(args)
     except ImpactArmError as exc:
         print(f'impact-arm {args.command}: error: {exc}', file=sys.stderr)
         return 2

@@ -63,6 +63,7 @@ def cli(args) -> int:
     if output:
         os.makedirs(args.out, exist_ok=True)
     env = dds_environment()
+    precompile(scene, args.rate)
 
     run = Run(scene, scene_path, args, output, env)
 
@@ -87,7 +88,8 @@ def cli(args) -> int:
                        stopped=outcome)
     print(format_table(result))
     if args.mode == 'lockstep' and run.wall > 0:
-        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall, '
+        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
+              f'first command to the last impact; the nodes\' start-up not included), '
               f'real-time factor {run.sim_time / run.wall:.2f}')
     elif run.diagnostics:
         d = run.diagnostics
@@ -97,7 +99,7 @@ def cli(args) -> int:
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
         check = check_recording(output, args.rate)
-        print(f'recorded to {output}: {check.summary()}')
+        print(f'wrote {output}: {check.summary()}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
     elif output:
@@ -114,6 +116,22 @@ def cli(args) -> int:
             print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
         return 1
     return 0
+
+
+def precompile(scene, rate):
+    """Compile, or load from the cache, what the simulator and controller nodes run, here
+    where the CLI announces it: otherwise each node compiles in its own process on the first
+    run of a scene shape, 20-45 s of silence before the arm moves."""
+    from ..core.control import CycleController
+    from ..core.driver import SimulatedArm
+    arm = SimulatedArm(scene, rate, trace=False)
+    arm.warm_up()
+    c = scene.controller
+    ctrl = CycleController(arm.model, 'q', c.kp, c.kd, c.ki, c.down_target, c.up_target,
+                           c.switch_height, scene.surfaces[0].height if scene.surfaces else 0.0)
+    for ctrl.law in ('q', 'pid'):
+        ctrl.torque(scene.q0, scene.qd0)
+    arm.model.tip(scene.q0, scene.qd0)
 
 
 def dds_environment() -> dict:
@@ -220,6 +238,7 @@ class Run:
         self.node = None
         self.interrupted = threading.Event()    # set by the CLI's SIGINT/SIGTERM handler
         self._reported = 0
+        self.stopping = False
         self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
         self.logdir = os.path.join(args.out, 'logs')
 
@@ -298,13 +317,15 @@ class Run:
             raise KeyboardInterrupt
 
     def _on_impact(self, msg):
-        self.impacts.append(json.loads(msg.data))
+        if not self.stopping:   # the arm released by the stopped controller falls: not the run
+            self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
-            self.sim_time = float(values.get('sim_time', self.sim_time))
+            if not self.stopping:   # the run's time ends with it; the counters with the node
+                self.sim_time = float(values.get('sim_time', self.sim_time))
             self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
 
     def watch(self, timeout) -> str:
@@ -358,14 +379,34 @@ class Run:
         count = len(self.impacts)
         line = (f'cycle {min(count + 1, cycles)}/{cycles}  impacts {count}  '
                 f't = {self.sim_time:7.3f} s')
-        if self.diagnostics:
-            line += f"  watchdog {self.diagnostics.get('watchdog')}"
+        # /diagnostics come at 1 Hz: 'waiting' seen before the first command is stale once
+        # impacts arrive, so only a state worth acting on is shown
+        watchdog = self.diagnostics.get('watchdog')
+        if watchdog == 'timeout' or (watchdog == 'waiting' and not count):
+            line += f'  watchdog {watchdog}'
         self.line.show(line, done=count, log=count != self._reported)
         self._reported = count
+
+    def _wait(self, proc, timeout):
+        """``proc.wait`` that keeps spinning the run's node: the simulator publishes a last
+        /diagnostics as it stops, and the summary is made from those final counts (overruns,
+        right-hand-side evaluations, simulated time), not from the last 1 Hz one."""
+        if self.node is None:
+            return proc.wait(timeout=timeout)
+        import rclpy
+        end = time.monotonic() + timeout
+        while proc.poll() is None:
+            if time.monotonic() > end:
+                raise subprocess.TimeoutExpired(proc.args, timeout)
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        for _ in range(4):          # what arrived just before the exit
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return proc.returncode
 
     def stop(self) -> dict:
         """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any
         that does not exit; returns exit codes by node."""
+        self.stopping = True
         codes = {}
         for name in STOP_ORDER:
             proc = self.procs.get(name)
@@ -376,7 +417,7 @@ class Run:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
             try:
-                codes[name] = proc.wait(timeout=10)
+                codes[name] = self._wait(proc, timeout=10)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 codes[name] = proc.wait()

@@ -25,7 +25,7 @@ SUBCOMMANDS = {
     'sweep': ('impact_arm.tools.benchmarks.sweep',
               'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
     'starts': ('impact_arm.tools.benchmarks.starts',
-               'realtime simulator + controller started N times as a user does (issue 12)'),
+               'realtime simulator + controller started N times as a user does'),
     'coldstart': ('impact_arm.tools.benchmarks.coldstart',
                   'first run of a new arm shape by link count: equations, compile, warm load'),
     'features': ('impact_arm.tools.benchmarks.features',

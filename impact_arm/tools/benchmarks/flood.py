@@ -1,5 +1,5 @@
 """``impact-arm bench stress --flood RATE``: the realtime loop under a garbage flood on its
-command topic (issue 17: simulator >= 99 % of 1 kHz with <= 0.5 % overruns under 40 k msg/s).
+command topic (target: simulator >= 99 % of 1 kHz with <= 0.5 % overruns under 40 k msg/s).
 
 The simulator (realtime, 1 kHz, defaults) and the controller start as a user starts them
 (``bench starts``); once the controller's commands flow, ``--flood-processes`` flooder
@@ -29,7 +29,7 @@ import time
 
 BURST_PERIOD = 0.005        # s between two bursts of a flooder
 PAYLOADS = 4000             # distinct garbage payloads a flooder cycles through
-RATE_TARGET = 0.99          # share of the nominal rate the issue asks for under a flood
+RATE_TARGET = 0.99          # share of the nominal rate targeted under a flood
 OVERRUN_TARGET = 0.5        # % of periods
 
 

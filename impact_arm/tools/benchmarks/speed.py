@@ -113,7 +113,7 @@ def search(scene, ref, levels, methods, log=common.progress):
     return rows
 
 
-# the sides of the comparison: ours; scipy with one tolerance (the definition);
+# the sides of the comparison: ours; scipy with one tolerance (the speed target's definition);
 # scipy given the same freedom as ours, a tighter tolerance in contact phases
 SIDES = {'ours': 'ours', 'scipy': 'scipy, one rtol', 'scipy_split': 'scipy, rtol / contact'}
 

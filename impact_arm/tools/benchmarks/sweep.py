@@ -219,6 +219,10 @@ def run(args) -> int:
         print(f"2 workers / 1 worker: {rows[1]['runs_per_s'] / rows[0]['runs_per_s']:.2f}x "
               f"overall, {rows[1]['steady_runs_per_s'] / rows[0]['steady_runs_per_s']:.2f}x "
               f"after start-up")
+        if rows[1]['cores_used'] < 1.5:
+            # a ratio near or below 1 here measures the machine, not the sweep
+            print(f"  (2 workers got only {rows[1]['cores_used']:.2f} cores: other jobs hold "
+                  f"the rest, so this ratio cannot show scaling; measure on an idle machine)")
         common.progress(f'{args.runs} runs, 2 workers')
         big = result['big'] = sweep_process(args.runs, 2, directory, 'big')
         common.progress_done()
