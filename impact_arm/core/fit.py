@@ -147,10 +147,12 @@ class TorqueSchedule:
 
 
 def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
-                   pre_state=None) -> Prediction:
+                   pre_state=None, dense=None) -> Prediction:
     """Simulate one impact from the recorded state at the last sample before it (the
     pre-impact fit, or ``pre_state`` = (q, q̇) in joint space) under the recorded efforts,
-    through every contact, to the compared samples after it."""
+    through every contact, to the compared samples after it. ``dense`` (a list of extra
+    times) makes ``Prediction.path`` rows (t, q̇ joint space..., cumulative impulse t, n)
+    at every boundary, for plots."""
     n = model.n
     T = joint_to_absolute_matrix(n)
     heights = [s.height for s in model.surfaces]
@@ -170,10 +172,13 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
                             **WINDOW_OPTIONS)
     torque = TorqueSchedule(win, timing)
     first = last = None
-    contacts, side, rates = 0, 'pre', []
+    contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
     targets = list(win.post_t)
+    edges = torque.boundaries(t0, targets[-1])
+    if dense is not None:
+        edges = sorted(set(edges) | {float(x) for x in dense if t0 < x < targets[-1]})
     try:
-        for edge in torque.boundaries(t0, targets[-1]):
+        for edge in edges:
             while integ.state.t < edge:
                 if side != 'contact' and held:
                     integ.state.held_torque = torque(integ.state.t, edge, side)
@@ -185,6 +190,10 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
                         side = 'contact'
                     elif event.kind == 'separation':
                         last, side = event, 'post'
+            if dense is not None:
+                impulse += integ.take_impulse()
+                path.append([integ.state.t, *np.linalg.solve(T, integ.state.y[n:2 * n]),
+                             *impulse])
             if targets and abs(edge - targets[0]) < 1e-12:
                 if side != 'post':
                     return _failed(n, 'no contact predicted across the recorded impact' if
@@ -194,11 +203,13 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
                 targets.pop(0)
     except SimulationError as exc:
         return _failed(n, str(exc))
-    jt, jn = integ.take_impulse()
-    return Prediction(np.array(rates), np.array([jt, jn]),
+    impulse += integ.take_impulse()
+    pred = Prediction(np.array(rates), impulse,
                       tip_normal_speed(model, first.y[:n], first.y[n:2 * n]),
                       tip_normal_speed(model, last.y[:n], last.y[n:2 * n]), contacts,
                       np.linalg.solve(T, last.y[n:2 * n]))
+    pred.path = np.array(path)
+    return pred
 
 
 def tip_y(model, q_abs) -> float:
@@ -271,8 +282,7 @@ class ImpactSet:
 
     def __init__(self, study: Study, specs: list, windows: list, use_wrench: bool):
         self.study, self.specs, self.windows = study, specs, windows
-        self.use_wrench = use_wrench and all(w.impulse is not None for w in windows) and \
-            len(windows) > 0
+        self.use_wrench = use_wrench and any(w.impulse is not None for w in windows)
         self.evaluations = 0
         self.timing = 'linear'
 
@@ -283,13 +293,17 @@ class ImpactSet:
         except SceneError as exc:
             raise FitError(f'the scene refuses {overrides}: {exc}') from None
 
-    def outputs(self, pred: Prediction):
+    def wrench_at(self, win: ImpactWindow) -> bool:
+        """Whether the wrench impulse of this impact is compared (recorded in full there)."""
+        return self.use_wrench and win.impulse is not None
+
+    def outputs(self, pred: Prediction, win: ImpactWindow):
         qd = pred.qd.ravel()
-        return np.concatenate([qd, pred.impulse]) if self.use_wrench else qd
+        return np.concatenate([qd, pred.impulse]) if self.wrench_at(win) else qd
 
     def recorded(self, win: ImpactWindow):
         qd = win.post_qd.ravel()
-        return np.concatenate([qd, win.impulse]) if self.use_wrench else qd
+        return np.concatenate([qd, win.impulse]) if self.wrench_at(win) else qd
 
     def predict(self, values):
         self.evaluations += 1
@@ -321,7 +335,7 @@ class ImpactSet:
                 continue
             q, qd, cov_pre = w.pre.state(w.t_a)
             x0 = np.concatenate([q, qd])
-            y0 = self.outputs(base)
+            y0 = self.outputs(base, w)
             S = np.zeros((len(y0), 2 * n))
             steps = np.sqrt(np.diag(cov_pre)) + 1e-9
             for k in range(2 * n):
@@ -329,11 +343,11 @@ class ImpactSet:
                 x[k] += steps[k]
                 p = predict_impact(model, w, self.timing, (x[:n], x[n:]))
                 if not p.error:
-                    S[:, k] = (self.outputs(p) - y0) / steps[k]
+                    S[:, k] = (self.outputs(p, w) - y0) / steps[k]
             m = len(w.post_t)
             C = S @ cov_pre @ S.T
             C[:m * n, :m * n] += np.diag(np.tile(sigma_qd ** 2, m))
-            if self.use_wrench:
+            if self.wrench_at(w):
                 C[m * n:, m * n:] += np.diag(w.impulse_var)
             kept.append(w)
             self.whiten.append(np.linalg.inv(np.linalg.cholesky(C)))
@@ -348,7 +362,7 @@ class ImpactSet:
             if p.error:
                 out.append(np.full(L.shape[0], PENALTY))
             else:
-                out.append(L @ (self.outputs(p) - self.recorded(w)))
+                out.append(L @ (self.outputs(p, w) - self.recorded(w)))
         return np.concatenate(out) if out else np.zeros(0)
 
 
@@ -375,6 +389,8 @@ class FitResult:
     start_predictions: list = field(default_factory=list, repr=False)
     recording: JointRecording | None = field(default=None, repr=False)
     scene_path: str = ''
+    timing: str = ''                 # how the efforts were read between samples
+    problem: object = field(default=None, repr=False)
 
     @property
     def fits(self) -> bool:
@@ -390,6 +406,7 @@ class FitResult:
             'scene': self.scene_path,
             # beyond the schema: what a reader needs to judge the fit
             'chi2': self.chi2, 'dof': self.dof, 'used_wrench': self.used_wrench,
+            'effort_timing': self.timing,
             'cannot_tell_apart': self.cannot_tell_apart, 'correlations': self.correlations,
             'noise': self.noise, 'per_impact': self.per_impact, 'notes': self.notes,
             'details': {k: {kk: v[kk] for kk in ('start', 'bounds', 'sigma_native',
@@ -463,7 +480,7 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
         missing = sum(w.impulse is None for w in windows)
         if missing:
             notes.append(f'wrench impulse unusable at {missing} impact(s) (wrench samples '
-                         f'missing there): joint rates only')
+                         f'missing there): joint rates only at those')
     problem = ImpactSet(study, specs, windows, options.use_wrench)
     start = np.array([p.start for p in specs])
     say(f'{len(windows)} impacts; calibrating the noise model', 0, None)
@@ -471,7 +488,7 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
     if not problem.windows:
         raise IdentifyError('the starting scene reproduces none of the recorded impacts: '
                             + '; '.join(notes[-3:]))
-    if len(problem.windows) * (2 if not problem.use_wrench else 4) <= len(specs):
+    if len(problem.windows) * problem.windows[0].post_qd.size <= len(specs):
         raise FitError(f'{len(problem.windows)} usable impact(s) cannot determine '
                        f'{len(specs)} parameters')
 
@@ -576,15 +593,16 @@ def _result(problem, specs, values, u_best, preds, start_preds, noise, notes, re
                      per_impact, noise.as_dict(), corr_out, pairs, notes, problem.evaluations,
                      wall, problem.use_wrench,
                      {p.key: float(v) for p, v in zip(specs, values)}, problem.windows, preds,
-                     start_preds, recording)
+                     start_preds, recording, timing=problem.timing, problem=problem)
 
 
 def _why(problem, per_impact, params, red, dof) -> str:
     parts = [f'residuals {math.sqrt(red):.1f}x the noise (chi2/dof = {red:.3g} over {dof} '
              f'degrees of freedom)']
-    if problem.use_wrench:
-        rate = np.mean([np.sum(np.square(x['whitened'][:-2])) for x in per_impact])
-        imp = np.mean([np.sum(np.square(x['whitened'][-2:])) for x in per_impact])
+    with_wrench = [x for x in per_impact if 'residual_impulse' in x]
+    if with_wrench:
+        rate = np.mean([np.sum(np.square(x['whitened'][:-2])) for x in with_wrench])
+        imp = np.mean([np.sum(np.square(x['whitened'][-2:])) for x in with_wrench])
         parts.append('mostly in the ' + ('wrench impulse' if imp > rate else 'joint rates'))
     bounded = [k for k, v in params.items() if v['at_bound']]
     if bounded:
@@ -614,7 +632,7 @@ def _per_impact(problem, preds, start_preds):
             out.append(row)
             continue
         rec = problem.recorded(w)
-        diff = problem.outputs(p) - rec
+        diff = problem.outputs(p, w) - rec
         m = len(w.post_t)
         # the recorded CoR: the fitted separation speed plus the tip-speed residual at the
         # first sample after the impact (the free flight between them is the model's)
@@ -626,7 +644,7 @@ def _per_impact(problem, preds, start_preds):
                     'cor_start': -p0.v_out / p0.v_in if p0.v_in and not p0.error else math.nan,
                     'residual_rates': diff[:m * n].reshape(m, n).tolist(),
                     'whitened': (L @ diff).tolist(), 'contacts': p.contacts})
-        if problem.use_wrench:
+        if problem.wrench_at(w):
             row['residual_impulse'] = diff[m * n:].tolist()
         raw.extend(diff[:m * n].tolist())
         sd.extend(w.sigma[:m * n].tolist())

@@ -305,7 +305,8 @@ def _add_impulse(rec, noise, win):
         return
     wt = rec.wrench_t
     dtw = float(np.median(np.diff(wt)))
-    sel = np.flatnonzero((wt > win.t_c - 0.5 * dtw) & (wt <= win.t_c + 1.5 * dtw))
+    # every period that can overlap the contact, which lies between the joint samples a, b
+    sel = np.flatnonzero((wt > win.t_a - 0.25 * dtw) & (wt <= win.t_b + 1.25 * dtw))
     if len(sel) < 2:
         return
     around = np.arange(max(sel[0] - 1, 0), min(sel[-1] + 2, len(wt)))

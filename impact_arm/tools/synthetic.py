@@ -54,7 +54,7 @@ def _noisy(x, sigma, rng):
     return x + rng.normal(0.0, sigma, x.shape) if sigma else x
 
 
-def _messages(rec: JointRecording, frame='surface'):
+def _messages(rec: JointRecording):
     """(topic, stamp ns, kind, fields) of the recording in time order."""
     out = []
     for k in range(len(rec.t)):
@@ -68,7 +68,7 @@ def _messages(rec: JointRecording, frame='surface'):
 
 
 def write_rosbag2(rec: JointRecording, folder, joints=None, states_topic='/joint_states',
-                  wrench_topic='/contact_wrench', extra_joint=True):
+                  wrench_topic='/contact_wrench', extra_joint=True, frame='surface'):
     """A rosbag2 folder (metadata.yaml + MCAP) written by the rosbags library, not by us; the
     joint states carry an extra joint first (as a real arm's driver may: a gripper)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
