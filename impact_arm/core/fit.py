@@ -209,7 +209,63 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
                       tip_normal_speed(model, last.y[:n], last.y[n:2 * n]), contacts,
                       np.linalg.solve(T, last.y[n:2 * n]))
     pred.path = np.array(path)
+    pred.t_sep, pred.y_sep = last.t, last.y[:2 * n].copy()
     return pred
+
+
+def free_flight(model: ArmModel, win: ImpactWindow, timing, t0, y0, t1):
+    """Joint rates at ``t1`` after free flight from absolute state ``y0`` at ``t0`` under
+    the torque ``timing`` uses after the impact (None if a contact intervenes)."""
+    n = model.n
+    state = model.initial_state()
+    state.t, state.y[:2 * n] = t0, y0
+    held = timing != 'controller'
+    state.mode = 'up'
+    integ = PhaseIntegrator(model, state, control='held' if held else 'continuous',
+                            **WINDOW_OPTIONS)
+    torque = TorqueSchedule(win, timing)
+    try:
+        for edge in torque.boundaries(t0, t1):
+            if held:
+                integ.state.held_torque = torque(integ.state.t, edge, 'post')
+                integ.reset_derivative()
+            integ.advance(edge)
+    except SimulationError:
+        return None
+    if integ.state.phase != 0:
+        return None
+    return np.linalg.solve(joint_to_absolute_matrix(n), integ.state.y[n:2 * n])
+
+
+def recorded_separation_rates(model: ArmModel, win: ImpactWindow, pred: Prediction, timing):
+    """The joint rates at the predicted separation that carry the model's free flight onto
+    the recorded first sample after the impact (Newton step through the flight's
+    sensitivity): the recorded side of the post-impact state, for its CoR."""
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    t1 = win.post_t[0]
+    base = free_flight(model, win, timing, pred.t_sep, pred.y_sep, t1)
+    if base is None:
+        return None
+    A = np.zeros((n, n))
+    for k in range(n):
+        y = pred.y_sep.copy()
+        y[n:2 * n] += T[:, k] * 1e-4          # one joint rate up by 1e-4 rad/s
+        moved = free_flight(model, win, timing, pred.t_sep, y, t1)
+        if moved is None:
+            return None
+        A[:, k] = (moved - base) / 1e-4
+    qd_sep = np.linalg.solve(T, pred.y_sep[n:2 * n])
+    return qd_sep + np.linalg.solve(A, win.post_qd[0] - base)
+
+
+def recorded_cor(model: ArmModel, win: ImpactWindow, pred: Prediction, timing, v_in):
+    n = model.n
+    qd = recorded_separation_rates(model, win, pred, timing)
+    if qd is None or not v_in:
+        return math.nan
+    T = joint_to_absolute_matrix(n)
+    return -tip_normal_speed(model, pred.y_sep[:n], T @ qd) / v_in
 
 
 def tip_y(model, q_abs) -> float:
@@ -307,7 +363,11 @@ class ImpactSet:
 
     def predict(self, values):
         self.evaluations += 1
-        model = self.model(values)
+        try:
+            model = self.model(values)
+        except FitError as exc:    # a combination the scene's schema refuses: a penalty
+            n = self.windows[0].post_qd.shape[1] if self.windows else 1
+            return [_failed(n, str(exc)) for _ in self.windows]
         return [predict_impact(model, w, self.timing) for w in self.windows]
 
     def calibrate(self, values, sigma_qd):
@@ -349,6 +409,8 @@ class ImpactSet:
             C[:m * n, :m * n] += np.diag(np.tile(sigma_qd ** 2, m))
             if self.wrench_at(w):
                 C[m * n:, m * n:] += np.diag(w.impulse_var)
+            # noise-free data (a simulation) leave C singular: a relative floor keeps it usable
+            C += np.eye(len(C)) * max(1e-12 * np.trace(C) / len(C), 1e-30)
             kept.append(w)
             self.whiten.append(np.linalg.inv(np.linalg.cholesky(C)))
             w.sigma = np.sqrt(np.diag(C))
@@ -516,6 +578,7 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
             len(candidates) + s + 1, total)
     u_best = best[1]
     values = to_values(u_best)
+    problem.best = values
     preds = problem.predict(values)
     start_preds = problem.predict(start)
     return _result(problem, specs, values, u_best, preds, start_preds, noise, notes,
@@ -618,7 +681,7 @@ def _why(problem, per_impact, params, red, dof) -> str:
 def _per_impact(problem, preds, start_preds):
     out, raw, sd = [], [], []
     n = problem.windows[0].effort.shape[1] if problem.windows else 0
-    model = problem.model([p.start for p in problem.specs])   # kinematics only
+    model = problem.model(problem.best)   # the fitted scene's free flight and kinematics
     for w, L, p, p0 in zip(problem.windows, problem.whiten, preds, start_preds):
         T = joint_to_absolute_matrix(n)
         q, qd_pre, _ = w.pre.state(w.t_c)
@@ -634,12 +697,9 @@ def _per_impact(problem, preds, start_preds):
         rec = problem.recorded(w)
         diff = problem.outputs(p, w) - rec
         m = len(w.post_t)
-        # the recorded CoR: the fitted separation speed plus the tip-speed residual at the
-        # first sample after the impact (the free flight between them is the model's)
-        dv = tip_normal_speed(model, T @ q, T @ (w.post_qd[0] - p.qd[0]))
         row.update({'qd_after_fitted': p.qd[0].tolist(), 'qd_separation': p.qd_sep.tolist(),
                     'impulse_fitted': p.impulse.tolist(),
-                    'cor_recorded': -(p.v_out + dv) / v_in if v_in else math.nan,
+                    'cor_recorded': recorded_cor(model, w, p, problem.timing, v_in),
                     'cor_fitted': -p.v_out / p.v_in if p.v_in else math.nan,
                     'cor_start': -p0.v_out / p0.v_in if p0.v_in and not p0.error else math.nan,
                     'residual_rates': diff[:m * n].reshape(m, n).tolist(),

@@ -218,9 +218,10 @@ def estimate_noise(rec: JointRecording, impacts, window: int = 15) -> Noise:
         raise IdentifyError(f'{len(starts)} free-flight windows of {window} samples between the '
                             f'impacts: too few to estimate the sensor noise (record longer or '
                             f'at a higher rate)')
+    # noise-free input (a simulation): floors far below any sensor keep the weights finite
     floor = 1e-12
-    sq = np.maximum(_window_noise(rec.t, rec.position, starts, window), floor)
-    sqd = np.maximum(_window_noise(rec.t, rec.velocity, starts, window), floor)
+    sq = np.maximum(_window_noise(rec.t, rec.position, starts, window), 1e-10)
+    sqd = np.maximum(_window_noise(rec.t, rec.velocity, starts, window), 1e-8)
     se = _window_noise(rec.t, rec.effort, starts, window)
     sw = None
     if rec.wrench is not None and len(rec.wrench_t) > 4 * window:
@@ -279,6 +280,10 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     if len(pre_idx) < min_samples or len(post_idx) < max(min_samples, post_samples + 1):
         return None, (f'{min(len(pre_idx), len(post_idx))} free samples on one side (another '
                       f'impact or the end of the recording too close)')
+    if len(pre_idx) > min_samples and _contact_under_way(rec, noise, pre_idx):
+        # the contact began before sample a: it is no free-flight sample
+        return make_window(rec, noise, a - 1, b, lo, hi, window, min_samples, max_gap,
+                           post_samples)
     fits = [LocalFit(rec.t[idx], rec.position[idx], rec.velocity[idx], rec.t[ref],
                      noise.position, noise.velocity)
             for idx, ref in ((pre_idx, a), (post_idx, b))]
@@ -296,6 +301,18 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
                            post_samples)[0]
     win.widened = widened
     return win, ''
+
+
+def _contact_under_way(rec, noise, pre_idx, limit=6.0) -> bool:
+    """Whether the last pre-impact sample's rates leave the free flight the samples before
+    it predict (by more than ``limit`` standard deviations): a contact already under way."""
+    head, last = pre_idx[:-1], pre_idx[-1]
+    fit = LocalFit(rec.t[head], rec.position[head], rec.velocity[head], rec.t[head[-1]],
+                   noise.position, noise.velocity)
+    _, qd, cov = fit.state(rec.t[last])
+    n = rec.n
+    sd = np.sqrt(np.diag(cov)[n:] + noise.velocity ** 2)
+    return bool(np.any(np.abs(rec.velocity[last] - qd) > limit * sd))
 
 
 def _add_impulse(rec, noise, win):
