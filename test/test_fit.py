@@ -192,3 +192,23 @@ def test_param_syntax_is_refused_in_one_line():
         parse_param('surfaces[0].mu=0.1')
     assert parse_param('tip_radius=1e-3:1e-2') == ('tip_radius', (1e-3, 1e-2))
     assert os.sep not in parse_param('a.b=1:2')[0]
+
+
+def test_fit_a_driver_recording_of_another_material_and_posture():
+    """The simulator node's reading of efforts (each stamp reports the command held over
+    the period before it, sampled 1 kHz control), an aluminium-like arm and floor, other
+    targets and start: the reading is told from the free flight, the values come back."""
+    from impact_arm.core.study import Study, apply_overrides
+    from impact_arm.tools.synthetic import driver_recording
+    variant = {'materials.steel.E': 70e9, 'materials.steel.nu': 0.33,
+               'materials.steel.S_y': 2.5e8, 'surfaces[0].mu': 0.3, 'controller.rate': 1000.0,
+               'controller.down_target_deg': [-70.0, -85.0], 'initial.q_deg': [40.0, 60.0],
+               'surfaces[0].height': -1.1}
+    truth = {'materials.steel.S_y': 3.1e8, 'surfaces[0].mu': 0.42}
+    rec = driver_recording('paper', {**variant, **truth}, cycles=6, seed=71)
+    scene = apply_overrides(Study('paper').data, variant)
+    result = fit(rec, scene, {'materials.steel.S_y': (5e7, 2e9), 'surfaces[0].mu': (0.05, 1.0)})
+    assert result.timing == 'previous'
+    assert result.fits, result.verdict
+    for key, err in relative_errors(result, truth).items():
+        assert err < 0.05, (key, result.parameters[key], truth[key])

@@ -122,7 +122,7 @@ class ImpactWindow:
     t_c: float
     pre: LocalFit
     post: LocalFit
-    effort: np.ndarray                      # (a-1, a, b, b+1, ... b+m) efforts [N m]
+    effort: np.ndarray                      # (a-1, a, ..., b, ... b+m) efforts [N m]
     effort_t: np.ndarray                    # their times
     post_t: np.ndarray                      # first m samples after the impact
     post_qd: np.ndarray                     # their rates (m, n)
@@ -192,6 +192,7 @@ def find_impacts(rec: JointRecording, z_min: float = 30.0, is_contact=None) -> l
         raise IdentifyError('the joint states carry no rates (velocity): impacts are found and '
                             'fitted from the joint rates')
     z, _ = rate_steps(rec)
+    rec.step_z = z          # kept: make_window stops its comparison at a further contact
     candidates = np.flatnonzero(z > z_min)                # gap k lies after sample k
     gaps = []
     for k in candidates:
@@ -273,6 +274,9 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
     given to the impact on that side, for a contact that spans a sample."""
     N, dt = len(rec.t), rec.period
+    off = lambda k: bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))  # noqa: E731
+    while b < min(hi, a + 4) and off(b) and not off(a):
+        b += 1          # actuators off at b while driven before: b was taken in the contact
     pre_idx = np.arange(max(lo, a - window + 1), a + 1)
     post_idx = np.arange(b, min(hi, b + window - 1) + 1)
     if rec.t[b] - rec.t[a] > max_gap * dt:
@@ -288,11 +292,17 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
                      noise.position, noise.velocity)
             for idx, ref in ((pre_idx, a), (post_idx, b))]
     t_c = _contact_time(*fits, rec.t[a], rec.t[b], noise.position)
-    compare = post_idx[:post_samples]
-    e_idx = np.concatenate([[max(a - 1, 0), a], np.arange(b, min(compare[-1] + 2, N))])
+    compare = post_idx[:_before_next_contact(rec, noise, post_idx[:post_samples])]
+    # efforts from the sample before a to the one after the last compared sample, including
+    # any taken during the contact (between a and b)
+    e_idx = np.concatenate([[max(a - 1, 0)], np.arange(a, min(compare[-1] + 2, N))])
     win = ImpactWindow(0, a, b, float(rec.t[a]), float(rec.t[b]), t_c, *fits,
                        effort=rec.effort[e_idx].copy(), effort_t=rec.t[e_idx].copy(),
                        post_t=rec.t[compare].copy(), post_qd=rec.velocity[compare].copy())
+    win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
+    # samples during the contact whose torque is zero within the noise: actuators off
+    win.effort_off = [bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12))
+                      for k in range(len(e_idx))]
     _add_impulse(rec, noise, win)
 
     def widened(side):
@@ -301,6 +311,27 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
                            post_samples)[0]
     win.widened = widened
     return win, ''
+
+
+def _before_next_contact(rec, noise, idx, z_min=30.0) -> int:
+    """How many of the post-impact samples ``idx`` come before a further contact (a bounce:
+    a rate step, or wrench in the period that ends at the sample); at least one."""
+    z = getattr(rec, 'step_z', None)
+    dt = rec.period
+    for count, j in enumerate(idx[1:], start=1):
+        # the step statistic of the two gaps after an impact still sees that impact
+        if z is not None and j - 1 >= idx[0] + 2 and j - 1 < len(z) and z[j - 1] > z_min:
+            return count
+        # a joint torque of zero (within the noise) between driven samples: actuators off,
+        # as they are in a contact
+        if np.all(np.abs(rec.effort[j]) < 6 * noise.effort + 1e-12) and \
+                np.any(np.abs(rec.effort[idx[0]]) > 6 * noise.effort + 1e-12):
+            return count
+        if rec.wrench is not None and noise.wrench is not None:
+            near = (rec.wrench_t > rec.t[j - 1] + 0.5 * dt) & (rec.wrench_t <= rec.t[j] + 0.5 * dt)
+            if np.any(np.abs(rec.wrench[near]) > 8 * noise.wrench):
+                return count
+    return len(idx)
 
 
 def _contact_under_way(rec, noise, pre_idx, limit=6.0) -> bool:

@@ -14,7 +14,7 @@ REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench':
 
 def synthetic_recording(scene='paper', overrides=None, *, cycles=None, publish_rate=1000.0,
                         noise=None, drop=0.0, jitter=0.0, clock_offset=0.0, seed=0,
-                        wrench=True) -> JointRecording:
+                        wrench=True, control_rate=None) -> JointRecording:
     """Simulate ``scene`` with ``overrides`` and sample it as a driver would, adding Gaussian
     ``noise`` (per signal, see REALISTIC_NOISE), dropping a fraction ``drop`` of the samples,
     jittering the stamps by ``jitter`` seconds (uniform) and offsetting the clock."""
@@ -24,7 +24,7 @@ def synthetic_recording(scene='paper', overrides=None, *, cycles=None, publish_r
     if cycles is not None:
         over['cycles'] = cycles
     sc = Study(scene).scene(over)
-    result = run(sc, publish_rate=publish_rate)
+    result = run(sc, publish_rate=publish_rate, control_rate=control_rate)
     if result.error:
         raise RuntimeError(f'synthetic run stopped: {result.error}')
     rng = np.random.default_rng(seed)
@@ -102,3 +102,35 @@ def write_rosbag2(rec: JointRecording, folder, joints=None, states_topic='/joint
                          wrench=W(force=V(x=float(fx), y=float(fy), z=0.0),
                                   torque=V(x=0.0, y=0.0, z=0.0)))
                 writer.write(cw, ns, store.serialize_cdr(msg, WS.__msgtype__))
+
+
+def driver_recording(scene='paper', overrides=None, *, rate=1000.0, cycles=6, noise=None,
+                     seed=0, t_max=None) -> JointRecording:
+    """What the simulator node publishes (``SimulatedArm``: each period's effort is the
+    command held over the period that ends at the stamp) under the scene's controller
+    sampled at ``rate`` — the reading of efforts of a ros2_control driver."""
+    from ..contract import to_absolute
+    from ..core.control import CycleController
+    from ..core.driver import SimulatedArm
+    from ..core.study import Study
+    sc = Study(scene).scene(dict(overrides or {}))
+    arm = SimulatedArm(sc, rate)
+    ctrl = CycleController.for_scene(arm.model, sc.controller)
+    rng = np.random.default_rng(seed)
+    rows, done, t_end = [], 0, t_max or sc.t_max
+    tick = arm.sample()
+    while done < cycles and tick.t < t_end:
+        before = ctrl.mode
+        arm.apply(ctrl.update(tick.t, to_absolute(tick.position), to_absolute(tick.velocity),
+                              normal_force=tick.wrench[1]))
+        done += before == 'up' and ctrl.mode == 'down'
+        tick = arm.step()
+        rows.append((tick.t, tick.position, tick.velocity, tick.effort, tick.wrench))
+    noise = REALISTIC_NOISE if noise is None else noise
+    t = np.array([r[0] for r in rows])
+    q, qd, tau, w = (np.array([r[k] for r in rows], float) for k in range(1, 5))
+    q, qd, tau, w = (_noisy(x, noise.get(name, 0.0), rng) for x, name in
+                     ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench')))
+    return JointRecording(t=t - t[0], position=q, velocity=qd, effort=tau, wrench_t=t - t[0],
+                          wrench=w, joints=[f'joint{i + 1}' for i in range(q.shape[1])],
+                          source=f'driver {scene}', t0_ns=int(round(t[0] * 1e9)))
