@@ -264,6 +264,10 @@ COMMANDS = {
                 'draw the arm, the surface and the contact force into a GIF or MP4'),
     'study': ('impact_arm.tools.contact_study',
               'shipped studies: contact (the contact laws against published results)'),
+    'fit': ('impact_arm.tools.fit',
+            'fit scene parameters (E, S_y, mu, ...) to the impacts of a recording'),
+    'compare': ('impact_arm.tools.compare',
+                'compare the impacts of two recordings, or of a recording and a scene'),
     'bench': ('impact_arm.tools.benchmarks',
               'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
