@@ -11,7 +11,7 @@ the writers' sequence numbers: ``contract.LOSSES_METADATA``, also on /diagnostic
 After each drain the recorder publishes the newest /joint_states stamp it has written on
 /recorder/progress: a lockstep simulator with ``recorder_window`` waits for it.
 
-With a ``scene``, the file also shows the arm in 3D by itself (design.md §9): the recorder
+With a ``scene``, the file also shows the arm in 3D by itself (docs/topics.md): the recorder
 derives /robot_description and /tf_static (once, at the start), /tf and /impact_markers (at
 ``tf_rate`` of the joint-state stamps) from the scene and the recorded /joint_states,
 /contact_wrench and /impact_report, exactly as ``simulate --mcap`` does (io/scene_visuals.py).
