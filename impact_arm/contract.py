@@ -46,8 +46,18 @@ force.x tangential, force.y normal, the numbers the physics computes.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from typing import Optional
+
+
+class TextEnum(str, enum.Enum):
+    """A typed set of names whose members are their strings everywhere: equal, hashed,
+    printed, formatted and written to JSON as the text (``EventKind.SWITCH == 'switch'``,
+    ``{'switch': 1}[EventKind.SWITCH]``), so a state can be typed without changing any output."""
+    __hash__ = str.__hash__
+    __str__ = str.__str__
+    __format__ = str.__format__
 
 # ------------------------------------------------------------------------------- topics
 JOINT_STATES = '/joint_states'

@@ -108,7 +108,7 @@ def bag(tmp_path_factory):
 
 def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, capsys):
     from impact_arm.core.scene import load_scene
-    from impact_arm.core.simulate import run_without_samples
+    from impact_arm.core.simulate import run
     from impact_arm.tools.cli import main
     folder, truth = bag
     out = tmp_path / 'fit'
@@ -130,7 +130,7 @@ def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, c
         assert f'wrote {out / name}' in text
     scene = load_scene(data['scene'])
     assert scene.surfaces[0].mu == pytest.approx(data['parameters']['surfaces[0].mu']['value'])
-    assert not run_without_samples(scene).error
+    assert not run(scene, samples=False).error
 
 
 def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):

@@ -6,7 +6,15 @@ import pytest
 from impact_arm.core.errors import SceneError
 from impact_arm.core.integrator import PhaseIntegrator
 from impact_arm.core.model import ArmModel
-from impact_arm.core.simulate import run, run_events
+from impact_arm.core.simulate import run
+
+
+def run_events(scene, **options):
+    """The event-only run's impacts (a simulation error raised)."""
+    result = run(scene, samples=False, **options)
+    if result.exception:
+        raise result.exception
+    return result.impacts, result.t_end, result.integrator, result.wall_time
 
 from scenes import scene_from
 from test_article import ARTICLE_FIRST_IMPACT

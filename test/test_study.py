@@ -12,7 +12,14 @@ from hypothesis import strategies as st
 
 from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import parse_scene
-from impact_arm.core.simulate import run_events
+from impact_arm.core.simulate import run as run_scene
+
+
+def _events(scene, **options):
+    result = run_scene(scene, samples=False, **options)
+    if result.exception:
+        raise result.exception
+    return result.impacts, result.t_end, result.integrator, result.wall_time
 from impact_arm.core.study import Study, apply_overrides, parse_key_path
 from impact_arm.tools.benchmarks.fuzz import key_paths
 
@@ -48,7 +55,7 @@ def test_key_paths_and_overrides_change_only_their_value():
 def test_a_run_with_overrides_is_the_event_run_of_the_scene_they_describe():
     study = Study('paper', LOOSE)
     result = study.run({'surfaces[0].mu': 0.5, 'controller.kp': [800, 300], 'cycles': 4})
-    expected = run_events(scene_from({**LOOSE_NESTED, ('surfaces',): [
+    expected = _events(scene_from({**LOOSE_NESTED, ('surfaces',): [
         {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.5, 'v_d': 0.02, 'material': 'steel'}],
         ('controller', 'kp'): [800.0, 300.0]}, cycles=4))[0]
     assert not result.error and result.impacts == expected

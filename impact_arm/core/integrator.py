@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS
+from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS, TextEnum
 from . import layout
 from .errors import RunBudgetError, SimulationError
 from .model import ArmModel, ArmState, Phase
@@ -53,9 +53,18 @@ def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None
             'max_step': spec.max_step, 'method': spec.method}
 
 
+class EventKind(TextEnum):
+    """What an event located by the integrator is."""
+    CONTACT = 'contact'                  # the tip reaches a surface
+    YIELD = 'yield'                      # elastic -> elasto-plastic compression
+    MAX_COMPRESSION = 'max_compression'  # compression -> restitution
+    SEPARATION = 'separation'            # restitution ends: free motion again
+    SWITCH = 'switch'                    # the controller's down/up half of the cycle changes
+
+
 @dataclass
 class Event:
-    kind: str            # contact | yield | max_compression | separation | switch | sample
+    kind: EventKind
     t: float
     surface: int
     y: np.ndarray
@@ -79,9 +88,9 @@ EVENT_LOG_CAPACITY = 64    # events one kernel call crosses before Python reads 
 STEPS_PER_CALL = 20_000
 MIN_STEP_BUDGET = 500_000
 STEPS_PER_SIMULATED_SECOND = 200_000
-_KINDS = {layout.EV_SWITCH: 'switch', layout.EV_YIELD: 'yield',
-          layout.EV_MAX: 'max_compression', layout.EV_SEP: 'separation'}
-KIND_BITS = {'contact': layout.KIND_BIT_CONTACT,
+_KINDS = {layout.EV_SWITCH: EventKind.SWITCH, layout.EV_YIELD: EventKind.YIELD,
+          layout.EV_MAX: EventKind.MAX_COMPRESSION, layout.EV_SEP: EventKind.SEPARATION}
+KIND_BITS = {EventKind.CONTACT: layout.KIND_BIT_CONTACT,
              **{kind: 1 << (1 + slot) for slot, kind in _KINDS.items()}}
 ALL_KINDS_MASK = sum(KIND_BITS.values())
 _LAWS = {'held': layout.LAW_HELD, 'q': layout.LAW_Q, 'pid': layout.LAW_PID,
@@ -266,7 +275,7 @@ class PhaseIntegrator:
     # --- phase machine (compiled: the kernel applies it without returning) -----------------
     def _kind(self, slot):
         n_surf = len(self.model.surfaces)
-        return 'contact' if slot < n_surf else _KINDS[slot - n_surf]
+        return EventKind.CONTACT if slot < n_surf else _KINDS[slot - n_surf]
 
     @staticmethod
     def _info(kind, values):

@@ -138,14 +138,14 @@ def _timing(result, load_s, what) -> str:
 
 
 def _simulate_without_samples(scene, args, load_s=0.0) -> int:
-    from ..core.simulate import format_table, run_without_samples
+    from ..core.simulate import format_table, run
     rate = scene.controller.rate if args.control_rate is None else args.control_rate
     if rate or args.mcap:
         what = '--mcap' if args.mcap else f'a sampled controller ({rate:g} Hz)'
         raise ImpactArmError(f'--no-samples runs from event to event with continuous control: '
                              f'{what} needs the sampled run (drop --no-samples'
                              + (', or pass --control-rate 0)' if rate else ')'))
-    result = run_without_samples(scene, preset=args.preset)
+    result = run(scene, samples=False, preset=args.preset)
     print(format_table(result))
     print(_timing(result, load_s, 'integration only, no samples'))
     if args.json:

@@ -52,7 +52,7 @@ def add_arguments(parser):
 
 def cli(args) -> int:
     from ..core.scene import load_scene, resolve_scene_path
-    from ..core.simulate import RunResult, format_table
+    from ..core.simulate import RunResult, StopReason, format_table
 
     if not 1.0 <= args.rate <= 100000.0:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
@@ -85,7 +85,9 @@ def cli(args) -> int:
         codes = run.stop()
     result = RunResult(scene=scene, impacts=run.impacts, t_end=run.sim_time,
                        rhs_evaluations=run.rhs_evaluations, wall_time=run.wall,
-                       stopped=outcome)
+                       stop_reason=StopReason.CYCLES_COMPLETED if outcome == 'completed' else
+                       StopReason.INTERRUPTED if outcome == 'interrupted' else
+                       StopReason.FAILED, stop_detail=outcome)
     print(format_table(result))
     if args.mode == 'lockstep' and run.wall > 0:
         print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contract import to_joint_space
+from ..contract import CONTACT_WRENCH, JOINT_STATES, to_joint_space
 from ..core.identify import JointRecording
 
 REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
@@ -67,8 +67,8 @@ def _messages(rec: JointRecording):
     return out
 
 
-def write_rosbag2(rec: JointRecording, folder, joints=None, states_topic='/joint_states',
-                  wrench_topic='/contact_wrench', extra_joint=True, frame='surface'):
+def write_rosbag2(rec: JointRecording, folder, joints=None, states_topic=JOINT_STATES,
+                  wrench_topic=CONTACT_WRENCH, extra_joint=True, frame='surface'):
     """A rosbag2 folder (metadata.yaml + MCAP) written by the rosbags library, not by us; the
     joint states carry an extra joint first (as a real arm's driver may: a gripper)."""
     from rosbags.rosbag2 import StoragePlugin, Writer

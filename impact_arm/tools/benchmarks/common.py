@@ -42,15 +42,17 @@ def load(scene_name: str):
 # --- timed runs -----------------------------------------------------------------------------
 def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
-    from ...core.simulate import run_events
+    from ...core.simulate import run
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
-        impacts, t_end, integ, wall = run_events(scene, rtol=rtol, atol=atol, max_step=max_step,
-                                                 method=method, contact_rtol=contact_rtol)
-        if wall < best:
-            best = wall
-        out = impacts, t_end, integ.stats.rhs_evaluations
+        result = run(scene, samples=False, rtol=rtol, atol=atol, max_step=max_step,
+                     method=method, contact_rtol=contact_rtol)
+        if result.exception:
+            raise result.exception
+        if result.wall_time < best:
+            best = result.wall_time
+        out = result.impacts, result.t_end, result.rhs_evaluations
     impacts, t_end, nfev = out
     return {'impacts': impacts, 't_end': t_end, 'rhs_evaluations': nfev, 'wall': best}
 

@@ -3,7 +3,7 @@
 On the article's scene at the sweep setting (README, "Choosing a preset": Rosenbrock free
 flight, rtol 1e-2, contact_rtol 3e-4) with random μ, E and kp:
 
-1. per-run cost, on the same runs: the event-only kernel (``run_impacts``' own wall time on a
+1. per-run cost, on the same runs: the event-only kernel (``run(samples=False)``' own wall time on a
    validated scene), the Python API (``Study.run``: overrides, validation, model, integration,
    summary) and a sweep worker's chunk (``run_chunk``: the API plus the rows as a pyarrow
    table), interleaved in blocks of 50 runs, each block's fastest of ``--repeats`` timings
@@ -58,7 +58,7 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
     kept. Other jobs only ever add time, so on a shared machine the minimum is the
     estimate a load spike during one path's turn does not decide; with ``repeats=1``
     every figure is a single timing, as before."""
-    from ...core.simulate import run_impacts
+    from ...core.simulate import run
     from ...core.study import Study
     from .. import sweep
     spec = sweep.Spec(common_spec(count), origin='bench')
@@ -81,7 +81,7 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
             t0 = time.perf_counter()
             sweep.run_chunk(spec.hash, spec.scene_data, spec.fixed, spec.outputs, items)
             return time.perf_counter() - t0
-        paths = {'kernel': lambda: sum(run_impacts(s).wall_time for s in scenes),
+        paths = {'kernel': lambda: sum(run(s, samples=False).wall_time for s in scenes),
                  'api': api, 'worker': worker}
         times = {name: [] for name in paths}
         for _ in range(repeats):
@@ -198,7 +198,7 @@ def run(args) -> int:
     print(f"Per run, article's scene at rtol 1e-2 / contact 3e-4, {cost['runs']} random runs "
           f"(mu, E, kp), fastest of {cost['repeats']} timings of each block of 50:")
     print(common.table(['path', 'ms per run', 'vs kernel'], [
-        ['event-only kernel (run_impacts)', f"{cost['kernel_ms']:.3f}", '1.00'],
+        ['event-only kernel (run, samples=False)', f"{cost['kernel_ms']:.3f}", '1.00'],
         ['Python API (Study.run)', f"{cost['api_ms']:.3f}", f"{cost['api_ratio']:.2f}"],
         ['sweep worker (run_chunk)', f"{cost['worker_ms']:.3f}",
          f"{cost['worker_ratio']:.2f}"]]))
