@@ -327,6 +327,17 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
 
 
 # ------------------------------------------------------------------------------ runner
+def freeze_recorder(domain, seconds):
+    """SIGSTOP the run's recorder for ``seconds``, as a recorder starved by a busy machine."""
+    from pathlib import Path
+    recorder = [int(pid) for pid in node_processes(domain)
+                if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
+    assert len(recorder) == 1, recorder
+    os.kill(recorder[0], signal.SIGSTOP)
+    time.sleep(seconds)
+    os.kill(recorder[0], signal.SIGCONT)
+
+
 def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     """``impact-arm run`` in lockstep records every period, command and impact report, in
     stamp order, although its recorder is frozen (SIGSTOP) for 3 s while the commands flow:
@@ -354,12 +365,7 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
         froze = wait_for(lambda: commands_flow() or run.poll() is not None, timeout=240) \
             and run.poll() is None
         if froze:
-            recorder = [int(pid) for pid in node_processes(env['ROS_DOMAIN_ID'])
-                        if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
-            assert len(recorder) == 1, recorder
-            os.kill(recorder[0], signal.SIGSTOP)
-            time.sleep(3.0)
-            os.kill(recorder[0], signal.SIGCONT)
+            freeze_recorder(env['ROS_DOMAIN_ID'], 3.0)
         out, _ = run.communicate(timeout=300)
     finally:
         if run.poll() is None:
@@ -428,12 +434,7 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
         time.sleep(1.0)
         froze = run.poll() is None
         if froze:
-            recorder = [int(pid) for pid in node_processes(env['ROS_DOMAIN_ID'])
-                        if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
-            assert len(recorder) == 1, recorder
-            os.kill(recorder[0], signal.SIGSTOP)
-            time.sleep(3.0)
-            os.kill(recorder[0], signal.SIGCONT)
+            freeze_recorder(env['ROS_DOMAIN_ID'], 3.0)
         out, _ = run.communicate(timeout=300)
     finally:
         if run.poll() is None:
