@@ -124,7 +124,10 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
     # gentle gains: this test is about the clock and the watchdog, and a loaded test machine
     # must not turn the article's stiff loop (kd = 100 at 1 kHz) unstable through latency
     gentle = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
-    with start_process(simulator('command_timeout:=0.1'), ros_env, tmp_path, 'sim') as sim, \
+    # the zero-torque watchdog policy: this test watches the torque drop to zero (the
+    # default, brake, holds the joints instead: test_session.py)
+    with start_process(simulator('command_timeout:=0.1', 'watchdog_policy:=zero'), ros_env,
+                       tmp_path, 'sim') as sim, \
             start_process(controller(*gentle), ros_env, tmp_path, 'ctl') as ctl:
         assert wait_for(lambda: states and stamp(states[-1][1]) > 0.1, timeout=30), sim.stderr
         begin = len(states)

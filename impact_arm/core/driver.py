@@ -11,7 +11,10 @@ import json
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..contract import to_joint_space
+from .control import q_law
 from .errors import ImpactArmError
 from .integrator import PRESETS, PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder
@@ -44,6 +47,12 @@ def advance_period(integ, builder, t_end, on_event=None):
     return impacts, integ.take_impulse()
 
 
+# Each joint's brake torque limit [N m]: ten times the article arm's largest static gravity
+# torque (~20 N m at joint 1, stretched out horizontally), so it holds the arm anywhere and
+# stops a swinging one within a few degrees.
+DEFAULT_BRAKE_TORQUE = 200.0
+
+
 class CommandError(ImpactArmError):
     """A torque command that must not be applied (wrong length, non-finite values)."""
 
@@ -66,7 +75,8 @@ class SimulatedArm:
     schedule by accumulated rounding."""
 
     def __init__(self, scene: Scene, rate: float, *, preset: str | None = None,
-                 max_effort: float = math.inf, trace: bool = True):
+                 max_effort: float = math.inf, trace: bool = True,
+                 brake_torque: float = DEFAULT_BRAKE_TORQUE):
         if not rate > 0:
             raise ValueError(f'rate = {rate}: must be > 0 Hz')
         preset = preset or scene.integrator.preset
@@ -77,6 +87,12 @@ class SimulatedArm:
         self.n = self.model.n
         self.rate = float(rate)
         self.max_effort = float(max_effort)
+        self.brake_torque = float(brake_torque)
+        # the brake holds with the scene controller's own stiffness: gains known to be
+        # stable at the control rate, under the same zero-order hold
+        self._brake_gains = (np.asarray(scene.controller.kp, float),
+                             np.asarray(scene.controller.kd, float))
+        self._brake_at = None                  # absolute link angles the brake holds
         spec = scene.integrator
         # the scene's own tolerances apply with its own preset
         self._options = dict(control='held', trace=trace,
@@ -108,6 +124,7 @@ class SimulatedArm:
                 break
         n, y = self.n, scratch.state.y
         scratch.torque()
+        self._brake_torques(y[:n].copy(), y[n:2 * n].copy(), y[:n].copy())
         scratch.contact_forces(y[:n], y[n:2 * n])
         kinetic_energy_split(self.model, y[:n], y[n:2 * n])
         self.model.tip(y[:n], y[n:2 * n])
@@ -139,6 +156,29 @@ class SimulatedArm:
     def release(self):
         """Zero torque (watchdog expired, controller gone)."""
         self._hold([0.0] * self.n)
+
+    def engage_brake(self):
+        """Hold the joints where they are now, from this period on (``brake``)."""
+        self._brake_at = self.integrator.state.y[:self.n].copy()
+
+    def brake(self) -> list:
+        """Apply the brake for the next period and return its joint torques: a stiff hold of
+        the angles ``engage_brake`` saw (the scene controller's PD gains plus gravity
+        compensation, recomputed each period from the state), each joint's torque limited to
+        ±``brake_torque``, as a real brake slips beyond its rated torque."""
+        y = self.integrator.state.y
+        n = self.n
+        tau = self._brake_torques(y[:n].copy(), y[n:2 * n].copy(), self._brake_at)
+        limit = self.brake_torque
+        tau = [min(max(v, -limit), limit) for v in tau]
+        self._hold(tau)
+        return tau
+
+    def _brake_torques(self, q, qd, target) -> list:
+        out = np.zeros(self.n)
+        q_law(q, qd, target, *self._brake_gains, np.asarray(self.model.gravity_forces(q), float),
+              out)
+        return out.tolist()
 
     def _hold(self, tau):
         if tau != self.command:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from enum import Enum
 
 import numpy as np
 
@@ -23,6 +24,22 @@ PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute g
 # impact: 0.1 s crashes the arm, 0.02 s does not. A slower controller needs a longer
 # timeout: a few of its periods.
 DEFAULT_COMMAND_TIMEOUT = 0.02
+
+
+class WatchdogState(str, Enum):
+    """waiting: no command yet (brakes on); ok: a fresh command is held; timeout: the newest
+    command is older than the timeout (the policy acts)."""
+    WAITING = 'waiting'
+    OK = 'ok'
+    TIMEOUT = 'timeout'
+
+
+class WatchdogPolicy(str, Enum):
+    """What the driver does on a command timeout. brake: hold the joints where they are
+    (``SimulatedArm.brake``), as a real drive's safe stop does; zero: zero torque, the arm
+    falls under gravity (onto the part, where it chatters)."""
+    BRAKE = 'brake'
+    ZERO = 'zero'
 
 
 class PeriodStats:
@@ -94,17 +111,22 @@ class PeriodStats:
 
 
 class Watchdog:
-    """Zero-order hold of the newest command, zero torque once it is older than ``timeout``.
+    """Zero-order hold of the newest command; once it is older than ``timeout``, zero torque
+    (``policy`` zero) or the brake (brake) until the next valid command.
 
-    ``state``: waiting (no command yet: brakes on) | ok | timeout; ``timeouts`` counts the
-    changes to timeout (each one a silence of the controller longer than ``timeout``);
-    ``silence`` is the wait before the newest command and ``longest_silence`` the longest
-    one of the run (s): a middleware stall shows there with its length."""
+    ``state``: a WatchdogState; ``timeouts`` counts the changes to timeout (each one a
+    silence of the controller longer than ``timeout``), ``brakes`` those the brake answered
+    and ``brake_peak`` is the largest brake torque applied [N m]; ``silence`` is the wait
+    before the newest command and ``longest_silence`` the longest one of the run (s): a
+    middleware stall shows there with its length."""
 
-    def __init__(self, timeout):
+    def __init__(self, timeout, policy=WatchdogPolicy.ZERO):
         self.timeout = timeout
-        self.state = 'waiting'
+        self.policy = WatchdogPolicy(policy)
+        self.state = WatchdogState.WAITING
         self.timeouts = 0
+        self.brakes = 0
+        self.brake_peak = 0.0
         self.pending = None        # (torques, arrival time) of the newest valid command
         self.applied = None        # the pending command the arm holds
         self.last_command = None   # arrival time of the newest valid command
@@ -118,26 +140,33 @@ class Watchdog:
         self.last_command = now
 
     def hold(self, arm, now):
-        """Make ``arm`` hold the newest command, or zero torque when it is too old. Returns
-        'timeout' or 'resumed' when the state changes that way (for the log), else None."""
+        """Make ``arm`` hold the newest command, or act on the policy when it is too old.
+        Returns the new state when it changes to TIMEOUT or back to OK (for the log), else
+        None."""
         pending = self.pending
         if pending is None:
-            self.state = 'waiting'
+            self.state = WatchdogState.WAITING
             arm.release()
             return None
         if now - pending[1] > self.timeout:
-            changed = self.state != 'timeout'
-            self.state = 'timeout'
+            changed = self.state is not WatchdogState.TIMEOUT
+            self.state = WatchdogState.TIMEOUT
             self.timeouts += changed
-            arm.release()
+            if self.policy is WatchdogPolicy.BRAKE:
+                if changed:
+                    self.brakes += 1
+                    arm.engage_brake()
+                self.brake_peak = max(self.brake_peak, *(abs(v) for v in arm.brake()))
+            else:
+                arm.release()
             self.applied = None
-            return 'timeout' if changed else None
-        resumed = self.state == 'timeout'
-        self.state = 'ok'
+            return WatchdogState.TIMEOUT if changed else None
+        resumed = self.state is WatchdogState.TIMEOUT
+        self.state = WatchdogState.OK
         if pending is not self.applied:    # a held command is not applied again each period
             arm.apply_checked(pending[0])  # checked on arrival
             self.applied = pending
-        return 'resumed' if resumed else None
+        return WatchdogState.OK if resumed else None
 
     def reapply(self):
         """Apply the held command again at the next period (a new effort limit)."""
@@ -147,9 +176,9 @@ class Watchdog:
         """The state as of ``now``: a loop that has not run since the timeout elapsed will
         zero the torque on its next period. Only reads: the change itself (its log line and
         count) is the loop's, in ``hold``."""
-        if self.state == 'ok' and self.last_command is not None and \
+        if self.state is WatchdogState.OK and self.last_command is not None and \
                 now - self.last_command > self.timeout:
-            return 'timeout'
+            return WatchdogState.TIMEOUT
         return self.state
 
 
@@ -174,10 +203,10 @@ class DriverLoop:
 
     def __init__(self, arm, *, wall_period, command_timeout, take_command=None, accept=None,
                  publish=None, log=None, clock=time.monotonic, sleep=time.sleep,
-                 max_takes=100, take_budget=0.5):
+                 max_takes=100, take_budget=0.5, policy=WatchdogPolicy.ZERO):
         self.arm = arm
         self.wall_period = wall_period          # realtime: wall seconds per period
-        self.watchdog = Watchdog(command_timeout)
+        self.watchdog = Watchdog(command_timeout, policy)
         self.stats = PeriodStats(wall_period)
         self.take_command = take_command or (lambda: None)
         self.accept = accept or (lambda raw, now: False)
@@ -263,9 +292,11 @@ class DriverLoop:
             self.watchdog.reapply()
             return
         change = self.watchdog.hold(self.arm, self._run_time(now))
-        if change == 'timeout':
-            self.log('warning', f'no command for {self.watchdog.timeout:g} s: torques zeroed')
-        elif change == 'resumed':
+        if change is WatchdogState.TIMEOUT:
+            action = 'brakes on' if self.watchdog.policy is WatchdogPolicy.BRAKE \
+                else 'torques zeroed'
+            self.log('warning', f'no command for {self.watchdog.timeout:g} s: {action}')
+        elif change is WatchdogState.OK:
             self.log('info', f'commands resumed after {self.watchdog.silence:.3f} s without one')
 
     # -------------------------------------------------------------------- control
@@ -305,7 +336,7 @@ class DriverLoop:
         if self._reset.is_set():
             self._reset.clear()
             self.arm.reset()
-            self.watchdog = Watchdog(self.watchdog.timeout)
+            self.watchdog = Watchdog(self.watchdog.timeout, self.watchdog.policy)
             self.stats = PeriodStats(self.stats.nominal)
             self.commands = self.impacts = self.skipped = self.flooded = self.stale = \
                 self.superseded = 0
