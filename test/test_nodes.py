@@ -22,6 +22,8 @@ from impact_arm.core.scene import load_scene, resolve_scene_path
 from impact_arm.core.simulate import run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+# whole runs over DDS: minutes for the module
+pytestmark = pytest.mark.slow
 
 
 # ------------------------------------------------------------------------------- lockstep

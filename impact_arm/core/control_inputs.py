@@ -59,7 +59,8 @@ class ControlInputs:
         self.hold_until = clock() + startup_hold
         self.next_tick = 0.0
         self.latest: tuple[float, list[float], list[float]] | None = None   # absolute angles
-        self.waiting = None                # a joint state waiting for its wrench
+        # a joint state waiting for its wrench
+        self.waiting: tuple[float, list[float], list[float]] | None = None
         self.wrench_stamp = -math.inf
         self.normal_force: float | None = None   # the largest since the last tick
         self.wrench_flowing = True         # wait for each state's wrench (see joint_state)
@@ -67,7 +68,7 @@ class ControlInputs:
         self.dropped = dict.fromkeys(DROPPED, 0)
         self.jump_from: float | None = None   # stamp of a sample that jumped, until confirmed
 
-    def drop(self, counter: str, why: str):
+    def drop(self, counter: str, why: str) -> None:
         self.dropped[counter] += 1
         self.log(f'{why} ({counter}: {self.dropped[counter]})')
 
@@ -91,7 +92,7 @@ class ControlInputs:
         return False
 
     def joint_state(self, sec: int, nanosec: int, names: Sequence[str],
-                    position: Sequence[float], velocity: Sequence[float]):
+                    position: Sequence[float], velocity: Sequence[float]) -> None:
         t = sec + nanosec * 1e-9
         try:
             index = [names.index(j) for j in self.joint_names]
@@ -148,13 +149,13 @@ class ControlInputs:
         self.waiting = None
         self._tick(*self.latest)
 
-    def timer(self):
+    def timer(self) -> None:
         """Trigger timer: tick on the latest state."""
         if self.latest is not None:
             self._tick(*self.latest)
 
     # --------------------------------------------------------------------------- output
-    def _tick(self, t: float, q: list[float], qd: list[float]):
+    def _tick(self, t: float, q: list[float], qd: list[float]) -> None:
         if not self.started:
             # the driver repeats its held state, which brings us back here
             if self.clock() < self.hold_until or not self.ready():

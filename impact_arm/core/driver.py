@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -22,7 +23,8 @@ from .model import ArmModel
 from .scene import Scene
 
 
-def feed_events(integ, builder, events, on_event=None):
+def feed_events(integ: PhaseIntegrator, builder: ImpactBuilder, events: Iterable,
+                on_event: Callable | None = None) -> list:
     """Feed located ``events`` to the impact ``builder`` (``on_event`` sees each first).
     Returns the impacts completed [(record, trace rows)], each taking the trace so far."""
     impacts = []
@@ -38,7 +40,8 @@ def feed_events(integ, builder, events, on_event=None):
     return impacts
 
 
-def advance_period(integ, builder, t_end, on_event=None):
+def advance_period(integ: PhaseIntegrator, builder: ImpactBuilder, t_end: float,
+                   on_event: Callable | None = None) -> tuple[list, tuple[float, float]]:
     """The one period loop of every sampled run (the driver's periods, offline held control):
     advance ``integ`` to ``t_end`` and ``feed_events``. Returns the impacts completed and the
     contact impulse (tangential, normal) over the period, which callers divide by the period
@@ -131,7 +134,7 @@ class SimulatedArm:
         self.model.gravity_forces(y[:n])
 
     # ----------------------------------------------------------------------- commands
-    def check_command(self, values) -> list:
+    def check_command(self, values: Iterable[float]) -> list[float]:
         """The command as floats, or CommandError saying why it is refused."""
         values = list(values)
         if len(values) != self.n:
@@ -143,11 +146,11 @@ class SimulatedArm:
             raise CommandError(f'command value(s) {out} not finite (index {bad})')
         return out
 
-    def apply(self, values):
+    def apply(self, values: Iterable[float]):
         """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
         self.apply_checked(self.check_command(values))
 
-    def apply_checked(self, tau: list):
+    def apply_checked(self, tau: list[float]):
         """``apply`` for torques ``check_command`` has already passed (a driver checks each
         command once, when it arrives, and applies it at its next period)."""
         limit = self.max_effort
@@ -161,7 +164,7 @@ class SimulatedArm:
         """Hold the joints where they are now, from this period on (``brake``)."""
         self._brake_at = self.integrator.state.y[:self.n].copy()
 
-    def brake(self) -> list:
+    def brake(self) -> list[float]:
         """Apply the brake for the next period and return its joint torques: a stiff hold of
         the angles ``engage_brake`` saw (the scene controller's PD gains plus gravity
         compensation, recomputed each period from the state), each joint's torque limited to
@@ -199,7 +202,7 @@ class SimulatedArm:
         self.periods += 1
         return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
 
-    def sample(self, wrench=(0.0, 0.0), impacts=()) -> Tick:
+    def sample(self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable = ()) -> Tick:
         """The sensors' view of the current state."""
         st = self.integrator.state
         n = self.n

@@ -17,7 +17,7 @@ import math
 import time
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
@@ -89,14 +89,14 @@ class Session:
         self._diag_published = 0
         self.last_tick: tuple[Tick, float] | None = None   # (tick, when published)
 
-    def publish_initial(self):
+    def publish_initial(self) -> None:
         """The state at t = 0, before anything moves."""
         initial = self.arm.sample()
         self.out.publish(initial)
         self.last_tick = (initial, self.clock())
 
     # ---------------------------------------------------------------------- commands in
-    def ordered(self, values) -> list[float]:
+    def ordered(self, values: Iterable[float]) -> list[float]:
         """A command array (in the order ``command_order`` names) as joint torques."""
         values = self.arm.check_command(values)
         torques = [0.0] * self.arm.n
@@ -118,7 +118,7 @@ class Session:
         self._commanded(now)
         return True
 
-    def _reject(self, exc, now) -> bool:
+    def _reject(self, exc: Exception, now: float | None) -> bool:
         # formatted only when logged: a flood of garbage must cost as little as possible
         self.rejected += 1
         now = self.clock() if now is None else now
@@ -131,11 +131,11 @@ class Session:
         """After a valid command (lockstep: run its period)."""
 
     # -------------------------------------------------------------------------- control
-    def set_max_effort(self, limit: float):
+    def set_max_effort(self, limit: float) -> None:
         self.arm.max_effort = limit
         self.loop.watchdog.reapply()       # re-clip the held command with the new limit
 
-    def set_command_timeout(self, timeout: float):
+    def set_command_timeout(self, timeout: float) -> None:
         self.loop.watchdog.timeout = timeout
 
     def set_e_stop(self, on: bool) -> bool:
@@ -173,7 +173,7 @@ class Session:
             self.fail(f'{exc} [state {state}, held torque {self.arm.command}]')
             return None
 
-    def fail(self, why: str):
+    def fail(self, why: str) -> None:
         self.failed = why
         self.out.log('error', f'simulation stopped: {why}')
 
@@ -293,12 +293,12 @@ class RealtimeSession(Session):
     """Periods paced by the wall clock; ``run`` is the loop thread's body."""
     mode = 'realtime'
 
-    def __init__(self, arm: SimulatedArm, **kwargs):
+    def __init__(self, arm: SimulatedArm, **kwargs: Any) -> None:
         super().__init__(arm, **kwargs)
         if not self.rate_factor > 0:
             raise ValueError(f'rate_factor = {self.rate_factor}: realtime needs a pace > 0')
 
-    def run(self, should_stop: Callable[[], bool]):
+    def run(self, should_stop: Callable[[], bool]) -> None:
         """Run periods until ``should_stop()`` or a failure."""
         while not should_stop() and not self.failed:
             tick = self.stepping(self.loop.realtime_period)
@@ -319,7 +319,7 @@ class LockstepSession(Session):
 
     def __init__(self, arm: SimulatedArm, *, recorder_window: int = 0,
                  recorder_present: Callable[[], bool] = lambda: True,
-                 controller_present: Callable[[], bool] = lambda: True, **kwargs):
+                 controller_present: Callable[[], bool] = lambda: True, **kwargs: Any) -> None:
         super().__init__(arm, **kwargs)
         self.loop.stats.nominal = None     # lockstep has no wall period to jitter around
         self.window_ns = round(recorder_window * 1e9 / self.publish_rate)
@@ -367,7 +367,7 @@ class LockstepSession(Session):
         return self.recorded_until is None or \
             round(self.arm.t * 1e9) - self.recorded_until >= self.window_ns
 
-    def recorder_progress(self, written_ns: int):
+    def recorder_progress(self, written_ns: int) -> None:
         """The recorder has written the joint states up to stamp ``written_ns``."""
         self.recorder_seen = True
         self.recorded_until = written_ns
@@ -389,11 +389,11 @@ class LockstepSession(Session):
             return
         tick = self.stepping(lambda: self.loop.lockstep_period(arrived, self.rate_factor))
         if tick is not None:
-            self.last_tick = (tick, self.loop.stats.last_publish)
+            self.last_tick = (tick, self.loop.stats.last_publish or self.clock())
             self.out.report(tick)
 
     # ------------------------------------------------------------------- every 0.1 s
-    def tick(self, now: float | None = None):
+    def tick(self, now: float | None = None) -> None:
         """Before the first command the initial state goes out again; later, a period
         unanswered for LOCKSTEP_REPEAT_S is published again with its own stamp: a sample
         lost on the way must not stall the run forever, and a controller answers each stamp
@@ -413,9 +413,11 @@ class LockstepSession(Session):
                              f'{(self.recorded_until or 0) * 1e-9:.3f} s, simulated '
                              f'{self.arm.t:.3f} s (recorder_window {self.recorder_window})')
             return
+        if self.last_tick is None:         # (publish_initial not called yet)
+            return
         now = self.clock() if now is None else now
         tick, published = self.last_tick
-        last_command = self.loop.watchdog.last_command
+        last_command = self.loop.watchdog.last_command or published
         if now - published > LOCKSTEP_REPEAT_S and now - last_command > LOCKSTEP_REPEAT_S \
                 and self.controller_present():   # not once the controller left
             self.repeats += 1

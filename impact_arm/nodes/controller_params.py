@@ -8,7 +8,7 @@ import math
 from .. import contract
 from ..contract import (ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES,
                         joint_names, to_joint_space)
-from .params import Param, ParameterError, values_class
+from .params import Param, ParameterError
 
 
 def parameter_table(scene):
