@@ -198,6 +198,8 @@ COMMANDS = {
                 'draw the arm, the surface and the contact force into a GIF or MP4'),
     'study': ('impact_arm.tools.contact_study',
               'shipped studies: contact (the contact laws against published results)'),
+    'kernel': ('impact_arm.tools.kernel',
+               "kernel dump: print the generated kernel module of a scene's shape"),
     'bench': ('impact_arm.tools.benchmarks',
               'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }
