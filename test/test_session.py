@@ -285,3 +285,14 @@ def test_the_brake_is_released_by_the_next_valid_command(scene):
     loop.command([1.0, 1.0], clock.now)
     loop.realtime_period()
     assert loop.arm.command == [1.0, 1.0] and loop.watchdog.state is WatchdogState.OK
+
+
+def test_typed_kinds_are_their_text_wherever_text_was_used():
+    import json
+
+    from impact_arm.core.kinds import EventKind
+    kind = EventKind.MAX_COMPRESSION
+    assert kind == 'max_compression' and str(kind) == f'{kind}' == 'max_compression'
+    assert {'max_compression': 1}[kind] == 1 and json.dumps([kind]) == '["max_compression"]'
+    assert EventKind('separation') is EventKind.SEPARATION
+    assert WatchdogState.TIMEOUT == 'timeout' and f'{WatchdogPolicy.BRAKE}' == 'brake'

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import threading
 import time
-from enum import Enum
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
+
+from .kinds import TextEnum
 
 if TYPE_CHECKING:
     from .driver import SimulatedArm, Tick
@@ -30,7 +31,7 @@ PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute g
 DEFAULT_COMMAND_TIMEOUT = 0.02
 
 
-class WatchdogState(str, Enum):
+class WatchdogState(TextEnum):
     """waiting: no command yet (brakes on); ok: a fresh command is held; timeout: the newest
     command is older than the timeout (the policy acts)."""
     WAITING = 'waiting'
@@ -38,7 +39,7 @@ class WatchdogState(str, Enum):
     TIMEOUT = 'timeout'
 
 
-class WatchdogPolicy(str, Enum):
+class WatchdogPolicy(TextEnum):
     """What the driver does on a command timeout. brake: hold the joints where they are
     (``SimulatedArm.brake``), as a real drive's safe stop does; zero: zero torque, the arm
     falls under gravity (onto the part, where it chatters)."""
