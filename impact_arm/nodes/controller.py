@@ -1,4 +1,4 @@
-"""controller: the down/up striking cycle as an effort controller (design.md §3-4), a thin ROS
+"""controller: the down/up striking cycle as an effort controller (docs/nodes.md), a thin ROS
 shell over the ROS-free cycle (core/control.py) and input handling (core/control_inputs.py);
 parameters in controller_params.py.
 

@@ -1,4 +1,4 @@
-"""simulator: the arm as a hardware driver presents it (design.md §3-4): a thin ROS shell
+"""simulator: the arm as a hardware driver presents it (docs/nodes.md): a thin ROS shell
 over a ROS-free session (core/session.py), parameters in simulator_params.py.
 
 Publishes /joint_states, /contact_wrench (averaged over each period), /impact_report (JSON per
