@@ -46,18 +46,8 @@ force.x tangential, force.y normal, the numbers the physics computes.
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
 from typing import Optional
-
-
-class TextEnum(str, enum.Enum):
-    """A typed set of names whose members are their strings everywhere: equal, hashed,
-    printed, formatted and written to JSON as the text (``EventKind.SWITCH == 'switch'``,
-    ``{'switch': 1}[EventKind.SWITCH]``), so a state can be typed without changing any output."""
-    __hash__ = str.__hash__
-    __str__ = str.__str__
-    __format__ = str.__format__
 
 # ------------------------------------------------------------------------------- topics
 JOINT_STATES = '/joint_states'
@@ -213,7 +203,7 @@ STARTUP_HOLD = 4.0
 # sample not yet taken by the recorder is still in its writer's history and is resent; large
 # enough that the recorder's 10 ms polls never hold the loop back (~30 periods a poll).
 RECORDER_WINDOW = 500
-PROGRESS_QOS = TopicQos(depth=1)
+PROGRESS_QOS = TopicQos(durability='transient_local', depth=1)   # latched: a late reader gets the last
 LATCHED_1 = TopicQos(durability='transient_local', depth=1)
 VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
     ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),

@@ -168,7 +168,8 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
                     not_applied(values[-2]) != 0 and values[-1]['commands'] == \
                     values[-2]['commands'] and values
             running = wait_for(settled, timeout=15)
-            assert running, [{k: v for k, v in diagnostics_values(m).items() if k.startswith("command") or k == "level"} for _, m in diags][-4:]
+            assert running, [{k: v for k, v in diagnostics_values(m).items()
+                              if k.startswith("command") or k == "level"} for _, m in diags][-4:]
             assert wait_for(lambda: len(states) > flood_end + 500, timeout=15), sim.stderr
             assert sim.alive(), sim.stderr
     finally:

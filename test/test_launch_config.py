@@ -1,6 +1,7 @@
 """The launch file and the node parameter files: what a ROS 2 user starts with
 `ros2 launch impact_arm arm.launch.py` must name real executables and valid parameters."""
 import ast
+import contextlib
 import os
 import subprocess
 import sys
@@ -10,7 +11,8 @@ import types
 import pytest
 import yaml
 
-from ros_helpers import PYTHON, ROOT, controller, ros_env, start_process  # noqa: F401
+from ros_helpers import (PYTHON, ROOT, controller, probe, ros_env,  # noqa: F401
+                         start_process, wait_for)
 
 NODES = ('simulator', 'controller', 'recorder')
 
@@ -275,3 +277,41 @@ def test_controller_middleware_threads_share_its_realtime_priority(ros_env, tmp_
     assert middleware, threads     # Fast DDS names its threads dds.*
     expected = {(os.SCHED_FIFO, priority)} if priority else {(os.SCHED_OTHER, 0)}
     assert all(v == expected for v in middleware.values()), middleware
+
+
+@pytest.mark.dds
+def test_launched_nodes_each_appear_once_in_the_graph(probe, ros_env, tmp_path):
+    """Started as the launch file starts them (``-r __node:=NAME`` and the parameter file),
+    the nodes and their helper nodes (the simulator's command reader, the recorder's reader)
+    have distinct names: launch's global ``__node`` remap used to rename the helpers too, so
+    ``ros2 node list`` showed /simulator and /recorder twice and rcl warned "Publisher
+    already registered for node name"."""
+    actions = load_launch_with_stubs(ROOT)
+    nodes = [a.kwargs for a in actions if type(a).__name__ == 'Node'
+             and a.kwargs['package'] == 'impact_arm']
+    names = sorted(n['name'] for n in nodes)
+    assert len(set(names)) == len(names)
+    procs = []
+    with contextlib.ExitStack() as stack:
+        for n in nodes:
+            args = [PYTHON, '-m', f'impact_arm.nodes.{n["executable"]}', '--ros-args',
+                    '-r', f'__node:={n["name"]}', '--params-file',
+                    os.path.join(ROOT, 'config', n['executable'] + '.yaml')]
+            if n['executable'] == 'recorder':
+                args += ['-p', f'output:={tmp_path / "run.mcap"}']
+            procs.append(stack.enter_context(start_process(args, ros_env, tmp_path,
+                                                           n['name'])))
+
+        def graph():
+            return [f'{ns.rstrip("/")}/{name}'
+                    for name, ns in probe.node.get_node_names_and_namespaces()]
+        helpers = ['/_simulator_command_reader', '/_recorder_reader']
+        assert wait_for(lambda: set(f'/{n}' for n in names) | set(helpers) <= set(graph())
+                        or not all(p.alive() for p in procs), timeout=60), \
+            (graph(), [p.stderr[-2000:] for p in procs])
+        time.sleep(1.0)                 # anything duplicated would be discovered by now
+        seen = [n for n in graph() if n != '/test_probe']
+        assert sorted(seen) == sorted(set(seen)), seen
+        for p in procs:
+            assert p.alive(), p.stderr
+            assert 'already registered' not in p.stderr + p.stdout, p.stderr

@@ -22,6 +22,8 @@ from impact_arm.core.scene import load_scene, resolve_scene_path
 from impact_arm.core.simulate import run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+# whole runs over DDS: minutes for the module
+pytestmark = pytest.mark.slow
 
 
 # ------------------------------------------------------------------------------- lockstep
@@ -124,7 +126,10 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
     # gentle gains: this test is about the clock and the watchdog, and a loaded test machine
     # must not turn the article's stiff loop (kd = 100 at 1 kHz) unstable through latency
     gentle = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
-    with start_process(simulator('command_timeout:=0.1'), ros_env, tmp_path, 'sim') as sim, \
+    # the zero-torque watchdog policy: this test watches the torque drop to zero (the
+    # default, brake, holds the joints instead: test_session.py)
+    with start_process(simulator('command_timeout:=0.1', 'watchdog_policy:=zero'), ros_env,
+                       tmp_path, 'sim') as sim, \
             start_process(controller(*gentle), ros_env, tmp_path, 'ctl') as ctl:
         assert wait_for(lambda: states and stamp(states[-1][1]) > 0.1, timeout=30), sim.stderr
         begin = len(states)
@@ -485,10 +490,11 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
     from std_msgs.msg import Float64MultiArray
     from impact_arm import contract
     from impact_arm.nodes.recorder import MATCHED_LINE
-    from impact_arm.tools.runner import SIMULATOR_TOPICS, ready_for_commands, recorder_says
+    from impact_arm.tools.runner import SIMULATOR_TOPICS, RecorderProgress, ready_for_commands
     mcap = tmp_path / 'slow.mcap'
     states = probe.listen(JointState, contract.JOINT_STATES, depth=20000)
     with probe.lock:
+        progress = RecorderProgress(probe.node)
         command = probe.node.create_publisher(Float64MultiArray, contract.COMMANDS,
                                               contract.qos(contract.COMMANDS).to_rclpy())
     with start_process(node_args('impact_arm.nodes.recorder', f'output:={mcap}', 'scene:=paper'),
@@ -505,7 +511,7 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                 assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), \
                     sim.stderr
                 thaw.start()
-                assert wait_for(lambda: ready_for_commands(probe.node, rec.err_path), timeout=60), \
+                assert wait_for(lambda: ready_for_commands(probe.node, progress), timeout=60), \
                     rec.stderr
                 assert command.get_subscription_count() >= 2
 
@@ -516,8 +522,8 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                 advance(200)
                 # then, thawed and matched for sure, more: the recording goes on after a gap
                 thaw.join()
-                assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_says(
-                    rec.err_path)[MATCHED_LINE], timeout=60), rec.stderr
+                assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_log_says(
+                    rec.err_path, MATCHED_LINE), timeout=60), rec.stderr
                 reached = max(stamp(m) for _, m in states)
                 advance(100)
                 assert wait_for(lambda: stamp(states[-1][1]) > reached, timeout=30), sim.stderr
@@ -529,6 +535,7 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
             probe.forget(states)
             with probe.lock:
                 probe.node.destroy_publisher(command)
+                probe.node.destroy_subscription(progress.subscription)
         rec.signal(signal.SIGINT)
         assert rec.wait(20) == 0, rec.stderr
     with AnyReader([Path(mcap)]) as reader:
@@ -537,6 +544,16 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                   for c, _, raw in reader.messages(joint_states)} if joint_states else set()
     missing = set(range(round(sent * 1000) + 1)) - stamps
     assert not missing, f'{len(missing)} periods not recorded, from stamp {min(missing)} ms'
+
+
+def recorder_log_says(log_path, line) -> set:
+    """The topics the recorder's log names after each of its lines ``line``."""
+    topics = set()
+    with open(log_path, encoding='utf-8', errors='replace') as f:
+        for text in f:
+            if line in text:
+                topics.update(text.partition(line)[2].split())
+    return topics
 
 
 def test_run_command_interrupted_stops_nodes_and_keeps_the_recording(ros_env, tmp_path):

@@ -24,9 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS, TextEnum
+from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS
 from . import layout
 from .errors import RunBudgetError, SimulationError
+from .kinds import EventKind
 from .model import ArmModel, ArmState, Phase
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.
@@ -53,18 +54,9 @@ def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None
             'max_step': spec.max_step, 'method': spec.method}
 
 
-class EventKind(TextEnum):
-    """What an event located by the integrator is."""
-    CONTACT = 'contact'                  # the tip reaches a surface
-    YIELD = 'yield'                      # elastic -> elasto-plastic compression
-    MAX_COMPRESSION = 'max_compression'  # compression -> restitution
-    SEPARATION = 'separation'            # restitution ends: free motion again
-    SWITCH = 'switch'                    # the controller's down/up half of the cycle changes
-
-
 @dataclass
 class Event:
-    kind: EventKind
+    kind: EventKind      # contact | yield | max_compression | separation | switch
     t: float
     surface: int
     y: np.ndarray

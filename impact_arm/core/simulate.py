@@ -12,11 +12,11 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from ..contract import TextEnum
 from .control import CycleController
 from .driver import advance_period, feed_events
 from .errors import SceneError, SimulationError
 from .integrator import PhaseIntegrator, options_from_spec
+from .kinds import TextEnum
 from .metrics import ImpactBuilder, settle_index
 from .model import ArmModel
 from .scene import Scene

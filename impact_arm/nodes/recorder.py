@@ -44,7 +44,7 @@ from ..io.msgdefs import typestore
 from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 from ..io.wire import (MalformedMessage, header_stamp_ns, joint_state_fields,
                        wrench_stamped_fields)
-from ._runner import run
+from ._runner import reader_node, run, take_raw
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
@@ -147,7 +147,7 @@ class Recorder(Node):
         self.progress = self.create_publisher(Time, contract.RECORDER_PROGRESS,
                                               contract.PROGRESS_QOS.to_rclpy())
         self.written_until = self.announced = None   # ns: newest /joint_states stamp written
-        self.reader = Node('_recorder_reader', context=self.context)
+        self.reader = reader_node(self, 'reader')   # ignores launch's __node remap
         self._subscribe_known()
         self.create_timer(interval, self._flush)
         self.pub_diag = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS,
@@ -231,15 +231,11 @@ class Recorder(Node):
         per_topic = []
         for topic, sub in list(self.subs.items()):
             taken = []
-            with sub.handle:
-                while True:
-                    message = sub.handle.take_message(sub.msg_type, True)
-                    if message is None:
-                        break
-                    data, info = message
-                    self.losses.count(topic, info)
-                    received = info.get('received_timestamp') or time.time_ns()
-                    taken.append((received, topic, data, info.get('source_timestamp') or received))
+            while (message := take_raw(sub)) is not None:
+                data, info = message
+                self.losses.count(topic, info)
+                received = info.get('received_timestamp') or time.time_ns()
+                taken.append((received, topic, data, info.get('source_timestamp') or received))
             per_topic.append(taken)
             if taken and topic not in self.flowing:
                 # matched is not yet flowing: the writer may match our reader later than we

@@ -268,6 +268,8 @@ COMMANDS = {
             'fit scene parameters (E, S_y, mu, ...) to the impacts of a recording'),
     'compare': ('impact_arm.tools.compare',
                 'compare the impacts of two recordings, or of a recording and a scene'),
+    'kernel': ('impact_arm.tools.kernel',
+               "kernel dump: print the generated kernel module of a scene's shape"),
     'bench': ('impact_arm.tools.benchmarks',
               'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
 }

@@ -192,39 +192,47 @@ def simulator_diagnostics(msg):
     return None
 
 
-def ready_for_commands(node, recorder_log=None) -> bool:
+RECORDER_READER = '_recorder_reader'   # the recorder's reader node (nodes/_runner.reader_node)
+
+
+class RecorderProgress:
+    """What the recorder says it has written: the newest joint-state stamp on
+    /recorder/progress (ns; None until it says anything). A progress message proves the
+    recorder is writing the simulator's stream, not merely subscribed to it."""
+
+    def __init__(self, node):
+        from builtin_interfaces.msg import Time
+        self.written_until = None
+        self.subscription = node.create_subscription(
+            Time, contract.RECORDER_PROGRESS, self._on_progress, contract.PROGRESS_QOS.to_rclpy())
+
+    def _on_progress(self, msg):
+        self.written_until = msg.sec * 1_000_000_000 + msg.nanosec
+
+
+def recorder_subscribed(node) -> set:
+    """The simulator topics the recorder's reader subscribes to, as ``node`` sees the graph."""
+    return {topic for topic in SIMULATOR_TOPICS
+            if any(info.node_name == RECORDER_READER
+                   for info in node.get_subscriptions_info_by_topic(topic))}
+
+
+def ready_for_commands(node, recorder=None) -> bool:
     """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
-    its command reader (and the recorder's) are known and, with a recorder (``recorder_log``:
-    its log file), the recorder has matched every simulator publisher and received joint
-    states (the simulator publishes its held initial state until the first command). The arm
-    starts moving with the first command and nothing must go unrecorded: a subscription in the
-    graph is not a matched reader (it may match seconds later), and the reader matching a
-    writer is not the writer matching the reader."""
-    from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
-    listeners = 1 if recorder_log else 0
+    its command reader (and the recorder's) are known and, with a recorder (``recorder``: a
+    RecorderProgress), the recorder's reader subscribes to every simulator topic and the
+    recorder has said it wrote joint states (the simulator publishes its held initial state
+    until the first command). The arm starts moving with the first command and nothing must go
+    unrecorded: a subscription in the graph is not a matched reader (it may match seconds
+    later); a written sample is proof."""
+    listeners = 1 if recorder is not None else 0
     if not (node.count_publishers(JOINT_STATES) >= 1
             and node.count_subscribers(COMMANDS) >= 1 + listeners):
         return False
-    if not recorder_log:
+    if recorder is None:
         return True
-    says = recorder_says(recorder_log)
-    return set(SIMULATOR_TOPICS) <= says[MATCHED_LINE] and JOINT_STATES in says[FLOWING_LINE]
-
-
-def recorder_says(log_path) -> dict:
-    """The topics the recorder's log names after each of its lines (MATCHED_LINE,
-    FLOWING_LINE -> set of topics), from one read of the log."""
-    from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
-    says = {MATCHED_LINE: set(), FLOWING_LINE: set()}
-    try:
-        with open(log_path, encoding='utf-8', errors='replace') as f:
-            for text in f:
-                for line, topics in says.items():
-                    if line in text:
-                        topics.update(text.partition(line)[2].split())
-    except OSError:
-        pass
-    return says
+    return recorder.written_until is not None and \
+        recorder_subscribed(node) == set(SIMULATOR_TOPICS)
 
 
 class Run:
@@ -298,11 +306,11 @@ class Run:
 
     def _await_graph(self, timeout=60.0):
         """Until the controller may start (``ready_for_commands``)."""
-        recorder_log = self.logs.get('recorder')
+        recorder = RecorderProgress(self.node) if 'recorder' in self.procs else None
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self._spin_once(0.05)
-            if ready_for_commands(self.node, recorder_log):
+            if ready_for_commands(self.node, recorder):
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
