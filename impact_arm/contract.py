@@ -203,7 +203,8 @@ STARTUP_HOLD = 4.0
 # sample not yet taken by the recorder is still in its writer's history and is resent; large
 # enough that the recorder's 10 ms polls never hold the loop back (~30 periods a poll).
 RECORDER_WINDOW = 500
-PROGRESS_QOS = TopicQos(durability='transient_local', depth=1)   # latched: a late reader gets the last
+# latched: a reader that joins late (the runner, a simulator) still gets the newest stamp
+PROGRESS_QOS = TopicQos(durability='transient_local', depth=1)
 LATCHED_1 = TopicQos(durability='transient_local', depth=1)
 VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
     ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),
