@@ -26,6 +26,8 @@ SUBCOMMANDS = {
               'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
     'starts': ('impact_arm.tools.benchmarks.starts',
                'realtime simulator + controller started N times as a user does (issue 12)'),
+    'fit': ('impact_arm.tools.benchmarks.fit',
+            'impact-arm fit: accuracy and interval coverage over drawn cases, cost, growth'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }
