@@ -10,7 +10,12 @@ import pytest
 
 from impact_arm.core.errors import ImpactArmError
 from impact_arm.core.fit import FitError, fit
-from impact_arm.core.identify import IdentifyError, JointRecording, LocalFit, find_impacts
+from impact_arm.core.identify import (
+    IdentifyError,
+    JointRecording,
+    LocalFit,
+    find_impacts,
+)
 from impact_arm.io.recording import RecordingInputError, read_recording
 from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
 
@@ -148,9 +153,9 @@ def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):
 
 
 @pytest.mark.parametrize('kwargs, message', [
-    (dict(joints=['shoulder', 'elbow']), '--joints: shoulder, elbow not in /joint_states'),
-    (dict(states_topic='/arm/joint_states'), '--states-topic /arm/joint_states: not in'),
-    (dict(wrench_topic='/ft_sensor'), '--wrench-topic /ft_sensor: not in'),
+    ({'joints': ['shoulder', 'elbow']}, '--joints: shoulder, elbow not in /joint_states'),
+    ({'states_topic': '/arm/joint_states'}, '--states-topic /arm/joint_states: not in'),
+    ({'wrench_topic': '/ft_sensor'}, '--wrench-topic /ft_sensor: not in'),
 ])
 def test_bad_recording_input_is_refused_in_one_line(bag, kwargs, message):
     with pytest.raises(RecordingInputError) as exc:

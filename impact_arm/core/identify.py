@@ -254,7 +254,7 @@ def impact_windows(rec: JointRecording, noise: Noise, impacts, window: int = 15,
     """An ``ImpactWindow`` per usable impact and a note per impact left out (too few free
     samples between impacts, a gap of more than ``max_gap`` periods across the contact)."""
     out, notes = [], []
-    N, dt = len(rec.t), rec.period
+    N, _dt = len(rec.t), rec.period
     for i, a in enumerate(impacts):
         lo = impacts[i - 1] + 1 if i else 0
         hi = impacts[i + 1] if i + 1 < len(impacts) else N - 1
@@ -274,7 +274,7 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
     given to the impact on that side, for a contact that spans a sample."""
     N, dt = len(rec.t), rec.period
-    off = lambda k: bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))  # noqa: E731
+    off = lambda k: bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))
     while b < min(hi, a + 4) and off(b) and not off(a):
         b += 1          # actuators off at b while driven before: b was taken in the contact
     pre_idx = np.arange(max(lo, a - window + 1), a + 1)

@@ -38,6 +38,7 @@ def _drawn(rng):
 
 def accuracy(cases, impacts, say):
     import numpy as np
+
     from ...core.fit import fit
     from ..synthetic import synthetic_recording
     rng = np.random.default_rng(2026)
@@ -98,11 +99,12 @@ def fresh_process(say):
                'surfaces[0].mu=0.05:1', '--param', 'materials.steel.S_y=2e8:5e9',
                '--out', os.path.join(tmp, 'out'), '--json', os.path.join(tmp, 'r.json')]
         t0 = time.perf_counter()
-        done = subprocess.run(cmd, capture_output=True, text=True)
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         wall = time.perf_counter() - t0
         if done.returncode not in (0, 1):
             raise RuntimeError(f'fresh fit failed: {done.stderr.strip()[-500:]}')
-        data = json.load(open(os.path.join(tmp, 'r.json')))
+        with open(os.path.join(tmp, 'r.json'), encoding='utf-8') as f:
+            data = json.load(f)
     say(f'  fresh process: {wall:.2f} s for {data["impacts_used"]} impacts, 2 parameters '
         f'({data["verdict"]})')
     return {'wall': wall, 'impacts': data['impacts_used'], 'verdict': data['verdict']}
