@@ -194,16 +194,16 @@ def write_figures(result, out) -> list:
                 dtw = float(np.median(np.diff(rec.wrench_t)))
                 ts = rec.wrench_t[wsel]
                 ts = ts[(ts > w.t_a) & (ts <= w.post_t[-1])]
-                for col, style, name in ((4, '--', 'normal'), (3, ':', 'tangential')):
+                for col, mark, name in ((4, 'x', 'normal'), (3, '+', 'tangential')):
                     cum = np.interp(ts, pred.path[:, 0], pred.path[:, col]) - \
                         np.interp(ts - dtw, pred.path[:, 0], pred.path[:, col])
-                    ax.step(t_ms(ts), cum / dtw, style, where='pre', lw=1,
-                            color='k' if col == 4 else 'tab:gray', label=f'{name} fitted')
+                    ax.plot(t_ms(ts), cum / dtw, mark, ms=9,
+                            color='tab:red' if col == 4 else 'tab:purple', label=f'{name} fitted')
             ax.set_xlabel('time from contact [ms]')
             ax.set_ylabel('period-averaged force [N]')
             if c == 0:
                 ax.legend(fontsize=7)
-    fig.suptitle('Recorded (markers) and fitted (lines) around the impacts', fontsize=10)
+    fig.suptitle('Recorded and fitted around the impacts', fontsize=10)
     fig.tight_layout()
     path = os.path.join(out, 'impacts.png')
     fig.savefig(path, dpi=110)
