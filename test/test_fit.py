@@ -217,3 +217,12 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
     assert result.fits, result.verdict
     for key, err in relative_errors(result, truth).items():
         assert err < 0.05, (key, result.parameters[key], truth[key])
+
+
+def test_joints_in_the_wrong_order_are_told_not_fitted():
+    rec = recording({}, 81, cycles=2)
+    for name in ('position', 'velocity', 'effort'):
+        setattr(rec, name, getattr(rec, name)[:, ::-1].copy())    # elbow first
+    with pytest.raises(IdentifyError, match='none with the tip near a surface of the scene '
+                                            r'\(check --joints order'):
+        fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0)})

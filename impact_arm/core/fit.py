@@ -589,11 +589,22 @@ def prepare(recording: JointRecording, options: FitOptions, model: ArmModel | No
     impacts = find_impacts(recording, options.z_min,
                            contact_test(model) if model is not None else None)
     if not impacts:
-        raise IdentifyError(f'no impact in the recording {recording.source or ""}: no step in '
-                            f'the joint rates stands out of the noise'.replace('  ', ' '))
+        steps = len(find_impacts(recording, options.z_min)) if model is not None else 0
+        why = (f'{steps} step(s) of the joint rates, none with the tip near a surface of the '
+               f'scene (check --joints order, the scene\'s links and surface heights)'
+               if steps else 'no step in the joint rates stands out of the noise')
+        raise IdentifyError(f'no impact in the recording {recording.source}: {why}')
     noise = estimate_noise(recording, impacts, options.window)
     windows, notes = impact_windows(recording, noise, impacts, options.window,
                                     post_samples=options.post_samples)
+    normal = [w.impulse[1] for w in windows if w.impulse is not None]
+    if normal and np.median(normal) < 0:
+        # a wrench published as the force on the surface, not on the arm: same law
+        for w in windows:
+            if w.impulse is not None:
+                w.impulse = -w.impulse
+        notes.append('the recorded wrench points into the surface: its sign is reversed '
+                     '(the simulator publishes the force on the arm)')
     if not windows:
         raise IdentifyError(f'{len(impacts)} impact(s) found but none usable: ' + '; '.join(notes))
     return impacts, noise, windows, notes
