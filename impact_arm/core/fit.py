@@ -424,16 +424,7 @@ class ImpactSet:
         self.timing, self.timing_errors = effort_timing(model, self.windows)
         kept, self.whiten, notes = [], [], []
         for w in self.windows:
-            base = predict_impact(model, w, self.timing)
-            # a contact under way at the last sample before it, or still at the first after
-            for _ in range(6):      # a long contact can span several samples
-                side = 'pre' if 'above the arm' in base.error else \
-                    'post' if 'outlasts' in base.error else ''
-                wider = w.widened(side) if side and getattr(w, 'widened', None) else None
-                if wider is None:
-                    break
-                wider.index = w.index
-                w, base = wider, predict_impact(model, wider, self.timing)
+            w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
                 notes.append(f'impact at t = {w.t_c:.4f} s left out: {base.error} with the '
                              f'starting scene')
@@ -457,6 +448,20 @@ class ImpactSet:
         self.windows = kept
         return notes
 
+    def _widen(self, model, w, base):
+        """A contact under way at the last sample before the impact, or still at the first
+        after it (a long contact can span several samples): that sample leaves the free
+        flight, as long as the model says so."""
+        for _ in range(6):
+            side = 'pre' if 'above the arm' in base.error else \
+                'post' if 'outlasts' in base.error else ''
+            wider = w.widened(side) if side and getattr(w, 'widened', None) else None
+            if wider is None:
+                break
+            wider.index = w.index
+            w, base = wider, predict_impact(model, wider, self.timing)
+        return w, base
+
     def calibrate(self, values, sigma_qd):
         """The full whitening of each impact's residual at ``values`` (the optimum so far):
         the recorded rates' noise (``sigma_qd`` per joint), the wrench noise, and the
@@ -469,8 +474,10 @@ class ImpactSet:
         n = model.n
         for i, w in enumerate(self.windows):
             base = predict_impact(model, w, self.timing)
+            w, base = self._widen(model, w, base)
             if base.error:
                 continue
+            self.windows[i] = w
             q, qd, cov_pre = w.pre.state(w.t_a)
             x0 = np.concatenate([q, qd])
             y0 = self.outputs(base, w)
