@@ -10,7 +10,12 @@ import pytest
 
 from impact_arm.core.errors import ImpactArmError
 from impact_arm.core.fit import FitError, fit
-from impact_arm.core.identify import IdentifyError, JointRecording, LocalFit, find_impacts
+from impact_arm.core.identify import (
+    IdentifyError,
+    JointRecording,
+    LocalFit,
+    find_impacts,
+)
 from impact_arm.io.recording import RecordingInputError, read_recording
 from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
 
@@ -148,9 +153,9 @@ def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):
 
 
 @pytest.mark.parametrize('kwargs, message', [
-    (dict(joints=['shoulder', 'elbow']), '--joints: shoulder, elbow not in /joint_states'),
-    (dict(states_topic='/arm/joint_states'), '--states-topic /arm/joint_states: not in'),
-    (dict(wrench_topic='/ft_sensor'), '--wrench-topic /ft_sensor: not in'),
+    ({'joints': ['shoulder', 'elbow']}, '--joints: shoulder, elbow not in /joint_states'),
+    ({'states_topic': '/arm/joint_states'}, '--states-topic /arm/joint_states: not in'),
+    ({'wrench_topic': '/ft_sensor'}, '--wrench-topic /ft_sensor: not in'),
 ])
 def test_bad_recording_input_is_refused_in_one_line(bag, kwargs, message):
     with pytest.raises(RecordingInputError) as exc:
@@ -212,3 +217,12 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
     assert result.fits, result.verdict
     for key, err in relative_errors(result, truth).items():
         assert err < 0.05, (key, result.parameters[key], truth[key])
+
+
+def test_joints_in_the_wrong_order_are_told_not_fitted():
+    rec = recording({}, 81, cycles=2)
+    for name in ('position', 'velocity', 'effort'):
+        setattr(rec, name, getattr(rec, name)[:, ::-1].copy())    # elbow first
+    with pytest.raises(IdentifyError, match='none with the tip near a surface of the scene '
+                                            r'\(check --joints order'):
+        fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0)})

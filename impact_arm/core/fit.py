@@ -13,6 +13,7 @@ correlations and the verdict.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -20,16 +21,40 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ImpactArmError, SceneError, SimulationError
-from .identify import (IdentifyError, ImpactWindow, JointRecording, estimate_noise,
-                       find_impacts, impact_windows, joint_to_absolute_matrix,
-                       tip_normal_speed)
-from .integrator import PhaseIntegrator
+from .identify import (
+    IdentifyError,
+    ImpactWindow,
+    JointRecording,
+    estimate_noise,
+    find_impacts,
+    impact_windows,
+    joint_to_absolute_matrix,
+    tip_normal_speed,
+)
+from .integrator import PRESETS, PhaseIntegrator, options_from_spec
 from .model import ArmModel
 from .study import Study, parse_key_path
 
-PENALTY = 30.0         # whitened residual of an impact the model cannot reproduce at all
-REFUSED = 1e4          # ... of every impact, for values the scene's schema refuses
-WINDOW_OPTIONS = dict(preset='accurate')   # the impacts are short: tight tolerances are cheap
+# The whitened residual of an impact the model cannot replay at some values (no contact, a
+# contact outside the law's validity): well above any misfit near the start, so that the
+# search never prefers losing impacts to fitting them (30x that for values the scene refuses)
+PENALTY = 30.0
+FIT_RTOL = 1e-8        # loosest tolerance a replay may use (finite-difference Jacobians)
+
+
+def window_options(model: ArmModel) -> dict:
+    """Integrator options of the replays: the scene's own (the fitted scene will run with
+    them, and a second contact on the edge of happening is found or missed as the scene's
+    runs find or miss it), tightened to 'balanced' when looser than FIT_RTOL."""
+    opts = getattr(model, '_fit_options', None)
+    if opts is None:
+        spec = model.scene.integrator
+        opts = options_from_spec(spec)
+        rtol = opts['rtol'] if opts['rtol'] is not None else PRESETS[opts['preset']][0]
+        if max(rtol, opts['contact_rtol'] or rtol) > FIT_RTOL:
+            opts = options_from_spec(spec, preset='balanced')
+        model._fit_options = opts
+    return opts
 
 
 class FitError(ImpactArmError):
@@ -151,8 +176,8 @@ class TorqueSchedule:
         if self.timing == 'linear':
             edges = np.concatenate([[t_from], grid, [t_to]])
             grid = np.concatenate([np.linspace(lo, hi, SUBSTEPS + 1)[1:-1]
-                                   for lo, hi in zip(edges[:-1], edges[1:])] + [grid])
-        return sorted(set(float(x) for x in grid) | {float(t_to)})
+                                   for lo, hi in itertools.pairwise(edges)] + [grid])
+        return sorted({float(x) for x in grid} | {float(t_to)})
 
 
 def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
@@ -178,7 +203,7 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
     held = timing != 'controller'
     state.mode = 'down'          # the scene's controller, if used, is approaching the surface
     integ = PhaseIntegrator(model, state, control='held' if held else 'continuous',
-                            **WINDOW_OPTIONS)
+                            **window_options(model))
     torque = TorqueSchedule(win, timing)
     first = last = None
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
@@ -189,8 +214,9 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
     try:
         for edge in edges:
             while integ.state.t < edge:
-                if side != 'contact' and held:
-                    integ.state.held_torque = torque(integ.state.t, edge, side)
+                if held:    # (ignored by the kernel while actuators are off in contact)
+                    integ.state.held_torque = torque(integ.state.t, edge,
+                                                     'pre' if side == 'pre' else 'post')
                     integ.reset_derivative()
                 for event in integ.advance(edge, stop_at_event=('contact', 'separation')):
                     if event.kind == 'contact':
@@ -212,10 +238,12 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
                                                stop_at_event=('separation',)):
                         if event.kind == 'separation':
                             last, side = event, 'post'
-                if side != 'post':
+                if side == 'pre' or last is None:
                     return _failed(n, 'no contact predicted across the recorded impact' if
                                    side == 'pre' else 'the contact outlasts the first '
                                    'sample after it')
+                # else in a further contact begun since: the rates there are continuous in
+                # the parameters (it has only just begun when it appears), compare them
                 rates.append(np.linalg.solve(T, integ.state.y[n:2 * n]))
                 targets.pop(0)
     except SimulationError as exc:
@@ -239,7 +267,7 @@ def free_flight(model: ArmModel, win: ImpactWindow, timing, t0, y0, t1):
     held = timing != 'controller'
     state.mode = 'up'
     integ = PhaseIntegrator(model, state, control='held' if held else 'continuous',
-                            **WINDOW_OPTIONS)
+                            **window_options(model))
     torque = TorqueSchedule(win, timing)
     try:
         for edge in torque.boundaries(t0, t1):
@@ -346,7 +374,7 @@ class FitOptions:
     starts: int = 3             # local searches from the best points of the global stage
     global_points: int = 0      # 0: 6 + 4 per parameter
     z_min: float = 30.0         # impact detection threshold (robust z of the rate step)
-    max_nfev: int = 60          # per local search and parameter
+    max_nfev: int = 25          # per local search and parameter
     post_samples: int = 3       # samples after each impact compared with the model
 
 
@@ -358,6 +386,7 @@ class ImpactSet:
         self.use_wrench = use_wrench and any(w.impulse is not None for w in windows)
         self.evaluations = 0
         self.timing = 'linear'
+        self.penalty = PENALTY
 
     def model(self, values) -> ArmModel:
         overrides = {p.key: float(v) for p, v in zip(self.specs, values)}
@@ -387,27 +416,15 @@ class ImpactSet:
             return [_failed(n, str(exc)) for _ in self.windows]
         return [predict_impact(model, w, self.timing) for w in self.windows]
 
-    def calibrate(self, values, sigma_qd, simple=False):
-        """The whitening of each impact's residual at ``values``: the recorded rates' noise
-        (``sigma_qd`` per joint), the wrench noise, and the pre-impact fit's covariance
-        carried through the impact (sensitivities by finite differences). Keeps the impacts
-        the model reproduces; returns notes on the others."""
+    def select(self, values, sigma_qd):
+        """At the starting ``values``: choose the reading of the efforts, move samples taken
+        in a contact out of each impact's comparison, keep the impacts the scene replays and
+        give them robust diagonal weights (``calibrate`` refines them at the optimum)."""
         model = self.model(values)
-        n = model.n
-        if not hasattr(self, 'all_windows'):
-            self.all_windows = list(self.windows)
-        self.timing, self.timing_errors = effort_timing(model, self.all_windows)
+        self.timing, self.timing_errors = effort_timing(model, self.windows)
         kept, self.whiten, notes = [], [], []
-        for w in self.all_windows:
-            base = predict_impact(model, w, self.timing)
-            # a contact under way at the last sample before it, or still at the first after
-            side = 'pre' if 'above the arm' in base.error else \
-                'post' if 'outlasts' in base.error else ''
-            if side and getattr(w, 'widened', None):
-                wider = w.widened(side)
-                if wider is not None:
-                    wider.index = w.index
-                    w, base = wider, predict_impact(model, wider, self.timing)
+        for w in self.windows:
+            w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
                 notes.append(f'impact at t = {w.t_c:.4f} s left out: {base.error} with the '
                              f'starting scene')
@@ -418,21 +435,53 @@ class ImpactSet:
                              f'the contact shows no torque, so the command held after the '
                              f'contact is not recorded')
                 continue
+            # robust weights for the global stage (no linearisation, which a bounce that
+            # comes and goes with the parameters would spoil): each recorded rate's noise
+            # plus the pre-impact rates' uncertainty, the impulse's noise
+            cov_pre = w.pre.state(w.t_a)[2]
+            var = np.tile(sigma_qd ** 2 + np.diag(cov_pre)[model.n:], len(w.post_t))
+            if self.wrench_at(w):
+                var = np.concatenate([var, w.impulse_var])
+            kept.append(w)
+            self.whiten.append(np.diag(1.0 / np.sqrt(var)))
+            w.sigma = np.sqrt(var)
+        self.windows = kept
+        return notes
+
+    def _widen(self, model, w, base):
+        """A contact under way at the last sample before the impact, or still at the first
+        after it (a long contact can span several samples): that sample leaves the free
+        flight, as long as the model says so."""
+        for _ in range(6):
+            side = 'pre' if 'above the arm' in base.error else \
+                'post' if 'outlasts' in base.error else ''
+            wider = w.widened(side) if side and getattr(w, 'widened', None) else None
+            if wider is None:
+                break
+            wider.index = w.index
+            w, base = wider, predict_impact(model, wider, self.timing)
+        return w, base
+
+    def calibrate(self, values, sigma_qd):
+        """The full whitening of each impact's residual at ``values`` (the optimum so far):
+        the recorded rates' noise (``sigma_qd`` per joint), the wrench noise, and the
+        pre-impact fit's covariance carried through the impact (sensitivities by finite
+        differences). An impact the model cannot replay at ``values`` keeps its weights."""
+        try:
+            model = self.model(values)
+        except FitError:
+            return
+        n = model.n
+        for i, w in enumerate(self.windows):
+            base = predict_impact(model, w, self.timing)
+            w, base = self._widen(model, w, base)
+            if base.error:
+                continue
+            self.windows[i] = w
             q, qd, cov_pre = w.pre.state(w.t_a)
             x0 = np.concatenate([q, qd])
             y0 = self.outputs(base, w)
             m = len(w.post_t)
-            if simple:
-                # robust weights for the global stage (no linearisation, which a bounce
-                # that comes and goes with the parameters would spoil): each recorded rate's
-                # noise plus the pre-impact rate's uncertainty, the impulse's noise
-                var = np.tile(sigma_qd ** 2 + np.diag(cov_pre)[n:], m)
-                if self.wrench_at(w):
-                    var = np.concatenate([var, w.impulse_var])
-                kept.append(w)
-                self.whiten.append(np.diag(1.0 / np.sqrt(var)))
-                w.sigma = np.sqrt(var)
-                continue
             S = np.zeros((len(y0), 2 * n))
             steps = np.sqrt(np.diag(cov_pre)) + 1e-9
             for k in range(2 * n):
@@ -447,19 +496,16 @@ class ImpactSet:
                 C[m * n:, m * n:] += np.diag(w.impulse_var)
             # noise-free data (a simulation) leave C singular: a relative floor keeps it usable
             C += np.eye(len(C)) * max(1e-12 * np.trace(C) / len(C), 1e-30)
-            kept.append(w)
-            self.whiten.append(np.linalg.inv(np.linalg.cholesky(C)))
+            self.whiten[i] = np.linalg.inv(np.linalg.cholesky(C))
             w.sigma = np.sqrt(np.diag(C))
-        self.windows = kept
-        return notes
 
     def residuals(self, values, predictions=None):
         preds = predictions if predictions is not None else self.predict(values)
         out = []
         for w, L, p in zip(self.windows, self.whiten, preds):
             if p.error:
-                out.append(np.full(L.shape[0], REFUSED if p.error.startswith('the scene refuses')
-                                   else PENALTY))
+                refused = p.error.startswith('the scene refuses')
+                out.append(np.full(L.shape[0], self.penalty * (30 if refused else 1)))
             else:
                 out.append(L @ (self.outputs(p, w) - self.recorded(w)))
         return np.concatenate(out) if out else np.zeros(0)
@@ -550,11 +596,22 @@ def prepare(recording: JointRecording, options: FitOptions, model: ArmModel | No
     impacts = find_impacts(recording, options.z_min,
                            contact_test(model) if model is not None else None)
     if not impacts:
-        raise IdentifyError(f'no impact in the recording {recording.source or ""}: no step in '
-                            f'the joint rates stands out of the noise'.replace('  ', ' '))
+        steps = len(find_impacts(recording, options.z_min)) if model is not None else 0
+        why = (f'{steps} step(s) of the joint rates, none with the tip near a surface of the '
+               f'scene (check --joints order, the scene\'s links and surface heights)'
+               if steps else 'no step in the joint rates stands out of the noise')
+        raise IdentifyError(f'no impact in the recording {recording.source}: {why}')
     noise = estimate_noise(recording, impacts, options.window)
     windows, notes = impact_windows(recording, noise, impacts, options.window,
                                     post_samples=options.post_samples)
+    normal = [w.impulse[1] for w in windows if w.impulse is not None]
+    if normal and np.median(normal) < 0:
+        # a wrench published as the force on the surface, not on the arm: same law
+        for w in windows:
+            if w.impulse is not None:
+                w.impulse = -w.impulse
+        notes.append('the recorded wrench points into the surface: its sign is reversed '
+                     '(the simulator publishes the force on the arm)')
     if not windows:
         raise IdentifyError(f'{len(impacts)} impact(s) found but none usable: ' + '; '.join(notes))
     return impacts, noise, windows, notes
@@ -583,7 +640,8 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
     problem = ImpactSet(study, specs, windows, options.use_wrench)
     start = np.array([p.start for p in specs])
     say(f'{len(windows)} impacts; reading of the efforts', 0, None)
-    start_notes = problem.calibrate(start, noise.velocity, simple=True)
+    start_notes = problem.select(start, noise.velocity)
+    notes += start_notes
     if not problem.windows:
         raise IdentifyError('the starting scene reproduces none of the recorded impacts: '
                             + '; '.join(start_notes[-3:]))
@@ -591,7 +649,9 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
         raise FitError(f'{len(problem.windows)} usable impact(s) cannot determine '
                        f'{len(specs)} parameters')
 
-    to_values = lambda u: np.array([p.from_unit(x) for p, x in zip(specs, u)])  # noqa: E731
+    to_values = lambda u: np.array([p.from_unit(x) for p, x in zip(specs, u)])
+    r0 = problem.residuals(start)
+    problem.penalty = max(PENALTY, 10 * float(np.sqrt(np.mean(r0 ** 2))))
     u_start = np.array([p.to_unit(p.start) for p in specs])
     n_global = options.global_points or 6 + 4 * len(specs)
     candidates = [u_start] + list(0.02 + 0.96 * _halton(n_global, len(specs)))
@@ -619,15 +679,14 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
     # the full covariance (pre-impact uncertainty through the impact map) is linearised
     # where the model is right: at the optimum, then refined from there, until it settles
     for rounds in range(3):
-        run_notes = problem.calibrate(to_values(best[1]), noise.velocity)
+        problem.calibrate(to_values(best[1]), noise.velocity)
         cost, u = local(best[1])
         moved = np.max(np.abs(u - best[1]))
         best = (cost, u)
-        say(f'refinement {rounds + 1}  chi2 {cost:.4g}', len(candidates) + options.starts + 1,
-            total)
+        say(f'refinement {rounds + 1} at the optimum: chi2 {cost:.4g} over '
+            f'{len(problem.residuals(to_values(u)))} values')
         if moved < 1e-4:
             break
-    notes += run_notes
     u_best = best[1]
     values = to_values(u_best)
     problem.best = values
@@ -721,8 +780,8 @@ def _result(problem, specs, values, u_best, preds, start_preds, noise, notes, re
 
 
 def _why(problem, per_impact, params, red, dof) -> str:
-    parts = [f'residuals {math.sqrt(red):.1f}x the noise (chi2/dof = {red:.3g} over {dof} '
-             f'degrees of freedom)']
+    parts = [(f'residuals {math.sqrt(red):.1f}x the noise (chi2/dof = {red:.3g} over {dof} '
+             f'degrees of freedom)')]
     with_wrench = [x for x in per_impact if 'residual_impulse' in x]
     if with_wrench:
         rate = np.mean([np.sum(np.square(x['whitened'][:-2])) for x in with_wrench])

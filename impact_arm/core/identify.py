@@ -200,11 +200,15 @@ def find_impacts(rec: JointRecording, z_min: float = 30.0, is_contact=None) -> l
             gaps[-1].append(k)
         else:
             gaps.append([k])
-    found = [max(group, key=lambda k: z[k]) for group in gaps]
-    if is_contact is not None:
-        v = rec.velocity
-        found = [k for k in found if 2 <= k < len(v) - 3 and is_contact(
-            rec.position[k], 2 * v[k] - v[k - 1], 2 * v[k + 1] - v[k + 2])]
+    v = rec.velocity
+    found = []
+    for group in gaps:
+        # the strongest gap of the group that can be a contact (a stiff sampled controller
+        # makes steps of its own right after an impact, some larger than the impact's)
+        if is_contact is not None:
+            group = [k for k in group if is_contact(rec.position[k], v[k], v[k + 1])]
+        if group:
+            found.append(max(group, key=lambda k: z[k]))
     return found
 
 
@@ -254,7 +258,7 @@ def impact_windows(rec: JointRecording, noise: Noise, impacts, window: int = 15,
     """An ``ImpactWindow`` per usable impact and a note per impact left out (too few free
     samples between impacts, a gap of more than ``max_gap`` periods across the contact)."""
     out, notes = [], []
-    N, dt = len(rec.t), rec.period
+    N, _dt = len(rec.t), rec.period
     for i, a in enumerate(impacts):
         lo = impacts[i - 1] + 1 if i else 0
         hi = impacts[i + 1] if i + 1 < len(impacts) else N - 1
@@ -274,9 +278,18 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
     given to the impact on that side, for a contact that spans a sample."""
     N, dt = len(rec.t), rec.period
-    off = lambda k: bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))  # noqa: E731
+    off = lambda k: bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))
     while b < min(hi, a + 4) and off(b) and not off(a):
         b += 1          # actuators off at b while driven before: b was taken in the contact
+    v = rec.velocity
+    while b < min(hi - 1, a + 4):
+        # the step still going on after b in its own direction (by more than a tenth of
+        # it): b was taken in the contact too
+        jump = v[b] - v[a]
+        size = float(np.linalg.norm(jump))
+        if not size or float((v[b + 1] - v[b]) @ jump) / size < 0.1 * size:
+            break
+        b += 1
     pre_idx = np.arange(max(lo, a - window + 1), a + 1)
     post_idx = np.arange(b, min(hi, b + window - 1) + 1)
     if rec.t[b] - rec.t[a] > max_gap * dt:

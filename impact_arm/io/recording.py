@@ -117,9 +117,8 @@ def read_recording(path, joints=None, n_joints: int = 2, states_topic: str = JOI
                     if not all(j in index for j in joints):
                         continue
                     cols = [index[j] for j in joints]
-                    pick = (lambda values: [values[c] for c in cols]
-                            if len(values) == len(names) else [np.nan] * len(cols))
-                    states.append((stamp, m.log_time_ns, pick(pos), pick(vel), pick(eff)))
+                    states.append((stamp, m.log_time_ns, *(_pick(v, cols, len(names))
+                                                          for v in (pos, vel, eff))))
                 else:
                     stamp, force = _wrench(m.data)
                     wrenches.append((stamp, m.log_time_ns, force[0], force[1]))
@@ -134,6 +133,11 @@ def read_recording(path, joints=None, n_joints: int = 2, states_topic: str = JOI
                 f'{", ".join(sorted(seen_names)) or "none"})')
         raise RecordingInputError(f'{states_topic}: no message names all of {joints}')
     return _assemble(states, wrenches, joints, os.fspath(path), notes)
+
+
+def _pick(values, cols, count):
+    """The wanted joints' values, or NaN when a field does not give one per name."""
+    return [values[c] for c in cols] if len(values) == count else [np.nan] * len(cols)
 
 
 def _stamps(header_ns, log_ns):

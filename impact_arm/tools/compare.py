@@ -36,7 +36,7 @@ def recorded_impacts(rec, study, timing=None) -> tuple:
     model = ArmModel(study.scene())
     _, noise, windows, notes = prepare(rec, FitOptions(), model)
     problem = ImpactSet(study, [], windows, True)
-    problem.calibrate([], noise.velocity)
+    problem.select([], noise.velocity)
     T = joint_to_absolute_matrix(rec.n)
     rows, preds = [], []
     for w in problem.windows:
@@ -98,7 +98,7 @@ def compare(a, b, *, scene='paper', joints=None, controller=False, states_topic=
     study = Study(kin_scene)
     n = study.scene().n_links
     rec_a = read_recording(a, joints, n, states_topic or JOINT_STATES, wrench_topic)
-    a_rows, preds, problem, _ = recorded_impacts(rec_a, study)
+    a_rows, preds, _problem, _ = recorded_impacts(rec_a, study)
     a_origin = a_rows[0]['t'] if a_rows else 0.0
     if b_is_recording:
         rec_b = read_recording(b, joints, n, states_topic or JOINT_STATES, wrench_topic)
@@ -130,8 +130,8 @@ def compare(a, b, *, scene='paper', joints=None, controller=False, states_topic=
 
 
 def format_table(result) -> str:
-    lines = [f"{'#':>3} {'t A [s]':>8} {'t B [s]':>8} {'v A':>6} {'v B':>6} {'e A':>7} "
-             f"{'e B':>7} {'de':>8} {'Pn A':>7} {'Pn B':>7} {'dPn':>8}  dqd after [rad/s]"]
+    lines = [(f"{'#':>3} {'t A [s]':>8} {'t B [s]':>8} {'v A':>6} {'v B':>6} {'e A':>7} "
+             f"{'e B':>7} {'de':>8} {'Pn A':>7} {'Pn B':>7} {'dPn':>8}  dqd after [rad/s]")]
     for k, r in enumerate(result['table']):
         lines.append(
             f"{k + 1:>3} {r['a_t']:>8.4f} {r['b_t']:>8.4f} {r['impact_speed_a']:>6.3f} "

@@ -9,6 +9,7 @@ Python API: ``fit_recording(...)`` returns the ``FitResult`` and writes the same
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -72,6 +73,7 @@ def fit_recording(recording, scene, params: dict, *, joints=None, states_topic=N
 def write_fitted_scene(scene, values: dict, path, recording=''):
     """The scene with the fitted values: a file ``impact-arm simulate --scene`` runs."""
     import yaml
+
     from ..core.scene import parse_scene
     from ..core.study import Study, apply_overrides
     study = Study(scene)
@@ -94,11 +96,11 @@ def report_text(result, recording, scene) -> str:
     lines = [f'# Fit of {os.fspath(recording)}', '',
              f'Scene: `{scene}` → fitted scene `{result.scene_path}`', '',
              f'**Verdict: {result.verdict}**', '',
-             f'{result.impacts_used} impacts used; {"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
+             (f'{result.impacts_used} impacts used; {"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
              f'χ² = {result.chi2:.4g} over {result.dof} degrees of freedom '
              f'(χ²/dof = {result.chi2 / result.dof:.3g}); residual rms {result.residual_rms:.3g} '
              f'rad/s against a noise rms of {result.noise_rms:.3g} rad/s; '
-             f'{result.evaluations} model evaluations in {result.wall_time:.2f} s.', '',
+             f'{result.evaluations} model evaluations in {result.wall_time:.2f} s.'), '',
              '| parameter | start | fitted | 95 % interval | identified |', '|---|---:|---:|---|---|']
     for key, p in result.parameters.items():
         ident = 'yes' if p['identifiable'] else f'no ({p.get("why", "correlated")})'
@@ -120,8 +122,8 @@ def report_text(result, recording, scene) -> str:
                   + (f', wrench {", ".join(_fmt(x) for x in noise["wrench"])} N'
                      if 'wrench' in noise else '') + '.',
               f'Effort timing used between samples: {result.timing}.', '',
-              '| # | t [s] | impact speed [m/s] | CoR recorded | CoR fitted | '
-              'rate residual [rad/s] | whitened rms |', '|---:|---:|---:|---:|---:|---|---:|']
+              ('| # | t [s] | impact speed [m/s] | CoR recorded | CoR fitted | '
+              'rate residual [rad/s] | whitened rms |'), '|---:|---:|---:|---:|---:|---|---:|']
     for k, row in enumerate(result.per_impact):
         if row.get('error'):
             lines.append(f'| {k + 1} | {row["t"]:.4f} | {row["impact_speed"]:.4g} | | | '
@@ -139,11 +141,16 @@ def report_text(result, recording, scene) -> str:
     return '\n'.join(lines)
 
 
+def _ms_from(origin, t):
+    return (np.asarray(t) - origin) * 1e3
+
+
 def write_figures(result, out) -> list:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+
     from ..core.fit import predict_impact
     problem = result.problem
     model = problem.model([result.scene_overrides[p.key] for p in problem.specs])
@@ -164,7 +171,7 @@ def write_figures(result, out) -> list:
         ax = axes[0][c]
         lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
         sel = (rec.t >= lo) & (rec.t <= hi)
-        t_ms = lambda t: (np.asarray(t) - w.t_c) * 1e3   # noqa: E731
+        t_ms = functools.partial(_ms_from, w.t_c)
         for j in range(rec.n):
             ax.plot(t_ms(rec.t[sel]), rec.velocity[sel, j], 'o', ms=3, color=colors[j % 4],
                     label=f'{rec.joints[j]} recorded')
@@ -187,16 +194,16 @@ def write_figures(result, out) -> list:
                 dtw = float(np.median(np.diff(rec.wrench_t)))
                 ts = rec.wrench_t[wsel]
                 ts = ts[(ts > w.t_a) & (ts <= w.post_t[-1])]
-                for col, style, name in ((4, '--', 'normal'), (3, ':', 'tangential')):
+                for col, mark, name in ((4, 'x', 'normal'), (3, '+', 'tangential')):
                     cum = np.interp(ts, pred.path[:, 0], pred.path[:, col]) - \
                         np.interp(ts - dtw, pred.path[:, 0], pred.path[:, col])
-                    ax.step(t_ms(ts), cum / dtw, style, where='pre', lw=1,
-                            color='k' if col == 4 else 'tab:gray', label=f'{name} fitted')
+                    ax.plot(t_ms(ts), cum / dtw, mark, ms=9,
+                            color='tab:red' if col == 4 else 'tab:purple', label=f'{name} fitted')
             ax.set_xlabel('time from contact [ms]')
             ax.set_ylabel('period-averaged force [N]')
             if c == 0:
                 ax.legend(fontsize=7)
-    fig.suptitle('Recorded (markers) and fitted (lines) around the impacts', fontsize=10)
+    fig.suptitle('Recorded and fitted around the impacts', fontsize=10)
     fig.tight_layout()
     path = os.path.join(out, 'impacts.png')
     fig.savefig(path, dpi=110)

@@ -42,7 +42,7 @@ def synthetic_recording(scene='paper', overrides=None, *, cycles=None, publish_r
     w_keep = rng.random(len(t)) >= drop
     rec = JointRecording(t=stamps[keep] - stamps[keep][0], position=q[keep], velocity=qd[keep],
                          effort=tau[keep], joints=[f'joint{i + 1}' for i in range(q.shape[1])],
-                         source=f'synthetic {scene}', t0_ns=int(round(stamps[keep][0] * 1e9)))
+                         source=f'synthetic {scene}', t0_ns=round(stamps[keep][0] * 1e9))
     if wrench:
         rec.wrench_t = stamps[w_keep] - stamps[keep][0]
         rec.wrench = w[w_keep]
@@ -58,11 +58,11 @@ def _messages(rec: JointRecording):
     """(topic, stamp ns, kind, fields) of the recording in time order."""
     out = []
     for k in range(len(rec.t)):
-        ns = rec.t0_ns + int(round(rec.t[k] * 1e9))
+        ns = rec.t0_ns + round(rec.t[k] * 1e9)
         out.append((ns, 'js', k))
     if rec.wrench is not None:
         for k in range(len(rec.wrench_t)):
-            out.append((rec.t0_ns + int(round(rec.wrench_t[k] * 1e9)), 'w', k))
+            out.append((rec.t0_ns + round(rec.wrench_t[k] * 1e9), 'w', k))
     out.sort(key=lambda x: x[0])
     return out
 
@@ -133,4 +133,4 @@ def driver_recording(scene='paper', overrides=None, *, rate=1000.0, cycles=6, no
                      ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench')))
     return JointRecording(t=t - t[0], position=q, velocity=qd, effort=tau, wrench_t=t - t[0],
                           wrench=w, joints=[f'joint{i + 1}' for i in range(q.shape[1])],
-                          source=f'driver {scene}', t0_ns=int(round(t[0] * 1e9)))
+                          source=f'driver {scene}', t0_ns=round(t[0] * 1e9))

@@ -28,6 +28,8 @@ SUBCOMMANDS = {
                'realtime simulator + controller started N times as a user does'),
     'coldstart': ('impact_arm.tools.benchmarks.coldstart',
                   'first run of a new arm shape by link count: equations, compile, warm load'),
+    'fit': ('impact_arm.tools.benchmarks.fit',
+            'impact-arm fit: accuracy and interval coverage over drawn cases, cost, growth'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }
