@@ -42,6 +42,19 @@ def cache_dir() -> str:
     return base
 
 
+# the kernel's form of mass_and_rhs (``kernel/injected.py``) for the symbolic derivation
+MASS_INTO_WRAPPER = """
+
+@jit_leaf
+def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
+    values = mass_and_rhs(q, qd, Qx, L, m, g)
+    for i in range(len(q) * len(q)):
+        S[i] = values[i]
+    for i in range(len(q)):
+        out[i] = values[len(q) * len(q) + i]
+"""
+
+
 def _derive_source(n: int, gravity: bool) -> str:
     """Generate Python source for the chain's numeric functions (runs sympy)."""
     import sympy as sp
@@ -193,7 +206,28 @@ def _chain_source(n: int, gravity: bool) -> str:
     entries += [f'r{i}' for i in r]
     lines.append(f'    return ({", ".join(entries)},)')
     funcs.append('\n'.join(lines))
-
+    # the kernel's form: loops, not straight-line code (n² named values cost numba seconds
+    # to type and lower: 6 s at 12 links)
+    gravity_term = ' - g * L[j] * cos(q[j]) * (0.5 * m[j] + tail)' if gravity else ''
+    funcs.append(f'''@jit_leaf
+def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
+    n = q.shape[0]
+    tail = 0.0                  # mass of the links beyond link j
+    for j in range(n - 1, -1, -1):
+        out[j] = Qx[j]{gravity_term}
+        S[j * n + j] = L[j] * L[j] * (m[j] / 3.0 + tail)
+        for i in range(j):      # the upper triangle holds C_ij until the second pass
+            S[i * n + j] = L[i] * L[j] * (0.5 * m[j] + tail)
+        tail += m[j]
+    for j in range(n):
+        for i in range(j):
+            c = S[i * n + j]
+            d = q[i] - q[j]
+            sn = c * sin(d)
+            out[i] -= sn * qd[j] * qd[j]
+            out[j] += sn * qd[i] * qd[i]
+            S[i * n + j] = c * cos(d)
+            S[j * n + i] = S[i * n + j]''')
     lines = head('tip', ['q', 'qd', 'L'])
     trig(lines)
     lines.append('    return (' + ' + '.join(f'L[{i}] * c{i}' for i in r) + ', '
@@ -286,13 +320,13 @@ def _derivation(n, gravity):
         with open(path, encoding='utf-8') as f:
             text = f.read()
         if text:
-            return text
+            return text + MASS_INTO_WRAPPER
     sys.stderr.write(f'impact_arm: deriving the equations of motion of a {n}-link arm '
                      f'(sympy; first use of this shape only)\n')
     sys.stderr.flush()
     text = _derive_source(n, gravity)
     _write_atomically(path, text)
-    return text
+    return text + MASS_INTO_WRAPPER
 
 
 def _write_atomically(path, text):
