@@ -136,11 +136,11 @@ def _derive_source(n: int, gravity: bool) -> str:
     return '\n\n\n'.join(funcs) + '\n'
 
 
-# Up to this many links the equations come from the symbolic derivation above; beyond it from
-# the chain's closed-form recursion below (``_chain_source``): the symbolic expansion grows
-# steeply with n (5 links: 5 s, 8 links: ~1 min) while the recursion's straight-line code
-# is O(n²) lines, written in milliseconds and compiled in seconds.
-SYMBOLIC_LINKS = 4
+# Up to this many links the equations come from the symbolic derivation above (which then
+# also gives q̈ in closed form); beyond it from the chain's closed form below
+# (``_chain_source``): the symbolic expansion grows steeply with n (4 links: 5 s, 5 links:
+# 5-10 s, 8 links: ~1 min) while the closed form is written in milliseconds.
+SYMBOLIC_LINKS = 3
 
 
 def _chain_source(n: int, gravity: bool) -> str:
