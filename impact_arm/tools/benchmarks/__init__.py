@@ -28,6 +28,8 @@ SUBCOMMANDS = {
                'realtime simulator + controller started N times as a user does (issue 12)'),
     'coldstart': ('impact_arm.tools.benchmarks.coldstart',
                   'first run of a new arm shape by link count: equations, compile, warm load'),
+    'peers': ('impact_arm.tools.benchmarks.peers',
+              'MuJoCo on the same scene beside this project (optional: pip install mujoco)'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }
