@@ -33,7 +33,8 @@ def arguments(rng, n):
 @pytest.mark.parametrize('n', [2, 3, 4])
 @pytest.mark.parametrize('gravity', [True, False])
 def test_closed_form_matches_the_symbolic_derivation(n, gravity):
-    symbolic = functions(equations._derive_source(n, gravity) if n > equations.SYMBOLIC_LINKS
+    symbolic = functions(equations._derive_source(n, gravity) + equations.MASS_INTO_WRAPPER
+                         if n > equations.SYMBOLIC_LINKS
                          else equations._derivation(n, gravity))
     chain = functions(equations._chain_source(n, gravity))
     rng = np.random.default_rng(n)
@@ -45,6 +46,13 @@ def test_closed_form_matches_the_symbolic_derivation(n, gravity):
             assert got.shape == want.shape, name
             scale = max(1.0, np.max(np.abs(want)))
             assert np.max(np.abs(got - want)) <= 1e-12 * scale, (name, got, want)
+        # the kernel's form (arrays, not a tuple): the same numbers
+        want = np.array(symbolic['mass_and_rhs'](*args['mass_and_rhs']))
+        for f in (symbolic, chain):
+            S, out = np.zeros(n * n), np.zeros(n)
+            f['mass_and_rhs_into'](*args['mass_and_rhs'], S, out)
+            got = np.concatenate([S, out])
+            assert np.max(np.abs(got - want)) <= 1e-12 * max(1.0, np.max(np.abs(want)))
 
 
 def kinetic_energy(f, q, qd, L, m):
@@ -72,11 +80,11 @@ def test_long_chain_conserves_energy_in_free_swing():
     f = functions(equations._chain_source(n, True))
     L, m = np.linspace(0.3, 0.6, n), np.linspace(1.0, 0.4, n)
 
-    def rate(y):
+    def rate(y):      # through the kernel's form of the equations
         q, qd = y[:n], y[n:]
-        values = f['mass_and_rhs'](q, qd, np.zeros(n), L, m, 9.81)
-        M = np.array(values[:n * n]).reshape(n, n)
-        return np.concatenate([qd, np.linalg.solve(M, np.array(values[n * n:]))])
+        S, b = np.zeros(n * n), np.zeros(n)
+        f['mass_and_rhs_into'](q, qd, np.zeros(n), L, m, 9.81, S, b)
+        return np.concatenate([qd, np.linalg.solve(S.reshape(n, n), b)])
 
     def energy(y):
         q, qd = y[:n], y[n:]

@@ -42,6 +42,19 @@ def cache_dir() -> str:
     return base
 
 
+# the kernel's form of mass_and_rhs (``kernel/injected.py``) for the symbolic derivation
+MASS_INTO_WRAPPER = """
+
+@jit_leaf
+def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
+    values = mass_and_rhs(q, qd, Qx, L, m, g)
+    for i in range(len(q) * len(q)):
+        S[i] = values[i]
+    for i in range(len(q)):
+        out[i] = values[len(q) * len(q) + i]
+"""
+
+
 def _derive_source(n: int, gravity: bool) -> str:
     """Generate Python source for the chain's numeric functions (runs sympy)."""
     import sympy as sp
@@ -123,11 +136,11 @@ def _derive_source(n: int, gravity: bool) -> str:
     return '\n\n\n'.join(funcs) + '\n'
 
 
-# Up to this many links the equations come from the symbolic derivation above; beyond it from
-# the chain's closed-form recursion below (``_chain_source``): the symbolic expansion grows
-# steeply with n (5 links: 5 s, 8 links: ~1 min) while the recursion's straight-line code
-# is O(n²) lines, written in milliseconds and compiled in seconds.
-SYMBOLIC_LINKS = 4
+# Up to this many links the equations come from the symbolic derivation above (which then
+# also gives q̈ in closed form); beyond it from the chain's closed form below
+# (``_chain_source``): the symbolic expansion grows steeply with n (4 links: 5 s, 5 links:
+# 5-10 s, 8 links: ~1 min) while the closed form is written in milliseconds.
+SYMBOLIC_LINKS = 3
 
 
 def _chain_source(n: int, gravity: bool) -> str:
@@ -193,7 +206,28 @@ def _chain_source(n: int, gravity: bool) -> str:
     entries += [f'r{i}' for i in r]
     lines.append(f'    return ({", ".join(entries)},)')
     funcs.append('\n'.join(lines))
-
+    # the kernel's form: loops, not straight-line code (n² named values cost numba seconds
+    # to type and lower: 6 s at 12 links)
+    gravity_term = ' - g * L[j] * cos(q[j]) * (0.5 * m[j] + tail)' if gravity else ''
+    funcs.append(f'''@jit_leaf
+def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
+    n = q.shape[0]
+    tail = 0.0                  # mass of the links beyond link j
+    for j in range(n - 1, -1, -1):
+        out[j] = Qx[j]{gravity_term}
+        S[j * n + j] = L[j] * L[j] * (m[j] / 3.0 + tail)
+        for i in range(j):      # the upper triangle holds C_ij until the second pass
+            S[i * n + j] = L[i] * L[j] * (0.5 * m[j] + tail)
+        tail += m[j]
+    for j in range(n):
+        for i in range(j):
+            c = S[i * n + j]
+            d = q[i] - q[j]
+            sn = c * sin(d)
+            out[i] -= sn * qd[j] * qd[j]
+            out[j] += sn * qd[i] * qd[i]
+            S[i * n + j] = c * cos(d)
+            S[j * n + i] = S[i * n + j]''')
     lines = head('tip', ['q', 'qd', 'L'])
     trig(lines)
     lines.append('    return (' + ' + '.join(f'L[{i}] * c{i}' for i in r) + ', '
@@ -259,7 +293,7 @@ def _module_header(n, gravity, contact, friction, n_integral):
              '# Do not edit: delete the file to regenerate it.',
              f'# compiled with {jit_options()}',
              'import math', 'from math import sin, cos, sqrt', 'import numpy as np',
-             'from impact_arm.core.jit import jit, jit_alloc, jit_leaf',
+             'from impact_arm.core.jit import jit, jit_leaf',
              *(['# a long chain: the kernel\'s helpers are compiled once and called instead',
                 '# of inlined at every call site (numba\'s inlining copies and re-types their',
                 '# code each time: a 30 s cold start, growing with the links)',
@@ -286,7 +320,7 @@ def _derivation(n, gravity):
         with open(path, encoding='utf-8') as f:
             text = f.read()
         if text:
-            return text
+            return text + MASS_INTO_WRAPPER
     from .jit import compile_ended, compile_started
     compile_started()           # sympy: part of the one-time cost the tools announce
     try:
@@ -294,7 +328,7 @@ def _derivation(n, gravity):
     finally:
         compile_ended()
     _write_atomically(path, text)
-    return text
+    return text + MASS_INTO_WRAPPER
 
 
 def _write_atomically(path, text):

@@ -89,6 +89,29 @@ _LAWS = {'held': layout.LAW_HELD, 'q': layout.LAW_Q, 'pid': layout.LAW_PID,
          'pd': layout.LAW_PID, 'none': layout.LAW_NONE}
 
 
+def _numba_type(value):
+    """numba's type of a kernel argument, built directly: ``numba.typeof`` of an array imports
+    numpy.ma (13 ms of a fresh process) to rule out masked arrays."""
+    from numba import types
+    if isinstance(value, np.ndarray):
+        dtype = types.int64 if value.dtype == np.int64 else types.float64
+        return types.Array(dtype, value.ndim, 'C')
+    return types.float64
+
+
+def scratch_arrays(model):
+    """The kernel's working arrays (``kernel/loop.py``, ``advance``), made once per
+    integrator: y1, f1, err, work, y_root, f_tmp (the state's size each), the stages K, the
+    right-hand side's scratch W, three rows of event values, the Rosenbrock Jacobian and its
+    factors JW, y_prev, and the contact-frequency scratch."""
+    size, n = model.size, model.n
+    events = model.surface_table.shape[0] + 4
+    vectors = [np.zeros(size) for _ in range(6)]
+    return (*vectors, np.zeros((5, size)), np.zeros(model.eq.SCRATCH), np.zeros(events),
+            np.zeros(events), np.zeros(events), np.zeros((2 * size + 2, size)), np.zeros(size),
+            np.zeros(4 * n + n * n))
+
+
 class PhaseIntegrator:
     """Advances an ``ArmState`` on an ``ArmModel`` across contact phase switches.
 
@@ -145,6 +168,7 @@ class PhaseIntegrator:
         self._ev[layout.EV_STEPS] = STEPS_PER_CALL
         self._evlog = np.zeros((EVENT_LOG_CAPACITY, layout.E_Y + model.size))
         self._W = np.zeros(model.eq.SCRATCH)
+        self._scratch = scratch_arrays(model)
         self._O = np.zeros(3)                   # next output index k, period dt (0: off), rows
         self._out = np.zeros((1, self.output_width))
         self._output = []
@@ -161,14 +185,13 @@ class PhaseIntegrator:
         if not jit.AVAILABLE or eq.advance.overloads:
             return 0.0
         import time
-        from numba import typeof
         t0 = time.perf_counter()
         st = self.state
         args = (self._T, 0.0, st.y, self._f, self._P, self._I, self.model.surface_table, st.c,
                 st.levels, st.held, self._stats, self._trace_buffer, self._trace_count,
-                self._ev, self._evlog, self._O, self._out)
-        eq.advance.compile(tuple(typeof(a) for a in args))
-        vector = typeof(st.y)
+                self._ev, self._evlog, self._O, self._out, *self._scratch)
+        eq.advance.compile(tuple(_numba_type(a) for a in args))
+        vector = _numba_type(st.y)
         eq.tip.compile((vector, vector, vector))           # the impact records' kinematics
         eq.link_energies.compile((vector, vector, vector, vector))
         return time.perf_counter() - t0
@@ -339,7 +362,7 @@ class PhaseIntegrator:
             status = model.eq.advance(self._T, t_call, st.y, self._f, self._P, self._I,
                                       model.surface_table, st.c, st.levels, st.held,
                                       self._stats, self._trace_buffer, self._trace_count,
-                                      self._ev, self._evlog, O, self._out)
+                                      self._ev, self._evlog, O, self._out, *self._scratch)
             st.t, self._h = float(self._T[layout.T_TIME]), float(self._T[layout.T_STEP])
             self._f_valid = self._T[layout.T_STALE] == 0.0
             self._drain_events(events)

@@ -40,13 +40,13 @@ def _load_cached_without_refresh():
     ``Cache.load_overload`` refreshes the target context before each load: it imports and
     registers numba's whole typing and lowering library (numba.cpython, np.linalg, the typed
     containers, ...): 0.09-0.14 s of a fresh process's first kernel call, for a load that
-    only links machine code from the cache file. Loading needs the runtime (NRT: the
-    kernel's entry point allocates its scratch), which is initialised here. A cache miss
+    only links machine code from the cache file. Nor does it initialise numba's
+    reference-counting runtime (JIT-compiling it costs 20-30 ms): no function of this package
+    uses it (``OPTIONS``). A cache miss
     still compiles with everything: numba's compiler refreshes the context itself, after
     ``_load_numba_without_blas`` (only then: a process that just loads never imports
     numba's array library, 27 ms). Only this package's functions are loaded this way."""
     from numba.core import caching
-    from numba.core.runtime import rtsys
     original = caching.Cache.load_overload
     if getattr(original, '_impact_arm', False):
         return
@@ -54,7 +54,6 @@ def _load_cached_without_refresh():
     def load_overload(self, sig, target_context):
         if not getattr(self._py_func, '__module__', '').startswith('impact_arm'):
             return original(self, sig, target_context)    # other packages' functions
-        rtsys.initialize(target_context)
         loaded = None
         with self._guard_against_spurious_io_errors():
             loaded = self._load_overload(sig, target_context)
@@ -85,15 +84,15 @@ except ImportError as exc:  # interpreter fallback: identical code, ~100x slower
 # handles is counted up and down with atomic instructions around each inlined call, and the
 # pruning pass removes those pairs only in branch-free code. In the right-hand side (early
 # returns, phase branches) they cost 4/5 of each evaluation (0.49 -> 0.09 us measured, two
-# links). Functions built this way must not allocate (np.empty & co. fail to compile); the
-# one that does, the kernel's entry point, uses ``jit_alloc``.
+# links). Functions built this way must not allocate (np.empty & co. fail to compile): the
+# kernel's scratch comes from its caller (``integrator.scratch_arrays``), so no function of
+# this package needs numba's runtime at all, and loading one never initialises it.
 OPTIONS = dict(cache=True, nogil=True, _nrt=False)
 # Small leaf functions (force laws, control laws, generated equations) are inlined at the IR
 # level into their callers: calls between compiled functions otherwise cost more than the
 # arithmetic of a two-link right-hand side (measured 0.36 -> 0.21 us per call). Inlining the
 # big kernel functions too would make compilation explode, so they stay plain calls.
 LEAF_OPTIONS = dict(OPTIONS, inline='always')
-ALLOC_OPTIONS = dict(OPTIONS, _nrt=True)
 
 
 def jit(func):
@@ -109,13 +108,6 @@ def jit_leaf(func):
     if _njit is None:
         return func
     return _njit(**LEAF_OPTIONS)(func)
-
-
-def jit_alloc(func):
-    """Like ``jit`` for a function that allocates arrays (with reference counting)."""
-    if _njit is None:
-        return func
-    return _njit(**ALLOC_OPTIONS)(func)
 
 
 # ------------------------------------------------------------------ compile notifications

@@ -120,7 +120,6 @@ class RunResult:
             'vy_range': ranges.v_range(1),
             'rhs_evaluations': self.rhs_evaluations,
             'wall_time': self.wall_time,
-            'kernel_load_time': self.load_time,
         }
 
     def to_json(self) -> dict:

@@ -37,6 +37,12 @@ def mass_and_rhs(q, qd, Qx, L, m, g) -> tuple:
     return (math.nan,) * (N * N + N)
 
 
+def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
+    """``mass_and_rhs`` written into arrays: M row-major into S[:N*N], the right-hand side
+    into out[:N] (a long chain's N*N + N values are not returned as a tuple: numba types and
+    lowers a big tuple, and each indexing of it, slowly)."""
+
+
 def tip(q, qd, L) -> tuple:
     """(x, y, ẋ, ẏ) of the tip."""
     return (math.nan,) * 4

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..jit import jit, jit_alloc, jit_leaf
+from ..jit import jit, jit_leaf
 from ..layout import *
 from .events import event_values, locate
 from .injected import *
@@ -17,9 +17,9 @@ from .rhs import contact_frequency, rhs
 from .steps import EPS, error_norm, initial_step, phase_tolerances, rosenbrock_now, trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
-@jit_alloc
+@jit
 def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev, evlog,
-            O, out):
+            O, out, y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp, JW, y_prev, scratch):
     """Integrate from T[T_TIME] to t_end with step T[T_STEP]; y, f updated in place.
     T[T_STALE] != 0 asks for f to be recomputed first (new phase, new command); T[T_STEP] <= 0
     for a fresh step size. With O[O_DT] = dt > 0, rows of ``out`` are written at the output times k dt (``emit_output``)
@@ -34,11 +34,11 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
     (ERR_RESIDUAL at a maximum compression that ``apply_event`` refused, not logged)."""
     size = y.shape[0]
     ns = SURF.shape[0]
-    # the only allocation: scratch for the stepping loop, which itself runs without NRT
-    y1, f1, err, work = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
-    y_root, f_tmp, K = np.empty(size), np.empty(size), np.empty((5, size))
-    W, g0, g1, g_tmp = np.empty(SCRATCH), np.empty(ns + 4), np.empty(ns + 4), np.empty(ns + 4)
-    JW, y_prev, scratch = np.zeros((2 * size + 2, size)), np.empty(size), np.empty(4 * N + N * N)
+    # y1 ... scratch: the stepping loop's scratch, allocated once by the caller
+    # (``integrator.scratch_arrays``; separate arguments, not a tuple, so that numba's
+    # dispatcher types them on its fast path): the kernel allocates nothing, so it needs no
+    # reference-counting runtime (loading that runtime cost every process 20-30 ms)
+    JW[JW.shape[0] - 1, 0] = 0.0            # no Jacobian yet (Rosenbrock)
     while True:
         status = stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                                tcount, ev, y1, f1, err, work, y_root, f_tmp, K, W, g0, g1,

@@ -22,12 +22,13 @@ def accelerations(q, qd, generalized, P, out, S):
         for i in range(N):
             out[i] = values[i]
     else:
-        # M q̈ = b with M symmetric positive definite (it is a kinetic energy): Cholesky
-        # M = G G^T into S (row-major, lower triangle), then two triangular solves
-        values = mass_and_rhs(q, qd, generalized, L, m, P[P_G])
+        # M q̈ = b with M symmetric positive definite (it is a kinetic energy): M into S and
+        # b into out, Cholesky M = G G^T in place in S (row-major, lower triangle), then two
+        # triangular solves in place in out
+        mass_and_rhs_into(q, qd, generalized, L, m, P[P_G], S, out)
         for i in range(N):
             for j in range(i + 1):
-                s = values[i * N + j]
+                s = S[i * N + j]
                 for k in range(j):
                     s -= S[i * N + k] * S[j * N + k]
                 if i == j:
@@ -35,7 +36,7 @@ def accelerations(q, qd, generalized, P, out, S):
                 else:
                     S[i * N + j] = s / S[j * N + j]
         for i in range(N):
-            s = values[N * N + i]
+            s = out[i]
             for k in range(i):
                 s -= S[i * N + k] * out[k]
             out[i] = s / S[i * N + i]

@@ -30,6 +30,8 @@ SUBCOMMANDS = {
                   'first run of a new arm shape by link count: equations, compile, warm load'),
     'fit': ('impact_arm.tools.benchmarks.fit',
             'impact-arm fit: accuracy and interval coverage over drawn cases, cost, growth'),
+    'peers': ('impact_arm.tools.benchmarks.peers',
+              'MuJoCo on the same scene beside this project (optional: pip install mujoco)'),
     'features': ('impact_arm.tools.benchmarks.features',
                  'cost per simulated second of free motion, Hertz contact, the article'),
 }

@@ -85,10 +85,12 @@ def run(args) -> int:
             warm = _child(n, cache)
         rows.append({'links': n, 'cold': cold, 'warm': warm})
     common.progress_done()
+    from ...core.equations import SYMBOLIC_LINKS
     print('First run of a new arm shape, fresh process each, empty kernel cache (cold) and the '
           'same cache again (warm). Parts: equations = generating (sympy up to '
-          '4 links, closed form beyond) and importing the module; kernel = numba compiling '
-          '(cold) or loading (warm) it; run = 0.5 s simulated.')
+          f'{SYMBOLIC_LINKS} links, closed form beyond) and importing the module; compile / '
+          'kernel load = numba compiling (cold) or loading (warm) the kernel; CPU = user + '
+          'system seconds of the process (the wall time includes waiting for a busy machine).')
     print()
     body = [[r['links'], f"{r['cold']['wall']:.1f}", f"{r['cold']['cpu']:.1f}",
              f"{r['cold']['equations']:.2f}", f"{r['cold']['kernel']:.1f}",

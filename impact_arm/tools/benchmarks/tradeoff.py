@@ -151,8 +151,10 @@ def plot(rows, path, scene_name):
                          r['kind'], f"solve_ivp {r['method']}")
             series.setdefault(label, []).append(r)
     for label, rs in series.items():
-        rs = sorted(rs, key=lambda r: r['wall'])
         ours = label.startswith('ours')
+        # ours along the wall time; a scipy method along its tolerance (its timings are noisy
+        # enough on a shared machine to zigzag when sorted by wall time)
+        rs = sorted(rs, key=lambda r: r['wall'] if ours else -r['rtol'])
         ax.loglog([r['wall'] for r in rs], [r['worst'] for r in rs],
                   'o-' if ours else 's--', label=label, ms=6 if ours else 4,
                   lw=1.8 if ours else 1.0, zorder=3 if ours else 2)
