@@ -62,7 +62,7 @@ def test_cli_json_has_exactly_the_documented_structure(tmp_path):
         'phase_durations', 'q_max_compression_deg', 'q_separation_deg'}
     assert set(data['run']) == {'impacts', 't_end', 'period_last', 'q1_range_deg',
                                 'q2_range_deg', 'vx_range', 'vy_range', 'rhs_evaluations',
-                                'wall_time', 'kernel_load_time'}
+                                'wall_time'}
     assert data['run']['impacts'] == 15 == len(data['impacts'])
 
 
