@@ -1,6 +1,11 @@
-"""Shared fixtures. Every test process keeps DDS on this machine (see DEVELOPERS notes)."""
+"""Shared fixtures. Every test process keeps DDS on this machine (CONTRIBUTING.md). The
+benchmarks' package (bench/impact_arm_bench) is importable: some tests check its helpers."""
 import os
 import random
+import sys
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                'bench'))
 
 from ros_helpers import domain_range
 

@@ -13,7 +13,7 @@ from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
 from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_command,
                                 joint_state_fields, wrench_stamped_fields)
-from impact_arm.tools.benchmarks.fuzz import key_paths
+from generators import key_paths
 
 from scenes import PAPER, paper_dict
 
@@ -259,7 +259,7 @@ def test_a_lone_surrogate_in_a_name_is_refused():
 
 def test_bench_stress_fuzz_classifies_each_scene():
     """A smoke run of ``bench stress --fuzz``: a worker process, seeded scenes, a tally."""
-    from impact_arm.tools.benchmarks.fuzz import GOOD, run_fuzz
+    from impact_arm_bench.fuzz import GOOD, run_fuzz
     tally, bad = run_fuzz(4, seed=1, timeout=60.0)
     assert sum(tally.values()) == 4 and not bad, bad
     assert set(k for k, v in tally.items() if v) <= set(GOOD)

@@ -10,7 +10,7 @@ import time
 from ros_helpers import (PYTHON, controller, diagnostics_values, from_simulator, node_args,  # noqa: F401,E501
                          probe, ros_env, simulator, start_process, wait_for)
 
-from impact_arm.tools.benchmarks.flood import malformed_commands
+from generators import malformed_commands
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

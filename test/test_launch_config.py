@@ -177,7 +177,7 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     output = re.search(r'output = "([^"]+)"', script['sourceCode']).group(1)
     assert [t.strip().strip('"') for t in inputs.split(',')] == ['/impact_report']
     used = set()
-    for panel, config in layout['configById'].items():
+    for config in layout['configById'].values():
         for entry in config.get('paths', []):
             used.add(entry['value'].split('.')[0])
         if 'topicPath' in config:

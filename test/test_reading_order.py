@@ -22,7 +22,7 @@ def scrambled_copy(source, target):
     for m in messages:
         by_topic.setdefault(m.topic, []).append(m)
     order = []
-    for topic, ms in by_topic.items():
+    for ms in by_topic.values():
         half = len(ms) // 2
         order += ms[half:] + ms[:half]
     metadata = read_metadata(source)

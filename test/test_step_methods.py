@@ -8,6 +8,9 @@ from impact_arm.core.integrator import PhaseIntegrator
 from impact_arm.core.model import ArmModel
 from impact_arm.core.simulate import run
 
+from scenes import scene_from
+from test_article import ARTICLE_FIRST_IMPACT
+
 
 def run_events(scene, **options):
     """The event-only run's impacts (a simulation error raised)."""
@@ -15,9 +18,6 @@ def run_events(scene, **options):
     if result.exception:
         raise result.exception
     return result.impacts, result.t_end, result.integrator, result.wall_time
-
-from scenes import scene_from
-from test_article import ARTICLE_FIRST_IMPACT
 
 
 def stiff_free_scene():

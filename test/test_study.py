@@ -13,21 +13,24 @@ from hypothesis import strategies as st
 from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import parse_scene
 from impact_arm.core.simulate import run as run_scene
-
-
-def _events(scene, **options):
-    result = run_scene(scene, samples=False, **options)
-    if result.exception:
-        raise result.exception
-    return result.impacts, result.t_end, result.integrator, result.wall_time
 from impact_arm.core.study import Study, apply_overrides, parse_key_path
-from impact_arm.tools.benchmarks.fuzz import key_paths
 
+from generators import key_paths
 from scenes import paper_dict, scene_from
 
 pa = pytest.importorskip('pyarrow')
 from impact_arm.tools import sweep  # noqa: E402  (needs pyarrow: the studies extra)
-from impact_arm.tools.benchmarks.sweep import live_descendants  # noqa: E402
+from impact_arm_bench.sweep import live_descendants  # noqa: E402
+
+
+
+def _events(scene, **options):
+    """The event-only run's impacts (a simulation error raised)."""
+    result = run_scene(scene, samples=False, **options)
+    if result.exception:
+        raise result.exception
+    return result.impacts, result.t_end, result.integrator, result.wall_time
+
 
 LOOSE = {'integrator.preset': 'fast', 'integrator.method': 'rosenbrock',
          'integrator.rtol': 1e-2, 'integrator.atol': 1e-4, 'integrator.contact_rtol': 3e-4}

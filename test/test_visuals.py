@@ -158,7 +158,7 @@ def test_every_frame_id_in_the_file_is_a_tf_frame(recording):
             tf_frames |= {t.child_frame_id for t in msg.transforms}
             tf_frames |= {t.header.frame_id for t in msg.transforms}
     used = set()
-    for topic, messages in by_topic.items():
+    for messages in by_topic.values():
         for _, msg in messages:
             for item in getattr(msg, 'markers', []) or getattr(msg, 'transforms', []) or [msg]:
                 header = getattr(item, 'header', None)

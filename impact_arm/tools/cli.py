@@ -16,9 +16,10 @@ import time
 STARTED = time.perf_counter()      # the command's start, for the timings it prints
 NOTICE = []                        # the command's CompileNotice (how long it compiled)
 
-from ..contract import INTEGRATOR_PRESETS
-from ..core.errors import ImpactArmError
-from .progress import CompileNotice, Progress
+# (the clock above starts before the package's own imports: they count in the command's time)
+from ..contract import INTEGRATOR_PRESETS  # noqa: E402
+from ..core.errors import ImpactArmError  # noqa: E402
+from .progress import CompileNotice, Progress  # noqa: E402
 
 DEFAULT_SCENE = 'paper'
 
@@ -270,8 +271,9 @@ COMMANDS = {
                 'compare the impacts of two recordings, or of a recording and a scene'),
     'kernel': ('impact_arm.tools.kernel',
                "kernel dump: print the generated kernel module of a scene's shape"),
-    'bench': ('impact_arm.tools.benchmarks',
-              'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
+    'bench': ('impact_arm.tools.bench_command',
+              'benchmarks from the repository\'s bench/ folder: speed, tradeoff, stress, '
+              'rates, fit, peers, ... (docs/benchmarks.md)'),
 }
 
 

@@ -303,7 +303,7 @@ def fig_force_indentation(impact, constants, out):
                   (d2, [jackson_green_force(d, c) for d in d2], 'Jackson–Green'),
                   (d3, [restitution_force(d, dr, c.E, rr) for d in d3], 'restitution law')]
         for a in (ax, inset):
-            for i, (d, force, name) in enumerate(curves):
+            for i, (d, force, _name) in enumerate(curves):
                 a.plot(d * 1e6, np.asarray(force) * 1e-3, color='0.6', lw=2.5, alpha=0.6,
                        zorder=0, label='the model\'s laws: Hertz, Jackson–Green, restitution'
                        if a is ax and i == 0 else None)

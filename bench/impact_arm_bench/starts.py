@@ -44,8 +44,8 @@ def _listener(domain):
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
-    from ... import contract
-    from ..runner import simulator_diagnostics
+    from impact_arm import contract
+    from impact_arm.tools.runner import simulator_diagnostics
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('bench_starts_listener', context=context)
@@ -264,13 +264,13 @@ def summary(rows):
 
 
 def run(args) -> int:
-    from ..runner import dds_environment
+    from impact_arm.tools.runner import dds_environment
     if args.runs < 1:
         print(f'--runs = {args.runs}: must be >= 1', file=sys.stderr)
         return 2
     env = dds_environment()
-    from ...core.scene import load_scene
-    from ..runner import precompile
+    from impact_arm.core.scene import load_scene
+    from impact_arm.tools.runner import precompile
     precompile(load_scene('paper'), 1000.0)    # a cold cache compiles here, announced
     logdir = tempfile.mkdtemp(prefix='impact_arm_bench_starts_')
     print(f'bench starts: {args.runs} starts of simulator (realtime 1 kHz) + controller, '

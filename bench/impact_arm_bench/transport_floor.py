@@ -7,7 +7,7 @@ subscribes to both and answers each joint state with a command. The mean period 
 exchange is the floor under ``impact-arm run --mode lockstep`` on this machine: its real-time
 factor at 1 kHz can never exceed 1 ms / floor. ``bench rates`` prints it next to the real run.
 
-Run as ``python -m impact_arm.tools.benchmarks.transport_floor driver|controller``; ``measure()``
+Run as ``python -m impact_arm_bench.transport_floor driver|controller``; ``measure()``
 starts both (local DDS domain, ended by PID) and returns the floor in seconds.
 """
 from __future__ import annotations
@@ -17,8 +17,8 @@ import subprocess
 import sys
 import time
 
-from ... import contract
-from ...contract import CLOCK, COMMANDS, CONTACT_WRENCH, JOINT_STATES, joint_names
+from impact_arm import contract
+from impact_arm.contract import CLOCK, COMMANDS, CONTACT_WRENCH, JOINT_STATES, joint_names
 
 WARM_UP = 200
 
@@ -30,7 +30,7 @@ def _controller(seconds):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from ...io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
+    from impact_arm.io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
     node = rclpy.create_node('floor_controller')
     pub = node.create_publisher(Float64MultiArray, COMMANDS,
                                 contract.qos(COMMANDS).to_rclpy())
@@ -60,7 +60,7 @@ def _driver(periods, clock):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from ...io.wire import PatchedMessage, float64_array_data
+    from impact_arm.io.wire import PatchedMessage, float64_array_data
     node = rclpy.create_node('floor_driver')
 
     def publisher(msg_type, topic):

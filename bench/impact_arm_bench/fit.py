@@ -39,8 +39,8 @@ def _drawn(rng):
 def accuracy(cases, impacts, say):
     import numpy as np
 
-    from ...core.fit import fit
-    from ..synthetic import synthetic_recording
+    from impact_arm.core.fit import fit
+    from impact_arm.tools.synthetic import synthetic_recording
     rng = np.random.default_rng(2026)
     rows = []
     for case in range(cases):
@@ -88,7 +88,7 @@ def summarize(rows):
 
 def fresh_process(say):
     """Wall time of ``impact-arm fit`` (2 parameters, 15 impacts) in a new interpreter."""
-    from ..synthetic import synthetic_recording, write_rosbag2
+    from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
     with tempfile.TemporaryDirectory() as tmp:
         rec = synthetic_recording('paper', {'surfaces[0].mu': 0.33,
                                             'materials.steel.S_y': 8e8},
@@ -111,8 +111,8 @@ def fresh_process(say):
 
 
 def growth(say):
-    from ...core.fit import fit
-    from ..synthetic import synthetic_recording
+    from impact_arm.core.fit import fit
+    from impact_arm.tools.synthetic import synthetic_recording
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
     out = {'impacts': [], 'params': []}
     fit(synthetic_recording('paper', truth, cycles=3, seed=1), 'paper',
@@ -161,7 +161,7 @@ def run(args) -> int:
                     f'{100 * v["median_abs_error"]:.2f} %, 95 % interval holds the truth in '
                     f'{100 * v["coverage"]:.0f} %')
     if args.json:
-        from ..cli import write_json
+        from impact_arm.tools.cli import write_json
         report['cases'] = rows
         write_json(args.json, report)
         say(f'wrote {args.json}')

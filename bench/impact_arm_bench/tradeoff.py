@@ -69,7 +69,7 @@ def _row(kind, method, rtol, atol, result, ref):
 
 
 def measure(scene, methods, rtols, repeats, log=common.progress):
-    from ...core.integrator import PRESETS
+    from impact_arm.core.integrator import PRESETS
     ref_rtol, ref_atol = PRESETS['reference']
     log('reference preset')
     ref_result = common.time_ours(scene, ref_rtol, ref_atol, repeats=1)
@@ -106,7 +106,7 @@ def measure(scene, methods, rtols, repeats, log=common.progress):
 def control_rate_trade(scene, rates, ref, log=common.progress):
     """simulate.run with continuous control (rate 0) or sampled control, preset accurate, so
     the differences are the control rate's, not the integrator's."""
-    from ...core.simulate import run
+    from impact_arm.core.simulate import run
     rows = []
     for rate in rates:
         log(f'control rate {rate:g} Hz')

@@ -62,7 +62,7 @@ def search(scene, ref, levels, methods, log=common.progress):
     """Every setting tried — ours: presets, then each step method with rtol on the grid and a
     tighter contact tolerance; scipy: each method and rtol (and contact rtol) until it reaches
     the tightest level — with its error and a first timing."""
-    from ...core.integrator import PRESETS
+    from impact_arm.core.integrator import PRESETS
     rows = []
     tightest = min(levels)
     for name, (rtol, atol) in PRESETS.items():
@@ -151,7 +151,7 @@ def final_timing(scene, groups, repeats):
 
 
 def run(args) -> int:
-    from ...core.integrator import PRESETS
+    from impact_arm.core.integrator import PRESETS
     scene = common.load(args.scene)
     levels = sorted((float(x) for x in args.levels.split(',')), reverse=True)
     methods = [m.strip() for m in args.methods.split(',') if m.strip()]

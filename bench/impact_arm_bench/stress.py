@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...contract import INTEGRATOR_METHODS
+from impact_arm.contract import INTEGRATOR_METHODS
 from . import common
 
 OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
@@ -47,7 +47,7 @@ class Case:
 
 def paper_dict():
     import yaml
-    from ...core.scene import _SceneLoader, resolve_scene_path
+    from impact_arm.core.scene import _SceneLoader, resolve_scene_path
     with open(resolve_scene_path('paper'), encoding='utf-8') as f:
         return yaml.load(f.read(), Loader=_SceneLoader)
 
@@ -65,7 +65,7 @@ def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):
 
 
 def build(case: Case):
-    from ...core.scene import parse_scene
+    from impact_arm.core.scene import parse_scene
     data = strike_dict(case.strike_speed) if case.base == 'strike' else paper_dict()
     data = copy.deepcopy(data)
     for path, value in case.changes.items():
@@ -171,10 +171,10 @@ class Outcome:
 
 def check_run(case: Case, scene, deadline=None, method='dopri5'):
     """Run one case event to event, checking every impact. Returns an ``Outcome``."""
-    from ...core.errors import SimulationError
-    from ...core.integrator import PhaseIntegrator
-    from ...core.metrics import ImpactBuilder
-    from ...core.model import ArmModel
+    from impact_arm.core.errors import SimulationError
+    from impact_arm.core.integrator import PhaseIntegrator
+    from impact_arm.core.metrics import ImpactBuilder
+    from impact_arm.core.model import ArmModel
     t0 = time.perf_counter()
     model = ArmModel(scene)
     integ = PhaseIntegrator(model, preset=case.preset, trace=True, method=method)
@@ -272,7 +272,7 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
 
 
 def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
-    from ...core.errors import SceneError
+    from impact_arm.core.errors import SceneError
     try:
         scene = build(case)
     except SceneError as exc:   # refused at load: a named limit, too
@@ -300,7 +300,7 @@ def add_arguments(parser):
                         help='step method in free flight (integrator.method)')
     parser.add_argument('--fuzz', type=int, metavar='N', default=0,
                         help='instead of the matrix: N scenes mutated from paper.yaml, each '
-                             'classified (benchmarks/fuzz.py)')
+                             'classified (bench/impact_arm_bench/fuzz.py)')
     parser.add_argument('--seed', type=int, default=0, help='seed of --fuzz')
     parser.add_argument('--fuzz-timeout', type=float, default=20.0, metavar='S',
                         help='seconds a fuzzed scene may run before it counts as a hang')

@@ -58,9 +58,9 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
     kept. Other jobs only ever add time, so on a shared machine the minimum is the
     estimate a load spike during one path's turn does not decide; with ``repeats=1``
     every figure is a single timing, as before."""
-    from ...core.simulate import run
-    from ...core.study import Study
-    from .. import sweep
+    from impact_arm.core.simulate import run
+    from impact_arm.core.study import Study
+    from impact_arm.tools import sweep
     spec = sweep.Spec(common_spec(count), origin='bench')
     study = Study(spec.scene_data, spec.fixed)
     study.run(spec.runs[0])                                   # load the kernel

@@ -155,7 +155,7 @@ def run(args) -> int:
     except ImportError:
         print('bench peers needs MuJoCo: pip install mujoco (an optional extra)')
         return 2
-    from ...core.integrator import PRESETS
+    from impact_arm.core.integrator import PRESETS
     scene = common.load(args.scene)
     if scene.n_links != 2 or len(scene.surfaces) != 1:
         print('bench peers models a two-link arm over one floor')

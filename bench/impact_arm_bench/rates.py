@@ -20,7 +20,7 @@ import os
 import sys
 import time
 
-from ...contract import DIAGNOSTICS, JOINT_STATES
+from impact_arm.contract import DIAGNOSTICS, JOINT_STATES
 from .common import cpu_seconds
 
 
@@ -48,13 +48,13 @@ def _memory_mb(pid, key='VmHWM'):
 
 
 def _session(scene_path, mode, rate, rate_factor=None):
-    from ..runner import Run
+    from impact_arm.tools.runner import Run
     args = argparse.Namespace(mode=mode, rate=rate, law=None, out=os.path.join('runs', 'bench'))
     return Run(_scene(scene_path), scene_path, args, None, os.environ.copy())
 
 
 def _scene(path):
-    from ...core.scene import load_scene
+    from impact_arm.core.scene import load_scene
     return load_scene(path)
 
 
@@ -124,7 +124,7 @@ def _run_fast(scene_path, rate, seconds):
     from rclpy.experimental import EventsExecutor
     from sensor_msgs.msg import JointState
 
-    from ..runner import simulator_diagnostics
+    from impact_arm.tools.runner import simulator_diagnostics
     run = _session(scene_path, 'realtime', rate)
     run.args.control_rate = 1000.0        # the controller keeps its 1 kHz
     # This measures the simulator's clock, not the control loop: a Python controller taking
@@ -177,12 +177,12 @@ def _run_fast(scene_path, rate, seconds):
 
 
 def run(args) -> int:
-    from ..runner import dds_environment
-    from ...core.scene import resolve_scene_path
+    from impact_arm.tools.runner import dds_environment
+    from impact_arm.core.scene import resolve_scene_path
     scene_path = resolve_scene_path(args.scene)
     env = dds_environment()
-    from ...core.scene import load_scene
-    from ..runner import precompile
+    from impact_arm.core.scene import load_scene
+    from impact_arm.tools.runner import precompile
     precompile(load_scene(scene_path), 1000.0)   # a cold cache compiles here, announced
     print(f'bench rates: scene {args.scene}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} '
           f'(localhost); machine: {os.cpu_count()} cores', file=sys.stderr)

@@ -11,7 +11,7 @@ import os
 import time
 import warnings
 
-from ..progress import Progress
+from impact_arm.tools.progress import Progress
 
 LEVELS_DOC = 'relative error vs the reference preset'
 
@@ -35,14 +35,14 @@ def progress_done() -> None:
 
 
 def load(scene_name: str):
-    from ...core.scene import load_scene
+    from impact_arm.core.scene import load_scene
     return load_scene(scene_name)
 
 
 # --- timed runs -----------------------------------------------------------------------------
 def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
-    from ...core.simulate import run
+    from impact_arm.core.simulate import run
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
@@ -58,7 +58,7 @@ def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', cont
 
 
 def time_scipy(scene, method, rtol, atol, repeats=3, contact_rtol=None):
-    from ..baselines import run_scipy
+    from impact_arm.tools.baselines import run_scipy
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
@@ -174,7 +174,7 @@ def table(header, rows, align=None) -> str:
 
 def write_json(path, data) -> None:
     """The CLI's atomic JSON writer (non-finite numbers as null), creating the directory."""
-    from ..cli import write_json as write_atomically
+    from impact_arm.tools.cli import write_json as write_atomically
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     write_atomically(path, data)
     print(f'wrote {path}')
@@ -189,7 +189,7 @@ def machine() -> dict:
         nb = numba.__version__
     except ImportError:
         nb = None
-    from ...core import jit
+    from impact_arm.core import jit
     return {'python': platform.python_version(), 'numpy': numpy.__version__,
             'scipy': scipy.__version__, 'numba': nb, 'jit': jit.AVAILABLE,
             'cpus': os.cpu_count(), 'time': time.strftime('%Y-%m-%dT%H:%M:%S')}

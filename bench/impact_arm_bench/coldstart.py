@@ -26,7 +26,7 @@ from impact_arm.core import equations
 from impact_arm.core.integrator import PhaseIntegrator
 from impact_arm.core.model import ArmModel
 from impact_arm.core.scene import parse_scene
-from impact_arm.tools.benchmarks.coldstart import chain_scene
+from impact_arm_bench.coldstart import chain_scene
 t1 = time.perf_counter()
 scene = parse_scene(chain_scene(int(sys.argv[1])), origin='chain')
 t2 = time.perf_counter()
@@ -85,7 +85,7 @@ def run(args) -> int:
             warm = _child(n, cache)
         rows.append({'links': n, 'cold': cold, 'warm': warm})
     common.progress_done()
-    from ...core.equations import SYMBOLIC_LINKS
+    from impact_arm.core.equations import SYMBOLIC_LINKS
     print('First run of a new arm shape, fresh process each, empty kernel cache (cold) and the '
           'same cache again (warm). Parts: equations = generating (sympy up to '
           f'{SYMBOLIC_LINKS} links, closed form beyond) and importing the module; compile / '

@@ -18,14 +18,14 @@ and refused, and the impacts (the controller still cycling).
 from __future__ import annotations
 
 import json
-import math
 import os
 import random
-import struct
 import subprocess
 import sys
 import tempfile
 import time
+
+from generators import malformed_commands  # test/generators.py (on the path: __init__)
 
 BURST_PERIOD = 0.005        # s between two bursts of a flooder
 PAYLOADS = 4000             # distinct garbage payloads a flooder cycles through
@@ -37,7 +37,7 @@ def add_arguments(parser):
     parser.add_argument('--flood', type=float, metavar='RATE', default=0.0,
                         help='instead of the matrix: flood the realtime simulator\'s command '
                              'topic with RATE garbage messages/s (all flooders together) '
-                             'while the controller runs (benchmarks/flood.py)')
+                             'while the controller runs (bench/impact_arm_bench/flood.py)')
     parser.add_argument('--flood-seconds', type=float, default=15.0, metavar='S',
                         help='length of the flood (default 15)')
     parser.add_argument('--flood-processes', type=int, default=4, metavar='N',
@@ -48,39 +48,6 @@ def add_arguments(parser):
                              '"the simulator\'s own work under a flood"')
 
 
-def malformed_commands(rng, count, n=2):
-    """Float64MultiArray payloads the simulator must refuse, each certainly invalid: shorter
-    than any n-double message (not empty: see the module doc; and short by 4 bytes at least:
-    the middleware pads a payload to a multiple of 4 with zeros), truncated, absurd or wrong
-    lengths, an unknown encapsulation, non-finite values."""
-    from rclpy.serialization import serialize_message
-    from std_msgs.msg import Float64MultiArray
-
-    def array(values):
-        return serialize_message(Float64MultiArray(data=values))
-    good = array([0.5] * n)
-    shortest = len(good)
-    out = []
-    while len(out) < count:
-        kind = rng.randrange(6)
-        if kind == 0:
-            out.append(rng.randbytes(rng.randrange(1, shortest - 3)))
-        elif kind == 1:
-            out.append(good[:rng.randrange(1, shortest - 3)])
-        elif kind == 2:     # the data length (bytes 12-15 of a layout-free array) absurd
-            out.append(good[:12] + struct.pack('<I', rng.choice((2**31 - 1, 2**32 - 1, n + 1)))
-                       + good[16:])
-        elif kind == 3:
-            out.append(b'\x07\x01\x00\x00' + good[4:])
-        elif kind == 4:
-            out.append(array([0.25] * rng.choice([k for k in range(6) if k != n])))
-        else:
-            values = [0.25] * n
-            values[rng.randrange(n)] = rng.choice((math.nan, math.inf, -math.inf))
-            out.append(array(values))
-    return out
-
-
 def flooder():
     """A flooder process: argv rate, seconds, seed, go file. Once matched, creates GO.SEED
     and waits for GO (every flooder started, the statistics taken); publishes until the time
@@ -88,7 +55,7 @@ def flooder():
     prints {"sent": N, "seconds": S} (S from its first to its last burst)."""
     import rclpy
     from std_msgs.msg import Float64MultiArray
-    from ... import contract
+    from impact_arm import contract
     rate, seconds, seed, go = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
     rclpy.init()
     node = rclpy.create_node(f'bench_flooder_{seed}')
@@ -178,7 +145,7 @@ def measure(args, env, logdir) -> dict:
         go = os.path.join(logdir, 'flood-go')
         for k in range(count):
             flooders.append(subprocess.Popen(
-                [sys.executable, '-c', 'from impact_arm.tools.benchmarks.flood import '
+                [sys.executable, '-c', 'from impact_arm_bench.flood import '
                  'flooder; flooder()', repr(args.flood / count), repr(args.flood_seconds),
                  str(k), go], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                 text=True, preexec_fn=_idle if args.flooders_idle else None))
@@ -246,7 +213,7 @@ def _window_mean(before, after, key):
 
 
 def report(args) -> int:
-    from ..runner import dds_environment
+    from impact_arm.tools.runner import dds_environment
     from .starts import wakeup_floor
     if not args.flood > 0 or args.flood_seconds <= 0:
         print('--flood and --flood-seconds must be > 0', file=sys.stderr)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import copy
 
-from ...contract import INTEGRATOR_PRESETS
+from impact_arm.contract import INTEGRATOR_PRESETS
 from . import common
 from .stress import paper_dict
 
@@ -71,9 +71,9 @@ def add_arguments(parser):
 
 
 def measure(name, make, preset, repeats):
-    from ...core.integrator import PRESETS
-    from ...core.model import ArmModel
-    from ...core.scene import parse_scene
+    from impact_arm.core.integrator import PRESETS
+    from impact_arm.core.model import ArmModel
+    from impact_arm.core.scene import parse_scene
     data = make(copy.deepcopy(paper_dict()))
     scene = parse_scene(data, origin=f'features:{name}')
     rtol, atol = PRESETS[preset]
