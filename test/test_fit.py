@@ -243,3 +243,17 @@ def test_noise_free_recording_with_a_start_up_hold_is_fitted_exactly():
     assert result.fits and result.impacts_used == 5, (result.verdict, result.notes)
     for key, err in relative_errors(result, truth).items():
         assert err < 1e-4, (key, result.parameters[key])
+
+
+def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
+    """Two recordings of the same arm (other noise, other lost samples, another clock, no
+    extra joint in the second): every impact matched, the CoR the same within the noise."""
+    from impact_arm.tools.compare import compare
+    folder, truth = bag
+    other = tmp_path / 'other_bag'
+    write_rosbag2(synthetic_recording('paper', truth, cycles=6, drop=0.03, clock_offset=5e8,
+                                      seed=42), str(other), extra_joint=False)
+    result = compare(folder, str(other))
+    d = np.array([r['d_cor'] for r in result['table']])
+    assert len(d) == len(result['a']) == len(result['b'])
+    assert np.max(np.abs(d)) < 0.01
