@@ -649,7 +649,9 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
         raise FitError(f'{len(problem.windows)} usable impact(s) cannot determine '
                        f'{len(specs)} parameters')
 
-    to_values = lambda u: np.array([p.from_unit(x) for p, x in zip(specs, u)])
+    def to_values(u):
+        return np.array([p.from_unit(x) for p, x in zip(specs, u)])
+
     r0 = problem.residuals(start)
     problem.penalty = max(PENALTY, 10 * float(np.sqrt(np.mean(r0 ** 2))))
     u_start = np.array([p.to_unit(p.start) for p in specs])

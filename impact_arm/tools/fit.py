@@ -93,15 +93,17 @@ def _fmt(v):
 
 
 def report_text(result, recording, scene) -> str:
+    compared = 'joint rates and wrench impulse' if result.used_wrench else 'joint rates only'
     lines = [f'# Fit of {os.fspath(recording)}', '',
              f'Scene: `{scene}` → fitted scene `{result.scene_path}`', '',
              f'**Verdict: {result.verdict}**', '',
-             (f'{result.impacts_used} impacts used; {"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
+             (f'{result.impacts_used} impacts used; {compared}; '
              f'χ² = {result.chi2:.4g} over {result.dof} degrees of freedom '
              f'(χ²/dof = {result.chi2 / result.dof:.3g}); residual rms {result.residual_rms:.3g} '
              f'rad/s against a noise rms of {result.noise_rms:.3g} rad/s; '
              f'{result.evaluations} model evaluations in {result.wall_time:.2f} s.'), '',
-             '| parameter | start | fitted | 95 % interval | identified |', '|---|---:|---:|---|---|']
+             '| parameter | start | fitted | 95 % interval | identified |',
+             '|---|---:|---:|---|---|']
     for key, p in result.parameters.items():
         ident = 'yes' if p['identifiable'] else f'no ({p.get("why", "correlated")})'
         lines.append(f'| `{key}` | {_fmt(p["start"])} | {_fmt(p["value"])} | '
