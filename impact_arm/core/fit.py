@@ -651,7 +651,6 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
 
     def to_values(u):
         return np.array([p.from_unit(x) for p, x in zip(specs, u)])
-
     r0 = problem.residuals(start)
     problem.penalty = max(PENALTY, 10 * float(np.sqrt(np.mean(r0 ** 2))))
     u_start = np.array([p.to_unit(p.start) for p in specs])

@@ -282,10 +282,8 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
     given to the impact on that side, for a contact that spans a sample."""
     N, dt = len(rec.t), rec.period
-
     def off(k):
         return bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))
-
     while b < min(hi, a + 4) and off(b) and not off(a):
         b += 1          # actuators off at b while driven before: b was taken in the contact
     v = rec.velocity

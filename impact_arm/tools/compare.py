@@ -1,8 +1,8 @@
 """``impact-arm compare A B``: the impacts of two recordings, or of a recording and a scene.
 
-    impact-arm compare runs/second.mcap runs/fit_first/fitted.yaml   # driven by A's efforts
-    impact-arm compare runs/second.mcap fitted.yaml --controller     # its own controller
-    impact-arm compare runs/a.mcap runs/b_bag/ --scene paper         # two recordings
+    impact-arm compare runs/second.mcap runs/fit_first/fitted.yaml  # scene driven by A's efforts
+    impact-arm compare runs/second.mcap fitted.yaml --controller    # scene, its own controller
+    impact-arm compare runs/a.mcap runs/b_bag/ --scene paper            # two recordings
 
 Each side becomes a table of impacts (time from the first impact, impact speed, kinematic CoR,
 impulse, joint rates just after); the impacts are matched one to one by time and the

@@ -93,11 +93,11 @@ def _fmt(v):
 
 
 def report_text(result, recording, scene) -> str:
-    compared = 'joint rates and wrench impulse' if result.used_wrench else 'joint rates only'
     lines = [f'# Fit of {os.fspath(recording)}', '',
              f'Scene: `{scene}` → fitted scene `{result.scene_path}`', '',
              f'**Verdict: {result.verdict}**', '',
-             (f'{result.impacts_used} impacts used; {compared}; '
+             (f'{result.impacts_used} impacts used; '
+              f'{"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
              f'χ² = {result.chi2:.4g} over {result.dof} degrees of freedom '
              f'(χ²/dof = {result.chi2 / result.dof:.3g}); residual rms {result.residual_rms:.3g} '
              f'rad/s against a noise rms of {result.noise_rms:.3g} rad/s; '
