@@ -226,3 +226,34 @@ def test_joints_in_the_wrong_order_are_told_not_fitted():
     with pytest.raises(IdentifyError, match='none with the tip near a surface of the scene '
                                             r'\(check --joints order'):
         fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0)})
+
+
+def test_noise_free_recording_with_a_start_up_hold_is_fitted_exactly():
+    """No sensor noise at all, and two seconds at rest first (a driver's start-up hold): the
+    noise floors and the robust scales must not break down; the values come back to 1e-4."""
+    truth = {'surfaces[0].mu': 0.35, 'materials.steel.S_y': 1.5e9}
+    rec = synthetic_recording('paper', truth, cycles=5, seed=6, noise={})
+    hold = 2000
+    rec.t = np.concatenate([np.arange(hold) * 1e-3, rec.t + hold * 1e-3])
+    rec.position = np.concatenate([np.repeat(rec.position[:1], hold, axis=0), rec.position])
+    rec.velocity = np.concatenate([np.zeros((hold, 2)), rec.velocity])
+    rec.effort = np.concatenate([np.zeros((hold, 2)), rec.effort])
+    rec.wrench_t = rec.wrench_t + hold * 1e-3
+    result = fit(rec, 'paper', BOUNDS)
+    assert result.fits and result.impacts_used == 5, (result.verdict, result.notes)
+    for key, err in relative_errors(result, truth).items():
+        assert err < 1e-4, (key, result.parameters[key])
+
+
+def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
+    """Two recordings of the same arm (other noise, other lost samples, another clock, no
+    extra joint in the second): every impact matched, the CoR the same within the noise."""
+    from impact_arm.tools.compare import compare
+    folder, truth = bag
+    other = tmp_path / 'other_bag'
+    write_rosbag2(synthetic_recording('paper', truth, cycles=6, drop=0.03, clock_offset=5e8,
+                                      seed=42), str(other), extra_joint=False)
+    result = compare(folder, str(other))
+    d = np.array([r['d_cor'] for r in result['table']])
+    assert len(d) == len(result['a']) == len(result['b'])
+    assert np.max(np.abs(d)) < 0.01

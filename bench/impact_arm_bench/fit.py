@@ -92,7 +92,7 @@ def fresh_process(say):
     with tempfile.TemporaryDirectory() as tmp:
         rec = synthetic_recording('paper', {'surfaces[0].mu': 0.33,
                                             'materials.steel.S_y': 8e8},
-                                  cycles=16, drop=0.02, clock_offset=1.7e9, seed=7)
+                                  cycles=15, drop=0.02, clock_offset=1.7e9, seed=7)
         bag = os.path.join(tmp, 'bag')
         write_rosbag2(rec, bag)
         cmd = [sys.executable, '-m', 'impact_arm.tools.cli', 'fit', bag, '--param',

@@ -167,7 +167,11 @@ def rate_steps(rec: JointRecording):
     c0 = vb - va - a2 * (tb - ta)[:, None]
     c1 = a2 - a1
     raw_step = vb - va - 0.5 * (a1 + a2) * (tb - ta)[:, None]
-    dev = np.abs(raw_step - np.median(raw_step, axis=0))
+    # the robust scale over the gaps where something moves: a noise-free recording that
+    # rests for a while (a start-up hold) would otherwise have a scale of zero
+    moving = np.any(v[3:-2] != v[2:-3], axis=1)
+    pool = raw_step[moving] if np.count_nonzero(moving) > 10 else raw_step
+    dev = np.abs(pool - np.median(pool, axis=0))
     scale = 1.4826 * np.median(dev, axis=0)
     scale = np.where(scale > 0, scale, max(float(np.max(scale)), 1e-12))
     c0s, c1s = c0 / scale, c1 / scale
@@ -298,7 +302,7 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     if len(pre_idx) < min_samples or len(post_idx) < max(min_samples, post_samples + 1):
         return None, (f'{min(len(pre_idx), len(post_idx))} free samples on one side (another '
                       f'impact or the end of the recording too close)')
-    if len(pre_idx) > min_samples and _contact_under_way(rec, noise, pre_idx):
+    if len(pre_idx) > min_samples and _contact_under_way(rec, noise, pre_idx, b):
         # the contact began before sample a: it is no free-flight sample
         return make_window(rec, noise, a - 1, b, lo, hi, window, min_samples, max_gap,
                            post_samples)
@@ -348,16 +352,19 @@ def _before_next_contact(rec, noise, idx, z_min=30.0) -> int:
     return len(idx)
 
 
-def _contact_under_way(rec, noise, pre_idx, limit=6.0) -> bool:
+def _contact_under_way(rec, noise, pre_idx, b, limit=6.0) -> bool:
     """Whether the last pre-impact sample's rates leave the free flight the samples before
-    it predict (by more than ``limit`` standard deviations): a contact already under way."""
+    it predict (by more than ``limit`` standard deviations, and more than 1e-3 of the rate
+    step across the impact: noise-free data leave only the cubic's own error): a contact
+    already under way."""
     head, last = pre_idx[:-1], pre_idx[-1]
     fit = LocalFit(rec.t[head], rec.position[head], rec.velocity[head], rec.t[head[-1]],
                    noise.position, noise.velocity)
     _, qd, cov = fit.state(rec.t[last])
     n = rec.n
     sd = np.sqrt(np.diag(cov)[n:] + noise.velocity ** 2)
-    return bool(np.any(np.abs(rec.velocity[last] - qd) > limit * sd))
+    floor = 1e-3 * float(np.max(np.abs(rec.velocity[b] - rec.velocity[last])))
+    return bool(np.any(np.abs(rec.velocity[last] - qd) > np.maximum(limit * sd, floor)))
 
 
 def _add_impulse(rec, noise, win):

@@ -35,8 +35,12 @@ def mcap_files(path) -> list:
         raise RecordingInputError(f'recording {path}: no such file or folder')
     meta = os.path.join(path, 'metadata.yaml')
     if not os.path.isfile(meta):
-        raise RecordingInputError(f'recording {path}: a folder without metadata.yaml is not a '
-                                  f'rosbag2 recording')
+        # a recorder killed before it wrote metadata.yaml leaves its MCAP files readable
+        files = sorted(glob.glob(os.path.join(path, '*.mcap')))
+        if files:
+            return files
+        raise RecordingInputError(f'recording {path}: a folder with neither metadata.yaml nor '
+                                  f'MCAP files is not a rosbag2 recording')
     import yaml
     try:
         with open(meta, encoding='utf-8') as f:
