@@ -343,6 +343,32 @@ def freeze_recorder(domain, seconds):
     os.kill(recorder[0], signal.SIGCONT)
 
 
+def run_with_frozen_recorder(argv, env, tmp_path, ready_line, after=0.0, seconds=3.0):
+    """``impact-arm run ARGV`` whose recorder is frozen for ``seconds`` once its log says
+    ``ready_line`` (and ``after`` more seconds); returns (process, output, whether it froze)."""
+    recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
+    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', *argv, '--out',
+                            str(tmp_path / 'runs')], env=env, cwd=tmp_path,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        def ready():
+            try:
+                return ready_line in recorder_log.read_text()
+            except OSError:
+                return False
+        wait_for(lambda: ready() or run.poll() is not None, timeout=240)
+        time.sleep(after)
+        froze = run.poll() is None
+        if froze:
+            freeze_recorder(env['ROS_DOMAIN_ID'], seconds)
+        out, _ = run.communicate(timeout=300)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    return run, out, froze
+
+
 def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     """``impact-arm run`` in lockstep records every period, command and impact report, in
     stamp order, although its recorder is frozen (SIGSTOP) for 3 s while the commands flow:
@@ -355,27 +381,8 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     from impact_arm.io.wire import joint_state_fields
     from impact_arm.nodes.recorder import FLOWING_LINE
     env = dict(ros_env)
-    recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
-    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--mode', 'lockstep',
-                            '--name', 'r', '--out', str(tmp_path / 'runs')],
-                           env=env, cwd=tmp_path, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
-    try:
-        def commands_flow():
-            try:
-                return any(FLOWING_LINE in line and contract.COMMANDS in line
-                           for line in recorder_log.read_text().splitlines())
-            except OSError:
-                return False
-        froze = wait_for(lambda: commands_flow() or run.poll() is not None, timeout=240) \
-            and run.poll() is None
-        if froze:
-            freeze_recorder(env['ROS_DOMAIN_ID'], 3.0)
-        out, _ = run.communicate(timeout=300)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait()
+    run, out, froze = run_with_frozen_recorder(
+        ['--mode', 'lockstep', '--name', 'r'], env, tmp_path, f'{FLOWING_LINE} {contract.COMMANDS}')
     assert run.returncode == 0, out
     assert froze, 'the run ended before the recorder could be frozen'
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
@@ -422,29 +429,10 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
     scene = tmp_path / 'short.yaml'
     scene.write_text(Path(resolve_scene_path('paper')).read_text().replace('cycles: 15',
                                                                            'cycles: 12'))
-    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--mode', 'realtime',
-                            '--scene', str(scene), '--name', 'rt', '--out',
-                            str(tmp_path / 'runs')], env=env, cwd=tmp_path,
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    run, out, froze = run_with_frozen_recorder(
+        ['--mode', 'realtime', '--scene', str(scene), '--name', 'rt'], env, tmp_path,
+        f'first samples on {contract.COMMANDS}', after=1.0)
     sim_log = tmp_path / 'runs' / 'logs' / 'simulator.log'
-    recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
-    try:
-        def moving():
-            try:
-                return f'first samples on {contract.COMMANDS}' in recorder_log.read_text() \
-                    or run.poll() is not None
-            except OSError:
-                return False
-        assert wait_for(moving, timeout=240), 'the arm never started'
-        time.sleep(1.0)
-        froze = run.poll() is None
-        if froze:
-            freeze_recorder(env['ROS_DOMAIN_ID'], 3.0)
-        out, _ = run.communicate(timeout=300)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait()
     assert froze, out
     assert run.returncode == 0, out
     mcap = tmp_path / 'runs' / 'rt.mcap'
