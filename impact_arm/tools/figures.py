@@ -230,11 +230,7 @@ def fig8_indentation(impact, out):
         inset.annotate(f'yield onset δ = 1.9 δc = {d_yield:.2f} µm\nat {t_yield:.2f} µs',
                        (t_yield, d_yield), xytext=(0.05, 0.7), textcoords='axes fraction',
                        fontsize=6, arrowprops=dict(arrowstyle='->', lw=0.6))
-        inset.set_title('zoom: elastic compression (Hertz)', fontsize=7)
-        inset.set_xlabel('t [µs]', fontsize=6)
-        inset.set_ylabel('δ [µm]', fontsize=6)
-        inset.tick_params(labelsize=6)
-        inset.grid(alpha=0.3)
+        _style_inset(inset, 'zoom: elastic compression (Hertz)', 't [µs]', 'δ [µm]')
     _note(ax, impact)
     _layout(fig)
     return fig
@@ -322,11 +318,7 @@ def fig_force_indentation(impact, constants, out):
     inset.set_xlim(0, edge)
     near = col['F_n'][delta <= edge]
     inset.set_ylim(0, max(float(np.max(near, initial=0)) * 1.3e-3, 1e-3))
-    inset.set_title('zoom: start of loading', fontsize=7)
-    inset.set_xlabel('δ [µm]', fontsize=6)
-    inset.set_ylabel('F_n [kN]', fontsize=6)
-    inset.tick_params(labelsize=6)
-    inset.grid(alpha=0.3)
+    _style_inset(inset, 'zoom: start of loading', 'δ [µm]', 'F_n [kN]')
     _note(ax, impact)
     _layout(fig)
     return fig
@@ -411,3 +403,12 @@ def draw_all(run, steps, sections, v_tip, impact, out, progress=None, recordings
                 f'; {impact[3]})' if impact[3] else ')')
         made.append((name, caption))
     return made
+
+
+def _style_inset(inset, title, xlabel, ylabel):
+    """A zoomed inset's small print: title, axis labels with units, ticks, grid."""
+    inset.set_title(title, fontsize=7)
+    inset.set_xlabel(xlabel, fontsize=6)
+    inset.set_ylabel(ylabel, fontsize=6)
+    inset.tick_params(labelsize=6)
+    inset.grid(alpha=0.3)
