@@ -15,10 +15,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def defined(source):
-    """Public names a module's text binds at top level by assignment or def (not imports)."""
-    names = set()
+    """Public names a module's text binds at top level by assignment or def (not imports, nor
+    an imported name bound again: a long chain's ``jit_leaf = jit`` switches a decorator)."""
+    names, imported = set(), set()
     for node in ast.parse(source).body:
-        if isinstance(node, ast.FunctionDef):
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            imported |= {(a.asname or a.name).split('.')[0] for a in node.names}
+        elif isinstance(node, ast.FunctionDef):
             names.add(node.name)
         elif isinstance(node, (ast.Assign, ast.AnnAssign)):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
@@ -26,7 +29,7 @@ def defined(source):
                 for name in ast.walk(target):
                     if isinstance(name, ast.Name):
                         names.add(name.id)
-    return {n for n in names if not n.startswith('_')}
+    return {n for n in names if not n.startswith('_')} - imported
 
 
 def generated(n, n_integral=0):
