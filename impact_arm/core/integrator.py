@@ -190,9 +190,6 @@ class PhaseIntegrator:
                 st.levels, st.held, self._stats, self._trace_buffer, self._trace_count,
                 self._ev, self._evlog, self._O, self._out, *self._scratch)
         eq.advance.compile(tuple(_numba_type(a) for a in args))
-        vector = _numba_type(st.y)
-        eq.tip.compile((vector, vector, vector))           # the impact records' kinematics
-        eq.link_energies.compile((vector, vector, vector, vector))
         seconds = time.perf_counter() - t0
         if eq.__name__ in jit.COMPILED:
             import sys
