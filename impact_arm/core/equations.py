@@ -293,7 +293,7 @@ def _module_header(n, gravity, contact, friction, n_integral):
              '# Do not edit: delete the file to regenerate it.',
              f'# compiled with {jit_options()}',
              'import math', 'from math import sin, cos, sqrt', 'import numpy as np',
-             'from impact_arm.core.jit import jit, jit_leaf, jit_small',
+             'from impact_arm.core.jit import jit, jit_leaf',
              *(['# a long chain: the kernel\'s helpers are compiled once and called instead',
                 '# of inlined at every call site (numba\'s inlining copies and re-types their',
                 '# code each time: a 30 s cold start, growing with the links)',

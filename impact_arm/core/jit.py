@@ -127,9 +127,3 @@ def jit_leaf(func):
         return func
     return _njit(**LEAF_OPTIONS)(func)
 
-
-# a few-line helper: inlined whatever the scene shape (the kernel of a long chain compiles its
-# other leaves once and calls them, ``equations._module_header``; for these a compilation of
-# their own costs more than inlining them)
-jit_small = jit_leaf
-

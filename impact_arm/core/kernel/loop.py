@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..jit import jit, jit_leaf, jit_small
+from ..jit import jit, jit_leaf
 from ..layout import *
 from .events import event_values, locate
 from .injected import *
@@ -79,14 +79,14 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
 CONTACT_RESOLUTION = 0.5
 
 
-@jit_small
+@jit_leaf
 def contact_step_cap(y, P, SURF, C, levels, scratch):
     """The longest contact step at state y (``CONTACT_RESOLUTION``); inf without force."""
     omega = contact_frequency(y, P, SURF, C, levels, scratch)
     return CONTACT_RESOLUTION / omega if omega > 0.0 else math.inf
 
 
-@jit_small
+@jit_leaf
 def copy_into(dst, src):
     """dst[:] = src (a slice assignment may allocate a temporary, which needs NRT)."""
     for i in range(dst.shape[0]):

@@ -5,7 +5,7 @@
 # flake8: noqa: F401,F403,F405
 import math
 
-from ..jit import jit, jit_leaf, jit_small
+from ..jit import jit, jit_leaf
 from ..layout import *
 from .injected import *
 from .rhs import rhs
@@ -181,7 +181,7 @@ def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held,
     rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats, W)
 
 
-@jit_small
+@jit_leaf
 def rosenbrock_now(I, C):
     """Whether the current phase steps with Rosenbrock (free flight, when chosen)."""
     return I[I_METHOD] == METHOD_ROSENBROCK and int(C[C_PHASE]) == FREE
@@ -209,7 +209,7 @@ def error_norm(err, y0, y1, rtol, atol):
     return math.sqrt(total / size)
 
 
-@jit_small
+@jit_leaf
 def phase_tolerances(P, C):
     """(rtol, atol) of the current phase: contact phases have their own (see PhaseIntegrator)."""
     if HAS_CONTACT:
