@@ -27,10 +27,26 @@ every impact. ``/clock`` is best effort like rclcpp's ClockQoS.
 
 Joint angles on the wire are relative (encoder) angles, joint1 = q1, joint_i = q_i - q_{i-1};
 the physics uses absolute link angles q_i. ``to_joint_space``/``to_absolute`` convert.
+
+Frames (REP 103): the physics works in its own plane, x to the right and y up, gravity along
+-y, angles positive counter-clockwise about the plane's z. Everything a ROS tool reads (URDF,
+/tf, markers, wrench frames) is in a REP 103 world instead: z up, gravity along -z. The one
+mapping between the two (``plane_to_world``): the model's plane is the world's x-z plane,
+
+    world x = model x,   world y = 0,   world z = model y,
+
+so the model's z axis (its rotation axis) is the world's -y: a positive joint angle turns
+about -y, and every URDF joint axis is ``0 -1 0``. A joint angle keeps its value and sign;
+only the axis it is drawn about is named differently.
+The contact frames ``surface1`` ... (``SURFACE_FRAME``) keep the model's axes, rotated by
+``PLANE_FRAME_ROTATION`` (+90 deg about world x): x tangential, y the surface's outward
+normal (world +z), z = world -y. /contact_wrench is given in ``surface1`` (``WRENCH_FRAME``):
+force.x tangential, force.y normal, the numbers the physics computes.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Optional
 
 # ------------------------------------------------------------------------------- topics
@@ -41,6 +57,10 @@ DIAGNOSTICS = '/diagnostics'
 # the names of the nodes' DiagnosticStatus (both publish on /diagnostics)
 SIMULATOR_STATUS = 'impact_arm: simulator'
 CONTROLLER_STATUS = 'impact_arm: controller'
+RECORDER_STATUS = 'impact_arm: recorder'
+# MCAP metadata record where the recorder writes the samples lost per topic
+# ('lost:/joint_states': '12', 'before_first:/joint_states': '0', ...)
+LOSSES_METADATA = 'recording/losses'
 CLOCK = '/clock'
 COMMANDS = '/effort_controller/commands'
 IMPACT_TRACE = '/impact_trace'  # written by offline runs only: the contact phase, densely
@@ -49,6 +69,12 @@ TF_STATIC = '/tf_static'
 TF = '/tf'
 IMPACT_MARKERS = '/impact_markers'
 E_STOP = '/e_stop'                # std_msgs/msg/Bool: true = zero torque, latched (simulator)
+# builtin_interfaces/msg/Time: the stamp of the newest /joint_states the recorder has written.
+# In lockstep the simulator stays at most ``recorder_window`` periods ahead of it, so a
+# recording is complete however long the recorder stalls (docs/nodes.md, "Recording in
+# lockstep").
+RECORDER_PROGRESS = '/recorder/progress'
+RECORDER_PROGRESS_TYPE = 'builtin_interfaces/msg/Time'
 
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
@@ -59,7 +85,16 @@ COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
 TRACE_TYPE = 'std_msgs/msg/Float64MultiArray'
 TF_TYPE = 'tf2_msgs/msg/TFMessage'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
-WRENCH_FRAME = 'surface'
+WORLD_FRAME = 'world'
+
+
+def surface_frame(index: int) -> str:
+    """TF frame of the scene's surface ``index`` (0-based): 'surface1', 'surface2', ..."""
+    return f'surface{index + 1}'
+
+
+# every surface is horizontal, so the first one's frame orients the wrench of any of them
+WRENCH_FRAME = surface_frame(0)
 
 # RMW_DURATION_INFINITE as rosbag2 writes it
 INFINITE_SEC, INFINITE_NSEC = 9223372036, 854775807
@@ -163,6 +198,13 @@ WRITER_REPAIR_DEPTH = 2000
 # reception for 0.33 s (eProsima/Fast-DDS#6535; docs/nodes.md). Lockstep needs no hold: a
 # stall there only delays the next period.
 STARTUP_HOLD = 4.0
+# Periods a lockstep simulator may run ahead of the recorder's progress when a run is
+# recorded (``impact-arm run``, the launch file). Well inside WRITER_REPAIR_DEPTH, so every
+# sample not yet taken by the recorder is still in its writer's history and is resent; large
+# enough that the recorder's 10 ms polls never hold the loop back (~30 periods a poll).
+RECORDER_WINDOW = 500
+# latched: a reader that joins late (the runner, a simulator) still gets the newest stamp
+PROGRESS_QOS = TopicQos(durability='transient_local', depth=1)
 LATCHED_1 = TopicQos(durability='transient_local', depth=1)
 VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher offers them
     ROBOT_DESCRIPTION: (STRING_TYPE, LATCHED_1),
@@ -195,6 +237,27 @@ def to_absolute(values) -> list:
         acc += float(v)
         out.append(acc)
     return out
+
+
+# ------------------------------------------------------------------------------- frames
+PLANE_AXIS_IN_WORLD = (0.0, -1.0, 0.0)   # the model's z (positive angles) in the world
+GRAVITY_IN_WORLD = (0.0, 0.0, -1.0)      # the model's -y
+
+
+def plane_to_world(x: float, y: float) -> tuple:
+    """A point (or vector) of the model's plane in the REP 103 world: (x, 0, y)."""
+    return float(x), 0.0, float(y)
+
+
+def plane_rotation(angle: float) -> tuple:
+    """Quaternion (x, y, z, w) in the world of a rotation by ``angle`` [rad] about the
+    model's z axis (= world -y): how a joint at that angle turns its child frame."""
+    return 0.0, -math.sin(angle / 2), 0.0, math.cos(angle / 2)
+
+
+# Quaternion (x, y, z, w) of a frame with the model's axes (x, y in the plane, z = world -y)
+# in the world: +90 deg about world x. The surface frames use it.
+PLANE_FRAME_ROTATION = (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
 
 
 # ------------------------------------------------------------------------------- names

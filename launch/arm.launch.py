@@ -53,7 +53,10 @@ def generate_launch_description():
                          {'scene': scene, 'publish_rate': rate, 'mode': mode,
                           'rate_factor': PythonExpression(['0.0 if ', lockstep,
                                                            ' else 1.0']),
-                          'publish_tf': PythonExpression(['not ', rsp])}]),
+                          'publish_tf': PythonExpression(['not ', rsp]),
+                          # lockstep: wait for the recorder, so the recording is complete
+                          'recorder_window': PythonExpression([
+                              f'{contract.RECORDER_WINDOW} if ', lockstep, ' else 0'])}]),
         Node(package='impact_arm', executable='controller', name='controller', output='screen',
              parameters=[os.path.join(config, 'controller.yaml'),
                          {'scene': scene, 'law': law, 'rate': rate,

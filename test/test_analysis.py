@@ -14,7 +14,8 @@ from impact_arm.tools.figures import FIGURE_SIZE
 
 FIGURES = ['fig3_controllers.png', 'fig4_link_angles.png', 'fig5_phase_portraits.png',
            'fig6_poincare.png', 'fig7_tip_velocity.png', 'fig8_indentation.png',
-           'fig9_impact_velocity.png', 'fig10_contact_force.png', 'fig11_kinetic_energy.png']
+           'fig9_impact_velocity.png', 'fig10_contact_force.png', 'fig10b_force_indentation.png',
+           'fig11_kinetic_energy.png']
 
 
 def cli(*argv, cwd):
@@ -91,7 +92,7 @@ def test_every_figure_is_written_non_empty_and_of_the_stated_size(article):
         drawn = np.any(np.abs(pixels - background) > 0.05, axis=-1).mean()
         assert 0.01 < drawn < 0.9, (name, drawn)
         assert f'({name})' in open(d / 'out' / 'report.md', encoding='utf-8').read()
-    assert 'figure 9/9' in ana.stderr  # progress is shown
+    assert 'figure 10/10' in ana.stderr  # progress is shown
 
 
 def test_report_states_table_cycle_and_sections(article):
@@ -146,9 +147,14 @@ def test_what_the_data_allows_compare_and_errors(article, tmp_path):
              '--no-animation', cwd=tmp_path)
     assert ok.returncode == 0, ok.stderr
     made = sorted(p.name for p in (tmp_path / 'cmp').glob('*.png'))
-    assert made == sorted(FIGURES[:4])  # no scene: no Fig. 7; no traces: no Figs. 8-11
+    # no scene: no Figs. 3 and 7; no traces and no reports: no Figs. 8-11; each said why
+    assert made == sorted(['fig3b_recordings.png'] + FIGURES[1:4])
+    assert 'Figure 3 not drawn' in ok.stdout and 'stores no scene' in ok.stdout
+    assert 'Figures 8-11 not drawn' in ok.stdout and 'no /impact_report' in ok.stdout
+    assert 'impact-arm simulate --scene SCENE --mcap FILE' in ok.stdout
     report = (tmp_path / 'cmp' / 'report.md').read_text(encoding='utf-8')
-    assert 'Figure 3 compares: small.mcap, small.mcap' in report
+    assert 'Recordings compared (fig3b_recordings.png): small.mcap, small.mcap' in report
+    assert 'Figures 8-11 not drawn' in report
     assert '0 impact reports' in report and 'no impacts recorded' in report
     rows = np.loadtxt(tmp_path / 'cmp' / 'poincare_qd1_zero.csv', delimiter=',', skiprows=1)
     # q̇1 = 4 cos 4t crosses zero at t = π/8, 3π/8, 5π/8 within 2 s, where q1 = ±1 rad and
@@ -164,3 +170,97 @@ def test_what_the_data_allows_compare_and_errors(article, tmp_path):
         bad = cli('analyze', *argv, cwd=tmp_path)
         assert bad.returncode == 2 and needle in bad.stderr, bad.stderr
         assert 'Traceback' not in bad.stderr
+
+
+def without_trace(src, dst):
+    """A copy of an offline recording without /impact_trace: what a live recording holds
+    (the simulator node publishes no trace)."""
+    from impact_arm.io.mcap_ros2 import Ros2McapWriter, iter_raw, read_metadata, topics_info
+    info = topics_info(src)
+    with Ros2McapWriter(dst) as w:
+        for topic, ti in info.items():
+            if topic != '/impact_trace':
+                w.add_topic(topic, ti.type_name, ti.qos or None)
+        for m in iter_raw(src):
+            if m.topic != '/impact_trace':
+                w.write(m.topic, m.data, m.log_time_ns)
+        for name, data in read_metadata(src).items():
+            if name != 'rosbag2':           # the writer writes its own
+                w.add_metadata(name, data)
+    return dst
+
+
+def test_a_live_recording_gets_figures_8_to_11_from_its_impact_reports(article, tmp_path):
+    """No /impact_trace: impact 2 is integrated again from its reported contact state; its
+    points are the offline trace's (the same impact, actuators off during contact)."""
+    from impact_arm.tools import analysis
+    d, _, _ = article
+    live = without_trace(d / 'paper.mcap', tmp_path / 'live.mcap')
+    ana = cli('analyze', live, '--out', tmp_path / 'out', '--impact', 2, '--laws', '',
+              '--no-animation', cwd=tmp_path)
+    assert ana.returncode == 0, ana.stderr
+    for name in FIGURES[5:]:
+        assert png_size(tmp_path / 'out' / name) == FIGURE_SIZE, name
+    assert 'impact 2 re-integrated from /impact_report' in ana.stdout
+    assert not (tmp_path / 'out' / 'fig3_controllers.png').exists()   # --laws ''
+    recorded = analysis.load(d / 'paper.mcap')
+    again = analysis.load(live)
+    assert not again.traces
+    (columns, rows, record, note), _ = analysis.impact_points(again, 2)
+    (_, trace_rows, _, trace_note), _ = analysis.impact_points(recorded, 2)
+    assert note and not trace_note
+    assert rows.shape == trace_rows.shape
+    delta, force = columns.index('delta'), columns.index('F_n')
+    assert np.max(rows[:, delta]) == pytest.approx(record['delta_m'], rel=1e-5)
+    assert rows[:, delta] == pytest.approx(trace_rows[:, delta], rel=1e-4, abs=1e-9)
+    assert rows[:, force] == pytest.approx(trace_rows[:, force], rel=1e-4, abs=1e-3)
+    # the points start at contact and every phase switch is among them
+    assert rows[0, delta] == 0 and rows[0, 0] == record['t_contact']
+    phase = rows[:, columns.index('phase')]
+    assert list(np.unique(phase)) == [1, 2, 3]
+    t_us = (rows[:, 0] - record['t_contact']) * 1e6
+    switches = t_us[np.nonzero(np.diff(phase))[0]]
+    elastic, plastic, _ = np.array(record['phase_durations']) * 1e6
+    assert switches == pytest.approx([elastic, elastic + plastic], abs=1e-6)
+    # maximum compression is a point: v_y = 0 there, no jump to the next phase's points
+    v_y = rows[:, columns.index('v_y')]
+    assert abs(v_y[np.nonzero(np.diff(phase))[0][1]]) < 1e-3
+
+
+def test_figure_3_data_are_the_articles_comparison_of_the_control_laws():
+    """Step responses without impact (the surface taken away): PD settles short of the
+    target by exactly gravity / Kp, PID overshoots, the Q controller overshoots by nothing
+    worth the name and settles within 0.1° sooner than PID on both links."""
+    from impact_arm.core.scene import load_scene
+    from impact_arm.tools.analysis import step_response
+    scene = load_scene('paper')
+    runs = {law: step_response(scene, law, t_max=5.0) for law in ('q', 'pd', 'pid')}
+    target = np.array(scene.controller.down_target)
+    assert not any(r.impacts for r in runs.values())
+    step = np.degrees(runs['q'].q[0] - target)        # the step (from 60°, 45°), deg
+
+    def past_target(run, k):            # degrees beyond the target, in the step's direction
+        return max(0.0, float(-np.min(np.degrees(run.q[:, k] - target[k]) * np.sign(step[k]))))
+
+    def settled_at(run, k, band=0.1):  # time from which |error| stays within band degrees
+        out = np.nonzero(np.abs(np.degrees(run.q[:, k] - target[k])) > band)[0]
+        return run.t[out[-1] + 1] if out[-1] + 1 < len(run.t) else math.inf
+
+    # PD: at rest, K_p e balances gravity: e2 = Q2g / Kp2, e1 = (Q1g + Q2g) / Kp1, with
+    # Q1g = -(m1/2 + m2) g L1 cos q1, Q2g = -m2 g L2/2 cos q2 at the resting angles
+    q1, q2 = runs['pd'].q[-1]
+    (m1, m2), (L1, L2), g = scene.masses, scene.lengths, scene.gravity
+    Q1g, Q2g = -(m1 / 2 + m2) * g * L1 * math.cos(q1), -m2 * g * L2 / 2 * math.cos(q2)
+    kp = scene.controller.kp
+    expected = np.degrees([(Q1g + Q2g) / kp[0], Q2g / kp[1]])
+    error = np.degrees(runs['pd'].q[-1] - target)
+    assert error == pytest.approx(expected, rel=0.02)
+    assert np.all(np.abs(error) > 0.25)              # PD does not reach the target
+    for k in (0, 1):
+        assert settled_at(runs['pd'], k) == math.inf
+        # PID: overshoot, by more than 5 % of the step on link 1
+        assert past_target(runs['pid'], k) > 0.05 * abs(step[k])
+        # Q: no overshoot worth the name (< 0.05 % of the step), no offset, faster
+        assert past_target(runs['q'], k) < 5e-4 * abs(step[k])
+        assert abs(np.degrees(runs['q'].q[-1, k] - target[k])) < 0.01
+        assert settled_at(runs['q'], k) < settled_at(runs['pid'], k)

@@ -1,4 +1,4 @@
-"""The article's scene: first impact against model.md's reading, limit cycle, CLI JSON."""
+"""The article's scene: first impact against docs/model.md's reading, limit cycle, CLI JSON."""
 import json
 
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from impact_arm.core.scene import load_scene
 from impact_arm.core.simulate import run
 
-# model.md, "What the article reports for its first impact" (truncated values: 1 % band)
+# docs/model.md, "What the article reports, and what the package gives" (truncated: 1 % band)
 ARTICLE_FIRST_IMPACT = {
     'duration': 1.44e-4, 'delta_m': 3.53e-4, 'delta_r': 2.84e-4, 'F_max': 2.77e4,
     'v_before': [-3.66, -5.54], 'v_after': [-2.43, 2.23], 'cor_kinematic': 0.40,
@@ -59,7 +59,7 @@ def test_cli_json_has_exactly_the_documented_structure(tmp_path):
     assert set(data['impacts'][0]) == {
         'index', 't_contact', 'q_contact_deg', 'duration', 'delta_m', 'delta_r', 'F_max',
         'v_before', 'v_after', 'cor_kinematic', 'T_before', 'T_after', 'cor_energetic',
-        'phase_durations'}
+        'phase_durations', 'q_max_compression_deg', 'q_separation_deg'}
     assert set(data['run']) == {'impacts', 't_end', 'period_last', 'q1_range_deg',
                                 'q2_range_deg', 'vx_range', 'vy_range', 'rhs_evaluations',
                                 'wall_time'}

@@ -7,7 +7,7 @@ from impact_arm.tools.contact_study import cor_table, hertz_case
 
 
 def test_hertz_impact_of_the_aluminium_sphere_matches_the_closed_form():
-    # the issue asks for 1 %; the laws and a tight DOP853 give far better
+    # 1 % would do; the laws and a tight DOP853 give far better
     for key, (model, theory) in hertz_case().items():
         assert model == pytest.approx(theory, rel=1e-6), key
     delta_m, F_max, duration = (theory for _, theory in hertz_case().values())

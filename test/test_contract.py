@@ -72,3 +72,34 @@ def test_every_layer_is_a_package_setup_installs():
     folders = {'.'.join(p.parent.relative_to(PACKAGE.parent).parts)
                for p in PACKAGE.rglob('*.py') if '__pycache__' not in p.parts}
     assert folders <= found
+
+
+def test_compile_notice_announces_a_long_compile_once_and_its_end():
+    """The one-time compile is announced once with its progress however many bursts it takes,
+    ends with 'compiled in N s', and a short compile says nothing."""
+    import io
+    import time
+
+    from impact_arm.core import jit
+    from impact_arm.tools.progress import COMPILE_NOTICE, CompileNotice
+    out = io.StringIO()
+    with CompileNotice(stream=out) as notice:
+        notice.SETTLE = 0.6
+        jit.compile_started()
+        time.sleep(1.6)                  # a long first burst: announced
+        jit.compile_ended()
+        jit.compile_started()            # a second burst right after: the same notice
+        time.sleep(0.2)
+        jit.compile_ended()
+        time.sleep(1.5)                  # settled: the notice ends by itself
+        text = out.getvalue()
+        jit.compile_started()            # a short compile later: nothing printed
+        time.sleep(0.1)
+        jit.compile_ended()
+    lines = out.getvalue().splitlines()
+    assert out.getvalue() == text
+    assert lines[0] == f'{COMPILE_NOTICE} ...'
+    assert lines[-1].startswith(f'{COMPILE_NOTICE}: compiled in ')
+    assert lines[-1].endswith(' s, cached for next time')
+    assert sum(COMPILE_NOTICE in line for line in lines) == 2
+    assert notice.total > 1.7

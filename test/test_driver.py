@@ -244,7 +244,7 @@ def test_e_stop_zeroes_the_torque_at_the_next_period_until_cleared(scene):
 def test_lockstep_paced_never_ahead_of_the_rate_factor(scene):
     clock, published = FakeClock(), []
     loop = make_loop(scene, clock, published=published)
-    for k in range(4):
+    for _ in range(4):
         loop.command([0.0, 0.0], clock.now)
         loop.lockstep_period(clock.now, rate_factor=0.5)   # 2 wall ms per period
     assert clock.now == pytest.approx(100.0 + 4 * 2 * P)

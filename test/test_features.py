@@ -1,4 +1,4 @@
-"""Model only what a scene requires (issue 5): surfaces, laws, friction, gravity, integral
+"""Model only what a scene requires: surfaces, laws, friction, gravity, integral
 states decide what the generated module contains, and the kernel keeps every piece of contact,
 friction and integral code behind the compile-time constants that remove it."""
 import ast

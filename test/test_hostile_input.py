@@ -1,5 +1,5 @@
 """Hostile input without ROS: scene files and raw payloads either give finite values or are
-refused in one line (issues 15 and 17). Property-based parts are bounded and derandomized."""
+refused in one line. Property-based parts are bounded and derandomized."""
 import copy
 import math
 import os
@@ -13,7 +13,7 @@ from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
 from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_command,
                                 joint_state_fields, wrench_stamped_fields)
-from impact_arm.tools.benchmarks.fuzz import key_paths
+from generators import key_paths
 
 from scenes import PAPER, paper_dict
 
@@ -259,7 +259,61 @@ def test_a_lone_surrogate_in_a_name_is_refused():
 
 def test_bench_stress_fuzz_classifies_each_scene():
     """A smoke run of ``bench stress --fuzz``: a worker process, seeded scenes, a tally."""
-    from impact_arm.tools.benchmarks.fuzz import GOOD, run_fuzz
+    from impact_arm_bench.fuzz import GOOD, run_fuzz
     tally, bad = run_fuzz(4, seed=1, timeout=60.0)
     assert sum(tally.values()) == 4 and not bad, bad
     assert set(k for k, v in tally.items() if v) <= set(GOOD)
+
+
+def test_a_nul_byte_in_a_scene_is_refused_in_one_line(tmp_path):
+    path = tmp_path / 'nul.yaml'
+    path.write_bytes(PAPER_TEXT.encode()[:40] + b'\x00' + PAPER_TEXT.encode()[40:])
+    with pytest.raises(SceneError) as err:
+        load_scene(str(path))
+    assert 'not valid YAML' in str(err.value) and '\n' not in str(err.value)
+
+
+@pytest.mark.parametrize('cut', [1, 2, 3])
+def test_a_command_cut_short_and_zero_padded_is_refused(cut):
+    """A transport pads a payload cut 1-3 bytes short back to its length with zeros (seen
+    between two processes with Fast DDS): the last torque's top bytes, sign and exponent,
+    become zero. (A torque whose low mantissa bytes are zero too would read as exactly 0,
+    which no check can tell from a valid zero.)"""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+    from impact_arm.core.driver import CommandError, SimulatedArm
+    raw = serialize_message(Float64MultiArray(data=[1.5, -2.2500001]))
+    padded = raw[:len(raw) - cut] + bytes(cut)
+    with pytest.raises(MalformedMessage):
+        float64_array_data(raw[:len(raw) - cut])          # as sent: too short
+    values = float64_array_data(padded)                   # as received: parses ...
+    assert values[0] == 1.5 and 0 < abs(values[1]) < 1e-300
+    arm = SimulatedArm(load_scene(PAPER), 1000.0)
+    with pytest.raises(CommandError, match='subnormal'):  # ... and the driver refuses it
+        arm.check_command(values)
+    assert arm.check_command([1.5, 0.0]) == [1.5, 0.0]
+
+
+def test_a_command_with_bytes_appended_is_malformed():
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+    raw = serialize_message(Float64MultiArray(data=[1.5, -2.25]))
+    assert float64_array_data(raw) == [1.5, -2.25]
+    with pytest.raises(MalformedMessage, match='after the end'):
+        float64_array_data(raw + bytes(8))
+
+
+def test_a_huge_sampled_run_is_estimated_and_needs_yes(tmp_path, capsys):
+    """publish_rate 1e6 Hz up to t_max 60 s is 6e7 samples (~3 min): refused up front with
+    the estimate unless --yes; a run past a tenth of the limit states its estimate and runs."""
+    from impact_arm.tools import cli
+    huge = tmp_path / 'huge.yaml'
+    huge.write_text(PAPER_TEXT.replace('publish_rate: 1000.0', 'publish_rate: 1000000.0'))
+    assert cli.main(['simulate', '--scene', str(huge)]) == 2
+    err = capsys.readouterr().err
+    assert '6e+07 samples' in err and '--yes' in err and err.count('\n') == 1, err
+    medium = tmp_path / 'medium.yaml'
+    medium.write_text(PAPER_TEXT.replace('cycles: 15', 'cycles: 1').replace('t_max: 60.0',
+                      't_max: 2.0').replace('publish_rate: 1000.0', 'publish_rate: 600000.0'))
+    assert cli.main(['simulate', '--scene', str(medium)]) == 0
+    assert 'samples: up to about' in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""Hostile peers on the graph (issue 17 items 1-4): garbage on the controller's raw inputs,
+"""Hostile peers on the graph: garbage on the controller's raw inputs,
 absurd states, stamp jumps and a malformed SetParameters request must not stop a node nor
 make the controller send a non-finite or absurd torque."""
 import os
@@ -10,7 +10,7 @@ import time
 from ros_helpers import (PYTHON, controller, diagnostics_values, from_simulator, node_args,  # noqa: F401,E501
                          probe, ros_env, simulator, start_process, wait_for)
 
-from impact_arm.tools.benchmarks.flood import malformed_commands
+from generators import malformed_commands
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -87,6 +87,9 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
         future = client.call_async(bad)
         assert wait_for(future.done, timeout=10)
         assert not any(r.successful for r in future.result().results)
+        future = client.call_async(SetParameters.Request(parameters=[Parameter(name='')]))
+        assert wait_for(future.done, timeout=10)
+        assert [r.successful for r in future.result().results] == [False]
 
         # still alive and still controlling on the driver's own states after all of that
         assert wait_for(lambda: len(commands()) > sent_before + 50, timeout=30), ctl.stderr
@@ -117,7 +120,7 @@ def not_applied(values):
 
 
 def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_env, tmp_path):  # noqa: F811,E501
-    """Issue 15 item 4: >= 1 000 malformed raw payloads mixed with valid commands on the
+    """>= 1 000 malformed raw payloads mixed with valid commands on the
     realtime simulator's command topic: it keeps running and publishing every period, holds
     only the valid commands' torques, and counts the rest (refused, or superseded: not
     checked because a newer valid command of the same period was). Counts and values only:
@@ -165,7 +168,8 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
                     not_applied(values[-2]) != 0 and values[-1]['commands'] == \
                     values[-2]['commands'] and values
             running = wait_for(settled, timeout=15)
-            assert running, [{k: v for k, v in diagnostics_values(m).items() if k.startswith("command") or k == "level"} for _, m in diags][-4:]
+            assert running, [{k: v for k, v in diagnostics_values(m).items()
+                              if k.startswith("command") or k == "level"} for _, m in diags][-4:]
             assert wait_for(lambda: len(states) > flood_end + 500, timeout=15), sim.stderr
             assert sim.alive(), sim.stderr
     finally:

@@ -1,6 +1,7 @@
 """The launch file and the node parameter files: what a ROS 2 user starts with
 `ros2 launch impact_arm arm.launch.py` must name real executables and valid parameters."""
 import ast
+import contextlib
 import os
 import subprocess
 import sys
@@ -10,7 +11,8 @@ import types
 import pytest
 import yaml
 
-from ros_helpers import PYTHON, ROOT, controller, ros_env, start_process  # noqa: F401
+from ros_helpers import (PYTHON, ROOT, controller, probe, ros_env,  # noqa: F401
+                         start_process, wait_for)
 
 NODES = ('simulator', 'controller', 'recorder')
 
@@ -114,6 +116,77 @@ def test_tf_rsp_starts_robot_state_publisher_with_the_urdf_and_rviz_its_shipped_
     assert rviz_config['Visualization Manager']['Global Options']['Fixed Frame'] == 'world'
 
 
+def test_rviz_view_looks_along_y_onto_the_arms_x_z_plane():
+    """REP 103: z up, the arm moves in x-z. RViz's orbit camera sits at focal + distance *
+    (cos yaw cos pitch, sin yaw cos pitch, sin pitch): here on -y, level, so it looks along
+    +y with x to the right and z up."""
+    import math
+    config = yaml.safe_load(open(os.path.join(ROOT, 'config', 'impact_arm.rviz')))
+    view = config['Visualization Manager']['Views']['Current']
+    assert view['Class'] == 'rviz_default_plugins/Orbit'
+    yaw, pitch = view['Yaw'], view['Pitch']
+    direction = (math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch),
+                 math.sin(pitch))
+    assert direction == pytest.approx((0, -1, 0), abs=1e-6)
+    grid = next(d for d in config['Visualization Manager']['Displays']
+                if d['Class'] == 'rviz_default_plugins/Grid')
+    assert grid['Plane'] == 'XZ'
+
+
+def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
+    """config/impact_arm.foxglove.json: every panel in the layout tree is configured, the 3D
+    camera looks along +y onto the x-z plane, and every topic a panel reads is in a
+    recording."""
+    import json
+    import math
+    import re
+
+    from impact_arm.core.simulate import run
+    from impact_arm.io.offline_mcap import OfflineRecorder
+    from scenes import scene_from
+    layout = json.load(open(os.path.join(ROOT, 'config', 'impact_arm.foxglove.json')))
+
+    def panels(node):
+        return [node] if isinstance(node, str) else panels(node['first']) + \
+            panels(node['second'])
+    shown = panels(layout['layout'])
+    assert sorted(shown) == sorted(layout['configById'])
+    kinds = {panel.split('!')[0] for panel in shown}
+    assert kinds == {'3D', 'Plot', 'Table'}
+    three_d = layout['configById']['3D!arm']
+    camera = three_d['cameraState']
+    # the 3D panel's camera: spherical (distance, phi from +z, theta = -thetaOffset)
+    phi, theta = math.radians(camera['phi']), -math.radians(camera['thetaOffset'])
+    position = (math.sin(phi) * math.sin(theta), -math.sin(phi) * math.cos(theta),
+                math.cos(phi))
+    assert position == pytest.approx((0, -1, 0), abs=1e-9) and camera['perspective']
+    assert three_d['followTf'] == 'world'
+    assert three_d['topics']['/robot_description']['visible']
+    assert three_d['topics']['/impact_markers']['visible']
+    # the topics the panels and the table's script read are in a recording
+    path = tmp_path / 'run.mcap'
+    scene = scene_from(cycles=1)
+    rec = OfflineRecorder(path, scene)
+    rec.close(run(scene, observer=rec))
+    from rosbags.highlevel import AnyReader
+    from pathlib import Path
+    with AnyReader([Path(path)]) as reader:
+        recorded = {c.topic: c.msgtype for c in reader.connections}
+    script, = layout['userNodes'].values()
+    inputs = re.search(r'inputs = \[([^]]*)\]', script['sourceCode']).group(1)
+    output = re.search(r'output = "([^"]+)"', script['sourceCode']).group(1)
+    assert [t.strip().strip('"') for t in inputs.split(',')] == ['/impact_report']
+    used = set()
+    for config in layout['configById'].values():
+        for entry in config.get('paths', []):
+            used.add(entry['value'].split('.')[0])
+        if 'topicPath' in config:
+            assert config['topicPath'].startswith(output + '.')
+    used |= set(three_d['topics'])
+    assert used <= set(recorded), used - set(recorded)
+    assert recorded['/joint_states'] == 'sensor_msgs/msg/JointState'
+
+
 def test_urdf_command_prints_the_robot_description(tmp_path):
     out = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'urdf', '--scene', 'paper'],
                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
@@ -204,3 +277,41 @@ def test_controller_middleware_threads_share_its_realtime_priority(ros_env, tmp_
     assert middleware, threads     # Fast DDS names its threads dds.*
     expected = {(os.SCHED_FIFO, priority)} if priority else {(os.SCHED_OTHER, 0)}
     assert all(v == expected for v in middleware.values()), middleware
+
+
+@pytest.mark.dds
+def test_launched_nodes_each_appear_once_in_the_graph(probe, ros_env, tmp_path):
+    """Started as the launch file starts them (``-r __node:=NAME`` and the parameter file),
+    the nodes and their helper nodes (the simulator's command reader, the recorder's reader)
+    have distinct names: launch's global ``__node`` remap used to rename the helpers too, so
+    ``ros2 node list`` showed /simulator and /recorder twice and rcl warned "Publisher
+    already registered for node name"."""
+    actions = load_launch_with_stubs(ROOT)
+    nodes = [a.kwargs for a in actions if type(a).__name__ == 'Node'
+             and a.kwargs['package'] == 'impact_arm']
+    names = sorted(n['name'] for n in nodes)
+    assert len(set(names)) == len(names)
+    procs = []
+    with contextlib.ExitStack() as stack:
+        for n in nodes:
+            args = [PYTHON, '-m', f'impact_arm.nodes.{n["executable"]}', '--ros-args',
+                    '-r', f'__node:={n["name"]}', '--params-file',
+                    os.path.join(ROOT, 'config', n['executable'] + '.yaml')]
+            if n['executable'] == 'recorder':
+                args += ['-p', f'output:={tmp_path / "run.mcap"}']
+            procs.append(stack.enter_context(start_process(args, ros_env, tmp_path,
+                                                           n['name'])))
+
+        def graph():
+            return [f'{ns.rstrip("/")}/{name}'
+                    for name, ns in probe.node.get_node_names_and_namespaces()]
+        helpers = ['/_simulator_command_reader', '/_recorder_reader']
+        assert wait_for(lambda: set(f'/{n}' for n in names) | set(helpers) <= set(graph())
+                        or not all(p.alive() for p in procs), timeout=60), \
+            (graph(), [p.stderr[-2000:] for p in procs])
+        time.sleep(1.0)                 # anything duplicated would be discovered by now
+        seen = [n for n in graph() if n != '/test_probe']
+        assert sorted(seen) == sorted(set(seen)), seen
+        for p in procs:
+            assert p.alive(), p.stderr
+            assert 'already registered' not in p.stderr + p.stdout, p.stderr

@@ -65,7 +65,7 @@ def _samples():
                     effort=[12.5, -7.0])
     js.header.stamp.sec, js.header.stamp.nanosec = 3, 123456789
     ws = WrenchStamped()
-    ws.header.frame_id = 'surface'
+    ws.header.frame_id = 'surface1'
     ws.wrench.force.x, ws.wrench.force.y, ws.wrench.torque.z = -1.5, 27790.25, 0.125
     diag = DiagnosticArray(status=[DiagnosticStatus(
         level=DiagnosticStatus.WARN, name='simulator', message='overrun',

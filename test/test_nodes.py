@@ -22,6 +22,8 @@ from impact_arm.core.scene import load_scene, resolve_scene_path
 from impact_arm.core.simulate import run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+# whole runs over DDS: minutes for the module
+pytestmark = pytest.mark.slow
 
 
 # ------------------------------------------------------------------------------- lockstep
@@ -124,7 +126,10 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
     # gentle gains: this test is about the clock and the watchdog, and a loaded test machine
     # must not turn the article's stiff loop (kd = 100 at 1 kHz) unstable through latency
     gentle = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
-    with start_process(simulator('command_timeout:=0.1'), ros_env, tmp_path, 'sim') as sim, \
+    # the zero-torque watchdog policy: this test watches the torque drop to zero (the
+    # default, brake, holds the joints instead: test_session.py)
+    with start_process(simulator('command_timeout:=0.1', 'watchdog_policy:=zero'), ros_env,
+                       tmp_path, 'sim') as sim, \
             start_process(controller(*gentle), ros_env, tmp_path, 'ctl') as ctl:
         assert wait_for(lambda: states and stamp(states[-1][1]) > 0.1, timeout=30), sim.stderr
         begin = len(states)
@@ -327,70 +332,138 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
 
 
 # ------------------------------------------------------------------------------ runner
-def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
-    """``impact-arm run`` in lockstep records every period, even though its recorder is
-    frozen for 0.6 s (SIGSTOP) while the commands flow, as a recorder starved by a busy machine
-    is: the simulator's and the controller's writers keep enough history
-    (contract.WRITER_REPAIR_DEPTH) to resend what the recorder missed. With a history of 100
-    about a thousand periods were lost."""
-    from rosbags.highlevel import AnyReader
+def freeze_recorder(domain, seconds):
+    """SIGSTOP the run's recorder for ``seconds``, as a recorder starved by a busy machine."""
     from pathlib import Path
-    from impact_arm.nodes.recorder import FLOWING_LINE
-    env = dict(ros_env)
+    recorder = [int(pid) for pid in node_processes(domain)
+                if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
+    assert len(recorder) == 1, recorder
+    os.kill(recorder[0], signal.SIGSTOP)
+    time.sleep(seconds)
+    os.kill(recorder[0], signal.SIGCONT)
+
+
+def run_with_frozen_recorder(argv, env, tmp_path, ready_line, after=0.0, seconds=3.0):
+    """``impact-arm run ARGV`` whose recorder is frozen for ``seconds`` once its log says
+    ``ready_line`` (and ``after`` more seconds); returns (process, output, whether it froze)."""
     recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
-    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--mode', 'lockstep',
-                            '--name', 'r', '--out', str(tmp_path / 'runs')],
-                           env=env, cwd=tmp_path, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
+    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', *argv, '--out',
+                            str(tmp_path / 'runs')], env=env, cwd=tmp_path,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        def commands_flow():
+        def ready():
             try:
-                return any(FLOWING_LINE in line and contract.COMMANDS in line
-                           for line in recorder_log.read_text().splitlines())
+                return ready_line in recorder_log.read_text()
             except OSError:
                 return False
-        froze = wait_for(lambda: commands_flow() or run.poll() is not None, timeout=240) \
-            and run.poll() is None
+        wait_for(lambda: ready() or run.poll() is not None, timeout=240)
+        time.sleep(after)
+        froze = run.poll() is None
         if froze:
-            recorder = [int(pid) for pid in node_processes(env['ROS_DOMAIN_ID'])
-                        if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
-            assert len(recorder) == 1, recorder
-            os.kill(recorder[0], signal.SIGSTOP)
-            time.sleep(0.6)
-            os.kill(recorder[0], signal.SIGCONT)
+            freeze_recorder(env['ROS_DOMAIN_ID'], seconds)
         out, _ = run.communicate(timeout=300)
     finally:
         if run.poll() is None:
             run.kill()
             run.wait()
+    return run, out, froze
+
+
+def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
+    """``impact-arm run`` in lockstep records every period, command and impact report, in
+    stamp order, although its recorder is frozen (SIGSTOP) for 3 s while the commands flow:
+    the simulator waits for the recorder's progress (``recorder_window``) instead of running
+    past what the writers' history can resend. Without the wait, a recorder frozen for 1 s
+    lost 1 300-1 700 periods."""
+    from pathlib import Path
+    from mcap.reader import make_reader
+    from rosbags.highlevel import AnyReader
+    from impact_arm.io.wire import joint_state_fields
+    from impact_arm.nodes.recorder import FLOWING_LINE
+    env = dict(ros_env)
+    run, out, froze = run_with_frozen_recorder(
+        ['--mode', 'lockstep', '--name', 'r'], env, tmp_path, f'{FLOWING_LINE} {contract.COMMANDS}')
     assert run.returncode == 0, out
     assert froze, 'the run ended before the recorder could be frozen'
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
     assert len(rows) == 15
     assert 'real-time factor' in out
+    assert ': complete' in out, out
+    # the progress shows no stale 1 Hz watchdog state once the arm is being driven
+    assert not [line for line in out.splitlines()
+                if 'watchdog waiting' in line and 'impacts 0' not in line]
     mcap = tmp_path / 'runs' / 'r.mcap'
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-    assert counts.get('/impact_report') == 15
-    # nothing lost at the start (issue 17 item 10: the runner starts the controller once the
-    # recorder has matched the simulator's publishers) nor while the recorder was frozen: the
-    # held initial state (stamp 0) and then every period, 1 ms apart, to the end. (Commands
-    # are not counted against the periods: one CI run recorded 24 fewer, cause not pinned;
-    # a recorder that matches the controller's writer only after the writer matched it
-    # would miss the first ones.)
-    from mcap.reader import make_reader
-    from impact_arm.io.wire import joint_state_fields
+        reports = [json.loads(reader.deserialize(raw, c.msgtype).data)['index']
+                   for c, _, raw in reader.messages(
+                       [c for c in reader.connections if c.topic == '/impact_report'])]
+    assert reports == list(range(1, 16)), reports
+    # the held initial state (stamp 0) and then every period, 1 ms apart, to the end, in
+    # the order they were written; a command started each period after the first
     with open(mcap, 'rb') as f:
-        stamps = {round((sec + nanosec * 1e-9) * 1000) for sec, nanosec, *_ in (
+        stamps = [round((sec + nanosec * 1e-9) * 1000) for sec, nanosec, *_ in (
             joint_state_fields(m.data) for _, c, m in make_reader(f).iter_messages(
-                topics=['/joint_states']))}
-    missing = sorted(set(range(max(stamps) + 1)) - stamps)
+                topics=['/joint_states'], log_time_order=False))]
+    distinct = sorted(set(stamps))
+    missing = sorted(set(range(distinct[-1] + 1)) - set(distinct))
     assert not missing, f'{len(missing)} periods not recorded, from {missing[0]} ms'
+    later = [s for s in stamps if s > 0]
+    assert later == sorted(later), 'joint states written out of stamp order'
+    assert counts.get(contract.COMMANDS, 0) >= distinct[-1], (counts, distinct[-1])
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 
+def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
+    """Realtime cannot wait for a recorder: one frozen (SIGSTOP) for 3 s loses samples, and
+    the loss is counted exactly per topic (from the writers' sequence numbers), in the file's
+    metadata and in the run's summary: recorded + lost + published before the recorder's
+    first sample = what the simulator says it sent. The file has one clock: each joint
+    state's log time is its header stamp (simulated time), and the run ends paused where the
+    cycles completed (no falling arm after the last cycle)."""
+    from pathlib import Path
+    from mcap.reader import make_reader
+    from impact_arm.io.mcap_ros2 import read_metadata
+    from impact_arm.io.wire import header_stamp_ns
+    env = dict(ros_env)
+    scene = tmp_path / 'short.yaml'
+    scene.write_text(Path(resolve_scene_path('paper')).read_text().replace('cycles: 15',
+                                                                           'cycles: 12'))
+    run, out, froze = run_with_frozen_recorder(
+        ['--mode', 'realtime', '--scene', str(scene), '--name', 'rt'], env, tmp_path,
+        f'first samples on {contract.COMMANDS}', after=1.0)
+    sim_log = tmp_path / 'runs' / 'logs' / 'simulator.log'
+    assert froze, out
+    assert run.returncode == 0, out
+    mcap = tmp_path / 'runs' / 'rt.mcap'
+    losses = read_metadata(mcap)[contract.LOSSES_METADATA]
+    sent = dict(re.findall(r'(/\w+) (\d+)', sim_log.read_text().partition('samples sent:')[2]))
+    with open(mcap, 'rb') as f:
+        records = [(m.log_time, header_stamp_ns(m.data)) for _, _, m in
+                   make_reader(f).iter_messages(topics=[contract.JOINT_STATES])]
+    lost = int(losses[f'lost:{contract.JOINT_STATES}'])
+    assert lost > 1000, losses                  # ~3 000 periods of 1 ms
+    assert len(records) + lost + int(losses[f'before_first:{contract.JOINT_STATES}']) == \
+        int(sent[contract.JOINT_STATES]), (len(records), losses, sent)
+    assert f'{contract.JOINT_STATES} {lost}' in out, out
+    assert all(log == stamp for log, stamp in records)
+    rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
+    assert len(rows) >= 12, out
+    assert not node_processes(env['ROS_DOMAIN_ID'])
+    # the live recording (no /impact_trace) still gives Figures 8-11: the impact integrated
+    # again from its /impact_report, as the command says
+    ana = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'analyze', str(mcap), '--out',
+                          str(tmp_path / 'analysis'), '--laws', '', '--no-animation'],
+                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert ana.returncode == 0, ana.stderr
+    assert 'impact 1 re-integrated from /impact_report' in ana.stdout
+    for name in ('fig8_indentation.png', 'fig9_impact_velocity.png', 'fig10_contact_force.png',
+                 'fig11_kinetic_energy.png'):
+        assert (tmp_path / 'analysis' / name).stat().st_size > 10_000, name
+
+
 def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_env, tmp_path):
-    """Issue 17 item 10, the runner's side: the first command waits for the recorder to match
+    """The runner's side: the first command waits for the recorder to match
     the simulator's publishers and receive joint states, not only for its readers to be in the
     graph. The recorder is
     frozen (SIGSTOP) once its readers are known, before the simulator exists, and thawed 3 s
@@ -405,10 +478,11 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
     from std_msgs.msg import Float64MultiArray
     from impact_arm import contract
     from impact_arm.nodes.recorder import MATCHED_LINE
-    from impact_arm.tools.runner import SIMULATOR_TOPICS, ready_for_commands, recorder_says
+    from impact_arm.tools.runner import SIMULATOR_TOPICS, RecorderProgress, ready_for_commands
     mcap = tmp_path / 'slow.mcap'
     states = probe.listen(JointState, contract.JOINT_STATES, depth=20000)
     with probe.lock:
+        progress = RecorderProgress(probe.node)
         command = probe.node.create_publisher(Float64MultiArray, contract.COMMANDS,
                                               contract.qos(contract.COMMANDS).to_rclpy())
     with start_process(node_args('impact_arm.nodes.recorder', f'output:={mcap}', 'scene:=paper'),
@@ -425,7 +499,7 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                 assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), \
                     sim.stderr
                 thaw.start()
-                assert wait_for(lambda: ready_for_commands(probe.node, rec.err_path), timeout=60), \
+                assert wait_for(lambda: ready_for_commands(probe.node, progress), timeout=60), \
                     rec.stderr
                 assert command.get_subscription_count() >= 2
 
@@ -436,8 +510,8 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                 advance(200)
                 # then, thawed and matched for sure, more: the recording goes on after a gap
                 thaw.join()
-                assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_says(
-                    rec.err_path)[MATCHED_LINE], timeout=60), rec.stderr
+                assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_log_says(
+                    rec.err_path, MATCHED_LINE), timeout=60), rec.stderr
                 reached = max(stamp(m) for _, m in states)
                 advance(100)
                 assert wait_for(lambda: stamp(states[-1][1]) > reached, timeout=30), sim.stderr
@@ -449,6 +523,7 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
             probe.forget(states)
             with probe.lock:
                 probe.node.destroy_publisher(command)
+                probe.node.destroy_subscription(progress.subscription)
         rec.signal(signal.SIGINT)
         assert rec.wait(20) == 0, rec.stderr
     with AnyReader([Path(mcap)]) as reader:
@@ -457,6 +532,16 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
                   for c, _, raw in reader.messages(joint_states)} if joint_states else set()
     missing = set(range(round(sent * 1000) + 1)) - stamps
     assert not missing, f'{len(missing)} periods not recorded, from stamp {min(missing)} ms'
+
+
+def recorder_log_says(log_path, line) -> set:
+    """The topics the recorder's log names after each of its lines ``line``."""
+    topics = set()
+    with open(log_path, encoding='utf-8', errors='replace') as f:
+        for text in f:
+            if line in text:
+                topics.update(text.partition(line)[2].split())
+    return topics
 
 
 def test_run_command_interrupted_stops_nodes_and_keeps_the_recording(ros_env, tmp_path):

@@ -110,7 +110,7 @@ def test_contact_force_laws_join_where_the_model_says():
     c = contact_constants(STEEL, STEEL, 0.005)
     d_y = 1.9 * c.delta_c
     jump = jackson_green_force(d_y, c) / hertz_force(d_y, c.E, c.R) - 1
-    assert 0.001 < jump < 0.01  # model.md: about +0.6 % at 1.9 δc
+    assert 0.001 < jump < 0.01  # docs/model.md: about +0.6 % at 1.9 δc
     # restitution starts exactly at (δm, Pm) and ends at zero force at δr
     delta_m = 100 * c.delta_c
     p_m = jackson_green_force(delta_m, c)

@@ -85,6 +85,13 @@ def test_unreadable_file_is_a_scene_error():
         load_scene('/nonexistent/scene.yaml')
 
 
+def test_a_misspelled_scene_name_lists_the_installed_scenes():
+    with pytest.raises(SceneError, match=r"scene 'papr': cannot be read: .*installed scenes: "
+                                         r"paper\b") as refused:
+        load_scene('papr')
+    assert 'simulator' not in str(refused.value)     # node parameter files are not scenes
+
+
 def test_cli_reports_bad_scene_without_traceback(tmp_path, capsys):
     from impact_arm.tools.cli import main
     bad = tmp_path / 'bad.yaml'

@@ -1,4 +1,4 @@
-"""Simulation control and robustness over DDS, real processes (issue 12): ~/reset, ~/pause,
+"""Simulation control and robustness over DDS, real processes: ~/reset, ~/pause,
 ~/step and /e_stop change what /joint_states and /diagnostics show; a controller that loses
 every wrench sample still cycles; start-up in either order, or with the controller late,
 never stops the simulator."""

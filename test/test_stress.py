@@ -1,14 +1,14 @@
-"""Stability at the extremes (issue 5): the fast cases of the stress matrix.
+"""Stability at the extremes: the fast cases of the stress matrix.
 
 Each case must finish with finite, physically consistent impacts (phases in order, δm > 0,
 0 <= δr < δm, δ >= 0, contact adds no energy, the impacts the geometry forces all found) or
 stop with an error naming the limit it crossed. The checks live in
-impact_arm/benchmarks/stress.py; `impact-arm bench stress` runs the full sweep and the soak.
+bench/impact_arm_bench/stress.py; `impact-arm bench stress` runs the full sweep and the soak.
 Only scene shapes the rest of the suite already compiles are used.
 """
 import pytest
 
-from impact_arm.tools.benchmarks import stress
+from impact_arm_bench import stress
 
 # cases that must stop, and the words of the limit their message must name
 NAMED_STOPS = {

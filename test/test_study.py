@@ -12,15 +12,25 @@ from hypothesis import strategies as st
 
 from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import parse_scene
-from impact_arm.core.simulate import run_events
+from impact_arm.core.simulate import run as run_scene
 from impact_arm.core.study import Study, apply_overrides, parse_key_path
-from impact_arm.tools.benchmarks.fuzz import key_paths
 
+from generators import key_paths
 from scenes import paper_dict, scene_from
 
 pa = pytest.importorskip('pyarrow')
 from impact_arm.tools import sweep  # noqa: E402  (needs pyarrow: the studies extra)
-from impact_arm.tools.benchmarks.sweep import live_descendants  # noqa: E402
+from impact_arm_bench.sweep import live_descendants  # noqa: E402
+
+
+
+def _events(scene, **options):
+    """The event-only run's impacts (a simulation error raised)."""
+    result = run_scene(scene, samples=False, **options)
+    if result.exception:
+        raise result.exception
+    return result.impacts, result.t_end, result.integrator, result.wall_time
+
 
 LOOSE = {'integrator.preset': 'fast', 'integrator.method': 'rosenbrock',
          'integrator.rtol': 1e-2, 'integrator.atol': 1e-4, 'integrator.contact_rtol': 3e-4}
@@ -48,7 +58,7 @@ def test_key_paths_and_overrides_change_only_their_value():
 def test_a_run_with_overrides_is_the_event_run_of_the_scene_they_describe():
     study = Study('paper', LOOSE)
     result = study.run({'surfaces[0].mu': 0.5, 'controller.kp': [800, 300], 'cycles': 4})
-    expected = run_events(scene_from({**LOOSE_NESTED, ('surfaces',): [
+    expected = _events(scene_from({**LOOSE_NESTED, ('surfaces',): [
         {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.5, 'v_d': 0.02, 'material': 'steel'}],
         ('controller', 'kp'): [800.0, 300.0]}, cycles=4))[0]
     assert not result.error and result.impacts == expected
@@ -173,6 +183,39 @@ def test_a_failing_run_is_a_row_and_the_sweep_goes_on(tmp_path):
     assert impacts['run'] == [0, 0, 0, 2, 2, 2] and impacts['surfaces[0].mu'][-1] == 0.3
 
 
+def test_a_typo_in_a_key_path_exits_non_zero_before_any_run(tmp_path, capsys):
+    """surfaces[0].muu (and an index past the end) are refused at load with every distinct
+    error, the command exits non-zero, and no run is made (no output directory)."""
+    with pytest.raises(sweep.SpecError) as refused:
+        spec(tmp_path, parameters={'surfaces[0].muu': {'grid': [0.1, 0.5, 3]},
+                                   'controller.kp[2]': {'list': [400.0]},
+                                   'controller.kd[0]': {'lhs': [50.0, 150.0]}})
+    text = str(refused.value)
+    assert '2 key path(s)' in text and 'nothing was run' in text
+    assert 'surfaces[0].muu is not a known key' in text and 'controller.kp has 2 entries' in text
+    assert 'controller.kd[0]' not in text
+    path = tmp_path / 'typo.yaml'
+    path.write_text('scene: paper\nparameters:\n  surfaces[0].muu: {grid: [0.1, 0.5, 200]}\n')
+    out = tmp_path / 'typo.sweep'
+    from impact_arm.tools.cli import main
+    assert main(['sweep', str(path), '--workers', '0', '--out', str(out)]) != 0
+    assert 'surfaces[0].muu is not a known key' in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_a_sweep_with_failed_runs_exits_non_zero_listing_the_distinct_errors(tmp_path,
+                                                                              capsys):
+    path = tmp_path / 'bad.yaml'
+    path.write_text('scene: paper\nset: {cycles: 2, integrator.preset: fast}\n'
+                    'parameters:\n  surfaces[0].mu: {list: [0.2, -1.0, -1.0, 11.0]}\n')
+    from impact_arm.tools.cli import main
+    assert main(['sweep', str(path), '--workers', '0', '--out', str(tmp_path / 'o')]) == 1
+    err = capsys.readouterr().err
+    assert '3 run(s) failed with 2 distinct error(s)' in err
+    assert '2 x' in err and 'surfaces[0].mu = -1 is out of range' in err
+    assert 'surfaces[0].mu = 11 is out of range' in err
+
+
 def test_impact_rows_are_the_runs_records_whatever_their_overrides():
     """A chunk's impacts table holds each run's impact records, lists spread over key[i]
     columns, also when runs override different keys (their tables are joined by name)."""
@@ -216,7 +259,8 @@ def test_a_sweep_killed_with_sigkill_resumes_and_runs_every_run_exactly_once(tmp
     path.write_text(text)
     out = tmp_path / 'kill.sweep'
     child = subprocess.Popen([sys.executable, '-m', 'impact_arm.tools.cli', 'sweep', str(path),
-                              '--workers', '2', '--batch', '3'],
+                              '--workers', '2', '--batch', '3',
+                              '--out', str(out)],
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and child.poll() is None:
@@ -287,6 +331,11 @@ def test_sweep_plot_writes_a_png(tmp_path):
     out = str(tmp_path / 'out')
     sweep.execute(s, out, workers=0, show_progress=False)
     path = sweep.plot(out, 'cor_kinematic', 'surfaces[0].mu', 'controller.kp[0]')
+    assert '[' not in os.path.basename(path)        # a name a shell takes as it is
+    assert sweep.axis_label('controller.kp[0]') == 'controller.kp[0] [N m/rad]'
+    assert sweep.axis_label('materials.steel.E') == 'materials.steel.E [Pa]'
+    assert sweep.axis_label('F_max') == 'F_max [N]'
+    assert sweep.axis_label('surfaces[0].mu') == 'surfaces[0].mu [-]'
     with open(path, 'rb') as f:
         assert f.read(8) == b'\x89PNG\r\n\x1a\n'
     with pytest.raises(sweep.SpecError, match="x 'mu' is not a column"):

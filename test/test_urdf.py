@@ -1,4 +1,5 @@
-"""The generated robot description, read by an independent URDF parser (yourdfpy)."""
+"""The generated robot description, read by an independent URDF parser (yourdfpy) and an
+independent dynamics library (Pinocchio), both in REP 103's world (z up, gravity along -z)."""
 import io
 import math
 
@@ -48,13 +49,15 @@ def test_links_masses_inertias_and_joints_match_the_scene(scene):
                                                                m * L * L / 12], rel=1e-15)
         assert link.visuals[0].geometry.cylinder.length == pytest.approx(L, rel=1e-15)
         joint = urdf.joint_map[f'joint{k + 1}']
-        assert list(joint.axis) == [0, 0, 1]
+        assert list(joint.axis) == [0, -1, 0]   # the model's z axis in the z-up world
         assert joint.parent == ('world' if k == 0 else f'link{k}')
         assert joint.origin[:3, 3] == pytest.approx([scene.lengths[k - 1] if k else 0, 0, 0])
-    assert urdf.link_map['tip'].visuals[0].geometry.sphere.radius == scene.tip_radius
+    assert urdf.link_map['tip'].collisions[0].geometry.sphere.radius == scene.tip_radius
     for i, surface in enumerate(scene.surfaces):
         name = f'surface{i + 1}'
-        assert urdf.get_transform(name, 'world')[1, 3] == pytest.approx(surface.height)
+        pose = urdf.get_transform(name, 'world')
+        assert pose[:3, 3] == pytest.approx([0, 0, surface.height])   # z up
+        assert pose[:3, 1] == pytest.approx([0, 0, 1])   # the surface frame's y: the normal
         box = urdf.link_map[name].visuals[0]
         top = box.origin[1, 3] + box.geometry.box.size[1] / 2   # the slab's top face
         assert top == pytest.approx(0.0, abs=1e-15)
@@ -70,9 +73,10 @@ def test_joint_values_are_relative_angles_and_put_the_tip_where_the_model_does(s
     for _ in range(5):
         q = rng.uniform(-math.pi, math.pi, scene.n_links)
         urdf.update_cfg(np.concatenate([[q[0]], np.diff(q)]))
-        x, y = urdf.get_transform('tip', 'world')[:2, 3]
         xb, yb = model.tip(q, np.zeros_like(q))[:2]
-        assert (x, y) == pytest.approx((xb, yb), abs=1e-12)
+        # the model's plane is the world's x-z plane: B = (x, 0, y)
+        assert urdf.get_transform('tip', 'world')[:3, 3] == pytest.approx([xb, 0, yb],
+                                                                        abs=1e-12)
 
 
 def test_ros2_control_block_names_topic_hardware_with_effort_commands():
@@ -90,13 +94,56 @@ def test_ros2_control_block_names_topic_hardware_with_effort_commands():
 
 
 def test_frame_functions_compose_to_the_tip():
+    from scipy.spatial.transform import Rotation
     scene = scenes()[1]
     q = [0.3, -1.1, 2.0]
     chain = moving_transforms(scene.lengths, q) + static_transforms(scene)[:1]
-    x = y = yaw = 0.0
-    for t in chain:   # compose planar transforms world -> ... -> tip
-        x, y = x + math.cos(yaw) * t.x - math.sin(yaw) * t.y, y + math.sin(yaw) * t.x + \
-            math.cos(yaw) * t.y
-        yaw += t.yaw
+    R, p = np.eye(3), np.zeros(3)
+    for t in chain:   # compose world -> ... -> tip
+        p = p + R @ [t.x, t.y, t.z]
+        R = R @ Rotation.from_quat(t.quaternion()).as_matrix()
     xb, yb = ArmModel(scene).tip(q, [0, 0, 0])[:2]
-    assert (x, y) == pytest.approx((xb, yb), abs=1e-12)
+    assert p == pytest.approx([xb, 0, yb], abs=1e-12)
+
+
+@pytest.mark.parametrize('scene', scenes(), ids=['2 links', '3 links'])
+def test_an_independent_dynamics_library_finds_the_models_gravity_torques(scene):
+    """Pinocchio builds the arm from the URDF with its own default gravity (-9.81 along -z):
+    at random states its gravity torques must be the model's. Pinocchio's g(q) is dV/dq in
+    joint (relative) angles; the model's gravity_forces are -dV/dq in absolute angles, and
+    q_abs = S q_rel with S lower-triangular ones, so g = -S^T gravity_forces."""
+    pin = pytest.importorskip('pinocchio')
+    model = pin.buildModelFromXML(robot_description(scene))
+    assert model.gravity.linear == pytest.approx([0, 0, -9.81])
+    data = model.createData()
+    arm = ArmModel(scene)
+    n = scene.n_links
+    S = np.tril(np.ones((n, n)))
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        q = rng.uniform(-math.pi, math.pi, n)
+        relative = np.concatenate([[q[0]], np.diff(q)])
+        # continuous joints are (cos, sin) pairs in Pinocchio's configuration
+        config = np.concatenate([[math.cos(a), math.sin(a)] for a in relative])
+        expected = -S.T @ np.asarray(arm.gravity_forces(q)) * 9.81 / scene.gravity
+        torques = pin.computeGeneralizedGravity(model, data, config)
+        assert torques == pytest.approx(expected, rel=1e-12, abs=1e-12)
+        assert np.abs(torques).max() > 1.0   # not all zero: gravity is not along an axis
+
+
+def test_rod_radius_is_a_visual_setting_and_the_tip_stands_out_of_the_rod():
+    from impact_arm.io.urdf import default_rod_radius
+    scene = scene_from()
+    urdf = parse(scene)
+    rod = urdf.link_map['link1'].visuals[0].geometry.cylinder.radius
+    assert rod == default_rod_radius(scene) == pytest.approx(0.01 * min(scene.lengths))
+    tip = urdf.link_map['tip']
+    assert tip.visuals[0].geometry.sphere.radius >= 2 * rod      # visible around the rod
+    assert tip.collisions[0].geometry.sphere.radius == scene.tip_radius
+    assert tip.visuals[0].material.name != urdf.link_map['link1'].visuals[0].material.name
+    thick = yourdfpy.URDF.load(io.StringIO(robot_description(scene, rod_radius=0.05)),
+                               load_meshes=False)
+    assert thick.link_map['link2'].visuals[0].geometry.cylinder.radius == 0.05
+    for bad in (-0.01, math.nan, 10 * max(scene.lengths)):
+        with pytest.raises(ValueError, match='rod_radius'):
+            robot_description(scene, rod_radius=bad)

@@ -1,4 +1,4 @@
-"""Contact laws of one impact (model.md): Hertz elastic compression, Jackson-Green
+"""Contact laws of one impact (docs/model.md): Hertz elastic compression, Jackson-Green
 elasto-plastic compression, elastic restitution about a residual dent, and tanh-smoothed
 Coulomb friction. Plain functions of the indentation so they test against closed forms.
 
@@ -19,7 +19,7 @@ YIELD_ONSET_FACTOR = 1.9   # the elastic phase ends at δ = 1.9 δc (Jackson-Gre
 
 @dataclass(frozen=True)
 class ContactConstants:
-    """Everything one tip/surface pairing needs, computed once per scene (model.md)."""
+    """Everything one tip/surface pairing needs, computed once per scene (docs/model.md)."""
     E: float          # reduced modulus [Pa]
     R: float          # reduced radius [m] (flat surface: the tip radius)
     S_y: float        # yield strength of the weaker material [Pa]
@@ -54,7 +54,7 @@ def hertz_force(delta, E, R):
 
 @jit
 def jackson_green(delta, delta_c, R, S_y, C_j, P_c, B):
-    """Elasto-plastic compression force, article eq. 12 with model.md's a and H."""
+    """Elasto-plastic compression force, article eq. 12 with docs/model.md's a and H."""
     if delta <= 0:
         return 0.0
     ratio = delta / delta_c
@@ -71,7 +71,7 @@ def jackson_green_force(delta: float, c: ContactConstants) -> float:
 
 @jit
 def residual(delta_m, delta_c):
-    """δr after unloading from δm (Etsion et al. fit, model.md).
+    """δr after unloading from δm (Etsion et al. fit, docs/model.md).
 
     The fit is for contacts that yielded (δm ≥ δc); below δc the contact stayed elastic and
     unloads along its loading curve, so δr = 0 — the fit itself would turn negative there."""
@@ -97,5 +97,5 @@ def restitution_force(delta, delta_r, E, R_r):
 
 @jit
 def friction_force(normal_force, slip_velocity, mu, v_d):
-    """Tangential force opposing slip: -μ |Fn| tanh(v/v_d) (model.md fixes eq. 14's sign)."""
+    """Tangential force opposing slip: -μ |Fn| tanh(v/v_d) (docs/model.md fixes eq. 14's sign)."""
     return -mu * abs(normal_force) * math.tanh(slip_velocity / v_d)

@@ -1,4 +1,4 @@
-"""Control laws (article §2.3, model.md) and the down/up cycle logic, free of ROS.
+"""Control laws (article §2.3, docs/model.md) and the down/up cycle logic, free of ROS.
 
 Torques are joint torques τ_i acting from link i-1 on link i (τ_1 = T01, τ_2 = T12). With the
 absolute-angle coordinates of the model they enter Lagrange's equations as
@@ -37,7 +37,7 @@ def q_law(q, qd, target, kp, kd, gravity_forces, out):
 @jit
 def pid_error(q, qd, target, joint_space, error, rate):
     """Error and its rate in the angles the PID acts on: absolute link angles (article
-    eq. 10 as model.md reads it) or relative joint angles (encoder angles)."""
+    eq. 10 as docs/model.md reads it) or relative joint angles (encoder angles)."""
     for i in range(q.shape[0]):
         if joint_space and i > 0:
             error[i] = (q[i] - q[i - 1]) - (target[i] - target[i - 1])

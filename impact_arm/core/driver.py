@@ -9,9 +9,14 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import numpy as np
 
 from ..contract import to_joint_space
+from .control import q_law
 from .errors import ImpactArmError
 from .integrator import PRESETS, PhaseIntegrator, options_from_spec
 from .metrics import ImpactBuilder
@@ -19,7 +24,8 @@ from .model import ArmModel
 from .scene import Scene
 
 
-def feed_events(integ, builder, events, on_event=None):
+def feed_events(integ: PhaseIntegrator, builder: ImpactBuilder, events: Iterable,
+                on_event: Callable | None = None) -> list:
     """Feed located ``events`` to the impact ``builder`` (``on_event`` sees each first).
     Returns the impacts completed [(record, trace rows)], each taking the trace so far."""
     impacts = []
@@ -35,13 +41,20 @@ def feed_events(integ, builder, events, on_event=None):
     return impacts
 
 
-def advance_period(integ, builder, t_end, on_event=None):
+def advance_period(integ: PhaseIntegrator, builder: ImpactBuilder, t_end: float,
+                   on_event: Callable | None = None) -> tuple[list, tuple[float, float]]:
     """The one period loop of every sampled run (the driver's periods, offline held control):
     advance ``integ`` to ``t_end`` and ``feed_events``. Returns the impacts completed and the
     contact impulse (tangential, normal) over the period, which callers divide by the period
     for the averaged wrench."""
     impacts = feed_events(integ, builder, integ.advance(t_end), on_event)
     return impacts, integ.take_impulse()
+
+
+# Each joint's brake torque limit [N m]: ten times the article arm's largest static gravity
+# torque (~20 N m at joint 1, stretched out horizontally), so it holds the arm anywhere and
+# stops a swinging one within a few degrees.
+DEFAULT_BRAKE_TORQUE = 200.0
 
 
 class CommandError(ImpactArmError):
@@ -66,7 +79,8 @@ class SimulatedArm:
     schedule by accumulated rounding."""
 
     def __init__(self, scene: Scene, rate: float, *, preset: str | None = None,
-                 max_effort: float = math.inf, trace: bool = True):
+                 max_effort: float = math.inf, trace: bool = True,
+                 brake_torque: float = DEFAULT_BRAKE_TORQUE):
         if not rate > 0:
             raise ValueError(f'rate = {rate}: must be > 0 Hz')
         preset = preset or scene.integrator.preset
@@ -77,6 +91,12 @@ class SimulatedArm:
         self.n = self.model.n
         self.rate = float(rate)
         self.max_effort = float(max_effort)
+        self.brake_torque = float(brake_torque)
+        # the brake holds with the scene controller's own stiffness: gains known to be
+        # stable at the control rate, under the same zero-order hold
+        self._brake_gains = (np.asarray(scene.controller.kp, float),
+                             np.asarray(scene.controller.kd, float))
+        self._brake_at = None                  # absolute link angles the brake holds
         spec = scene.integrator
         # the scene's own tolerances apply with its own preset
         self._options = dict(control='held', trace=trace,
@@ -108,13 +128,14 @@ class SimulatedArm:
                 break
         n, y = self.n, scratch.state.y
         scratch.torque()
+        self._brake_torques(y[:n].copy(), y[n:2 * n].copy(), y[:n].copy())
         scratch.contact_forces(y[:n], y[n:2 * n])
         kinetic_energy_split(self.model, y[:n], y[n:2 * n])
         self.model.tip(y[:n], y[n:2 * n])
         self.model.gravity_forces(y[:n])
 
     # ----------------------------------------------------------------------- commands
-    def check_command(self, values) -> list:
+    def check_command(self, values: Iterable[float]) -> list[float]:
         """The command as floats, or CommandError saying why it is refused."""
         values = list(values)
         if len(values) != self.n:
@@ -124,13 +145,19 @@ class SimulatedArm:
         bad = [i for i, v in enumerate(out) if not math.isfinite(v)]
         if bad:
             raise CommandError(f'command value(s) {out} not finite (index {bad})')
+        # a subnormal torque (< 2.2e-308 N m) is no controller's output but the mark of a
+        # message cut short and zero-padded on the way: its last bytes were zeroed
+        tiny = [i for i, v in enumerate(out) if v and abs(v) < sys.float_info.min]
+        if tiny:
+            raise CommandError(f'command value(s) {out} subnormal (index {tiny}): a corrupted '
+                               f'or truncated message')
         return out
 
-    def apply(self, values):
+    def apply(self, values: Iterable[float]):
         """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
         self.apply_checked(self.check_command(values))
 
-    def apply_checked(self, tau: list):
+    def apply_checked(self, tau: list[float]):
         """``apply`` for torques ``check_command`` has already passed (a driver checks each
         command once, when it arrives, and applies it at its next period)."""
         limit = self.max_effort
@@ -139,6 +166,29 @@ class SimulatedArm:
     def release(self):
         """Zero torque (watchdog expired, controller gone)."""
         self._hold([0.0] * self.n)
+
+    def engage_brake(self):
+        """Hold the joints where they are now, from this period on (``brake``)."""
+        self._brake_at = self.integrator.state.y[:self.n].copy()
+
+    def brake(self) -> list[float]:
+        """Apply the brake for the next period and return its joint torques: a stiff hold of
+        the angles ``engage_brake`` saw (the scene controller's PD gains plus gravity
+        compensation, recomputed each period from the state), each joint's torque limited to
+        ±``brake_torque``, as a real brake slips beyond its rated torque."""
+        y = self.integrator.state.y
+        n = self.n
+        tau = self._brake_torques(y[:n].copy(), y[n:2 * n].copy(), self._brake_at)
+        limit = self.brake_torque
+        tau = [min(max(v, -limit), limit) for v in tau]
+        self._hold(tau)
+        return tau
+
+    def _brake_torques(self, q, qd, target) -> list:
+        out = np.zeros(self.n)
+        q_law(q, qd, target, *self._brake_gains, np.asarray(self.model.gravity_forces(q), float),
+              out)
+        return out.tolist()
 
     def _hold(self, tau):
         if tau != self.command:
@@ -159,7 +209,7 @@ class SimulatedArm:
         self.periods += 1
         return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
 
-    def sample(self, wrench=(0.0, 0.0), impacts=()) -> Tick:
+    def sample(self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable = ()) -> Tick:
         """The sensors' view of the current state."""
         st = self.integrator.state
         n = self.n

@@ -2,7 +2,7 @@
 
 Generalized coordinates are the *absolute* link angles q_i (from +x). Lagrange's equations
 d/dt(dT/dq̇) - dT/dq = Q give  M(q) q̈ = Q - b(q, q̇)  with b the velocity-product terms.
-Gravity enters through its generalized forces Q_g = Σ G_j · ∂r_Cj/∂q_i (model.md), never
+Gravity enters through its generalized forces Q_g = Σ G_j · ∂r_Cj/∂q_i (docs/model.md), never
 through a hand-typed formula.
 
 The derivation keeps lengths, masses and g as symbols, so one derivation serves every scene
@@ -321,10 +321,12 @@ def _derivation(n, gravity):
             text = f.read()
         if text:
             return text + MASS_INTO_WRAPPER
-    sys.stderr.write(f'impact_arm: deriving the equations of motion of a {n}-link arm '
-                     f'(sympy; first use of this shape only)\n')
-    sys.stderr.flush()
-    text = _derive_source(n, gravity)
+    from .jit import compile_ended, compile_started
+    compile_started()           # sympy: part of the one-time cost the tools announce
+    try:
+        text = _derive_source(n, gravity)
+    finally:
+        compile_ended()
     _write_atomically(path, text)
     return text + MASS_INTO_WRAPPER
 

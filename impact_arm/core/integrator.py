@@ -27,6 +27,7 @@ import numpy as np
 from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS
 from . import layout
 from .errors import RunBudgetError, SimulationError
+from .kinds import EventKind
 from .model import ArmModel, ArmState, Phase
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.
@@ -55,7 +56,7 @@ def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None
 
 @dataclass
 class Event:
-    kind: str            # contact | yield | max_compression | separation | switch | sample
+    kind: EventKind      # contact | yield | max_compression | separation | switch
     t: float
     surface: int
     y: np.ndarray
@@ -79,9 +80,9 @@ EVENT_LOG_CAPACITY = 64    # events one kernel call crosses before Python reads 
 STEPS_PER_CALL = 20_000
 MIN_STEP_BUDGET = 500_000
 STEPS_PER_SIMULATED_SECOND = 200_000
-_KINDS = {layout.EV_SWITCH: 'switch', layout.EV_YIELD: 'yield',
-          layout.EV_MAX: 'max_compression', layout.EV_SEP: 'separation'}
-KIND_BITS = {'contact': layout.KIND_BIT_CONTACT,
+_KINDS = {layout.EV_SWITCH: EventKind.SWITCH, layout.EV_YIELD: EventKind.YIELD,
+          layout.EV_MAX: EventKind.MAX_COMPRESSION, layout.EV_SEP: EventKind.SEPARATION}
+KIND_BITS = {EventKind.CONTACT: layout.KIND_BIT_CONTACT,
              **{kind: 1 << (1 + slot) for slot, kind in _KINDS.items()}}
 ALL_KINDS_MASK = sum(KIND_BITS.values())
 _LAWS = {'held': layout.LAW_HELD, 'q': layout.LAW_Q, 'pid': layout.LAW_PID,
@@ -190,11 +191,7 @@ class PhaseIntegrator:
                 st.levels, st.held, self._stats, self._trace_buffer, self._trace_count,
                 self._ev, self._evlog, self._O, self._out, *self._scratch)
         eq.advance.compile(tuple(_numba_type(a) for a in args))
-        seconds = time.perf_counter() - t0
-        if eq.__name__ in jit.COMPILED:
-            import sys
-            sys.stderr.write(f'impact_arm: kernel compiled in {seconds:.1f} s\n')
-        return seconds
+        return time.perf_counter() - t0
 
     # --- output on a time grid, from each step's continuous extension -------------------
     @property
@@ -290,7 +287,7 @@ class PhaseIntegrator:
     # --- phase machine (compiled: the kernel applies it without returning) -----------------
     def _kind(self, slot):
         n_surf = len(self.model.surfaces)
-        return 'contact' if slot < n_surf else _KINDS[slot - n_surf]
+        return EventKind.CONTACT if slot < n_surf else _KINDS[slot - n_surf]
 
     @staticmethod
     def _info(kind, values):

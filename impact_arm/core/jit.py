@@ -31,23 +31,6 @@ def _load_numba_without_blas():
         del sys.modules['scipy.linalg']
 
 
-COMPILED = set()     # generated kernel modules compiled (not loaded from cache) in this process
-
-
-def _announce_compilation(func):
-    """One line on stderr when a scene shape's kernel is compiled rather than loaded: the
-    first run of a new arm shape otherwise sits silent for tens of seconds."""
-    module = sys.modules.get(getattr(func, '__module__', ''))
-    if module is None or not module.__name__.startswith('impact_arm_kernel_') \
-            or module.__name__ in COMPILED:
-        return
-    COMPILED.add(module.__name__)
-    features = [name for flag, name in ((module.HAS_CONTACT, 'contact'),
-                                        (module.HAS_FRICTION, 'friction')) if flag]
-    sys.stderr.write(f'impact_arm: compiling the simulation kernel for a {module.N}-link arm'
-                     f'{" with " + " and ".join(features) if features else ""} (first use of '
-                     f'this shape: ~10-30 s; cached in {os.path.dirname(module.__file__)})\n')
-    sys.stderr.flush()
 
 
 def _load_cached_without_refresh():
@@ -76,7 +59,6 @@ def _load_cached_without_refresh():
             loaded = self._load_overload(sig, target_context)
         if loaded is None:      # a compilation follows
             _load_numba_without_blas()
-            _announce_compilation(self._py_func)
         return loaded
     load_overload._impact_arm = True
     caching.Cache.load_overload = load_overload
@@ -127,3 +109,53 @@ def jit_leaf(func):
         return func
     return _njit(**LEAF_OPTIONS)(func)
 
+
+# ------------------------------------------------------------------ compile notifications
+# Compiling a scene shape's kernel takes ~30 s once; the tools tell the user so. The core
+# only notifies (no printing policy here): ``add_compile_hook(on_start, on_end)`` registers
+# callbacks that run when the first compile (numba, or the sympy derivation) starts while none
+# is running, and when the last one ends. Loads from numba's on-disk cache are not compiles.
+_hooks = []
+_depth = [0]
+
+
+def add_compile_hook(on_start, on_end):
+    """Register ``on_start()``/``on_end()`` around every outermost compile; returns a function
+    that removes them."""
+    _install_numba_listener()
+    pair = (on_start, on_end)
+    _hooks.append(pair)
+    return lambda: pair in _hooks and _hooks.remove(pair)
+
+
+def compile_started():
+    _depth[0] += 1
+    if _depth[0] == 1:
+        for on_start, _ in list(_hooks):
+            on_start()
+
+
+def compile_ended():
+    _depth[0] = max(0, _depth[0] - 1)
+    if _depth[0] == 0:
+        for _, on_end in list(_hooks):
+            on_end()
+
+
+_listener = []
+
+
+def _install_numba_listener():
+    if _listener or _njit is None:
+        return
+    from numba.core import event
+
+    class _CompileListener(event.Listener):
+        def on_start(self, ev):
+            compile_started()
+
+        def on_end(self, ev):
+            compile_ended()
+
+    _listener.append(_CompileListener())
+    event.register('numba:compile', _listener[0])

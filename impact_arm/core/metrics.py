@@ -1,4 +1,4 @@
-"""Impact metrics (model.md): assembled from the integrator's located events, so every number
+"""Impact metrics (docs/model.md): assembled from the integrator's located events, so every number
 comes from the state at an exactly located phase switch, not from a sampled signal."""
 from __future__ import annotations
 
@@ -53,6 +53,8 @@ class ImpactBuilder:
                                f'or no contact)')
         impact['times'][kind] = event.t
         impact.update(event.info)
+        if kind == 'max_compression':   # where a viewer draws the impact (io/scene_visuals)
+            impact['q_max'] = np.asarray(event.y[:self.model.n], dtype=float).tolist()
         if kind != 'separation':
             return None
         self._open = None
@@ -83,6 +85,8 @@ class ImpactBuilder:
             'cor_energetic': [math.sqrt(a / b) if b > 0 else math.nan
                               for a, b in zip(T_after, T_before)],
             'phase_durations': [t_yield - t0, t_max - t_yield, t_sep - t_max],
+            'q_max_compression_deg': [math.degrees(a) for a in impact['q_max']],
+            'q_separation_deg': [math.degrees(a) for a in event.y[:self.model.n]],
         }
 
 

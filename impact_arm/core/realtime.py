@@ -10,8 +10,14 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
+
+from .kinds import TextEnum
+
+if TYPE_CHECKING:
+    from .driver import SimulatedArm, Tick
 
 PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute goes
 
@@ -25,19 +31,36 @@ PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute g
 DEFAULT_COMMAND_TIMEOUT = 0.02
 
 
+class WatchdogState(TextEnum):
+    """waiting: no command yet (brakes on); ok: a fresh command is held; timeout: the newest
+    command is older than the timeout (the policy acts)."""
+    WAITING = 'waiting'
+    OK = 'ok'
+    TIMEOUT = 'timeout'
+
+
+class WatchdogPolicy(TextEnum):
+    """What the driver does on a command timeout. brake: hold the joints where they are
+    (``SimulatedArm.brake``), as a real drive's safe stop does; zero: zero torque, the arm
+    falls under gravity (onto the part, where it chatters)."""
+    BRAKE = 'brake'
+    ZERO = 'zero'
+
+
 class PeriodStats:
     """Timing of the published periods, kept by the stepping thread, read by diagnostics."""
 
-    def __init__(self, nominal=None):
+    def __init__(self, nominal: float | None = None):
         self.lock = threading.Lock()
-        self.intervals = []        # wall time between consecutive publications [s]
-        self.computes = []         # wall time to step and publish one period [s]
+        self.intervals: list[float] = []   # wall time between consecutive publications [s]
+        self.computes: list[float] = []    # wall time to step and publish one period [s]
         self.published = 0
         self.overruns = 0
         self.worst_compute = 0.0
         self.worst_compute_t = 0.0
-        self.worst_parts = (0.0, 0.0, 0.0)   # the worst period's commands, physics, publish
-        self.last_publish = None
+        # the worst period's commands, physics, publish
+        self.worst_parts: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self.last_publish: float | None = None
         self.t_published = 0.0     # simulated time of the last period counted in ``published``
         self.nominal = nominal     # the wall period the jitter is measured against [s]
         # whole-run jitter |interval - period| as a 1 us histogram (0 ... 20 ms), plus the max
@@ -49,11 +72,12 @@ class PeriodStats:
         self.part_sums = [0.0, 0.0, 0.0, 0.0]
         self.part_count = 0
 
-    def part_means(self):
+    def part_means(self) -> list[float]:
         with self.lock:
             return [s / self.part_count if self.part_count else 0.0 for s in self.part_sums]
 
-    def add(self, published_at, compute, t_sim, overrun, parts=None):
+    def add(self, published_at: float, compute: float, t_sim: float, overrun: bool,
+            parts: Sequence[float] | None = None):
         with self.lock:
             if parts is not None:
                 for i, part in enumerate(parts):
@@ -77,7 +101,7 @@ class PeriodStats:
                 if parts is not None:
                     self.worst_parts = tuple(parts[:3])
 
-    def run_percentiles(self, *qs):
+    def run_percentiles(self, *qs: float) -> list[float]:
         """Whole-run jitter percentiles [s] from the histogram."""
         with self.lock:
             total = int(self.histogram.sum())
@@ -86,7 +110,7 @@ class PeriodStats:
             cumulative = np.cumsum(self.histogram)
             return [float(np.searchsorted(cumulative, q / 100 * total)) * 1e-6 for q in qs]
 
-    def take(self):
+    def take(self) -> tuple[list[float], list[float]]:
         with self.lock:
             intervals, computes = self.intervals, self.computes
             self.intervals, self.computes = [], []
@@ -94,62 +118,75 @@ class PeriodStats:
 
 
 class Watchdog:
-    """Zero-order hold of the newest command, zero torque once it is older than ``timeout``.
+    """Zero-order hold of the newest command; once it is older than ``timeout``, zero torque
+    (``policy`` zero) or the brake (brake) until the next valid command.
 
-    ``state``: waiting (no command yet: brakes on) | ok | timeout; ``timeouts`` counts the
-    changes to timeout (each one a silence of the controller longer than ``timeout``);
-    ``silence`` is the wait before the newest command and ``longest_silence`` the longest
-    one of the run (s): a middleware stall shows there with its length."""
+    ``state``: a WatchdogState; ``timeouts`` counts the changes to timeout (each one a
+    silence of the controller longer than ``timeout``), ``brakes`` those the brake answered
+    and ``brake_peak`` is the largest brake torque applied [N m]; ``silence`` is the wait
+    before the newest command and ``longest_silence`` the longest one of the run (s): a
+    middleware stall shows there with its length."""
 
-    def __init__(self, timeout):
+    def __init__(self, timeout: float, policy: WatchdogPolicy | str = WatchdogPolicy.ZERO):
         self.timeout = timeout
-        self.state = 'waiting'
+        self.policy = WatchdogPolicy(policy)
+        self.state = WatchdogState.WAITING
         self.timeouts = 0
-        self.pending = None        # (torques, arrival time) of the newest valid command
-        self.applied = None        # the pending command the arm holds
-        self.last_command = None   # arrival time of the newest valid command
+        self.brakes = 0
+        self.brake_peak = 0.0
+        # (torques, arrival time) of the newest valid command
+        self.pending: tuple[list[float], float] | None = None
+        self.applied: tuple[list[float], float] | None = None   # the pending command the arm holds
+        self.last_command: float | None = None   # arrival time of the newest valid command
         self.silence = self.longest_silence = 0.0
 
-    def command(self, torques, now):
+    def command(self, torques: list[float], now: float):
         if self.last_command is not None:
             self.silence = now - self.last_command
             self.longest_silence = max(self.longest_silence, self.silence)
         self.pending = (torques, now)
         self.last_command = now
 
-    def hold(self, arm, now):
-        """Make ``arm`` hold the newest command, or zero torque when it is too old. Returns
-        'timeout' or 'resumed' when the state changes that way (for the log), else None."""
+    def hold(self, arm: SimulatedArm, now: float) -> WatchdogState | None:
+        """Make ``arm`` hold the newest command, or act on the policy when it is too old.
+        Returns the new state when it changes to TIMEOUT or back to OK (for the log), else
+        None."""
         pending = self.pending
         if pending is None:
-            self.state = 'waiting'
+            self.state = WatchdogState.WAITING
             arm.release()
             return None
         if now - pending[1] > self.timeout:
-            changed = self.state != 'timeout'
-            self.state = 'timeout'
+            changed = self.state is not WatchdogState.TIMEOUT
+            self.state = WatchdogState.TIMEOUT
             self.timeouts += changed
-            arm.release()
+            if self.policy is WatchdogPolicy.BRAKE:
+                if changed:
+                    self.brakes += 1
+                    arm.engage_brake()
+                self.brake_peak = max(self.brake_peak, *(abs(v) for v in arm.brake()))
+            else:
+                arm.release()
             self.applied = None
-            return 'timeout' if changed else None
-        resumed = self.state == 'timeout'
-        self.state = 'ok'
+            return WatchdogState.TIMEOUT if changed else None
+        resumed = self.state is WatchdogState.TIMEOUT
+        self.state = WatchdogState.OK
         if pending is not self.applied:    # a held command is not applied again each period
             arm.apply_checked(pending[0])  # checked on arrival
             self.applied = pending
-        return 'resumed' if resumed else None
+        return WatchdogState.OK if resumed else None
 
     def reapply(self):
         """Apply the held command again at the next period (a new effort limit)."""
         self.applied = None
 
-    def status(self, now):
+    def status(self, now: float) -> WatchdogState:
         """The state as of ``now``: a loop that has not run since the timeout elapsed will
         zero the torque on its next period. Only reads: the change itself (its log line and
         count) is the loop's, in ``hold``."""
-        if self.state == 'ok' and self.last_command is not None and \
+        if self.state is WatchdogState.OK and self.last_command is not None and \
                 now - self.last_command > self.timeout:
-            return 'timeout'
+            return WatchdogState.TIMEOUT
         return self.state
 
 
@@ -172,12 +209,18 @@ class DriverLoop:
     (initial state at t = 0, brakes on until the next command, statistics and counts reset),
     ``e_stop`` (zero torque whatever the commands, until cleared)."""
 
-    def __init__(self, arm, *, wall_period, command_timeout, take_command=None, accept=None,
-                 publish=None, log=None, clock=time.monotonic, sleep=time.sleep,
-                 max_takes=100, take_budget=0.5):
+    def __init__(self, arm: SimulatedArm, *, wall_period: float, command_timeout: float,
+                 take_command: Callable[[], Any] | None = None,
+                 accept: Callable[[Any, float], bool] | None = None,
+                 publish: Callable[[Tick], None] | None = None,
+                 log: Callable[[str, str], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep,
+                 max_takes: int = 100, take_budget: float = 0.5,
+                 policy: WatchdogPolicy | str = WatchdogPolicy.ZERO):
         self.arm = arm
         self.wall_period = wall_period          # realtime: wall seconds per period
-        self.watchdog = Watchdog(command_timeout)
+        self.watchdog = Watchdog(command_timeout, policy)
         self.stats = PeriodStats(wall_period)
         self.take_command = take_command or (lambda: None)
         self.accept = accept or (lambda raw, now: False)
@@ -196,8 +239,8 @@ class DriverLoop:
         self.publish = publish or (lambda tick: None)
         self.log = log or (lambda level, text: None)
         self.clock, self.sleep = clock, sleep
-        self.start_wall = None                  # wall time the schedule is counted from
-        self.first_command_wall = None          # simulated time starts here
+        self.start_wall: float | None = None    # wall time the schedule is counted from
+        self.first_command_wall: float | None = None   # simulated time starts here
         self.commands = 0
         self.impacts = 0
         self.skipped = 0                        # periods skipped after stalls
@@ -208,18 +251,18 @@ class DriverLoop:
         # periods run without a command newer than the previous period's: the controller did
         # not answer within the period (the zero-order hold then holds an older command)
         self.stale = 0
-        self._last_pending = None
+        self._last_pending: tuple[list[float], float] | None = None
         self.paused = False
         self.e_stop = False
         self._steps = 0
         self._reset = threading.Event()
         self._reset_done = threading.Event()
         self._frozen = 0.0                      # wall time spent paused [s]
-        self._paused_at = None
+        self._paused_at: float | None = None
         self._k = 0                             # index of the next period's deadline
 
     # -------------------------------------------------------------------- commands in
-    def command(self, torques, now):
+    def command(self, torques: list[float], now: float):
         """A valid command (already checked by ``arm.check_command``) arrived at ``now``
         (wall time)."""
         if self.first_command_wall is None:
@@ -243,7 +286,7 @@ class DriverLoop:
         """The queued commands, oldest first, at most ``max_takes`` and until
         ``take_budget`` of the period has gone; and whether some may be left queued."""
         end = now + self.take_budget * self.wall_period
-        taken = []
+        taken: list[Any] = []
         while len(taken) < self.max_takes:
             raw = self.take_command()
             if raw is None:
@@ -263,13 +306,15 @@ class DriverLoop:
             self.watchdog.reapply()
             return
         change = self.watchdog.hold(self.arm, self._run_time(now))
-        if change == 'timeout':
-            self.log('warning', f'no command for {self.watchdog.timeout:g} s: torques zeroed')
-        elif change == 'resumed':
+        if change is WatchdogState.TIMEOUT:
+            action = 'brakes on' if self.watchdog.policy is WatchdogPolicy.BRAKE \
+                else 'torques zeroed'
+            self.log('warning', f'no command for {self.watchdog.timeout:g} s: {action}')
+        elif change is WatchdogState.OK:
             self.log('info', f'commands resumed after {self.watchdog.silence:.3f} s without one')
 
     # -------------------------------------------------------------------- control
-    def set_paused(self, paused):
+    def set_paused(self, paused: bool):
         """Freeze (True) or resume the physics; the watchdog's and lockstep's clocks leave
         the paused time out, so nothing times out or catches up on resume."""
         now = self.clock()
@@ -281,17 +326,17 @@ class DriverLoop:
             self._steps = 0
         self.paused = paused
 
-    def request_steps(self, n):
+    def request_steps(self, n: int):
         self._steps += n
 
-    def take_step(self):
+    def take_step(self) -> bool:
         """Lockstep while paused: True (and one step fewer to go) when a period may run."""
         if self._steps > 0:
             self._steps -= 1
             return True
         return False
 
-    def request_reset(self, timeout=None):
+    def request_reset(self, timeout: float | None = None) -> bool:
         """Ask the loop for a reset; True once it is done (realtime: at the next period;
         ``timeout`` None means the caller runs the periods itself, e.g. lockstep)."""
         self._reset_done.clear()
@@ -305,7 +350,7 @@ class DriverLoop:
         if self._reset.is_set():
             self._reset.clear()
             self.arm.reset()
-            self.watchdog = Watchdog(self.watchdog.timeout)
+            self.watchdog = Watchdog(self.watchdog.timeout, self.watchdog.policy)
             self.stats = PeriodStats(self.stats.nominal)
             self.commands = self.impacts = self.skipped = self.flooded = self.stale = \
                 self.superseded = 0
@@ -321,7 +366,7 @@ class DriverLoop:
         return tick
 
     # -------------------------------------------------------------------- realtime
-    def realtime_period(self):
+    def realtime_period(self) -> Tick | None:
         """Wait for the next period's deadline, take its commands, step and publish it.
         Returns the period's tick (its impact reports still to be sent), or None when no
         physics ran (brakes on before the first command, paused). SimulationError
@@ -374,7 +419,7 @@ class DriverLoop:
                 self.skipped += missed
 
     # ---------------------------------------------------------------------------- lockstep
-    def lockstep_period(self, arrived, rate_factor):
+    def lockstep_period(self, arrived: float, rate_factor: float) -> Tick:
         """The period a command that arrived at ``arrived`` starts (lockstep); paced so that
         simulated time never runs ahead of ``rate_factor`` x wall time (0: unpaced)."""
         if self.e_stop:

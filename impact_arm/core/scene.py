@@ -44,7 +44,7 @@ class Material:
 
 
 def reduced_modulus(a: Material, b: Material) -> float:
-    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (model.md)."""
+    """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (docs/model.md)."""
     return a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
 
 
@@ -441,7 +441,12 @@ def read_scene_file(name: str | os.PathLike) -> tuple[str, str]:
         with open(path, 'rb') as f:
             data = f.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
-        raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}") from None
+        hint = ''
+        if isinstance(exc, FileNotFoundError) and not os.path.dirname(path):
+            names = installed_scenes()
+            hint = (f"; installed scenes: {', '.join(names)} (or give a path to a scene file)"
+                    if names else '')
+        raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}{hint}") from None
     if len(data) > MAX_FILE_BYTES:
         raise SceneError(f"scene '{path}': larger than {MAX_FILE_BYTES} bytes: not a scene file")
     try:
@@ -547,8 +552,10 @@ def _near_key(text: str, line: int) -> str:
 def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
     """The scene's YAML as plain data, not yet validated (studies change values in it), or
     ``SceneError`` in one line with line, column and key. Also reads sweep specs (``what``)."""
-    loader = _SceneLoader(text)
+    loader = None
     try:
+        # the reader checks the characters as it is built: a NUL byte fails here already
+        loader = _SceneLoader(text)
         node = loader.get_single_node()
         if node is not None and _expanded_size(node, {}) > MAX_YAML_NODES:
             raise SceneError(f"{what} '{origin}': more than {MAX_YAML_NODES} YAML nodes once "
@@ -564,7 +571,8 @@ def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
         problem = ' '.join(str(exc).split()) or type(exc).__name__
         raise SceneError(f"{what} '{origin}': not valid YAML: {problem[:200]}") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def scene_from_text(text: str, origin: str = '<scene>', path: str = '') -> Scene:
@@ -582,6 +590,23 @@ def resolve_scene_path(name: str | os.PathLike) -> str:
             if os.path.exists(full):
                 return full
     return name  # load_scene reports it as unreadable
+
+
+def installed_scenes() -> list[str]:
+    """Names of the scene files in the installed config directories (the node parameter
+    files there are not scenes: a scene has a top-level ``links:``)."""
+    names = set()
+    for directory in config_dirs():
+        for entry in os.listdir(directory):
+            if not entry.endswith('.yaml'):
+                continue
+            try:
+                with open(os.path.join(directory, entry), encoding='utf-8') as f:
+                    if any(line.startswith('links:') for line in f):
+                        names.add(entry[:-len('.yaml')])
+            except (OSError, UnicodeDecodeError):
+                continue
+    return sorted(names)
 
 
 def config_dirs() -> list[str]:

@@ -16,6 +16,7 @@ from .control import CycleController
 from .driver import advance_period, feed_events
 from .errors import SceneError, SimulationError
 from .integrator import PhaseIntegrator, options_from_spec
+from .kinds import TextEnum
 from .metrics import ImpactBuilder, settle_index
 from .model import ArmModel
 from .scene import Scene
@@ -63,8 +64,19 @@ class SampleRanges:
         return [] if self.v_min is None else [self.v_min[k], self.v_max[k]]
 
 
+class StopReason(TextEnum):
+    """Why a run ended (a str: it compares equal to its value)."""
+    CYCLES_COMPLETED = 'cycles completed'
+    T_MAX_REACHED = 't_max reached'
+    ERROR = 'error'                  # a SimulationError ended it: ``RunResult.error`` says what
+    INTERRUPTED = 'interrupted'
+    FAILED = 'failed'                # outside the physics (a node exited, a time-out, ...)
+
+
 @dataclass
 class RunResult:
+    """What every run returns: the impact records, the samples if kept, the totals and why
+    it stopped (``stop_reason``; ``stopped`` is the same in words, with its numbers)."""
     scene: Scene
     impacts: list
     samples: list = field(default_factory=list)    # empty when run(keep_samples=False)
@@ -74,8 +86,24 @@ class RunResult:
     rhs_evaluations: int = 0
     wall_time: float = 0.0                         # the integration (and its bookkeeping)
     load_time: float = 0.0                         # loading the compiled kernel, first run
-    stopped: str = ''                              # why the run ended
+    stop_reason: StopReason | None = None
+    stop_detail: str = ''                          # e.g. '15 cycles completed'
     error: str = ''
+    exception: SimulationError | None = None       # what ended the run early, if anything
+    integrator: PhaseIntegrator | None = None
+
+    @property
+    def stopped(self) -> str:
+        """Why the run ended, in words ('15 cycles completed', 't_max = 6 s reached')."""
+        return self.stop_detail or (self.stop_reason.value if self.stop_reason else '')
+
+    def stop(self, reason: StopReason, detail: str = ''):
+        self.stop_reason, self.stop_detail = reason, detail
+
+    def fail(self, exc: SimulationError):
+        """A simulation error ended the run; what was simulated before it is kept."""
+        self.exception, self.error = exc, str(exc)
+        self.stop(StopReason.ERROR)
 
     def summary(self) -> dict:
         """The "run" object of the JSON output (SI units, angles in degrees)."""
@@ -102,11 +130,16 @@ class RunResult:
         return settle_index(self.impacts)
 
 
-def run(scene: Scene, *, control_rate: float | None = None, preset: str | None = None,
-        rtol=None, atol=None, publish_rate: float | None = None, trace=False,
-        observer=None, progress=None, t_max: float | None = None,
-        keep_samples=True) -> RunResult:
-    """Simulate ``scene`` for its number of cycles (or until ``t_max``).
+def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None,
+        preset: str | None = None, rtol=None, atol=None, contact_rtol=None, method=None,
+        max_step=None, publish_rate: float | None = None, trace=False, observer=None,
+        progress=None, t_max: float | None = None, keep_samples=True) -> RunResult:
+    """Simulate ``scene`` for its number of cycles (or until ``t_max``): the one way to run.
+
+    ``samples=False`` takes the event-only path (continuous control, no sampled output: the
+    integrator runs from event to event; what studies, fits and ``simulate --no-samples``
+    use). A simulation error never raises: it ends the run with ``stop_reason`` ERROR and
+    the impacts completed before it (``result.exception`` to re-raise).
 
     ``observer`` may have ``on_sample(sample)``, ``on_impact(record, trace_rows)``; ``progress``
     is called as progress(cycle, cycles, impacts, t). The samples go to the observer as they
@@ -114,8 +147,17 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
     them all in ``result.samples``, refused beyond ``MAX_KEPT_SAMPLES`` (publish_rate * t_max).
     With ``keep_samples=False`` memory stays bounded whatever the sample count."""
     control_rate = scene.controller.rate if control_rate is None else control_rate
-    publish_rate = publish_rate or scene.publish_rate
+    options = options_from_spec(scene.integrator, preset, rtol, atol, contact_rtol)
+    if max_step is not None:
+        options['max_step'] = max_step
+    options['method'] = method or options['method']
     t_max = scene.t_max if t_max is None else t_max
+    if not samples:
+        if control_rate or observer is not None or trace:
+            raise ValueError('run(samples=False) runs from event to event with continuous '
+                             'control: no control_rate, observer or trace')
+        return _run_events(scene, t_max, options, progress)
+    publish_rate = publish_rate or scene.publish_rate
     if keep_samples and publish_rate * t_max > MAX_KEPT_SAMPLES:
         raise SceneError(
             f'publish_rate = {publish_rate:g} is out of range with t_max = {t_max:g} s for a '
@@ -123,10 +165,8 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
             f'publish_rate * t_max must be <= {MAX_KEPT_SAMPLES:g} (impact-arm simulate '
             f'streams them: no limit there)')
     model = ArmModel(scene)
-    spec = scene.integrator
     integ = PhaseIntegrator(
-        model, control='held' if control_rate else 'continuous', trace=True,
-        **options_from_spec(spec, preset, rtol, atol))
+        model, control='held' if control_rate else 'continuous', trace=True, **options)
     st = integ.state
     n = model.n
     ctrl = None
@@ -185,8 +225,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
             _run_sampled(scene, integ, dt_pub, t_max, feed, publish, result,
                          lambda: cycles_done)
         except SimulationError as exc:
-            result.error = str(exc)
-            result.stopped = 'error'
+            result.fail(exc)
         return _finish(result, integ, wall0)
 
     impulse_since_ctl = [0.0, 0.0]
@@ -199,7 +238,7 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
             t_ctl = k_ctl * dt_ctl
             t_next = min(t_pub, t_ctl)
             if t_next > t_max:
-                result.stopped = f't_max = {t_max:g} s reached'
+                result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')
                 break
             if t_next > st.t:
                 impacts, j = advance_period(integ, builder, t_next, count_switch)
@@ -227,11 +266,10 @@ def run(scene: Scene, *, control_rate: float | None = None, preset: str | None =
                                ctrl.mode if ctrl else st.mode), model.tip(q, qd)[2:])
                 k_pub += 1
             if scene.cycles and cycles_done >= scene.cycles:
-                result.stopped = f'{scene.cycles} cycles completed'
+                result.stop(StopReason.CYCLES_COMPLETED, f'{scene.cycles} cycles completed')
                 break
     except SimulationError as exc:  # keep what was simulated; the caller reports the error
-        result.error = str(exc)
-        result.stopped = 'error'
+        result.fail(exc)
     return _finish(result, integ, wall0)
 
 
@@ -283,9 +321,9 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
                 next_sample = min(t_final, math.ceil(st.t / dt - 1e-9) * dt)
                 mode = st.mode
                 feed(integ.advance(next_sample))
-            result.stopped = f'{scene.cycles} cycles completed'
+            result.stop(StopReason.CYCLES_COMPLETED, f'{scene.cycles} cycles completed')
             return
-    result.stopped = f't_max = {t_max:g} s reached'
+    result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')
 
 
 def format_table(result: RunResult) -> str:
@@ -319,66 +357,26 @@ def format_table(result: RunResult) -> str:
     return '\n'.join(lines)
 
 
-@dataclass
-class EventRun:
-    """A run on the event-only path: impact records, no samples."""
-    impacts: list
-    t_end: float
-    integrator: PhaseIntegrator
-    wall_time: float
-    exception: SimulationError | None = None    # what ended the run early; impacts before kept
-
-    @property
-    def error(self) -> str:
-        return str(self.exception) if self.exception else ''
-
-
-def run_impacts(scene: Scene, *, preset=None, rtol=None, atol=None, max_step=None,
-                method=None, contact_rtol=None) -> EventRun:
-    """The scene's cycles with continuous control and no sampled output: the integrator runs
-    from event to event. A simulation error ends the run and is returned with the impacts
-    completed before it (studies record it as a row, never as the end of the study)."""
+def _run_events(scene: Scene, t_max: float, options: dict, progress=None) -> RunResult:
+    """``run(samples=False)``: the scene's cycles on the event-only path. A cycle ends at a
+    switch; the kernel crosses each impact's phases by itself."""
     model = ArmModel(scene)
-    spec = scene.integrator
-    options = options_from_spec(spec, preset, rtol, atol, contact_rtol)
-    if max_step is not None:
-        options['max_step'] = max_step
-    options['method'] = method or options['method']
     integ = PhaseIntegrator(model, **options)
     builder = ImpactBuilder(model)
+    result = RunResult(scene=scene, impacts=builder.impacts)
     cycles = 0
-    failure = None
     wall0 = time.perf_counter()
     try:
-        while integ.state.t < scene.t_max and (not scene.cycles or cycles < scene.cycles):
-            # a cycle ends at a switch: the kernel crosses the impact's phases by itself
-            for event in integ.advance(scene.t_max, stop_at_event=('switch',)):
+        while integ.state.t < t_max and (not scene.cycles or cycles < scene.cycles):
+            for event in integ.advance(t_max, stop_at_event=('switch',)):
                 cycles += event.kind == 'switch'
                 builder.feed(event)
+            if progress:
+                progress(cycles, scene.cycles, len(builder.impacts), integ.state.t)
+        if scene.cycles and cycles >= scene.cycles:
+            result.stop(StopReason.CYCLES_COMPLETED, f'{scene.cycles} cycles completed')
+        else:
+            result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')
     except SimulationError as exc:
-        failure = exc
-    return EventRun(builder.impacts, integ.state.t, integ, time.perf_counter() - wall0, failure)
-
-
-def run_without_samples(scene: Scene, *, preset=None) -> RunResult:
-    """``run`` on the event-only path (continuous control): impacts and the run's totals, no
-    samples, no traces; what ``simulate --no-samples`` prints."""
-    events = run_impacts(scene, preset=preset)
-    cycles_done = scene.cycles and events.t_end < scene.t_max and not events.error
-    result = RunResult(
-        scene=scene, impacts=events.impacts, t_end=events.t_end,
-        rhs_evaluations=events.integrator.stats.rhs_evaluations, wall_time=events.wall_time,
-        stopped='error' if events.error else f'{scene.cycles} cycles completed' if cycles_done
-        else f't_max = {scene.t_max:g} s reached', error=events.error,
-        load_time=events.integrator.load_time)
-    result.integrator = events.integrator
-    return result
-
-
-def run_events(scene: Scene, **options):
-    """``run_impacts`` for benchmarks and tests: a simulation error is raised. Returns
-    (impacts, t_end, integrator, wall)."""
-    result = run_impacts(scene, **options)
-    if result.exception:
-        raise result.exception
-    return result.impacts, result.t_end, result.integrator, result.wall_time
+        result.fail(exc)
+    return _finish(result, integ, wall0)

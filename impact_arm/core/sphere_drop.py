@@ -2,7 +2,7 @@
 ``contact.py`` alone, no arm. One degree of freedom, the indentation δ (positive into the
 surface), m δ̈ = -F(δ), no gravity during the contact (mg is 1e-5 of the contact force here).
 
-Phases as model.md and the kernel's ``apply_event``: Hertz compression until δ = 1.9 δc
+Phases as docs/model.md and the kernel's ``apply_event``: Hertz compression until δ = 1.9 δc
 (elasto-plastic surfaces) or δ̇ = 0; Jackson-Green compression until δ̇ = 0; there δm, Pm,
 δr (Etsion et al.'s fit; 0 for a Hertz surface) and Rr; elastic restitution about δr until
 δ = δr, separation. Integrated with scipy's DOP853 and terminal events, to tolerances far

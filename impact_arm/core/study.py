@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from .errors import SceneError
 from .metrics import settle_index
 from .scene import Scene, parse_scene, read_scene_file, scene_data
-from .simulate import run_impacts
+from .simulate import run as run_scene
 
 _TOKEN = re.compile(r'\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]')
 
@@ -181,7 +181,7 @@ class Study:
         except SceneError as exc:
             return StudyRun(overrides, summary=summarize([], wall=time.perf_counter() - wall0),
                             error=str(exc), error_kind='scene')
-        result = run_impacts(scene)
+        result = run_scene(scene, samples=False)
         summary = summarize(result.impacts, result.t_end, result.integrator.stats,
                             time.perf_counter() - wall0)
         return StudyRun(overrides, result.impacts, summary, result.error,

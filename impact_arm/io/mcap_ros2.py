@@ -457,8 +457,10 @@ class RawMessage(NamedTuple):
     data: bytes
 
 
-def iter_raw(path, topics=None, start_time_ns: int = None) -> Iterator[RawMessage]:
-    """Serialized messages in log-time order (chunk indexes let the reader sort)."""
+def iter_raw(path, topics=None, start_time_ns: int = None,
+             log_time_order: bool = True) -> Iterator[RawMessage]:
+    """Serialized messages in log-time order (chunk indexes let the reader sort), or in the
+    order they were written with ``log_time_order=False``."""
     from mcap.reader import make_reader
     with open(path, 'rb') as f:
         reader = make_reader(f)
@@ -468,7 +470,8 @@ def iter_raw(path, topics=None, start_time_ns: int = None) -> Iterator[RawMessag
             new = 'starting_at' in inspect.signature(reader.iter_messages).parameters
             kw['starting_at' if new else 'start_time'] = int(start_time_ns)
         for schema, channel, message in reader.iter_messages(
-                topics=list(topics) if topics else None, log_time_order=True, **kw):
+                topics=list(topics) if topics else None, log_time_order=log_time_order,
+                **kw):
             yield RawMessage(channel.topic, schema.name if schema else '', message.log_time,
                              message.publish_time, message.data)
 

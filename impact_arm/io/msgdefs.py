@@ -224,14 +224,28 @@ def message_definition(type_name: str) -> str:
 
 
 def type_hash(type_name: str) -> str:
-    """RIHS01 type hash from the installed type description (.json), or '' if unavailable."""
+    """RIHS01 type hash from the installed type description (.json); for a stand-in type
+    (``STAND_INS``, no .json installed) the hash of its full definition as stored; '' if
+    neither is available."""
     path = share_file(type_name, '.json')
     try:
         with open(path, encoding='utf-8') as f:
             hashes = json.load(f)['type_hashes']
         return next(h['hash_string'] for h in hashes if h['type_name'] == type_name)
     except (TypeError, OSError, ValueError, KeyError, StopIteration):
-        return ''
+        pass
+    if type_name in STAND_INS:
+        return definition_hash(type_name)
+    return ''
+
+
+def definition_hash(type_name: str) -> str:
+    """RIHS01 hash of ``message_definition(type_name)``, computed by rosbags as ROS does
+    (SHA-256 of the type description, nested types included)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg(message_definition(type_name), type_name))
+    return store.hash_rihs01(type_name)
 
 
 # --------------------------------------------------------------------------------- CDR

@@ -1,7 +1,7 @@
 """Record an offline run (``impact-arm simulate --mcap FILE``) as a ROS 2 MCAP file.
 
 ``OfflineRecorder(path, scene)`` is an observer for ``simulate.run``: it writes, as the run goes,
-the topics and types the live simulator publishes (design.md §3, docs/topics.md), so
+the topics and types the live simulator publishes (docs/topics.md), so
 ``impact-arm analyze``, ``rosbags``, ``ros2 bag play`` and the replay node treat an offline file
 like a live recording. Every time below is *simulated* time: header stamps, and also the MCAP
 log and publish times (t = 0 at the start of the run), so time-ordered readers see the run in
@@ -18,7 +18,8 @@ Header stamp = sample time, frame_id ''.
 ``/contact_wrench`` (geometry_msgs/msg/WrenchStamped), one per sample: force.x = tangential
 (friction) force, force.y = normal force on the tip in the surface frame, both averaged over the
 publish period that ends at the stamp (so the contact impulse is kept); torque = 0.
-frame_id ``surface``.
+frame_id ``surface1``, the TF frame of the (first) surface: x tangential, y its outward normal
+(world +z; contract.py, "Frames").
 
 ``/impact_report`` (std_msgs/msg/String), one per impact: ``data`` is the impact record as one
 JSON object, the same fields and values as ``simulate --json`` (docs/outputs.md). Logged at the
@@ -38,9 +39,11 @@ F_f friction force [N]; v_x, v_y tip velocity [m/s]; T1 … TN link kinetic ener
 trace belongs to the k-th report.
 
 ``/robot_description``, ``/tf_static`` (once, at t = 0), ``/tf`` and ``/impact_markers`` (at
-``tf_rate`` of simulated time, on the joint-state samples): the arm in 3D, see
-io/scene_visuals.py. /tf is tf2_msgs/msg/TFMessage with its full definition even where the
-tf2_msgs package is absent.
+``tf_rate`` of simulated time, on the joint-state samples, and at each impact's first contact,
+maximum compression and separation): the arm in 3D, REP 103 frames (z up), see
+io/scene_visuals.py. The event frames are written when the report comes, before the samples
+after the separation, so the file stays in time order. /tf is tf2_msgs/msg/TFMessage with its
+full definition and type hash even where the tf2_msgs package is absent.
 
 Stored with the messages
 ------------------------
@@ -150,10 +153,10 @@ class OfflineRecorder:
 
     def on_impact(self, record, trace_rows):
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])
+        self.visuals.impact(record)   # its frames are stamped from the contact on: first
         self._write(IMPACT_REPORT, self._types['std_msgs/msg/String'](data=json.dumps(record)),
                     t_ns)
         self._write(IMPACT_TRACE, self.trace_message(trace_rows), t_ns)
-        self.visuals.impact(record)
         self.writer.flush()  # an impact is never lost, whatever happens later
 
     def trace_message(self, rows):

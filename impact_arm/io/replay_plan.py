@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import Iterator, Optional
+from typing import Iterator
 
 from ..core.errors import ImpactArmError
 from .mcap_ros2 import RawMessage, TopicInfo, iter_raw, topics_info

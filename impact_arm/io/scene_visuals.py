@@ -1,8 +1,8 @@
 """What a 3D viewer needs to show the arm: robot description, TF and impact markers.
 
-``SceneVisuals(scene, tf_rate)`` turns the arm's state into the messages of design.md §8–9;
-the offline recorder, the recorder node and the simulator node all use it, so a live system and
-every recording show the same thing:
+``SceneVisuals(scene, tf_rate)`` turns the arm's state into the visual messages; the offline
+recorder, the recorder node and the simulator node all use it, so a live system and every
+recording show the same thing. Frames are REP 103 (z up; contract.py, io/urdf.py):
 
 =====================  =================================  =====================================
 topic                  type                               content
@@ -10,33 +10,49 @@ topic                  type                               content
 /robot_description     std_msgs/msg/String                the scene's URDF (io/urdf.py), once
 /tf_static             tf2_msgs/msg/TFMessage             tip on the last link, surfaces, once
 /tf                    tf2_msgs/msg/TFMessage             the joint transforms, at ``tf_rate``
+                                                          and at each impact's events
 /impact_markers        visualization_msgs/msg/MarkerArray surfaces, contact-force arrow, impact
                                                           points; with each /tf message
 =====================  =================================  =====================================
 
-Each MarkerArray carries the whole picture (every surface, the arrow or its deletion, every
-impact point so far), so a viewer that jumps to any time shows it right from one message.
-The arrow shows the strongest period-averaged contact force (the /contact_wrench value) seen
-since the previous MarkerArray, so a contact shorter than the marker period is never missed;
-its length grows with the force towards the arm's reach (half of it at ``ARROW_HALF_FORCE``),
-because impact forces span several decades.
+A contact lasts ~0.1 ms, far less than a /tf period (10 ms): sampled at ``tf_rate`` alone an
+impact would never be seen. So each impact adds three frames, /tf and markers stamped at its
+events (first contact, maximum compression, separation: ``add_impact`` reads their states
+from the impact report) and computed from those states. At the first-contact frame the tip
+frame lies on the surface.
+
+The force arrow starts at the contact point (the tip centre B at first contact, on the
+surface) and points along the surface's outward normal; its length grows with the impact's
+peak normal force F_max towards the arm's reach (half of it at ``ARROW_HALF_FORCE``), because
+impact forces span several decades. It lives ``ARROW_HOLD`` seconds from the contact (marker
+lifetime; each MarkerArray in that window adds it again with the lifetime left), so at 1x
+playback it is on screen for ~20 rendered frames. No message deletes it: a frame published
+before the report arrived (live, the report follows its period's joint state) cannot hide it.
+
+Each MarkerArray carries every surface and every impact point so far (persistent), so a
+viewer that jumps to any time shows them right from one message.
 """
 from __future__ import annotations
 
 import json
 import math
 
-from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, TF_TYPE, VISUAL_TOPICS
+from ..contract import (IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, TF_TYPE, VISUAL_TOPICS,
+                        plane_to_world)
 from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (SURFACE_THICKNESS_PER_REACH, WORLD, moving_transforms, robot_description,
-                   static_transforms, surface_frames)
+                   rod_radius_of, static_transforms, surface_frames)
 
 DEFAULT_TF_RATE = 100.0  # Hz: smooth to the eye, a tenth of the joint-state rate
 ARROW_HALF_FORCE = 1000.0  # N at which the arrow is half the reach long
+# s the force arrow stays after a contact: >= 0.3 s, ~20 frames at 1x, and gone before the
+# article's next impact (0.4 s later)
+ARROW_HOLD = 0.35
+IMPACT_EVENTS = ('contact', 'max_compression', 'separation')
 
 
 def tip_position(lengths, q) -> tuple:
-    """(x, y) of the tip centre B for absolute link angles ``q`` (the model's kinematics)."""
+    """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``."""
     return (math.fsum(L * math.cos(a) for L, a in zip(lengths, q)),
             math.fsum(L * math.sin(a) for L, a in zip(lengths, q)))
 
@@ -47,19 +63,37 @@ def arrow_length(force: float, reach: float) -> float:
     return reach * force / (force + ARROW_HALF_FORCE)
 
 
+def event_states(record) -> list:
+    """[(event, stamp [ns], absolute link angles [rad])] of an impact report: first contact,
+    maximum compression and separation (the last two only in reports that carry their
+    angles). The contact stamp is rounded up and the separation stamp down to the ns, so both
+    lie inside the contact interval."""
+    t0 = float(record['t_contact'])
+    out = [('contact', math.ceil(t0 * 1e9 - 1e-6), record['q_contact_deg'])]
+    if 'q_max_compression_deg' in record:
+        t_max = t0 + math.fsum(record['phase_durations'][:2])
+        out.append(('max_compression', round(t_max * 1e9), record['q_max_compression_deg']))
+    if 'q_separation_deg' in record:
+        t_sep = t0 + float(record['duration'])
+        out.append(('separation', math.floor(t_sep * 1e9 + 1e-6), record['q_separation_deg']))
+    return [(kind, int(t), [math.radians(a) for a in q]) for kind, t, q in out]
+
+
 def _stamp(header, t_ns: int):
     header.stamp.sec, header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
 
 
 class SceneVisuals:
-    """Builds the visual messages of one scene; ``due`` paces /tf and the markers."""
+    """Builds the visual messages of one scene; ``due`` paces /tf and the markers,
+    ``add_impact`` queues an impact's event frames (``take_events``)."""
 
-    def __init__(self, scene, tf_rate: float = DEFAULT_TF_RATE):
+    def __init__(self, scene, tf_rate: float = DEFAULT_TF_RATE, rod_radius=None):
         from .msgdefs import message_class
         if not (math.isfinite(tf_rate) and tf_rate > 0):
             raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')
         self.scene = scene
         self.tf_rate = float(tf_rate)
+        self.rod_radius = rod_radius_of(scene, rod_radius)
         self._TF = message_class(TF_TYPE)   # the stand-in where tf2_msgs is missing
         from geometry_msgs.msg import Point, TransformStamped
         from std_msgs.msg import String
@@ -68,15 +102,20 @@ class SceneVisuals:
         self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
         self._next_tf = 0           # index k of the next /tf time k / tf_rate
-        self._strongest = None      # (|F|, q, (F_t, F_n)) since the last markers
-        self.impact_points = []     # (x, y) where each impact touched the surface
+        self.impacts = []           # (contact stamp [ns], contact point (x, z), F_max [N])
+        self._events = []           # event frames not yet taken: (stamp [ns], q)
         self._fixed_markers = []   # surfaces, then impact points, as drawn so far
         self._drawn_points = 0
-        self._prefix = None        # their CDR, the start of every MarkerArray
+        self._prefixes = None      # their CDR, the start of every MarkerArray (see markers)
+
+    @property
+    def impact_points(self) -> list:
+        """(x, z) in the world where each impact touched the surface."""
+        return [point for _, point, _ in self.impacts]
 
     # ------------------------------------------------------------------ once per run
     def description(self):
-        return self._String(data=robot_description(self.scene))
+        return self._String(data=robot_description(self.scene, rod_radius=self.rod_radius))
 
     def tf_static(self, t_ns: int = 0):
         return self._TF(transforms=[self._transform(t, t_ns)
@@ -95,20 +134,33 @@ class SceneVisuals:
         return self._TF(transforms=[self._transform(t, t_ns)
                                     for t in moving_transforms(self.scene.lengths, q)])
 
-    def observe_force(self, q, wrench):
-        """Keep the strongest contact force until the next ``markers`` call."""
-        magnitude = math.hypot(wrench[0], wrench[1])
-        if magnitude > 0 and (self._strongest is None or magnitude > self._strongest[0]):
-            self._strongest = (magnitude, tuple(q), (float(wrench[0]), float(wrench[1])))
-
     def add_impact(self, record):
-        """An impact report (the JSON record): where B touched the surface becomes a
-        marker."""
+        """An impact report (the JSON record or its text): its contact point becomes a
+        marker, its force the arrow, and its event frames are queued (``take_events``)."""
         if isinstance(record, (str, bytes)):
             record = json.loads(record)
-        # the model's contact begins when the tip centre B reaches the surface plane
-        self.impact_points.append(tip_position(self.scene.lengths, [
-            math.radians(a) for a in record['q_contact_deg']]))
+        try:
+            events = event_states(record)
+            force = float(record['F_max'])
+            _, t_contact, q_contact = events[0]
+            # the model's contact begins when the tip centre B reaches the surface plane
+            x, _, z = plane_to_world(*tip_position(self.scene.lengths, q_contact))
+            n = self.scene.n_links
+            numbers = [force, x, z] + [a for _, _, q in events for a in q]
+        except (KeyError, TypeError, IndexError, AttributeError, OverflowError,
+                ValueError) as e:   # ValueError: NaN or infinite numbers in the maths
+            raise ValueError(f'impact report not usable: {type(e).__name__} {e}') from None
+        if not all(math.isfinite(v) for v in numbers) or \
+                any(len(q) != n for _, _, q in events):
+            raise ValueError(f'impact report not usable: non-finite values or not {n} angles')
+        self.impacts.append((t_contact, (x, z), force))
+        self._events.extend((t, q) for _, t, q in events)
+
+    def take_events(self) -> list:
+        """[(stamp [ns], absolute link angles)] of the event frames queued since the last
+        call, in time order: publish ``tf`` and ``markers`` at each."""
+        events, self._events = self._events, []
+        return events
 
     def markers(self, t_ns: int) -> bytes:
         """The serialized MarkerArray at ``t_ns``: surfaces, impact points, then the arrow.
@@ -117,42 +169,53 @@ class SceneVisuals:
         and serializing every marker each time took 0.7 + 2.9 ms with 15 impacts, at tf_rate
         in the simulator and the recorder."""
         M = self._Marker
-        if self._prefix is None:
+        if not self._fixed_markers:
             thickness = SURFACE_THICKNESS_PER_REACH * self.reach
             for i, frame in enumerate(surface_frames(self.scene)):
                 m = self._marker('surface', i, M.CUBE, frame, 0, (0.6, 0.6, 0.6, 0.5))
+                # the surface frame's y is the normal: the slab lies below the plane
                 m.pose.position.y = -thickness / 2
                 m.scale.x, m.scale.y, m.scale.z = 2 * self.reach, thickness, self.reach / 2
                 self._fixed_markers.append(m)
-        if self._prefix is None or self._drawn_points < len(self.impact_points):
-            for k in range(self._drawn_points, len(self.impact_points)):
-                x, y = self.impact_points[k]
+        if self._prefixes is None or self._drawn_points < len(self.impacts):
+            for k in range(self._drawn_points, len(self.impacts)):
+                x, z = self.impacts[k][1]
                 m = self._marker('impact_points', k, M.SPHERE, WORLD, 0, (1.0, 0.8, 0.0, 1.0))
-                m.pose.position.x, m.pose.position.y = x, y
-                m.scale.x = m.scale.y = m.scale.z = 0.02 * self.reach
+                m.pose.position.x, m.pose.position.z = x, z
+                m.scale.x = m.scale.y = m.scale.z = 3 * self.rod_radius
                 self._fixed_markers.append(m)
-            self._drawn_points = len(self.impact_points)
-            self._prefix = sequence_cdr_prefix(self._fixed_markers, len(self._fixed_markers) + 1)
+            self._drawn_points = len(self.impacts)
+            n = len(self._fixed_markers)   # the CDR starts with the count: without, with arrow
+            self._prefixes = (sequence_cdr_prefix(self._fixed_markers, n),
+                              sequence_cdr_prefix(self._fixed_markers, n + 1))
+        held = self._held_impact(t_ns)
+        if held is None:
+            return self._prefixes[0]
+        t_contact, (x, z), force = held
         arrow = self._marker('contact_force', 0, M.ARROW, WORLD, t_ns, (1.0, 0.2, 0.1, 1.0))
-        if self._strongest is None:
-            arrow.action = M.DELETE
-        else:
-            magnitude, q, (f_t, f_n) = self._strongest
-            x, y = tip_position(self.scene.lengths, q)   # the force acts on the tip B
-            length = arrow_length(magnitude, self.reach)
-            arrow.points = [self._Point(x=x, y=y),
-                            self._Point(x=x + length * f_t / magnitude,
-                                        y=y + length * f_n / magnitude)]
-            arrow.scale.x, arrow.scale.y = 0.01 * self.reach, 0.02 * self.reach  # shaft, head
-        self._strongest = None
-        return append_cdr(self._prefix, arrow)
+        # from the contact point along the outward normal (world +z): the force on the tip
+        length = arrow_length(force, self.reach)
+        arrow.points = [self._Point(x=x, z=z), self._Point(x=x, z=z + length)]
+        arrow.scale.x, arrow.scale.y = 2 * self.rod_radius, 4 * self.rod_radius  # shaft, head
+        left = t_contact + round(ARROW_HOLD * 1e9) - t_ns
+        arrow.lifetime.sec, arrow.lifetime.nanosec = divmod(left, 1_000_000_000)
+        return append_cdr(self._prefixes[1], arrow)
+
+    def _held_impact(self, t_ns):
+        """The latest impact whose arrow is still shown at ``t_ns``, or None."""
+        hold = round(ARROW_HOLD * 1e9)
+        for impact in reversed(self.impacts):
+            if impact[0] <= t_ns:
+                return impact if t_ns < impact[0] + hold else None
+        return None
 
     # ------------------------------------------------------------------ helpers
     def _transform(self, t, t_ns):
         msg = self._TransformStamped()
         _stamp(msg.header, t_ns)
         msg.header.frame_id, msg.child_frame_id = t.parent, t.child
-        msg.transform.translation.x, msg.transform.translation.y = t.x, t.y
+        p = msg.transform.translation
+        p.x, p.y, p.z = t.x, t.y, t.z
         r = msg.transform.rotation
         r.x, r.y, r.z, r.w = t.quaternion()
         return msg
@@ -170,11 +233,12 @@ class SceneVisuals:
 class VisualsWriter:
     """Adds the visual topics to an MCAP writer from the recorded state: the offline recorder
     and the recorder node feed it what they write, it writes /robot_description and
-    /tf_static first, then /tf and /impact_markers at ``tf_rate`` of the state's stamps."""
+    /tf_static first, then /tf and /impact_markers at ``tf_rate`` of the state's stamps and at
+    each impact's events."""
 
     def __init__(self, writer, scene, tf_rate: float = DEFAULT_TF_RATE,
-                 log_time_ns: int = 0):
-        self.visuals = SceneVisuals(scene, tf_rate)
+                 log_time_ns: int = 0, rod_radius=None):
+        self.visuals = SceneVisuals(scene, tf_rate, rod_radius)
         self.writer = writer
         self.counts = {topic: 0 for topic in VISUAL_TOPICS}
         for topic, (type_name, qos) in VISUAL_TOPICS.items():
@@ -184,13 +248,11 @@ class VisualsWriter:
         self._last = None                # (stamp, q, log time) of the latest state
         self._shown = None               # stamp of the latest /tf written
 
-    def state(self, t_ns: int, q, wrench, log_time_ns: int = None):
-        """One joint state (absolute angles ``q``) and its contact wrench (F_t, F_n)."""
-        v = self.visuals
-        v.observe_force(q, wrench)
+    def state(self, t_ns: int, q, wrench=None, log_time_ns: int = None):
+        """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``)."""
         log = t_ns if log_time_ns is None else log_time_ns
         self._last = (t_ns, q, log)
-        if v.due(t_ns * 1e-9):
+        if self.visuals.due(t_ns * 1e-9):
             self._frame(t_ns, q, log)
 
     def finish(self):
@@ -205,15 +267,25 @@ class VisualsWriter:
         self._shown = t_ns
 
     def force(self, q, wrench):
-        """A contact wrench (F_t, F_n) that arrived apart from its joint state."""
-        self.visuals.observe_force(q, wrench)
+        """A sampled contact wrench: accepted and not drawn. The arrow comes from the impact
+        reports, whose contact point is exact; a period-averaged force belongs to no pose."""
 
-    def impact(self, record):
+    def impact(self, record, log_time_ns: int = None):
+        """An impact report: writes its event frames (``SceneVisuals.add_impact``). Their log
+        time is ``log_time_ns`` if given, else their stamp shifted by the latest state's
+        (log time - stamp): the stamp itself where log time is simulated time."""
         self.visuals.add_impact(record)
+        offset = 0 if self._last is None else self._last[2] - self._last[0]
+        for t_ns, q in self.visuals.take_events():
+            self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None
+                                 else log_time_ns)
+
+    def _frame_at_event(self, t_ns, q, log):
+        self._write(TF, self.visuals.tf(q, t_ns), log)
+        self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
 
     def _write(self, topic, msg, log_time_ns):
         """``msg``: a message, or its CDR bytes."""
         data = msg if isinstance(msg, bytes) else serialize_cdr(msg)
         self.writer.write(topic, data, log_time_ns, log_time_ns)
         self.counts[topic] += 1
-

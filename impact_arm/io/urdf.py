@@ -1,17 +1,27 @@
 """The robot description of a scene (URDF) and its frame tree, as plain Python (no rclpy).
 
-Frames (all in the x–y plane of the model, z out of it):
+Frames follow REP 103 (z up, gravity along -z); the model's plane is the world's x-z plane
+(``contract.plane_to_world``):
 
-* ``world`` — fixed; the model's origin O, x to the right, y up (gravity along −y);
-* ``link1`` … ``linkN`` — one per rod, origin at the rod's proximal joint, x along the rod.
-  ``joint1`` (world → link1) turns by q1; ``jointk`` (link(k−1) → linkk, at x = L(k−1)) turns by
-  the *relative* angle q_k − q_(k−1), so the joint values are the encoder angles of design.md §3
-  and link k's x axis points along the model's absolute angle q_k;
+* ``world`` — fixed; the model's origin O, x to the right, z up, y out of the screen when
+  the arm is seen with x to the right and z up (the model's z is the world's -y);
+* ``link1`` … ``linkN`` — one per rod, origin at the rod's proximal joint, x along the rod,
+  y = world y. ``joint1`` (world → link1) turns by q1; ``jointk`` (link(k−1) → linkk, at
+  x = L(k−1)) turns by the *relative* angle q_k − q_(k−1), so the joint values are the
+  encoder angles of the wire and link k's x axis points along the model's absolute angle q_k.
+  Every joint axis is ``0 -1 0`` (the model's z): a positive angle lifts the rod towards +z,
+  as it lifts it towards the model's +y;
 * ``tip`` — fixed to linkN at x = L_N: the centre B of the tip sphere (radius R1);
-* ``surface1`` … — fixed to world, one per scene surface, at y = height (the surface plane).
+* ``surface1`` … — fixed to world, one per scene surface, at z = height (the surface plane),
+  with the model's axes (``contract.PLANE_FRAME_ROTATION``): x tangential, y the outward
+  normal (world +z). /contact_wrench is given in ``surface1``.
 
-The joints are URDF ``continuous`` joints (revolute about z without position limits): the
-model has none, and effort clipping is the simulator's ``max_effort`` parameter.
+The joints are URDF ``continuous`` joints (revolute without position limits): the model has
+none, and effort clipping is the simulator's ``max_effort`` parameter.
+
+Rods are drawn as cylinders of ``rod_radius`` (a visual setting: the model's rods are lines;
+default ``ROD_RADIUS_PER_LENGTH`` of the shortest link). The tip sphere's collision radius is
+the model's R1; its visual is at least ``TIP_PER_ROD`` rod radii, so it stands out of the rod.
 
 The ``<ros2_control>`` block names ``topic_based_ros2_control/TopicBasedSystem`` so a
 controller_manager can drive the simulator through its topic-hardware interface
@@ -23,15 +33,20 @@ import math
 import xml.etree.ElementTree as ET
 from typing import NamedTuple
 
-from ..contract import joint_names
+from ..contract import (PLANE_AXIS_IN_WORLD, PLANE_FRAME_ROTATION, WORLD_FRAME, joint_names,
+                        plane_rotation, surface_frame)
+from ..core.errors import ImpactArmError
 
 # topic_based_ros2_control's TopicBasedSystem defaults: the simulator listens and publishes
 # there unless told otherwise, so the URDF and the node agree out of the box
 JOINT_COMMANDS_TOPIC = '/robot_joint_commands'
 JOINT_STATES_TOPIC = '/robot_joint_states'
-WORLD = 'world'
+WORLD = WORLD_FRAME
 TIP = 'tip'
-ROD_RADIUS_PER_REACH = 0.015   # visual thickness of the rods (the model's rods are lines)
+# rods 1 % of the shortest link in radius: 10 mm on the article's 1 m links, thin enough to
+# see the joints and the tip, thick enough to see the arm on a screen-sized view
+ROD_RADIUS_PER_LENGTH = 0.01
+TIP_PER_ROD = 2.5          # the tip sphere's visual radius, at least, in rod radii
 SURFACE_THICKNESS_PER_REACH = 0.02
 
 
@@ -40,43 +55,70 @@ def link_names(n_links: int) -> list:
 
 
 def surface_frames(scene) -> list:
-    return [f'surface{i + 1}' for i in range(len(scene.surfaces))]
+    return [surface_frame(i) for i in range(len(scene.surfaces))]
+
+
+class VisualSettingError(ImpactArmError, ValueError):
+    """A drawing setting out of range."""
+
+
+def default_rod_radius(scene) -> float:
+    return ROD_RADIUS_PER_LENGTH * min(scene.lengths)
+
+
+def rod_radius_of(scene, rod_radius=None) -> float:
+    """``rod_radius`` [m] checked (None or 0: the default for ``scene``)."""
+    if rod_radius is None or rod_radius == 0:
+        return default_rod_radius(scene)
+    rod_radius = float(rod_radius)
+    if not (math.isfinite(rod_radius) and 0 < rod_radius <= min(scene.lengths)):
+        raise VisualSettingError(f'rod_radius = {rod_radius!r}: must be > 0 and <= the '
+                                 f'shortest link ({min(scene.lengths):g} m), or 0 for the '
+                                 f'default')
+    return rod_radius
+
+
+def tip_visual_radius(scene, rod_radius=None) -> float:
+    return max(float(scene.tip_radius), TIP_PER_ROD * rod_radius_of(scene, rod_radius))
 
 
 class Transform(NamedTuple):
-    """Parent → child: translation (x, y) [m], then a rotation by ``yaw`` [rad] about z."""
+    """Parent → child in the world's convention: translation (x, y, z) [m], then the rotation
+    ``rotation`` (quaternion x, y, z, w)."""
     parent: str
     child: str
     x: float
     y: float
-    yaw: float
+    z: float
+    rotation: tuple
 
     def quaternion(self) -> tuple:
         """(x, y, z, w) of the rotation."""
-        return 0.0, 0.0, math.sin(self.yaw / 2), math.cos(self.yaw / 2)
+        return self.rotation
 
 
 def moving_transforms(lengths, q) -> list:
     """The joint transforms for absolute link angles ``q`` (one per link, chain order)."""
     links = link_names(len(lengths))
-    out = [Transform(WORLD, links[0], 0.0, 0.0, float(q[0]))]
+    out = [Transform(WORLD, links[0], 0.0, 0.0, 0.0, plane_rotation(float(q[0])))]
     for k in range(1, len(lengths)):
-        out.append(Transform(links[k - 1], links[k], float(lengths[k - 1]), 0.0,
-                             float(q[k]) - float(q[k - 1])))
+        out.append(Transform(links[k - 1], links[k], float(lengths[k - 1]), 0.0, 0.0,
+                             plane_rotation(float(q[k]) - float(q[k - 1]))))
     return out
 
 
 def static_transforms(scene) -> list:
     """The fixed transforms: the tip on the last link, each surface on the world."""
-    out = [Transform(link_names(scene.n_links)[-1], TIP, float(scene.lengths[-1]), 0.0, 0.0)]
-    out += [Transform(WORLD, name, 0.0, float(s.height), 0.0)
+    out = [Transform(link_names(scene.n_links)[-1], TIP, float(scene.lengths[-1]), 0.0, 0.0,
+                     (0.0, 0.0, 0.0, 1.0))]
+    out += [Transform(WORLD, name, 0.0, 0.0, float(s.height), PLANE_FRAME_ROTATION)
             for name, s in zip(surface_frames(scene), scene.surfaces)]
     return out
 
 
 def _geometry_sizes(scene):
     reach = math.fsum(scene.lengths)
-    return reach * ROD_RADIUS_PER_REACH, reach * SURFACE_THICKNESS_PER_REACH, reach
+    return reach * SURFACE_THICKNESS_PER_REACH, reach
 
 
 def _sub(parent, tag, **attrs):
@@ -98,9 +140,12 @@ def _visual_and_collision(link, origin, geometry_tag, material=None, **size):
 
 def robot_description(scene, *, name: str = 'impact_arm',
                       joint_commands_topic: str = JOINT_COMMANDS_TOPIC,
-                      joint_states_topic: str = JOINT_STATES_TOPIC) -> str:
+                      joint_states_topic: str = JOINT_STATES_TOPIC,
+                      rod_radius: float | None = None) -> str:
     """URDF text of ``scene`` (see the module docstring for frames and conventions)."""
-    rod_radius, thickness, reach = _geometry_sizes(scene)
+    thickness, reach = _geometry_sizes(scene)
+    rod_radius = rod_radius_of(scene, rod_radius)
+    axis = ' '.join(_num(a) for a in PLANE_AXIS_IN_WORLD)
     robot = ET.Element('robot', name=name)
     for colour, rgba in (('rod', '0.25 0.45 0.85 1'), ('tip', '0.9 0.3 0.2 1'),
                          ('surface', '0.6 0.6 0.6 1')):
@@ -113,7 +158,7 @@ def robot_description(scene, *, name: str = 'impact_arm',
         inertial = _sub(link, 'inertial')
         _sub(inertial, 'origin', xyz=f'{_num(L / 2)} 0 0', rpy='0 0 0')
         _sub(inertial, 'mass', value=_num(m))
-        # a uniform slender rod along x, about its centre: the model's inertia (model.md)
+        # a uniform slender rod along x, about its centre: the model's inertia
         i_c = m * L * L / 12
         _sub(inertial, 'inertia', ixx='0', ixy='0', ixz='0', iyy=_num(i_c), iyz='0',
              izz=_num(i_c))
@@ -126,10 +171,13 @@ def robot_description(scene, *, name: str = 'impact_arm',
         _sub(joint, 'child', link=link_name)
         x = 0.0 if k == 0 else scene.lengths[k - 1]
         _sub(joint, 'origin', xyz=f'{_num(x)} 0 0', rpy='0 0 0')
-        _sub(joint, 'axis', xyz='0 0 1')
+        _sub(joint, 'axis', xyz=axis)
     tip = _sub(robot, 'link', name=TIP)
     _visual_and_collision(tip, {'xyz': '0 0 0', 'rpy': '0 0 0'}, 'sphere', 'tip',
                           radius=_num(scene.tip_radius))
+    # drawn at least TIP_PER_ROD rod radii (R1 is a contact curvature, often far smaller)
+    tip.find('visual/geometry/sphere').set('radius',
+                                           _num(tip_visual_radius(scene, rod_radius)))
     for t in static_transforms(scene):
         if t.child != TIP:
             surface = _sub(robot, 'link', name=t.child)
@@ -140,7 +188,9 @@ def robot_description(scene, *, name: str = 'impact_arm',
         joint = _sub(robot, 'joint', name=f'{t.child}_joint', type='fixed')
         _sub(joint, 'parent', link=t.parent)
         _sub(joint, 'child', link=t.child)
-        _sub(joint, 'origin', xyz=f'{_num(t.x)} {_num(t.y)} 0', rpy='0 0 0')
+        roll = 2 * math.atan2(t.rotation[0], t.rotation[3])   # only rotations about x here
+        _sub(joint, 'origin', xyz=f'{_num(t.x)} {_num(t.y)} {_num(t.z)}',
+             rpy=f'{_num(roll)} 0 0')
     _ros2_control(robot, joints, joint_commands_topic, joint_states_topic)
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding='unicode') + '\n'

@@ -161,8 +161,7 @@ def float64_array_data(raw: bytes) -> list:
         # a command without layout dimensions (the usual one): the doubles start at byte 20
         dims, _, n = _PLAIN_ARRAY.unpack_from(raw)
         if dims == 0:
-            if n and len(raw) < 20 + 8 * n:
-                raise ValueError('CDR message too short for its type')
+            _ends_at(raw, 20 + 8 * n if n else 16)
             return list(struct.unpack_from(f'<{n}d', raw, 20)) if n else []
     r = CdrReader(raw)
     (dims,) = r.unpack('I', 4)
@@ -173,7 +172,30 @@ def float64_array_data(raw: bytes) -> list:
         r.unpack('I', 4, 2)
     r.align(4)
     r.unpack('I', 4)                # data_offset
-    return _doubles_at(r)[0]
+    values = _doubles_at(r)[0]
+    _ends_at(raw, r.pos)
+    return values
+
+
+def _ends_at(raw, end: int):
+    """A command must be exactly its encoding: serializers and transports pad a payload to
+    a multiple of 4 bytes (Fast CDR up to 8, not always with zeros), and any other length
+    means bytes were cut or added on the way. (A command cut short by 1-3 bytes comes
+    zero-padded back to its length: the driver refuses its subnormal last value.)"""
+    if len(raw) < end:
+        raise ValueError('CDR message too short for its type')
+    extra = len(raw) - end
+    if extra > 7 or (extra and len(raw) % 4):
+        raise ValueError(f'{extra} bytes after the end of the message')
+
+
+@_reader
+def header_stamp_ns(raw: bytes) -> int:
+    """The header stamp [ns] of a stamped message (std_msgs/Header first), read from its
+    first bytes without parsing the rest."""
+    r = CdrReader(raw)
+    sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
+    return sec * 1_000_000_000 + nanosec
 
 
 def _header(r: CdrReader):
@@ -281,6 +303,7 @@ def joint_state_command(raw: bytes, joints) -> list:
     _doubles_at(r)                   # position
     _doubles_at(r)                   # velocity
     efforts = _doubles_at(r)[0]
+    _ends_at(raw, r.pos)
     unknown = [n for n in names if n not in joints]
     if unknown:
         raise ValueError(f'unknown joint name(s) {unknown}: expected {list(joints)}')

@@ -35,6 +35,61 @@ def name_thread(name):
         pass
 
 
+def take_raw(subscription, msg_type=None):
+    """The oldest queued message of a ``raw=True`` subscription as (serialized bytes,
+    message info), or None when its queue is empty. A node polls its readers with this
+    instead of an executor callback: in the realtime loop thread (no second Python thread
+    contending for the GIL each period), in the recorder's drain, in the controller right
+    after a wrench."""
+    handle = subscription.handle
+    with handle:
+        return handle.take_message(msg_type or subscription.msg_type, True)
+
+
+def reader_node(owner, suffix):
+    """A helper node for ``owner``'s polled readers (no executor spins it), named
+    ``_<owner>_<suffix>`` in the owner's namespace. It ignores the process's global ROS
+    arguments: launch's ``__node`` remap names the owner, and would give this one the same
+    name (``ros2 node list`` showed it twice). The topic remaps among them still apply."""
+    import rclpy
+    return rclpy.create_node(f'_{owner.get_name()}_{suffix}', namespace=owner.get_namespace(),
+                             context=owner.context, start_parameter_services=False,
+                             enable_rosout=False, use_global_arguments=False,
+                             cli_args=topic_remaps(sys.argv))
+
+
+def topic_remaps(argv) -> list:
+    """The remap rules of ``argv``'s ROS arguments, except those naming the node
+    (``__node``, ``__name``, ``__ns``), as ROS arguments for another node."""
+    rules, inside, args = [], False, iter(argv)
+    for arg in args:
+        if arg in ('--ros-args', '--'):
+            inside = arg == '--ros-args'
+        elif inside and arg in ('-r', '--remap'):
+            rule = next(args, '')
+            if rule.partition(':=')[0].rpartition(':')[2] not in ('__node', '__name', '__ns'):
+                rules += ['-r', rule]
+    return ['--ros-args', *rules] if rules else []
+
+
+def await_acknowledgements(node, publishers, wait):
+    """Samples a reader has not acknowledged die with the process (a lagging recorder lost
+    the last impact reports of a run): give the readers of ``publishers`` up to ``wait`` s
+    in all. A reader that missed samples asks for them again only when the writer's periodic
+    heartbeat reaches it (every 3 s with Fast DDS's defaults); the wait ends as soon as
+    every reader has acknowledged."""
+    import time
+
+    from rclpy.duration import Duration
+    end = time.monotonic() + wait
+    for pub in publishers:
+        left = end - time.monotonic()
+        if left <= 0 or not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+            node.get_logger().warning(f'{pub.topic_name}: not every reader acknowledged the '
+                                      f'last samples within {wait:g} s')
+            return
+
+
 def _threads():
     try:
         return {int(t) for t in os.listdir('/proc/self/task')}

@@ -6,6 +6,7 @@ Numbers accept ints where floats are meant (``-p publish_rate:=500`` just works)
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -118,10 +119,22 @@ class Param:
 NODE_OPTIONS = dict(automatically_declare_parameters_from_overrides=True)
 
 
-def declare(node, table) -> dict:
+_TYPES = {'float': float, 'int': int, 'str': str, 'bool': bool, 'floats': list, 'strs': list}
+
+
+def values_class(name, table) -> type:
+    """The typed object of a parameter table: a frozen dataclass with one field per
+    parameter (read as ``p.publish_rate``; a change makes a new one with ``p.replace``)."""
+    cls = dataclasses.make_dataclass(name, [(p.name, _TYPES[p.kind]) for p in table],
+                                     frozen=True)
+    cls.replace = lambda self, **changes: dataclasses.replace(self, **changes)
+    return cls
+
+
+def declare(node, table, cls=None):
     """Declare every parameter of ``table`` on a node made with ``NODE_OPTIONS``; returns
-    {name: checked value}. Raises ParameterError for the first bad value, naming it and its
-    range."""
+    the checked values as a ``values_class`` object (``cls``, or one made for ``table``).
+    Raises ParameterError for the first bad value, naming it and its range."""
     values = {}
     for p in table:
         default = list(p.default) if isinstance(p.default, tuple) else p.default
@@ -139,7 +152,7 @@ def declare(node, table) -> dict:
             raise ParameterError(f'parameter {p.name} = {shown!r}: out of range; allowed: '
                                  f'{p.allowed()}') from exc
         values[p.name] = p.check(value)
-    return values
+    return (cls or values_class(f'{node.get_name()}_parameters', table))(**values)
 
 
 def validator(table, apply):
@@ -150,6 +163,10 @@ def validator(table, apply):
     def callback(parameters):
         checked = {}
         for param in parameters:
+            if not param.name.strip():
+                # rclpy would store it as an undeclared parameter nobody can read back
+                return SetParametersResult(successful=False,
+                                           reason='a parameter name must not be empty')
             spec = by_name.get(param.name)
             if spec is None:
                 continue
@@ -185,8 +202,9 @@ def refuse_unknown(node, table):
 def _declared_by_ros(context) -> set:
     """The parameters rclpy declares on every node (use_sim_time, ...): those of a bare node."""
     from rclpy.node import Node
+    # not renamed by a global __node remap (launch gives one), so it never shares a name
     bare = Node('_impact_arm_parameter_probe', context=context, start_parameter_services=False,
-                enable_rosout=False)
+                enable_rosout=False, use_global_arguments=False)
     try:
         return set(bare.get_parameters_by_prefix(''))
     finally:

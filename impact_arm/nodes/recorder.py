@@ -1,12 +1,17 @@
 """recorder: subscribes to topics as serialized data and writes a crash-safe ROS 2 MCAP file.
 
-Parameters: output, topics, scene, param_nodes, flush_interval, tf_rate (see their
-descriptions). Messages are stored as received (no deserialization): log time = reception
-time, publish time = the publisher's source timestamp. The file also holds the scene YAML
-(attachment and metadata), the parameters of ``param_nodes`` at start and at shutdown, and the
-package version.
+Parameters: output, topics, scene, param_nodes, flush_interval, tf_rate, log_time (see their
+descriptions). Messages are stored as received (no deserialization): log time = the newest
+/clock or /joint_states stamp (simulated time, one clock for the whole file; ``log_time:
+reception`` keeps the wall clock), publish time = the publisher's source timestamp. The file
+also holds the scene YAML (attachment and metadata), the parameters of ``param_nodes`` at
+start and at shutdown, the package version and the samples lost on the way per topic (from
+the writers' sequence numbers: ``contract.LOSSES_METADATA``, also on /diagnostics).
 
-With a ``scene``, the file also shows the arm in 3D by itself (design.md §9): the recorder
+After each drain the recorder publishes the newest /joint_states stamp it has written on
+/recorder/progress: a lockstep simulator with ``recorder_window`` waits for it.
+
+With a ``scene``, the file also shows the arm in 3D by itself (docs/topics.md): the recorder
 derives /robot_description and /tf_static (once, at the start), /tf and /impact_markers (at
 ``tf_rate`` of the joint-state stamps) from the scene and the recorded /joint_states,
 /contact_wrench and /impact_report, exactly as ``simulate --mcap`` does (io/scene_visuals.py).
@@ -25,6 +30,7 @@ import json
 import os
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters, ListParameters
@@ -36,8 +42,9 @@ from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, packa
                             ros_distro)
 from ..io.msgdefs import typestore
 from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
-from ..io.wire import MalformedMessage, joint_state_fields, wrench_stamped_fields
-from ._runner import run
+from ..io.wire import (MalformedMessage, header_stamp_ns, joint_state_fields,
+                       wrench_stamped_fields)
+from ._runner import reader_node, run, take_raw
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
@@ -78,8 +85,16 @@ class Recorder(Node):
         tf_rate = _param(self, 'tf_rate', DEFAULT_TF_RATE,
                          'rate of the derived /tf and /impact_markers [Hz of sim time] '
                          '(with a scene)')
+        log_time = _param(self, 'log_time', 'stamps',
+                          'log time of each message: "stamps" = the newest /clock or '
+                          '/joint_states stamp received (simulated time, as ros2 bag record '
+                          '--use-sim-time; 0 before the first), "reception" = wall clock')
         if not interval > 0:
             raise ValueError(f'flush_interval = {interval}: must be > 0 s')
+        if log_time not in ('stamps', 'reception'):
+            raise ValueError(f'log_time = {log_time!r}: must be "stamps" or "reception"')
+        self.by_stamps = log_time == 'stamps'
+        self.now_ns = 0                  # stamps: the newest /clock or /joint_states stamp
         scene_text = None
         if scene:
             from ..core.scene import resolve_scene_path
@@ -104,6 +119,7 @@ class Recorder(Node):
                                                'yaml': scene_text})
         self.failed = False
         self.received = 0
+        self.losses = Losses()
         self.malformed = 0        # samples stored but not drawn (malformed payloads)
         self.wanted = {}  # topic -> type name ('' until discovered)
         for entry in topics:
@@ -115,7 +131,8 @@ class Recorder(Node):
             if not tf_rate > 0:
                 raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')
             self.visuals = VisualsWriter(self.writer, scene_from_text(scene_text, scene),
-                                         tf_rate, log_time_ns=time.time_ns())
+                                         tf_rate,
+                                         log_time_ns=0 if self.by_stamps else time.time_ns())
             derived = sorted(set(self.wanted) & set(contract.VISUAL_TOPICS))
             if derived:
                 self.get_logger().info(f'not subscribing to {derived}: derived from the scene')
@@ -125,9 +142,17 @@ class Recorder(Node):
             self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
             self._read_string = _string_reader()
         self.subs = {}
-        self.reader = Node('_recorder_reader', context=self.context)
+        # what has been written, for a lockstep simulator that waits for the recording
+        from builtin_interfaces.msg import Time
+        self.progress = self.create_publisher(Time, contract.RECORDER_PROGRESS,
+                                              contract.PROGRESS_QOS.to_rclpy())
+        self.written_until = self.announced = None   # ns: newest /joint_states stamp written
+        self.reader = reader_node(self, 'reader')   # ignores launch's __node remap
         self._subscribe_known()
         self.create_timer(interval, self._flush)
+        self.pub_diag = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS,
+                                              contract.qos(contract.DIAGNOSTICS).to_rclpy())
+        self.create_timer(1.0, self._publish_diagnostics)
         self.create_timer(0.5, self._discover)
         self.matched = set()     # topics whose subscription has matched a publisher
         self.flowing = set()     # topics a sample has arrived on
@@ -206,14 +231,11 @@ class Recorder(Node):
         per_topic = []
         for topic, sub in list(self.subs.items()):
             taken = []
-            with sub.handle:
-                while True:
-                    message = sub.handle.take_message(sub.msg_type, True)
-                    if message is None:
-                        break
-                    data, info = message
-                    received = info.get('received_timestamp') or time.time_ns()
-                    taken.append((received, topic, data, info.get('source_timestamp') or received))
+            while (message := take_raw(sub)) is not None:
+                data, info = message
+                self.losses.count(topic, info)
+                received = info.get('received_timestamp') or time.time_ns()
+                taken.append((received, topic, data, info.get('source_timestamp') or received))
             per_topic.append(taken)
             if taken and topic not in self.flowing:
                 # matched is not yet flowing: the writer may match our reader later than we
@@ -224,9 +246,30 @@ class Recorder(Node):
             if self.failed:
                 break
             self._store(topic, data, received, published)
+        if self.written_until != self.announced and not self.failed:
+            from builtin_interfaces.msg import Time
+            self.announced = self.written_until
+            sec, nanosec = divmod(self.written_until, 1_000_000_000)
+            self.progress.publish(Time(sec=sec, nanosec=nanosec))
+
+    def _log_time(self, topic, data, received) -> int:
+        """Simulated time (stamps) or reception time: one clock for the whole file, so that
+        a viewer plays it at 1x and its index is in stamp order."""
+        if not self.by_stamps:
+            return received
+        if topic in (contract.JOINT_STATES, contract.CLOCK):
+            try:
+                # both begin with a builtin_interfaces/Time (Header.stamp, Clock.clock)
+                stamp = header_stamp_ns(data)
+            except MalformedMessage:
+                return self.now_ns
+            if 0 <= stamp < 1 << 63:       # a hostile peer's negative stamp is not a time
+                self.now_ns = stamp
+        return self.now_ns
 
     def _store(self, topic, data, received, published):
         try:
+            received = self._log_time(topic, data, received)
             if not self.writer.has_topic(topic):
                 # Like rosbag2: store the QoS the publishers actually offer, else the contract's.
                 pubs = self.get_publishers_info_by_topic(topic)
@@ -236,6 +279,8 @@ class Recorder(Node):
                                       None if thash in (None, 'INVALID') else thash)
             self.writer.write(topic, data, received, published)
             self.received += 1
+            if topic == contract.JOINT_STATES:
+                self.written_until = header_stamp_ns(data)
             if self.visuals is not None:
                 self._derive_visuals(topic, data, received)
         except RecordingError as e:
@@ -266,8 +311,22 @@ class Recorder(Node):
             except (SerdeError, ValueError, KeyError) as e:
                 self.get_logger().warning(f'impact report not drawn: {e}')
 
+    def _publish_diagnostics(self):
+        lost = self.losses.lost_total()
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if lost else DiagnosticStatus.OK,
+            name=contract.RECORDER_STATUS, hardware_id='impact_arm_recorder',
+            message=f'{lost} samples lost' if lost else 'recording, nothing lost',
+            values=[KeyValue(key=k, value=v) for k, v in self.losses.as_metadata().items()]
+            + [KeyValue(key='messages_written', value=str(self.received))])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
+
     def _flush(self):
         try:
+            if self.losses.changed:
+                self.writer.add_metadata(contract.LOSSES_METADATA, self.losses.as_metadata())
             self.writer.flush()
         except RecordingError as e:
             self._fail(e)
@@ -319,9 +378,14 @@ class Recorder(Node):
         try:
             if self.visuals is not None and not self.failed:
                 self.visuals.finish()
+            if not self.failed:
+                self.writer.add_metadata(contract.LOSSES_METADATA, self.losses.as_metadata())
             self.writer.close()
         except RecordingError as e:
             self._fail(e)
+        lost = self.losses.lost_total()
+        if lost:
+            self.get_logger().warning(f'lost on the way: {self.losses.describe()}')
         self.get_logger().info(
             f'{self.writer.message_count} messages in {self.output}' if not self.failed else
             f'recording failed; {self.output} holds the data flushed before the error')
@@ -332,6 +396,46 @@ class Recorder(Node):
         if getattr(self, 'reader', None) is not None:   # absent if the output was refused
             self.reader.destroy_node()
         super().destroy_node()
+
+
+class Losses:
+    """Samples that never reached the recorder, per topic, from each writer's publication
+    sequence numbers (every rmw since Iron reports them; a gap is what a reliable writer's
+    history no longer held, or a best-effort sample dropped). ``before_first`` counts what a
+    writer published before its first sample reached us (before the match). Like rosbag2's
+    lost-message events, but exact and independent of the middleware's event support."""
+
+    def __init__(self):
+        self.last = {}                     # (topic, writer gid) -> last sequence number
+        self.lost = {}                     # topic -> samples missing between two received
+        self.before_first = {}             # topic -> samples published before the first
+        self.changed = False
+
+    def count(self, topic, info):
+        seq = info.get('publication_sequence_number')
+        gid = (info.get('publisher_gid') or {}).get('data')
+        if not seq or gid is None:
+            return                          # an rmw that does not say: nothing to count
+        key = (topic, bytes(gid))
+        last = self.last.get(key)
+        if last is None:
+            self.before_first[topic] = self.before_first.get(topic, 0) + seq - 1
+        elif seq > last + 1:
+            self.lost[topic] = self.lost.get(topic, 0) + seq - last - 1
+            self.changed = True
+        self.last[key] = seq if last is None else max(seq, last)
+
+    def lost_total(self) -> int:
+        return sum(self.lost.values())
+
+    def as_metadata(self) -> dict:
+        self.changed = False
+        out = {f'lost:{t}': str(n) for t, n in sorted(self.lost.items())}
+        out.update({f'before_first:{t}': str(n) for t, n in sorted(self.before_first.items())})
+        return out
+
+    def describe(self) -> str:
+        return ', '.join(f'{t} {n}' for t, n in sorted(self.lost.items()) if n)
 
 
 def _never_called(msg):

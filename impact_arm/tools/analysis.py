@@ -9,12 +9,15 @@ impact record each: the table is exactly the one ``simulate`` prints), ``/impact
 (full-resolution points inside each impact: Figures 8–11), and the scene stored in the file
 (link lengths for the tip velocity of Figure 7, the controller law for Figure 3).
 
-Outputs in DIR (default: ``<FILE without .mcap>_analysis``): ``report.md``, ``impacts.json``
-(``{"impacts": [...]}``, the records as published), ``impact_table.txt``,
+Outputs in DIR (default: ``runs/<FILE name without .mcap>_analysis``): ``report.md``,
+``impacts.json`` (``{"impacts": [...]}``, the records as published), ``impact_table.txt``,
 ``poincare_qd1_zero.csv`` / ``poincare_qd2_zero.csv`` and the figures ``fig3_controllers.png``
-… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each). Figure 3 compares
-controller laws: it shows every recording given (FILE and ``--compare`` files), plus offline
-runs of the file's scene for the laws given with ``--laws`` (e.g. ``--laws q,pd,pid``).
+… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each). Figure 3 is the
+article's comparison of the control laws (``--laws``, default q, pd, pid): step responses of
+the file's scene with its surface taken away, simulated offline. Figures 8-11 come from
+``/impact_trace`` (offline recordings) or, in a live recording, from the impact integrated
+again from its ``/impact_report`` contact state (exact when the actuators are off during
+contact, as in the article); when neither is possible the command says why.
 """
 from __future__ import annotations
 
@@ -96,11 +99,21 @@ def load(path, progress=_quiet) -> Run:
             traces.append((columns, data.reshape(dims[0].size, dims[1].size)))
     if not t:
         raise AnalysisError(f'{path}: /joint_states has no messages')
+    # stamp order, never file order: a recorder that stalled writes what it received late
+    # after newer messages (impact reports by their contact time, joint states by stamp)
+    impacts.sort(key=lambda record: _number(record.get('t_contact')))
     order = np.argsort(t, kind='stable')
     scene = _scene(metadata)
     law = scene.controller.law if scene is not None else ''
     return Run(os.path.basename(path), np.asarray(t)[order], np.asarray(pos, float)[order],
                np.asarray(vel, float)[order], impacts, traces, scene, metadata, law)
+
+
+def _number(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.inf
 
 
 def _scene(metadata):
@@ -114,20 +127,134 @@ def _scene(metadata):
         return None
 
 
-def simulated(scene, law: str, t_max: float, progress=_quiet) -> Run:
-    """An offline run of ``scene`` with controller ``law`` (for Figure 3)."""
+STEP_LAWS = ('q', 'pd', 'pid')
+LAW_NAMES = {'q': 'Q controller (eq. 9)', 'pd': 'PD (eq. 10, Ki = 0)', 'pid': 'PID (eq. 10)'}
+
+
+def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
+    """The article's Figure 3 for one law: the arm driven from the scene's initial position
+    to its down target with the surfaces taken away (no impact: a step response), the
+    controller evaluated continuously. ``run.target`` holds the target (rad)."""
     from ..core.simulate import run
     if law not in FEEDBACK_LAWS:
         raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
-    sc = replace(scene, controller=replace(scene.controller, law=law))
-    if law == 'pid' and not any(sc.controller.ki):
+    controller = replace(scene.controller, law=law, rate=0.0)
+    if law == 'pid' and not any(controller.ki):
         raise AnalysisError('--laws pid: the scene has no integral gains (controller.ki)')
+    sc = replace(scene, controller=controller, surfaces=(), cycles=0)
+    progress(f'step response of law {law} for {t_max:g} s (no surface)')
+    result = run(sc, t_max=t_max)
+    if result.error:
+        raise AnalysisError(f'step response of law {law}: {result.error}')
+    samples = result.samples
+    out = Run(LAW_NAMES.get(law, law), np.array([s.t for s in samples]),
+              np.array([s.q for s in samples]), np.array([s.qd for s in samples]),
+              result.impacts, scene=sc, law=law)
+    out.target = np.asarray(scene.controller.down_target, float)
+    return out
+
+
+def step_metrics(run: Run, band_deg: float = 0.1) -> dict:
+    """Per link, in degrees and seconds: the overshoot past the target (0 if none), the error
+    at the end, and the time after which the angle stays within ``band_deg`` of the target
+    (NaN if it never does)."""
+    out = []
+    for k in range(len(run.target)):
+        e = np.degrees(run.q[:, k] - run.target[k])
+        direction = np.sign(e[0])
+        overshoot = max(0.0, float(-np.min(e * direction)))
+        outside = np.nonzero(np.abs(e) > band_deg)[0]
+        if not len(outside):
+            settle = float(run.t[0])
+        elif outside[-1] + 1 < len(e):
+            settle = float(run.t[outside[-1] + 1])
+        else:
+            settle = math.nan
+        out.append({'overshoot_deg': overshoot, 'final_error_deg': float(e[-1]),
+                    'settle_s': settle})
+    return out
+
+
+def compared_run(scene, law: str, t_max: float, progress=_quiet) -> Run:
+    """An offline run of ``scene`` (impacts included) with controller ``law``: for comparing
+    recordings of different laws (``--compare``)."""
+    from ..core.simulate import run
+    sc = replace(scene, controller=replace(scene.controller, law=law))
     progress(f'simulating law {law} for {t_max:g} s')
     result = run(sc, t_max=t_max)
     samples = result.samples
     return Run(f'law {law} (offline)', np.array([s.t for s in samples]),
                np.array([s.q for s in samples]), np.array([s.qd for s in samples]),
                result.impacts, scene=sc, law=law)
+
+
+# ------------------------------------------------------------------ impacts of live files
+def trace_missing_reason(run: Run) -> str:
+    """Why impact ``k``'s points cannot be re-integrated from /impact_report ('' if they
+    can): the re-integration starts from the reported contact state and needs the scene."""
+    if not run.impacts:
+        return 'the recording has no /impact_report'
+    if run.scene is None:
+        return 'the recording stores no scene'
+    if run.scene.n_links != 2:
+        return (f'the contact velocity gives the joint rates of 2 links only '
+                f'(this arm has {run.scene.n_links})')
+    if run.scene.actuators_during_contact:
+        return 'its scene keeps the actuators on during contact (their torque is not reported)'
+    return ''
+
+
+def reintegrated_trace(scene, record: dict):
+    """The points of one impact, integrated again from the state its /impact_report gives at
+    contact: angles, and joint rates from the tip velocity (q̇ = J(q)⁻¹ v). With the
+    actuators off during contact (the article's eq. 7) nothing else acts, so the impact is
+    the recorded one to the integrator's tolerance. Returns (columns, rows) as /impact_trace
+    carries them and the re-integrated record (to compare with the reported one)."""
+    from ..core.driver import feed_events
+    from ..core.integrator import PhaseIntegrator, options_from_spec
+    from ..core.metrics import ImpactBuilder
+    from ..core.model import ArmModel
+    from ..io.offline_mcap import trace_columns
+    model = ArmModel(scene)
+    n = model.n
+    q = np.radians(np.asarray(record['q_contact_deg'], float))
+    v = np.asarray(record['v_before'], float)
+    qd = np.linalg.solve(np.asarray(model.tip_jacobian(q), float).reshape(2, n), v)
+    # start a moment before contact (0.1 µs: ~0.6 µm above the surface) so that the contact
+    # event is located as in the run, not taken as already crossed
+    back = 1e-7
+    state = model.initial_state()
+    state.t = float(record['t_contact']) - back
+    state.y[:n], state.y[n:2 * n] = q - qd * back, qd
+    integ = PhaseIntegrator(model, state, control='held', trace=True,
+                            **options_from_spec(scene.integrator))
+    builder = ImpactBuilder(model)
+    t_end = state.t + 10 * max(float(record['duration']), 1e-6)
+    for made, rows in feed_events(integ, builder, integ.advance(t_end, stop_at_event=True)):
+        return (trace_columns(n), np.asarray(rows, float)), made
+    while state.t < t_end:
+        done = feed_events(integ, builder, integ.advance(t_end, stop_at_event=True))
+        if done:
+            made, rows = done[0]
+            return (trace_columns(n), np.asarray(rows, float)), made
+    raise AnalysisError(f'impact {record.get("index")} did not end when integrated again from '
+                        f'its reported contact state')
+
+
+def with_contact_point(columns, rows, record):
+    """The trace with its first point at contact (δ = 0, no force, the velocities and
+    energies before impact from the record): the kernel records points at step ends, so the
+    phase boundaries it crosses are there, but the contact itself is not."""
+    col = {name: i for i, name in enumerate(columns)}
+    first = np.zeros(len(columns))
+    first[col['t']], first[col['phase']] = record['t_contact'], 1
+    first[col['v_x']], first[col['v_y']] = record['v_before'][:2]
+    for i, energy in enumerate(record['T_before'][:-1]):
+        if f'T{i + 1}' in col:
+            first[col[f'T{i + 1}']] = energy
+    if len(rows) and rows[0][col['t']] <= record['t_contact']:
+        return rows
+    return np.vstack([first[None, :], rows])
 
 
 # ------------------------------------------------------------------------- analysis
@@ -179,16 +306,20 @@ def tip_velocity(run: Run) -> np.ndarray | None:
 def add_arguments(parser):
     parser.add_argument('file', help='MCAP recording (live or simulate --mcap)')
     parser.add_argument('--out', metavar='DIR',
-                        help='output directory (default: <file without .mcap>_analysis)')
+                        help='output directory (default: runs/<file name>_analysis)')
     parser.add_argument('--compare', nargs='+', default=[], metavar='FILE',
-                        help='more recordings (e.g. other controller laws) for Figure 3')
-    parser.add_argument('--laws', default='', metavar='LAWS',
-                        help='also simulate the file\'s scene with these controller laws for '
-                             'Figure 3, comma separated (q, pd, pid)')
-    parser.add_argument('--compare-time', type=float, default=1.0, metavar='S',
-                        help='simulated seconds per law for --laws (default 1.0, (0, 60])')
+                        help='more recordings (e.g. other controller laws): their link angles '
+                             'beside this one\'s (fig3b_recordings.png)')
+    parser.add_argument('--laws', default='q,pd,pid', metavar='LAWS',
+                        help='the control laws of Figure 3, comma separated (default q,pd,pid; '
+                             'empty: no Figure 3): step responses of the file\'s scene '
+                             'without its surface, simulated offline')
+    parser.add_argument('--compare-time', type=float, default=5.0, metavar='S',
+                        help='simulated seconds of each step response (default 5, (0, 60])')
     parser.add_argument('--impact', type=int, default=1, metavar='K',
-                        help='impact shown in Figures 8-11 (default 1, the first)')
+                        help='impact shown in Figures 8-11 (default 1, the first); from '
+                             '/impact_trace, or re-integrated from /impact_report in a live '
+                             'recording')
     parser.add_argument('--no-animation', action='store_true',
                         help='skip animation.gif (impact-arm animate makes it alone)')
 
@@ -200,7 +331,8 @@ def cli(args) -> int:
 
     def say(text):
         line.show(text, log=True)
-    out = args.out or (os.path.splitext(args.file)[0] + '_analysis')
+    out = args.out or os.path.join('runs', os.path.splitext(os.path.basename(args.file))[0]
+                                   + '_analysis')
     if not 0 < args.compare_time <= 60:
         raise AnalysisError(f'--compare-time = {args.compare_time}: must be in (0, 60] s')
     laws = [w.strip() for w in args.laws.split(',') if w.strip()]
@@ -211,15 +343,28 @@ def cli(args) -> int:
     if run.traces and not 1 <= args.impact <= len(run.traces):
         raise AnalysisError(f'--impact = {args.impact}: must be in [1, {len(run.traces)}] '
                             f'(the impacts with a trace in {args.file})')
+    if not run.traces and run.impacts and not 1 <= args.impact <= len(run.impacts):
+        raise AnalysisError(f'--impact = {args.impact}: must be in [1, {len(run.impacts)}] '
+                            f'(the impacts reported in {args.file})')
     others = [load(f, progress=say) for f in args.compare]
+    missing = []
+    steps = []
     if laws and run.scene is None:
-        raise AnalysisError(f'--laws: {args.file} holds no scene to simulate')
-    others += [simulated(run.scene, law, args.compare_time, say) for law in laws]
+        missing.append(f'Figure 3 not drawn: {args.file} stores no scene to simulate the '
+                       f'step responses of')
+    elif laws:
+        steps = [step_response(run.scene, law, args.compare_time, say) for law in laws]
+    impact, constants = impact_points(run, args.impact, say)
+    if impact is None:
+        missing.append(f'Figures 8-11 not drawn: {args.file} has no /impact_trace, and '
+                       f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
+                       f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE')
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
         raise AnalysisError(f'--out {out}: cannot create ({e.strerror})') from None
-    written = write_outputs(run, others, out, args.impact, figures, progress=say)
+    written = write_outputs(run, steps, out, impact, figures, progress=say, recordings=others,
+                            constants=constants, missing=missing)
     if not args.no_animation and run.scene is not None:
         from .animation import animate, contact_forces
         gif = os.path.join(out, 'animation.gif')
@@ -232,8 +377,58 @@ def cli(args) -> int:
     print(written['table'])
     lc = written['limit_cycle']
     print(_limit_cycle_text(lc))
-    print(f'report: {os.path.join(out, "report.md")} ({len(written["figures"])} figures)')
+    if impact is not None and impact[3]:
+        print(f'Figures 8-11: impact {args.impact} {impact[3]}')
+    for line_ in missing:
+        print(line_)
+    print(f'wrote {os.path.join(out, "report.md")} ({len(written["figures"])} figures: '
+          + ', '.join(name for name, _ in written['figures']) + ')')
     return 0
+
+
+def impact_points(run: Run, k: int, progress=_quiet):
+    """(columns, rows, record, note) of impact ``k`` for Figures 8-11, and the contact
+    constants of the surface it struck (None without a scene). From /impact_trace when the
+    file has it (offline recordings); otherwise integrated again from /impact_report's
+    contact state (live recordings), the note saying so; (None, None) if neither."""
+    record = run.impacts[k - 1] if 0 < k <= len(run.impacts) else None
+    constants = None
+    if run.scene is not None and record is not None:
+        constants = _struck_surface(run.scene, record)
+    if run.traces and 0 < k <= len(run.traces):
+        columns, rows = run.traces[k - 1]
+        if record is None:
+            record = _record_from_trace(columns, rows, k)
+        return (columns, with_contact_point(columns, rows, record), record, ''), constants
+    if record is None or trace_missing_reason(run):
+        return None, constants
+    progress(f'integrating impact {k} again from its /impact_report (no /impact_trace)')
+    (columns, rows), made = reintegrated_trace(run.scene, record)
+    worst = max(abs(made[key] / record[key] - 1) for key in ('delta_m', 'F_max', 'duration'))
+    note = (f're-integrated from /impact_report (no /impact_trace in the file); δm, F_max '
+            f'and duration within {max(worst, 1e-12):.0e} of the report')
+    return (columns, with_contact_point(columns, rows, record), record, note), constants
+
+
+def _struck_surface(scene, record):
+    """Contact constants of the surface the tip met at contact (the nearest height)."""
+    from ..core.model import ArmModel
+    model = ArmModel(scene)
+    if not model.surfaces:
+        return None
+    q = np.radians(np.asarray(record['q_contact_deg'], float))
+    y_tip = float(np.sum(model.L * np.sin(q)))
+    return min(model.surfaces, key=lambda s: abs(s.height - y_tip)).constants
+
+
+def _record_from_trace(columns, rows, k):
+    """The few record fields the figures need, read off a trace without its report."""
+    col = {name: rows[:, i] for i, name in enumerate(columns)}
+    energies = [col[c][0] for c in columns if c.startswith('T') and c[1:].isdigit()]
+    return {'index': k, 't_contact': float(col['t'][0]), 'v_before': [col['v_x'][0],
+            col['v_y'][0]], 'T_before': energies + [sum(energies)],
+            'delta_m': float(np.max(col['delta'])), 'delta_r': float(col['delta'][-1]),
+            'F_max': float(np.max(col['F_n']))}
 
 
 def _limit_cycle_text(lc) -> str:
@@ -252,7 +447,8 @@ def _write(path, text):
     os.replace(tmp, path)
 
 
-def write_outputs(run: Run, others, out, impact_k, figures, progress=_quiet) -> dict:
+def write_outputs(run: Run, steps, out, impact, figures, progress=_quiet, recordings=(),
+                  constants=None, missing=()) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
     lc = limit_cycle(run.impacts)
@@ -267,13 +463,14 @@ def write_outputs(run: Run, others, out, impact_k, figures, progress=_quiet) -> 
             for r in rows]
         _write(os.path.join(out, f'poincare_qd{k + 1}_zero.csv'), '\n'.join(lines) + '\n')
     v_tip = tip_velocity(run)
-    made = figures.draw_all(run, others, sections, v_tip, impact_k, out, progress=progress)
-    _write(os.path.join(out, 'report.md'), report(run, others, table, lc, sections, made,
-                                                  impact_k))
+    made = figures.draw_all(run, steps, sections, v_tip, impact, out, progress=progress,
+                            recordings=recordings, constants=constants)
+    _write(os.path.join(out, 'report.md'), report(run, recordings, table, lc, sections, made,
+                                                  steps, missing))
     return {'table': table, 'limit_cycle': lc, 'figures': made, 'sections': sections}
 
 
-def report(run: Run, others, table, lc, sections, made, impact_k) -> str:
+def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) -> str:
     info = run.metadata.get('impact_arm', {})
     nonfinite = int(np.count_nonzero(~np.isfinite(run.q)) + np.count_nonzero(
         ~np.isfinite(run.qd)))
@@ -303,7 +500,20 @@ def report(run: Run, others, table, lc, sections, made, impact_k) -> str:
     lines += ['', '## Figures', '']
     for name, caption in made:
         lines += [f'![{caption}]({name})', '', f'*{caption}*', '']
+    if steps:
+        lines += ['Figure 3 (step responses without impact, settling = staying within 0.1° '
+                  'of the target):', '']
+        for step in steps:
+            for k, m in enumerate(step_metrics(step)):
+                settle = (f'settles at {m["settle_s"]:.3f} s' if math.isfinite(m['settle_s'])
+                          else f'does not settle within {step.t[-1]:g} s')
+                lines.append(f'- {step.label}, link {k + 1}: {m["overshoot_deg"]:.3f}° past '
+                             f'the target at most, error at the end '
+                             f'{round(m["final_error_deg"], 3) + 0.0:+.3f}°, {settle}')
+        lines.append('')
+    for line in missing:
+        lines += [f'**{line}**', '']
     if others:
-        lines += ['Figure 3 compares: ' + ', '.join([run.label] + [o.label for o in others])
-                  + '.', '']
+        lines += ['Recordings compared (fig3b_recordings.png): '
+                  + ', '.join([run.label] + [o.label for o in others]) + '.', '']
     return '\n'.join(lines)

@@ -142,7 +142,7 @@ def animate(run, out_path, forces=None, fps: float = DEFAULT_FPS, slow: float = 
 def add_arguments(parser):
     parser.add_argument('file', help='MCAP recording (live or simulate --mcap)')
     parser.add_argument('--out', metavar='FILE',
-                        help='GIF or MP4 to write (default: <file without .mcap>.gif)')
+                        help='GIF or MP4 to write (default: runs/<file name>.gif)')
     parser.add_argument('--fps', type=float, default=DEFAULT_FPS,
                         help=f'frames per second of simulated time (default {DEFAULT_FPS:g})')
     parser.add_argument('--slow', type=float, default=DEFAULT_SLOW,
@@ -155,7 +155,10 @@ def add_arguments(parser):
 
 def cli(args) -> int:
     from .analysis import load
-    out = args.out or (os.path.splitext(args.file)[0] + '.gif')
+    out = args.out or os.path.join(
+        'runs', os.path.splitext(os.path.basename(args.file))[0] + '.gif')
+    if os.path.dirname(out):
+        os.makedirs(os.path.dirname(out), exist_ok=True)
     from .progress import Progress
     line = Progress(prefix='animate: ')
 
@@ -165,5 +168,5 @@ def cli(args) -> int:
     frames = animate(run, out, contact_forces(args.file), args.fps, args.slow, args.window,
                      progress=say)
     line.end()
-    print(f'{frames} frames written to {out}')
+    print(f'wrote {out} ({frames} frames)')
     return 0

@@ -11,10 +11,15 @@ import json
 import math
 import os
 import sys
+import time
 
-from ..contract import INTEGRATOR_PRESETS
-from ..core.errors import ImpactArmError
-from .progress import Progress
+STARTED = time.perf_counter()      # the command's start, for the timings it prints
+NOTICE = []                        # the command's CompileNotice (how long it compiled)
+
+# (the clock above starts before the package's own imports: they count in the command's time)
+from ..contract import INTEGRATOR_PRESETS  # noqa: E402
+from ..core.errors import ImpactArmError  # noqa: E402
+from .progress import CompileNotice, Progress  # noqa: E402
 
 DEFAULT_SCENE = 'paper'
 
@@ -45,8 +50,10 @@ def cmd_simulate(args) -> int:
     # refused now, not after a long run whose results would then be lost
     args.json = args.json and writable_output(args.json, '--json')
     args.mcap = args.mcap and writable_output(args.mcap, '--mcap')
+    load_s = _load_kernel(scene)
     if args.no_samples:
-        return _simulate_without_samples(scene, args)
+        return _simulate_without_samples(scene, args, load_s)
+    _check_run_size(scene, args)
     observer = None
     if args.mcap:
         from ..io.offline_mcap import OfflineRecorder
@@ -70,40 +77,95 @@ def cmd_simulate(args) -> int:
             observer.close(result)  # with the result: its summary is stored in the file
         line.end()
     print(format_table(result))
+    print(_timing(result, load_s, f'integration, {round(result.t_end * scene.publish_rate)} '
+                                  f'samples' + (', MCAP writing' if args.mcap else '')))
     if args.json:
         write_json(args.json, result.to_json())
+        print(f'wrote {args.json}')
     if args.mcap:
-        print(f'recorded to {args.mcap}')
+        print(f'wrote {args.mcap}')
     return 1 if result.error else 0
+
+
+# A sampled run's cost grows with publish_rate x t_max: measured on a 2-core VM, ~3 us and
+# (with --mcap) ~120 bytes of compressed MCAP per sample. Beyond this many samples (~30 s,
+# ~1.2 GB; counted up to t_max, which the scene's cycles may end sooner) `simulate` says what
+# the run may cost and runs it only with --yes.
+RUN_SIZE_LIMIT = 1e7
+SECONDS_PER_SAMPLE, MCAP_BYTES_PER_SAMPLE = 3e-6, 120
+
+
+def _check_run_size(scene, args):
+    samples = scene.publish_rate * scene.t_max
+    if samples <= RUN_SIZE_LIMIT / 10:
+        return
+    estimate = (f'publish_rate {scene.publish_rate:g} Hz x t_max {scene.t_max:g} s = '
+                f'{samples:.3g} samples: up to about {samples * SECONDS_PER_SAMPLE:.0f} s'
+                + (f' and {samples * MCAP_BYTES_PER_SAMPLE / 1e9:.1f} GB of MCAP'
+                   if args.mcap else ''))
+    if samples > RUN_SIZE_LIMIT and not args.yes:
+        raise ImpactArmError(f'{estimate}; more than {RUN_SIZE_LIMIT:.0e} samples run only '
+                             f'with --yes (or lower publish_rate or t_max)')
+    print(f'impact-arm simulate: {estimate}', file=sys.stderr)
 
 
 def cmd_urdf(args) -> int:
     from ..core.scene import load_scene
     from ..io.urdf import robot_description
-    sys.stdout.write(robot_description(load_scene(args.scene)))
+    sys.stdout.write(robot_description(load_scene(args.scene), rod_radius=args.rod_radius))
     return 0
 
 
-def _simulate_without_samples(scene, args) -> int:
-    from ..core.simulate import format_table, run_without_samples
+def _load_kernel(scene) -> float:
+    """Load (or compile, announced) the scene's kernel before the run is timed: the first
+    call in a process reads numba's cache (~0.1-0.3 s), which is start-up, not integration.
+    Returns the seconds it took."""
+    from ..core.driver import SimulatedArm
+    t0 = time.perf_counter()
+    SimulatedArm(scene, scene.publish_rate, trace=False).warm_up()
+    return time.perf_counter() - t0
+
+
+def _timing(result, load_s, what) -> str:
+    """What the printed times include, in one line."""
+    total = time.perf_counter() - STARTED
+    compiled = NOTICE[-1].total if NOTICE else 0.0
+    loading = ('compiling the kernel (first use of this scene shape)' if compiled > 1.0
+               else 'loading the compiled kernel')
+    return (f'timing: {result.t_end:.3f} s simulated in {result.wall_time * 1e3:.1f} ms wall '
+            f'({what}); before that {load_s:.2f} s {loading}; '
+            f'{total:.2f} s for the whole command with start-up. Repeated warm runs: '
+            f'impact-arm bench speed')
+
+
+def _simulate_without_samples(scene, args, load_s=0.0) -> int:
+    from ..core.simulate import format_table, run
     rate = scene.controller.rate if args.control_rate is None else args.control_rate
     if rate or args.mcap:
         what = '--mcap' if args.mcap else f'a sampled controller ({rate:g} Hz)'
         raise ImpactArmError(f'--no-samples runs from event to event with continuous control: '
                              f'{what} needs the sampled run (drop --no-samples'
                              + (', or pass --control-rate 0)' if rate else ')'))
-    result = run_without_samples(scene, preset=args.preset)
+    result = run(scene, samples=False, preset=args.preset)
     print(format_table(result))
+    print(_timing(result, load_s, 'integration only, no samples'))
     if args.json:
         write_json(args.json, result.to_json())
+        print(f'wrote {args.json}')
     return 1 if result.error else 0
 
 
 def writable_output(path, flag) -> str:
     """The file to write for ``flag``, checked before any work: its directory must exist and
     be writable (none is created), and it must be absent, a regular file, or a symlink to one
-    (then its target is written and the link kept). Directories, FIFOs and devices are refused."""
+    (then its target is written and the link kept). Directories, FIFOs and devices are refused.
+    The one exception to "none is created": ``runs/``, where every command's outputs go by
+    default, is made when its parent exists (a fresh clone has none)."""
     target = os.path.realpath(path)
+    runs = os.path.dirname(target)
+    if os.path.basename(runs) == 'runs' and not os.path.exists(runs) \
+            and os.path.isdir(os.path.dirname(runs)):
+        os.makedirs(runs, exist_ok=True)
     if os.path.isdir(target):
         raise ImpactArmError(f'{flag} {path}: is a directory')
     if os.path.exists(target) and not os.path.isfile(target):
@@ -167,6 +229,8 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
     p.add_argument('--tf-rate', type=_positive, default=100.0, metavar='HZ',
                    help='rate of /tf and /impact_markers in the MCAP file (default 100)')
+    p.add_argument('--yes', action='store_true',
+                   help=f'run even past {RUN_SIZE_LIMIT:.0e} samples (publish_rate x t_max)')
     p.add_argument('--no-samples', action='store_true',
                    help='impacts only: integrate from event to event without sampling or '
                         'tracing (the fast path of studies; continuous control)')
@@ -174,6 +238,9 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
 
     p = sub.add_parser('urdf', help="print the scene's robot description (URDF)")
     p.add_argument('--scene', default=DEFAULT_SCENE, help='scene file or installed scene name')
+    p.add_argument('--rod-radius', type=float, default=0.0, metavar='M',
+                   help='radius the rods are drawn with [m] (default 0: 1 %% of the shortest '
+                        'link)')
     p.set_defaults(func=cmd_urdf)
 
     for name, (module, help_text) in COMMANDS.items():
@@ -198,8 +265,15 @@ COMMANDS = {
                 'draw the arm, the surface and the contact force into a GIF or MP4'),
     'study': ('impact_arm.tools.contact_study',
               'shipped studies: contact (the contact laws against published results)'),
-    'bench': ('impact_arm.tools.benchmarks',
-              'benchmarks: speed, tradeoff, stress, features (see docs/benchmarks.md)'),
+    'fit': ('impact_arm.tools.fit',
+            'fit scene parameters (E, S_y, mu, ...) to the impacts of a recording'),
+    'compare': ('impact_arm.tools.compare',
+                'compare the impacts of two recordings, or of a recording and a scene'),
+    'kernel': ('impact_arm.tools.kernel',
+               "kernel dump: print the generated kernel module of a scene's shape"),
+    'bench': ('impact_arm.tools.bench_command',
+              'benchmarks from the repository\'s bench/ folder: speed, tradeoff, stress, '
+              'rates, fit, peers, ... (docs/benchmarks.md)'),
 }
 
 
@@ -228,7 +302,9 @@ def main(argv=None) -> int:
     selected = next((a for a in argv if not a.startswith('-')), None)
     args = build_parser(selected).parse_args(argv)
     try:
-        return args.func(args)
+        with CompileNotice(prefix=f'impact-arm {args.command}: ') as notice:
+            NOTICE.append(notice)
+            return args.func(args)
     except ImpactArmError as exc:
         print(f'impact-arm {args.command}: error: {exc}', file=sys.stderr)
         return 2

@@ -56,8 +56,8 @@ def cor_table(ratios=RATIOS) -> list[dict]:
 
 def add_arguments(parser):
     parser.add_argument('name', choices=['contact'], help='the study to run')
-    parser.add_argument('--out', default='contact_study', metavar='DIR',
-                        help='where cor.csv and cor.png go (default: contact_study)')
+    parser.add_argument('--out', default=os.path.join('runs', 'contact_study'), metavar='DIR',
+                        help='where cor.csv and cor.png go (default: runs/contact_study)')
 
 
 def cli(args) -> int:
@@ -89,10 +89,10 @@ def cli(args) -> int:
     ax.semilogx(fine, [thornton_cor(x) for x in fine], '--', label='Thornton (1997)')
     ax.semilogx(fine, [min(1.0, 1.185 * x ** -0.25) for x in fine], ':',
                 label='Thornton, large-V asymptote 1.185 (V_y/V)^1/4')
-    ax.set_xlabel('V / V_y')
-    ax.set_ylabel('coefficient of restitution e')
+    ax.set_xlabel('impact velocity / yield velocity, V / V_y [-]')
+    ax.set_ylabel('coefficient of restitution e [-]')
     ax.set_title('steel sphere on steel, normal impact')
-    ax.legend()
+    ax.legend(loc='upper right', fontsize=8)     # the curves fall to the lower right
     path = os.path.join(args.out, 'cor.png')
     fig.savefig(path, dpi=120)
     plt.close(fig)

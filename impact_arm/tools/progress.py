@@ -8,6 +8,7 @@ per line, without ETA noise.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 
@@ -60,3 +61,110 @@ def _duration(seconds: float) -> str:
     if minutes < 60:
         return f'{minutes} min {seconds:02d} s'
     return f'{minutes // 60} h {minutes % 60:02d} min'
+
+
+COMPILE_NOTICE = 'compiling the kernel for this scene shape (one time, ~30 s)'
+
+
+class CompileNotice:
+    """Says on stderr when the core compiles (numba, sympy) instead of loading its cache: one
+    line ``compiling the kernel ... (one time, ~30 s)`` with the elapsed seconds (rewritten in
+    place on a terminal, every 10 s elsewhere) and ``compiled in N s`` once no compile has
+    followed for ``SETTLE`` seconds (a first run compiles in a few bursts: one notice for
+    all). A compile that is over within a second says nothing. Use as a context manager."""
+
+    QUIET = 1.0         # s: shorter compiles are not worth a line
+    SETTLE = 1.5        # s without a compile before the notice ends
+    LOG_EVERY = 10.0    # s between lines off a terminal
+
+    def __init__(self, stream=None, clock=time.monotonic, prefix=''):
+        self.stream = sys.stderr if stream is None else stream
+        self.clock = clock
+        self.prefix = prefix
+        self.tty = self.stream.isatty()
+        self.total = 0.0            # s compiled in this process so far
+        self._burst_start = None    # start of the compile running now
+        self._first = None          # start of the first compile of this notice
+        self._idle_since = None     # end of the last compile (None while one runs)
+        self._compiled = 0.0        # s compiled within this notice
+        self._shown = False
+        self._logged = 0.0
+        self._lock = threading.Lock()
+        self._thread = None
+        self._remove = None
+
+    def __enter__(self):
+        from ..core import jit
+        self._remove = jit.add_compile_hook(self._start, self._end)
+        return self
+
+    def __exit__(self, *exc):
+        if self._remove is not None:
+            self._remove()
+        with self._lock:
+            if self._burst_start is not None:
+                self._close_burst()
+            self._finish()
+        return False
+
+    def _start(self):
+        with self._lock:
+            self._burst_start = self.clock()
+            self._idle_since = None
+            if self._first is None:
+                self._first = self._burst_start
+                self._compiled, self._shown, self._logged = 0.0, False, 0.0
+                self._thread = threading.Thread(target=self._tick, daemon=True)
+                self._thread.start()
+
+    def _end(self):
+        with self._lock:
+            if self._burst_start is not None:
+                self._close_burst()
+
+    def _close_burst(self):
+        elapsed = self.clock() - self._burst_start
+        self._compiled += elapsed
+        self.total += elapsed
+        self._burst_start = None
+        self._idle_since = self.clock()
+
+    def _finish(self):
+        """End the notice (lock held): the closing line if the opening one was shown."""
+        if self._first is None:
+            return
+        if self._shown:
+            self._write(f'{COMPILE_NOTICE}: compiled in {self._compiled:.0f} s, cached for '
+                        f'next time', final=True)
+        self._first, self._idle_since, self._shown = None, None, False
+
+    def _tick(self):
+        while True:
+            time.sleep(0.5 if self.tty else 1.0)
+            with self._lock:
+                if self._first is None:
+                    return
+                now = self.clock()
+                if self._idle_since is not None and now - self._idle_since >= self.SETTLE:
+                    self._finish()
+                    return
+                elapsed = now - self._first
+                if self._idle_since is not None or elapsed < self.QUIET:
+                    continue
+                if not self._shown:
+                    self._shown = True
+                    self._logged = elapsed
+                    self._write(f'{COMPILE_NOTICE} ...' + (f' {elapsed:.0f} s' if self.tty
+                                                            else ''))
+                elif self.tty:
+                    self._write(f'{COMPILE_NOTICE} ... {elapsed:.0f} s')
+                elif elapsed - self._logged >= self.LOG_EVERY:
+                    self._logged = elapsed
+                    self._write(f'  ... {elapsed:.0f} s')
+
+    def _write(self, text, final=False):
+        if self.tty:
+            self.stream.write(f'\r\033[K{self.prefix}{text}' + ('\n' if final else ''))
+        else:
+            self.stream.write(f'{self.prefix}{text}\n')
+        self.stream.flush()

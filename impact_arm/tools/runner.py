@@ -52,7 +52,7 @@ def add_arguments(parser):
 
 def cli(args) -> int:
     from ..core.scene import load_scene, resolve_scene_path
-    from ..core.simulate import RunResult, format_table
+    from ..core.simulate import RunResult, StopReason, format_table
 
     if not 1.0 <= args.rate <= 100000.0:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
@@ -63,6 +63,7 @@ def cli(args) -> int:
     if output:
         os.makedirs(args.out, exist_ok=True)
     env = dds_environment()
+    precompile(scene, args.rate)
 
     run = Run(scene, scene_path, args, output, env)
 
@@ -84,27 +85,55 @@ def cli(args) -> int:
         codes = run.stop()
     result = RunResult(scene=scene, impacts=run.impacts, t_end=run.sim_time,
                        rhs_evaluations=run.rhs_evaluations, wall_time=run.wall,
-                       stopped=outcome)
+                       stop_reason=StopReason.CYCLES_COMPLETED if outcome == 'completed' else
+                       StopReason.INTERRUPTED if outcome == 'interrupted' else
+                       StopReason.FAILED, stop_detail=outcome)
     print(format_table(result))
     if args.mode == 'lockstep' and run.wall > 0:
-        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall, '
+        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
+              f'first command to the last impact; the nodes\' start-up not included), '
               f'real-time factor {run.sim_time / run.wall:.2f}')
     elif run.diagnostics:
         d = run.diagnostics
         print(f"realtime: {d.get('overruns', '?')} overruns; worst period compute "
               f"{d.get('compute_worst_us', '?')} us of {d.get('period_us', '?')} us")
-    if output:
-        print(f'recorded to {output}' if os.path.exists(output) else
-              f'no recording: {output} was not written')
+    incomplete = False
+    if output and os.path.exists(output):
+        from ..io.recording_check import check_recording
+        check = check_recording(output, args.rate)
+        print(f'wrote {output}: {check.summary()}')
+        # lockstep waits for the recorder: a gap there is a defect, not load
+        incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
+    elif output:
+        print(f'no recording: {output} was not written')
     failed = {n: c for n, c in codes.items() if c not in (0, None)}
     if outcome == 'interrupted':
         print('interrupted: nodes stopped, recording closed', file=sys.stderr)
         return 130
+    if incomplete:
+        print('the lockstep recording is incomplete', file=sys.stderr)
+        return 1
     if failed or outcome not in ('completed',):
         for node, code in failed.items():
             print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
         return 1
     return 0
+
+
+def precompile(scene, rate):
+    """Compile, or load from the cache, what the simulator and controller nodes run, here
+    where the CLI announces it: otherwise each node compiles in its own process on the first
+    run of a scene shape, 20-45 s of silence before the arm moves."""
+    from ..core.control import CycleController
+    from ..core.driver import SimulatedArm
+    arm = SimulatedArm(scene, rate, trace=False)
+    arm.warm_up()
+    c = scene.controller
+    ctrl = CycleController(arm.model, 'q', c.kp, c.kd, c.ki, c.down_target, c.up_target,
+                           c.switch_height, scene.surfaces[0].height if scene.surfaces else 0.0)
+    for ctrl.law in ('q', 'pid'):
+        ctrl.torque(scene.q0, scene.qd0)
+    arm.model.tip(scene.q0, scene.qd0)
 
 
 def dds_environment() -> dict:
@@ -163,39 +192,47 @@ def simulator_diagnostics(msg):
     return None
 
 
-def ready_for_commands(node, recorder_log=None) -> bool:
+RECORDER_READER = '_recorder_reader'   # the recorder's reader node (nodes/_runner.reader_node)
+
+
+class RecorderProgress:
+    """What the recorder says it has written: the newest joint-state stamp on
+    /recorder/progress (ns; None until it says anything). A progress message proves the
+    recorder is writing the simulator's stream, not merely subscribed to it."""
+
+    def __init__(self, node):
+        from builtin_interfaces.msg import Time
+        self.written_until = None
+        self.subscription = node.create_subscription(
+            Time, contract.RECORDER_PROGRESS, self._on_progress, contract.PROGRESS_QOS.to_rclpy())
+
+    def _on_progress(self, msg):
+        self.written_until = msg.sec * 1_000_000_000 + msg.nanosec
+
+
+def recorder_subscribed(node) -> set:
+    """The simulator topics the recorder's reader subscribes to, as ``node`` sees the graph."""
+    return {topic for topic in SIMULATOR_TOPICS
+            if any(info.node_name == RECORDER_READER
+                   for info in node.get_subscriptions_info_by_topic(topic))}
+
+
+def ready_for_commands(node, recorder=None) -> bool:
     """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
-    its command reader (and the recorder's) are known and, with a recorder (``recorder_log``:
-    its log file), the recorder has matched every simulator publisher and received joint
-    states (the simulator publishes its held initial state until the first command). The arm
-    starts moving with the first command and nothing must go unrecorded: a subscription in the
-    graph is not a matched reader (it may match seconds later), and the reader matching a
-    writer is not the writer matching the reader."""
-    from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
-    listeners = 1 if recorder_log else 0
+    its command reader (and the recorder's) are known and, with a recorder (``recorder``: a
+    RecorderProgress), the recorder's reader subscribes to every simulator topic and the
+    recorder has said it wrote joint states (the simulator publishes its held initial state
+    until the first command). The arm starts moving with the first command and nothing must go
+    unrecorded: a subscription in the graph is not a matched reader (it may match seconds
+    later); a written sample is proof."""
+    listeners = 1 if recorder is not None else 0
     if not (node.count_publishers(JOINT_STATES) >= 1
             and node.count_subscribers(COMMANDS) >= 1 + listeners):
         return False
-    if not recorder_log:
+    if recorder is None:
         return True
-    says = recorder_says(recorder_log)
-    return set(SIMULATOR_TOPICS) <= says[MATCHED_LINE] and JOINT_STATES in says[FLOWING_LINE]
-
-
-def recorder_says(log_path) -> dict:
-    """The topics the recorder's log names after each of its lines (MATCHED_LINE,
-    FLOWING_LINE -> set of topics), from one read of the log."""
-    from ..nodes.recorder import FLOWING_LINE, MATCHED_LINE
-    says = {MATCHED_LINE: set(), FLOWING_LINE: set()}
-    try:
-        with open(log_path, encoding='utf-8', errors='replace') as f:
-            for text in f:
-                for line, topics in says.items():
-                    if line in text:
-                        topics.update(text.partition(line)[2].split())
-    except OSError:
-        pass
-    return says
+    return recorder.written_until is not None and \
+        recorder_subscribed(node) == set(SIMULATOR_TOPICS)
 
 
 class Run:
@@ -211,6 +248,7 @@ class Run:
         self.node = None
         self.interrupted = threading.Event()    # set by the CLI's SIGINT/SIGTERM handler
         self._reported = 0
+        self.stopping = False
         self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
         self.logdir = os.path.join(args.out, 'logs')
 
@@ -218,7 +256,10 @@ class Run:
         a = self.args
         params = {'simulator': [f'scene:={self.scene_path}', f'publish_rate:={a.rate}',
                                 f'mode:={a.mode}',
-                                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}'],
+                                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}']
+                  # lockstep: the simulator waits for the recorder, so nothing is lost
+                  + ([f'recorder_window:={contract.RECORDER_WINDOW}']
+                     if self.output and a.mode == 'lockstep' else []),
                   'controller': [f'scene:={self.scene_path}',
                                  f'rate:={getattr(a, "control_rate", None) or a.rate}']
                   + ([f'law:={a.law}'] if a.law else [])
@@ -265,11 +306,11 @@ class Run:
 
     def _await_graph(self, timeout=60.0):
         """Until the controller may start (``ready_for_commands``)."""
-        recorder_log = self.logs.get('recorder')
+        recorder = RecorderProgress(self.node) if 'recorder' in self.procs else None
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self._spin_once(0.05)
-            if ready_for_commands(self.node, recorder_log):
+            if ready_for_commands(self.node, recorder):
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
@@ -286,13 +327,15 @@ class Run:
             raise KeyboardInterrupt
 
     def _on_impact(self, msg):
-        self.impacts.append(json.loads(msg.data))
+        if not self.stopping:   # the arm released by the stopped controller falls: not the run
+            self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
-            self.sim_time = float(values.get('sim_time', self.sim_time))
+            if not self.stopping:   # the run's time ends with it; the counters with the node
+                self.sim_time = float(values.get('sim_time', self.sim_time))
             self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
 
     def watch(self, timeout) -> str:
@@ -314,6 +357,8 @@ class Run:
             self.wall = now - (first or start)
             self._progress(cycles)
             if len(self.impacts) >= cycles:
+                if self.args.mode == 'realtime':
+                    self._pause_simulator()
                 return 'completed'
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
@@ -323,19 +368,55 @@ class Run:
             if now - start > timeout:
                 return f'timeout after {timeout:g} s'
 
+    def _pause_simulator(self, timeout=2.0):
+        """Realtime: freeze the arm where the run completed. Stopping the controller first
+        let the arm fall and chatter on the surface until the simulator stopped too (41 extra
+        impacts in one recording); paused, the simulator holds the state."""
+        from std_srvs.srv import SetBool
+        client = self.node.create_client(SetBool, '/simulator/pause')
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                return
+            future = client.call_async(SetBool.Request(data=True))
+            end = time.monotonic() + timeout
+            while not future.done() and time.monotonic() < end:
+                self._spin_once(0.05)
+        finally:
+            self.node.destroy_client(client)
+
     def _progress(self, cycles):
         """One refreshed line on a terminal; otherwise a line per impact (logs stay short)."""
         count = len(self.impacts)
         line = (f'cycle {min(count + 1, cycles)}/{cycles}  impacts {count}  '
                 f't = {self.sim_time:7.3f} s')
-        if self.diagnostics:
-            line += f"  watchdog {self.diagnostics.get('watchdog')}"
+        # /diagnostics come at 1 Hz: 'waiting' seen before the first command is stale once
+        # impacts arrive, so only a state worth acting on is shown
+        watchdog = self.diagnostics.get('watchdog')
+        if watchdog == 'timeout' or (watchdog == 'waiting' and not count):
+            line += f'  watchdog {watchdog}'
         self.line.show(line, done=count, log=count != self._reported)
         self._reported = count
+
+    def _wait(self, proc, timeout):
+        """``proc.wait`` that keeps spinning the run's node: the simulator publishes a last
+        /diagnostics as it stops, and the summary is made from those final counts (overruns,
+        right-hand-side evaluations, simulated time), not from the last 1 Hz one."""
+        if self.node is None:
+            return proc.wait(timeout=timeout)
+        import rclpy
+        end = time.monotonic() + timeout
+        while proc.poll() is None:
+            if time.monotonic() > end:
+                raise subprocess.TimeoutExpired(proc.args, timeout)
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        for _ in range(4):          # what arrived just before the exit
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return proc.returncode
 
     def stop(self) -> dict:
         """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any
         that does not exit; returns exit codes by node."""
+        self.stopping = True
         codes = {}
         for name in STOP_ORDER:
             proc = self.procs.get(name)
@@ -346,7 +427,7 @@ class Run:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
             try:
-                codes[name] = proc.wait(timeout=10)
+                codes[name] = self._wait(proc, timeout=10)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 codes[name] = proc.wait()

@@ -83,6 +83,34 @@ class Spec:
              'samples': self.samples, 'seed': self.seed, 'outputs': self.outputs},
             sort_keys=True, default=str).encode()).hexdigest()[:12]
         self.runs = self._expand()
+        self._check_key_paths(origin)
+
+    def _check_key_paths(self, origin):
+        """Refuse a key path the scene does not have (``surfaces[0].muu``, an index past the
+        end) now, before any run: otherwise every run fails with the same error. Each path is
+        tried alone with its first run's value; out-of-range values are the runs' business
+        (a sweep may cross the schema's limits on purpose)."""
+        from ..core.errors import SceneError
+        first = self.runs[0] if self.runs else {}
+        errors = []
+
+        def check(base, key, value):
+            try:
+                Study(self.scene_data, base).scene({key: value})
+            except SceneError as exc:
+                text = str(exc)
+                if 'is not a known key' in text or text.startswith('override '):
+                    errors.append(f'{key}: {text}')
+        # the fixed overrides alone first (a parameter's path may need one of them, e.g. a
+        # second surface), then each parameter on top of them
+        for key, value in self.fixed.items():
+            check({}, key, value)
+        if not errors:
+            for key in self.parameters:
+                check(self.fixed, key, first.get(key))
+        if errors:
+            raise SpecError(f"sweep '{origin}': {len(errors)} key path(s) the scene does not "
+                            f"have, nothing was run:\n  " + '\n  '.join(errors))
 
     def _expand(self) -> list[dict]:
         """Each run's overrides, in run order: grid/list product (first parameter slowest)
@@ -374,6 +402,7 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
     done = 0
     pending, pending_runs, last_flush = [], 0, time.perf_counter()
     failed, first_result, after_first = 0, None, 0
+    errors = {}         # distinct error -> runs that failed with it
     try:
         for tables in results:
             pending.append(tables)
@@ -383,7 +412,10 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
             else:
                 after_first += count
             pending_runs += count
-            failed += sum(1 for e in tables['runs'].column('error').to_pylist() if e)
+            for error in tables['runs'].column('error').to_pylist():
+                if error:
+                    failed += 1
+                    errors[error] = errors.get(error, 0) + 1
             done += count
             if progress:
                 rate = done / max(time.monotonic() - progress.started, 1e-9)
@@ -399,12 +431,64 @@ def execute(spec: Spec, out: str, *, workers: int | None = None, cluster: str | 
     end = time.perf_counter()
     # start-up: until the first chunk is back (worker start, imports, kernels); then the rate
     return {'runs': len(spec.runs), 'skipped': len(spec.runs) - len(todo), 'ran': len(todo),
-            'failed': failed, 'wall': end - wall0,
+            'failed': failed, 'errors': errors, 'wall': end - wall0,
             'startup': (first_result or end) - wall0,
             'rate': after_first / (end - first_result) if after_first else math.nan}
 
 
 # --- plots -------------------------------------------------------------------------------
+# units of the run and impact columns (docs/outputs.md); parameters take theirs from the schema
+COLUMN_UNITS = {'impacts': '', 't_end': 's', 'period': 's', 'settled_after': 'impacts',
+                'cor_kinematic': '', 'cor_energetic': '', 'rhs_evaluations': '', 'steps': '',
+                'wall_time': 's', 't_contact': 's', 'duration': 's', 'delta_m': 'm',
+                'delta_r': 'm', 'F_max': 'N', 'v_before': 'm/s', 'v_after': 'm/s',
+                'T_before': 'J', 'T_after': 'J', 'q_contact_deg': 'deg',
+                'phase_durations': 's', 'index': ''}
+
+
+def column_unit(name: str) -> str:
+    """The unit of a table column: a metric's, or a swept key path's from the scene schema
+    ('' when dimensionless or unknown)."""
+    from ..core.scene import SCHEMA
+    base = name.split('[', 1)[0]
+    if base in COLUMN_UNITS:
+        return COLUMN_UNITS[base]
+    try:
+        parts = parse_key_path(name)
+    except ImpactArmError:
+        return ''
+    node = ('dict', SCHEMA, '', None)
+    for part in parts:
+        kind, inner = node[0], node[1]
+        if isinstance(part, int):
+            if kind == 'vec':
+                continue
+            if kind != 'list':
+                return ''
+            node = ('dict', inner, '', None)
+        elif kind == 'map':
+            node = ('dict', inner, '', None)     # materials.<name>
+        elif kind == 'dict' and part in inner:
+            node = inner[part]
+        else:
+            return ''
+    unit = node[2] if isinstance(node[2], str) else ''
+    return '' if unit == '-' else unit
+
+
+def axis_label(name: str) -> str:
+    unit = column_unit(name)
+    return f'{name} [{unit}]' if unit else f'{name} [-]'
+
+
+def plot_file_name(metric, x, y=None) -> str:
+    """'cor_kinematic_vs_surfaces_0_.mu' style names without brackets or dots to trip a
+    shell: key paths become words joined by '_'."""
+    import re
+    words = [re.sub(r'[^A-Za-z0-9]+', '_', w).strip('_') for w in (metric, x, y) if w]
+    return '_vs_'.join(words[:2]) + (f'_and_{words[2]}' if len(words) > 2 else '') + '.png'
+
+
 def plot(out: str, metric: str, x: str, y: str | None = None, table: str = 'runs',
          impact: int | None = None, path: str | None = None) -> str:
     """``metric`` against one swept parameter (points) or two (points coloured by the metric);
@@ -433,19 +517,45 @@ def plot(out: str, metric: str, x: str, y: str | None = None, table: str = 'runs
     values = [data[metric][i] for i in keep]
     fig, ax = plt.subplots(figsize=(6.4, 4.8), constrained_layout=True)
     if y is None:
-        ax.plot(xs, values, 'o', ms=3)
-        ax.set_ylabel(metric)
+        # runs that share an x (one grid node, several random/LHS draws of other
+        # parameters) are spread a little sideways so that they do not hide each other
+        ax.plot(_spread(xs), values, 'o', ms=3, alpha=0.7)
+        ax.set_ylabel(axis_label(metric))
     else:
-        points = ax.scatter(xs, [data[y][i] for i in keep], c=values, s=12, cmap='viridis')
-        fig.colorbar(points, ax=ax, label=metric)
-        ax.set_ylabel(y)
-    ax.set_xlabel(x)
+        points = ax.scatter(xs, [data[y][i] for i in keep], c=values, s=12, cmap='viridis',
+                            alpha=0.8)
+        fig.colorbar(points, ax=ax, label=axis_label(metric))
+        ax.set_ylabel(axis_label(y))
+    ax.set_xlabel(axis_label(x))
     which = '' if table == 'runs' else f' (impact {impact})' if impact else ' (last impact)'
-    ax.set_title(f'{metric}{which}: {len(keep)} runs')
-    path = path or os.path.join(out, f'{metric}_vs_{x}' + (f'_{y}' if y else '') + '.png')
+    stacked = y is None and len(set(xs)) < len(xs)
+    ax.set_title(f'{metric}{which}: {len(keep)} runs'
+                 + ('\n(runs sharing an x value are spread sideways by up to 1 %)'
+                    if stacked else ''), fontsize=10)
+    path = path or os.path.join(out, plot_file_name(metric, x, y))
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def _spread(xs):
+    """x values with repeated ones offset by up to ±1 % of the x range (or of the value),
+    evenly, so that points stacked on one grid node show as a short row."""
+    counts, seen = {}, {}
+    for v in xs:
+        counts[v] = counts.get(v, 0) + 1
+    finite = [v for v in xs if isinstance(v, (int, float)) and math.isfinite(v)]
+    span = (max(finite) - min(finite)) if len(finite) > 1 else 0.0
+    out = []
+    for v in xs:
+        n = counts[v]
+        if n == 1 or not isinstance(v, (int, float)):
+            out.append(v)
+            continue
+        k = seen[v] = seen.get(v, -1) + 1
+        width = 0.02 * (span or abs(v) or 1.0)
+        out.append(v + width * (k / (n - 1) - 0.5))
+    return out
 
 
 # --- command line ------------------------------------------------------------------------
@@ -458,7 +568,7 @@ def add_arguments(parser):
                         help='with plot: the sweep\'s output directory')
     run = parser.add_argument_group('running a spec')
     run.add_argument('--out', metavar='DIR',
-                     help='output directory (default: SPEC without .yaml, + .sweep)')
+                     help='output directory (default: runs/SPEC_NAME.sweep)')
     run.add_argument('--workers', type=int, default=None, metavar='N',
                      help='local worker processes (default: all cores; 0: in this process)')
     run.add_argument('--cluster', metavar='ADDRESS',
@@ -480,8 +590,8 @@ def cli(args) -> int:
     if args.target == 'plot':
         if not args.results or not args.x:
             raise SpecError('sweep plot needs the output directory and --x PARAM')
-        print(plot(args.results, args.metric, args.x, args.y, args.table, args.impact,
-                   args.output))
+        print('wrote ' + plot(args.results, args.metric, args.x, args.y, args.table,
+                              args.impact, args.output))
         return 0
     if args.results:
         raise SpecError(f'unexpected argument {args.results!r} (only "plot" takes OUT)')
@@ -490,11 +600,14 @@ def cli(args) -> int:
     if args.workers is not None and args.workers < 0:
         raise SpecError(f'--workers = {args.workers} must be >= 0')
     spec = Spec.load(args.target)
-    out = args.out or os.path.splitext(args.target)[0] + '.sweep'
+    out = args.out or os.path.join(
+        'runs', os.path.splitext(os.path.basename(args.target))[0] + '.sweep')
     stats = execute(spec, out, workers=args.workers, cluster=args.cluster, batch=args.batch)
     print(f"{stats['runs']} runs: {stats['ran']} run now, {stats['skipped']} already done, "
-          f"{stats['failed']} failed (error column) in {stats['wall']:.1f} s (first results "
-          f"after {stats['startup']:.1f} s, then {stats['rate']:.0f} runs/s) -> {out}")
+          f"{stats['failed']} failed (error column) in {stats['wall']:.1f} s wall (first "
+          f"results after {stats['startup']:.1f} s: workers, imports, kernels; then "
+          f"{stats['rate']:.0f} runs/s)")
+    print(f'wrote {out}/runs' + ('' if 'impacts' not in spec.outputs else f', {out}/impacts'))
     if args.csv:
         import pyarrow.csv as pcsv
         for table in TABLES:
@@ -504,4 +617,19 @@ def cli(args) -> int:
                 continue
             pcsv.write_csv(rows, os.path.join(out, f'{table}.csv'))
             print(f'wrote {os.path.join(out, table + ".csv")}')
+    if stats['failed']:
+        _print_errors(stats['errors'], stats['failed'])
+        return 1
     return 0
+
+
+def _print_errors(errors: dict, failed: int, show: int = 10):
+    """The distinct errors of the failed runs, most frequent first, on stderr."""
+    import sys
+    ranked = sorted(errors.items(), key=lambda item: -item[1])
+    print(f'sweep: {failed} run(s) failed with {len(ranked)} distinct error(s):', file=sys.stderr)
+    for error, count in ranked[:show]:
+        print(f'  {count} x {error}', file=sys.stderr)
+    if len(ranked) > show:
+        print(f'  ... and {len(ranked) - show} more (the error column of the runs table)',
+              file=sys.stderr)

@@ -1,0 +1,25 @@
+"""impact-arm kernel dump: the generated kernel module of a scene's shape (links, gravity,
+contact, friction, PID integral states), as equations.py writes it: the module numba
+compiles, for reading or for a debugger. ``--path`` prints where the file is instead."""
+from __future__ import annotations
+
+import sys
+
+
+def add_arguments(parser):
+    sub = parser.add_subparsers(dest='action', required=True)
+    dump = sub.add_parser('dump', help="print the generated kernel module of a scene's shape")
+    dump.add_argument('--scene', default='paper', help='scene file or installed scene name')
+    dump.add_argument('--path', action='store_true', help='print the file path, not the text')
+
+
+def cli(args) -> int:
+    from ..core.model import ArmModel
+    from ..core.scene import load_scene, resolve_scene_path
+    module = ArmModel(load_scene(resolve_scene_path(args.scene))).eq
+    if args.path:
+        print(module.__file__)
+        return 0
+    with open(module.__file__, encoding='utf-8') as f:
+        sys.stdout.write(f.read())
+    return 0

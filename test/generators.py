@@ -1,0 +1,130 @@
+"""Generators of hostile input, shared by the tests and the stress benchmarks (bench/
+impact_arm_bench puts this folder on its path): mutated scene files (``mutate``, ``key_paths``)
+and malformed command payloads (``malformed_commands``). Seeded: the same generator gives the
+same inputs, so a failure found once can be replayed."""
+from __future__ import annotations
+
+import math
+import random
+import struct
+
+WILD_NUMBERS = (0, -0.0, 1e308, -1e308, 1e-300, 5e-324, 2.0 ** 64, 10 ** 400, -(10 ** 400),
+                float('nan'), float('inf'), -float('inf'), 1e-12, 1e12, -1.0, 0.5, 1e6)
+WILD_VALUES = ('text', '', None, True, [], {}, [1, 2], {'x': 1})
+YAML_SNIPPETS = ('1:30', '017', '0b101', '1_000', 'yes', 'off', '.nan', '-.inf', '!!str 5',
+                 '!!binary aGVsbG8=', '!!python/object:os.system x', '2001-12-14', '~',
+                 '!!float 1e999', '"\\ud800"', '&a 1', '*undefined')
+
+
+# ----------------------------------------------------------------------------- mutation
+def key_paths(node, path=()):
+    """Every key/index path inside a nested dict/list, leaves and inner nodes, not the root."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from key_paths(v, path + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from key_paths(v, path + (i,))
+    if path:
+        yield path
+
+
+def _resize_links(data, n, rng):
+    """n links, every per-link vector resized to match (or, sometimes, left wrong)."""
+    links = data.get('links')
+    if not isinstance(links, list) or not links:
+        return
+    data['links'] = [dict(links[min(k, len(links) - 1)]) if isinstance(links[0], dict)
+                     else links[0] for k in range(n)]
+    if rng.random() < 0.8:
+        for section, key in (('controller', 'kp'), ('controller', 'kd'), ('controller', 'ki'),
+                             ('controller', 'down_target_deg'), ('controller', 'up_target_deg'),
+                             ('initial', 'q_deg'), ('initial', 'qd')):
+            vector = data.get(section, {}).get(key) if isinstance(data.get(section),
+                                                                  dict) else None
+            if isinstance(vector, list) and vector:
+                data[section][key] = [vector[min(k, len(vector) - 1)] for k in range(n)]
+
+
+def mutate(base: dict, rng: random.Random) -> str:
+    """One mutated scene, as YAML text."""
+    import copy
+
+    import yaml
+    data = copy.deepcopy(base)
+    if rng.random() < 0.3:
+        _resize_links(data, rng.randint(3, 8), rng)
+    if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:
+        data['surfaces'][0]['height'] = rng.choice((-3.0, -2.0, -50.0, 1e6))   # out of reach
+    for _ in range(rng.choice((0, 1, 1, 2, 3))):   # 0: only the links or surfaces changed
+        paths = list(key_paths(data))
+        if not paths:
+            break
+        path = rng.choice(paths)
+        parent = data
+        try:
+            for key in path[:-1]:
+                parent = parent[key]
+            action = rng.random()
+            if action < 0.2 and isinstance(parent, dict):
+                del parent[path[-1]]
+            elif action < 0.6:
+                parent[path[-1]] = rng.choice(WILD_NUMBERS)
+            elif action < 0.75:
+                parent[path[-1]] = rng.choice(WILD_VALUES)
+            elif action < 0.85 and isinstance(parent, dict):
+                parent[rng.choice(('extra', 'Gravity', 'links_', 'x' * 300))] = 1.0
+            else:
+                value = parent[path[-1]]
+                if isinstance(value, (int, float)) and not isinstance(value, bool):
+                    parent[path[-1]] = value * rng.choice((1e-9, 1e-3, 1e3, 1e9))
+        except (KeyError, IndexError, TypeError):
+            continue
+    text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+    lines = text.splitlines()
+    for _ in range(rng.choice((0, 0, 1, 2))):     # spellings only text can carry
+        k = rng.randrange(len(lines))
+        key, sep, _ = lines[k].partition(': ')
+        kind = rng.random()
+        if sep and kind < 0.6:
+            lines[k] = f'{key}: {rng.choice(YAML_SNIPPETS)}'
+        elif kind < 0.8:
+            lines.insert(k + 1, lines[k])              # a duplicate key (or a doubled item)
+        else:
+            lines.insert(0, 'a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1]\n' + '\n'.join(
+                f'a{j}: &a{j} [' + ', '.join([f'*a{j - 1}'] * 8) + ']' for j in range(1, 7)))
+    return '\n'.join(lines) + '\n'
+
+
+
+def malformed_commands(rng, count, n=2):
+    """Float64MultiArray payloads the simulator must refuse, each certainly invalid: shorter
+    than any n-double message (not empty: see the module doc; and short by 4 bytes at least:
+    the middleware pads a payload to a multiple of 4 with zeros), truncated, absurd or wrong
+    lengths, an unknown encapsulation, non-finite values."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    def array(values):
+        return serialize_message(Float64MultiArray(data=values))
+    good = array([0.5] * n)
+    shortest = len(good)
+    out = []
+    while len(out) < count:
+        kind = rng.randrange(6)
+        if kind == 0:
+            out.append(rng.randbytes(rng.randrange(1, shortest - 3)))
+        elif kind == 1:
+            out.append(good[:rng.randrange(1, shortest - 3)])
+        elif kind == 2:     # the data length (bytes 12-15 of a layout-free array) absurd
+            out.append(good[:12] + struct.pack('<I', rng.choice((2**31 - 1, 2**32 - 1, n + 1)))
+                       + good[16:])
+        elif kind == 3:
+            out.append(b'\x07\x01\x00\x00' + good[4:])
+        elif kind == 4:
+            out.append(array([0.25] * rng.choice([k for k in range(6) if k != n])))
+        else:
+            values = [0.25] * n
+            values[rng.randrange(n)] = rng.choice((math.nan, math.inf, -math.inf))
+            out.append(array(values))
+    return out

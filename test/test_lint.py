@@ -1,0 +1,84 @@
+"""The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
+(mypy), and imports point down the layers core -> io -> nodes -> tools, with contract.py at
+the bottom importing nothing of the package."""
+import ast
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PACKAGE = os.path.join(ROOT, 'impact_arm')
+LAYERS = {'contract': 0, 'core': 1, 'io': 2, 'nodes': 3, 'tools': 4}
+
+
+def _tool(module, *args):
+    pytest.importorskip(module, reason=f'{module} not installed: pip install -r '
+                                       f'requirements-dev.txt')
+    return subprocess.run([sys.executable, '-m', module, *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_ruff_finds_nothing():
+    out = _tool('ruff', 'check', 'impact_arm', 'test', 'bench', 'launch')
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_typed_modules_type_check():
+    out = _tool('mypy', '--config-file', 'mypy.ini')
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def _modules():
+    for folder, _, files in os.walk(PACKAGE):
+        for name in files:
+            if name.endswith('.py'):
+                path = os.path.join(folder, name)
+                parts = os.path.relpath(path, ROOT)[:-3].split(os.sep)
+                yield path, parts[:-1] if parts[-1] == '__init__' else parts
+
+
+def imported(path, parts):
+    """The package modules ``path`` (module ``parts``) imports, anywhere in it, as parts."""
+    package = parts if path.endswith('__init__.py') else parts[:-1]
+    for node in ast.walk(ast.parse(open(path, encoding='utf-8').read(), path)):
+        if isinstance(node, ast.Import):
+            names = [alias.name.split('.') for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = (package[:len(package) - node.level + 1] if node.level else []) + \
+                (node.module.split('.') if node.module else [])
+            names = [base + [alias.name] for alias in node.names] if not node.module \
+                else [base]
+        else:
+            continue
+        yield from (n for n in names if n[0] == 'impact_arm')
+
+
+def layer(parts):
+    return LAYERS.get(parts[1]) if len(parts) > 1 else None
+
+
+def test_imports_point_down_the_layers_only():
+    upward = []
+    for path, parts in _modules():
+        own = layer(parts)
+        for target in imported(path, parts):
+            theirs = layer(target)
+            if own is not None and theirs is not None and theirs > own:
+                upward.append(f'{".".join(parts)} imports {".".join(target)}')
+    assert not upward, upward
+
+
+def test_contract_imports_nothing_of_the_package():
+    path = os.path.join(PACKAGE, 'contract.py')
+    assert list(imported(path, ['impact_arm', 'contract'])) == []
+
+
+def test_the_layer_check_sees_an_upward_import(tmp_path):
+    """The checks above cannot pass by seeing nothing."""
+    module = tmp_path / 'bad.py'
+    module.write_text('from ..nodes import simulator\nfrom .. import contract\n')
+    found = list(imported(str(module), ['impact_arm', 'core', 'bad']))
+    assert found == [['impact_arm', 'nodes'], ['impact_arm', 'contract']]
+    assert layer(found[0]) > layer(['impact_arm', 'core', 'bad']) > layer(found[1])
