@@ -101,3 +101,44 @@ def test_long_chain_conserves_energy_in_free_swing():
         y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     assert abs(np.max(np.abs(y[n:]))) > 1.0          # it did swing
     assert abs(energy(y) - e0) < 1e-6 * swing
+
+
+def pinocchio_chain(pin, L, m, g):
+    """The same chain built in Pinocchio: revolute z joints (relative angles), each link a
+    uniform rod along its x axis, gravity along -y."""
+    model = pin.Model()
+    model.gravity.linear = np.array([0.0, -g, 0.0])
+    parent = 0
+    for i in range(len(L)):
+        offset = pin.SE3(np.eye(3), np.array([L[i - 1] if i else 0.0, 0.0, 0.0]))
+        joint = model.addJoint(parent, pin.JointModelRZ(), offset, f'joint{i}')
+        rod = np.diag([0.0, m[i] * L[i] ** 2 / 12, m[i] * L[i] ** 2 / 12])
+        model.appendBodyToJoint(joint, pin.Inertia(m[i], np.array([L[i] / 2, 0.0, 0.0]), rod),
+                                pin.SE3.Identity())
+        parent = joint
+    return model, model.createData()
+
+
+@pytest.mark.parametrize('n', [4, 6, 9])
+def test_long_chain_matches_pinocchio(n):
+    """An independent oracle: Pinocchio's mass matrix (CRBA) and inverse dynamics at zero
+    acceleration (RNEA: velocity terms and gravity) in relative joint angles θ, against the
+    closed form in absolute angles q = T θ (T: lower triangle of ones), i.e.
+    M_θ = Tᵀ M_q T and RNEA = Tᵀ (b - Q_g)."""
+    pin = pytest.importorskip('pinocchio')
+    f = functions(equations._chain_source(n, True))
+    rng = np.random.default_rng(n)
+    g = 9.81
+    T = np.tril(np.ones((n, n)))
+    for _ in range(10):
+        L, m = rng.uniform(0.2, 1.5, n), rng.uniform(0.3, 2.0, n)
+        q, qd = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+        model, data = pinocchio_chain(pin, L, m, g)
+        theta, theta_d = np.linalg.solve(T, q), np.linalg.solve(T, qd)
+        S, rhs = np.zeros(n * n), np.zeros(n)
+        f['mass_and_rhs_into'](q, qd, np.zeros(n), L, m, g, S, rhs)
+        M_theta = pin.crba(model, data, theta)
+        M_theta = np.triu(M_theta) + np.triu(M_theta, 1).T     # crba fills the upper half
+        assert np.allclose(T.T @ S.reshape(n, n) @ T, M_theta, rtol=1e-12, atol=1e-12)
+        bias = pin.rnea(model, data, theta, theta_d, np.zeros(n))
+        assert np.allclose(-T.T @ rhs, bias, rtol=1e-11, atol=1e-10)

@@ -119,3 +119,21 @@ def test_the_sweep_setting_holds_every_limit_cycle_impact():
         assert got['cor_kinematic'] == pytest.approx(want['cor_kinematic'], rel=1e-3)
         assert got['duration'] == pytest.approx(want['duration'], rel=1e-3)
         assert got['cor_energetic'] == pytest.approx(want['cor_energetic'], rel=1e-3)
+
+
+def test_the_fast_preset_spends_its_tolerance_on_the_contact():
+    """`fast` keeps rtol 1e-5 in free flight (bound by stability there) and takes its contact
+    phases at 3e-7: every impact's δm and e within 1e-5 of the reference preset (3e-5 at a
+    single rtol); explicit tolerances replace the preset's contact rtol too."""
+    scene = scene_from()
+    reference = run_events(scene, preset='reference')[0]
+    fast = run_events(scene, preset='fast')[0]
+    single = run_events(scene, rtol=1e-5, atol=1e-8)[0]
+    assert len(fast) == len(reference) == 15
+
+    def worst(impacts):
+        return max(max(abs(a[k] / b[k] - 1) for k in ('delta_m', 'cor_kinematic'))
+                   for a, b in zip(impacts, reference))
+    assert worst(fast) < 1e-5 < worst(single)
+    integ = PhaseIntegrator(ArmModel(scene), preset='fast', rtol=1e-4)
+    assert integ.contact_rtol == 1e-4

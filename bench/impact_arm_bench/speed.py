@@ -62,16 +62,18 @@ def search(scene, ref, levels, methods, log=common.progress):
     """Every setting tried — ours: presets, then each step method with rtol on the grid and a
     tighter contact tolerance; scipy: each method and rtol (and contact rtol) until it reaches
     the tightest level — with its error and a first timing."""
-    from impact_arm.core.integrator import PRESETS
+    from impact_arm.core.integrator import PRESET_CONTACT_RTOL, PRESETS
     rows = []
     tightest = min(levels)
     for name, (rtol, atol) in PRESETS.items():
         if name == 'reference':
             continue
         log(f'search: ours preset {name}')
-        r = common.time_ours(scene, rtol, atol, repeats=3)
+        contact = PRESET_CONTACT_RTOL.get(name)     # the preset as a whole
+        r = common.time_ours(scene, rtol, atol, repeats=3, contact_rtol=contact)
         rows.append(_row('ours', f'preset {name}', rtol, atol, r,
-                         common.every_impact_error(r['impacts'], ref), step='dopri5'))
+                         common.every_impact_error(r['impacts'], ref), step='dopri5',
+                         contact_rtol=contact))
     for step, label in OURS.items():
         for rtol in rtol_grid(1e-2, 1e-10):
             log(f'search: ours {step} rtol {rtol:.2g}')

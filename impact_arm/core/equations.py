@@ -293,11 +293,11 @@ def _module_header(n, gravity, contact, friction, n_integral):
              '# Do not edit: delete the file to regenerate it.',
              f'# compiled with {jit_options()}',
              'import math', 'from math import sin, cos, sqrt', 'import numpy as np',
-             'from impact_arm.core.jit import jit, jit_leaf',
-             *(['# a long chain: the kernel\'s helpers are compiled once and called instead',
-                '# of inlined at every call site (numba\'s inlining copies and re-types their',
-                '# code each time: a 30 s cold start, growing with the links)',
-                'jit_leaf = jit'] if n > SYMBOLIC_LINKS else []),
+             # a long chain: the kernel's helpers are compiled once and called instead of
+             # inlined at every call site (numba's inlining copies and re-types their code
+             # each time: a 30 s cold start, growing with the links)
+             'from impact_arm.core.jit import jit, jit_leaf' if n <= SYMBOLIC_LINKS else
+             'from impact_arm.core.jit import jit, jit as jit_leaf  # called, not inlined',
              'from impact_arm.core.layout import *  # noqa: F401,F403',
              'from impact_arm.core.contact import (hertz_force, jackson_green, restitution_force,',
              '                                friction_force, residual, restitution_radius,',

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .model import ArmModel, kinetic_energy_split
+from .model import ArmModel
 
 PHASE_ORDER = ('contact', 'yield', 'max_compression', 'separation')
 
@@ -19,15 +19,21 @@ class ImpactBuilder:
         self.model = model
         self.impacts = []
         self._open = None
+        # the generated functions' Python originals: two calls per impact cost ~10 us each
+        # this way, while their compiled versions would be compiled (a new arm shape: ~1 s
+        # each) or loaded (every process: milliseconds) for these calls alone
+        eq = model.eq
+        self._tip = getattr(eq.tip, 'py_func', eq.tip)
+        self._energies = getattr(eq.link_energies, 'py_func', eq.link_energies)
 
     def _tip_and_energy(self, y):
-        # array views, not lists: the compiled functions take them without conversion
-        # (lists cost 4x as much here, at two calls per impact)
         y = np.asarray(y, dtype=float)
-        n = self.model.n
+        model = self.model
+        n = model.n
         q, qd = y[:n], y[n:2 * n]
-        _, _, vx, vy = self.model.tip(q, qd)
-        return q.tolist(), (vx, vy), kinetic_energy_split(self.model, q, qd)
+        _, _, vx, vy = self._tip(q, qd, model.L)
+        parts = [float(T) for T in self._energies(q, qd, model.L, model.m)]
+        return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]
 
     def feed(self, event):
         """Returns the finished impact record when ``event`` completes one, else None."""

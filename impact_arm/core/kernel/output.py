@@ -56,15 +56,17 @@ def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, sc
             return False
         row = out[row_index]
         row[R_T] = ts
+        state = row[R_Y:R_Y + size]
         if abs(ts - t1) <= eps:
             for i in range(size):
-                row[R_Y + i] = y1[i]
+                state[i] = y1[i]
         else:
-            interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, row, R_Y)
+            # offset 0 into the row's state, as the stepping loop's calls: one compiled
+            # specialisation (numba compiles one per literal offset)
+            interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, state, 0)
         row[R_JT], row[R_JN] = C[C_JT], C[C_JN]
         C[C_JT] = 0.0
         C[C_JN] = 0.0
-        state = row[R_Y:R_Y + size]
         acting = control_torque(state, P, I, C, tau_held, row[R_TAU:R_TAU + N],
                                 scratch[:N], scratch[N:2 * N])
         row[R_ACT] = 1.0 if acting else 0.0
