@@ -6,6 +6,7 @@ a recorder process over DDS (this machine only), then count what reached the fil
 Prints the achieved publish rate, messages recorded and drops (published - recorded).
 Not a test: numbers depend on the machine (two cores share publisher, DDS and recorder).
 """
+
 import argparse
 import os
 import random
@@ -37,24 +38,39 @@ def main():
     from sensor_msgs.msg import JointState
     from impact_arm.io.mcap_ros2 import contract_qos, iter_raw
 
-    rec = subprocess.Popen([sys.executable, '-m', 'impact_arm.nodes.recorder', '--ros-args',
-                            '-p', f'output:={out}', '-p', 'param_nodes:=[""]'], env=env,
-                           stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, 'rec.err'),
-                                                                  'w'))
+    rec = subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'impact_arm.nodes.recorder',
+            '--ros-args',
+            '-p',
+            f'output:={out}',
+            '-p',
+            'param_nodes:=[""]',
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=open(os.path.join(tmp, 'rec.err'), 'w'),
+    )
     rclpy.init()
     try:
         node = rclpy.create_node('recorder_bench')
-        js = node.create_publisher(JointState, '/joint_states',
-                                   contract_qos('/joint_states').to_rclpy())
-        wr = node.create_publisher(WrenchStamped, '/contact_wrench',
-                                   contract_qos('/contact_wrench').to_rclpy())
+        js = node.create_publisher(
+            JointState, '/joint_states', contract_qos('/joint_states').to_rclpy()
+        )
+        wr = node.create_publisher(
+            WrenchStamped, '/contact_wrench', contract_qos('/contact_wrench').to_rclpy()
+        )
         end = time.monotonic() + 15
-        while (js.get_subscription_count() < 1 or wr.get_subscription_count() < 1) \
-                and time.monotonic() < end:
+        while (
+            js.get_subscription_count() < 1 or wr.get_subscription_count() < 1
+        ) and time.monotonic() < end:
             time.sleep(0.05)
         time.sleep(0.5)  # let both endpoints finish matching
-        m = JointState(name=['joint1', 'joint2'], position=[0.1, 0.2], velocity=[0.0, 0.0],
-                       effort=[1.0, -1.0])
+        m = JointState(
+            name=['joint1', 'joint2'], position=[0.1, 0.2], velocity=[0.0, 0.0], effort=[1.0, -1.0]
+        )
         w = WrenchStamped()
         n, start = 0, time.monotonic()
         total = int(a.rate * a.seconds)
@@ -83,10 +99,13 @@ def main():
         rclpy.try_shutdown()
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     recorded = sum(1 for _ in iter_raw(out))
-    print(f'published {n} messages in {elapsed:.2f} s = {n / elapsed:.0f} msg/s '
-          f'(target {a.rate:.0f})')
-    print(f'recorded {recorded}, drops {n - recorded} ({100.0 * (n - recorded) / n:.2f} %), '
-          f'recorder exit code {rec.returncode}, file {os.path.getsize(out)} bytes: {out}')
+    print(
+        f'published {n} messages in {elapsed:.2f} s = {n / elapsed:.0f} msg/s (target {a.rate:.0f})'
+    )
+    print(
+        f'recorded {recorded}, drops {n - recorded} ({100.0 * (n - recorded) / n:.2f} %), '
+        f'recorder exit code {rec.returncode}, file {os.path.getsize(out)} bytes: {out}'
+    )
     cpu = usage.ru_utime + usage.ru_stime
     print(f'recorder CPU {cpu:.2f} s = {1e6 * cpu / max(recorded, 1):.0f} us per message')
 

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """`python bench/run.py speed [options]` is `impact-arm bench speed [options]` (docs/benchmarks.md):
 the benchmarks of bench/impact_arm_bench, run from a clone of the repository."""
+
 import os
 import sys
 

@@ -9,6 +9,7 @@ Two runs stop at slightly different periods (the nodes are stopped after the las
 only the stamps both hold are compared; the last of them may be the period answering the
 controller's zero command on exit, which differs between two runs of the same code too.
 Exit status 1 when any other payload differs."""
+
 import sys
 
 from mcap.reader import make_reader
@@ -23,9 +24,12 @@ def payloads(path, topic):
     with open(path, 'rb') as f:
         for i, (_, _, message) in enumerate(make_reader(f).iter_messages(topics=[topic])):
             data = message.data
-            key = i if topic == '/impact_report' else \
-                int.from_bytes(data[4:8], 'little', signed=True) * 1_000_000_000 + \
-                int.from_bytes(data[8:12], 'little')
+            key = (
+                i
+                if topic == '/impact_report'
+                else int.from_bytes(data[4:8], 'little', signed=True) * 1_000_000_000
+                + int.from_bytes(data[8:12], 'little')
+            )
             out.setdefault(key, data)
     return out
 
@@ -42,10 +46,12 @@ def main(argv) -> int:
         differ = [k for k in common if a[k] != b[k]]
         last = max(common) if common else None
         bad += len([k for k in differ if k != last])
-        print(f'{topic}: {len(a)} / {len(b)} samples, {len(common)} in common, '
-              f'{len(common) - len(differ)} identical'
-              + (f', {len(differ)} different' if differ else '')
-              + (' (only the last common one)' if differ == [last] else ''))
+        print(
+            f'{topic}: {len(a)} / {len(b)} samples, {len(common)} in common, '
+            f'{len(common) - len(differ)} identical'
+            + (f', {len(differ)} different' if differ else '')
+            + (' (only the last common one)' if differ == [last] else '')
+        )
     return 1 if bad else 0
 
 

@@ -3,4 +3,5 @@
 The core (scene, model, contact, control, integrator, simulate, metrics) is plain Python/numpy
 with no rclpy import; ``impact_arm.nodes`` adapts it to ROS 2.
 """
+
 __version__ = '0.1.0'

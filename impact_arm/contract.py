@@ -43,6 +43,7 @@ The contact frames ``surface1`` ... (``SURFACE_FRAME``) keep the model's axes, r
 normal (world +z), z = world -y. /contact_wrench is given in ``surface1`` (``WRENCH_FRAME``):
 force.x tangential, force.y normal, the numbers the physics computes.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -64,11 +65,11 @@ LOSSES_METADATA = 'recording/losses'
 CLOCK = '/clock'
 COMMANDS = '/effort_controller/commands'
 IMPACT_TRACE = '/impact_trace'  # written by offline runs only: the contact phase, densely
-ROBOT_DESCRIPTION = '/robot_description'   # the visual topics (io/scene_visuals.py)
+ROBOT_DESCRIPTION = '/robot_description'  # the visual topics (io/scene_visuals.py)
 TF_STATIC = '/tf_static'
 TF = '/tf'
 IMPACT_MARKERS = '/impact_markers'
-E_STOP = '/e_stop'                # std_msgs/msg/Bool: true = zero torque, latched (simulator)
+E_STOP = '/e_stop'  # std_msgs/msg/Bool: true = zero torque, latched (simulator)
 # builtin_interfaces/msg/Time: the stamp of the newest /joint_states the recorder has written.
 # In lockstep the simulator stays at most ``recorder_window`` periods ahead of it, so a
 # recording is complete however long the recorder stalls (docs/nodes.md, "Recording in
@@ -117,47 +118,79 @@ class TopicQos:
 
     def as_dict(self) -> dict:
         """The mapping rosbag2 serializes (key order as rosbag2 writes it)."""
+
         def dur(ns):
             ns = INFINITE_NS if ns is None or ns <= 0 or ns >= INFINITE_NS else ns
             return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
-        return {'history': self.history, 'depth': int(self.depth),
-                'reliability': self.reliability, 'durability': self.durability,
-                'deadline': dur(self.deadline_ns), 'lifespan': dur(self.lifespan_ns),
-                'liveliness': self.liveliness,
-                'liveliness_lease_duration': dur(self.liveliness_lease_ns),
-                'avoid_ros_namespace_conventions': bool(self.avoid_ros_namespace_conventions)}
+
+        return {
+            'history': self.history,
+            'depth': int(self.depth),
+            'reliability': self.reliability,
+            'durability': self.durability,
+            'deadline': dur(self.deadline_ns),
+            'lifespan': dur(self.lifespan_ns),
+            'liveliness': self.liveliness,
+            'liveliness_lease_duration': dur(self.liveliness_lease_ns),
+            'avoid_ros_namespace_conventions': bool(self.avoid_ros_namespace_conventions),
+        }
 
     @classmethod
     def from_dict(cls, d: dict) -> 'TopicQos':
         def ns(v):
             t = int(v['sec']) * 1_000_000_000 + int(v['nsec'])
             return None if t == 0 or t >= INFINITE_NS else t
-        return cls(str(d['reliability']), str(d['durability']), int(d.get('depth', 0)),
-                   str(d.get('history', 'keep_last')), ns(d['deadline']), ns(d['lifespan']),
-                   str(d['liveliness']), ns(d['liveliness_lease_duration']),
-                   bool(d.get('avoid_ros_namespace_conventions', False)))
+
+        return cls(
+            str(d['reliability']),
+            str(d['durability']),
+            int(d.get('depth', 0)),
+            str(d.get('history', 'keep_last')),
+            ns(d['deadline']),
+            ns(d['lifespan']),
+            str(d['liveliness']),
+            ns(d['liveliness_lease_duration']),
+            bool(d.get('avoid_ros_namespace_conventions', False)),
+        )
 
     @classmethod
     def from_rclpy(cls, p) -> 'TopicQos':
         def ns(d):
             t = d.nanoseconds
             return None if t <= 0 or t >= INFINITE_NS else t
-        return cls(p.reliability.name.lower(), p.durability.name.lower(), int(p.depth),
-                   p.history.name.lower(), ns(p.deadline), ns(p.lifespan),
-                   p.liveliness.name.lower(), ns(p.liveliness_lease_duration),
-                   bool(p.avoid_ros_namespace_conventions))
+
+        return cls(
+            p.reliability.name.lower(),
+            p.durability.name.lower(),
+            int(p.depth),
+            p.history.name.lower(),
+            ns(p.deadline),
+            ns(p.lifespan),
+            p.liveliness.name.lower(),
+            ns(p.liveliness_lease_duration),
+            bool(p.avoid_ros_namespace_conventions),
+        )
 
     def to_rclpy(self, min_depth: int = 1):
         """An rclpy QoSProfile; 'unknown' policies (as discovery reports them) become defaults."""
         from rclpy.duration import Duration
-        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
-                               ReliabilityPolicy)
+        from rclpy.qos import (
+            DurabilityPolicy,
+            HistoryPolicy,
+            LivelinessPolicy,
+            QoSProfile,
+            ReliabilityPolicy,
+        )
 
         def pol(enum, name, default):
             return default if name in ('unknown', '') else enum[name.upper()]
+
         kw = {}
-        for key, attr in (('deadline', 'deadline_ns'), ('lifespan', 'lifespan_ns'),
-                          ('liveliness_lease_duration', 'liveliness_lease_ns')):
+        for key, attr in (
+            ('deadline', 'deadline_ns'),
+            ('lifespan', 'lifespan_ns'),
+            ('liveliness_lease_duration', 'liveliness_lease_ns'),
+        ):
             if getattr(self, attr) is not None:
                 kw[key] = Duration(nanoseconds=getattr(self, attr))
         return QoSProfile(
@@ -166,7 +199,9 @@ class TopicQos:
             reliability=pol(ReliabilityPolicy, self.reliability, ReliabilityPolicy.RELIABLE),
             durability=pol(DurabilityPolicy, self.durability, DurabilityPolicy.VOLATILE),
             liveliness=pol(LivelinessPolicy, self.liveliness, LivelinessPolicy.AUTOMATIC),
-            avoid_ros_namespace_conventions=self.avoid_ros_namespace_conventions, **kw)
+            avoid_ros_namespace_conventions=self.avoid_ros_namespace_conventions,
+            **kw,
+        )
 
 
 RELIABLE_100 = TopicQos(depth=100)
@@ -240,8 +275,8 @@ def to_absolute(values) -> list:
 
 
 # ------------------------------------------------------------------------------- frames
-PLANE_AXIS_IN_WORLD = (0.0, -1.0, 0.0)   # the model's z (positive angles) in the world
-GRAVITY_IN_WORLD = (0.0, 0.0, -1.0)      # the model's -y
+PLANE_AXIS_IN_WORLD = (0.0, -1.0, 0.0)  # the model's z (positive angles) in the world
+GRAVITY_IN_WORLD = (0.0, 0.0, -1.0)  # the model's -y
 
 
 def plane_to_world(x: float, y: float) -> tuple:
@@ -263,7 +298,7 @@ PLANE_FRAME_ROTATION = (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
 # ------------------------------------------------------------------------------- names
 INTEGRATOR_PRESETS = ('reference', 'accurate', 'balanced', 'fast')
 INTEGRATOR_METHODS = ('dopri5', 'rosenbrock')
-CONTROL_LAWS = ('q', 'pid', 'pd', 'none')     # 'none': no controller (zero torque)
-FEEDBACK_LAWS = ('q', 'pid', 'pd')            # the laws the controller node runs
+CONTROL_LAWS = ('q', 'pid', 'pd', 'none')  # 'none': no controller (zero torque)
+FEEDBACK_LAWS = ('q', 'pid', 'pd')  # the laws the controller node runs
 PID_SPACES = ('absolute', 'joint')
 ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')

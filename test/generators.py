@@ -2,18 +2,52 @@
 impact_arm_bench puts this folder on its path): mutated scene files (``mutate``, ``key_paths``)
 and malformed command payloads (``malformed_commands``). Seeded: the same generator gives the
 same inputs, so a failure found once can be replayed."""
+
 from __future__ import annotations
 
 import math
 import random
 import struct
 
-WILD_NUMBERS = (0, -0.0, 1e308, -1e308, 1e-300, 5e-324, 2.0 ** 64, 10 ** 400, -(10 ** 400),
-                float('nan'), float('inf'), -float('inf'), 1e-12, 1e12, -1.0, 0.5, 1e6)
+WILD_NUMBERS = (
+    0,
+    -0.0,
+    1e308,
+    -1e308,
+    1e-300,
+    5e-324,
+    2.0**64,
+    10**400,
+    -(10**400),
+    float('nan'),
+    float('inf'),
+    -float('inf'),
+    1e-12,
+    1e12,
+    -1.0,
+    0.5,
+    1e6,
+)
 WILD_VALUES = ('text', '', None, True, [], {}, [1, 2], {'x': 1})
-YAML_SNIPPETS = ('1:30', '017', '0b101', '1_000', 'yes', 'off', '.nan', '-.inf', '!!str 5',
-                 '!!binary aGVsbG8=', '!!python/object:os.system x', '2001-12-14', '~',
-                 '!!float 1e999', '"\\ud800"', '&a 1', '*undefined')
+YAML_SNIPPETS = (
+    '1:30',
+    '017',
+    '0b101',
+    '1_000',
+    'yes',
+    'off',
+    '.nan',
+    '-.inf',
+    '!!str 5',
+    '!!binary aGVsbG8=',
+    '!!python/object:os.system x',
+    '2001-12-14',
+    '~',
+    '!!float 1e999',
+    '"\\ud800"',
+    '&a 1',
+    '*undefined',
+)
 
 
 # ----------------------------------------------------------------------------- mutation
@@ -34,14 +68,21 @@ def _resize_links(data, n, rng):
     links = data.get('links')
     if not isinstance(links, list) or not links:
         return
-    data['links'] = [dict(links[min(k, len(links) - 1)]) if isinstance(links[0], dict)
-                     else links[0] for k in range(n)]
+    data['links'] = [
+        dict(links[min(k, len(links) - 1)]) if isinstance(links[0], dict) else links[0]
+        for k in range(n)
+    ]
     if rng.random() < 0.8:
-        for section, key in (('controller', 'kp'), ('controller', 'kd'), ('controller', 'ki'),
-                             ('controller', 'down_target_deg'), ('controller', 'up_target_deg'),
-                             ('initial', 'q_deg'), ('initial', 'qd')):
-            vector = data.get(section, {}).get(key) if isinstance(data.get(section),
-                                                                  dict) else None
+        for section, key in (
+            ('controller', 'kp'),
+            ('controller', 'kd'),
+            ('controller', 'ki'),
+            ('controller', 'down_target_deg'),
+            ('controller', 'up_target_deg'),
+            ('initial', 'q_deg'),
+            ('initial', 'qd'),
+        ):
+            vector = data.get(section, {}).get(key) if isinstance(data.get(section), dict) else None
             if isinstance(vector, list) and vector:
                 data[section][key] = [vector[min(k, len(vector) - 1)] for k in range(n)]
 
@@ -51,12 +92,13 @@ def mutate(base: dict, rng: random.Random) -> str:
     import copy
 
     import yaml
+
     data = copy.deepcopy(base)
     if rng.random() < 0.3:
         _resize_links(data, rng.randint(3, 8), rng)
     if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:
-        data['surfaces'][0]['height'] = rng.choice((-3.0, -2.0, -50.0, 1e6))   # out of reach
-    for _ in range(rng.choice((0, 1, 1, 2, 3))):   # 0: only the links or surfaces changed
+        data['surfaces'][0]['height'] = rng.choice((-3.0, -2.0, -50.0, 1e6))  # out of reach
+    for _ in range(rng.choice((0, 1, 1, 2, 3))):  # 0: only the links or surfaces changed
         paths = list(key_paths(data))
         if not paths:
             break
@@ -82,19 +124,23 @@ def mutate(base: dict, rng: random.Random) -> str:
             continue
     text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
     lines = text.splitlines()
-    for _ in range(rng.choice((0, 0, 1, 2))):     # spellings only text can carry
+    for _ in range(rng.choice((0, 0, 1, 2))):  # spellings only text can carry
         k = rng.randrange(len(lines))
         key, sep, _ = lines[k].partition(': ')
         kind = rng.random()
         if sep and kind < 0.6:
             lines[k] = f'{key}: {rng.choice(YAML_SNIPPETS)}'
         elif kind < 0.8:
-            lines.insert(k + 1, lines[k])              # a duplicate key (or a doubled item)
+            lines.insert(k + 1, lines[k])  # a duplicate key (or a doubled item)
         else:
-            lines.insert(0, 'a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1]\n' + '\n'.join(
-                f'a{j}: &a{j} [' + ', '.join([f'*a{j - 1}'] * 8) + ']' for j in range(1, 7)))
+            lines.insert(
+                0,
+                'a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1]\n'
+                + '\n'.join(
+                    f'a{j}: &a{j} [' + ', '.join([f'*a{j - 1}'] * 8) + ']' for j in range(1, 7)
+                ),
+            )
     return '\n'.join(lines) + '\n'
-
 
 
 def malformed_commands(rng, count, n=2):
@@ -107,6 +153,7 @@ def malformed_commands(rng, count, n=2):
 
     def array(values):
         return serialize_message(Float64MultiArray(data=values))
+
     good = array([0.5] * n)
     shortest = len(good)
     out = []
@@ -115,10 +162,11 @@ def malformed_commands(rng, count, n=2):
         if kind == 0:
             out.append(rng.randbytes(rng.randrange(1, shortest - 3)))
         elif kind == 1:
-            out.append(good[:rng.randrange(1, shortest - 3)])
-        elif kind == 2:     # the data length (bytes 12-15 of a layout-free array) absurd
-            out.append(good[:12] + struct.pack('<I', rng.choice((2**31 - 1, 2**32 - 1, n + 1)))
-                       + good[16:])
+            out.append(good[: rng.randrange(1, shortest - 3)])
+        elif kind == 2:  # the data length (bytes 12-15 of a layout-free array) absurd
+            out.append(
+                good[:12] + struct.pack('<I', rng.choice((2**31 - 1, 2**32 - 1, n + 1))) + good[16:]
+            )
         elif kind == 3:
             out.append(b'\x07\x01\x00\x00' + good[4:])
         elif kind == 4:

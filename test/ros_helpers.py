@@ -5,6 +5,7 @@
 
 Every process gets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and the module's ROS_DOMAIN_ID.
 """
+
 import argparse
 import contextlib
 import json
@@ -30,6 +31,7 @@ class Probe:
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
+
         self.rclpy = rclpy
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
@@ -52,13 +54,19 @@ class Probe:
     def listen(self, msg_type, topic, depth=1000, transient=False, keep=None):
         """Messages of ``topic`` as they arrive, those ``keep(msg)`` accepts when given."""
         from rclpy.qos import DurabilityPolicy, QoSProfile
+
         store = []
-        qos = QoSProfile(depth=depth, durability=DurabilityPolicy.TRANSIENT_LOCAL
-                         if transient else DurabilityPolicy.VOLATILE)
+        qos = QoSProfile(
+            depth=depth,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE,
+        )
         with self.lock:
             self.subscriptions[id(store)] = self.node.create_subscription(
-                msg_type, topic, lambda m: (keep is None or keep(m))
-                and store.append((time.monotonic(), m)), qos)
+                msg_type,
+                topic,
+                lambda m: (keep is None or keep(m)) and store.append((time.monotonic(), m)),
+                qos,
+            )
         return store
 
     def forget(self, *stores):
@@ -121,8 +129,9 @@ class Proc:
         self.out_path = os.path.join(workdir, f'{name}.out')
         self.err_path = os.path.join(workdir, f'{name}.err')
         with open(self.out_path, 'wb') as out, open(self.err_path, 'wb') as err:
-            self.popen = subprocess.Popen(args, env=env, cwd=workdir, stdout=out, stderr=err,
-                                          stdin=subprocess.DEVNULL)
+            self.popen = subprocess.Popen(
+                args, env=env, cwd=workdir, stdout=out, stderr=err, stdin=subprocess.DEVNULL
+            )
         self.pid = self.popen.pid
 
     def signal(self, sig):
@@ -232,16 +241,24 @@ def _publish(args):
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
     from impact_arm.contract import qos as contract_qos
+
     rclpy.init()
     node = rclpy.create_node('test_publisher')
-    js = node.create_publisher(JointState, '/joint_states',
-                               contract_qos('/joint_states').to_rclpy())
-    wr = node.create_publisher(WrenchStamped, '/contact_wrench',
-                               contract_qos('/contact_wrench').to_rclpy()) if args.wrench else None
+    js = node.create_publisher(
+        JointState, '/joint_states', contract_qos('/joint_states').to_rclpy()
+    )
+    wr = (
+        node.create_publisher(
+            WrenchStamped, '/contact_wrench', contract_qos('/contact_wrench').to_rclpy()
+        )
+        if args.wrench
+        else None
+    )
     end = time.monotonic() + args.wait_sub
     # every publisher matched (not just the first), or its first messages go nowhere
-    while (js.get_subscription_count() < 1 or (wr is not None and wr.get_subscription_count()
-                                               < 1)) and time.monotonic() < end:
+    while (
+        js.get_subscription_count() < 1 or (wr is not None and wr.get_subscription_count() < 1)
+    ) and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
     print(json.dumps({'event': 'matched', 'subs': js.get_subscription_count()}), flush=True)
     # Our writer matching a reader is not the reader matching us: a volatile reader drops what
@@ -255,8 +272,12 @@ def _publish(args):
         delay = target - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        m = JointState(name=['joint1', 'joint2'], position=[i * 1e-3, -i * 1e-3],
-                       velocity=[float(i), 0.5], effort=[0.25, -0.25])
+        m = JointState(
+            name=['joint1', 'joint2'],
+            position=[i * 1e-3, -i * 1e-3],
+            velocity=[float(i), 0.5],
+            effort=[0.25, -0.25],
+        )
         m.header.stamp.sec, m.header.stamp.nanosec = divmod(i, 1000)[0], (i % 1000) * 1_000_000
         js.publish(m)
         if wr is not None:
@@ -280,6 +301,7 @@ def _subscribe(args):
     from impact_arm.contract import TOPICS as CONTRACT_TOPICS
     from impact_arm.contract import qos as contract_qos
     from impact_arm.io.mcap_ros2 import message_class
+
     rclpy.init()
     node = rclpy.create_node('test_subscriber')
 
@@ -287,12 +309,19 @@ def _subscribe(args):
         def cb(msg):
             now = time.time_ns()
             stamp = getattr(getattr(msg, 'header', None), 'stamp', None) or getattr(
-                msg, 'clock', None)
+                msg, 'clock', None
+            )
             value = (stamp.sec * 10**9 + stamp.nanosec) if stamp is not None else None
             print(json.dumps({'topic': topic, 't': now, 'stamp': value}), flush=True)
+
         return cb
-    subs = [node.create_subscription(message_class(CONTRACT_TOPICS[t][0]), t, make_cb(t),
-                                     contract_qos(t).to_rclpy(1000)) for t in args.topics]
+
+    subs = [
+        node.create_subscription(
+            message_class(CONTRACT_TOPICS[t][0]), t, make_cb(t), contract_qos(t).to_rclpy(1000)
+        )
+        for t in args.topics
+    ]
     print(json.dumps({'event': 'ready', 'n': len(subs)}), flush=True)
     end = time.monotonic() + args.duration
     while time.monotonic() < end:

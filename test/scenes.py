@@ -1,4 +1,5 @@
 """Small scene builders for tests: the article's scene with a few fields changed."""
+
 import copy
 import os
 

@@ -8,6 +8,7 @@ interface files, the Python and the ROS prefix), so only the first test session 
 ~30 s build. ``build()`` returns the install prefix; ``environment(prefix, env)`` the
 variables a process needs to import the package.
 """
+
 import fcntl
 import hashlib
 import os
@@ -52,28 +53,42 @@ def build() -> Path:
     _check_tools()
     cache.mkdir(parents=True, exist_ok=True)
     with open(cache / 'simulation_interfaces.lock', 'w') as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)       # one build at a time, others wait for it
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one build at a time, others wait for it
         if (prefix / '.built').exists():
             return prefix
         work = prefix.with_name(prefix.name + '.build')
         shutil.rmtree(work, ignore_errors=True)
         shutil.rmtree(prefix, ignore_errors=True)
         venv = sys.prefix
-        env = dict(os.environ, AMENT_PREFIX_PATH=venv, CMAKE_PREFIX_PATH=venv,
-                   PATH=os.path.join(venv, 'bin') + os.pathsep + os.environ.get('PATH', ''))
+        env = dict(
+            os.environ,
+            AMENT_PREFIX_PATH=venv,
+            CMAKE_PREFIX_PATH=venv,
+            PATH=os.path.join(venv, 'bin') + os.pathsep + os.environ.get('PATH', ''),
+        )
         generator = ['-G', 'Ninja'] if shutil.which('ninja') else []
         steps = [
-            ['cmake', '-S', str(SOURCE), '-B', str(work), *generator,
-             f'-DCMAKE_INSTALL_PREFIX={prefix}', f'-DPython3_EXECUTABLE={sys.executable}',
-             '-DPython3_FIND_VIRTUALENV=ONLY', '-DBUILD_TESTING=OFF'],
+            [
+                'cmake',
+                '-S',
+                str(SOURCE),
+                '-B',
+                str(work),
+                *generator,
+                f'-DCMAKE_INSTALL_PREFIX={prefix}',
+                f'-DPython3_EXECUTABLE={sys.executable}',
+                '-DPython3_FIND_VIRTUALENV=ONLY',
+                '-DBUILD_TESTING=OFF',
+            ],
             ['cmake', '--build', str(work), '--parallel', '2'],
             ['cmake', '--install', str(work)],
         ]
         for step in steps:
             proc = subprocess.run(step, env=env, capture_output=True, text=True, timeout=900)
             if proc.returncode != 0:
-                raise RuntimeError(f'{" ".join(step[:2])} failed:\n{proc.stdout[-3000:]}\n'
-                                   f'{proc.stderr[-3000:]}')
+                raise RuntimeError(
+                    f'{" ".join(step[:2])} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}'
+                )
         shutil.rmtree(work, ignore_errors=True)
         (prefix / '.built').touch()
     return prefix
@@ -81,9 +96,11 @@ def build() -> Path:
 
 def environment(prefix: Path, env: dict) -> dict:
     """``env`` with the package importable (Python path, libraries, ament index)."""
+
     def prepend(name, value):
         old = env.get(name, '')
         return value + (os.pathsep + old if old else '')
+
     out = dict(env)
     out['PYTHONPATH'] = prepend('PYTHONPATH', str(prefix / 'lib' / PY / 'site-packages'))
     out['LD_LIBRARY_PATH'] = prepend('LD_LIBRARY_PATH', str(prefix / 'lib'))

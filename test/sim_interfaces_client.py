@@ -2,6 +2,7 @@
 process (it needs the built package on its paths, see sim_interfaces_build.py). Runs one
 scenario and prints what it saw as one JSON object: every service answer, and the stamp of
 the latest /joint_states after each call."""
+
 import json
 import sys
 import threading
@@ -10,16 +11,27 @@ import time
 import rclpy
 from sensor_msgs.msg import JointState
 from simulation_interfaces.msg import SimulationState
-from simulation_interfaces.srv import (GetSimulationState, GetSimulatorFeatures,
-                                       ResetSimulation, SetSimulationState, StepSimulation)
+from simulation_interfaces.srv import (
+    GetSimulationState,
+    GetSimulatorFeatures,
+    ResetSimulation,
+    SetSimulationState,
+    StepSimulation,
+)
 
 
 def main():
     rclpy.init()
     node = rclpy.create_node('sim_interfaces_client')
     latest = {}
-    node.create_subscription(JointState, '/joint_states', lambda m: latest.update(
-        t=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, position=list(m.position)), 100)
+    node.create_subscription(
+        JointState,
+        '/joint_states',
+        lambda m: latest.update(
+            t=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, position=list(m.position)
+        ),
+        100,
+    )
     spinner = threading.Thread(target=rclpy.spin, args=(node,), daemon=True)
     spinner.start()
     seen = {}
@@ -54,39 +66,52 @@ def main():
         seen[label] = call(GetSimulationState, '/get_simulation_state').state.state
 
     end = time.monotonic() + 30.0
-    while latest.get('t', 0.0) < 0.2 and time.monotonic() < end:   # running, commanded
+    while latest.get('t', 0.0) < 0.2 and time.monotonic() < end:  # running, commanded
         time.sleep(0.02)
-    seen['features'] = list(call(GetSimulatorFeatures, '/get_simulator_features')
-                            .features.features)
+    seen['features'] = list(call(GetSimulatorFeatures, '/get_simulator_features').features.features)
     state('state_running')
     result('step_while_playing', call(StepSimulation, '/step_simulation', steps=3))
-    result('pause', call(SetSimulationState, '/set_simulation_state',
-                         state=SimulationState.STATE_PAUSED))
+    result(
+        'pause',
+        call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_PAUSED),
+    )
     state('state_paused')
     settle('t_paused', 0.5)
-    result('pause_again', call(SetSimulationState, '/set_simulation_state',
-                               state=SimulationState.STATE_PAUSED))
+    result(
+        'pause_again',
+        call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_PAUSED),
+    )
     result('step', call(StepSimulation, '/step_simulation', steps=5))
     settle('t_stepped')
-    result('reset_time_only', call(ResetSimulation, '/reset_simulation',
-                                   scope=ResetSimulation.Request.SCOPE_TIME))
-    result('stop', call(SetSimulationState, '/set_simulation_state',
-                        state=SimulationState.STATE_STOPPED))
+    result(
+        'reset_time_only',
+        call(ResetSimulation, '/reset_simulation', scope=ResetSimulation.Request.SCOPE_TIME),
+    )
+    result(
+        'stop',
+        call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_STOPPED),
+    )
     state('state_stopped')
     settle('t_stopped', 0.5)
     seen['position_stopped'] = latest.get('position')
-    result('play', call(SetSimulationState, '/set_simulation_state',
-                        state=SimulationState.STATE_PLAYING))
+    result(
+        'play',
+        call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_PLAYING),
+    )
     state('state_played')
     settle('t_played', 0.5)
-    result('reset', call(ResetSimulation, '/reset_simulation',
-                         scope=ResetSimulation.Request.SCOPE_DEFAULT))
+    result(
+        'reset',
+        call(ResetSimulation, '/reset_simulation', scope=ResetSimulation.Request.SCOPE_DEFAULT),
+    )
     settle('t_reset', 0.05)
-    result('quit', call(SetSimulationState, '/set_simulation_state',
-                        state=SimulationState.STATE_QUITTING))
+    result(
+        'quit',
+        call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_QUITTING),
+    )
     print(json.dumps(seen))
     sys.stdout.flush()
-    rclpy.try_shutdown()      # ends the spin; then the thread, then the node
+    rclpy.try_shutdown()  # ends the spin; then the thread, then the node
     spinner.join(5.0)
     node.destroy_node()
 

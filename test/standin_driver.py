@@ -5,6 +5,7 @@ on /effort_controller/commands, as a ros2_control effort controller's hardware w
 
 Prints JSON lines: {"cmd": [...], "q": [...], "t": ...} per received command.
 """
+
 import json
 import sys
 import time
@@ -26,16 +27,20 @@ def main():
         values = list(msg.data)
         if len(values) == 2:
             tau[:] = values
-        print(json.dumps({'cmd': values, 'q': list(q), 't': clock['t'], 'wall': time.time()}),
-              flush=True)
-    node.create_subscription(Float64MultiArray, '/effort_controller/commands', on_command,
-                             QoSProfile(depth=10))
+        print(
+            json.dumps({'cmd': values, 'q': list(q), 't': clock['t'], 'wall': time.time()}),
+            flush=True,
+        )
+
+    node.create_subscription(
+        Float64MultiArray, '/effort_controller/commands', on_command, QoSProfile(depth=10)
+    )
     duration = float(sys.argv[1]) if len(sys.argv) > 1 else 30.0
     start = time.monotonic()
     k = 0
     msg = JointState(name=['joint1', 'joint2'])
     while time.monotonic() - start < duration:
-        for _ in range(5):                    # 5 x 1 ms of physics per published sample
+        for _ in range(5):  # 5 x 1 ms of physics per published sample
             for i in range(2):
                 qd[i] += 1e-3 * tau[i]
                 q[i] += 1e-3 * qd[i]

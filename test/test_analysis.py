@@ -1,5 +1,6 @@
 """``impact-arm analyze`` on the offline article run: the impact table of ``simulate`` exactly,
 the limit cycle, Poincaré sections, every figure (opened and measured) and the report."""
+
 import json
 import math
 import struct
@@ -12,22 +13,43 @@ import pytest
 from impact_arm.tools.analysis import limit_cycle, poincare
 from impact_arm.tools.figures import FIGURE_SIZE
 
-FIGURES = ['fig3_controllers.png', 'fig4_link_angles.png', 'fig5_phase_portraits.png',
-           'fig6_poincare.png', 'fig7_tip_velocity.png', 'fig8_indentation.png',
-           'fig9_impact_velocity.png', 'fig10_contact_force.png', 'fig10b_force_indentation.png',
-           'fig11_kinetic_energy.png']
+FIGURES = [
+    'fig3_controllers.png',
+    'fig4_link_angles.png',
+    'fig5_phase_portraits.png',
+    'fig6_poincare.png',
+    'fig7_tip_velocity.png',
+    'fig8_indentation.png',
+    'fig9_impact_velocity.png',
+    'fig10_contact_force.png',
+    'fig10b_force_indentation.png',
+    'fig11_kinetic_energy.png',
+]
 
 
 def cli(*argv, cwd):
-    return subprocess.run([sys.executable, '-m', 'impact_arm.tools.cli', *map(str, argv)],
-                          capture_output=True, text=True, cwd=cwd, timeout=300)
+    return subprocess.run(
+        [sys.executable, '-m', 'impact_arm.tools.cli', *map(str, argv)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+    )
 
 
 @pytest.fixture(scope='module')
 def article(tmp_path_factory):
     d = tmp_path_factory.mktemp('article')
-    sim = cli('simulate', '--scene', 'paper', '--mcap', d / 'paper.mcap', '--json',
-              d / 'paper.json', cwd=d)
+    sim = cli(
+        'simulate',
+        '--scene',
+        'paper',
+        '--mcap',
+        d / 'paper.mcap',
+        '--json',
+        d / 'paper.json',
+        cwd=d,
+    )
     assert sim.returncode == 0, sim.stderr
     ana = cli('analyze', d / 'paper.mcap', '--out', d / 'out', cwd=d)
     assert ana.returncode == 0, ana.stderr
@@ -47,7 +69,7 @@ def test_impact_table_is_exactly_the_simulated_one(article):
     assert rows in ana.stdout
     with open(d / 'out' / 'impact_table.txt', encoding='utf-8') as f:
         assert f.read().strip('\n') == rows
-    assert (d / 'out' / 'animation.gif').stat().st_size > 0   # analyze animates too
+    assert (d / 'out' / 'animation.gif').stat().st_size > 0  # analyze animates too
 
 
 def test_limit_cycle_and_poincare_sections(article):
@@ -81,6 +103,7 @@ def png_size(path):
 
 def test_every_figure_is_written_non_empty_and_of_the_stated_size(article):
     import matplotlib.image as mpimg
+
     d, _, ana = article
     for name in FIGURES:
         path = d / 'out' / name
@@ -98,9 +121,15 @@ def test_every_figure_is_written_non_empty_and_of_the_stated_size(article):
 def test_report_states_table_cycle_and_sections(article):
     d, _, _ = article
     text = (d / 'out' / 'report.md').read_text(encoding='utf-8')
-    for needle in ('# Analysis of paper.mcap', '## Impacts', '## Limit cycle',
-                   'limit cycle reached after 5 impacts', '## Poincaré sections',
-                   'poincare_qd1_zero.csv', 'scene paper, law q'):
+    for needle in (
+        '# Analysis of paper.mcap',
+        '## Impacts',
+        '## Limit cycle',
+        'limit cycle reached after 5 impacts',
+        '## Poincaré sections',
+        'poincare_qd1_zero.csv',
+        'scene paper, law q',
+    ):
         assert needle in text, needle
 
 
@@ -117,10 +146,12 @@ def test_poincare_crossings_of_a_known_signal():
 
 
 def test_limit_cycle_of_records():
-    impacts = [{'t_contact': 0.4 * i, 'q_contact_deg': [1.0, 2.0 + (i < 3)],
-                'v_before': [0.0, -1.0]} for i in range(8)]
+    impacts = [
+        {'t_contact': 0.4 * i, 'q_contact_deg': [1.0, 2.0 + (i < 3)], 'v_before': [0.0, -1.0]}
+        for i in range(8)
+    ]
     lc = limit_cycle(impacts)
-    assert lc["settled_after"] == 4 and lc['period'] == pytest.approx(0.4)
+    assert lc['settled_after'] == 4 and lc['period'] == pytest.approx(0.4)
 
 
 def small_recording(path):
@@ -128,13 +159,15 @@ def small_recording(path):
     from sensor_msgs.msg import JointState
 
     from impact_arm.io.mcap_ros2 import Ros2McapWriter
+
     with Ros2McapWriter(path) as w:
         for i in range(400):
             t = i * 0.005
-            m = JointState(name=['joint1', 'joint2'],
-                           position=[math.sin(4 * t), 0.5 * math.cos(4 * t) - math.sin(4 * t)],
-                           velocity=[4 * math.cos(4 * t),
-                                     -2 * math.sin(4 * t) - 4 * math.cos(4 * t)])
+            m = JointState(
+                name=['joint1', 'joint2'],
+                position=[math.sin(4 * t), 0.5 * math.cos(4 * t) - math.sin(4 * t)],
+                velocity=[4 * math.cos(4 * t), -2 * math.sin(4 * t) - 4 * math.cos(4 * t)],
+            )
             m.header.stamp.sec, m.header.stamp.nanosec = divmod(i * 5_000_000, 10**9)
             w.write_message('/joint_states', m, i * 5_000_000)
     return path
@@ -143,8 +176,16 @@ def small_recording(path):
 def test_what_the_data_allows_compare_and_errors(article, tmp_path):
     d, _, _ = article
     small = small_recording(tmp_path / 'small.mcap')
-    ok = cli('analyze', small, '--out', tmp_path / 'cmp', '--compare', small,
-             '--no-animation', cwd=tmp_path)
+    ok = cli(
+        'analyze',
+        small,
+        '--out',
+        tmp_path / 'cmp',
+        '--compare',
+        small,
+        '--no-animation',
+        cwd=tmp_path,
+    )
     assert ok.returncode == 0, ok.stderr
     made = sorted(p.name for p in (tmp_path / 'cmp').glob('*.png'))
     # no scene: no Figs. 3 and 7; no traces and no reports: no Figs. 8-11; each said why
@@ -159,14 +200,15 @@ def test_what_the_data_allows_compare_and_errors(article, tmp_path):
     rows = np.loadtxt(tmp_path / 'cmp' / 'poincare_qd1_zero.csv', delimiter=',', skiprows=1)
     # q̇1 = 4 cos 4t crosses zero at t = π/8, 3π/8, 5π/8 within 2 s, where q1 = ±1 rad and
     # the absolute q2 = joint1 + joint2 = 0.5 cos 4t = 0
-    assert rows[:, 0] == pytest.approx([math.pi / 8, 3 * math.pi / 8, 5 * math.pi / 8],
-                                       abs=1e-3)
+    assert rows[:, 0] == pytest.approx([math.pi / 8, 3 * math.pi / 8, 5 * math.pi / 8], abs=1e-3)
     assert rows[:, 1] == pytest.approx([57.2958, -57.2958, 57.2958], abs=0.01)
     assert rows[:, 2] == pytest.approx([0, 0, 0], abs=0.01)
-    for argv, needle in (([tmp_path / 'none.mcap'], 'no such file'),
-                         ([d / 'paper.mcap', '--impact', 16], '--impact = 16: must be in [1, 15]'),
-                         ([d / 'paper.mcap', '--laws', 'lqr'], "--laws: 'lqr' is not one of"),
-                         ([d / 'paper.json'], 'not a readable MCAP file')):
+    for argv, needle in (
+        ([tmp_path / 'none.mcap'], 'no such file'),
+        ([d / 'paper.mcap', '--impact', 16], '--impact = 16: must be in [1, 15]'),
+        ([d / 'paper.mcap', '--laws', 'lqr'], "--laws: 'lqr' is not one of"),
+        ([d / 'paper.json'], 'not a readable MCAP file'),
+    ):
         bad = cli('analyze', *argv, cwd=tmp_path)
         assert bad.returncode == 2 and needle in bad.stderr, bad.stderr
         assert 'Traceback' not in bad.stderr
@@ -176,6 +218,7 @@ def without_trace(src, dst):
     """A copy of an offline recording without /impact_trace: what a live recording holds
     (the simulator node publishes no trace)."""
     from impact_arm.io.mcap_ros2 import Ros2McapWriter, iter_raw, read_metadata, topics_info
+
     info = topics_info(src)
     with Ros2McapWriter(dst) as w:
         for topic, ti in info.items():
@@ -185,7 +228,7 @@ def without_trace(src, dst):
             if m.topic != '/impact_trace':
                 w.write(m.topic, m.data, m.log_time_ns)
         for name, data in read_metadata(src).items():
-            if name != 'rosbag2':           # the writer writes its own
+            if name != 'rosbag2':  # the writer writes its own
                 w.add_metadata(name, data)
     return dst
 
@@ -194,15 +237,26 @@ def test_a_live_recording_gets_figures_8_to_11_from_its_impact_reports(article, 
     """No /impact_trace: impact 2 is integrated again from its reported contact state; its
     points are the offline trace's (the same impact, actuators off during contact)."""
     from impact_arm.tools import analysis
+
     d, _, _ = article
     live = without_trace(d / 'paper.mcap', tmp_path / 'live.mcap')
-    ana = cli('analyze', live, '--out', tmp_path / 'out', '--impact', 2, '--laws', '',
-              '--no-animation', cwd=tmp_path)
+    ana = cli(
+        'analyze',
+        live,
+        '--out',
+        tmp_path / 'out',
+        '--impact',
+        2,
+        '--laws',
+        '',
+        '--no-animation',
+        cwd=tmp_path,
+    )
     assert ana.returncode == 0, ana.stderr
     for name in FIGURES[5:]:
         assert png_size(tmp_path / 'out' / name) == FIGURE_SIZE, name
     assert 'impact 2 re-integrated from /impact_report' in ana.stdout
-    assert not (tmp_path / 'out' / 'fig3_controllers.png').exists()   # --laws ''
+    assert not (tmp_path / 'out' / 'fig3_controllers.png').exists()  # --laws ''
     recorded = analysis.load(d / 'paper.mcap')
     again = analysis.load(live)
     assert not again.traces
@@ -233,13 +287,14 @@ def test_figure_3_data_are_the_articles_comparison_of_the_control_laws():
     worth the name and settles within 0.1° sooner than PID on both links."""
     from impact_arm.core.scene import load_scene
     from impact_arm.tools.analysis import step_response
+
     scene = load_scene('paper')
     runs = {law: step_response(scene, law, t_max=5.0) for law in ('q', 'pd', 'pid')}
     target = np.array(scene.controller.down_target)
     assert not any(r.impacts for r in runs.values())
-    step = np.degrees(runs['q'].q[0] - target)        # the step (from 60°, 45°), deg
+    step = np.degrees(runs['q'].q[0] - target)  # the step (from 60°, 45°), deg
 
-    def past_target(run, k):            # degrees beyond the target, in the step's direction
+    def past_target(run, k):  # degrees beyond the target, in the step's direction
         return max(0.0, float(-np.min(np.degrees(run.q[:, k] - target[k]) * np.sign(step[k]))))
 
     def settled_at(run, k, band=0.1):  # time from which |error| stays within band degrees
@@ -255,7 +310,7 @@ def test_figure_3_data_are_the_articles_comparison_of_the_control_laws():
     expected = np.degrees([(Q1g + Q2g) / kp[0], Q2g / kp[1]])
     error = np.degrees(runs['pd'].q[-1] - target)
     assert error == pytest.approx(expected, rel=0.02)
-    assert np.all(np.abs(error) > 0.25)              # PD does not reach the target
+    assert np.all(np.abs(error) > 0.25)  # PD does not reach the target
     for k in (0, 1):
         assert settled_at(runs['pd'], k) == math.inf
         # PID: overshoot, by more than 5 % of the step on link 1

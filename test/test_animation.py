@@ -1,4 +1,5 @@
 """``impact-arm animate``: a GIF of the recorded arm, its frames checked."""
+
 import numpy as np
 import pytest
 import yaml
@@ -18,7 +19,7 @@ def recording(tmp_path_factory):
     path = tmp_path_factory.mktemp('anim') / 'run.mcap'
     data = paper_dict()
     data['cycles'] = 1
-    scene = scene_from_text(yaml.safe_dump(data))   # with its text: the file keeps the scene
+    scene = scene_from_text(yaml.safe_dump(data))  # with its text: the file keeps the scene
     rec = OfflineRecorder(path, scene)
     result = None
     try:
@@ -40,14 +41,13 @@ def test_gif_has_one_frame_per_frame_time_showing_the_moving_arm(recording, tmp_
     out = tmp_path / 'arm.gif'
     assert main(['animate', str(recording), '--out', str(out), '--fps', '40']) == 0
     run_ = analysis.load(str(recording), progress=lambda _: None)
-    expected = frame_times(run_.t[0], run_.t[-1], [i['t_contact'] for i in run_.impacts],
-                           fps=40)
+    expected = frame_times(run_.t[0], run_.t[-1], [i['t_contact'] for i in run_.impacts], fps=40)
     image = Image.open(out)
     assert image.size == (400, 400) and image.n_frames == len(expected) > 25
     frames = [np.asarray(f.convert('RGB'), dtype=int) for f in ImageSequence.Iterator(image)]
     blue = [np.count_nonzero((f[..., 2] > 150) & (f[..., 0] < 80)) for f in frames]
-    assert min(blue) > 100                       # every frame draws the arm (tab:blue)
-    assert np.abs(frames[0] - frames[len(frames) // 2]).sum() > 0   # and it moves
+    assert min(blue) > 100  # every frame draws the arm (tab:blue)
+    assert np.abs(frames[0] - frames[len(frames) // 2]).sum() > 0  # and it moves
 
 
 def test_the_contact_force_is_drawn_at_the_impact(recording, tmp_path):
@@ -56,10 +56,14 @@ def test_the_contact_force_is_drawn_at_the_impact(recording, tmp_path):
     assert forces is not None and forces[1][:, 1].max() > 0
     out = tmp_path / 'arm.gif'
     animate(run_, str(out), forces, fps=10)
-    orange = [np.count_nonzero((f[..., 0] > 200) & (f[..., 1] > 100) & (f[..., 1] < 160)
-                               & (f[..., 2] < 60))
-              for f in (np.asarray(g.convert('RGB'), dtype=int)
-                        for g in ImageSequence.Iterator(Image.open(out)))]
+    orange = [
+        np.count_nonzero(
+            (f[..., 0] > 200) & (f[..., 1] > 100) & (f[..., 1] < 160) & (f[..., 2] < 60)
+        )
+        for f in (
+            np.asarray(g.convert('RGB'), dtype=int) for g in ImageSequence.Iterator(Image.open(out))
+        )
+    ]
     assert sum(o > 20 for o in orange) >= 1
 
 

@@ -1,4 +1,5 @@
 """The article's scene: first impact against docs/model.md's reading, limit cycle, CLI JSON."""
+
 import json
 
 import pytest
@@ -8,9 +9,15 @@ from impact_arm.core.simulate import run
 
 # docs/model.md, "What the article reports, and what the package gives" (truncated: 1 % band)
 ARTICLE_FIRST_IMPACT = {
-    'duration': 1.44e-4, 'delta_m': 3.53e-4, 'delta_r': 2.84e-4, 'F_max': 2.77e4,
-    'v_before': [-3.66, -5.54], 'v_after': [-2.43, 2.23], 'cor_kinematic': 0.40,
-    'T_before': [2.46, 13.95, 16.40], 'T_after': [4.43, 6.56, 11.02],
+    'duration': 1.44e-4,
+    'delta_m': 3.53e-4,
+    'delta_r': 2.84e-4,
+    'F_max': 2.77e4,
+    'v_before': [-3.66, -5.54],
+    'v_after': [-2.43, 2.23],
+    'cor_kinematic': 0.40,
+    'T_before': [2.46, 13.95, 16.40],
+    'T_after': [4.43, 6.56, 11.02],
     'cor_energetic': [1.34, 0.69, 0.82],
 }
 
@@ -52,17 +59,40 @@ def test_fifteen_cycles_settle_into_a_limit_cycle(paper_run):
 
 def test_cli_json_has_exactly_the_documented_structure(tmp_path):
     from impact_arm.tools.cli import main
+
     out = tmp_path / 'paper.json'
     assert main(['simulate', '--scene', 'paper', '--json', str(out)]) == 0
     data = json.loads(out.read_text())
     assert set(data) == {'impacts', 'run'}
     assert set(data['impacts'][0]) == {
-        'index', 't_contact', 'q_contact_deg', 'duration', 'delta_m', 'delta_r', 'F_max',
-        'v_before', 'v_after', 'cor_kinematic', 'T_before', 'T_after', 'cor_energetic',
-        'phase_durations', 'q_max_compression_deg', 'q_separation_deg'}
-    assert set(data['run']) == {'impacts', 't_end', 'period_last', 'q1_range_deg',
-                                'q2_range_deg', 'vx_range', 'vy_range', 'rhs_evaluations',
-                                'wall_time'}
+        'index',
+        't_contact',
+        'q_contact_deg',
+        'duration',
+        'delta_m',
+        'delta_r',
+        'F_max',
+        'v_before',
+        'v_after',
+        'cor_kinematic',
+        'T_before',
+        'T_after',
+        'cor_energetic',
+        'phase_durations',
+        'q_max_compression_deg',
+        'q_separation_deg',
+    }
+    assert set(data['run']) == {
+        'impacts',
+        't_end',
+        'period_last',
+        'q1_range_deg',
+        'q2_range_deg',
+        'vx_range',
+        'vy_range',
+        'rhs_evaluations',
+        'wall_time',
+    }
     assert data['run']['impacts'] == 15 == len(data['impacts'])
 
 

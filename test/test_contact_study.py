@@ -1,5 +1,6 @@
 """The contact laws alone (a sphere dropped on a flat, no arm) against published closed forms:
 Hertz's impact, and the coefficient of restitution's shape against Thornton (1997)."""
+
 import pytest
 
 from impact_arm.core.sphere_drop import thornton_cor
@@ -33,6 +34,6 @@ def test_cor_is_one_below_the_yield_speed_and_falls_monotonically_above():
 
 def test_thornton_closed_form_as_transcribed():
     assert thornton_cor(1.0) == 1.0 and thornton_cor(0.3) == 1.0
-    assert thornton_cor(1.0 + 1e-9) == pytest.approx(1.0, abs=1e-6)    # continuous at V_y
+    assert thornton_cor(1.0 + 1e-9) == pytest.approx(1.0, abs=1e-6)  # continuous at V_y
     # Thornton's large-velocity asymptote e = 1.185 (V_y / V)^(1/4)
-    assert thornton_cor(1e8) == pytest.approx(1.185 * 1e8 ** -0.25, rel=1e-3)
+    assert thornton_cor(1e8) == pytest.approx(1.185 * 1e8**-0.25, rel=1e-3)

@@ -1,4 +1,5 @@
 """The contract module: one spelling of every shared name, joint-space conversion, progress."""
+
 import io
 import pathlib
 import re
@@ -12,13 +13,27 @@ PACKAGE = pathlib.Path(contract.__file__).parent
 
 
 def test_topic_names_are_spelled_only_in_the_contract():
-    names = [contract.JOINT_STATES, contract.CONTACT_WRENCH, contract.IMPACT_REPORT, contract.TF,
-             contract.ROBOT_DESCRIPTION, contract.TF_STATIC, contract.IMPACT_MARKERS,
-             contract.DIAGNOSTICS, contract.CLOCK, contract.COMMANDS, contract.IMPACT_TRACE]
+    names = [
+        contract.JOINT_STATES,
+        contract.CONTACT_WRENCH,
+        contract.IMPACT_REPORT,
+        contract.TF,
+        contract.ROBOT_DESCRIPTION,
+        contract.TF_STATIC,
+        contract.IMPACT_MARKERS,
+        contract.DIAGNOSTICS,
+        contract.CLOCK,
+        contract.COMMANDS,
+        contract.IMPACT_TRACE,
+    ]
     spelled = re.compile('|'.join(rf"""['"]{re.escape(n)}['"]""" for n in names))
-    offenders = [f'{p.relative_to(PACKAGE)}:{k}' for p in PACKAGE.rglob('*.py')
-                 if p.name != 'contract.py'
-                 for k, line in enumerate(p.read_text().splitlines(), 1) if spelled.search(line)]
+    offenders = [
+        f'{p.relative_to(PACKAGE)}:{k}'
+        for p in PACKAGE.rglob('*.py')
+        if p.name != 'contract.py'
+        for k, line in enumerate(p.read_text().splitlines(), 1)
+        if spelled.search(line)
+    ]
     assert offenders == []
 
 
@@ -49,7 +64,7 @@ def test_progress_on_a_terminal_rewrites_one_line_with_an_eta():
     out = _Stream(tty=True)
     line = Progress(total=10, prefix='  ', stream=out, clock=lambda: now[0])
     now[0] += 8.0
-    line.show('cycle 5/10', done=4)           # 4 of 10 in 8 s: 12 s left
+    line.show('cycle 5/10', done=4)  # 4 of 10 in 8 s: 12 s left
     assert out.getvalue() == '\r\033[K  cycle 5/10   40 %  ETA 12 s'
     line.end()
     assert out.getvalue().endswith('\r\033[K')  # erased, the results follow
@@ -68,9 +83,13 @@ def test_every_layer_is_a_package_setup_installs():
     """setup.py's find_packages skips folders without __init__.py: a plain install would
     lack them."""
     from setuptools import find_packages
+
     found = set(find_packages(str(PACKAGE.parent), include=['impact_arm', 'impact_arm.*']))
-    folders = {'.'.join(p.parent.relative_to(PACKAGE.parent).parts)
-               for p in PACKAGE.rglob('*.py') if '__pycache__' not in p.parts}
+    folders = {
+        '.'.join(p.parent.relative_to(PACKAGE.parent).parts)
+        for p in PACKAGE.rglob('*.py')
+        if '__pycache__' not in p.parts
+    }
     assert folders <= found
 
 
@@ -82,18 +101,19 @@ def test_compile_notice_announces_a_long_compile_once_and_its_end():
 
     from impact_arm.core import jit
     from impact_arm.tools.progress import COMPILE_NOTICE, CompileNotice
+
     out = io.StringIO()
     with CompileNotice(stream=out) as notice:
         notice.SETTLE = 0.6
         jit.compile_started()
-        time.sleep(1.6)                  # a long first burst: announced
+        time.sleep(1.6)  # a long first burst: announced
         jit.compile_ended()
-        jit.compile_started()            # a second burst right after: the same notice
+        jit.compile_started()  # a second burst right after: the same notice
         time.sleep(0.2)
         jit.compile_ended()
-        time.sleep(1.5)                  # settled: the notice ends by itself
+        time.sleep(1.5)  # settled: the notice ends by itself
         text = out.getvalue()
-        jit.compile_started()            # a short compile later: nothing printed
+        jit.compile_started()  # a short compile later: nothing printed
         time.sleep(0.1)
         jit.compile_ended()
     lines = out.getvalue().splitlines()

@@ -1,4 +1,5 @@
 """The sampled PID's anti-windup and output limits (core/control.py), against hand values."""
+
 import math
 
 import pytest
@@ -13,8 +14,18 @@ TARGET = [0.0, 0.0]
 def controller(strategy, limit, kp=100.0):
     model = ArmModel(scene_from({('controller', 'law'): 'pid'}))
     integral = PidIntegrator(2, antiwindup=strategy, u_clamp_max=limit, u_clamp_min=-limit)
-    return CycleController(model, 'pid', [kp, kp], [0.0, 0.0], [5.0, 5.0], TARGET, TARGET,
-                           switch_height=10.0, surface_height=None, integrator=integral)
+    return CycleController(
+        model,
+        'pid',
+        [kp, kp],
+        [0.0, 0.0],
+        [5.0, 5.0],
+        TARGET,
+        TARGET,
+        switch_height=10.0,
+        surface_height=None,
+        integrator=integral,
+    )
 
 
 def run(c, q, samples=10, dt=1e-3):

@@ -2,6 +2,7 @@
 
 The arm is the real ``SimulatedArm`` of the article's scene; only the wall clock is fake, so
 every timing below is exact and nothing depends on the machine's load."""
+
 import pytest
 
 from impact_arm.core.driver import SimulatedArm
@@ -18,7 +19,7 @@ class FakeClock:
     def __init__(self):
         self.now = 100.0
         self.sleeps = []
-        self.cost = {}        # period index -> wall seconds its physics takes
+        self.cost = {}  # period index -> wall seconds its physics takes
         self.take_cost = 0.0  # wall seconds one take of a queued command takes
 
     def __call__(self):
@@ -34,8 +35,7 @@ def scene():
     return load_scene(resolve_scene_path('paper'))
 
 
-def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.1,
-              checked=None):
+def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.1, checked=None):
     """A loop whose queued commands come from ``commands`` (wall time of arrival ->
     torques; the string 'garbage' is a message that fails its check); ``checked`` collects
     every message the loop checks, in order."""
@@ -46,6 +46,7 @@ def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.
     def costly_step():
         clock.now += clock.cost.get(arm.periods, 0.0)
         return step()
+
     arm.step = costly_step
 
     def take_command():
@@ -60,11 +61,19 @@ def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.
             return False
         loop.command(raw, now)
         return True
-    loop = DriverLoop(arm, wall_period=P, command_timeout=timeout, take_command=take_command,
-                      accept=accept,
-                      publish=(published if published is not None else []).append,
-                      log=lambda level, text: (logs if logs is not None else []).append(text),
-                      clock=clock, sleep=clock.sleep, max_takes=10)
+
+    loop = DriverLoop(
+        arm,
+        wall_period=P,
+        command_timeout=timeout,
+        take_command=take_command,
+        accept=accept,
+        publish=(published if published is not None else []).append,
+        log=lambda level, text: (logs if logs is not None else []).append(text),
+        clock=clock,
+        sleep=clock.sleep,
+        max_takes=10,
+    )
     return loop
 
 
@@ -72,7 +81,7 @@ def test_brakes_on_until_the_first_command_then_paced_by_the_wall_clock(scene):
     clock, published = FakeClock(), []
     loop = make_loop(scene, clock, {100.0035: [1.0, 0.0]}, published)
     for _ in range(3):
-        assert loop.realtime_period() is None          # held, stamp 0, not stepped
+        assert loop.realtime_period() is None  # held, stamp 0, not stepped
     assert [tick.t for tick in published] == [0.0, 0.0, 0.0]
     assert loop.arm.periods == 0 and loop.watchdog.state == 'waiting'
     ticks = [loop.realtime_period() for _ in range(5)]
@@ -83,17 +92,17 @@ def test_brakes_on_until_the_first_command_then_paced_by_the_wall_clock(scene):
     assert loop.first_command_wall == pytest.approx(100.004) and loop.commands == 1
     assert loop.arm.command == [1.0, 0.0] and loop.watchdog.state == 'ok'
     assert loop.stats.overruns == 0 and loop.stats.published == 8
-    assert loop.stale == 4            # one command for five periods: four held an old one
+    assert loop.stale == 4  # one command for five periods: four held an old one
 
 
 def test_watchdog_zeroes_the_torque_when_commands_stop_and_resumes(scene):
     clock, logs = FakeClock(), []
     loop = make_loop(scene, clock, {100.0: [3.0, -2.0]}, logs=logs, timeout=0.01)
-    for _ in range(10):                                 # taken at 1 ms, held until 10 ms
+    for _ in range(10):  # taken at 1 ms, held until 10 ms
         loop.realtime_period()
     assert loop.arm.command == [3.0, -2.0]
     loop.realtime_period()
-    loop.realtime_period()                              # 11 ms after the command
+    loop.realtime_period()  # 11 ms after the command
     assert loop.watchdog.state == 'timeout' and loop.arm.command == [0.0, 0.0]
     assert logs == ['no command for 0.01 s: torques zeroed']
     loop.command([1.0, 1.0], clock.now)
@@ -117,15 +126,15 @@ def test_watchdog_status_reports_a_timeout_before_the_loop_runs_again(scene):
 
 def test_watchdog_counts_each_silence_once(scene):
     clock = FakeClock()
-    commands = {100.0 + 0.05 * k: [1.0, 0.0] for k in range(4)}   # a command every 50 ms
+    commands = {100.0 + 0.05 * k: [1.0, 0.0] for k in range(4)}  # a command every 50 ms
     loop = make_loop(scene, clock, commands, timeout=0.01)
     for _ in range(200):
         loop.realtime_period()
-    assert loop.watchdog.timeouts == 4      # the silence after each of the four commands
+    assert loop.watchdog.timeouts == 4  # the silence after each of the four commands
     assert loop.watchdog.longest_silence == pytest.approx(0.05)
     loop.request_reset()
     loop.realtime_period()
-    assert loop.watchdog.timeouts == 0      # statistics start again after ~/reset
+    assert loop.watchdog.timeouts == 0  # statistics start again after ~/reset
     assert loop.watchdog.longest_silence == 0.0
 
 
@@ -143,7 +152,7 @@ def test_effort_limit_clips_the_held_command(scene):
 def test_a_stall_skips_the_missed_periods_instead_of_bursting_through_them(scene):
     clock, published = FakeClock(), []
     loop = make_loop(scene, clock, {100.0: [0.0, 0.0]}, published)
-    clock.cost[3] = 2.5 * P                             # period 4's physics takes 2.5 ms
+    clock.cost[3] = 2.5 * P  # period 4's physics takes 2.5 ms
     for _ in range(6):
         loop.realtime_period()
     stats = loop.stats
@@ -152,7 +161,7 @@ def test_a_stall_skips_the_missed_periods_instead_of_bursting_through_them(scene
     assert stats.overruns == 1 and loop.skipped == 2
     assert [round(t.t * RATE) for t in published] == [1, 2, 3, 4, 5, 6]
     assert clock.now == pytest.approx(100.0 + 8 * P)
-    assert clock.sleeps[-2:] == pytest.approx([0.5 * P, P])   # to 7 ms, then 8 ms
+    assert clock.sleeps[-2:] == pytest.approx([0.5 * P, P])  # to 7 ms, then 8 ms
     assert stats.worst_compute == pytest.approx(2.5 * P)
     assert stats.worst_compute_t == pytest.approx(4 * P)
     commands, physics, publish = stats.worst_parts
@@ -164,7 +173,7 @@ def test_a_command_flood_is_taken_a_bounded_number_per_period(scene):
     queue = {100.0 + i * 1e-7: 'garbage' for i in range(35)}
     queue[100.0 + 36e-7] = [7.0, 0.0]
     loop = make_loop(scene, clock, queue)
-    loop.realtime_period()                              # 10 of 36 queued messages taken
+    loop.realtime_period()  # 10 of 36 queued messages taken
     assert loop.flooded == 1 and len(queue) == 26 and loop.arm.periods == 0
     for _ in range(3):
         loop.realtime_period()
@@ -178,7 +187,7 @@ def test_pause_freezes_physics_and_watchdog_and_step_advances_one_period_each(sc
     for _ in range(3):
         loop.realtime_period()
     loop.set_paused(True)
-    for _ in range(50):                                 # 50 ms paused: longer than the timeout
+    for _ in range(50):  # 50 ms paused: longer than the timeout
         assert loop.realtime_period() is None
     assert {round(t.t * RATE) for t in published[3:]} == {3}
     assert loop.arm.periods == 3
@@ -200,7 +209,7 @@ def test_reset_returns_to_the_initial_state_with_brakes_on(scene):
     loop.request_reset(timeout=None)
     assert loop.arm.t == 0.0 and loop.arm.periods == 0 and loop.commands == 0
     assert loop.stats.published == 0 and loop.arm.command == [0.0, 0.0]
-    assert loop.realtime_period() is None               # brakes on until the next command
+    assert loop.realtime_period() is None  # brakes on until the next command
     initial = SimulatedArm(scene, RATE).sample()
     assert published[-1].t == 0.0 and published[-1].position == initial.position
     loop.command([1.0, 0.0], clock.now)
@@ -214,12 +223,12 @@ def test_lockstep_pacing_restarts_after_a_reset_and_leaves_pauses_out(scene):
         loop.command([0.0, 0.0], clock.now)
         loop.lockstep_period(clock.now, rate_factor=1.0)
     loop.set_paused(True)
-    clock.now += 5.0                                    # 5 s paused
+    clock.now += 5.0  # 5 s paused
     loop.set_paused(False)
     clock.sleeps.clear()
     loop.command([0.0, 0.0], clock.now)
     loop.lockstep_period(clock.now, rate_factor=1.0)
-    assert clock.sleeps == pytest.approx([P])           # paced, no catching up on the pause
+    assert clock.sleeps == pytest.approx([P])  # paced, no catching up on the pause
     clock.now += 2.0
     loop.request_reset(timeout=None)
     loop.command([0.0, 0.0], clock.now)
@@ -233,7 +242,7 @@ def test_e_stop_zeroes_the_torque_at_the_next_period_until_cleared(scene):
     loop.realtime_period()
     assert loop.arm.command == [9.0, 9.0]
     loop.e_stop = True
-    loop.command([8.0, 8.0], clock.now)                 # commands still arrive: ignored
+    loop.command([8.0, 8.0], clock.now)  # commands still arrive: ignored
     loop.realtime_period()
     assert loop.arm.command == [0.0, 0.0]
     loop.e_stop = False
@@ -246,7 +255,7 @@ def test_lockstep_paced_never_ahead_of_the_rate_factor(scene):
     loop = make_loop(scene, clock, published=published)
     for _ in range(4):
         loop.command([0.0, 0.0], clock.now)
-        loop.lockstep_period(clock.now, rate_factor=0.5)   # 2 wall ms per period
+        loop.lockstep_period(clock.now, rate_factor=0.5)  # 2 wall ms per period
     assert clock.now == pytest.approx(100.0 + 4 * 2 * P)
     assert [round(t.t * RATE) for t in published] == [1, 2, 3, 4]
     clock2 = FakeClock()
@@ -277,8 +286,11 @@ def test_only_the_newest_valid_command_of_a_period_is_checked_and_applied(scene)
     refused, B applied, and A and the garbage before B are never parsed (superseded)."""
     clock, checked = FakeClock(), []
     a, b = [1.0, 0.0], [2.0, 0.0]
-    queue = dict(zip((100.0 + i * 1e-7 for i in range(6)),
-                     (a, 'garbage', 'garbage', 'garbage', b, 'garbage')))
+    queue = dict(
+        zip(
+            (100.0 + i * 1e-7 for i in range(6)), (a, 'garbage', 'garbage', 'garbage', b, 'garbage')
+        )
+    )
     loop = make_loop(scene, clock, queue, checked=checked)
     loop.realtime_period()
     assert not queue and loop.flooded == 0
@@ -299,6 +311,7 @@ def _silence_after_the_first_impact(scene, timeout, silence_from, silence=0.333)
     (the tip through the surface) raises SimulationError."""
     from impact_arm.contract import to_absolute
     from impact_arm.core.control import CycleController
+
     clock, published, commands = FakeClock(), [], {}
     loop = make_loop(scene, clock, commands, published, timeout=timeout)
     ctrl = CycleController.for_scene(loop.arm.model, scene.controller)
@@ -311,21 +324,24 @@ def _silence_after_the_first_impact(scene, timeout, silence_from, silence=0.333)
             continue
         answered = tick
         commands[clock.now + 0.0005] = ctrl.update(
-            tick.t, to_absolute(tick.position), to_absolute(tick.velocity),
-            normal_force=tick.wrench[1])
+            tick.t,
+            to_absolute(tick.position),
+            to_absolute(tick.velocity),
+            normal_force=tick.wrench[1],
+        )
     return impacts
 
 
 @pytest.mark.parametrize('silence_from', [0.244, 0.248, 0.252])
-def test_default_watchdog_survives_a_middleware_silence_right_after_an_impact(scene,
-                                                                              silence_from):
+def test_default_watchdog_survives_a_middleware_silence_right_after_an_impact(scene, silence_from):
     """The middleware sometimes delivers nothing for ~0.33 s. Right after an impact the
     controller has switched to a large 'up' torque; held for 0.1 s (the old default) it swings
     the arm through the floor (seen in CI), zeroed after the default timeout it does not."""
     from impact_arm.core.errors import SimulationError
     from impact_arm.core.realtime import DEFAULT_COMMAND_TIMEOUT
+
     with pytest.raises(SimulationError, match='penetration'):
-        _silence_after_the_first_impact(scene, 0.1, silence_from)    # the danger is real
+        _silence_after_the_first_impact(scene, 0.1, silence_from)  # the danger is real
     impacts = _silence_after_the_first_impact(scene, DEFAULT_COMMAND_TIMEOUT, silence_from)
     # and the cycle resumes: a clean run strikes at 0.24, 0.64, 1.03 and 1.43 s, one cycle
     # is lost to the silence, and the arm does not chatter on the surface

@@ -1,6 +1,7 @@
 """The chain's closed-form equations (used past ``SYMBOLIC_LINKS`` links) against the symbolic
 derivation for 2-4 links, and against mechanics itself (kinetic energy = ½ q̇ᵀ M q̇, energy
 conserved along an undamped motion) for a long chain the symbolic path cannot reach cheaply."""
+
 import math
 
 import numpy as np
@@ -8,14 +9,26 @@ import pytest
 
 from impact_arm.core import equations
 
-FUNCTIONS = ('mass_and_rhs', 'tip', 'tip_acceleration', 'tip_jacobian', 'gravity_forces',
-             'link_energies', 'potential')
+FUNCTIONS = (
+    'mass_and_rhs',
+    'tip',
+    'tip_acceleration',
+    'tip_jacobian',
+    'gravity_forces',
+    'link_energies',
+    'potential',
+)
 
 
 def functions(source):
     """The generated functions as plain Python (no compilation)."""
-    namespace = {'jit_leaf': lambda f: f, 'sin': math.sin, 'cos': math.cos,
-                 'sqrt': math.sqrt, 'math': math}
+    namespace = {
+        'jit_leaf': lambda f: f,
+        'sin': math.sin,
+        'cos': math.cos,
+        'sqrt': math.sqrt,
+        'math': math,
+    }
     exec(source, namespace)
     return namespace
 
@@ -24,18 +37,25 @@ def arguments(rng, n):
     q, qd, qdd, Qx = (rng.uniform(-3, 3, n) for _ in range(4))
     L, m = rng.uniform(0.2, 1.5, n), rng.uniform(0.3, 2.0, n)
     g = 9.81
-    return {'mass_and_rhs': (q, qd, Qx, L, m, g), 'tip': (q, qd, L),
-            'tip_acceleration': (q, qd, qdd, L), 'tip_jacobian': (q, L),
-            'gravity_forces': (q, L, m, g), 'link_energies': (q, qd, L, m),
-            'potential': (q, L, m, g)}
+    return {
+        'mass_and_rhs': (q, qd, Qx, L, m, g),
+        'tip': (q, qd, L),
+        'tip_acceleration': (q, qd, qdd, L),
+        'tip_jacobian': (q, L),
+        'gravity_forces': (q, L, m, g),
+        'link_energies': (q, qd, L, m),
+        'potential': (q, L, m, g),
+    }
 
 
 @pytest.mark.parametrize('n', [2, 3, 4])
 @pytest.mark.parametrize('gravity', [True, False])
 def test_closed_form_matches_the_symbolic_derivation(n, gravity):
-    symbolic = functions(equations._derive_source(n, gravity) + equations.MASS_INTO_WRAPPER
-                         if n > equations.SYMBOLIC_LINKS
-                         else equations._derivation(n, gravity))
+    symbolic = functions(
+        equations._derive_source(n, gravity) + equations.MASS_INTO_WRAPPER
+        if n > equations.SYMBOLIC_LINKS
+        else equations._derivation(n, gravity)
+    )
     chain = functions(equations._chain_source(n, gravity))
     rng = np.random.default_rng(n)
     for _ in range(20):
@@ -57,7 +77,7 @@ def test_closed_form_matches_the_symbolic_derivation(n, gravity):
 
 def kinetic_energy(f, q, qd, L, m):
     n = len(q)
-    M = np.array(f['mass_and_rhs'](q, qd, np.zeros(n), L, m, 9.81)[:n * n]).reshape(n, n)
+    M = np.array(f['mass_and_rhs'](q, qd, np.zeros(n), L, m, 9.81)[: n * n]).reshape(n, n)
     return 0.5 * qd @ M @ qd, M
 
 
@@ -80,7 +100,7 @@ def test_long_chain_conserves_energy_in_free_swing():
     f = functions(equations._chain_source(n, True))
     L, m = np.linspace(0.3, 0.6, n), np.linspace(1.0, 0.4, n)
 
-    def rate(y):      # through the kernel's form of the equations
+    def rate(y):  # through the kernel's form of the equations
         q, qd = y[:n], y[n:]
         S, b = np.zeros(n * n), np.zeros(n)
         f['mass_and_rhs_into'](q, qd, np.zeros(n), L, m, 9.81, S, b)
@@ -93,13 +113,13 @@ def test_long_chain_conserves_energy_in_free_swing():
     y = np.concatenate([np.linspace(0.2, 1.4, n), np.zeros(n)])
     e0 = energy(y)
     swing = max(abs(energy(np.concatenate([y[:n], np.ones(n)])) - e0), 1.0)
-    for _ in range(2500):       # 0.5 s
+    for _ in range(2500):  # 0.5 s
         k1 = rate(y)
         k2 = rate(y + 0.5 * dt * k1)
         k3 = rate(y + 0.5 * dt * k2)
         k4 = rate(y + dt * k3)
         y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    assert abs(np.max(np.abs(y[n:]))) > 1.0          # it did swing
+    assert abs(np.max(np.abs(y[n:]))) > 1.0  # it did swing
     assert abs(energy(y) - e0) < 1e-6 * swing
 
 
@@ -113,8 +133,9 @@ def pinocchio_chain(pin, L, m, g):
         offset = pin.SE3(np.eye(3), np.array([L[i - 1] if i else 0.0, 0.0, 0.0]))
         joint = model.addJoint(parent, pin.JointModelRZ(), offset, f'joint{i}')
         rod = np.diag([0.0, m[i] * L[i] ** 2 / 12, m[i] * L[i] ** 2 / 12])
-        model.appendBodyToJoint(joint, pin.Inertia(m[i], np.array([L[i] / 2, 0.0, 0.0]), rod),
-                                pin.SE3.Identity())
+        model.appendBodyToJoint(
+            joint, pin.Inertia(m[i], np.array([L[i] / 2, 0.0, 0.0]), rod), pin.SE3.Identity()
+        )
         parent = joint
     return model, model.createData()
 
@@ -138,7 +159,7 @@ def test_long_chain_matches_pinocchio(n):
         S, rhs = np.zeros(n * n), np.zeros(n)
         f['mass_and_rhs_into'](q, qd, np.zeros(n), L, m, g, S, rhs)
         M_theta = pin.crba(model, data, theta)
-        M_theta = np.triu(M_theta) + np.triu(M_theta, 1).T     # crba fills the upper half
+        M_theta = np.triu(M_theta) + np.triu(M_theta, 1).T  # crba fills the upper half
         assert np.allclose(T.T @ S.reshape(n, n) @ T, M_theta, rtol=1e-12, atol=1e-12)
         bias = pin.rnea(model, data, theta, theta_d, np.zeros(n))
         assert np.allclose(-T.T @ rhs, bias, rtol=1e-11, atol=1e-10)

@@ -1,6 +1,7 @@
 """Model only what a scene requires: surfaces, laws, friction, gravity, integral
 states decide what the generated module contains, and the kernel keeps every piece of contact,
 friction and integral code behind the compile-time constants that remove it."""
+
 import ast
 import inspect
 import os
@@ -22,22 +23,47 @@ def shape(scene):
     return eq.N, eq.HAS_CONTACT, eq.HAS_FRICTION, eq.NI
 
 
-@pytest.mark.parametrize('name, scene, expected', [
-    ('article', lambda: scene_from(), (2, True, True, 0)),
-    ('no surface', lambda: scene_from({('controller', 'law'): 'none'}, surfaces=[]),
-     (2, False, False, 0)),
-    ('surface with law none', lambda: scene_from(
-        {('controller', 'law'): 'none'},
-        surfaces=[{'height': -1.0, 'law': 'none', 'mu': 0.5, 'material': 'steel'}]),
-     (2, False, False, 0)),
-    ('frictionless Hertz', lambda: scene_from(
-        {('controller', 'law'): 'none'}, gravity=0.0, surfaces=HERTZ_FLOOR), (2, True, False, 0)),
-    ('continuous PID', lambda: scene_from({('controller', 'law'): 'pid'}, surfaces=[]),
-     (2, False, False, 2)),
-    ('sampled PID', lambda: scene_from({('controller', 'law'): 'pid', ('controller', 'rate'): 1e3},
-                                       surfaces=[]), (2, False, False, 0)),
-    ('PD', lambda: scene_from({('controller', 'law'): 'pd'}, surfaces=[]), (2, False, False, 0)),
-])
+@pytest.mark.parametrize(
+    'name, scene, expected',
+    [
+        ('article', lambda: scene_from(), (2, True, True, 0)),
+        (
+            'no surface',
+            lambda: scene_from({('controller', 'law'): 'none'}, surfaces=[]),
+            (2, False, False, 0),
+        ),
+        (
+            'surface with law none',
+            lambda: scene_from(
+                {('controller', 'law'): 'none'},
+                surfaces=[{'height': -1.0, 'law': 'none', 'mu': 0.5, 'material': 'steel'}],
+            ),
+            (2, False, False, 0),
+        ),
+        (
+            'frictionless Hertz',
+            lambda: scene_from({('controller', 'law'): 'none'}, gravity=0.0, surfaces=HERTZ_FLOOR),
+            (2, True, False, 0),
+        ),
+        (
+            'continuous PID',
+            lambda: scene_from({('controller', 'law'): 'pid'}, surfaces=[]),
+            (2, False, False, 2),
+        ),
+        (
+            'sampled PID',
+            lambda: scene_from(
+                {('controller', 'law'): 'pid', ('controller', 'rate'): 1e3}, surfaces=[]
+            ),
+            (2, False, False, 0),
+        ),
+        (
+            'PD',
+            lambda: scene_from({('controller', 'law'): 'pd'}, surfaces=[]),
+            (2, False, False, 0),
+        ),
+    ],
+)
 def test_generated_module_holds_only_what_the_scene_uses(name, scene, expected):
     assert shape(scene()) == expected, name
 
@@ -49,10 +75,13 @@ def test_state_has_integral_states_only_with_a_continuous_pid():
 
 def test_gravity_off_removes_gravity_from_the_equations():
     def body(scene):
-        source = inspect.getsource(ArmModel(scene).eq.accel.py_func
-                                   if hasattr(ArmModel(scene).eq.accel, 'py_func')
-                                   else ArmModel(scene).eq.accel)
-        return source.split(':', 1)[1]      # after the signature, which names g
+        source = inspect.getsource(
+            ArmModel(scene).eq.accel.py_func
+            if hasattr(ArmModel(scene).eq.accel, 'py_func')
+            else ArmModel(scene).eq.accel
+        )
+        return source.split(':', 1)[1]  # after the signature, which names g
+
     free = {('controller', 'law'): 'none'}
     with_g = body(scene_from(free, surfaces=[]))
     without = body(scene_from(free, surfaces=[], gravity=0.0))
@@ -60,8 +89,12 @@ def test_gravity_off_removes_gravity_from_the_equations():
     assert not re.search(r'\bg\b', without.split('\n', 1)[1])
 
 
-GUARDED = {'contact_forces': 'HAS_CONTACT', 'tip_jacobian': 'HAS_CONTACT',
-           'record_point': 'HAS_CONTACT', 'friction_force': 'HAS_FRICTION'}
+GUARDED = {
+    'contact_forces': 'HAS_CONTACT',
+    'tip_jacobian': 'HAS_CONTACT',
+    'record_point': 'HAS_CONTACT',
+    'friction_force': 'HAS_FRICTION',
+}
 
 
 def test_contact_friction_and_integral_code_sits_behind_compile_time_constants():
@@ -87,6 +120,7 @@ def test_contact_friction_and_integral_code_sits_behind_compile_time_constants()
                 found.append((node.func.id, guards))
             for child in ast.iter_child_nodes(node):
                 visit(child, guards)
+
         visit(func, frozenset())
         return found
 
@@ -100,8 +134,9 @@ def test_contact_friction_and_integral_code_sits_behind_compile_time_constants()
                 assert 'HAS_FRICTION' in guards
                 checked += 1
     # the step loop: per-step contact bookkeeping only under HAS_CONTACT
-    loop_calls = [(c, g) for c, g in guarded_calls(functions['stepping_loop'])
-                  if c == 'record_point']
+    loop_calls = [
+        (c, g) for c, g in guarded_calls(functions['stepping_loop']) if c == 'record_point'
+    ]
     assert any('HAS_CONTACT' in g for c, g in loop_calls)
     assert checked >= 3
     rhs_src = ast.get_source_segment(source, functions['rhs'])
@@ -111,10 +146,14 @@ def test_contact_friction_and_integral_code_sits_behind_compile_time_constants()
 def test_several_surfaces_each_with_its_own_law():
     """A Hertz shelf at -0.8 m above the article's floor: the arm strikes the shelf (elastic,
     no dent), never the floor below it; a `none` surface is not there at all."""
-    scene = scene_from(cycles=2, surfaces=[
-        {'height': -0.5, 'law': 'none', 'material': 'steel'},
-        {'height': -0.8, 'law': 'hertz', 'mu': 0.2, 'material': 'steel'},
-        {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.2, 'material': 'steel'}])
+    scene = scene_from(
+        cycles=2,
+        surfaces=[
+            {'height': -0.5, 'law': 'none', 'material': 'steel'},
+            {'height': -0.8, 'law': 'hertz', 'mu': 0.2, 'material': 'steel'},
+            {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.2, 'material': 'steel'},
+        ],
+    )
     model = ArmModel(scene)
     assert [s.height for s in model.surfaces] == [-0.8, -1.0]
     integ = PhaseIntegrator(model)
@@ -125,7 +164,7 @@ def test_several_surfaces_each_with_its_own_law():
             if event.kind == 'contact':
                 surfaces.add(event.surface)
             if event.kind == 'max_compression':
-                assert event.info['delta_r'] == 0.0      # Hertz: elastic, no dent
+                assert event.info['delta_r'] == 0.0  # Hertz: elastic, no dent
     assert surfaces == {0}
     assert 'yield' not in kinds and kinds.count('separation') >= 2
 
@@ -139,14 +178,19 @@ def test_kernel_parts_name_only_what_their_imports_declare():
     import symtable
 
     from impact_arm.core.kernel import MARKER, PARTS
+
     missing = []
     for name in PARTS:
         module = importlib.import_module(f'impact_arm.core.kernel.{name}')
         source = open(module.__file__, encoding='utf-8').read()
         assert MARKER in source
         for func in symtable.symtable(source, module.__file__, 'exec').get_children():
-            missing += [f'{name}.{func.get_name()}: {s.get_name()}' for s in func.get_symbols()
-                        if s.is_global() and s.is_referenced()
-                        and not hasattr(module, s.get_name())
-                        and not hasattr(builtins, s.get_name())]
+            missing += [
+                f'{name}.{func.get_name()}: {s.get_name()}'
+                for s in func.get_symbols()
+                if s.is_global()
+                and s.is_referenced()
+                and not hasattr(module, s.get_name())
+                and not hasattr(builtins, s.get_name())
+            ]
     assert missing == []

@@ -2,6 +2,7 @@
 simulator (with sensor noise, lost samples and a wall-clock offset) and must come back within
 the targets; a contact the scene cannot express must be refused as a fit; bad input is
 refused in one line naming what is wrong."""
+
 import json
 import os
 
@@ -10,28 +11,26 @@ import pytest
 
 from impact_arm.core.errors import ImpactArmError
 from impact_arm.core.fit import FitError, fit
-from impact_arm.core.identify import (
-    IdentifyError,
-    JointRecording,
-    LocalFit,
-    find_impacts,
-)
+from impact_arm.core.identify import IdentifyError, JointRecording, LocalFit, find_impacts
 from impact_arm.io.recording import RecordingInputError, read_recording
 from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
 
 BOUNDS = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
-WALL_CLOCK = 1.7e9          # stamps of a machine's clock, not from zero
+WALL_CLOCK = 1.7e9  # stamps of a machine's clock, not from zero
 
 
 def drawn(seed):
     rng = np.random.default_rng(seed)
-    return {'surfaces[0].mu': float(rng.uniform(0.12, 0.6)),
-            'materials.steel.S_y': float(np.exp(rng.uniform(np.log(5e8), np.log(2e9))))}
+    return {
+        'surfaces[0].mu': float(rng.uniform(0.12, 0.6)),
+        'materials.steel.S_y': float(np.exp(rng.uniform(np.log(5e8), np.log(2e9)))),
+    }
 
 
 def recording(truth, seed, cycles=6, **kw):
-    return synthetic_recording('paper', truth, cycles=cycles, drop=0.02,
-                               clock_offset=WALL_CLOCK, seed=seed, **kw)
+    return synthetic_recording(
+        'paper', truth, cycles=cycles, drop=0.02, clock_offset=WALL_CLOCK, seed=seed, **kw
+    )
 
 
 def relative_errors(result, truth):
@@ -69,8 +68,7 @@ def test_contact_the_scene_cannot_express_does_not_fit():
     result = fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0)})
     assert result.verdict.startswith('does not fit: '), result.verdict
     # the same recording fitted with E free fits, and finds E
-    free = fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0),
-                              'materials.steel.E': (1e10, 5e11)})
+    free = fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.E': (1e10, 5e11)})
     assert free.fits, free.verdict
     assert abs(free.parameters['materials.steel.E']['value'] / 40e9 - 1) < 0.1
 
@@ -78,14 +76,15 @@ def test_contact_the_scene_cannot_express_does_not_fit():
 def test_local_fit_differentiates_a_cubic_exactly():
     t = np.linspace(0.0, 0.014, 15)
     c = np.array([0.3, -2.0, 40.0, 900.0])
-    q = (c[0] + c[1] * t + c[2] * t ** 2 + c[3] * t ** 3)[:, None]
-    qd = (c[1] + 2 * c[2] * t + 3 * c[3] * t ** 2)[:, None]
+    q = (c[0] + c[1] * t + c[2] * t**2 + c[3] * t**3)[:, None]
+    qd = (c[1] + 2 * c[2] * t + 3 * c[3] * t**2)[:, None]
     fitted = LocalFit(t, q, qd, t[-1], np.array([1e-5]), np.array([1e-3]))
-    t_out = 0.0155          # extrapolated past the window, as at an impact
+    t_out = 0.0155  # extrapolated past the window, as at an impact
     q1, qd1, cov = fitted.state(t_out)
-    assert q1[0] == pytest.approx(c[0] + c[1] * t_out + c[2] * t_out ** 2 + c[3] * t_out ** 3,
-                                  abs=1e-12)
-    assert qd1[0] == pytest.approx(c[1] + 2 * c[2] * t_out + 3 * c[3] * t_out ** 2, abs=1e-9)
+    assert q1[0] == pytest.approx(
+        c[0] + c[1] * t_out + c[2] * t_out**2 + c[3] * t_out**3, abs=1e-12
+    )
+    assert qd1[0] == pytest.approx(c[1] + 2 * c[2] * t_out + 3 * c[3] * t_out**2, abs=1e-9)
     assert cov[1, 1] > 0
 
 
@@ -115,16 +114,38 @@ def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, c
     from impact_arm.core.scene import load_scene
     from impact_arm.core.simulate import run
     from impact_arm.tools.cli import main
+
     folder, truth = bag
     out = tmp_path / 'fit'
-    code = main(['fit', folder, '--scene', 'paper', '--joints', 'joint1,joint2',
-                 '--param', 'surfaces[0].mu=0.05:1', '--param', 'materials.steel.S_y=2e8:5e9',
-                 '--json', str(tmp_path / 'r.json'), '--out', str(out)])
+    code = main(
+        [
+            'fit',
+            folder,
+            '--scene',
+            'paper',
+            '--joints',
+            'joint1,joint2',
+            '--param',
+            'surfaces[0].mu=0.05:1',
+            '--param',
+            'materials.steel.S_y=2e8:5e9',
+            '--json',
+            str(tmp_path / 'r.json'),
+            '--out',
+            str(out),
+        ]
+    )
     text = capsys.readouterr().out
     assert code == 0, text
     data = json.loads((tmp_path / 'r.json').read_text())
-    assert set(data) >= {'parameters', 'verdict', 'residual_rms', 'noise_rms', 'impacts_used',
-                         'scene'}
+    assert set(data) >= {
+        'parameters',
+        'verdict',
+        'residual_rms',
+        'noise_rms',
+        'impacts_used',
+        'scene',
+    }
     assert data['verdict'] == 'fits'
     for key, value in truth.items():
         p = data['parameters'][key]
@@ -140,35 +161,43 @@ def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, c
 
 def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):
     from impact_arm.tools.compare import compare
+
     folder, truth = bag
     scene = tmp_path / 'truth.yaml'
     from impact_arm.tools.fit import write_fitted_scene
+
     write_fitted_scene('paper', truth, str(scene))
     right = compare(folder, str(scene))
     wrong = compare(folder, 'paper')
     d_right = np.array([r['d_cor'] for r in right['table']])
     d_wrong = np.array([r['d_cor'] for r in wrong['table']])
     assert len(d_right) >= 4 and right['unmatched_a'] == 0
-    assert np.sqrt(np.mean(d_right ** 2)) < 0.2 * np.sqrt(np.mean(d_wrong ** 2))
+    assert np.sqrt(np.mean(d_right**2)) < 0.2 * np.sqrt(np.mean(d_wrong**2))
 
 
-@pytest.mark.parametrize('kwargs, message', [
-    ({'joints': ['shoulder', 'elbow']}, '--joints: shoulder, elbow not in /joint_states'),
-    ({'states_topic': '/arm/joint_states'}, '--states-topic /arm/joint_states: not in'),
-    ({'wrench_topic': '/ft_sensor'}, '--wrench-topic /ft_sensor: not in'),
-])
+@pytest.mark.parametrize(
+    'kwargs, message',
+    [
+        ({'joints': ['shoulder', 'elbow']}, '--joints: shoulder, elbow not in /joint_states'),
+        ({'states_topic': '/arm/joint_states'}, '--states-topic /arm/joint_states: not in'),
+        ({'wrench_topic': '/ft_sensor'}, '--wrench-topic /ft_sensor: not in'),
+    ],
+)
 def test_bad_recording_input_is_refused_in_one_line(bag, kwargs, message):
     with pytest.raises(RecordingInputError) as exc:
         read_recording(bag[0], **kwargs)
     assert message in str(exc.value) and '\n' not in str(exc.value)
 
 
-@pytest.mark.parametrize('bounds, message', [
-    ({'surfaces[0].gamma': (0.1, 1.0)}, "no 'gamma' in surfaces[0]"),
-    ({'materials.brass.E': (1e9, 1e12)}, "no 'brass' in materials"),
-    ({'surfaces[0].mu': (0.3, 1.0)}, "the bounds exclude the scene's value 0.2"),
-    ({'surfaces[0].mu': (1.0, 0.3)}, 'bounds must be finite with LO < HI'),
-])
+@pytest.mark.parametrize(
+    'bounds, message',
+    [
+        ({'surfaces[0].gamma': (0.1, 1.0)}, "no 'gamma' in surfaces[0]"),
+        ({'materials.brass.E': (1e9, 1e12)}, "no 'brass' in materials"),
+        ({'surfaces[0].mu': (0.3, 1.0)}, "the bounds exclude the scene's value 0.2"),
+        ({'surfaces[0].mu': (1.0, 0.3)}, 'bounds must be finite with LO < HI'),
+    ],
+)
 def test_bad_parameters_are_refused_in_one_line(bounds, message):
     rec = recording({}, 51, cycles=2)
     with pytest.raises(FitError) as exc:
@@ -178,21 +207,26 @@ def test_bad_parameters_are_refused_in_one_line(bounds, message):
 
 def test_a_recording_without_impact_is_refused(tmp_path, capsys):
     from impact_arm.tools.cli import main
+
     # the arm is sent down to the horizontal only: it never reaches the floor
-    rec = synthetic_recording('paper', {'controller.down_target_deg': [0.0, 0.0], 't_max': 1.5},
-                              seed=61)
+    rec = synthetic_recording(
+        'paper', {'controller.down_target_deg': [0.0, 0.0], 't_max': 1.5}, seed=61
+    )
     with pytest.raises(IdentifyError, match='no impact in the recording'):
         fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0)})
     folder = tmp_path / 'quiet_bag'
     write_rosbag2(rec, str(folder))
-    assert main(['fit', str(folder), '--param', 'surfaces[0].mu=0.05:1',
-                 '--out', str(tmp_path / 'o')]) == 2
+    assert (
+        main(['fit', str(folder), '--param', 'surfaces[0].mu=0.05:1', '--out', str(tmp_path / 'o')])
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'no impact in the recording' in err[0]
 
 
 def test_param_syntax_is_refused_in_one_line():
     from impact_arm.tools.fit import parse_param
+
     with pytest.raises(ImpactArmError, match="--param 'surfaces\\[0\\].mu=0.1': expected"):
         parse_param('surfaces[0].mu=0.1')
     assert parse_param('tip_radius=1e-3:1e-2') == ('tip_radius', (1e-3, 1e-2))
@@ -205,10 +239,17 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
     targets and start: the reading is told from the free flight, the values come back."""
     from impact_arm.core.study import Study, apply_overrides
     from impact_arm.tools.synthetic import driver_recording
-    variant = {'materials.steel.E': 70e9, 'materials.steel.nu': 0.33,
-               'materials.steel.S_y': 2.5e8, 'surfaces[0].mu': 0.3, 'controller.rate': 1000.0,
-               'controller.down_target_deg': [-70.0, -85.0], 'initial.q_deg': [40.0, 60.0],
-               'surfaces[0].height': -1.1}
+
+    variant = {
+        'materials.steel.E': 70e9,
+        'materials.steel.nu': 0.33,
+        'materials.steel.S_y': 2.5e8,
+        'surfaces[0].mu': 0.3,
+        'controller.rate': 1000.0,
+        'controller.down_target_deg': [-70.0, -85.0],
+        'initial.q_deg': [40.0, 60.0],
+        'surfaces[0].height': -1.1,
+    }
     truth = {'materials.steel.S_y': 3.1e8, 'surfaces[0].mu': 0.42}
     rec = driver_recording('paper', {**variant, **truth}, cycles=6, seed=71)
     scene = apply_overrides(Study('paper').data, variant)
@@ -222,9 +263,12 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
 def test_joints_in_the_wrong_order_are_told_not_fitted():
     rec = recording({}, 81, cycles=2)
     for name in ('position', 'velocity', 'effort'):
-        setattr(rec, name, getattr(rec, name)[:, ::-1].copy())    # elbow first
-    with pytest.raises(IdentifyError, match='none with the tip near a surface of the scene '
-                                            r'\(check --joints order'):
+        setattr(rec, name, getattr(rec, name)[:, ::-1].copy())  # elbow first
+    with pytest.raises(
+        IdentifyError,
+        match='none with the tip near a surface of the scene '
+        r'\(check --joints order',
+    ):
         fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0)})
 
 
@@ -249,10 +293,14 @@ def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
     """Two recordings of the same arm (other noise, other lost samples, another clock, no
     extra joint in the second): every impact matched, the CoR the same within the noise."""
     from impact_arm.tools.compare import compare
+
     folder, truth = bag
     other = tmp_path / 'other_bag'
-    write_rosbag2(synthetic_recording('paper', truth, cycles=6, drop=0.03, clock_offset=5e8,
-                                      seed=42), str(other), extra_joint=False)
+    write_rosbag2(
+        synthetic_recording('paper', truth, cycles=6, drop=0.03, clock_offset=5e8, seed=42),
+        str(other),
+        extra_joint=False,
+    )
     result = compare(folder, str(other))
     d = np.array([r['d_cor'] for r in result['table']])
     assert len(d) == len(result['a']) == len(result['b'])

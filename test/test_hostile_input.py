@@ -1,5 +1,6 @@
 """Hostile input without ROS: scene files and raw payloads either give finite values or are
 refused in one line. Property-based parts are bounded and derandomized."""
+
 import copy
 import math
 import os
@@ -11,16 +12,26 @@ from hypothesis import strategies as st
 
 from impact_arm.core.errors import SceneError
 from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
-from impact_arm.io.wire import (MalformedMessage, float64_array_data, joint_state_command,
-                                joint_state_fields, wrench_stamped_fields)
+from impact_arm.io.wire import (
+    MalformedMessage,
+    float64_array_data,
+    joint_state_command,
+    joint_state_fields,
+    wrench_stamped_fields,
+)
 from generators import key_paths
 
 from scenes import PAPER, paper_dict
 
-BOUNDED = settings(max_examples=150, deadline=None, derandomize=True,
-                   suppress_health_check=list(HealthCheck))
-READERS = (float64_array_data, joint_state_fields, wrench_stamped_fields,
-           lambda raw: joint_state_command(raw, ('joint1', 'joint2')))
+BOUNDED = settings(
+    max_examples=150, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck)
+)
+READERS = (
+    float64_array_data,
+    joint_state_fields,
+    wrench_stamped_fields,
+    lambda raw: joint_state_command(raw, ('joint1', 'joint2')),
+)
 with open(PAPER, encoding='utf-8') as _f:
     PAPER_TEXT = _f.read()
 
@@ -29,6 +40,7 @@ with open(PAPER, encoding='utf-8') as _f:
 def joint_state_bytes(names, position, velocity, sec=0, nanosec=0):
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
+
     msg = JointState(name=names, position=position, velocity=velocity)
     msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
     return serialize_message(msg)
@@ -56,8 +68,9 @@ def test_mutated_joint_states_give_a_value_or_a_malformed_message(data):
     elif action == 'flip':
         raw[at] ^= data.draw(st.integers(1, 255))
     else:
-        raw[at:at + 4] = struct.pack('<I', data.draw(st.sampled_from((2**31 - 1, 2**32 - 1,
-                                                                      1000, 7))))
+        raw[at : at + 4] = struct.pack(
+            '<I', data.draw(st.sampled_from((2**31 - 1, 2**32 - 1, 1000, 7)))
+        )
     for read in READERS:
         try:
             read(bytes(raw))
@@ -65,12 +78,15 @@ def test_mutated_joint_states_give_a_value_or_a_malformed_message(data):
             pass
 
 
-@pytest.mark.parametrize('raw, why', [
-    (b'', 'empty'),
-    (b'\x00\x01\x00\x00', 'header only'),
-    (b'\x07\x01\x00\x00' + bytes(40), 'wrong encapsulation'),
-    (b'\x00\x01\x00\x00' + bytes(8) + struct.pack('<I', 2**31 - 1) + bytes(16), 'huge frame'),
-])
+@pytest.mark.parametrize(
+    'raw, why',
+    [
+        (b'', 'empty'),
+        (b'\x00\x01\x00\x00', 'header only'),
+        (b'\x07\x01\x00\x00' + bytes(40), 'wrong encapsulation'),
+        (b'\x00\x01\x00\x00' + bytes(8) + struct.pack('<I', 2**31 - 1) + bytes(16), 'huge frame'),
+    ],
+)
 def test_each_reader_refuses_named_malformations(raw, why):
     for read in READERS:
         with pytest.raises(MalformedMessage):
@@ -79,8 +95,8 @@ def test_each_reader_refuses_named_malformations(raw, why):
 
 def test_absurd_sequence_lengths_and_non_utf8_names_are_malformed():
     good = joint_state_bytes(['joint1', 'joint2'], [0.1, 0.2], [0.0, 0.0])
-    names_at = good.index(b'joint1') - 8          # the name count, then the first length
-    huge = good[:names_at] + struct.pack('<I', 2**31 - 1) + good[names_at + 4:]
+    names_at = good.index(b'joint1') - 8  # the name count, then the first length
+    huge = good[:names_at] + struct.pack('<I', 2**31 - 1) + good[names_at + 4 :]
     with pytest.raises(MalformedMessage, match='cannot fit'):
         joint_state_fields(huge)
     bad_name = good.replace(b'joint1', b'joi\xffn1')
@@ -98,32 +114,49 @@ def refusal(text):
     return message
 
 
-@pytest.mark.parametrize('old, new, words', [
-    ('gravity: 9.81', 'gravity: 1:30', ['line 5', "'gravity'", '1:30', 'YAML 1.1']),
-    ('cycles: 15', 'cycles: 017', ["'cycles'", '017']),
-    ('actuators_during_contact: false', 'actuators_during_contact: on', ['on']),
-    ('cycles: 15', 'cycles: 15\ncycles: 3', ['duplicate key', "'cycles'"]),
-    ('t_max: 60.0', 't_max: [1, 2', ['line', 'column']),
-    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
-     '  - {length: 1.0, mass: 1.0}\n  - {length: 1' + '0' * 400 + ', mass: 1.0}',
-     ['links[1].length', '401 digits']),
-    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
-     '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 5e-324}', ['links[1].mass', 'kg']),
-    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
-     '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0e-6, mass: 1.0}', ['links[1].length']),
-    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
-     '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0e-5}', ['ratio', 'masses']),
-    ('preset: balanced', 'max_step: 1.0e-300', ['integrator.max_step', '1e-05']),
-    ('rate: 0 ', 'rate: 1.0e-300 ', ['controller.rate', 'more than a second']),
-    ('kd: [100.0, 100.0]', 'kd: [1.0e9, 100.0]', ['controller.kd[0]', 'closed-loop rate']),
-    ('  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}\n',     # stiff, light
-     '  - {length: 1.0, mass: 1.0e-6}\n  - {length: 1.0, mass: 1.0e-6}\nmaterials: {steel: '
-     '{E: 1.0e13, nu: 0.29, S_y: 1.12e9}}\n', ['contact lasts', 'surfaces[0].material']),
-])
+@pytest.mark.parametrize(
+    'old, new, words',
+    [
+        ('gravity: 9.81', 'gravity: 1:30', ['line 5', "'gravity'", '1:30', 'YAML 1.1']),
+        ('cycles: 15', 'cycles: 017', ["'cycles'", '017']),
+        ('actuators_during_contact: false', 'actuators_during_contact: on', ['on']),
+        ('cycles: 15', 'cycles: 15\ncycles: 3', ['duplicate key', "'cycles'"]),
+        ('t_max: 60.0', 't_max: [1, 2', ['line', 'column']),
+        (
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1' + '0' * 400 + ', mass: 1.0}',
+            ['links[1].length', '401 digits'],
+        ),
+        (
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 5e-324}',
+            ['links[1].mass', 'kg'],
+        ),
+        (
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0e-6, mass: 1.0}',
+            ['links[1].length'],
+        ),
+        (
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}',
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0e-5}',
+            ['ratio', 'masses'],
+        ),
+        ('preset: balanced', 'max_step: 1.0e-300', ['integrator.max_step', '1e-05']),
+        ('rate: 0 ', 'rate: 1.0e-300 ', ['controller.rate', 'more than a second']),
+        ('kd: [100.0, 100.0]', 'kd: [1.0e9, 100.0]', ['controller.kd[0]', 'closed-loop rate']),
+        (
+            '  - {length: 1.0, mass: 1.0}\n  - {length: 1.0, mass: 1.0}\n',  # stiff, light
+            '  - {length: 1.0, mass: 1.0e-6}\n  - {length: 1.0, mass: 1.0e-6}\nmaterials: {steel: '
+            '{E: 1.0e13, nu: 0.29, S_y: 1.12e9}}\n',
+            ['contact lasts', 'surfaces[0].material'],
+        ),
+    ],
+)
 def test_scene_refusals_name_the_key_in_one_line(old, new, words):
     assert PAPER_TEXT.count(old) == 1
     text = PAPER_TEXT.replace(old, new)
-    if new.count('materials:'):     # the replacement brings its own materials
+    if new.count('materials:'):  # the replacement brings its own materials
         text = text.replace('materials:\n  steel: {E: 210.0e9, nu: 0.29, S_y: 1.12e9}\n', '')
     message = refusal(text)
     for word in words:
@@ -147,20 +180,28 @@ def test_oversized_and_endless_files_are_refused_quickly(tmp_path):
 
 
 def test_yaml_12_numbers_still_read():
-    scene = scene_from_text(PAPER_TEXT.replace('gravity: 9.81', 'gravity: 0x0A')
-                            .replace('cycles: 15', 'cycles: 0o17'))
+    scene = scene_from_text(
+        PAPER_TEXT.replace('gravity: 9.81', 'gravity: 0x0A').replace('cycles: 15', 'cycles: 0o17')
+    )
     assert scene.gravity == 10.0 and scene.cycles == 15
-    assert math.copysign(1, scene_from_text(PAPER_TEXT.replace(
-        'gravity: 9.81', 'gravity: -0.0')).gravity) == -1   # -0.0 is within [0, 1000]
+    assert (
+        math.copysign(
+            1, scene_from_text(PAPER_TEXT.replace('gravity: 9.81', 'gravity: -0.0')).gravity
+        )
+        == -1
+    )  # -0.0 is within [0, 1000]
 
 
 LEAVES = st.one_of(
-    st.none(), st.booleans(), st.text(max_size=8),
-    st.integers(min_value=-2**80, max_value=2**1100),
+    st.none(),
+    st.booleans(),
+    st.text(max_size=8),
+    st.integers(min_value=-(2**80), max_value=2**1100),
     st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from([5e-324, -0.0, 1e308, 1e-300, 2.0**64]),
-    st.lists(st.floats(), max_size=3), st.dictionaries(st.text(max_size=3), st.integers(),
-                                                       max_size=2))
+    st.lists(st.floats(), max_size=3),
+    st.dictionaries(st.text(max_size=3), st.integers(), max_size=2),
+)
 
 
 @BOUNDED
@@ -179,7 +220,7 @@ def test_mutated_scenes_are_accepted_finite_or_refused_in_one_line(data):
             else:
                 parent[path[-1]] = data.draw(LEAVES)
         except (KeyError, IndexError, TypeError):
-            continue                      # an earlier mutation removed or replaced the parent
+            continue  # an earlier mutation removed or replaced the parent
     try:
         result = parse_scene(scene, origin='fuzz')
     except SceneError as exc:
@@ -190,8 +231,9 @@ def test_mutated_scenes_are_accepted_finite_or_refused_in_one_line(data):
 
 
 @BOUNDED
-@given(st.text(alphabet=st.sampled_from(list(' \n:-[]{}&*!|>#"\'0123456789.eE+abcxyz_')),
-               max_size=120))
+@given(
+    st.text(alphabet=st.sampled_from(list(' \n:-[]{}&*!|>#"\'0123456789.eE+abcxyz_')), max_size=120)
+)
 def test_arbitrary_yaml_text_is_refused_in_one_line(text):
     try:
         scene_from_text(text)
@@ -207,6 +249,7 @@ def test_a_run_that_cannot_progress_stops_with_the_run_budget(monkeypatch):
     from impact_arm.core import integrator
     from impact_arm.core.simulate import run
     from scenes import scene_from
+
     monkeypatch.setattr(integrator, 'STEPS_PER_CALL', 1000)
     monkeypatch.setattr(integrator, 'MIN_STEP_BUDGET', 5000)
     scene = scene_from(cycles=1)
@@ -224,12 +267,15 @@ def short_scene(tmp_path):
 @pytest.mark.parametrize('flag', ['--json', '--mcap'])
 def test_output_paths_are_refused_before_the_run(tmp_path, capsys, flag):
     from impact_arm.tools.cli import main
+
     fifo = tmp_path / 'fifo'
     os.mkfifo(fifo)
-    for target, words in ((tmp_path, 'is a directory'),
-                          (tmp_path / 'missing' / 'x', 'does not exist'),
-                          (fifo / 'x', 'is not a directory'),
-                          (fifo, 'not a regular file')):
+    for target, words in (
+        (tmp_path, 'is a directory'),
+        (tmp_path / 'missing' / 'x', 'does not exist'),
+        (fifo / 'x', 'is not a directory'),
+        (fifo, 'not a regular file'),
+    ):
         assert main(['simulate', '--scene', short_scene(tmp_path), flag, str(target)]) == 2
         err = capsys.readouterr().err
         assert words in err and err.count('\n') == 1, err
@@ -239,12 +285,15 @@ def test_output_paths_are_refused_before_the_run(tmp_path, capsys, flag):
 def test_json_through_a_symlink_keeps_the_link_and_writes_no_nan(tmp_path, capsys):
     import json
     from impact_arm.tools.cli import write_json, main
+
     real = tmp_path / 'real.json'
     real.write_text('{}')
     link = tmp_path / 'link.json'
     link.symlink_to(real)
-    assert main(['simulate', '--scene', short_scene(tmp_path), '--no-samples',
-                 '--json', str(link)]) == 0
+    assert (
+        main(['simulate', '--scene', short_scene(tmp_path), '--no-samples', '--json', str(link)])
+        == 0
+    )
     assert link.is_symlink() and 'impacts' in json.loads(real.read_text())
     assert 'link is kept' in capsys.readouterr().out
     write_json(str(real), {'a': float('nan'), 'b': [float('inf'), 1.0]})
@@ -260,6 +309,7 @@ def test_a_lone_surrogate_in_a_name_is_refused():
 def test_bench_stress_fuzz_classifies_each_scene():
     """A smoke run of ``bench stress --fuzz``: a worker process, seeded scenes, a tally."""
     from impact_arm_bench.fuzz import GOOD, run_fuzz
+
     tally, bad = run_fuzz(4, seed=1, timeout=60.0)
     assert sum(tally.values()) == 4 and not bad, bad
     assert set(k for k, v in tally.items() if v) <= set(GOOD)
@@ -282,11 +332,12 @@ def test_a_command_cut_short_and_zero_padded_is_refused(cut):
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64MultiArray
     from impact_arm.core.driver import CommandError, SimulatedArm
+
     raw = serialize_message(Float64MultiArray(data=[1.5, -2.2500001]))
-    padded = raw[:len(raw) - cut] + bytes(cut)
+    padded = raw[: len(raw) - cut] + bytes(cut)
     with pytest.raises(MalformedMessage):
-        float64_array_data(raw[:len(raw) - cut])          # as sent: too short
-    values = float64_array_data(padded)                   # as received: parses ...
+        float64_array_data(raw[: len(raw) - cut])  # as sent: too short
+    values = float64_array_data(padded)  # as received: parses ...
     assert values[0] == 1.5 and 0 < abs(values[1]) < 1e-300
     arm = SimulatedArm(load_scene(PAPER), 1000.0)
     with pytest.raises(CommandError, match='subnormal'):  # ... and the driver refuses it
@@ -297,6 +348,7 @@ def test_a_command_cut_short_and_zero_padded_is_refused(cut):
 def test_a_command_with_bytes_appended_is_malformed():
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64MultiArray
+
     raw = serialize_message(Float64MultiArray(data=[1.5, -2.25]))
     assert float64_array_data(raw) == [1.5, -2.25]
     with pytest.raises(MalformedMessage, match='after the end'):
@@ -307,13 +359,17 @@ def test_a_huge_sampled_run_is_estimated_and_needs_yes(tmp_path, capsys):
     """publish_rate 1e6 Hz up to t_max 60 s is 6e7 samples (~3 min): refused up front with
     the estimate unless --yes; a run past a tenth of the limit states its estimate and runs."""
     from impact_arm.tools import cli
+
     huge = tmp_path / 'huge.yaml'
     huge.write_text(PAPER_TEXT.replace('publish_rate: 1000.0', 'publish_rate: 1000000.0'))
     assert cli.main(['simulate', '--scene', str(huge)]) == 2
     err = capsys.readouterr().err
     assert '6e+07 samples' in err and '--yes' in err and err.count('\n') == 1, err
     medium = tmp_path / 'medium.yaml'
-    medium.write_text(PAPER_TEXT.replace('cycles: 15', 'cycles: 1').replace('t_max: 60.0',
-                      't_max: 2.0').replace('publish_rate: 1000.0', 'publish_rate: 600000.0'))
+    medium.write_text(
+        PAPER_TEXT.replace('cycles: 15', 'cycles: 1')
+        .replace('t_max: 60.0', 't_max: 2.0')
+        .replace('publish_rate: 1000.0', 'publish_rate: 600000.0')
+    )
     assert cli.main(['simulate', '--scene', str(medium)]) == 0
     assert 'samples: up to about' in capsys.readouterr().err

@@ -1,5 +1,6 @@
 """The launch file and the node parameter files: what a ROS 2 user starts with
 `ros2 launch impact_arm arm.launch.py` must name real executables and valid parameters."""
+
 import ast
 import contextlib
 import os
@@ -11,16 +12,18 @@ import types
 import pytest
 import yaml
 
-from ros_helpers import (PYTHON, ROOT, controller, probe, ros_env,  # noqa: F401
-                         start_process, wait_for)
+from ros_helpers import PYTHON, ROOT, controller, start_process, wait_for
 
 NODES = ('simulator', 'controller', 'recorder')
 
 
 def console_scripts():
     tree = ast.parse(open(os.path.join(ROOT, 'setup.py')).read())
-    scripts = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
-               and isinstance(n.value, str) and ' = impact_arm.' in n.value]
+    scripts = [
+        n.value
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Constant) and isinstance(n.value, str) and ' = impact_arm.' in n.value
+    ]
     return {s.split(' = ')[0] for s in scripts}
 
 
@@ -32,6 +35,7 @@ def load_launch_with_stubs(share):
         def __init__(self, *args, **kwargs):
             self.args, self.kwargs = args, kwargs
             created.append(self)
+
     stubs = {
         'ament_index_python': types.ModuleType('ament_index_python'),
         'ament_index_python.packages': types.ModuleType('ament_index_python.packages'),
@@ -41,8 +45,7 @@ def load_launch_with_stubs(share):
         'launch_ros': types.ModuleType('launch_ros'),
         'launch_ros.actions': types.ModuleType('launch_ros.actions'),
         'launch.conditions': types.ModuleType('launch.conditions'),
-        'launch_ros.parameter_descriptions': types.ModuleType(
-            'launch_ros.parameter_descriptions'),
+        'launch_ros.parameter_descriptions': types.ModuleType('launch_ros.parameter_descriptions'),
     }
     stubs['ament_index_python.packages'].get_package_share_directory = lambda pkg: share
     stubs['launch'].LaunchDescription = lambda actions: actions
@@ -52,8 +55,9 @@ def load_launch_with_stubs(share):
     stubs['launch_ros.actions'].Node = type('Node', (Action,), {})
     stubs['launch.conditions'].IfCondition = type('IfCondition', (Action,), {})
     stubs['launch.substitutions'].Command = type('Command', (Action,), {})
-    stubs['launch_ros.parameter_descriptions'].ParameterValue = type('ParameterValue',
-                                                                     (Action,), {})
+    stubs['launch_ros.parameter_descriptions'].ParameterValue = type(
+        'ParameterValue', (Action,), {}
+    )
     saved = {k: sys.modules.get(k) for k in stubs}
     sys.modules.update(stubs)
     try:
@@ -71,8 +75,9 @@ def load_launch_with_stubs(share):
 
 def test_launch_file_starts_the_three_nodes_with_their_parameter_files():
     actions = load_launch_with_stubs(ROOT)
-    nodes = [a for a in actions if type(a).__name__ == 'Node'
-             and a.kwargs['package'] == 'impact_arm']
+    nodes = [
+        a for a in actions if type(a).__name__ == 'Node' and a.kwargs['package'] == 'impact_arm'
+    ]
     arguments = {a.args[0] for a in actions if type(a).__name__ == 'DeclareLaunchArgument'}
     assert {'scene', 'law', 'rate', 'mode', 'tf', 'rviz'} <= arguments
     assert sorted(n.kwargs['executable'] for n in nodes) == sorted(NODES)
@@ -88,30 +93,39 @@ def test_tf_rsp_starts_robot_state_publisher_with_the_urdf_and_rviz_its_shipped_
     scene and the simulator stops publishing TF; rviz:=true opens config/impact_arm.rviz."""
     actions = load_launch_with_stubs(ROOT)
     by_package = {a.kwargs['package']: a for a in actions if type(a).__name__ == 'Node'}
-    rsp, rviz, sim = by_package['robot_state_publisher'], by_package['rviz2'], [
-        a for a in actions if type(a).__name__ == 'Node'
-        and a.kwargs.get('executable') == 'simulator'][0]
+    rsp, rviz, sim = (
+        by_package['robot_state_publisher'],
+        by_package['rviz2'],
+        [
+            a
+            for a in actions
+            if type(a).__name__ == 'Node' and a.kwargs.get('executable') == 'simulator'
+        ][0],
+    )
 
-    def text(sub):   # a stub substitution tree flattened to the text it would evaluate
+    def text(sub):  # a stub substitution tree flattened to the text it would evaluate
         if isinstance(sub, str):
             return sub
         if isinstance(sub, (list, tuple)):
             return ''.join(text(s) for s in sub)
         return type(sub).__name__ + '(' + ''.join(text(a) for a in sub.args) + ')'
+
     rsp_condition = text(rsp.kwargs['condition'])
     assert "' == 'rsp'" in rsp_condition and 'LaunchConfiguration(tf)' in rsp_condition
     command = rsp.kwargs['parameters'][0]['robot_description'].args[0]
-    assert text(command) == ('Command(python3 -m impact_arm.tools.cli urdf --scene '
-                             'LaunchConfiguration(scene))')
-    assert text(rsp.kwargs['condition'].args[0]) in text(sim.kwargs['parameters'][1]
-                                                         ['publish_tf'])
+    assert text(command) == (
+        'Command(python3 -m impact_arm.tools.cli urdf --scene LaunchConfiguration(scene))'
+    )
+    assert text(rsp.kwargs['condition'].args[0]) in text(sim.kwargs['parameters'][1]['publish_tf'])
     assert text(rviz.kwargs['condition']) == 'IfCondition(LaunchConfiguration(rviz))'
     config = rviz.kwargs['arguments'][1]
     assert config == os.path.join(ROOT, 'config', 'impact_arm.rviz')
     rviz_config = yaml.safe_load(open(config))
     displays = {d['Class']: d for d in rviz_config['Visualization Manager']['Displays']}
-    assert displays['rviz_default_plugins/RobotModel']['Description Topic']['Value'] == \
-        '/robot_description'
+    assert (
+        displays['rviz_default_plugins/RobotModel']['Description Topic']['Value']
+        == '/robot_description'
+    )
     assert displays['rviz_default_plugins/MarkerArray']['Topic']['Value'] == '/impact_markers'
     assert rviz_config['Visualization Manager']['Global Options']['Fixed Frame'] == 'world'
 
@@ -121,15 +135,18 @@ def test_rviz_view_looks_along_y_onto_the_arms_x_z_plane():
     (cos yaw cos pitch, sin yaw cos pitch, sin pitch): here on -y, level, so it looks along
     +y with x to the right and z up."""
     import math
+
     config = yaml.safe_load(open(os.path.join(ROOT, 'config', 'impact_arm.rviz')))
     view = config['Visualization Manager']['Views']['Current']
     assert view['Class'] == 'rviz_default_plugins/Orbit'
     yaw, pitch = view['Yaw'], view['Pitch']
-    direction = (math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch),
-                 math.sin(pitch))
+    direction = (math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch))
     assert direction == pytest.approx((0, -1, 0), abs=1e-6)
-    grid = next(d for d in config['Visualization Manager']['Displays']
-                if d['Class'] == 'rviz_default_plugins/Grid')
+    grid = next(
+        d
+        for d in config['Visualization Manager']['Displays']
+        if d['Class'] == 'rviz_default_plugins/Grid'
+    )
     assert grid['Plane'] == 'XZ'
 
 
@@ -144,11 +161,12 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     from impact_arm.core.simulate import run
     from impact_arm.io.offline_mcap import OfflineRecorder
     from scenes import scene_from
+
     layout = json.load(open(os.path.join(ROOT, 'config', 'impact_arm.foxglove.json')))
 
     def panels(node):
-        return [node] if isinstance(node, str) else panels(node['first']) + \
-            panels(node['second'])
+        return [node] if isinstance(node, str) else panels(node['first']) + panels(node['second'])
+
     shown = panels(layout['layout'])
     assert sorted(shown) == sorted(layout['configById'])
     kinds = {panel.split('!')[0] for panel in shown}
@@ -157,8 +175,7 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     camera = three_d['cameraState']
     # the 3D panel's camera: spherical (distance, phi from +z, theta = -thetaOffset)
     phi, theta = math.radians(camera['phi']), -math.radians(camera['thetaOffset'])
-    position = (math.sin(phi) * math.sin(theta), -math.sin(phi) * math.cos(theta),
-                math.cos(phi))
+    position = (math.sin(phi) * math.sin(theta), -math.sin(phi) * math.cos(theta), math.cos(phi))
     assert position == pytest.approx((0, -1, 0), abs=1e-9) and camera['perspective']
     assert three_d['followTf'] == 'world'
     assert three_d['topics']['/robot_description']['visible']
@@ -170,9 +187,10 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     rec.close(run(scene, observer=rec))
     from rosbags.highlevel import AnyReader
     from pathlib import Path
+
     with AnyReader([Path(path)]) as reader:
         recorded = {c.topic: c.msgtype for c in reader.connections}
-    script, = layout['userNodes'].values()
+    (script,) = layout['userNodes'].values()
     inputs = re.search(r'inputs = \[([^]]*)\]', script['sourceCode']).group(1)
     output = re.search(r'output = "([^"]+)"', script['sourceCode']).group(1)
     assert [t.strip().strip('"') for t in inputs.split(',')] == ['/impact_report']
@@ -188,8 +206,13 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
 
 
 def test_urdf_command_prints_the_robot_description(tmp_path):
-    out = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'urdf', '--scene', 'paper'],
-                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    out = subprocess.run(
+        [PYTHON, '-m', 'impact_arm.tools.cli', 'urdf', '--scene', 'paper'],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+    )
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith('<?xml') and '<robot name="impact_arm">' in out.stdout
 
@@ -199,9 +222,14 @@ def test_parameter_files_are_accepted_by_the_nodes(ros_env, tmp_path, node):
     """Start the node with its parameter file; a bad key or value would stop it at once."""
     params = os.path.join(ROOT, 'config', f'{node}.yaml')
     assert yaml.safe_load(open(params))[node]['ros__parameters']
-    proc = subprocess.Popen([PYTHON, '-m', f'impact_arm.nodes.{node}', '--ros-args',
-                             '--params-file', params], env=ros_env, cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [PYTHON, '-m', f'impact_arm.nodes.{node}', '--ros-args', '--params-file', params],
+        env=ros_env,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         out, _ = proc.communicate(timeout=6)
         pytest.fail(f'{node} exited with {proc.returncode}:\n{out}')
@@ -215,23 +243,26 @@ def test_parameter_files_are_accepted_by_the_nodes(ros_env, tmp_path, node):
 def test_nodes_keep_discovery_on_this_machine_unless_told_otherwise(ros_env):
     """Started without ROS_AUTOMATIC_DISCOVERY_RANGE, a node process limits DDS discovery to
     localhost before rclpy starts; an explicit choice is kept."""
-    probe = ('import os, rclpy\n'
-             'from rclpy.node import Node\n'
-             'from impact_arm.nodes._runner import run\n'
-             'class Once(Node):\n'
-             '    done = True\n'
-             '    def __init__(self):\n'
-             '        super().__init__("once")\n'
-             '        print("RANGE=" + os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"])\n'
-             '    def finish(self, executor):\n'
-             '        return 0\n'
-             'raise SystemExit(run(Once))\n')
+    probe = (
+        'import os, rclpy\n'
+        'from rclpy.node import Node\n'
+        'from impact_arm.nodes._runner import run\n'
+        'class Once(Node):\n'
+        '    done = True\n'
+        '    def __init__(self):\n'
+        '        super().__init__("once")\n'
+        '        print("RANGE=" + os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"])\n'
+        '    def finish(self, executor):\n'
+        '        return 0\n'
+        'raise SystemExit(run(Once))\n'
+    )
     for given, expected in ((None, 'LOCALHOST'), ('OFF', 'OFF')):
         env = {k: v for k, v in ros_env.items() if k != 'ROS_AUTOMATIC_DISCOVERY_RANGE'}
         if given:
             env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = given
-        out = subprocess.run([PYTHON, '-c', probe], env=env, capture_output=True, text=True,
-                             timeout=60)
+        out = subprocess.run(
+            [PYTHON, '-c', probe], env=env, capture_output=True, text=True, timeout=60
+        )
         assert out.returncode == 0, out.stderr
         assert f'RANGE={expected}' in out.stdout
 
@@ -254,7 +285,7 @@ def _scheduling(pid):
                 name = f.read().strip()
             policy = os.sched_getscheduler(int(tid))
             priority = os.sched_getparam(int(tid)).sched_priority
-        except OSError:            # the thread ended meanwhile
+        except OSError:  # the thread ended meanwhile
             continue
         out.setdefault(name, set()).add((policy, priority))
     return out
@@ -266,15 +297,16 @@ def test_controller_middleware_threads_share_its_realtime_priority(ros_env, tmp_
     """The middleware threads that deliver the joint states run at the control thread's
     SCHED_FIFO priority (under load they held samples back for 100 ms and more at normal
     priority); thread_priority 0 leaves every thread to the normal scheduler."""
-    with start_process(controller(f'thread_priority:={priority}'), ros_env, tmp_path,
-                       'controller') as proc:
+    with start_process(
+        controller(f'thread_priority:={priority}'), ros_env, tmp_path, 'controller'
+    ) as proc:
         deadline = time.monotonic() + 60
         while 'scheduling' not in proc.stderr and proc.alive() and time.monotonic() < deadline:
             time.sleep(0.2)
-        time.sleep(0.5)            # the runner raises them right after the constructor
+        time.sleep(0.5)  # the runner raises them right after the constructor
         threads = _scheduling(proc.pid)
     middleware = {k: v for k, v in threads.items() if k.startswith('dds.')}
-    assert middleware, threads     # Fast DDS names its threads dds.*
+    assert middleware, threads  # Fast DDS names its threads dds.*
     expected = {(os.SCHED_FIFO, priority)} if priority else {(os.SCHED_OTHER, 0)}
     assert all(v == expected for v in middleware.values()), middleware
 
@@ -287,29 +319,45 @@ def test_launched_nodes_each_appear_once_in_the_graph(probe, ros_env, tmp_path):
     ``ros2 node list`` showed /simulator and /recorder twice and rcl warned "Publisher
     already registered for node name"."""
     actions = load_launch_with_stubs(ROOT)
-    nodes = [a.kwargs for a in actions if type(a).__name__ == 'Node'
-             and a.kwargs['package'] == 'impact_arm']
+    nodes = [
+        a.kwargs
+        for a in actions
+        if type(a).__name__ == 'Node' and a.kwargs['package'] == 'impact_arm'
+    ]
     names = sorted(n['name'] for n in nodes)
     assert len(set(names)) == len(names)
     procs = []
     with contextlib.ExitStack() as stack:
         for n in nodes:
-            args = [PYTHON, '-m', f'impact_arm.nodes.{n["executable"]}', '--ros-args',
-                    '-r', f'__node:={n["name"]}', '--params-file',
-                    os.path.join(ROOT, 'config', n['executable'] + '.yaml')]
+            args = [
+                PYTHON,
+                '-m',
+                f'impact_arm.nodes.{n["executable"]}',
+                '--ros-args',
+                '-r',
+                f'__node:={n["name"]}',
+                '--params-file',
+                os.path.join(ROOT, 'config', n['executable'] + '.yaml'),
+            ]
             if n['executable'] == 'recorder':
                 args += ['-p', f'output:={tmp_path / "run.mcap"}']
-            procs.append(stack.enter_context(start_process(args, ros_env, tmp_path,
-                                                           n['name'])))
+            procs.append(stack.enter_context(start_process(args, ros_env, tmp_path, n['name'])))
 
         def graph():
-            return [f'{ns.rstrip("/")}/{name}'
-                    for name, ns in probe.node.get_node_names_and_namespaces()]
+            return [
+                f'{ns.rstrip("/")}/{name}'
+                for name, ns in probe.node.get_node_names_and_namespaces()
+            ]
+
         helpers = ['/_simulator_command_reader', '/_recorder_reader']
-        assert wait_for(lambda: set(f'/{n}' for n in names) | set(helpers) <= set(graph())
-                        or not all(p.alive() for p in procs), timeout=60), \
-            (graph(), [p.stderr[-2000:] for p in procs])
-        time.sleep(1.0)                 # anything duplicated would be discovered by now
+        assert wait_for(
+            lambda: (
+                set(f'/{n}' for n in names) | set(helpers) <= set(graph())
+                or not all(p.alive() for p in procs)
+            ),
+            timeout=60,
+        ), (graph(), [p.stderr[-2000:] for p in procs])
+        time.sleep(1.0)  # anything duplicated would be discovered by now
         seen = [n for n in graph() if n != '/test_probe']
         assert sorted(seen) == sorted(set(seen)), seen
         for p in procs:

@@ -1,6 +1,7 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
 (mypy), and imports point down the layers core -> io -> nodes -> tools, with contract.py at
 the bottom importing nothing of the package."""
+
 import ast
 import os
 import subprocess
@@ -14,14 +15,21 @@ LAYERS = {'contract': 0, 'core': 1, 'io': 2, 'nodes': 3, 'tools': 4}
 
 
 def _tool(module, *args):
-    pytest.importorskip(module, reason=f'{module} not installed: pip install -r '
-                                       f'requirements-dev.txt')
-    return subprocess.run([sys.executable, '-m', module, *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=300)
+    pytest.importorskip(
+        module, reason=f'{module} not installed: pip install -r requirements-dev.txt'
+    )
+    return subprocess.run(
+        [sys.executable, '-m', module, *args], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
 
 
 def test_ruff_finds_nothing():
     out = _tool('ruff', 'check', 'impact_arm', 'test', 'bench', 'launch')
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_the_tree_is_formatted():
+    out = _tool('ruff', 'format', '--check', 'impact_arm', 'test', 'bench', 'launch')
     assert out.returncode == 0, out.stdout + out.stderr
 
 
@@ -46,10 +54,10 @@ def imported(path, parts):
         if isinstance(node, ast.Import):
             names = [alias.name.split('.') for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
-            base = (package[:len(package) - node.level + 1] if node.level else []) + \
-                (node.module.split('.') if node.module else [])
-            names = [base + [alias.name] for alias in node.names] if not node.module \
-                else [base]
+            base = (package[: len(package) - node.level + 1] if node.level else []) + (
+                node.module.split('.') if node.module else []
+            )
+            names = [base + [alias.name] for alias in node.names] if not node.module else [base]
         else:
             continue
         yield from (n for n in names if n[0] == 'impact_arm')

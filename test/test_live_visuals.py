@@ -1,6 +1,7 @@
 """What a 3D viewer gets from the live simulator over DDS: each impact's force arrow and
 impact point, stamped at the impact's first contact and anchored where the report says the
 tip touched the surface (real node processes, random domain)."""
+
 import json
 import math
 
@@ -8,8 +9,7 @@ import pytest
 
 from impact_arm.core.model import ArmModel
 from impact_arm.core.scene import load_scene
-from ros_helpers import (controller, probe, ros_env, simulator,  # noqa: F401
-                         start_process, wait_for)
+from ros_helpers import controller, simulator, start_process, wait_for
 
 
 def stamp_ns(header):
@@ -20,22 +20,32 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
     from geometry_msgs.msg import WrenchStamped
     from std_msgs.msg import String
     from visualization_msgs.msg import MarkerArray
+
     reports = probe.listen(String, '/impact_report', transient=True)
     markers = probe.listen(MarkerArray, '/impact_markers')
     wrenches = probe.listen(WrenchStamped, '/contact_wrench', depth=100)
-    with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path,
-                       'sim') as sim, \
-            start_process(controller(), ros_env, tmp_path, 'ctl') as ctl:
-        assert wait_for(lambda: len(reports) >= 3 or not sim.alive() or not ctl.alive(),
-                        timeout=120), sim.stderr[-2000:] + ctl.stderr[-2000:]
+    with (
+        start_process(
+            simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path, 'sim'
+        ) as sim,
+        start_process(controller(), ros_env, tmp_path, 'ctl') as ctl,
+    ):
+        assert wait_for(
+            lambda: len(reports) >= 3 or not sim.alive() or not ctl.alive(), timeout=120
+        ), sim.stderr[-2000:] + ctl.stderr[-2000:]
         # the event frames of the last report go out with the next visual tick (10 ms)
-        assert wait_for(lambda: any(m.ns == 'impact_points' and m.id == 2
-                                    for _, ma in markers for m in ma.markers), timeout=10)
+        assert wait_for(
+            lambda: any(
+                m.ns == 'impact_points' and m.id == 2 for _, ma in markers for m in ma.markers
+            ),
+            timeout=10,
+        )
     probe.forget(reports, markers, wrenches)
     scene = load_scene('paper')
     model, height = ArmModel(scene), scene.surfaces[0].height
-    arrows = {stamp_ns(m.header): m for _, ma in markers for m in ma.markers
-              if m.ns == 'contact_force'}
+    arrows = {
+        stamp_ns(m.header): m for _, ma in markers for m in ma.markers if m.ns == 'contact_force'
+    }
     for _, msg in reports[:3]:
         report = json.loads(msg.data)
         t_contact = math.ceil(report['t_contact'] * 1e9 - 1e-6)
@@ -44,6 +54,6 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
         x_b, y_b = model.tip([math.radians(a) for a in report['q_contact_deg']], [0, 0])[:2]
         start = arrow.points[0]
         assert (start.x, start.y, start.z) == pytest.approx((x_b, 0.0, y_b), abs=1e-6)
-        assert start.z == pytest.approx(height, abs=1e-6)     # on the surface, z up
+        assert start.z == pytest.approx(height, abs=1e-6)  # on the surface, z up
         assert arrow.lifetime.sec + arrow.lifetime.nanosec * 1e-9 >= 0.3
     assert {w.header.frame_id for _, w in wrenches} == {'surface1'}

@@ -1,6 +1,7 @@
 """MCAP writer, message definitions and CDR: every file is read back with the independent
 ``rosbags`` library (which builds its types from the definitions stored in the file) and with
 the ``mcap`` library's reader."""
+
 import errno
 import json
 import os
@@ -20,8 +21,17 @@ from impact_arm.io.mcap_ros2 import RecordingError, Ros2McapWriter, parse_qos_ya
 from impact_arm.io.msgdefs import message_class, message_definition, serialize_cdr
 
 TYPES = sorted({t for t, _ in CONTRACT_TOPICS.values()} | {'std_msgs/msg/Float64MultiArray'})
-QOS_KEYS = {'history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan',
-            'liveliness', 'liveliness_lease_duration', 'avoid_ros_namespace_conventions'}
+QOS_KEYS = {
+    'history',
+    'depth',
+    'reliability',
+    'durability',
+    'deadline',
+    'lifespan',
+    'liveliness',
+    'liveliness_lease_duration',
+    'avoid_ros_namespace_conventions',
+}
 
 
 def rosbags_read(path):
@@ -61,24 +71,41 @@ def _samples():
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
-    js = JointState(name=['joint1', 'joint2'], position=[0.5, -1.25], velocity=[3.0, 1e-9],
-                    effort=[12.5, -7.0])
+
+    js = JointState(
+        name=['joint1', 'joint2'], position=[0.5, -1.25], velocity=[3.0, 1e-9], effort=[12.5, -7.0]
+    )
     js.header.stamp.sec, js.header.stamp.nanosec = 3, 123456789
     ws = WrenchStamped()
     ws.header.frame_id = 'surface1'
     ws.wrench.force.x, ws.wrench.force.y, ws.wrench.torque.z = -1.5, 27790.25, 0.125
-    diag = DiagnosticArray(status=[DiagnosticStatus(
-        level=DiagnosticStatus.WARN, name='simulator', message='overrun',
-        hardware_id='sim', values=[KeyValue(key='rate', value='999.5')])])
+    diag = DiagnosticArray(
+        status=[
+            DiagnosticStatus(
+                level=DiagnosticStatus.WARN,
+                name='simulator',
+                message='overrun',
+                hardware_id='sim',
+                values=[KeyValue(key='rate', value='999.5')],
+            )
+        ]
+    )
     clock = Clock()
     clock.clock.sec, clock.clock.nanosec = 7, 5
     arr = Float64MultiArray(data=[1.0, 2.5, -3.0, 4.0])
-    arr.layout.dim = [MultiArrayDimension(label='row', size=2, stride=4),
-                      MultiArrayDimension(label='a,b', size=2, stride=2)]
-    return {'/joint_states': js, '/contact_wrench': ws, '/diagnostics': diag, '/clock': clock,
-            '/impact_report': String(data=json.dumps({'index': 1, 'F_max': 2.5e4})),
-            '/effort_controller/commands': Float64MultiArray(data=[1.5, -0.25]),
-            '/impact_trace': arr}
+    arr.layout.dim = [
+        MultiArrayDimension(label='row', size=2, stride=4),
+        MultiArrayDimension(label='a,b', size=2, stride=2),
+    ]
+    return {
+        '/joint_states': js,
+        '/contact_wrench': ws,
+        '/diagnostics': diag,
+        '/clock': clock,
+        '/impact_report': String(data=json.dumps({'index': 1, 'F_max': 2.5e4})),
+        '/effort_controller/commands': Float64MultiArray(data=[1.5, -0.25]),
+        '/impact_trace': arr,
+    }
 
 
 def _same(ours, theirs):
@@ -113,8 +140,11 @@ def test_cdr_bytes_are_what_rosbags_serializes():
 def _write_all(path, **kw):
     samples = _samples()
     with Ros2McapWriter(path, **kw) as w:
-        w.add_topic('/impact_trace', 'std_msgs/msg/Float64MultiArray',
-                    TopicQos(durability='transient_local', depth=100))
+        w.add_topic(
+            '/impact_trace',
+            'std_msgs/msg/Float64MultiArray',
+            TopicQos(durability='transient_local', depth=100),
+        )
         for k in range(5):
             for j, (topic, msg) in enumerate(samples.items()):
                 # log times deliberately out of order between topics
@@ -142,17 +172,21 @@ def test_writer_round_trip_rosbags_and_mcap(tmp_path):
         assert reader.get_header().profile == 'ros2'
         summary = reader.get_summary()
         assert {s.name for s in summary.schemas.values()} == {
-            mcap_ros2.type_name_of(m) for m in samples.values()}
-        assert all(s.encoding == 'ros2msg' and s.data.decode() == message_definition(s.name)
-                   for s in summary.schemas.values())
+            mcap_ros2.type_name_of(m) for m in samples.values()
+        }
+        assert all(
+            s.encoding == 'ros2msg' and s.data.decode() == message_definition(s.name)
+            for s in summary.schemas.values()
+        )
         assert all(c.message_encoding == 'cdr' for c in summary.channels.values())
         for c in summary.channels.values():
             profiles = yaml.safe_load(c.metadata['offered_qos_profiles'])
             assert len(profiles) == 1 and set(profiles[0]) == QOS_KEYS
             for key in ('deadline', 'lifespan', 'liveliness_lease_duration'):
                 assert set(profiles[0][key]) == {'sec', 'nsec'}
-            expected = CONTRACT_TOPICS.get(c.topic, (None, TopicQos(
-                durability='transient_local', depth=100)))[1]
+            expected = CONTRACT_TOPICS.get(
+                c.topic, (None, TopicQos(durability='transient_local', depth=100))
+            )[1]
             assert parse_qos_yaml(c.metadata['offered_qos_profiles']) == [expected]
             assert c.metadata['topic_type_hash'].startswith('RIHS01_')
         assert summary.statistics.message_count == 5 * len(samples)
@@ -167,15 +201,16 @@ def test_writer_round_trip_rosbags_and_mcap(tmp_path):
         bag = yaml.safe_load(meta['rosbag2']['serialized_metadata'])
         assert bag['version'] == 9 and bag['storage_identifier'] == 'mcap'
         assert bag['message_count'] == 5 * len(samples)
-        counts = {t['topic_metadata']['name']: t['message_count']
-                  for t in bag['topics_with_message_count']}
+        counts = {
+            t['topic_metadata']['name']: t['message_count']
+            for t in bag['topics_with_message_count']
+        }
         assert counts == {t: 5 for t in samples}
         for t in bag['topics_with_message_count']:
             assert set(t['topic_metadata']['offered_qos_profiles'][0]) == QOS_KEYS
         assert meta['scene'] == {'yaml': 'name: x\n'}
         att = {a.name: a for a in reader.iter_attachments()}
-        assert att['x.yaml'].data == b'name: x\n' and att['x.yaml'].media_type == \
-            'application/yaml'
+        assert att['x.yaml'].data == b'name: x\n' and att['x.yaml'].media_type == 'application/yaml'
 
 
 def test_uncompressed_and_lz4_files_read_back(tmp_path):
@@ -189,6 +224,7 @@ def test_file_is_complete_after_every_flush(tmp_path):
     """What a SIGKILL leaves: a copy taken with unflushed data pending holds what was
     flushed, and both readers open it."""
     from std_msgs.msg import String
+
     path = tmp_path / 'live.mcap'
     w = Ros2McapWriter(path, flush_interval=None, chunk_size=1 << 30)
     empty = tmp_path / 'empty.mcap'
@@ -203,7 +239,8 @@ def test_file_is_complete_after_every_flush(tmp_path):
     snapshot = tmp_path / 'snapshot.mcap'
     shutil.copy(path, snapshot)
     assert [m.data for m in rosbags_read(snapshot)['/impact_report'][1]] == [
-        str(i) for i in range(100)]
+        str(i) for i in range(100)
+    ]
     with open(snapshot, 'rb') as f:
         assert sum(1 for _ in make_reader(f).iter_messages()) == 100
     w.close()
@@ -219,6 +256,7 @@ def test_unwritable_path_is_a_clear_error(tmp_path):
 
 def test_disk_full_stops_writing_and_keeps_what_was_flushed(tmp_path, monkeypatch):
     from std_msgs.msg import String
+
     path = tmp_path / 'full.mcap'
     w = Ros2McapWriter(path, flush_interval=None)
     w.add_topic('/impact_report', 'std_msgs/msg/String')
@@ -233,6 +271,7 @@ def test_disk_full_stops_writing_and_keeps_what_was_flushed(tmp_path, monkeypatc
         if len(calls) == 1:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return real(fd, data, offset)
+
     monkeypatch.setattr(mcap_ros2.os, 'pwrite', full)
     w.write_message('/impact_report', String(data='lost'), 11)
     with pytest.raises(RecordingError, match='No space left'):
@@ -242,8 +281,7 @@ def test_disk_full_stops_writing_and_keeps_what_was_flushed(tmp_path, monkeypatc
     with pytest.raises(RecordingError):
         w.close()
     monkeypatch.setattr(mcap_ros2.os, 'pwrite', real)
-    assert [m.data for m in rosbags_read(path)['/impact_report'][1]] == [
-        str(i) for i in range(10)]
+    assert [m.data for m in rosbags_read(path)['/impact_report'][1]] == [str(i) for i in range(10)]
 
 
 def test_bad_arguments_are_refused(tmp_path):

@@ -1,5 +1,6 @@
 """``simulate --mcap``: the offline recording holds exactly what the run computed, read back with
 ``rosbags`` and the ``mcap`` reader."""
+
 import json
 import math
 import os
@@ -43,24 +44,29 @@ def test_topics_types_and_counts(offline):
     n_tf = got['/tf'][1]
     # at the default tf_rate, and at each impact's three events
     assert n_tf - 3 * k == pytest.approx(result.samples[-1].t * 100, abs=1.5)
-    assert got == {'/joint_states': (TOPICS['/joint_states'], n),
-                   '/contact_wrench': (TOPICS['/contact_wrench'], n),
-                   '/impact_report': (TOPICS['/impact_report'], k),
-                   TRACE_TOPIC: (TOPICS[TRACE_TOPIC], k),
-                   '/robot_description': ('std_msgs/msg/String', 1),
-                   '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
-                   '/tf': ('tf2_msgs/msg/TFMessage', n_tf),
-                   '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf)}
+    assert got == {
+        '/joint_states': (TOPICS['/joint_states'], n),
+        '/contact_wrench': (TOPICS['/contact_wrench'], n),
+        '/impact_report': (TOPICS['/impact_report'], k),
+        TRACE_TOPIC: (TOPICS[TRACE_TOPIC], k),
+        '/robot_description': ('std_msgs/msg/String', 1),
+        '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
+        '/tf': ('tf2_msgs/msg/TFMessage', n_tf),
+        '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf),
+    }
 
 
 def test_field_values_equal_what_the_run_computed(offline):
     path, scene, result = offline
     js, ws, reports, traces = [], [], [], []
     with AnyReader([Path(path)]) as reader:
-        wanted = {'/joint_states': js, '/contact_wrench': ws, '/impact_report': reports,
-                  TRACE_TOPIC: traces}
-        for con, t, raw in reader.messages([c for c in reader.connections
-                                            if c.topic in wanted]):
+        wanted = {
+            '/joint_states': js,
+            '/contact_wrench': ws,
+            '/impact_report': reports,
+            TRACE_TOPIC: traces,
+        }
+        for con, t, raw in reader.messages([c for c in reader.connections if c.topic in wanted]):
             wanted[con.topic].append((t, reader.deserialize(raw, con.msgtype)))
     for (t, m), s in zip(js, result.samples):
         assert t == sim_time_ns(s.t) == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
@@ -71,7 +77,7 @@ def test_field_values_equal_what_the_run_computed(offline):
         assert to_absolute(m.position) == pytest.approx(list(s.q), abs=1e-15)
     for (t, m), s in zip(ws, result.samples):
         assert (m.wrench.force.x, m.wrench.force.y) == tuple(s.wrench)
-        assert m.header.frame_id == 'surface1'   # the TF frame of the surface
+        assert m.header.frame_id == 'surface1'  # the TF frame of the surface
     assert [json.loads(m.data) for _, m in reports] == json.loads(json.dumps(result.impacts))
     columns = trace_columns(scene.n_links)
     for (t, m), rows, rep in zip(traces, result.traces, reports):
@@ -102,21 +108,37 @@ def test_metadata_scene_and_summary_indexes(offline):
     assert run_summary['impacts'] == 15 and meta['run']['error'] == ''
     assert math.isclose(run_summary['t_end'], result.t_end)
     bag = yaml.safe_load(meta['rosbag2']['serialized_metadata'])
-    n_tf = summary.statistics.channel_message_counts[next(
-        c.id for c in summary.channels.values() if c.topic == '/tf')]
-    assert bag['message_count'] == summary.statistics.message_count == \
-        2 * len(result.samples) + 2 * 15 + 2 + 2 * n_tf   # + description, static, tf, markers
+    n_tf = summary.statistics.channel_message_counts[
+        next(c.id for c in summary.channels.values() if c.topic == '/tf')
+    ]
+    assert (
+        bag['message_count']
+        == summary.statistics.message_count
+        == 2 * len(result.samples) + 2 * 15 + 2 + 2 * n_tf
+    )  # + description, static, tf, markers
     assert summary.chunk_indexes and all(c.message_index_offsets for c in summary.chunk_indexes)
 
 
 def test_cli_writes_the_file_and_refuses_an_unwritable_path(tmp_path):
     import subprocess
     import sys
+
     blocker = tmp_path / 'file'
     blocker.write_text('x')
-    proc = subprocess.run([sys.executable, '-m', 'impact_arm.tools.cli', 'simulate', '--mcap',
-                           str(blocker / 'out.mcap')], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=120)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'impact_arm.tools.cli',
+            'simulate',
+            '--mcap',
+            str(blocker / 'out.mcap'),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
     assert proc.returncode == 2
     # refused before the run, naming the parent that is not a directory
     assert 'is not a directory' in proc.stderr and 'Traceback' not in proc.stderr

@@ -3,6 +3,7 @@
 The test process is one more DDS participant (a probe node spun in a background thread); the
 nodes under test run in their own processes and are always ended by PID.
 """
+
 import json
 import math
 import os
@@ -13,9 +14,17 @@ import time
 
 import pytest
 
-from ros_helpers import (PYTHON, ROOT, controller, diagnostics_values,  # noqa: F401
-                         from_simulator, node_args, probe, ros_env, simulator, stamp,
-                         start_process, wait_for)
+from ros_helpers import (
+    PYTHON,
+    controller,
+    diagnostics_values,
+    from_simulator,
+    node_args,
+    simulator,
+    stamp,
+    start_process,
+    wait_for,
+)
 
 from impact_arm import contract
 from impact_arm.core.scene import load_scene, resolve_scene_path
@@ -37,29 +46,32 @@ def lockstep_run(probe, ros_env, workdir, name, until):
     """Simulator (lockstep) + controller until ``until(reports, joint_states)``."""
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
+
     # a history deep enough for the whole run: the probe may lag, it must not lose samples
     states = probe.listen(JointState, '/joint_states', depth=20000)
     reports = probe.listen(String, '/impact_report', transient=True)
-    with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, workdir,
-                       f'{name}_sim') as sim:
+    with start_process(
+        simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, workdir, f'{name}_sim'
+    ) as sim:
         # the simulator repeats its initial state until the first command: once the probe
         # has seen it, it is matched and will miss no period of the run
-        assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), \
-            sim.stderr
+        assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), sim.stderr
         with start_process(controller(), ros_env, workdir, f'{name}_ctl') as ctl:
-            done = wait_for(lambda: until(reports, states) or not sim.alive()
-                            or not ctl.alive(), timeout=150)
+            done = wait_for(
+                lambda: until(reports, states) or not sim.alive() or not ctl.alive(), timeout=150
+            )
             assert sim.alive() and ctl.alive(), sim.stderr + ctl.stderr
             assert done, f'lockstep run did not finish: {len(reports)} reports\n{sim.stderr}'
     probe.forget(states, reports)
-    return [json.loads(m.data) for _, m in reports], \
-        [(stamp(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for _, m in states]
+    return [json.loads(m.data) for _, m in reports], [
+        (stamp(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for _, m in states
+    ]
 
 
 def test_lockstep_article_matches_offline_and_repeats_bit_identically(
-        probe, ros_env, tmp_path, article_offline):
-    reports, states = lockstep_run(probe, ros_env, tmp_path, 'a',
-                                   lambda r, s: len(r) >= 15)
+    probe, ros_env, tmp_path, article_offline
+):
+    reports, states = lockstep_run(probe, ros_env, tmp_path, 'a', lambda r, s: len(r) >= 15)
     assert len(reports) >= 15
     first, offline = reports[0], article_offline.impacts[0]
     for key in ('delta_m', 'F_max'):
@@ -70,8 +82,9 @@ def test_lockstep_article_matches_offline_and_repeats_bit_identically(
     assert set(first) == set(offline)
 
     # a second run: the same joint states, bit for bit, through the first impact and beyond
-    _, again = lockstep_run(probe, ros_env, tmp_path, 'b',
-                            lambda r, s: s and stamp_of(s[-1]) >= 0.6)
+    _, again = lockstep_run(
+        probe, ros_env, tmp_path, 'b', lambda r, s: s and stamp_of(s[-1]) >= 0.6
+    )
     by_stamp = {s[0]: s for s in states}
     compared = [s for s in again if 0 < s[0] <= 0.6 and s[0] in by_stamp]
     assert len(compared) >= 590
@@ -89,6 +102,7 @@ def test_lockstep_publishes_an_unanswered_period_again(probe, ros_env, tmp_path)
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
+
     pub = probe.publisher(Float64MultiArray, '/effort_controller/commands')
     seen, answered, dropped = [], set(), []
 
@@ -96,21 +110,29 @@ def test_lockstep_publishes_an_unanswered_period_again(probe, ros_env, tmp_path)
         t = round(stamp(msg), 6)
         seen.append(t)
         if t == 0.003 and not dropped:
-            dropped.append(t)          # lost: no answer
+            dropped.append(t)  # lost: no answer
             return
-        if t not in answered:          # a controller answers each stamp once
+        if t not in answered:  # a controller answers each stamp once
             answered.add(t)
             pub.publish(Float64MultiArray(data=[0.0, 0.0]))
+
     with probe.lock:
         sub = probe.node.create_subscription(JointState, '/joint_states', on_state, 100)
     diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
-    with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0',
-                                 'diagnostics_period:=0.2'), ros_env, tmp_path, 'sim') as sim:
-        assert wait_for(lambda: 0.01 in answered or not sim.alive(), timeout=60), \
+    with start_process(
+        simulator('mode:=lockstep', 'rate_factor:=0.0', 'diagnostics_period:=0.2'),
+        ros_env,
+        tmp_path,
+        'sim',
+    ) as sim:
+        assert wait_for(lambda: 0.01 in answered or not sim.alive(), timeout=60), (
             f'stalled after {sorted(answered)[-3:]}\n{sim.stderr}'
+        )
         assert seen.count(0.003) == 2 and dropped
-        assert wait_for(lambda: diags and diagnostics_values(diags[-1][1]).get(
-            'lockstep_repeats') == '1', timeout=5)
+        assert wait_for(
+            lambda: diags and diagnostics_values(diags[-1][1]).get('lockstep_repeats') == '1',
+            timeout=5,
+        )
         assert 'published it again' in sim.stderr + sim.stdout
     with probe.lock:
         probe.node.destroy_subscription(sub)
@@ -121,6 +143,7 @@ def test_lockstep_publishes_an_unanswered_period_again(probe, ros_env, tmp_path)
 def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
+
     states = probe.listen(JointState, '/joint_states', depth=5000)
     diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
     # gentle gains: this test is about the clock and the watchdog, and a loaded test machine
@@ -128,17 +151,21 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
     gentle = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
     # the zero-torque watchdog policy: this test watches the torque drop to zero (the
     # default, brake, holds the joints instead: test_session.py)
-    with start_process(simulator('command_timeout:=0.1', 'watchdog_policy:=zero'), ros_env,
-                       tmp_path, 'sim') as sim, \
-            start_process(controller(*gentle), ros_env, tmp_path, 'ctl') as ctl:
+    with (
+        start_process(
+            simulator('command_timeout:=0.1', 'watchdog_policy:=zero'), ros_env, tmp_path, 'sim'
+        ) as sim,
+        start_process(controller(*gentle), ros_env, tmp_path, 'ctl') as ctl,
+    ):
         assert wait_for(lambda: states and stamp(states[-1][1]) > 0.1, timeout=30), sim.stderr
         begin = len(states)
         # a window of 3 s of stamps, however late this probe receives them (a loaded machine
         # starves its normal-priority thread behind the nodes' realtime ones): its pace is
         # judged below from the promptest deliveries, not from how long we waited
-        assert wait_for(lambda: len(states) > begin and
-                        stamp(states[-1][1]) - stamp(states[begin][1]) >= 3.2, timeout=60), \
-            sim.stderr
+        assert wait_for(
+            lambda: len(states) > begin and stamp(states[-1][1]) - stamp(states[begin][1]) >= 3.2,
+            timeout=60,
+        ), sim.stderr
         window = states[begin:]
         stamps = [stamp(m) for _, m in window]
         # Every period published once, in order: consecutive stamps lie on the 1 ms grid and
@@ -150,18 +177,23 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         assert not bad, f'joint states repeated, reordered or off the 1 ms grid: {bad[:5]}'
         lost = sum(round(s) - 1 for s in steps)
         assert lost <= 0.05 * len(stamps), f'{lost} of {len(stamps) + lost} joint states lost'
+
         # the simulator's own count says every period was published: between two of its
         # diagnostics, periods published = simulated time advanced / 1 ms, exactly
         # (1 Hz; this starved probe may receive them late, as it did the states)
         def running_diagnostics():
             values = [diagnostics_values(m) for _, m in list(diags)]
             return [v for v in values if float(v['periods_published_until_s']) > 0.2]
-        assert wait_for(lambda: len(running_diagnostics()) >= 2, timeout=30), \
+
+        assert wait_for(lambda: len(running_diagnostics()) >= 2, timeout=30), (
             'fewer than two /diagnostics while running'
+        )
         running = running_diagnostics()
         first, last = running[0], running[-1]
-        periods = round((float(last['periods_published_until_s'])
-                         - float(first['periods_published_until_s'])) / 1e-3)
+        periods = round(
+            (float(last['periods_published_until_s']) - float(first['periods_published_until_s']))
+            / 1e-3
+        )
         published = int(last['periods_published']) - int(first['periods_published'])
         assert periods >= 500 and published == periods, (first, last)
         # and published at the wall-clock pace: the rate is the number of periods over the
@@ -182,13 +214,13 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         # periods (counted) instead. How many a stall costs is the machine's business (this
         # VM's bare 1 ms sleeps wake > 1 ms late 2-10 % of the time: bench starts), so the
         # share skipped is not asserted here, only the pace.
-        run = (stamps[-edge] - stamps[edge - 1]) / 1e-3 / wall   # periods actually run
+        run = (stamps[-edge] - stamps[edge - 1]) / 1e-3 / wall  # periods actually run
         assert rate >= 0.98 * 1000.0, f'{rate:.1f} Hz ({skipped} periods skipped)'
         assert run <= 1.02 * 1000.0, f'{run:.1f} Hz: ahead of the wall clock'
 
-        ctl.signal(signal.SIGKILL)       # no goodbye: the watchdog must act
+        ctl.signal(signal.SIGKILL)  # no goodbye: the watchdog must act
         killed = time.monotonic()
-        seen = stamp(states[-1][1])      # simulated time the probe had reached (it may lag)
+        seen = stamp(states[-1][1])  # simulated time the probe had reached (it may lag)
         ctl.wait(5)
         assert wait_for(lambda: stamp(states[-1][1]) > seen + 1.0, timeout=20), sim.stderr
         # The last command stays applied (zero-order hold) until the watchdog expires: count,
@@ -196,20 +228,28 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         # this probe receives them).
         after = [m for _, m in states if stamp(m) > seen - 0.5]
         moving = [i for i, m in enumerate(after) if any(e != 0.0 for e in m.effort)]
-        assert moving and moving[-1] < len(after) - 200, \
+        assert moving and moving[-1] < len(after) - 200, (
             f'torque never dropped to zero ({len(after)} states)\n{sim.stderr[-2000:]}'
+        )
         last = tuple(after[moving[-1]].effort)
         held = moving[-1]
         while held > 0 and tuple(after[held - 1].effort) == last:
             held -= 1
         held_for = stamp(after[moving[-1]]) - stamp(after[held])
         assert held_for <= 0.1 + 0.005, f'last command held {held_for:.3f} s > command_timeout'
-        assert all(all(e == 0.0 for e in m.effort) for m in after[moving[-1] + 1:])
-        assert wait_for(lambda: any(diagnostics_values(m)['watchdog'] == 'timeout'
-                                    and diagnostics_values(m)['level'] == 1
-                                    for t, m in diags if t > killed), timeout=5.0), \
-            [(v['level'], v['message'], v['watchdog'])
-             for v in map(diagnostics_values, (m for _, m in diags[-3:]))]
+        assert all(all(e == 0.0 for e in m.effort) for m in after[moving[-1] + 1 :])
+        assert wait_for(
+            lambda: any(
+                diagnostics_values(m)['watchdog'] == 'timeout'
+                and diagnostics_values(m)['level'] == 1
+                for t, m in diags
+                if t > killed
+            ),
+            timeout=5.0,
+        ), [
+            (v['level'], v['message'], v['watchdog'])
+            for v in map(diagnostics_values, (m for _, m in diags[-3:]))
+        ]
         assert sim.alive(), sim.stderr
     probe.forget(states, diags)
 
@@ -218,25 +258,32 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
+
     states = probe.listen(JointState, '/joint_states', depth=5000)
     diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
     pub = probe.publisher(Float64MultiArray, '/effort_controller/commands')
-    with start_process(simulator('max_effort:=10.0', 'command_timeout:=5.0',
-                                 'diagnostics_period:=0.2'), ros_env, tmp_path, 'sim') as sim:
+    with start_process(
+        simulator('max_effort:=10.0', 'command_timeout:=5.0', 'diagnostics_period:=0.2'),
+        ros_env,
+        tmp_path,
+        'sim',
+    ) as sim:
         assert wait_for(lambda: states and pub.get_subscription_count() > 0, timeout=30)
         for bad in ([1.0], [math.nan, 0.0], [1.0, 2.0, 3.0], [math.inf, 1.0]):
             pub.publish(Float64MultiArray(data=bad))
-        assert wait_for(lambda: diags and diagnostics_values(diags[-1][1])
-                        ['commands_rejected'] == '4', timeout=5), \
-            diagnostics_values(diags[-1][1]) if diags else 'no diagnostics'
+        assert wait_for(
+            lambda: diags and diagnostics_values(diags[-1][1])['commands_rejected'] == '4',
+            timeout=5,
+        ), diagnostics_values(diags[-1][1]) if diags else 'no diagnostics'
         values = diagnostics_values(diags[-1][1])
         assert values['commands'] == '0' and values['watchdog'] == 'waiting'
         assert all(all(e == 0.0 for e in m.effort) for _, m in states)
         assert 'command rejected' in sim.stderr + sim.stdout
 
-        pub.publish(Float64MultiArray(data=[50.0, -3.0]))   # joint1 beyond max_effort
-        assert wait_for(lambda: tuple(states[-1][1].effort) == (10.0, -3.0), timeout=5), \
-            states[-1][1].effort
+        pub.publish(Float64MultiArray(data=[50.0, -3.0]))  # joint1 beyond max_effort
+        assert wait_for(lambda: tuple(states[-1][1].effort) == (10.0, -3.0), timeout=5), states[-1][
+            1
+        ].effort
         values = diagnostics_values(wait_for(lambda: diags[-1][1], timeout=1))
         time.sleep(0.5)
         values = diagnostics_values(diags[-1][1])
@@ -244,22 +291,26 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
     probe.forget(states, diags)
 
 
-@pytest.mark.parametrize('node, param, name', [
-    ('simulator', 'publish_rate:=-5.0', 'publish_rate'),
-    ('simulator', 'mode:=fast', 'mode'),
-    ('simulator', 'joints:=[joint1,jointX]', 'joints'),
-    ('simulator', 'scene:=/no/such/scene.yaml', 'scene'),
-    ('simulator', 'publish_rat:=5.0', 'publish_rat'),
-    ('simulator', 'command_timeout:=5e-324', 'command_timeout'),    # would disable control
-    ('simulator', 'max_effort:=5e-324', 'max_effort'),
-    ('controller', 'law:=lqr', 'law'),
-    ('controller', 'p:=[1.0]', 'p'),
-    ('controller', 'rate:=0.0', 'rate'),
-])
+@pytest.mark.parametrize(
+    'node, param, name',
+    [
+        ('simulator', 'publish_rate:=-5.0', 'publish_rate'),
+        ('simulator', 'mode:=fast', 'mode'),
+        ('simulator', 'joints:=[joint1,jointX]', 'joints'),
+        ('simulator', 'scene:=/no/such/scene.yaml', 'scene'),
+        ('simulator', 'publish_rat:=5.0', 'publish_rat'),
+        ('simulator', 'command_timeout:=5e-324', 'command_timeout'),  # would disable control
+        ('simulator', 'max_effort:=5e-324', 'max_effort'),
+        ('controller', 'law:=lqr', 'law'),
+        ('controller', 'p:=[1.0]', 'p'),
+        ('controller', 'rate:=0.0', 'rate'),
+    ],
+)
 def test_invalid_parameters_refused_clearly(ros_env, tmp_path, node, param, name):
     args = node_args(f'impact_arm.nodes.{node}', param)
-    proc = subprocess.run(args, env=ros_env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=60)
+    proc = subprocess.run(
+        args, env=ros_env, cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
     message = proc.stderr + proc.stdout
     assert proc.returncode == 2, message
     assert name in message and 'Traceback' not in message, message
@@ -272,13 +323,28 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
     left with a zero command when the controller stops."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
+
     standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '60']
-    params = ('law:=pd', 'space:=joint', 'p:=[40.0,40.0]', 'd:=[13.0,13.0]',
-              'down_target:=[-0.5,0.3]', 'switch_height:=100.0', 'surface_height:=-100.0',
-              'rate:=200.0')
-    with start_process(standin, ros_env, tmp_path, 'standin') as driver, \
-            start_process(controller(*params, ros_args=['-r', '__node:=standin_controller']),
-                          ros_env, tmp_path, 'ctl') as ctl:
+    params = (
+        'law:=pd',
+        'space:=joint',
+        'p:=[40.0,40.0]',
+        'd:=[13.0,13.0]',
+        'down_target:=[-0.5,0.3]',
+        'switch_height:=100.0',
+        'surface_height:=-100.0',
+        'rate:=200.0',
+    )
+    with (
+        start_process(standin, ros_env, tmp_path, 'standin') as driver,
+        start_process(
+            controller(*params, ros_args=['-r', '__node:=standin_controller']),
+            ros_env,
+            tmp_path,
+            'ctl',
+        ) as ctl,
+    ):
+
         def position():
             lines = [x for x in driver.lines() if 'q' in x]
             return lines[-1]['q'] if lines else None
@@ -286,6 +352,7 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
         def near(target):
             q = position()
             return q is not None and all(abs(a - b) < 0.01 for a, b in zip(q, target))
+
         assert wait_for(lambda: near([-0.5, 0.3]), timeout=30), (position(), ctl.stderr)
 
         # (its own name: a controller SIGKILLed by an earlier test may linger in discovery)
@@ -293,11 +360,20 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
         assert client.wait_for_service(timeout_sec=10)
 
         def set_param(name, values):
-            request = SetParameters.Request(parameters=[Parameter(name=name, value=ParameterValue(
-                type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=values))])
+            request = SetParameters.Request(
+                parameters=[
+                    Parameter(
+                        name=name,
+                        value=ParameterValue(
+                            type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=values
+                        ),
+                    )
+                ]
+            )
             future = client.call_async(request)
             assert wait_for(future.done, timeout=10)
             return future.result().results[0]
+
         refused = set_param('p', [-1.0, 40.0])
         assert not refused.successful and 'p' in refused.reason and 'allowed' in refused.reason
         assert set_param('down_target', [0.4, -0.2]).successful
@@ -315,16 +391,26 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
     """Realtime start-up: the controller sends nothing until ``startup_hold`` has passed since
     it started (DDS discovery settles meanwhile), then drives the arm as usual."""
     import re
+
     standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '30']
     params = ('law:=pd', 'space:=joint', 'rate:=200.0', 'startup_hold:=2.5')
-    with start_process(standin, ros_env, tmp_path, 'standin') as driver, \
-            start_process(controller(*params, ros_args=['-r', '__node:=held_controller']),
-                          ros_env, tmp_path, 'ctl') as ctl:
+    with (
+        start_process(standin, ros_env, tmp_path, 'standin') as driver,
+        start_process(
+            controller(*params, ros_args=['-r', '__node:=held_controller']),
+            ros_env,
+            tmp_path,
+            'ctl',
+        ) as ctl,
+    ):
+
         def commands():
             return [x for x in driver.lines() if 'cmd' in x]
+
         assert wait_for(lambda: len(commands()) > 10, timeout=60), ctl.stderr
-        held = re.search(r'\[(\d+\.\d+)\] \[held_controller\]: first command held 2\.5 s',
-                         ctl.stderr)
+        held = re.search(
+            r'\[(\d+\.\d+)\] \[held_controller\]: first command held 2\.5 s', ctl.stderr
+        )
         assert held, ctl.stderr
         first = commands()[0]['wall']
         # the log line is written right after the hold starts (both are wall-clock times)
@@ -335,8 +421,12 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
 def freeze_recorder(domain, seconds):
     """SIGSTOP the run's recorder for ``seconds``, as a recorder starved by a busy machine."""
     from pathlib import Path
-    recorder = [int(pid) for pid in node_processes(domain)
-                if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()]
+
+    recorder = [
+        int(pid)
+        for pid in node_processes(domain)
+        if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()
+    ]
     assert len(recorder) == 1, recorder
     os.kill(recorder[0], signal.SIGSTOP)
     time.sleep(seconds)
@@ -347,15 +437,22 @@ def run_with_frozen_recorder(argv, env, tmp_path, ready_line, after=0.0, seconds
     """``impact-arm run ARGV`` whose recorder is frozen for ``seconds`` once its log says
     ``ready_line`` (and ``after`` more seconds); returns (process, output, whether it froze)."""
     recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
-    run = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', *argv, '--out',
-                            str(tmp_path / 'runs')], env=env, cwd=tmp_path,
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    run = subprocess.Popen(
+        [PYTHON, '-m', 'impact_arm.tools.cli', 'run', *argv, '--out', str(tmp_path / 'runs')],
+        env=env,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
+
         def ready():
             try:
                 return ready_line in recorder_log.read_text()
             except OSError:
                 return False
+
         wait_for(lambda: ready() or run.poll() is not None, timeout=240)
         time.sleep(after)
         froze = run.poll() is None
@@ -380,9 +477,11 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     from rosbags.highlevel import AnyReader
     from impact_arm.io.wire import joint_state_fields
     from impact_arm.nodes.recorder import FLOWING_LINE
+
     env = dict(ros_env)
     run, out, froze = run_with_frozen_recorder(
-        ['--mode', 'lockstep', '--name', 'r'], env, tmp_path, f'{FLOWING_LINE} {contract.COMMANDS}')
+        ['--mode', 'lockstep', '--name', 'r'], env, tmp_path, f'{FLOWING_LINE} {contract.COMMANDS}'
+    )
     assert run.returncode == 0, out
     assert froze, 'the run ended before the recorder could be frozen'
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
@@ -390,21 +489,31 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert 'real-time factor' in out
     assert ': complete' in out, out
     # the progress shows no stale 1 Hz watchdog state once the arm is being driven
-    assert not [line for line in out.splitlines()
-                if 'watchdog waiting' in line and 'impacts 0' not in line]
+    assert not [
+        line for line in out.splitlines() if 'watchdog waiting' in line and 'impacts 0' not in line
+    ]
     mcap = tmp_path / 'runs' / 'r.mcap'
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        reports = [json.loads(reader.deserialize(raw, c.msgtype).data)['index']
-                   for c, _, raw in reader.messages(
-                       [c for c in reader.connections if c.topic == '/impact_report'])]
+        reports = [
+            json.loads(reader.deserialize(raw, c.msgtype).data)['index']
+            for c, _, raw in reader.messages(
+                [c for c in reader.connections if c.topic == '/impact_report']
+            )
+        ]
     assert reports == list(range(1, 16)), reports
     # the held initial state (stamp 0) and then every period, 1 ms apart, to the end, in
     # the order they were written; a command started each period after the first
     with open(mcap, 'rb') as f:
-        stamps = [round((sec + nanosec * 1e-9) * 1000) for sec, nanosec, *_ in (
-            joint_state_fields(m.data) for _, c, m in make_reader(f).iter_messages(
-                topics=['/joint_states'], log_time_order=False))]
+        stamps = [
+            round((sec + nanosec * 1e-9) * 1000)
+            for sec, nanosec, *_ in (
+                joint_state_fields(m.data)
+                for _, c, m in make_reader(f).iter_messages(
+                    topics=['/joint_states'], log_time_order=False
+                )
+            )
+        ]
     distinct = sorted(set(stamps))
     missing = sorted(set(range(distinct[-1] + 1)) - set(distinct))
     assert not missing, f'{len(missing)} periods not recorded, from {missing[0]} ms'
@@ -425,13 +534,19 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
     from mcap.reader import make_reader
     from impact_arm.io.mcap_ros2 import read_metadata
     from impact_arm.io.wire import header_stamp_ns
+
     env = dict(ros_env)
     scene = tmp_path / 'short.yaml'
-    scene.write_text(Path(resolve_scene_path('paper')).read_text().replace('cycles: 15',
-                                                                           'cycles: 12'))
+    scene.write_text(
+        Path(resolve_scene_path('paper')).read_text().replace('cycles: 15', 'cycles: 12')
+    )
     run, out, froze = run_with_frozen_recorder(
-        ['--mode', 'realtime', '--scene', str(scene), '--name', 'rt'], env, tmp_path,
-        f'first samples on {contract.COMMANDS}', after=1.0)
+        ['--mode', 'realtime', '--scene', str(scene), '--name', 'rt'],
+        env,
+        tmp_path,
+        f'first samples on {contract.COMMANDS}',
+        after=1.0,
+    )
     sim_log = tmp_path / 'runs' / 'logs' / 'simulator.log'
     assert froze, out
     assert run.returncode == 0, out
@@ -439,12 +554,15 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
     losses = read_metadata(mcap)[contract.LOSSES_METADATA]
     sent = dict(re.findall(r'(/\w+) (\d+)', sim_log.read_text().partition('samples sent:')[2]))
     with open(mcap, 'rb') as f:
-        records = [(m.log_time, header_stamp_ns(m.data)) for _, _, m in
-                   make_reader(f).iter_messages(topics=[contract.JOINT_STATES])]
+        records = [
+            (m.log_time, header_stamp_ns(m.data))
+            for _, _, m in make_reader(f).iter_messages(topics=[contract.JOINT_STATES])
+        ]
     lost = int(losses[f'lost:{contract.JOINT_STATES}'])
-    assert lost > 1000, losses                  # ~3 000 periods of 1 ms
-    assert len(records) + lost + int(losses[f'before_first:{contract.JOINT_STATES}']) == \
-        int(sent[contract.JOINT_STATES]), (len(records), losses, sent)
+    assert lost > 1000, losses  # ~3 000 periods of 1 ms
+    assert len(records) + lost + int(losses[f'before_first:{contract.JOINT_STATES}']) == int(
+        sent[contract.JOINT_STATES]
+    ), (len(records), losses, sent)
     assert f'{contract.JOINT_STATES} {lost}' in out, out
     assert all(log == stamp for log, stamp in records)
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
@@ -452,13 +570,33 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
     assert not node_processes(env['ROS_DOMAIN_ID'])
     # the live recording (no /impact_trace) still gives Figures 8-11: the impact integrated
     # again from its /impact_report, as the command says
-    ana = subprocess.run([PYTHON, '-m', 'impact_arm.tools.cli', 'analyze', str(mcap), '--out',
-                          str(tmp_path / 'analysis'), '--laws', '', '--no-animation'],
-                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    ana = subprocess.run(
+        [
+            PYTHON,
+            '-m',
+            'impact_arm.tools.cli',
+            'analyze',
+            str(mcap),
+            '--out',
+            str(tmp_path / 'analysis'),
+            '--laws',
+            '',
+            '--no-animation',
+        ],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert ana.returncode == 0, ana.stderr
     assert 'impact 1 re-integrated from /impact_report' in ana.stdout
-    for name in ('fig8_indentation.png', 'fig9_impact_velocity.png', 'fig10_contact_force.png',
-                 'fig11_kinetic_energy.png'):
+    for name in (
+        'fig8_indentation.png',
+        'fig9_impact_velocity.png',
+        'fig10_contact_force.png',
+        'fig11_kinetic_energy.png',
+    ):
         assert (tmp_path / 'analysis' / name).stat().st_size > 10_000, name
 
 
@@ -479,39 +617,59 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
     from impact_arm import contract
     from impact_arm.nodes.recorder import MATCHED_LINE
     from impact_arm.tools.runner import SIMULATOR_TOPICS, RecorderProgress, ready_for_commands
+
     mcap = tmp_path / 'slow.mcap'
     states = probe.listen(JointState, contract.JOINT_STATES, depth=20000)
     with probe.lock:
         progress = RecorderProgress(probe.node)
-        command = probe.node.create_publisher(Float64MultiArray, contract.COMMANDS,
-                                              contract.qos(contract.COMMANDS).to_rclpy())
-    with start_process(node_args('impact_arm.nodes.recorder', f'output:={mcap}', 'scene:=paper'),
-                       ros_env, tmp_path, 'slow_rec') as rec:
-        assert wait_for(lambda: not rec.alive() or (
-            'waiting for their publishers' in rec.stderr and command.get_subscription_count() >= 1
-            and probe.node.count_subscribers(contract.COMMANDS) >= 1), timeout=60), rec.stderr
+        command = probe.node.create_publisher(
+            Float64MultiArray, contract.COMMANDS, contract.qos(contract.COMMANDS).to_rclpy()
+        )
+    with start_process(
+        node_args('impact_arm.nodes.recorder', f'output:={mcap}', 'scene:=paper'),
+        ros_env,
+        tmp_path,
+        'slow_rec',
+    ) as rec:
+        assert wait_for(
+            lambda: (
+                not rec.alive()
+                or (
+                    'waiting for their publishers' in rec.stderr
+                    and command.get_subscription_count() >= 1
+                    and probe.node.count_subscribers(contract.COMMANDS) >= 1
+                )
+            ),
+            timeout=60,
+        ), rec.stderr
         assert rec.alive(), rec.stderr
         rec.signal(signal.SIGSTOP)
         thaw = threading.Timer(3.0, rec.signal, (signal.SIGCONT,))
         try:
-            with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path,
-                               'slow_sim') as sim:
-                assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), \
+            with start_process(
+                simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path, 'slow_sim'
+            ) as sim:
+                assert wait_for(lambda: states or not sim.alive(), timeout=60) and sim.alive(), (
                     sim.stderr
+                )
                 thaw.start()
-                assert wait_for(lambda: ready_for_commands(probe.node, progress), timeout=60), \
+                assert wait_for(lambda: ready_for_commands(probe.node, progress), timeout=60), (
                     rec.stderr
+                )
                 assert command.get_subscription_count() >= 2
 
-                def advance(periods):                  # lockstep: a period per command
+                def advance(periods):  # lockstep: a period per command
                     for _ in range(periods):
                         command.publish(Float64MultiArray(data=[0.0, 0.0]))
                         time.sleep(0.002)
+
                 advance(200)
                 # then, thawed and matched for sure, more: the recording goes on after a gap
                 thaw.join()
-                assert wait_for(lambda: set(SIMULATOR_TOPICS) <= recorder_log_says(
-                    rec.err_path, MATCHED_LINE), timeout=60), rec.stderr
+                assert wait_for(
+                    lambda: set(SIMULATOR_TOPICS) <= recorder_log_says(rec.err_path, MATCHED_LINE),
+                    timeout=60,
+                ), rec.stderr
                 reached = max(stamp(m) for _, m in states)
                 advance(100)
                 assert wait_for(lambda: stamp(states[-1][1]) > reached, timeout=30), sim.stderr
@@ -528,8 +686,14 @@ def test_run_starts_commands_only_once_a_slow_recorder_has_matched(probe, ros_en
         assert rec.wait(20) == 0, rec.stderr
     with AnyReader([Path(mcap)]) as reader:
         joint_states = [c for c in reader.connections if c.topic == contract.JOINT_STATES]
-        stamps = {round(stamp(reader.deserialize(raw, c.msgtype)) * 1000)
-                  for c, _, raw in reader.messages(joint_states)} if joint_states else set()
+        stamps = (
+            {
+                round(stamp(reader.deserialize(raw, c.msgtype)) * 1000)
+                for c, _, raw in reader.messages(joint_states)
+            }
+            if joint_states
+            else set()
+        )
     missing = set(range(round(sent * 1000) + 1)) - stamps
     assert not missing, f'{len(missing)} periods not recorded, from stamp {min(missing)} ms'
 
@@ -547,10 +711,25 @@ def recorder_log_says(log_path, line) -> set:
 def test_run_command_interrupted_stops_nodes_and_keeps_the_recording(ros_env, tmp_path):
     from rosbags.highlevel import AnyReader
     from pathlib import Path
+
     logs = tmp_path / 'runs' / 'logs'
-    proc = subprocess.Popen([PYTHON, '-m', 'impact_arm.tools.cli', 'run', '--name', 'i', '--out',
-                             str(tmp_path / 'runs')], env=ros_env, cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [
+            PYTHON,
+            '-m',
+            'impact_arm.tools.cli',
+            'run',
+            '--name',
+            'i',
+            '--out',
+            str(tmp_path / 'runs'),
+        ],
+        env=ros_env,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         # interrupt once the arm moves (the controller's log exists once it was started)
         assert wait_for(lambda: (logs / 'controller.log').exists(), timeout=60)

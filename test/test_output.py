@@ -1,5 +1,6 @@
 """Output on a time grid from each step's continuous extension (PhaseIntegrator.start_output),
 checked against integrations that step exactly to each grid time, and against momentum."""
+
 import numpy as np
 import pytest
 
@@ -33,8 +34,7 @@ def with_output(model, t_end, dt, **kw):
     return integ.take_output(), integ.stats
 
 
-@pytest.mark.parametrize('method, rtol', [('dopri5', 1e-6), ('dopri5', 1e-4),
-                                          ('rosenbrock', 1e-5)])
+@pytest.mark.parametrize('method, rtol', [('dopri5', 1e-6), ('dopri5', 1e-4), ('rosenbrock', 1e-5)])
 def test_grid_output_is_as_accurate_as_stepping_to_each_grid_time(method, rtol):
     """The article's first strike and rebound (1.5 s, four impacts): the interpolated states
     are as close to the reference as those of an integration that stops at every sample,
@@ -46,22 +46,25 @@ def test_grid_output_is_as_accurate_as_stepping_to_each_grid_time(method, rtol):
     states, torques, impulses, stepped_stats = stepped(model, times, **options)
     rows, stats = with_output(model, times[-1], DT, **options)
     n, size = model.n, model.size
-    assert np.array_equal(rows[:, 0], times)          # exactly the grid, nothing skipped
-    scale = np.abs(reference[:, :2 * n]).max(axis=0) + 1e-3
+    assert np.array_equal(rows[:, 0], times)  # exactly the grid, nothing skipped
+    scale = np.abs(reference[:, : 2 * n]).max(axis=0) + 1e-3
 
     def error(y):
-        return np.max(np.abs(y[:, :2 * n] - reference[:, :2 * n]) / scale)
+        return np.max(np.abs(y[:, : 2 * n] - reference[:, : 2 * n]) / scale)
+
     # (after the impacts the trajectories of both part from the reference alike: the
     # rebound amplifies the impact's error, so the bound is relative to the stepped run's)
-    assert error(rows[:, 1:1 + size]) <= 3 * error(states) + 1e-9, \
-        (error(rows[:, 1:1 + size]), error(states))
+    assert error(rows[:, 1 : 1 + size]) <= 3 * error(states) + 1e-9, (
+        error(rows[:, 1 : 1 + size]),
+        error(states),
+    )
     assert stats.steps < 0.7 * stepped_stats.steps, (stats.steps, stepped_stats.steps)
     # torque and impulse of each row: what the stepped integration saw over that period
-    tau = rows[:, 3 + size:3 + size + n]
+    tau = rows[:, 3 + size : 3 + size + n]
     assert np.max(np.abs(tau - torques)) < 10 * rtol * np.abs(torques).max()
-    impulse = rows[:, 1 + size:3 + size]
+    impulse = rows[:, 1 + size : 3 + size]
     assert np.max(np.abs(impulse - impulses)) < 10 * rtol * np.abs(impulses).max()
-    assert np.abs(impulses[:, 1]).max() > 1.0         # the window really holds impacts
+    assert np.abs(impulses[:, 1]).max() > 1.0  # the window really holds impacts
 
 
 @pytest.mark.parametrize('law', ['hertz', 'elastoplastic'])
@@ -83,7 +86,7 @@ def test_output_rows_split_an_impact_impulse_without_losing_any(law, preset, rel
     size = model.size
     normal = rows[:, 2 + size]
     dp = generalized_momentum(states['separation']) - generalized_momentum(states['contact'])
-    assert (normal > 0).sum() >= 5                    # spread over several rows
+    assert (normal > 0).sum() >= 5  # spread over several rows
     assert normal.sum() + integ.take_impulse()[1] == pytest.approx(dp[0], rel=rel)
     assert np.allclose(np.diff(rows[:, 0]), 2e-5, rtol=1e-9, atol=0)
 
@@ -101,7 +104,7 @@ def test_simulate_samples_come_from_the_grid_and_match_a_stepped_run():
     k = len(times) // 2
     reference, _, _, _ = stepped(model, [times[k]], preset='reference')
     sample = result.samples[k]
-    assert np.allclose(sample.q + sample.qd, reference[0, :2 * model.n], rtol=1e-4, atol=1e-6)
+    assert np.allclose(sample.q + sample.qd, reference[0, : 2 * model.n], rtol=1e-4, atol=1e-6)
 
 
 def test_output_period_must_be_positive():

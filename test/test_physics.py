@@ -1,12 +1,19 @@
 """Physics checks that use no article number: closed forms, conservation laws, convergence."""
+
 import math
 
 import numpy as np
 import pytest
 from scipy.special import beta
 
-from impact_arm.core.contact import (contact_constants, hertz_force, jackson_green_force,
-                                residual_indentation, restitution_force, restitution_radius)
+from impact_arm.core.contact import (
+    contact_constants,
+    hertz_force,
+    jackson_green_force,
+    residual_indentation,
+    restitution_force,
+    restitution_radius,
+)
 from impact_arm.core.integrator import PhaseIntegrator
 from impact_arm.core.model import ArmModel
 from impact_arm.core.scene import Material
@@ -20,8 +27,12 @@ STEEL = Material(E=210e9, nu=0.29, S_y=1.12e9)
 def mass_matrix_by_hand(q, L=(1.0, 1.0), m=(1.0, 1.0)):
     """Two uniform rods, absolute angles: textbook mass matrix, written independently."""
     c = math.cos(q[0] - q[1])
-    return np.array([[m[0] * L[0] ** 2 / 3 + m[1] * L[0] ** 2, m[1] * L[0] * L[1] / 2 * c],
-                     [m[1] * L[0] * L[1] / 2 * c, m[1] * L[1] ** 2 / 3]])
+    return np.array(
+        [
+            [m[0] * L[0] ** 2 / 3 + m[1] * L[0] ** 2, m[1] * L[0] * L[1] / 2 * c],
+            [m[1] * L[0] * L[1] / 2 * c, m[1] * L[1] ** 2 / 3],
+        ]
+    )
 
 
 def free_scene(**top):
@@ -35,16 +46,16 @@ def test_generated_mass_matrix_matches_hand_derivation():
     rng = np.random.default_rng(1)
     for _ in range(5):
         q = rng.uniform(-3, 3, 2).tolist()
-        assert np.allclose(model.mass_matrix(q), mass_matrix_by_hand(q),
-                           rtol=1e-13, atol=1e-13)
+        assert np.allclose(model.mass_matrix(q), mass_matrix_by_hand(q), rtol=1e-13, atol=1e-13)
 
 
 def test_energy_is_conserved_in_free_motion_without_control():
     scene = free_scene(t_max=10.0, publish_rate=100.0)
     result = run(scene, preset='reference')
     model = ArmModel(scene)
-    energy = [sum(model.link_energies(s.q, s.qd)) + model.potential_energy(s.q)
-              for s in result.samples]
+    energy = [
+        sum(model.link_energies(s.q, s.qd)) + model.potential_energy(s.q) for s in result.samples
+    ]
     scale = max(abs(model.potential_energy(s.q)) for s in result.samples)
     assert result.samples[-1].t == pytest.approx(10.0)
     assert max(abs(e - energy[0]) for e in energy) / scale < 1e-8
@@ -57,11 +68,16 @@ def vertical_strike_scene(v, law='hertz', mu=0.0, qd2=0.0, gap=1e-7):
     moves straight down at v: at this pose the mass matrix is diagonal and the tip's
     vertical effective mass is M11 = 4/3 kg, its horizontal one M22 = 1/3 kg."""
     return scene_from(
-        {('initial', 'q_deg'): [0.0, -90.0], ('initial', 'qd'): [-v, qd2],
-         ('controller', 'law'): 'none'},
-        gravity=0.0, cycles=0, t_max=0.002,
-        surfaces=[{'height': -1.0 - gap, 'law': law, 'mu': mu, 'v_d': 0.02,
-                   'material': 'steel'}])
+        {
+            ('initial', 'q_deg'): [0.0, -90.0],
+            ('initial', 'qd'): [-v, qd2],
+            ('controller', 'law'): 'none',
+        },
+        gravity=0.0,
+        cycles=0,
+        t_max=0.002,
+        surfaces=[{'height': -1.0 - gap, 'law': law, 'mu': mu, 'v_d': 0.02, 'material': 'steel'}],
+    )
 
 
 def test_hertz_impact_matches_closed_form_indentation_and_duration():
@@ -72,11 +88,11 @@ def test_hertz_impact_matches_closed_form_indentation_and_duration():
     c = contact_constants(STEEL, STEEL, 0.005)
     m_eff = 4.0 / 3.0
     k = 4.0 / 3.0 * c.E * math.sqrt(c.R)
-    delta_m = (5 * m_eff * v ** 2 / (4 * k)) ** 0.4          # ½mv² = (2/5) k δm^(5/2)
+    delta_m = (5 * m_eff * v**2 / (4 * k)) ** 0.4  # ½mv² = (2/5) k δm^(5/2)
     duration = 2 * (2 / 5) * beta(2 / 5, 1 / 2) * delta_m / v  # ∫ dδ / δ̇ over load + unload
     assert impact['delta_m'] == pytest.approx(delta_m, rel=1e-6)
     assert impact['duration'] == pytest.approx(duration, rel=1e-6)
-    assert impact['F_max'] == pytest.approx(k * delta_m ** 1.5, rel=1e-6)
+    assert impact['F_max'] == pytest.approx(k * delta_m**1.5, rel=1e-6)
     assert impact['delta_r'] == 0.0
     assert impact['cor_kinematic'] == pytest.approx(1.0, abs=1e-6)  # Hertz is elastic
 
@@ -121,8 +137,9 @@ def test_contact_force_laws_join_where_the_model_says():
     assert restitution_force(delta_r, delta_r, c.E, r_r) == 0.0
     # below yield the contact unloads along its own Hertz curve
     assert residual_indentation(0.5 * c.delta_c, c) == 0.0
-    assert restitution_radius(0.5 * c.delta_c, 0.0, hertz_force(0.5 * c.delta_c, c.E, c.R),
-                              c.E) == pytest.approx(c.R, rel=1e-12)
+    assert restitution_radius(
+        0.5 * c.delta_c, 0.0, hertz_force(0.5 * c.delta_c, c.E, c.R), c.E
+    ) == pytest.approx(c.R, rel=1e-12)
 
 
 def first_impact(rtol):
@@ -138,6 +155,7 @@ def test_first_impact_metrics_converge_as_tolerances_tighten():
         rel = [abs(impact[k] / reference[k] - 1) for k in keys]
         rel.append(abs(impact['v_after'][1] / reference['v_after'][1] - 1))
         return max(rel)
+
     errors = [error(first_impact(rtol)) for rtol in (1e-4, 1e-6, 1e-8, 1e-10)]
     assert errors[0] > errors[1] > errors[2] > errors[3] or errors[3] < 1e-9, errors
     assert errors[-1] < 1e-7
@@ -145,9 +163,13 @@ def test_first_impact_metrics_converge_as_tolerances_tighten():
 
 
 def step_response(law):
-    scene = scene_from({('controller', 'law'): law,
-                        ('controller', 'down_target_deg'): [80.0, 70.0]},
-                       surfaces=[], cycles=0, t_max=6.0, publish_rate=100.0)
+    scene = scene_from(
+        {('controller', 'law'): law, ('controller', 'down_target_deg'): [80.0, 70.0]},
+        surfaces=[],
+        cycles=0,
+        t_max=6.0,
+        publish_rate=100.0,
+    )
     result = run(scene)
     q = np.degrees(np.array([s.q for s in result.samples]))
     return q - [80.0, 70.0]
@@ -160,10 +182,10 @@ def test_q_controller_reaches_target_without_steady_error():
 
 def test_pd_controller_stops_short_of_the_target_against_gravity():
     error = step_response('pd')
-    assert np.all(error[-1] < -0.1)              # degrees short, both links
+    assert np.all(error[-1] < -0.1)  # degrees short, both links
     assert np.all(np.abs(error[-1] - error[-50]) < 1e-3)  # and it stays there
 
 
 def test_pid_controller_overshoots_then_settles():
     error = step_response('pid')
-    assert np.all(error.max(axis=0) > 1.0)       # overshoot of more than a degree
+    assert np.all(error.max(axis=0) > 1.0)  # overshoot of more than a degree

@@ -2,6 +2,7 @@
 stalled writes what reached it late after newer messages (impact reports [5..15, 1..4] were
 seen), and a table that began with impact 5 would call impact 5 the first. The test writes
 such a file on purpose and analyses it."""
+
 import subprocess
 import sys
 
@@ -16,8 +17,9 @@ def scrambled_copy(source, target):
     """``source``'s joint states, wrenches and impact reports in a scrambled file order, each
     logged when 'received' (the log time grows with the file position): the second half of
     the joint states and of the reports first, then the first half."""
-    messages = list(iter_raw(source, [contract.JOINT_STATES, contract.CONTACT_WRENCH,
-                                      contract.IMPACT_REPORT]))
+    messages = list(
+        iter_raw(source, [contract.JOINT_STATES, contract.CONTACT_WRENCH, contract.IMPACT_REPORT])
+    )
     by_topic = {}
     for m in messages:
         by_topic.setdefault(m.topic, []).append(m)
@@ -37,17 +39,29 @@ def scrambled_copy(source, target):
 
 def test_a_scrambled_recording_is_analysed_in_stamp_order(tmp_path):
     source, target = tmp_path / 'run.mcap', tmp_path / 'scrambled.mcap'
-    sim = subprocess.run([sys.executable, '-m', 'impact_arm.tools.cli', 'simulate', '--scene',
-                          'paper', '--mcap', str(source)], capture_output=True, text=True,
-                         cwd=tmp_path, timeout=300)
+    sim = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'impact_arm.tools.cli',
+            'simulate',
+            '--scene',
+            'paper',
+            '--mcap',
+            str(source),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=300,
+    )
     assert sim.returncode == 0, sim.stderr
     reports = scrambled_copy(source, target)
     assert reports == 15
     in_file = [m for m in iter_raw(target, [contract.IMPACT_REPORT], log_time_order=False)]
     original, scrambled = load(source), load(target)
     # the file really is out of order ...
-    assert [m.data for m in in_file] != [m.data for m in iter_raw(source,
-                                                                  [contract.IMPACT_REPORT])]
+    assert [m.data for m in in_file] != [m.data for m in iter_raw(source, [contract.IMPACT_REPORT])]
     # ... and the analysis reads it as the run happened
     assert [r['index'] for r in scrambled.impacts] == list(range(1, 16))
     assert scrambled.impacts == original.impacts

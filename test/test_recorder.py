@@ -1,6 +1,7 @@
 """The recorder node over DDS (separate processes, this machine only, a private domain): what
 was published is what the file holds; SIGKILL keeps everything up to the last flush; an
 unwritable output is a clear error and a non-zero exit."""
+
 import json
 import math
 import os
@@ -15,8 +16,7 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from impact_arm import contract
-from ros_helpers import (controller, helper_args, node_args, ros_env, simulator,  # noqa: F401
-                         start_process, wait_for)
+from ros_helpers import controller, helper_args, node_args, simulator, start_process, wait_for
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAPER = os.path.join(ROOT, 'config', 'paper.yaml')
@@ -64,13 +64,25 @@ def metadata(path):
 def test_records_what_was_published(ros_env, tmp_path):
     out = tmp_path / 'run.mcap'
     n = 150
-    rec_args = node_args(RECORDER, f'output:={out}', f'scene:={PAPER}',
-                         'param_nodes:=[test_publisher]', 'flush_interval:=0.2')
-    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
-            start_process(helper_args('pub', '--count', n, '--rate', 300, '--wrench',
-                                      '--linger', 30.0), ros_env, tmp_path, 'pub') as pub:
-        assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), \
+    rec_args = node_args(
+        RECORDER,
+        f'output:={out}',
+        f'scene:={PAPER}',
+        'param_nodes:=[test_publisher]',
+        'flush_interval:=0.2',
+    )
+    with (
+        start_process(rec_args, ros_env, tmp_path, 'recorder') as rec,
+        start_process(
+            helper_args('pub', '--count', n, '--rate', 300, '--wrench', '--linger', 30.0),
+            ros_env,
+            tmp_path,
+            'pub',
+        ) as pub,
+    ):
+        assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), (
             pub.stderr + rec.stderr
+        )
         assert [e for e in pub.lines() if e.get('event') == 'matched'][0]['subs'] >= 1
         # everything published has reached a flushed file before the recorder is stopped;
         # with the scene, the file also holds the derived description, static frames and,
@@ -78,8 +90,13 @@ def test_records_what_was_published(ros_env, tmp_path):
         # recorder stops, at the last stamp)
         n_tf = 15
         # (and, once a second, the recorder's own status on /diagnostics)
-        assert wait_for(lambda: (count_messages(out) or 0) - topic_count(out, '/diagnostics')
-                        == 2 * n + 2 + 2 * n_tf, 10), rec.stderr
+        assert wait_for(
+            lambda: (
+                (count_messages(out) or 0) - topic_count(out, '/diagnostics')
+                == 2 * n + 2 + 2 * n_tf
+            ),
+            10,
+        ), rec.stderr
         # the publisher's parameters are asked once its services are discovered
         assert wait_for(lambda: 'parameters/test_publisher/start' in metadata(out), 20)
         pub.stop()
@@ -97,10 +114,11 @@ def test_records_what_was_published(ros_env, tmp_path):
         '/robot_description': ('std_msgs/msg/String', 1),
         '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
         '/tf': ('tf2_msgs/msg/TFMessage', n_tf + 1),
-        '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf + 1)}
-    last = got['/tf'][1].pop()               # the final pose, joint state 149
+        '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf + 1),
+    }
+    last = got['/tf'][1].pop()  # the final pose, joint state 149
     assert last.transforms[0].header.stamp.nanosec == 149 * 10**6
-    for k, tf in enumerate(got['/tf'][1]):   # joint state 10 k: q1 = 10 k ms, q2 - q1 = -q1
+    for k, tf in enumerate(got['/tf'][1]):  # joint state 10 k: q1 = 10 k ms, q2 - q1 = -q1
         link1, link2 = tf.transforms
         assert (link1.header.stamp.sec, link1.header.stamp.nanosec) == (0, k * 10**7)
         # REP 103: the joints turn about -y (the model's z axis in the z-up world)
@@ -108,11 +126,10 @@ def test_records_what_was_published(ros_env, tmp_path):
             r = link.transform.rotation
             assert r.x == r.z == 0.0
             assert -2 * math.atan2(r.y, r.w) == pytest.approx(angle, abs=1e-12)
-        assert link2.transform.translation.x == 1.0     # at the end of link 1 (L1 = 1 m)
+        assert link2.transform.translation.x == 1.0  # at the end of link 1 (L1 = 1 m)
     # the force arrow comes from impact reports (exact contact point), none were published:
     # sampled wrenches alone draw no arrow
-    assert not any(m.ns == 'contact_force' for ma in got['/impact_markers'][1]
-                   for m in ma.markers)
+    assert not any(m.ns == 'contact_force' for ma in got['/impact_markers'][1] for m in ma.markers)
     for i, m in enumerate(got['/joint_states'][1]):
         assert list(m.name) == ['joint1', 'joint2']
         assert list(m.position) == [i * 1e-3, -i * 1e-3]
@@ -128,11 +145,13 @@ def test_records_what_was_published(ros_env, tmp_path):
             qos = yaml.safe_load(c.metadata['offered_qos_profiles'])
             assert qos and qos[0]['reliability'] == 'reliable'
             assert {'deadline', 'lifespan', 'liveliness_lease_duration'} <= set(qos[0])
-        messages = [m for _, c, m in reader.iter_messages(log_time_order=True)
-                    if c.topic == '/joint_states']
+        messages = [
+            m for _, c, m in reader.iter_messages(log_time_order=True) if c.topic == '/joint_states'
+        ]
         # log time = the joint state's own stamp (simulated time: one clock in the file),
         # publish time = send time (wall clock)
         from impact_arm.io.wire import header_stamp_ns
+
         assert all(m.log_time == header_stamp_ns(m.data) for m in messages)
         batches = [e for e in pub.lines() if e.get('event') == 'sent']
         for e in batches:  # message n-1 was sent before the publisher printed its batch line
@@ -152,16 +171,20 @@ def test_records_what_was_published(ros_env, tmp_path):
 
 def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
     out = tmp_path / 'killed.mcap'
-    rec_args = node_args(RECORDER, f'output:={out}', 'flush_interval:=0.2',
-                         'param_nodes:=[""]')
+    rec_args = node_args(RECORDER, f'output:={out}', 'flush_interval:=0.2', 'param_nodes:=[""]')
     go = tmp_path / 'go'
-    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
-            start_process(helper_args('pub', '--count', 3000, '--rate', 200, '--wait-sub', 30,
-                                      '--go-file', go), ros_env, tmp_path, 'pub') as pub:
+    with (
+        start_process(rec_args, ros_env, tmp_path, 'recorder') as rec,
+        start_process(
+            helper_args('pub', '--count', 3000, '--rate', 200, '--wait-sub', 30, '--go-file', go),
+            ros_env,
+            tmp_path,
+            'pub',
+        ) as pub,
+    ):
         # the recorder's reader has matched the publisher: nothing published from now on is
         # dropped at the start (the file must hold a prefix of what was published)
-        assert wait_for(lambda: 'publishers matched on /joint_states' in rec.stderr, 30), \
-            rec.stderr
+        assert wait_for(lambda: 'publishers matched on /joint_states' in rec.stderr, 30), rec.stderr
         go.touch()
         seen = wait_for(lambda: (count_messages(out) or 0) >= 60 and count_messages(out), 30)
         assert seen, rec.stderr + pub.stderr
@@ -180,8 +203,9 @@ def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
 def test_unwritable_output_is_a_clear_error(ros_env, tmp_path):
     blocker = tmp_path / 'a_file'
     blocker.write_text('x')
-    with start_process(node_args(RECORDER, f'output:={blocker}/run.mcap'), ros_env, tmp_path,
-                       'recorder') as rec:
+    with start_process(
+        node_args(RECORDER, f'output:={blocker}/run.mcap'), ros_env, tmp_path, 'recorder'
+    ) as rec:
         code = rec.wait(30)
     assert code != 0
     assert 'output' in rec.stderr and str(blocker) in rec.stderr
@@ -189,8 +213,12 @@ def test_unwritable_output_is_a_clear_error(ros_env, tmp_path):
 
 
 def test_bad_parameter_names_the_parameter(ros_env, tmp_path):
-    with start_process(node_args(RECORDER, f'output:={tmp_path}/x.mcap', 'flush_interval:=0.0'),
-                       ros_env, tmp_path, 'recorder') as rec:
+    with start_process(
+        node_args(RECORDER, f'output:={tmp_path}/x.mcap', 'flush_interval:=0.0'),
+        ros_env,
+        tmp_path,
+        'recorder',
+    ) as rec:
         code = rec.wait(30)
     assert code == 2 and 'flush_interval' in rec.stderr and '> 0' in rec.stderr
     time.sleep(0)  # nothing left running: start_process ends it by PID
@@ -205,6 +233,7 @@ def test_impact_reports_are_read_as_dds_sends_them():
     from std_msgs.msg import String
 
     from impact_arm.nodes.recorder import _string_reader
+
     read = _string_reader()
     for text in ('', 'ab', json.dumps({'q_contact_deg': [30.0, -12.5]})):
         raw = serialize_message(String(data=text))
@@ -221,26 +250,38 @@ def test_says_recording_once_every_topic_has_a_publisher(ros_env, tmp_path):
     without a publisher after its grace period, logs each topic as its reader matches one,
     and says "recording" only once all have: then nothing published is lost."""
     from impact_arm.nodes.recorder import MATCHED_LINE
+
     out = tmp_path / 'matched.mcap'
     n = 100
-    rec_args = node_args(RECORDER, f'output:={out}', 'topics:=[/joint_states,/contact_wrench]',
-                         'flush_interval:=0.2')
+    rec_args = node_args(
+        RECORDER, f'output:={out}', 'topics:=[/joint_states,/contact_wrench]', 'flush_interval:=0.2'
+    )
     with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec:
-        assert wait_for(lambda: 'no publisher yet on /contact_wrench /joint_states'
-                        in rec.stderr, 20), rec.stderr
-        assert not [line for line in rec.stderr.splitlines()
-                    if ']: recording' in line and 'no publisher yet' not in line], rec.stderr
-        with start_process(helper_args('pub', '--count', n, '--rate', 200, '--wrench'),
-                           ros_env, tmp_path, 'pub') as pub:
-            assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 20), \
+        assert wait_for(
+            lambda: 'no publisher yet on /contact_wrench /joint_states' in rec.stderr, 20
+        ), rec.stderr
+        assert not [
+            line
+            for line in rec.stderr.splitlines()
+            if ']: recording' in line and 'no publisher yet' not in line
+        ], rec.stderr
+        with start_process(
+            helper_args('pub', '--count', n, '--rate', 200, '--wrench'), ros_env, tmp_path, 'pub'
+        ) as pub:
+            assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 20), (
                 rec.stderr + pub.stderr
+            )
             assert wait_for(lambda: count_messages(out) == 2 * n, 10), rec.stderr
         rec.stop()
         assert rec.popen.returncode == 0, rec.stderr
     lines = rec.stderr.splitlines()
     said = next(i for i, line in enumerate(lines) if 'every topic has a publisher' in line)
-    matched = {t for line in lines[:said] if MATCHED_LINE in line
-               for t in line.partition(MATCHED_LINE)[2].split()}
+    matched = {
+        t
+        for line in lines[:said]
+        if MATCHED_LINE in line
+        for t in line.partition(MATCHED_LINE)[2].split()
+    }
     assert matched == {'/joint_states', '/contact_wrench'}, lines
 
 
@@ -253,10 +294,13 @@ def test_simulator_exit_waits_for_a_lagging_recorder(ros_env, tmp_path):
     rec_args = node_args(RECORDER, f'output:={out}', 'topics:=[/impact_report,/joint_states]')
     sim_args = simulator('mode:=lockstep', 'rate_factor:=0.0')
     ctl_args = controller('command_readers:=1')
-    with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec, \
-            start_process(sim_args, ros_env, tmp_path, 'sim') as sim:
-        assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 60), \
+    with (
+        start_process(rec_args, ros_env, tmp_path, 'recorder') as rec,
+        start_process(sim_args, ros_env, tmp_path, 'sim') as sim,
+    ):
+        assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 60), (
             rec.stderr + sim.stderr
+        )
         with start_process(ctl_args, ros_env, tmp_path, 'ctl') as ctl:
             # the recorder stops taking anything (and acknowledging) while the run goes on:
             # once a report is recorded (not after a fixed 3 s, which a loaded machine can

@@ -1,6 +1,7 @@
 """Offline runs stream their samples (``run(keep_samples=False)``, what ``impact-arm simulate``
 does): the observer gets the same samples a run that keeps them holds, and memory stays
 bounded however many samples the run produces."""
+
 import math
 import tracemalloc
 
@@ -11,7 +12,7 @@ from impact_arm.core.simulate import MAX_KEPT_SAMPLES, run
 
 from scenes import scene_from
 
-MEMORY_BUDGET = 5e6     # bytes: a run holding 2e4 samples or more needs well over this
+MEMORY_BUDGET = 5e6  # bytes: a run holding 2e4 samples or more needs well over this
 
 
 class Collect:
@@ -41,18 +42,28 @@ def test_streamed_samples_are_the_kept_ones(control_rate):
     # the summary's ranges, kept as the run goes, are those of the samples
     summary, q1 = lean.summary(), [math.degrees(s.q[0]) for s in full.samples]
     assert summary['q1_range_deg'] == [min(q1), max(q1)]
-    for key in ('impacts', 't_end', 'q1_range_deg', 'q2_range_deg', 'vx_range', 'vy_range',
-                'rhs_evaluations'):
+    for key in (
+        'impacts',
+        't_end',
+        'q1_range_deg',
+        'q2_range_deg',
+        'vx_range',
+        'vy_range',
+        'rhs_evaluations',
+    ):
         assert summary[key] == full.summary()[key], key
 
 
-@pytest.mark.parametrize('control_rate, publish_rate, t_max', [
-    (0.0, 1e5, 0.5),        # continuous control: samples from the integrator's output rows
-    (1000.0, 2e4, 1.0),     # sampled control: one sample per period on the merged clock
-])
+@pytest.mark.parametrize(
+    'control_rate, publish_rate, t_max',
+    [
+        (0.0, 1e5, 0.5),  # continuous control: samples from the integrator's output rows
+        (1000.0, 2e4, 1.0),  # sampled control: one sample per period on the merged clock
+    ],
+)
 def test_streaming_holds_memory_bounded(control_rate, publish_rate, t_max):
     scene = scene_from(publish_rate=publish_rate, t_max=t_max, cycles=0)
-    run(scene, control_rate=control_rate, t_max=0.01)   # kernel and laws loaded outside
+    run(scene, control_rate=control_rate, t_max=0.01)  # kernel and laws loaded outside
     counter = Count()
     tracemalloc.start()
     try:
@@ -65,7 +76,7 @@ def test_streaming_holds_memory_bounded(control_rate, publish_rate, t_max):
 
 
 def test_a_run_keeping_its_samples_refuses_more_than_memory_holds():
-    scene = scene_from(publish_rate=1e6, t_max=60.0)     # a scene the loader accepts
+    scene = scene_from(publish_rate=1e6, t_max=60.0)  # a scene the loader accepts
     with pytest.raises(SceneError, match=r'publish_rate = 1e\+06 .* 6e\+07 samples'):
         run(scene)
     assert 1e6 * 60.0 > MAX_KEPT_SAMPLES

@@ -1,4 +1,5 @@
 """Scene validation: bad scenes are refused with messages naming key, value and range."""
+
 import math
 
 import pytest
@@ -86,14 +87,18 @@ def test_unreadable_file_is_a_scene_error():
 
 
 def test_a_misspelled_scene_name_lists_the_installed_scenes():
-    with pytest.raises(SceneError, match=r"scene 'papr': cannot be read: .*installed scenes: "
-                                         r"paper\b") as refused:
+    with pytest.raises(
+        SceneError,
+        match=r"scene 'papr': cannot be read: .*installed scenes: "
+        r'paper\b',
+    ) as refused:
         load_scene('papr')
-    assert 'simulator' not in str(refused.value)     # node parameter files are not scenes
+    assert 'simulator' not in str(refused.value)  # node parameter files are not scenes
 
 
 def test_cli_reports_bad_scene_without_traceback(tmp_path, capsys):
     from impact_arm.tools.cli import main
+
     bad = tmp_path / 'bad.yaml'
     bad.write_text(open(PAPER, encoding='utf-8').read().replace('mass: 1.0}', 'mass: -2.0}', 1))
     assert main(['simulate', '--scene', str(bad)]) == 2

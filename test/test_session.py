@@ -1,6 +1,7 @@
 """The ROS-free sessions (core/session.py) and the controller's input handling
 (core/control_inputs.py) on a fake clock, as the simulator and controller nodes drive them;
 and the watchdog's brake policy against a controller that goes silent in the down-swing."""
+
 import math
 
 import pytest
@@ -25,24 +26,35 @@ def scene():
 
 def session(kind, scene, clock, published, logs=None, **kwargs):
     arm = SimulatedArm(scene, RATE, max_effort=100.0, trace=False)
-    outputs = Outputs(publish=published.append,
-                      log=lambda level, text: (logs if logs is not None else []).append(text))
-    return kind(arm, publish_rate=RATE, rate_factor=kwargs.pop('rate_factor', 1.0),
-                command_timeout=0.1, command_order=[1, 0], outputs=outputs, clock=clock,
-                sleep=clock.sleep, **kwargs)
+    outputs = Outputs(
+        publish=published.append,
+        log=lambda level, text: (logs if logs is not None else []).append(text),
+    )
+    return kind(
+        arm,
+        publish_rate=RATE,
+        rate_factor=kwargs.pop('rate_factor', 1.0),
+        command_timeout=0.1,
+        command_order=[1, 0],
+        outputs=outputs,
+        clock=clock,
+        sleep=clock.sleep,
+        **kwargs,
+    )
 
 
 def test_commands_are_checked_reordered_counted_and_clipped(scene):
     clock, published, logs = FakeClock(), [], []
     s = session(RealtimeSession, scene, clock, published, logs)
-    assert not s.offer(lambda: s.ordered([1.0]))                 # wrong length
-    assert not s.offer(lambda: s.ordered([math.nan, 0.0]))       # not finite
-    assert s.rejected == 2 and len(logs) == 1                    # logged once a second
+    assert not s.offer(lambda: s.ordered([1.0]))  # wrong length
+    assert not s.offer(lambda: s.ordered([math.nan, 0.0]))  # not finite
+    assert s.rejected == 2 and len(logs) == 1  # logged once a second
 
     def malformed():
         raise CommandError('truncated')
+
     assert not s.offer(malformed) and s.rejected == 3
-    assert s.offer(lambda: s.ordered([500.0, 2.0]))              # joints in the order [2, 1]
+    assert s.offer(lambda: s.ordered([500.0, 2.0]))  # joints in the order [2, 1]
     assert s.clipped == 1 and s.loop.commands == 1
     s.loop.realtime_period()
     assert s.arm.command == [2.0, 100.0]
@@ -62,7 +74,7 @@ def test_realtime_session_status_snapshot_says_what_the_arm_does(scene):
     assert status.level is Level.OK and status.message == 'running'
     assert status.value('periods_published') == '10' and status.value('commands') == '1'
     assert status.value('watchdog_policy') == 'zero'
-    clock.now += 1.0                                             # the controller went silent
+    clock.now += 1.0  # the controller went silent
     assert s.take_status().message == 'no command for more than 0.1 s: torques zeroed'
     assert s.set_e_stop(True) and not s.set_e_stop(True)
     assert s.take_status().level is Level.ERROR
@@ -82,16 +94,18 @@ def test_lockstep_session_runs_one_period_per_command_and_holds_while_paused(sce
     assert s.arm.periods == 3 and [round(t.t * RATE) for t in published] == [0, 1, 2, 3]
     s.pause(True)
     s.offer(lambda: [0.0, 0.0])
-    assert s.arm.periods == 3                       # held until resumed or stepped
-    s.step(2)                                       # the waiting command runs one at once
+    assert s.arm.periods == 3  # held until resumed or stepped
+    s.step(2)  # the waiting command runs one at once
     assert s.arm.periods == 4
     s.offer(lambda: [0.0, 0.0])
     s.offer(lambda: [0.0, 0.0])
-    assert s.arm.periods == 5                       # the second step, then held again
-    s.pause(False)                                  # resuming answers the waiting command
+    assert s.arm.periods == 5  # the second step, then held again
+    s.pause(False)  # resuming answers the waiting command
     assert s.arm.periods == 6
-    assert s.reset() == (True, 'reset to the initial state at t = 0; brakes on until the '
-                                'next command')
+    assert s.reset() == (
+        True,
+        'reset to the initial state at t = 0; brakes on until the next command',
+    )
     assert s.arm.periods == 0 and published[-1].t == 0.0
     assert s.take_status().value('mode') == 'lockstep'
 
@@ -99,21 +113,28 @@ def test_lockstep_session_runs_one_period_per_command_and_holds_while_paused(sce
 def test_lockstep_session_repeats_an_unanswered_period_once_a_second(scene):
     clock, published, logs = FakeClock(), [], []
     controller_there = [True]
-    s = session(LockstepSession, scene, clock, published, logs, rate_factor=0.0,
-                controller_present=lambda: controller_there[0])
+    s = session(
+        LockstepSession,
+        scene,
+        clock,
+        published,
+        logs,
+        rate_factor=0.0,
+        controller_present=lambda: controller_there[0],
+    )
     s.publish_initial()
     s.tick()
-    assert len(published) == 2 and published[-1].t == 0.0     # before the first command
+    assert len(published) == 2 and published[-1].t == 0.0  # before the first command
     s.offer(lambda: [0.0, 0.0])
     clock.now += 0.5
     s.tick()
-    assert len(published) == 3                                  # answered recently enough
+    assert len(published) == 3  # answered recently enough
     clock.now += 0.6
     s.tick()
     assert len(published) == 4 and published[-1] is published[-2] and s.repeats == 1
     assert 'published it again (1 so far)' in logs[-1]
     clock.now += 1.1
-    controller_there[0] = False                                 # not once it left
+    controller_there[0] = False  # not once it left
     s.tick()
     assert len(published) == 4
 
@@ -121,23 +142,31 @@ def test_lockstep_session_repeats_an_unanswered_period_once_a_second(scene):
 def test_lockstep_session_waits_for_the_recorder_within_its_window(scene):
     clock, published, logs = FakeClock(), [], []
     recorder_there = [True]
-    s = session(LockstepSession, scene, clock, published, logs, rate_factor=0.0,
-                recorder_window=3, recorder_present=lambda: recorder_there[0])
+    s = session(
+        LockstepSession,
+        scene,
+        clock,
+        published,
+        logs,
+        rate_factor=0.0,
+        recorder_window=3,
+        recorder_present=lambda: recorder_there[0],
+    )
     s.offer(lambda: [0.0, 0.0])
-    assert s.arm.periods == 0 and s.waits_for_recorder == 1     # no progress yet
+    assert s.arm.periods == 0 and s.waits_for_recorder == 1  # no progress yet
     s.recorder_progress(0)
-    assert s.arm.periods == 1                                    # the deferred command ran
+    assert s.arm.periods == 1  # the deferred command ran
     s.offer(lambda: [0.0, 0.0])
     s.offer(lambda: [0.0, 0.0])
     assert s.arm.periods == 3
     s.offer(lambda: [0.0, 0.0])
-    assert s.arm.periods == 3 and s.deferred is not None         # 3 periods ahead: held
+    assert s.arm.periods == 3 and s.deferred is not None  # 3 periods ahead: held
     s.recorder_progress(round(1e9 * P))
     assert s.arm.periods == 4
     s.offer(lambda: [0.0, 0.0])
     s.tick()
     assert s.arm.periods == 4 and 'waiting for the recorder' in logs[-1]
-    recorder_there[0] = False                                    # it left: go on without
+    recorder_there[0] = False  # it left: go on without
     s.tick()
     assert s.arm.periods == 5 and logs[-1] == 'the recorder left: the run goes on without it'
     assert s.take_status().value('periods_waiting_for_recorder') == '3'
@@ -148,9 +177,17 @@ def inputs(scene, sent, clock=None, **kwargs):
     model = ArmModel(scene)
     ctrl = CycleController.for_scene(model, scene.controller)
     logs = kwargs.pop('logs', [])
-    return ControlInputs(ctrl, ['joint1', 'joint2'], [0, 1], 1000.0, kwargs.pop('trigger',
-                         'joint_states'), sent.append, log=logs.append,
-                         clock=clock or FakeClock(), **kwargs)
+    return ControlInputs(
+        ctrl,
+        ['joint1', 'joint2'],
+        [0, 1],
+        1000.0,
+        kwargs.pop('trigger', 'joint_states'),
+        sent.append,
+        log=logs.append,
+        clock=clock or FakeClock(),
+        **kwargs,
+    )
 
 
 def state(c, t, q=(1.0, 0.5), qd=(0.0, 0.0)):
@@ -162,10 +199,10 @@ def test_a_state_waits_for_the_wrench_of_its_instant_and_the_force_is_latched(sc
     sent = []
     c = inputs(scene, sent)
     state(c, 0.0)
-    assert sent == [] and c.waiting is not None               # its wrench comes first
+    assert sent == [] and c.waiting is not None  # its wrench comes first
     c.wrench(0, 0, (0.0, 5.0))
-    c.wrench(0, 0, (0.0, 2.0))                                 # latched: the largest counts
-    assert len(sent) == 1 and c.normal_force == 2.0           # (the tick took 5.0, reset)
+    c.wrench(0, 0, (0.0, 2.0))  # latched: the largest counts
+    assert len(sent) == 1 and c.normal_force == 2.0  # (the tick took 5.0, reset)
     c.wrench(0, 1_000_000, (0.0, 7.0))
     c.wrench(0, 1_000_000, (0.0, 3.0))
     assert c.normal_force == 7.0
@@ -186,14 +223,14 @@ def test_a_stamp_jump_is_dropped_unless_the_next_sample_confirms_it(scene):
     state(c, 0.0)
     state(c, 0.001)
     assert len(sent) == 2
-    state(c, 2.0**31)                                          # one bad stamp: dropped
+    state(c, 2.0**31)  # one bad stamp: dropped
     assert c.dropped['stamp_jumps'] == 1 and len(sent) == 2
-    state(c, 0.002)                                            # the stream goes on
+    state(c, 0.002)  # the stream goes on
     assert len(sent) == 3
     c.ctrl.mode = 'up'
-    state(c, 0.0)                                              # back in time: a reset?
+    state(c, 0.0)  # back in time: a reset?
     assert len(sent) == 3 and c.dropped['stamp_jumps'] == 2
-    state(c, 0.0)                                              # confirmed: re-armed there
+    state(c, 0.0)  # confirmed: re-armed there
     assert len(sent) == 4 and c.ctrl.mode == 'down'
 
 
@@ -211,12 +248,18 @@ def test_bad_samples_are_dropped_and_counted(scene):
 
 def test_the_first_command_waits_for_the_start_up_hold_and_the_readers(scene):
     sent, clock, matched = [], FakeClock(), [False]
-    c = inputs(scene, sent, clock, startup_hold=4.0, ready=lambda: matched[0],
-               wrench_publishers=lambda: False)
+    c = inputs(
+        scene,
+        sent,
+        clock,
+        startup_hold=4.0,
+        ready=lambda: matched[0],
+        wrench_publishers=lambda: False,
+    )
     state(c, 0.0)
     clock.now += 4.0
     state(c, 0.0)
-    assert sent == []                                          # held, readers not matched
+    assert sent == []  # held, readers not matched
     matched[0] = True
     state(c, 0.0)
     assert len(sent) == 1
@@ -252,8 +295,11 @@ def _silenced_in_the_down_swing(scene, policy, silence_from=0.1, silence=0.5, t_
             continue
         answered = tick
         commands[clock.now + 0.0005] = ctrl.update(
-            tick.t, to_absolute(tick.position), to_absolute(tick.velocity),
-            normal_force=tick.wrench[1])
+            tick.t,
+            to_absolute(tick.position),
+            to_absolute(tick.velocity),
+            normal_force=tick.wrench[1],
+        )
     return impacts, loop
 
 
@@ -264,7 +310,7 @@ def test_the_brake_holds_the_arm_through_a_silence_in_the_down_swing(scene):
     undisturbed, _ = _silenced_in_the_down_swing(scene, 'brake', silence=0.0)
     braked, loop = _silenced_in_the_down_swing(scene, 'brake')
     assert len(undisturbed) - 1 <= len(braked) <= len(undisturbed), (undisturbed, braked)
-    assert min(braked) > 0.6                 # no impact while braked (0.12 ... 0.6 s)
+    assert min(braked) > 0.6  # no impact while braked (0.12 ... 0.6 s)
     dog = loop.watchdog
     assert dog.brakes == 1 and dog.timeouts == 1 and dog.state is WatchdogState.OK
     # limited, and reported: the stop needed the brake's whole rated torque
@@ -291,6 +337,7 @@ def test_typed_kinds_are_their_text_wherever_text_was_used():
     import json
 
     from impact_arm.core.kinds import EventKind
+
     kind = EventKind.MAX_COMPRESSION
     assert kind == 'max_compression' and str(kind) == f'{kind}' == 'max_compression'
     assert {'max_compression': 1}[kind] == 1 and json.dumps([kind]) == '["max_compression"]'

@@ -2,13 +2,21 @@
 ~/step and /e_stop change what /joint_states and /diagnostics show; a controller that loses
 every wrench sample still cycles; start-up in either order, or with the controller late,
 never stops the simulator."""
+
 import json
 import time
 
 import pytest
 
-from ros_helpers import (controller, diagnostics_values, from_simulator,  # noqa: F401
-                         probe, ros_env, simulator, stamp, start_process, wait_for)
+from ros_helpers import (
+    controller,
+    diagnostics_values,
+    from_simulator,
+    simulator,
+    stamp,
+    start_process,
+    wait_for,
+)
 
 ARTICLE_PERIOD = 0.397
 
@@ -37,6 +45,7 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Bool, Float64MultiArray
     from std_srvs.srv import SetBool, Trigger
+
     states = probe.listen(JointState, '/joint_states', depth=5000)
     diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
     commands = probe.publisher(Float64MultiArray, '/effort_controller/commands')
@@ -48,24 +57,28 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
         while not stop_commanding:
             commands.publish(Float64MultiArray(data=[5.0, 1.0]))
             time.sleep(0.005)
+
     import threading
+
     commander = threading.Thread(target=command_loop, daemon=True)
-    with start_process(simulator('step_periods:=5', 'diagnostics_period:=0.2'), ros_env,
-                       tmp_path, 'sim') as sim:
+    with start_process(
+        simulator('step_periods:=5', 'diagnostics_period:=0.2'), ros_env, tmp_path, 'sim'
+    ) as sim:
         try:
             commander.start()
-            assert wait_for(lambda: states and stamp(states[-1][1]) > 0.2, timeout=60), \
-                sim.stderr
+            assert wait_for(lambda: states and stamp(states[-1][1]) > 0.2, timeout=60), sim.stderr
             assert tuple(states[-1][1].effort) == (5.0, 1.0)
 
             # e-stop: zero torque at once, latched, on /diagnostics
             e_stop.publish(Bool(data=True))
             sent = time.monotonic()
-            assert wait_for(lambda: states[-1][0] > sent + 0.1 and
-                            tuple(states[-1][1].effort) == (0.0, 0.0), timeout=5), sim.stderr
+            assert wait_for(
+                lambda: states[-1][0] > sent + 0.1 and tuple(states[-1][1].effort) == (0.0, 0.0),
+                timeout=5,
+            ), sim.stderr
             d = latest_diagnostics(diags, time.monotonic())
             assert d['e_stop'] == 'true' and d['level'] == 2, d
-            time.sleep(0.3)                                  # commands keep arriving: latched
+            time.sleep(0.3)  # commands keep arriving: latched
             assert tuple(states[-1][1].effort) == (0.0, 0.0)
             e_stop.publish(Bool(data=False))
             assert wait_for(lambda: tuple(states[-1][1].effort) == (5.0, 1.0), timeout=5)
@@ -77,8 +90,10 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
             time.sleep(0.5)
             frozen = [m for t, m in states if t > paused_at + 0.1]
             assert len(frozen) > 100, 'nothing published while paused'
-            assert len({stamp(m) for m in frozen}) == 1 and \
-                len({tuple(m.position) for m in frozen}) == 1
+            assert (
+                len({stamp(m) for m in frozen}) == 1
+                and len({tuple(m.position) for m in frozen}) == 1
+            )
             t_frozen = stamp(frozen[-1])
             assert latest_diagnostics(diags, time.monotonic())['paused'] == 'true'
             # step: exactly step_periods periods
@@ -93,8 +108,9 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
             before = latest_diagnostics(diags, time.monotonic())
             reset_at = time.monotonic()
             assert call(probe, Trigger, '/simulator/reset', Trigger.Request()).success
-            assert wait_for(lambda: any(stamp(m) < 0.05 for t, m in states if t > reset_at),
-                            timeout=5), 'time did not go back to 0'
+            assert wait_for(
+                lambda: any(stamp(m) < 0.05 for t, m in states if t > reset_at), timeout=5
+            ), 'time did not go back to 0'
             first = next(m for t, m in states if t > reset_at and stamp(m) < 0.05)
             initial = states[0][1]
             assert stamp(first) == 0.0 and tuple(first.position) == tuple(initial.position)
@@ -117,17 +133,20 @@ def test_controller_that_loses_every_wrench_sample_still_cycles(probe, ros_env, 
     no sample ever. The down-up switch must come from the joint states alone."""
     from geometry_msgs.msg import WrenchStamped
     from std_msgs.msg import String
+
     reports = probe.listen(String, '/impact_report', transient=True)
-    relay = probe.publisher(WrenchStamped, '/relayed_wrench')    # never publishes
+    relay = probe.publisher(WrenchStamped, '/relayed_wrench')  # never publishes
     relayed = controller() + ['-r', '/contact_wrench:=/relayed_wrench']
     with start_process(relayed, ros_env, tmp_path, 'ctl') as ctl:
         # the controller must know the relay before the run starts: a publisher it has not
         # discovered yet is no wrench source (it would tick without waiting, as it should)
         assert wait_for(lambda: relay.get_subscription_count() > 0, timeout=30), ctl.stderr
-        with start_process(simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env,
-                           tmp_path, 'sim') as sim:
-            assert wait_for(lambda: len(reports) >= 5 or not sim.alive() or not ctl.alive(),
-                            timeout=120), f'{len(reports)} impacts\n{ctl.stderr[-2000:]}'
+        with start_process(
+            simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path, 'sim'
+        ) as sim:
+            assert wait_for(
+                lambda: len(reports) >= 5 or not sim.alive() or not ctl.alive(), timeout=120
+            ), f'{len(reports)} impacts\n{ctl.stderr[-2000:]}'
             assert sim.alive() and ctl.alive(), sim.stderr + ctl.stderr
             assert 'ticking on the next state without it' in ctl.stderr
     times = reports_of(reports)[:5]
@@ -141,17 +160,18 @@ def test_controller_that_loses_every_wrench_sample_still_cycles(probe, ros_env, 
 def test_start_up_in_any_order_never_stops_the_simulator(probe, ros_env, tmp_path, order):
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
+
     reports = probe.listen(String, '/impact_report', transient=True)
     diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
-    first, second = (controller(), simulator()) if order == 'controller_first' else \
-        (simulator(), controller())
+    first, second = (
+        (controller(), simulator()) if order == 'controller_first' else (simulator(), controller())
+    )
     with start_process(first, ros_env, tmp_path, f'{order}_1') as a:
         if order == 'controller_late':
             time.sleep(2.0)
         with start_process(second, ros_env, tmp_path, f'{order}_2') as b:
             sim = a if order != 'controller_first' else b
-            assert wait_for(lambda: len(reports) >= 2 or not sim.alive(), timeout=90), \
-                sim.stderr
+            assert wait_for(lambda: len(reports) >= 2 or not sim.alive(), timeout=90), sim.stderr
             assert sim.alive(), sim.stderr
             assert not any(diagnostics_values(m)['level'] == 2 for _, m in diags), sim.stderr
     # (the cycle period under load is bench starts' business: a loaded machine can delay the
@@ -162,7 +182,8 @@ def test_start_up_in_any_order_never_stops_the_simulator(probe, ros_env, tmp_pat
 def test_interpreted_kernel_is_announced_at_start(ros_env, tmp_path):
     env = dict(ros_env, IMPACT_ARM_JIT='0')
     with start_process(simulator(), env, tmp_path, 'interpreted') as sim:
-        assert wait_for(lambda: 'INTERPRETED kernel' in sim.stderr or not sim.alive(),
-                        timeout=60), sim.stderr
+        assert wait_for(
+            lambda: 'INTERPRETED kernel' in sim.stderr or not sim.alive(), timeout=60
+        ), sim.stderr
         line = next(ln for ln in sim.stderr.splitlines() if 'INTERPRETED' in ln)
     assert line.startswith('[WARN]') and 'IMPACT_ARM_JIT=0' in line and 'Fix:' in line

@@ -1,6 +1,7 @@
 """simulation_interfaces, ROS 2's standard simulator services: the mapping onto the
 simulator's reset / pause / step (no ROS), then for real over DDS with the interface package
 built from its specification (sim_interfaces_build.py) and a client in its own process."""
+
 import json
 import subprocess
 import sys
@@ -11,7 +12,6 @@ from pathlib import Path
 import pytest
 
 from impact_arm.nodes import sim_services as si
-from ros_helpers import probe, ros_env  # noqa: F401  (fixtures)
 
 HERE = Path(__file__).parent
 
@@ -37,13 +37,13 @@ class FakeArm:
             self.calls.append(f'step {n}')
             self.periods += n
             return True, f'{n} run'
-        return si.SimulationControls(reset, pause, step, lambda: self.paused,
-                                     lambda: self.failed)
+
+        return si.SimulationControls(reset, pause, step, lambda: self.paused, lambda: self.failed)
 
 
 def test_features_are_what_the_simulator_can_do():
     features = si.SimulationInterfaces(FakeArm().controls()).features()
-    assert set(features) == {20, 24, 25, 26, 31, 32}   # reset, state get/set/pause, stepping
+    assert set(features) == {20, 24, 25, 26, 31, 32}  # reset, state get/set/pause, stepping
 
 
 def test_pause_step_stop_and_play_map_onto_the_simulators_controls():
@@ -77,7 +77,7 @@ def test_reset_needs_time_and_state_together_and_quitting_is_not_served():
     for scope in (si.SCOPE_DEFAULT, si.SCOPE_ALL, si.SCOPE_TIME | si.SCOPE_STATE):
         arm.periods = 7
         assert sim.reset(scope)[0] == si.RESULT_OK and arm.periods == 0
-    assert sim.state() == si.STATE_PLAYING            # a reset keeps running or paused
+    assert sim.state() == si.STATE_PLAYING  # a reset keeps running or paused
     for state in (si.STATE_QUITTING, si.STATE_NO_WORLD, si.STATE_LOADING_WORLD):
         assert sim.set_state(state)[0] == si.RESULT_FEATURE_UNSUPPORTED
     assert sim.set_state(9)[0] == si.RESULT_OPERATION_FAILED
@@ -103,20 +103,23 @@ def test_attach_without_the_package_serves_nothing():
 @pytest.fixture(scope='module')
 def interfaces_prefix():
     import sim_interfaces_build
+
     try:
         return sim_interfaces_build.build()
     except sim_interfaces_build.Unavailable as exc:
         pytest.skip(f'cannot build simulation_interfaces: {exc}')
 
 
-def test_services_over_dds_reset_pause_step_and_report_state(interfaces_prefix, probe, ros_env,
-                                                             tmp_path):
+def test_services_over_dds_reset_pause_step_and_report_state(
+    interfaces_prefix, probe, ros_env, tmp_path
+):
     """The simulator (realtime, 1 kHz) with the built package on its paths serves the
     standard's services; a client process calls them as a ROS user would, while a stand-in
     controller commands a small torque."""
     from ros_helpers import simulator, start_process, wait_for
     from sim_interfaces_build import environment
     from std_msgs.msg import Float64MultiArray
+
     env = environment(interfaces_prefix, ros_env)
     commands = probe.publisher(Float64MultiArray, '/effort_controller/commands')
     stop = threading.Event()
@@ -125,14 +128,22 @@ def test_services_over_dds_reset_pause_step_and_report_state(interfaces_prefix, 
         while not stop.is_set():
             commands.publish(Float64MultiArray(data=[5.0, 1.0]))
             time.sleep(0.005)
+
     commander = threading.Thread(target=command_loop, daemon=True)
     with start_process(simulator(), env, tmp_path, 'sim') as sim:
         commander.start()
         try:
-            assert wait_for(lambda: 'simulation_interfaces services' in sim.stderr
-                            or not sim.alive(), timeout=60), sim.stderr
-            client = subprocess.run([sys.executable, str(HERE / 'sim_interfaces_client.py')],
-                                    env=env, capture_output=True, text=True, timeout=180)
+            assert wait_for(
+                lambda: 'simulation_interfaces services' in sim.stderr or not sim.alive(),
+                timeout=60,
+            ), sim.stderr
+            client = subprocess.run(
+                [sys.executable, str(HERE / 'sim_interfaces_client.py')],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=180,
+            )
             assert client.returncode == 0, client.stderr[-3000:] + sim.stderr[-3000:]
             assert sim.alive(), sim.stderr
         finally:
@@ -142,8 +153,7 @@ def test_services_over_dds_reset_pause_step_and_report_state(interfaces_prefix, 
     OK, FAILED = si.RESULT_OK, si.RESULT_OPERATION_FAILED
     assert set(seen['features']) == set(si.FEATURES)
     assert seen['state_running'] == si.STATE_PLAYING
-    assert seen['step_while_playing'][0] == FAILED and 'not paused' in \
-        seen['step_while_playing'][1]
+    assert seen['step_while_playing'][0] == FAILED and 'not paused' in seen['step_while_playing'][1]
     assert seen['pause'][0] == OK and seen['state_paused'] == si.STATE_PAUSED
     assert seen['pause_again'][0] == si.ALREADY_IN_TARGET_STATE
     # five periods of 1 ms, run before the answer came

@@ -1,5 +1,6 @@
 """The Rosenbrock free-flight step and the separate contact tolerance, checked against the
 Dormand-Prince reference and docs/model.md's first impact, never against their own numbers."""
+
 import numpy as np
 import pytest
 
@@ -51,7 +52,7 @@ def test_rosenbrock_step_is_not_capped_by_the_stiff_free_flight():
     scene = stiff_free_scene()
     _, explicit = state_at(scene, 1.0, rtol=1e-2, atol=1e-4)
     _, implicit = state_at(scene, 1.0, method='rosenbrock', rtol=1e-2, atol=1e-4)
-    assert explicit.steps > 200                      # ~1 s / 3-4 ms: stability-bound
+    assert explicit.steps > 200  # ~1 s / 3-4 ms: stability-bound
     assert implicit.steps < explicit.steps / 3, (implicit.steps, explicit.steps)
 
 
@@ -82,10 +83,13 @@ def test_a_tighter_contact_tolerance_buys_the_impact_accuracy():
     assert first_impact_error(split, reference) < 1e-3
 
 
-@pytest.mark.parametrize('field, value, words', [
-    ('method', 'rk4', ['integrator.method', 'dopri5', 'rosenbrock']),
-    ('contact_rtol', 1.0, ['integrator.contact_rtol']),
-])
+@pytest.mark.parametrize(
+    'field, value, words',
+    [
+        ('method', 'rk4', ['integrator.method', 'dopri5', 'rosenbrock']),
+        ('contact_rtol', 1.0, ['integrator.contact_rtol']),
+    ],
+)
 def test_bad_integrator_settings_are_refused_by_name(field, value, words):
     with pytest.raises(SceneError) as err:
         scene_from({('integrator', field): value})
@@ -96,9 +100,15 @@ def test_bad_integrator_settings_are_refused_by_name(field, value, words):
 def test_a_named_preset_replaces_the_scenes_own_tolerances():
     """``--preset reference`` on a scene that sets loose tolerances must mean the reference
     tolerances (the scene's rtol once won silently); the scene's step method still applies."""
-    loose = scene_from({('integrator', 'method'): 'rosenbrock', ('integrator', 'rtol'): 1e-2,
-                        ('integrator', 'atol'): 1e-4, ('integrator', 'contact_rtol'): 3e-4},
-                       cycles=1)
+    loose = scene_from(
+        {
+            ('integrator', 'method'): 'rosenbrock',
+            ('integrator', 'rtol'): 1e-2,
+            ('integrator', 'atol'): 1e-4,
+            ('integrator', 'contact_rtol'): 3e-4,
+        },
+        cycles=1,
+    )
     reference = run_events(scene_from(cycles=1), preset='reference')[0]
     again = run_events(loose, preset='reference')[0]
     assert first_impact_error(again, reference) < 1e-9
@@ -132,8 +142,11 @@ def test_the_fast_preset_spends_its_tolerance_on_the_contact():
     assert len(fast) == len(reference) == 15
 
     def worst(impacts):
-        return max(max(abs(a[k] / b[k] - 1) for k in ('delta_m', 'cor_kinematic'))
-                   for a, b in zip(impacts, reference))
+        return max(
+            max(abs(a[k] / b[k] - 1) for k in ('delta_m', 'cor_kinematic'))
+            for a, b in zip(impacts, reference)
+        )
+
     assert worst(fast) < 1e-5 < worst(single)
     integ = PhaseIntegrator(ArmModel(scene), preset='fast', rtol=1e-4)
     assert integ.contact_rtol == 1e-4

@@ -6,15 +6,16 @@ stop with an error naming the limit it crossed. The checks live in
 bench/impact_arm_bench/stress.py; `impact-arm bench stress` runs the full sweep and the soak.
 Only scene shapes the rest of the suite already compiles are used.
 """
+
 import pytest
 
 from impact_arm_bench import stress
 
 # cases that must stop, and the words of the limit their message must name
 NAMED_STOPS = {
-    'E = 1e+07 Pa': 'yield strain',                 # steel's S_y on a rubbery modulus
+    'E = 1e+07 Pa': 'yield strain',  # steel's S_y on a rubbery modulus
     'E = 1e+07 Pa, S_y = 53000 Pa': 'penetration exceeds the tip radius',
-    'E = 1e+13 Pa': 'residual indentation fit',     # δm/δc beyond the Etsion fit
+    'E = 1e+13 Pa': 'residual indentation fit',  # δm/δc beyond the Etsion fit
     'tip radius 0.0001 m': 'penetration exceeds the tip radius',
     'S_y 1e5 Pa (yields at once)': 'penetration exceeds the tip radius',
 }
@@ -45,4 +46,4 @@ def test_elastic_frictionless_impact_conserves_energy():
     case = next(c for c in stress.FAST if c.name.startswith('mu = 0'))
     outcome = stress.run_case(case, deadline=120)
     assert outcome.outcome == stress.OK
-    assert 0 < outcome.energy_error < 1e-6    # measured, not assumed zero
+    assert 0 < outcome.energy_error < 1e-6  # measured, not assumed zero

@@ -1,11 +1,11 @@
 """The simulator as ros2_control topic hardware, over DDS: JointState commands by name, states
 on their own topic, the robot description and markers (real node processes, random domain)."""
+
 import math
 import threading
 import time
 
-from ros_helpers import (diagnostics_values, probe, ros_env, simulator,  # noqa: F401
-                         start_process, wait_for)
+from ros_helpers import diagnostics_values, simulator, start_process, wait_for
 
 PERIODS = 150
 
@@ -26,7 +26,8 @@ def drive(probe, env, workdir, kind):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, String
     from visualization_msgs.msg import MarkerArray
-    node = probe.node   # answers every new joint state with the next command
+
+    node = probe.node  # answers every new joint state with the next command
     states, hw_states, diags, descriptions, markers = {}, {}, [], [], []
     if kind == 'array':
         pub = node.create_publisher(Float64MultiArray, '/effort_controller/commands', 10)
@@ -40,41 +41,55 @@ def drive(probe, env, workdir, kind):
         sent[0] += 1
         if kind == 'array':
             pub.publish(Float64MultiArray(data=tau))
-        else:   # names out of order, positions that must be ignored
-            pub.publish(JointState(name=['joint2', 'joint1'], position=[123.0, -4.0],
-                                   effort=[tau[1], tau[0]]))
+        else:  # names out of order, positions that must be ignored
+            pub.publish(
+                JointState(
+                    name=['joint2', 'joint1'], position=[123.0, -4.0], effort=[tau[1], tau[0]]
+                )
+            )
 
-    def on_state(msg):   # each new period answered once, after the start (like a controller)
+    def on_state(msg):  # each new period answered once, after the start (like a controller)
         s = stamp(msg)
         if s not in states and len(states) <= PERIODS:
             states[s] = (tuple(msg.position), tuple(msg.velocity), tuple(msg.effort))
             if go.is_set() and s > 0 and len(states) <= PERIODS:
                 send()
+
     go = threading.Event()
-    subs = [node.create_subscription(JointState, '/joint_states', on_state, 1000),
-            node.create_subscription(JointState, '/robot_joint_states',
-                                     lambda m: hw_states.setdefault(stamp(m), tuple(m.position)),
-                                     1000),
-            node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10),
-            node.create_subscription(String, '/robot_description', descriptions.append,
-                                     QoSProfile(depth=1,
-                                                durability=DurabilityPolicy.TRANSIENT_LOCAL)),
-            node.create_subscription(MarkerArray, '/impact_markers', markers.append, 10)]
+    subs = [
+        node.create_subscription(JointState, '/joint_states', on_state, 1000),
+        node.create_subscription(
+            JointState,
+            '/robot_joint_states',
+            lambda m: hw_states.setdefault(stamp(m), tuple(m.position)),
+            1000,
+        ),
+        node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10),
+        node.create_subscription(
+            String,
+            '/robot_description',
+            descriptions.append,
+            QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL),
+        ),
+        node.create_subscription(MarkerArray, '/impact_markers', markers.append, 10),
+    ]
     params = ('mode:=lockstep', 'rate_factor:=0.0', 'diagnostics_period:=0.2')
-    with start_process(simulator(*params), env, workdir,
-                       f'sim_{kind}') as sim:
-        assert wait_for(lambda: pub.get_subscription_count() > 0 or not sim.alive(),
-                        timeout=60) and sim.alive(), sim.stderr
-        time.sleep(0.3)   # the initial state's subscribers matched too
-        if kind == 'joint_state':   # refused: unknown name; no efforts. Nothing moves.
+    with start_process(simulator(*params), env, workdir, f'sim_{kind}') as sim:
+        assert (
+            wait_for(lambda: pub.get_subscription_count() > 0 or not sim.alive(), timeout=60)
+            and sim.alive()
+        ), sim.stderr
+        time.sleep(0.3)  # the initial state's subscribers matched too
+        if kind == 'joint_state':  # refused: unknown name; no efforts. Nothing moves.
             pub.publish(JointState(name=['joint1', 'elbow'], effort=[1.0, 2.0]))
             pub.publish(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2]))
             assert wait_for(lambda: diags and rejected(diags[-1]) == 2, timeout=10), sim.stderr
             assert 'command rejected' in sim.stderr + sim.stdout
         go.set()
         send()
-        assert wait_for(lambda: len(states) > PERIODS or not sim.alive(), timeout=120), \
+        assert wait_for(lambda: len(states) > PERIODS or not sim.alive(), timeout=120), (
             f'{len(states)} periods\n{sim.stderr}'
+        )
         time.sleep(0.5)
     for sub in subs:
         node.destroy_subscription(sub)
@@ -88,12 +103,11 @@ def rejected(diag):
     return int(diagnostics_values(diag)['commands_rejected'])
 
 
-def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_env,
-                                                                     tmp_path):
+def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_env, tmp_path):
     by_array, hw_array, _ = drive(probe, ros_env, tmp_path, 'array')
     by_name, hw_name, diags = drive(probe, ros_env, tmp_path, 'joint_state')
-    assert len(by_array) == len(by_name) == PERIODS + 1     # the initial state and PERIODS
-    assert by_name == by_array                    # bit-identical lockstep runs
+    assert len(by_array) == len(by_name) == PERIODS + 1  # the initial state and PERIODS
+    assert by_name == by_array  # bit-identical lockstep runs
     moved = [v[0] for v in by_array.values()]
     assert moved[-1] != moved[0]
     # the topic-hardware states are the joint states, on their own topic

@@ -1,5 +1,6 @@
 """The arm in 3D from a recording alone: /robot_description, /tf_static, /tf and
 /impact_markers in ``simulate --mcap`` files, read back with rosbags."""
+
 import json
 import math
 from pathlib import Path
@@ -34,14 +35,14 @@ def recording(tmp_path_factory, request):
     finally:
         rec.close(result)
     by_topic = {}
-    with open(path, 'rb') as f:                 # written in time order (as stored)
-        log_times = [m.log_time for _, _, m in make_reader(f).iter_messages(
-            log_time_order=False)]
+    with open(path, 'rb') as f:  # written in time order (as stored)
+        log_times = [m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=False)]
     assert log_times == sorted(log_times)
     with AnyReader([Path(path)]) as reader:
         for conn, t_ns, raw in reader.messages():
             by_topic.setdefault(conn.topic, []).append(
-                (t_ns, reader.deserialize(raw, conn.msgtype)))
+                (t_ns, reader.deserialize(raw, conn.msgtype))
+            )
     return path, scene, result, by_topic
 
 
@@ -52,9 +53,13 @@ def stamp_ns(header):
 def rotation(q):
     """3x3 matrix of a unit quaternion message (x, y, z, w)."""
     x, y, z, w = q.x, q.y, q.z, q.w
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def compose(chain):
@@ -88,17 +93,17 @@ def test_tf_composes_to_the_model_tip_at_the_joint_state_stamps(recording):
     _, scene, result, by_topic = recording
     model = ArmModel(scene)
     states = {stamp_ns(m.header): m for _, m in by_topic['/joint_states']}
-    (_, static), = by_topic['/tf_static']
+    ((_, static),) = by_topic['/tf_static']
     tip = next(t for t in static.transforms if t.child_frame_id == 'tip')
     tfs = [m for _, m in by_topic['/tf'] if stamp_ns(m.transforms[0].header) in states]
     duration = result.samples[-1].t
     assert abs(len(tfs) - (math.floor(duration * TF_RATE) + 1)) <= 1
     for msg in tfs:
         stamp = stamp_ns(msg.transforms[0].header)
-        js = states[stamp]           # a paced /tf stamp is a joint-state stamp
+        js = states[stamp]  # a paced /tf stamp is a joint-state stamp
         frames = {t.child_frame_id: t for t in msg.transforms}
         parent = 'world'
-        for k in range(scene.n_links):   # walk the tree from world down to the last link
+        for k in range(scene.n_links):  # walk the tree from world down to the last link
             t = frames[f'link{k + 1}']
             assert t.header.frame_id == parent and stamp_ns(t.header) == stamp
             parent = t.child_frame_id
@@ -119,21 +124,29 @@ def test_every_impact_is_shown_with_the_tip_on_the_surface_and_the_arrow_at_it(r
     that lives >= 0.3 s."""
     _, scene, result, by_topic = recording
     model = ArmModel(scene)
-    (_, static), = by_topic['/tf_static']
+    ((_, static),) = by_topic['/tf_static']
     tip = next(t for t in static.transforms if t.child_frame_id == 'tip')
-    markers = {stamp_ns(a.header): ma for _, ma in by_topic['/impact_markers']
-               for a in ma.markers if a.ns == 'contact_force'}   # by the arrow's stamp
+    markers = {
+        stamp_ns(a.header): ma
+        for _, ma in by_topic['/impact_markers']
+        for a in ma.markers
+        if a.ns == 'contact_force'
+    }  # by the arrow's stamp
     reports = [json.loads(m.data) for _, m in by_topic['/impact_report']]
     assert len(reports) == len(result.impacts) == 2
     height = scene.surfaces[0].height
     for report in reports:
         t0 = round(report['t_contact'] * 1e9)
         t1 = round((report['t_contact'] + report['duration']) * 1e9)
-        inside = [m for _, m in by_topic['/tf'] if t0 - 1 <= stamp_ns(m.transforms[0].header)
-                  <= t1 + 1]
+        inside = [
+            m for _, m in by_topic['/tf'] if t0 - 1 <= stamp_ns(m.transforms[0].header) <= t1 + 1
+        ]
         assert len(inside) == 3
-        on_surface = [(stamp_ns(m.transforms[0].header), tip_in_world(m, tip)) for m in inside
-                      if abs(tip_in_world(m, tip)[2] - height) <= 1e-6]
+        on_surface = [
+            (stamp_ns(m.transforms[0].header), tip_in_world(m, tip))
+            for m in inside
+            if abs(tip_in_world(m, tip)[2] - height) <= 1e-6
+        ]
         assert on_surface, 'no frame of the impact shows the tip on the surface'
         stamp, b = on_surface[0]
         q_contact = np.radians(report['q_contact_deg'])
@@ -143,11 +156,10 @@ def test_every_impact_is_shown_with_the_tip_on_the_surface_and_the_arrow_at_it(r
         assert arrow.header.frame_id == 'world'
         start, end = arrow.points
         assert np.array([start.x, start.y, start.z]) == pytest.approx(b, abs=1e-6)
-        assert end.x == start.x and end.y == start.y and end.z > start.z   # along the normal
+        assert end.x == start.x and end.y == start.y and end.z > start.z  # along the normal
         assert arrow.lifetime.sec + arrow.lifetime.nanosec * 1e-9 >= 0.3
     # the arrow is never deleted: it goes when its lifetime ends
-    assert not any(m.action != m.ADD for _, ma in by_topic['/impact_markers']
-                   for m in ma.markers)
+    assert not any(m.action != m.ADD for _, ma in by_topic['/impact_markers'] for m in ma.markers)
 
 
 def test_every_frame_id_in_the_file_is_a_tf_frame(recording):
@@ -164,23 +176,22 @@ def test_every_frame_id_in_the_file_is_a_tf_frame(recording):
                 header = getattr(item, 'header', None)
                 if header is not None and header.frame_id:
                     used.add(header.frame_id)
-    assert 'surface1' in used          # /contact_wrench and the surface marker
+    assert 'surface1' in used  # /contact_wrench and the surface marker
     assert used <= tf_frames
     assert {w.header.frame_id for _, w in by_topic['/contact_wrench']} == {'surface1'}
 
 
 def test_description_and_static_frames_are_stored_once(recording):
     _, scene, _, by_topic = recording
-    (_, description), = by_topic['/robot_description']
+    ((_, description),) = by_topic['/robot_description']
     assert description.data == robot_description(scene)
-    (_, static), = by_topic['/tf_static']
+    ((_, static),) = by_topic['/tf_static']
     assert {t.child_frame_id for t in static.transforms} == {'tip', 'surface1'}
     surface = next(t for t in static.transforms if t.child_frame_id == 'surface1')
     # z up (REP 103): the surface plane at z = height, its frame's y the normal (world +z)
     v = surface.transform.translation
     assert (v.x, v.y, v.z) == (0.0, 0.0, scene.surfaces[0].height)
-    assert rotation(surface.transform.rotation) @ [0, 1, 0] == pytest.approx([0, 0, 1],
-                                                                            abs=1e-15)
+    assert rotation(surface.transform.rotation) @ [0, 1, 0] == pytest.approx([0, 0, 1], abs=1e-15)
 
 
 def test_markers_show_the_surface_the_contact_force_and_every_impact(recording):
@@ -190,13 +201,14 @@ def test_markers_show_the_surface_the_contact_force_and_every_impact(recording):
     arrows = [a for ma in markers for a in ma.markers if a.ns == 'contact_force']
     # each impact's three event frames, and the paced frames within ARROW_HOLD after it
     paced = {stamp_ns(m.header) for _, m in by_topic['/joint_states']} & {
-        stamp_ns(m.transforms[0].header) for _, m in by_topic['/tf']}
+        stamp_ns(m.transforms[0].header) for _, m in by_topic['/tf']
+    }
     contacts = [i['t_contact'] for i in result.impacts]
     held = [t for t in paced if any(0 <= t * 1e-9 - c < ARROW_HOLD for c in contacts)]
     assert len(result.impacts) == 2 and len(held) > 30
     assert len(arrows) == 3 * len(result.impacts) + len(held)
     height = scene.surfaces[0].height
-    for a in arrows:   # the arrow starts on the surface (z up) and points up
+    for a in arrows:  # the arrow starts on the surface (z up) and points up
         assert a.points[0].z == pytest.approx(height, abs=1e-6)
         assert a.points[1].z > a.points[0].z
     last = markers[-1].markers
@@ -242,6 +254,7 @@ def test_marker_bytes_built_from_a_kept_prefix_equal_whole_message_serialization
     from visualization_msgs.msg import Marker, MarkerArray
 
     from impact_arm.io.msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
+
     for n in range(5):
         items = [Marker(ns='x' * k, id=k, text='t' * (3 * k)) for k in range(n)]
         last = Marker(ns='arrow', frame_locked=True)
@@ -269,14 +282,15 @@ def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
     stamps shifted as the latest state's log time is from its stamp."""
     from rosbags.typesys import Stores, get_typestore
     from impact_arm.io.scene_visuals import VisualsWriter, event_states
+
     store = get_typestore(Stores.ROS2_KILTED)
     scene = scene_from(cycles=1)
     result = run(scene, control_rate=1000.0)
     report = result.impacts[0]
     writer = ListWriter()
     visuals = VisualsWriter(writer, scene, TF_RATE)
-    offset = 1_700_000_000 * 10**9          # wall-clock log times
-    for s in result.samples:     # up to the first state after the separation
+    offset = 1_700_000_000 * 10**9  # wall-clock log times
+    for s in result.samples:  # up to the first state after the separation
         t_ns = round(s.t * 1e9)
         visuals.state(t_ns, s.q, (0.0, 0.0), t_ns + offset + 123)
         if s.t > report['t_contact'] + report['duration']:
@@ -293,25 +307,38 @@ def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
     # and a later paced frame within ARROW_HOLD still shows the arrow, with the time left
     t_later = stamps[0] + 100_000_000
     marker_bytes = visuals.visuals.markers(t_later)
-    arrow = next(m for m in store.deserialize_cdr(
-        marker_bytes, 'visualization_msgs/msg/MarkerArray').markers if m.ns == 'contact_force')
+    arrow = next(
+        m
+        for m in store.deserialize_cdr(marker_bytes, 'visualization_msgs/msg/MarkerArray').markers
+        if m.ns == 'contact_force'
+    )
     left = arrow.lifetime.sec * 10**9 + arrow.lifetime.nanosec
     assert left == stamps[0] + round(ARROW_HOLD * 1e9) - t_later
-    after = store.deserialize_cdr(visuals.visuals.markers(stamps[0] + round(ARROW_HOLD * 1e9)),
-                                  'visualization_msgs/msg/MarkerArray')
-    assert not any(m.ns == 'contact_force' for m in after.markers)   # its time is over
+    after = store.deserialize_cdr(
+        visuals.visuals.markers(stamps[0] + round(ARROW_HOLD * 1e9)),
+        'visualization_msgs/msg/MarkerArray',
+    )
+    assert not any(m.ns == 'contact_force' for m in after.markers)  # its time is over
 
 
-@pytest.mark.parametrize('bad', [
-    {}, {'t_contact': 0.1}, {'t_contact': 0.1, 'q_contact_deg': 'ab', 'F_max': 1.0},
-    {'t_contact': float('nan'), 'q_contact_deg': [1.0, 2.0], 'F_max': 1.0},
-    {'t_contact': 0.1, 'q_contact_deg': [1.0], 'F_max': 1.0},
-    {'t_contact': 0.1, 'q_contact_deg': [1.0, 2.0], 'F_max': None},
-    {'t_contact': 0.1, 'q_contact_deg': [1.0, float('inf')], 'F_max': 1.0}, [1, 2]])
+@pytest.mark.parametrize(
+    'bad',
+    [
+        {},
+        {'t_contact': 0.1},
+        {'t_contact': 0.1, 'q_contact_deg': 'ab', 'F_max': 1.0},
+        {'t_contact': float('nan'), 'q_contact_deg': [1.0, 2.0], 'F_max': 1.0},
+        {'t_contact': 0.1, 'q_contact_deg': [1.0], 'F_max': 1.0},
+        {'t_contact': 0.1, 'q_contact_deg': [1.0, 2.0], 'F_max': None},
+        {'t_contact': 0.1, 'q_contact_deg': [1.0, float('inf')], 'F_max': 1.0},
+        [1, 2],
+    ],
+)
 def test_a_malformed_report_is_refused_with_a_value_error_and_draws_nothing(bad):
     """The recorder draws reports from the wire: anything malformed must raise ValueError
     (which it catches and logs), never another error, and leave nothing queued."""
     from impact_arm.io.scene_visuals import SceneVisuals
+
     visuals = SceneVisuals(scene_from())
     with pytest.raises(ValueError, match='impact report'):
         visuals.add_impact(json.dumps(bad))

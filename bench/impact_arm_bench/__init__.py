@@ -10,6 +10,7 @@ speed`` never loads rclpy). The hostile-input generators they share with the tes
 test/generators.py: importing this package puts test/ (and bench/, for the worker processes
 the benchmarks start) on the path.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,37 +25,54 @@ for _folder in (_TESTS, _BENCH):
         sys.path.insert(0, _folder)
 # worker processes (fuzz, flood, transport floor) import these modules too
 os.environ['PYTHONPATH'] = os.pathsep.join(
-    [_BENCH, _TESTS] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p])
+    [_BENCH, _TESTS] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]
+)
 
 SUBCOMMANDS = {
-    'speed': ('impact_arm_bench.speed',
-              'offline speed at equal accuracy vs scipy solve_ivp'),
-    'tradeoff': ('impact_arm_bench.tradeoff',
-                 'work-precision table and plot: presets and solve_ivp methods vs reference'),
-    'stress': ('impact_arm_bench.stress',
-               'stability matrix at the extremes of the parameter space'),
-    'rates': ('impact_arm_bench.rates',
-              'nodes over DDS: realtime jitter/overruns at 1 and 5 kHz, lockstep speed'),
-    'sweep': ('impact_arm_bench.sweep',
-              'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs'),
-    'starts': ('impact_arm_bench.starts',
-               'realtime simulator + controller started N times as a user does'),
-    'coldstart': ('impact_arm_bench.coldstart',
-                  'first run of a new arm shape by link count: equations, compile, warm load'),
-    'fit': ('impact_arm_bench.fit',
-            'impact-arm fit: accuracy and interval coverage over drawn cases, cost, growth'),
-    'peers': ('impact_arm_bench.peers',
-              'MuJoCo on the same scene beside this project (optional: pip install mujoco)'),
-    'features': ('impact_arm_bench.features',
-                 'cost per simulated second of free motion, Hertz contact, the article'),
+    'speed': ('impact_arm_bench.speed', 'offline speed at equal accuracy vs scipy solve_ivp'),
+    'tradeoff': (
+        'impact_arm_bench.tradeoff',
+        'work-precision table and plot: presets and solve_ivp methods vs reference',
+    ),
+    'stress': (
+        'impact_arm_bench.stress',
+        'stability matrix at the extremes of the parameter space',
+    ),
+    'rates': (
+        'impact_arm_bench.rates',
+        'nodes over DDS: realtime jitter/overruns at 1 and 5 kHz, lockstep speed',
+    ),
+    'sweep': (
+        'impact_arm_bench.sweep',
+        'studies: per-run cost of the API and a sweep worker, 1 vs 2 workers, 10k runs',
+    ),
+    'starts': (
+        'impact_arm_bench.starts',
+        'realtime simulator + controller started N times as a user does',
+    ),
+    'coldstart': (
+        'impact_arm_bench.coldstart',
+        'first run of a new arm shape by link count: equations, compile, warm load',
+    ),
+    'fit': (
+        'impact_arm_bench.fit',
+        'impact-arm fit: accuracy and interval coverage over drawn cases, cost, growth',
+    ),
+    'peers': (
+        'impact_arm_bench.peers',
+        'MuJoCo on the same scene beside this project (optional: pip install mujoco)',
+    ),
+    'features': (
+        'impact_arm_bench.features',
+        'cost per simulated second of free motion, Hertz contact, the article',
+    ),
 }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Every sub-command's options. Modules keep heavy imports (scipy, matplotlib, rclpy)
     inside ``run`` so building the parser stays cheap."""
-    sub = parser.add_subparsers(dest='bench', required=True,
-                                metavar='{%s}' % ','.join(SUBCOMMANDS))
+    sub = parser.add_subparsers(dest='bench', required=True, metavar='{%s}' % ','.join(SUBCOMMANDS))
     for name, (module, help_text) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         mod = importlib.import_module(module)
@@ -69,5 +87,6 @@ def cli(args) -> int:
 def main(argv=None) -> int:
     """``python bench/run.py speed --json out``: the same as ``impact-arm bench speed ...``."""
     from impact_arm.tools.cli import main as cli_main
+
     argv = list(sys.argv[1:] if argv is None else argv)
     return cli_main(['bench'] + argv)

@@ -7,6 +7,7 @@ then numba's compilation of the kernel, then one short run. A second process wit
 warm cache shows what every later run pays. Printed: wall and CPU seconds of the whole
 process, and its parts as the process measured them.
 """
+
 from __future__ import annotations
 
 import json
@@ -19,7 +20,7 @@ import time
 
 from . import common
 
-CHILD = r'''
+CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
 from impact_arm.core import equations
@@ -38,25 +39,32 @@ integ.advance(0.5)
 t5 = time.perf_counter()
 print(json.dumps({'imports': t1 - t0, 'scene': t2 - t1, 'equations': t3 - t2,
                   'kernel': integ.load_time, 'run': t5 - t4}))
-'''
+"""
 
 
 def chain_scene(n: int) -> dict:
     """The article's scene with an n-link arm of the same 2 m reach and 2 kg mass."""
     from .stress import paper_dict
+
     data = paper_dict()
     data['links'] = [{'length': 2.0 / n, 'mass': 2.0 / n}] * n
     c = data['controller']
-    c.update(kp=[600.0 / n] * n, kd=[100.0 / n] * n, ki=[0.0] * n,
-             down_target_deg=[-80.0] * n, up_target_deg=[80.0] * n)
+    c.update(
+        kp=[600.0 / n] * n,
+        kd=[100.0 / n] * n,
+        ki=[0.0] * n,
+        down_target_deg=[-80.0] * n,
+        up_target_deg=[80.0] * n,
+    )
     data['initial'] = {'q_deg': [60.0] * n, 'qd': [0.0] * n}
     data['cycles'] = 1
     return data
 
 
 def add_arguments(parser):
-    parser.add_argument('--links', default='2,4,5,8,12',
-                        help='link counts to start cold (default: %(default)s)')
+    parser.add_argument(
+        '--links', default='2,4,5,8,12', help='link counts to start cold (default: %(default)s)'
+    )
     parser.add_argument('--json', metavar='FILE', help='write the rows as JSON')
 
 
@@ -64,8 +72,9 @@ def _child(n, cache):
     env = dict(os.environ, IMPACT_ARM_CACHE=cache)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, '-c', CHILD, str(n)], env=env, capture_output=True,
-                          text=True)
+    done = subprocess.run(
+        [sys.executable, '-c', CHILD, str(n)], env=env, capture_output=True, text=True
+    )
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -86,20 +95,45 @@ def run(args) -> int:
         rows.append({'links': n, 'cold': cold, 'warm': warm})
     common.progress_done()
     from impact_arm.core.equations import SYMBOLIC_LINKS
-    print('First run of a new arm shape, fresh process each, empty kernel cache (cold) and the '
-          'same cache again (warm). Parts: equations = generating (sympy up to '
-          f'{SYMBOLIC_LINKS} links, closed form beyond) and importing the module; compile / '
-          'kernel load = numba compiling (cold) or loading (warm) the kernel; CPU = user + '
-          'system seconds of the process (the wall time includes waiting for a busy machine).')
+
+    print(
+        'First run of a new arm shape, fresh process each, empty kernel cache (cold) and the '
+        'same cache again (warm). Parts: equations = generating (sympy up to '
+        f'{SYMBOLIC_LINKS} links, closed form beyond) and importing the module; compile / '
+        'kernel load = numba compiling (cold) or loading (warm) the kernel; CPU = user + '
+        'system seconds of the process (the wall time includes waiting for a busy machine).'
+    )
     print()
-    body = [[r['links'], f"{r['cold']['wall']:.1f}", f"{r['cold']['cpu']:.1f}",
-             f"{r['cold']['equations']:.2f}", f"{r['cold']['kernel']:.1f}",
-             f"{r['warm']['wall']:.2f}", f"{r['warm']['imports']:.2f}",
-             f"{r['warm']['kernel'] * 1e3:.0f}"] for r in rows]
-    print(common.table(['links', 'cold wall [s]', 'cold CPU [s]', 'equations [s]',
-                        'compile [s]', 'warm wall [s]', 'warm imports [s]',
-                        'warm kernel load [ms]'], body))
+    body = [
+        [
+            r['links'],
+            f'{r["cold"]["wall"]:.1f}',
+            f'{r["cold"]["cpu"]:.1f}',
+            f'{r["cold"]["equations"]:.2f}',
+            f'{r["cold"]["kernel"]:.1f}',
+            f'{r["warm"]["wall"]:.2f}',
+            f'{r["warm"]["imports"]:.2f}',
+            f'{r["warm"]["kernel"] * 1e3:.0f}',
+        ]
+        for r in rows
+    ]
+    print(
+        common.table(
+            [
+                'links',
+                'cold wall [s]',
+                'cold CPU [s]',
+                'equations [s]',
+                'compile [s]',
+                'warm wall [s]',
+                'warm imports [s]',
+                'warm kernel load [ms]',
+            ],
+            body,
+        )
+    )
     if args.json:
-        common.write_json(args.json, {'benchmark': 'coldstart', 'machine': common.machine(),
-                                      'rows': rows})
+        common.write_json(
+            args.json, {'benchmark': 'coldstart', 'machine': common.machine(), 'rows': rows}
+        )
     return 0

@@ -4,6 +4,7 @@
 Every timing is the best of ``repeats`` runs inside the same process, so ratios printed by one
 benchmark compare like with like on the same machine at the same moment.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,7 +17,7 @@ from impact_arm.tools.progress import Progress
 LEVELS_DOC = 'relative error vs the reference preset'
 
 
-_status = []   # the benchmark's status line, made on first use (stderr as it is then)
+_status = []  # the benchmark's status line, made on first use (stderr as it is then)
 
 
 def progress(message: str, done=None, total=None) -> None:
@@ -36,6 +37,7 @@ def progress_done() -> None:
 
 def load(scene_name: str):
     from impact_arm.core.scene import load_scene
+
     return load_scene(scene_name)
 
 
@@ -43,11 +45,19 @@ def load(scene_name: str):
 def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
     from impact_arm.core.simulate import run
+
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
-        result = run(scene, samples=False, rtol=rtol, atol=atol, max_step=max_step,
-                     method=method, contact_rtol=contact_rtol)
+        result = run(
+            scene,
+            samples=False,
+            rtol=rtol,
+            atol=atol,
+            max_step=max_step,
+            method=method,
+            contact_rtol=contact_rtol,
+        )
         if result.exception:
             raise result.exception
         if result.wall_time < best:
@@ -59,14 +69,16 @@ def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', cont
 
 def time_scipy(scene, method, rtol, atol, repeats=3, contact_rtol=None):
     from impact_arm.tools.baselines import run_scipy
+
     best = math.inf
     out = None
     for _ in range(max(1, repeats)):
         with warnings.catch_warnings():
             # rejected trial steps of the explicit methods overflow harmlessly inside contact
             warnings.simplefilter('ignore', RuntimeWarning)
-            impacts, t_end, nfev, wall = run_scipy(scene, method, rtol, atol,
-                                                   contact_rtol=contact_rtol)
+            impacts, t_end, nfev, wall = run_scipy(
+                scene, method, rtol, atol, contact_rtol=contact_rtol
+            )
         best = min(best, wall)
         out = impacts, t_end, nfev
     impacts, t_end, nfev = out
@@ -92,21 +104,38 @@ def _rel_vec(value, ref):
 # impact's time as a fraction of the reference's limit-cycle period; and that period (the last
 # interval between impacts), relative. A run with another number of impacts than the
 # reference misses (inf).
-TRADEOFF_METRICS = ('delta_m', 'F_max', 'duration', 'v_after', 'cor_kin', 'cor_energy',
-                    't_impact', 'period')
+TRADEOFF_METRICS = (
+    'delta_m',
+    'F_max',
+    'duration',
+    'v_after',
+    'cor_kin',
+    'cor_energy',
+    't_impact',
+    'period',
+)
 METRIC_LABELS = {
-    'delta_m': 'δm', 'F_max': 'F_max', 'duration': 'duration', 'v_after': 'v after',
-    'cor_kin': 'e', 'cor_energy': 'e_energy', 't_impact': 't / period', 'period': 'period'}
+    'delta_m': 'δm',
+    'F_max': 'F_max',
+    'duration': 'duration',
+    'v_after': 'v after',
+    'cor_kin': 'e',
+    'cor_energy': 'e_energy',
+    't_impact': 't / period',
+    'period': 'period',
+}
 
 
 def _impact_errors(a, b):
     """One impact's relative errors against its reference (keys of TRADEOFF_METRICS)."""
-    return {'delta_m': _rel(a['delta_m'], b['delta_m']), 'F_max': _rel(a['F_max'], b['F_max']),
-            'duration': _rel(a['duration'], b['duration']),
-            'v_after': _rel_vec(a['v_after'], b['v_after']),
-            'cor_kin': _rel(a['cor_kinematic'], b['cor_kinematic']),
-            'cor_energy': max(_rel(x, y) for x, y in zip(a['cor_energetic'],
-                                                         b['cor_energetic']))}
+    return {
+        'delta_m': _rel(a['delta_m'], b['delta_m']),
+        'F_max': _rel(a['F_max'], b['F_max']),
+        'duration': _rel(a['duration'], b['duration']),
+        'v_after': _rel_vec(a['v_after'], b['v_after']),
+        'cor_kin': _rel(a['cor_kinematic'], b['cor_kinematic']),
+        'cor_energy': max(_rel(x, y) for x, y in zip(a['cor_energetic'], b['cor_energetic'])),
+    }
 
 
 def _period(impacts):
@@ -119,8 +148,9 @@ def per_impact_errors(impacts, ref_impacts):
     rows = []
     for a, b in zip(impacts, ref_impacts):
         row = _impact_errors(a, b)
-        row['t_impact'] = abs(a['t_contact'] - b['t_contact']) / period \
-            if math.isfinite(period) else math.nan
+        row['t_impact'] = (
+            abs(a['t_contact'] - b['t_contact']) / period if math.isfinite(period) else math.nan
+        )
         rows.append(row)
     return rows
 
@@ -135,8 +165,7 @@ def tradeoff_errors(impacts, ref_impacts):
     for key in TRADEOFF_METRICS[:-1]:
         values = [r[key] for r in rows if not math.isnan(r[key])]
         out[key] = max(values) if values else math.nan
-    out['period'] = _rel(_period(impacts), _period(ref_impacts)) if len(impacts) > 1 \
-        else math.nan
+    out['period'] = _rel(_period(impacts), _period(ref_impacts)) if len(impacts) > 1 else math.nan
     return out
 
 
@@ -167,14 +196,21 @@ def table(header, rows, align=None) -> str:
 
     def line(r):
         return '| ' + ' | '.join(f'{c:{a}{w}}' for c, a, w in zip(r, align, widths)) + ' |'
-    sep = '|' + '|'.join(('-' * (w + 1) + ':') if a == '>' else ('-' * (w + 2))
-                         for a, w in zip(align, widths)) + '|'
+
+    sep = (
+        '|'
+        + '|'.join(
+            ('-' * (w + 1) + ':') if a == '>' else ('-' * (w + 2)) for a, w in zip(align, widths)
+        )
+        + '|'
+    )
     return '\n'.join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
 
 
 def write_json(path, data) -> None:
     """The CLI's atomic JSON writer (non-finite numbers as null), creating the directory."""
     from impact_arm.tools.cli import write_json as write_atomically
+
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     write_atomically(path, data)
     print(f'wrote {path}')
@@ -184,15 +220,24 @@ def machine() -> dict:
     import platform
     import numpy
     import scipy
+
     try:
         import numba
+
         nb = numba.__version__
     except ImportError:
         nb = None
     from impact_arm.core import jit
-    return {'python': platform.python_version(), 'numpy': numpy.__version__,
-            'scipy': scipy.__version__, 'numba': nb, 'jit': jit.AVAILABLE,
-            'cpus': os.cpu_count(), 'time': time.strftime('%Y-%m-%dT%H:%M:%S')}
+
+    return {
+        'python': platform.python_version(),
+        'numpy': numpy.__version__,
+        'scipy': scipy.__version__,
+        'numba': nb,
+        'jit': jit.AVAILABLE,
+        'cpus': os.cpu_count(),
+        'time': time.strftime('%Y-%m-%dT%H:%M:%S'),
+    }
 
 
 def cpu_seconds(stat_path) -> float:

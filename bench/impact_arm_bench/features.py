@@ -11,6 +11,7 @@ Reported per scene, best of ``--repeats``: wall time, simulated time, wall micro
 simulated second, right-hand-side evaluations per simulated second and per wall second, and
 the compiled module's shape (contact / friction / integral states).
 """
+
 from __future__ import annotations
 
 import copy
@@ -38,16 +39,24 @@ def _hertz(data):
 def _no_gravity(data):
     data = _free(data)
     data['gravity'] = 0.0
-    data['initial']['qd'] = [2.0, -3.0]   # spinning, since nothing would pull it
+    data['initial']['qd'] = [2.0, -3.0]  # spinning, since nothing would pull it
     return data
 
 
 def _three_links(data):
-    data['links'] = [{'length': 0.7, 'mass': 1.0}, {'length': 0.7, 'mass': 1.0},
-                     {'length': 0.6, 'mass': 0.5}]
+    data['links'] = [
+        {'length': 0.7, 'mass': 1.0},
+        {'length': 0.7, 'mass': 1.0},
+        {'length': 0.6, 'mass': 0.5},
+    ]
     c = data['controller']
-    c.update(kp=[600.0, 300.0, 100.0], kd=[100.0, 100.0, 30.0], ki=[0.0, 0.0, 0.0],
-             down_target_deg=[-80.0, -70.0, -60.0], up_target_deg=[80.0, 70.0, 60.0])
+    c.update(
+        kp=[600.0, 300.0, 100.0],
+        kd=[100.0, 100.0, 30.0],
+        ki=[0.0, 0.0, 0.0],
+        down_target_deg=[-80.0, -70.0, -60.0],
+        up_target_deg=[80.0, 70.0, 60.0],
+    )
     data['initial'] = {'q_deg': [60.0, 45.0, 30.0], 'qd': [0.0, 0.0, 0.0]}
     data['cycles'] = 5
     return data
@@ -62,11 +71,13 @@ EXTRA = {'free motion, no gravity': _no_gravity}
 
 
 def add_arguments(parser):
-    parser.add_argument('--preset', default='balanced',
-                        choices=INTEGRATOR_PRESETS)
+    parser.add_argument('--preset', default='balanced', choices=INTEGRATOR_PRESETS)
     parser.add_argument('--repeats', type=int, default=5)
-    parser.add_argument('--three-links', action='store_true',
-                        help='add a three-link arm (compiles a new scene shape on first use)')
+    parser.add_argument(
+        '--three-links',
+        action='store_true',
+        help='add a three-link arm (compiles a new scene shape on first use)',
+    )
     parser.add_argument('--json', metavar='FILE')
 
 
@@ -74,22 +85,31 @@ def measure(name, make, preset, repeats):
     from impact_arm.core.integrator import PRESETS
     from impact_arm.core.model import ArmModel
     from impact_arm.core.scene import parse_scene
+
     data = make(copy.deepcopy(paper_dict()))
     scene = parse_scene(data, origin=f'features:{name}')
     rtol, atol = PRESETS[preset]
     common.progress(f'{name}: compile/load')
-    common.time_ours(scene, rtol, atol, repeats=1)          # load the compiled module
+    common.time_ours(scene, rtol, atol, repeats=1)  # load the compiled module
     common.progress(f'{name}: timing')
     r = common.time_ours(scene, rtol, atol, repeats=repeats)
     eq = ArmModel(scene).eq
-    return {'scene': name, 'links': scene.n_links, 'preset': preset,
-            'contact': eq.HAS_CONTACT, 'friction': eq.HAS_FRICTION,
-            'integral_states': eq.NI, 'gravity': scene.gravity != 0,
-            'impacts': len(r['impacts']), 't_simulated': r['t_end'], 'wall': r['wall'],
-            'us_per_sim_s': r['wall'] / r['t_end'] * 1e6,
-            'rhs_per_sim_s': r['rhs_evaluations'] / r['t_end'],
-            'rhs_per_wall_s': r['rhs_evaluations'] / r['wall'],
-            'ns_per_rhs': r['wall'] / r['rhs_evaluations'] * 1e9}
+    return {
+        'scene': name,
+        'links': scene.n_links,
+        'preset': preset,
+        'contact': eq.HAS_CONTACT,
+        'friction': eq.HAS_FRICTION,
+        'integral_states': eq.NI,
+        'gravity': scene.gravity != 0,
+        'impacts': len(r['impacts']),
+        't_simulated': r['t_end'],
+        'wall': r['wall'],
+        'us_per_sim_s': r['wall'] / r['t_end'] * 1e6,
+        'rhs_per_sim_s': r['rhs_evaluations'] / r['t_end'],
+        'rhs_per_wall_s': r['rhs_evaluations'] / r['wall'],
+        'ns_per_rhs': r['wall'] / r['rhs_evaluations'] * 1e9,
+    }
 
 
 def run(args) -> int:
@@ -98,19 +118,49 @@ def run(args) -> int:
         scenes['three links, article floor'] = _three_links
     rows = [measure(name, make, args.preset, args.repeats) for name, make in scenes.items()]
     common.progress_done()
-    print(f'Cost per simulated second, preset {args.preset}, best of {args.repeats} '
-          '(event-to-event runs, continuous control, no sampled output):')
+    print(
+        f'Cost per simulated second, preset {args.preset}, best of {args.repeats} '
+        '(event-to-event runs, continuous control, no sampled output):'
+    )
     print()
-    body = [[r['scene'], r['links'], 'yes' if r['contact'] else 'no',
-             'yes' if r['friction'] else 'no', r['impacts'], f"{r['t_simulated']:.3f}",
-             f"{r['wall'] * 1e3:.2f}", f"{r['us_per_sim_s']:.0f}",
-             f"{r['rhs_per_sim_s']:.0f}", f"{r['ns_per_rhs']:.0f}"] for r in rows]
-    print(common.table(['scene', 'links', 'contact code', 'friction term', 'impacts',
-                        'sim [s]', 'wall [ms]', 'wall us / sim s', 'rhs / sim s',
-                        'wall ns / rhs eval'], body))
-    print('\nwall ns / rhs eval: whole run (stepping, events, Python wrapper) per right-hand-side '
-          'evaluation, i.e. the per-evaluation price of the features compiled in.')
+    body = [
+        [
+            r['scene'],
+            r['links'],
+            'yes' if r['contact'] else 'no',
+            'yes' if r['friction'] else 'no',
+            r['impacts'],
+            f'{r["t_simulated"]:.3f}',
+            f'{r["wall"] * 1e3:.2f}',
+            f'{r["us_per_sim_s"]:.0f}',
+            f'{r["rhs_per_sim_s"]:.0f}',
+            f'{r["ns_per_rhs"]:.0f}',
+        ]
+        for r in rows
+    ]
+    print(
+        common.table(
+            [
+                'scene',
+                'links',
+                'contact code',
+                'friction term',
+                'impacts',
+                'sim [s]',
+                'wall [ms]',
+                'wall us / sim s',
+                'rhs / sim s',
+                'wall ns / rhs eval',
+            ],
+            body,
+        )
+    )
+    print(
+        '\nwall ns / rhs eval: whole run (stepping, events, Python wrapper) per right-hand-side '
+        'evaluation, i.e. the per-evaluation price of the features compiled in.'
+    )
     if args.json:
-        common.write_json(args.json, {'benchmark': 'features', 'machine': common.machine(),
-                                      'rows': rows})
+        common.write_json(
+            args.json, {'benchmark': 'features', 'machine': common.machine(), 'rows': rows}
+        )
     return 0

@@ -8,6 +8,7 @@
   folder: imports, the compiled kernel's loading, reading, fitting, writing the report);
 * growth: fitting time in one process against the number of impacts and of parameters.
 """
+
 from __future__ import annotations
 
 import json
@@ -17,23 +18,30 @@ import sys
 import tempfile
 import time
 
-BOUNDS = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9),
-          'materials.steel.E': (5e10, 1e12), 'surfaces[0].v_d': (0.002, 0.2)}
+BOUNDS = {
+    'surfaces[0].mu': (0.05, 1.0),
+    'materials.steel.S_y': (2e8, 5e9),
+    'materials.steel.E': (5e10, 1e12),
+    'surfaces[0].v_d': (0.002, 0.2),
+}
 
 
 def add_arguments(parser):
     parser.add_argument('--cases', type=int, default=20, help='drawn cases (default 20)')
-    parser.add_argument('--impacts', type=int, default=12,
-                        help='impacts per accuracy case (default 12)')
-    parser.add_argument('--skip-fresh', action='store_true',
-                        help='skip the fresh-process timing')
+    parser.add_argument(
+        '--impacts', type=int, default=12, help='impacts per accuracy case (default 12)'
+    )
+    parser.add_argument('--skip-fresh', action='store_true', help='skip the fresh-process timing')
     parser.add_argument('--json', default=None, metavar='FILE', help='write the figures here')
 
 
 def _drawn(rng):
     import numpy as np
-    return {'surfaces[0].mu': float(rng.uniform(0.1, 0.6)),
-            'materials.steel.S_y': float(np.exp(rng.uniform(np.log(4e8), np.log(2.5e9))))}
+
+    return {
+        'surfaces[0].mu': float(rng.uniform(0.1, 0.6)),
+        'materials.steel.S_y': float(np.exp(rng.uniform(np.log(4e8), np.log(2.5e9)))),
+    }
 
 
 def accuracy(cases, impacts, say):
@@ -41,36 +49,50 @@ def accuracy(cases, impacts, say):
 
     from impact_arm.core.fit import fit
     from impact_arm.tools.synthetic import synthetic_recording
+
     rng = np.random.default_rng(2026)
     rows = []
     for case in range(cases):
         truth = _drawn(rng)
-        rec = synthetic_recording('paper', truth, cycles=impacts, drop=0.02,
-                                  clock_offset=1.7e9, seed=100 + case)
+        rec = synthetic_recording(
+            'paper', truth, cycles=impacts, drop=0.02, clock_offset=1.7e9, seed=100 + case
+        )
         for wrench in (True, False):
             if not wrench:
                 rec.wrench = None
             t0 = time.perf_counter()
             res = fit(rec, 'paper', {k: BOUNDS[k] for k in truth})
             wall = time.perf_counter() - t0
-            row = {'case': case, 'wrench': wrench, 'wall': wall, 'verdict': res.verdict,
-                   'impacts': res.impacts_used}
+            row = {
+                'case': case,
+                'wrench': wrench,
+                'wall': wall,
+                'verdict': res.verdict,
+                'impacts': res.impacts_used,
+            }
             for k, v in truth.items():
                 p = res.parameters[k]
-                row[k] = {'truth': v, 'value': p['value'], 'error': p['value'] / v - 1,
-                          'covered': p['ci95'][0] <= v <= p['ci95'][1]}
+                row[k] = {
+                    'truth': v,
+                    'value': p['value'],
+                    'error': p['value'] / v - 1,
+                    'covered': p['ci95'][0] <= v <= p['ci95'][1],
+                }
             rows.append(row)
-        say(f'  case {case + 1}/{cases}: mu {truth["surfaces[0].mu"]:.3f} -> '
+        say(
+            f'  case {case + 1}/{cases}: mu {truth["surfaces[0].mu"]:.3f} -> '
             f'{rows[-2]["surfaces[0].mu"]["value"]:.3f} (wrench) '
             f'{rows[-1]["surfaces[0].mu"]["value"]:.3f} (joints); S_y '
             f'{truth["materials.steel.S_y"]:.3g} -> '
             f'{rows[-2]["materials.steel.S_y"]["value"]:.3g} / '
-            f'{rows[-1]["materials.steel.S_y"]["value"]:.3g}')
+            f'{rows[-1]["materials.steel.S_y"]["value"]:.3g}'
+        )
     return rows
 
 
 def summarize(rows):
     import numpy as np
+
     out = {}
     for wrench in (True, False):
         sel = [r for r in rows if r['wrench'] == wrench]
@@ -80,24 +102,48 @@ def summarize(rows):
             'cases': len(sel),
             'fits': sum(r['verdict'] == 'fits' for r in sel),
             'wall_median': float(np.median([r['wall'] for r in sel])),
-            **{k: {'max_abs_error': float(max(abs(r[k]['error']) for r in sel)),
-                   'median_abs_error': float(np.median([abs(r[k]['error']) for r in sel])),
-                   'coverage': float(np.mean([r[k]['covered'] for r in sel]))} for k in keys}}
+            **{
+                k: {
+                    'max_abs_error': float(max(abs(r[k]['error']) for r in sel)),
+                    'median_abs_error': float(np.median([abs(r[k]['error']) for r in sel])),
+                    'coverage': float(np.mean([r[k]['covered'] for r in sel])),
+                }
+                for k in keys
+            },
+        }
     return out
 
 
 def fresh_process(say):
     """Wall time of ``impact-arm fit`` (2 parameters, 15 impacts) in a new interpreter."""
     from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
+
     with tempfile.TemporaryDirectory() as tmp:
-        rec = synthetic_recording('paper', {'surfaces[0].mu': 0.33,
-                                            'materials.steel.S_y': 8e8},
-                                  cycles=15, drop=0.02, clock_offset=1.7e9, seed=7)
+        rec = synthetic_recording(
+            'paper',
+            {'surfaces[0].mu': 0.33, 'materials.steel.S_y': 8e8},
+            cycles=15,
+            drop=0.02,
+            clock_offset=1.7e9,
+            seed=7,
+        )
         bag = os.path.join(tmp, 'bag')
         write_rosbag2(rec, bag)
-        cmd = [sys.executable, '-m', 'impact_arm.tools.cli', 'fit', bag, '--param',
-               'surfaces[0].mu=0.05:1', '--param', 'materials.steel.S_y=2e8:5e9',
-               '--out', os.path.join(tmp, 'out'), '--json', os.path.join(tmp, 'r.json')]
+        cmd = [
+            sys.executable,
+            '-m',
+            'impact_arm.tools.cli',
+            'fit',
+            bag,
+            '--param',
+            'surfaces[0].mu=0.05:1',
+            '--param',
+            'materials.steel.S_y=2e8:5e9',
+            '--out',
+            os.path.join(tmp, 'out'),
+            '--json',
+            os.path.join(tmp, 'r.json'),
+        ]
         t0 = time.perf_counter()
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         wall = time.perf_counter() - t0
@@ -105,45 +151,62 @@ def fresh_process(say):
             raise RuntimeError(f'fresh fit failed: {done.stderr.strip()[-500:]}')
         with open(os.path.join(tmp, 'r.json'), encoding='utf-8') as f:
             data = json.load(f)
-    say(f'  fresh process: {wall:.2f} s for {data["impacts_used"]} impacts, 2 parameters '
-        f'({data["verdict"]})')
+    say(
+        f'  fresh process: {wall:.2f} s for {data["impacts_used"]} impacts, 2 parameters '
+        f'({data["verdict"]})'
+    )
     return {'wall': wall, 'impacts': data['impacts_used'], 'verdict': data['verdict']}
 
 
 def growth(say):
     from impact_arm.core.fit import fit
     from impact_arm.tools.synthetic import synthetic_recording
+
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
     out = {'impacts': [], 'params': []}
-    fit(synthetic_recording('paper', truth, cycles=3, seed=1), 'paper',
-        {'surfaces[0].mu': BOUNDS['surfaces[0].mu']})          # warm: kernels loaded
+    fit(
+        synthetic_recording('paper', truth, cycles=3, seed=1),
+        'paper',
+        {'surfaces[0].mu': BOUNDS['surfaces[0].mu']},
+    )  # warm: kernels loaded
     for cycles in (5, 10, 15, 30):
         rec = synthetic_recording('paper', truth, cycles=cycles, seed=cycles)
         t0 = time.perf_counter()
         res = fit(rec, 'paper', {k: BOUNDS[k] for k in truth})
         wall = time.perf_counter() - t0
-        out['impacts'].append({'impacts': res.impacts_used, 'wall': wall,
-                               'evaluations': res.evaluations})
-        say(f'  {res.impacts_used:3d} impacts, 2 parameters: {wall:.2f} s '
-            f'({res.evaluations} evaluations)')
+        out['impacts'].append(
+            {'impacts': res.impacts_used, 'wall': wall, 'evaluations': res.evaluations}
+        )
+        say(
+            f'  {res.impacts_used:3d} impacts, 2 parameters: {wall:.2f} s '
+            f'({res.evaluations} evaluations)'
+        )
     rec = synthetic_recording('paper', truth, cycles=15, seed=15)
     for count in (1, 2, 3, 4):
         keys = list(BOUNDS)[:count]
         t0 = time.perf_counter()
         res = fit(rec, 'paper', {k: BOUNDS[k] for k in keys})
         wall = time.perf_counter() - t0
-        out['params'].append({'params': count, 'wall': wall, 'evaluations': res.evaluations,
-                              'identified': [k for k in keys
-                                             if res.parameters[k]['identifiable']]})
-        say(f'  {res.impacts_used:3d} impacts, {count} parameters: {wall:.2f} s '
+        out['params'].append(
+            {
+                'params': count,
+                'wall': wall,
+                'evaluations': res.evaluations,
+                'identified': [k for k in keys if res.parameters[k]['identifiable']],
+            }
+        )
+        say(
+            f'  {res.impacts_used:3d} impacts, {count} parameters: {wall:.2f} s '
             f'({res.evaluations} evaluations; identified: '
-            f'{", ".join(out["params"][-1]["identified"]) or "none"})')
+            f'{", ".join(out["params"][-1]["identified"]) or "none"})'
+        )
     return out
 
 
 def run(args) -> int:
     def say(text):
         print(text, flush=True)
+
     report = {}
     if not args.skip_fresh:
         say('fresh process (2 parameters, 15 impacts):')
@@ -157,11 +220,14 @@ def run(args) -> int:
         say(f'{name}: {s["fits"]}/{s["cases"]} fit, median {s["wall_median"]:.2f} s')
         for k, v in s.items():
             if isinstance(v, dict):
-                say(f'  {k}: max |error| {100 * v["max_abs_error"]:.2f} %, median '
+                say(
+                    f'  {k}: max |error| {100 * v["max_abs_error"]:.2f} %, median '
                     f'{100 * v["median_abs_error"]:.2f} %, 95 % interval holds the truth in '
-                    f'{100 * v["coverage"]:.0f} %')
+                    f'{100 * v["coverage"]:.0f} %'
+                )
     if args.json:
         from impact_arm.tools.cli import write_json
+
         report['cases'] = rows
         write_json(args.json, report)
         say(f'wrote {args.json}')

@@ -15,6 +15,7 @@ not counted) or non-finite (a finished run reporting NaN or infinity).
 
 The scenes run in a worker process, one after another; a hang or crash costs a new worker.
 """
+
 from __future__ import annotations
 
 import json
@@ -31,6 +32,8 @@ from generators import mutate  # test/generators.py (on the path: __init__)
 
 CLASSES = ('accepted-finite', 'refused', 'stopped-at-limit', 'traceback', 'hang', 'non-finite')
 GOOD = CLASSES[:3]
+
+
 # ------------------------------------------------------------------------------- worker
 def _finite(value) -> bool:
     if isinstance(value, float):
@@ -47,16 +50,19 @@ def classify(text: str, warm_up=lambda scene: None) -> dict:
     from impact_arm.core.errors import SceneError
     from impact_arm.core.scene import scene_from_text
     from impact_arm.core.simulate import run
+
     try:
         scene = scene_from_text(text, origin='fuzz')
     except SceneError as exc:
         message = str(exc)
         one_line = '\n' not in message and len(message) < 1000
-        return {'class': 'refused' if one_line else 'traceback',
-                'detail': message[:300].replace('\n', '\\n')}
+        return {
+            'class': 'refused' if one_line else 'traceback',
+            'detail': message[:300].replace('\n', '\\n'),
+        }
     try:
         warm_up(scene)
-        result = run(scene, keep_samples=False)     # as the command runs it
+        result = run(scene, keep_samples=False)  # as the command runs it
         if result.error:
             return {'class': 'stopped-at-limit', 'detail': result.error[:300]}
         if not _finite(result.to_json()):
@@ -77,9 +83,14 @@ def worker():
     def ready(scene):
         # compile or load everything a scene of this shape runs (minutes, once per shape):
         # the kernel, and the laws and metrics first called at an impact, so 1 s of the run
-        shape = (scene.n_links, scene.gravity == 0, scene.controller.law,
-                 scene.controller.rate > 0, scene.integrator.method,
-                 tuple((s.law, s.mu > 0) for s in scene.surfaces))
+        shape = (
+            scene.n_links,
+            scene.gravity == 0,
+            scene.controller.law,
+            scene.controller.rate > 0,
+            scene.integrator.method,
+            tuple((s.law, s.mu > 0) for s in scene.surfaces),
+        )
         if shape not in shapes:
             shapes.add(shape)
             try:
@@ -87,6 +98,7 @@ def worker():
             except SimulationError:
                 pass
         print(json.dumps({'start': True}), flush=True)
+
     for line in sys.stdin:
         text = json.loads(line)
         outcome = classify(text, warm_up=ready)
@@ -96,13 +108,18 @@ def worker():
 class Worker:
     def __init__(self):
         self.proc = subprocess.Popen(
-            [sys.executable, '-c', 'from impact_arm_bench.fuzz import worker; '
-             'worker()'], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL, text=True, bufsize=1)
+            [sys.executable, '-c', 'from impact_arm_bench.fuzz import worker; worker()'],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+            bufsize=1,
+        )
 
     def _line(self, deadline):
         """The next JSON line, or None at the deadline or if the worker died."""
         import select
+
         while True:
             left = deadline - time.monotonic()
             if left <= 0 or not select.select([self.proc.stdout], [], [], left)[0]:
@@ -122,9 +139,12 @@ class Worker:
         if first is None:
             hang = self.proc.poll() is None
             self.close()
-            return {'class': 'hang' if hang else 'traceback',
-                    'detail': f'no result within {timeout:g} s' if hang else
-                    f'worker died (exit {self.proc.returncode})'}
+            return {
+                'class': 'hang' if hang else 'traceback',
+                'detail': f'no result within {timeout:g} s'
+                if hang
+                else f'worker died (exit {self.proc.returncode})',
+            }
         return first
 
     def close(self):
@@ -137,6 +157,7 @@ def run_fuzz(count, seed, timeout, keep_dir=None) -> tuple[dict, list]:
     """The tally of classes, and the unhandled scenes (each also written to ``keep_dir``
     as soon as it is found, as fuzz_SEED_INDEX.yaml)."""
     from .stress import paper_dict
+
     rng = random.Random(seed)
     base = paper_dict()
     tally = dict.fromkeys(CLASSES, 0)
@@ -144,8 +165,11 @@ def run_fuzz(count, seed, timeout, keep_dir=None) -> tuple[dict, list]:
     worker_proc = Worker()
     try:
         for i in range(count):
-            common.progress(f'[{i + 1}/{count}] ' + ', '.join(
-                f'{k} {v}' for k, v in tally.items() if v), i, count)
+            common.progress(
+                f'[{i + 1}/{count}] ' + ', '.join(f'{k} {v}' for k, v in tally.items() if v),
+                i,
+                count,
+            )
             text = mutate(base, rng)
             outcome = worker_proc.classify(text, timeout)
             if worker_proc.proc.poll() is not None:
@@ -154,8 +178,12 @@ def run_fuzz(count, seed, timeout, keep_dir=None) -> tuple[dict, list]:
             if outcome['class'] not in GOOD:
                 bad.append((i, outcome, text))
                 if keep_dir:
-                    with open(os.path.join(keep_dir, f'fuzz_{seed}_{i}.yaml'), 'w',
-                              encoding='utf-8', errors='surrogatepass') as f:
+                    with open(
+                        os.path.join(keep_dir, f'fuzz_{seed}_{i}.yaml'),
+                        'w',
+                        encoding='utf-8',
+                        errors='surrogatepass',
+                    ) as f:
                         f.write(f'# {outcome["class"]}: {outcome["detail"][-200:]!r}\n{text}')
     finally:
         worker_proc.close()
@@ -172,7 +200,14 @@ def report(args) -> int:
     for i, outcome, text in bad[:10]:
         print(f'\nscene {i}: {outcome["class"]}: {outcome["detail"]}')
     if args.json:
-        common.write_json(args.json, {'benchmark': 'stress --fuzz', 'seed': args.seed,
-                                      'machine': common.machine(), 'outcomes': tally,
-                                      'unhandled': [{'scene': i, **o} for i, o, _ in bad]})
+        common.write_json(
+            args.json,
+            {
+                'benchmark': 'stress --fuzz',
+                'seed': args.seed,
+                'machine': common.machine(),
+                'outcomes': tally,
+                'unhandled': [{'scene': i, **o} for i, o, _ in bad],
+            },
+        )
     return 1 if bad else 0

@@ -12,6 +12,7 @@ Errors, all against this project's ``reference`` preset: the first impact's F_ma
 contact duration, and the worst error over every impact of the kinematic CoR e. Wall time:
 the whole 15 cycles (6 s simulated), best of ``--repeats``.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,7 +20,7 @@ import time
 
 from . import common
 
-MJCF = '''<mujoco model="impact_arm">
+MJCF = """<mujoco model="impact_arm">
   <option timestep="{dt}" gravity="0 {gy} 0" integrator="{integrator}"/>
   <worldbody>
     <geom name="floor" type="plane" pos="0 {floor} 0" zaxis="0 1 0" size="5 5 0.1" friction="{mu} 0.005 0.0001" {contact}/>
@@ -33,7 +34,7 @@ MJCF = '''<mujoco model="impact_arm">
       </body>
     </body>
   </worldbody>
-</mujoco>'''
+</mujoco>"""
 
 
 def add_arguments(parser):
@@ -44,15 +45,29 @@ def add_arguments(parser):
 
 def build(scene, dt, solref=None, integrator='implicitfast'):
     import mujoco
+
     (L1, L2), (m1, m2) = scene.lengths, scene.masses
     surface = scene.surfaces[0]
     contact = '' if solref is None else f'solref="{solref[0]!r} {solref[1]!r}"'
     # the project's contact starts when the tip *centre* reaches the surface (δ = h - y_B):
     # MuJoCo's sphere touches a plane lowered by its radius at the same moment
-    xml = MJCF.format(dt=dt, gy=-scene.gravity, integrator=integrator,
-                      floor=surface.height - scene.tip_radius, contact=contact,
-                      c1=L1 / 2, m1=m1, i1=m1 * L1 ** 2 / 12, L1=L1, c2=L2 / 2, m2=m2,
-                      i2=m2 * L2 ** 2 / 12, L2=L2, radius=scene.tip_radius, mu=surface.mu)
+    xml = MJCF.format(
+        dt=dt,
+        gy=-scene.gravity,
+        integrator=integrator,
+        floor=surface.height - scene.tip_radius,
+        contact=contact,
+        c1=L1 / 2,
+        m1=m1,
+        i1=m1 * L1**2 / 12,
+        L1=L1,
+        c2=L2 / 2,
+        m2=m2,
+        i2=m2 * L2**2 / 12,
+        L2=L2,
+        radius=scene.tip_radius,
+        mu=surface.mu,
+    )
     return mujoco.MjModel.from_xml_string(xml)
 
 
@@ -60,6 +75,7 @@ def simulate(scene, model, t_end, max_impacts=None):
     """The cycle under MuJoCo; impact records (t, v before/after, F_max, duration, e)."""
     import mujoco
     import numpy as np
+
     data = mujoco.MjData(model)
     c = scene.controller
     (L1, L2), (m1, m2), g = scene.lengths, scene.masses, scene.gravity
@@ -86,7 +102,7 @@ def simulate(scene, model, t_end, max_impacts=None):
         touching = data.ncon > 0
         if touching and current is None:
             current = {'t': data.time - dt, 'v_before': previous, 'F_max': 0.0}
-            mode_up = True                       # struck: the cycle turns upward
+            mode_up = True  # struck: the cycle turns upward
         elif not touching and current is not None:
             current['duration'] = data.time - dt - current['t']
             current['v_after'] = (vx, vy)
@@ -98,7 +114,7 @@ def simulate(scene, model, t_end, max_impacts=None):
         if touching:
             mujoco.mj_contactForce(model, data, 0, force)
             current['F_max'] = max(current['F_max'], abs(force[0]))
-            qfrc[0] = qfrc[1] = 0.0              # actuators off during contact
+            qfrc[0] = qfrc[1] = 0.0  # actuators off during contact
         else:
             y_tip = L1 * s1 + L2 * s2
             if mode_up and y_tip >= c.switch_height:
@@ -116,7 +132,7 @@ def simulate(scene, model, t_end, max_impacts=None):
     return impacts
 
 
-TIMECONSTS = (8e-5, 1.2e-4, 1.6e-4, 2e-4, 2.5e-4, 3e-4)   # MuJoCo solref time constants [s]
+TIMECONSTS = (8e-5, 1.2e-4, 1.6e-4, 2e-4, 2.5e-4, 3e-4)  # MuJoCo solref time constants [s]
 
 
 def tune_dampratio(scene, dt, timeconst, e_target):
@@ -137,15 +153,20 @@ def tune_dampratio(scene, dt, timeconst, e_target):
 
 
 def errors(impacts, ref):
-    out = {'F_max #1': math.inf, 'duration #1': math.inf, 'e (worst impact)': math.inf,
-           'impacts': len(impacts)}
+    out = {
+        'F_max #1': math.inf,
+        'duration #1': math.inf,
+        'e (worst impact)': math.inf,
+        'impacts': len(impacts),
+    }
     if impacts:
         out['F_max #1'] = abs(impacts[0]['F_max'] / ref[0]['F_max'] - 1)
         out['duration #1'] = abs(impacts[0]['duration'] / ref[0]['duration'] - 1)
     if len(impacts) >= len(ref):
-        out['e (worst impact)'] = max(abs(a.get('e', a.get('cor_kinematic')) /
-                                          b['cor_kinematic'] - 1)
-                                      for a, b in zip(impacts, ref))
+        out['e (worst impact)'] = max(
+            abs(a.get('e', a.get('cor_kinematic')) / b['cor_kinematic'] - 1)
+            for a, b in zip(impacts, ref)
+        )
     return out
 
 
@@ -156,6 +177,7 @@ def run(args) -> int:
         print('bench peers needs MuJoCo: pip install mujoco (an optional extra)')
         return 2
     from impact_arm.core.integrator import PRESETS
+
     scene = common.load(args.scene)
     if scene.n_links != 2 or len(scene.surfaces) != 1:
         print('bench peers models a two-link arm over one floor')
@@ -164,9 +186,13 @@ def run(args) -> int:
     ref_run = common.time_ours(scene, *PRESETS['reference'], repeats=1)
     ref, t_end = ref_run['impacts'], ref_run['t_end']
     rows = []
-    for label, kw in (('impact_arm `balanced`', dict(rtol=1e-8, atol=1e-10)),
-                      ('impact_arm sweep setting (rosenbrock 1e-2, contact 3e-4)',
-                       dict(rtol=1e-2, atol=1e-4, method='rosenbrock', contact_rtol=3e-4))):
+    for label, kw in (
+        ('impact_arm `balanced`', dict(rtol=1e-8, atol=1e-10)),
+        (
+            'impact_arm sweep setting (rosenbrock 1e-2, contact 3e-4)',
+            dict(rtol=1e-2, atol=1e-4, method='rosenbrock', contact_rtol=3e-4),
+        ),
+    ):
         common.progress(f'ours: {label}')
         r = common.time_ours(scene, repeats=args.repeats, **kw)
         rows.append(dict(errors(r['impacts'], ref), engine=label, wall=r['wall']))
@@ -174,17 +200,19 @@ def run(args) -> int:
     # contact time constant whose contact duration comes closest
     best = None
     for timeconst in TIMECONSTS:
-        common.progress(f'MuJoCo: tuning solref on the first impact (time constant '
-                        f'{timeconst:g} s, dt 10 µs)')
+        common.progress(
+            f'MuJoCo: tuning solref on the first impact (time constant {timeconst:g} s, dt 10 µs)'
+        )
         damp = tune_dampratio(scene, 1e-5, timeconst, ref[0]['cor_kinematic'])
         first = simulate(scene, build(scene, 1e-5, (timeconst, damp)), 0.5, max_impacts=1)
         miss = abs(first[0]['duration'] / ref[0]['duration'] - 1) if first else math.inf
         if best is None or miss < best[0]:
             best = (miss, timeconst, damp)
     _, timeconst, damp = best
-    settings = (('MuJoCo defaults, dt 1 ms', 1e-3, None),
-                (f'MuJoCo solref ({timeconst:g}, {damp:.3f}) tuned, dt 10 µs', 1e-5,
-                 (timeconst, damp)))
+    settings = (
+        ('MuJoCo defaults, dt 1 ms', 1e-3, None),
+        (f'MuJoCo solref ({timeconst:g}, {damp:.3f}) tuned, dt 10 µs', 1e-5, (timeconst, damp)),
+    )
     for label, dt, solref in settings:
         common.progress(f'{label}: 15 cycles')
         model = build(scene, dt, solref)
@@ -195,21 +223,46 @@ def run(args) -> int:
             best = min(best, time.perf_counter() - t0)
         rows.append(dict(errors(impacts, ref), engine=label, wall=best))
     common.progress_done()
-    print(f"Scene '{scene.name}', {len(ref)} impacts in {t_end:.3f} s simulated; errors "
-          f"against impact_arm preset reference; MuJoCo {mujoco.__version__}, its controller "
-          f"evaluated in Python before each step; wall: the 15 cycles, best of "
-          f"{args.repeats}.")
+    print(
+        f"Scene '{scene.name}', {len(ref)} impacts in {t_end:.3f} s simulated; errors "
+        f'against impact_arm preset reference; MuJoCo {mujoco.__version__}, its controller '
+        f'evaluated in Python before each step; wall: the 15 cycles, best of '
+        f'{args.repeats}.'
+    )
     print()
-    body = [[r['engine'], f"{r['wall'] * 1e3:.1f}", r['impacts'],
-             common.fmt_err(r['F_max #1']), common.fmt_err(r['duration #1']),
-             common.fmt_err(r['e (worst impact)'])] for r in rows]
-    print(common.table(['engine, setting', 'wall [ms]', 'impacts', 'F_max #1 error',
-                        'duration #1 error', 'e error, worst impact'], body))
+    body = [
+        [
+            r['engine'],
+            f'{r["wall"] * 1e3:.1f}',
+            r['impacts'],
+            common.fmt_err(r['F_max #1']),
+            common.fmt_err(r['duration #1']),
+            common.fmt_err(r['e (worst impact)']),
+        ]
+        for r in rows
+    ]
+    print(
+        common.table(
+            [
+                'engine, setting',
+                'wall [ms]',
+                'impacts',
+                'F_max #1 error',
+                'duration #1 error',
+                'e error, worst impact',
+            ],
+            body,
+        )
+    )
     fastest_tuned = rows[-1]['wall']
     print()
-    print(f"impact_arm sweep setting vs tuned MuJoCo: {fastest_tuned / rows[1]['wall']:.0f}x "
-          f"faster; balanced: {fastest_tuned / rows[0]['wall']:.0f}x")
+    print(
+        f'impact_arm sweep setting vs tuned MuJoCo: {fastest_tuned / rows[1]["wall"]:.0f}x '
+        f'faster; balanced: {fastest_tuned / rows[0]["wall"]:.0f}x'
+    )
     if args.json:
-        common.write_json(args.json, {'benchmark': 'peers', 'scene': scene.name,
-                                      'machine': common.machine(), 'rows': rows})
+        common.write_json(
+            args.json,
+            {'benchmark': 'peers', 'scene': scene.name, 'machine': common.machine(), 'rows': rows},
+        )
     return 0

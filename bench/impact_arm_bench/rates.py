@@ -12,6 +12,7 @@
 
 Processes run on a free local DDS domain (localhost discovery) and are ended by PID.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,10 +34,16 @@ PERIOD_PARTS = ('commands', 'physics', 'publish')
 def add_arguments(parser):
     parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
     parser.add_argument('--scene', default='paper')
-    parser.add_argument('--fast-seconds', type=float, default=5.0, metavar='S',
-                        help='duration of the 5 kHz run (default 5)')
-    parser.add_argument('--skip', nargs='*', default=[],
-                        choices=('realtime', 'fast', 'lockstep', 'floor'))
+    parser.add_argument(
+        '--fast-seconds',
+        type=float,
+        default=5.0,
+        metavar='S',
+        help='duration of the 5 kHz run (default 5)',
+    )
+    parser.add_argument(
+        '--skip', nargs='*', default=[], choices=('realtime', 'fast', 'lockstep', 'floor')
+    )
 
 
 def _memory_mb(pid, key='VmHWM'):
@@ -49,12 +56,14 @@ def _memory_mb(pid, key='VmHWM'):
 
 def _session(scene_path, mode, rate, rate_factor=None):
     from impact_arm.tools.runner import Run
+
     args = argparse.Namespace(mode=mode, rate=rate, law=None, out=os.path.join('runs', 'bench'))
     return Run(_scene(scene_path), scene_path, args, None, os.environ.copy())
 
 
 def _scene(path):
     from impact_arm.core.scene import load_scene
+
     return load_scene(path)
 
 
@@ -62,13 +71,14 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
     """Simulator + controller until the scene's cycles are done; returns measurements."""
     import rclpy
     from sensor_msgs.msg import JointState
+
     run = _session(scene_path, mode, rate)
     started = time.monotonic()
     first_state = []
     run.start()
     probe = run.node.create_subscription(
-        JointState, JOINT_STATES,
-        lambda m: first_state or first_state.append(time.monotonic()), 10)
+        JointState, JOINT_STATES, lambda m: first_state or first_state.append(time.monotonic()), 10
+    )
     try:
         sim = run.procs['simulator']
         while not run.diagnostics or run.diagnostics.get('commands', '0') == '0':
@@ -83,7 +93,7 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         outcome = run.watch(timeout)
         cpu1, wall1 = cpu_seconds(f'/proc/{sim.pid}/stat'), time.monotonic()
         final = run.diagnostics
-        deadline = time.monotonic() + 2.5          # one more report, covering the last impact
+        deadline = time.monotonic() + 2.5  # one more report, covering the last impact
         while run.diagnostics is final and time.monotonic() < deadline:
             rclpy.spin_once(run.node, timeout_sec=0.05)
         memory = {name: _memory_mb(p.pid) for name, p in run.procs.items()}
@@ -91,7 +101,10 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
     finally:
         run.stop()
     return {
-        'mode': mode, 'rate_hz': rate, 'outcome': outcome, 'impacts': len(run.impacts),
+        'mode': mode,
+        'rate_hz': rate,
+        'outcome': outcome,
+        'impacts': len(run.impacts),
         'sim_time_s': float(d.get('sim_time', 0)),
         'real_time_factor': float(d.get('real_time_factor', 0)),
         'overruns': int(d.get('overruns', -1)),
@@ -102,10 +115,12 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'jitter_max_at_s': float(d.get('jitter_run_max_at_s', 'nan')),
         'scheduling': d.get('scheduling', '?'),
         'worst_compute_us': float(d.get('compute_worst_us', 'nan')),
-        'compute_mean_us': {part: float(d.get(f'compute_{part}_mean_us', 'nan'))
-                            for part in PERIOD_PARTS},
-        'worst_compute_parts_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
-                                   for part in PERIOD_PARTS},
+        'compute_mean_us': {
+            part: float(d.get(f'compute_{part}_mean_us', 'nan')) for part in PERIOD_PARTS
+        },
+        'worst_compute_parts_us': {
+            part: float(d.get(f'compute_worst_{part}_us', 'nan')) for part in PERIOD_PARTS
+        },
         'lockstep_wait_mean_us': float(d.get('lockstep_wait_mean_us', 'nan')),
         'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'period_us': 1e6 / rate,
@@ -125,8 +140,9 @@ def _run_fast(scene_path, rate, seconds):
     from sensor_msgs.msg import JointState
 
     from impact_arm.tools.runner import simulator_diagnostics
+
     run = _session(scene_path, 'realtime', rate)
-    run.args.control_rate = 1000.0        # the controller keeps its 1 kHz
+    run.args.control_rate = 1000.0  # the controller keeps its 1 kHz
     # This measures the simulator's clock, not the control loop: a Python controller taking
     # 10 000 messages/s next to a simulator using a whole core falls behind on two cores, and
     # the article's stiff gains (kd = 100) then go unstable on stale states. Gentle gains keep
@@ -137,24 +153,30 @@ def _run_fast(scene_path, rate, seconds):
     context = Context()
     rclpy.init(context=context, domain_id=int(os.environ['ROS_DOMAIN_ID']))
     node = rclpy.create_node('bench_rates_listener', context=context)
-    node.create_subscription(JointState, JOINT_STATES,
-                             lambda m: received.append(time.monotonic()), 1000)
+    node.create_subscription(
+        JointState, JOINT_STATES, lambda m: received.append(time.monotonic()), 1000
+    )
 
     def on_diagnostics(msg):
         values = simulator_diagnostics(msg)
         if values is not None:
             diagnostics.append(values)
+
     node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
     executor = EventsExecutor(context=context)
     executor.add_node(node)
     try:
         deadline = time.monotonic() + 60
-        while not (diagnostics and diagnostics[-1].get('commands', '0') != '0') and \
-                time.monotonic() < deadline:
+        while (
+            not (diagnostics and diagnostics[-1].get('commands', '0') != '0')
+            and time.monotonic() < deadline
+        ):
             executor.spin_once(timeout_sec=0.05)
         if not (diagnostics and diagnostics[-1].get('commands', '0') != '0'):
-            raise RuntimeError(f'realtime {rate:g} Hz: no command reached the simulator within '
-                               f'60 s (logs in {run.logdir})')
+            raise RuntimeError(
+                f'realtime {rate:g} Hz: no command reached the simulator within '
+                f'60 s (logs in {run.logdir})'
+            )
         begin, first = len(received), diagnostics[-1]
         end = time.monotonic() + seconds
         while time.monotonic() < end or diagnostics[-1] is first:
@@ -167,43 +189,55 @@ def _run_fast(scene_path, rate, seconds):
     periods = int(last.get('periods_published', 0)) - int(first.get('periods_published', 0))
     wall = float(last.get('wall_time', 0)) - float(first.get('wall_time', 0))
     sub_rate = (len(window) - 1) / (window[-1] - window[0]) if len(window) > 1 else 0.0
-    return {'mode': 'realtime', 'rate_hz': rate,
-            'achieved_hz_simulator': periods / wall if wall > 0 else 0.0,
-            'achieved_hz_subscriber': sub_rate,
-            'overruns': int(last.get('overruns', -1)),
-            'jitter_p99_us': float(last.get('jitter_run_p99_us', 'nan')),
-            'publish_failures': int(last.get('publish_failures', -1)),
-            'outcome': 'completed' if periods else 'failed: no period published'}
+    return {
+        'mode': 'realtime',
+        'rate_hz': rate,
+        'achieved_hz_simulator': periods / wall if wall > 0 else 0.0,
+        'achieved_hz_subscriber': sub_rate,
+        'overruns': int(last.get('overruns', -1)),
+        'jitter_p99_us': float(last.get('jitter_run_p99_us', 'nan')),
+        'publish_failures': int(last.get('publish_failures', -1)),
+        'outcome': 'completed' if periods else 'failed: no period published',
+    }
 
 
 def run(args) -> int:
     from impact_arm.tools.runner import dds_environment
     from impact_arm.core.scene import resolve_scene_path
+
     scene_path = resolve_scene_path(args.scene)
     env = dds_environment()
     from impact_arm.core.scene import load_scene
     from impact_arm.tools.runner import precompile
-    precompile(load_scene(scene_path), 1000.0)   # a cold cache compiles here, announced
-    print(f'bench rates: scene {args.scene}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} '
-          f'(localhost); machine: {os.cpu_count()} cores', file=sys.stderr)
+
+    precompile(load_scene(scene_path), 1000.0)  # a cold cache compiles here, announced
+    print(
+        f'bench rates: scene {args.scene}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} '
+        f'(localhost); machine: {os.cpu_count()} cores',
+        file=sys.stderr,
+    )
     rows = []
     if 'realtime' not in args.skip:
         print('  realtime 1 kHz, 15 cycles ...', file=sys.stderr, flush=True)
         rows.append(_run_cycles(scene_path, 'realtime', 1000.0))
         r = rows[-1]
-        print(f"realtime 1 kHz: {r['impacts']} impacts, {r['overruns']} overruns; period "
-              f"jitter p50 {r['jitter_p50_us']:.0f} us, p99 {r['jitter_p99_us']:.0f} us, max "
-              f"{r['jitter_max_us']:.0f} us (at t = {r['jitter_max_at_s']:.3f} s); worst compute "
-              f"{r['worst_compute_us']:.0f} us of a {r['period_us']:.0f} us period "
-              f"(at t = {r['worst_compute_at_s']:.3f} s); "
-              f"simulator CPU {r['simulator_cpu_percent']:.1f} % of one core "
-              f"({r['scheduling']}); peak RSS "
-              + ', '.join(f'{k} {v:.0f} MB' for k, v in r['rss_peak_mb'].items())
-              + f"; first /joint_states {r['first_joint_state_after_s']:.2f} s after start")
-        print("  a period's compute, mean: " + ', '.join(
-            f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items())
-            + '; the worst period: ' + ', '.join(
-            f'{part} {us:.0f} us' for part, us in r['worst_compute_parts_us'].items()))
+        print(
+            f'realtime 1 kHz: {r["impacts"]} impacts, {r["overruns"]} overruns; period '
+            f'jitter p50 {r["jitter_p50_us"]:.0f} us, p99 {r["jitter_p99_us"]:.0f} us, max '
+            f'{r["jitter_max_us"]:.0f} us (at t = {r["jitter_max_at_s"]:.3f} s); worst compute '
+            f'{r["worst_compute_us"]:.0f} us of a {r["period_us"]:.0f} us period '
+            f'(at t = {r["worst_compute_at_s"]:.3f} s); '
+            f'simulator CPU {r["simulator_cpu_percent"]:.1f} % of one core '
+            f'({r["scheduling"]}); peak RSS '
+            + ', '.join(f'{k} {v:.0f} MB' for k, v in r['rss_peak_mb'].items())
+            + f'; first /joint_states {r["first_joint_state_after_s"]:.2f} s after start'
+        )
+        print(
+            "  a period's compute, mean: "
+            + ', '.join(f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items())
+            + '; the worst period: '
+            + ', '.join(f'{part} {us:.0f} us' for part, us in r['worst_compute_parts_us'].items())
+        )
     if 'fast' not in args.skip:
         print('  realtime 5 kHz ...', file=sys.stderr, flush=True)
         try:
@@ -213,36 +247,55 @@ def run(args) -> int:
             print(f'realtime 5 kHz: FAILED: {exc}')
         else:
             r = rows[-1]
-            print(f"realtime 5 kHz: simulator published {r['achieved_hz_simulator']:.1f} Hz "
-                  f"({100 * r['achieved_hz_simulator'] / 5000:.2f} %), a subscriber received "
-                  f"{r['achieved_hz_subscriber']:.1f} Hz; {r['overruns']} overruns, jitter "
-                  f"p99 {r['jitter_p99_us']:.0f} us; {r['publish_failures']} samples the "
-                  f"middleware refused")
+            print(
+                f'realtime 5 kHz: simulator published {r["achieved_hz_simulator"]:.1f} Hz '
+                f'({100 * r["achieved_hz_simulator"] / 5000:.2f} %), a subscriber received '
+                f'{r["achieved_hz_subscriber"]:.1f} Hz; {r["overruns"]} overruns, jitter '
+                f'p99 {r["jitter_p99_us"]:.0f} us; {r["publish_failures"]} samples the '
+                f'middleware refused'
+            )
     if 'lockstep' not in args.skip:
         print('  lockstep 1 kHz, 15 cycles ...', file=sys.stderr, flush=True)
         rows.append(_run_cycles(scene_path, 'lockstep', 1000.0))
         r = rows[-1]
-        print(f"lockstep 1 kHz: {r['impacts']} impacts, {r['sim_time_s']:.3f} s simulated, "
-              f"real-time factor {r['real_time_factor']:.2f}")
-        print("  a period, mean: " + ', '.join(
-            f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items())
-              + f", waiting for the command {r['lockstep_wait_mean_us']:.0f} us")
+        print(
+            f'lockstep 1 kHz: {r["impacts"]} impacts, {r["sim_time_s"]:.3f} s simulated, '
+            f'real-time factor {r["real_time_factor"]:.2f}'
+        )
+        print(
+            '  a period, mean: '
+            + ', '.join(f'{part} {us:.0f} us' for part, us in r['compute_mean_us'].items())
+            + f', waiting for the command {r["lockstep_wait_mean_us"]:.0f} us'
+        )
     if 'floor' not in args.skip:
         from .transport_floor import measure
-        print('  transport floor (lockstep exchange without physics or control) ...',
-              file=sys.stderr, flush=True)
+
+        print(
+            '  transport floor (lockstep exchange without physics or control) ...',
+            file=sys.stderr,
+            flush=True,
+        )
         floor = measure(env=env)
-        rows.append({'mode': 'transport_floor', 'period_s': floor,
-                     'real_time_factor_ceiling_1khz': 1e-3 / floor})
-        print(f"transport floor: {floor * 1e6:.0f} us per lockstep period with no physics and "
-              f"no control law (wrench + joint state + clock out, command back): real-time "
-              f"factor at 1 kHz can never exceed {1e-3 / floor:.2f} here")
+        rows.append(
+            {
+                'mode': 'transport_floor',
+                'period_s': floor,
+                'real_time_factor_ceiling_1khz': 1e-3 / floor,
+            }
+        )
+        print(
+            f'transport floor: {floor * 1e6:.0f} us per lockstep period with no physics and '
+            f'no control law (wrench + joint state + clock out, command back): real-time '
+            f'factor at 1 kHz can never exceed {1e-3 / floor:.2f} here'
+        )
         lockstep = next((r for r in rows if r['mode'] == 'lockstep'), None)
         if lockstep and lockstep['real_time_factor'] > 0:
             # target: a lockstep period within 1.25x the bare exchange of this run
             period = 1e-3 / lockstep['real_time_factor']
-            print(f"lockstep period {period * 1e6:.0f} us = {period / floor:.2f}x the transport "
-                  f"floor measured in this run (target <= 1.25x)")
+            print(
+                f'lockstep period {period * 1e6:.0f} us = {period / floor:.2f}x the transport '
+                f'floor measured in this run (target <= 1.25x)'
+            )
     if args.json:
         with open(args.json, 'w') as f:
             json.dump(rows, f, indent=1)

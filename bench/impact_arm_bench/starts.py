@@ -12,6 +12,7 @@ Per start it prints: stopped or not, the cycle period against the article's 0.39
 per simulated second, overruns and skipped periods, the worst period and its split; then the
 summary the targets are stated in.
 """
+
 from __future__ import annotations
 
 import json
@@ -23,19 +24,27 @@ import sys
 import tempfile
 import time
 
-ARTICLE_PERIOD = 0.397       # s, the article's limit cycle
+ARTICLE_PERIOD = 0.397  # s, the article's limit cycle
 CYCLES = 15
-PERIOD_TOLERANCE = 0.05      # a cycle period further off than this means a missed impact
-SIM_TIME_LIMIT = 7.0         # s simulated: the 15th impact is due at ~5.8 s
-START_TIMEOUT = 120.0        # wall s for the first command (a cold numba cache compiles)
+PERIOD_TOLERANCE = 0.05  # a cycle period further off than this means a missed impact
+SIM_TIME_LIMIT = 7.0  # s simulated: the 15th impact is due at ~5.8 s
+START_TIMEOUT = 120.0  # wall s for the first command (a cold numba cache compiles)
 
 
 def add_arguments(parser):
-    parser.add_argument('--runs', type=int, default=5, metavar='N',
-                        help='number of starts (default 5; docs/benchmarks.md uses 30)')
+    parser.add_argument(
+        '--runs',
+        type=int,
+        default=5,
+        metavar='N',
+        help='number of starts (default 5; docs/benchmarks.md uses 30)',
+    )
     parser.add_argument('--json', metavar='FILE', help='write the per-start rows as JSON')
-    parser.add_argument('--keep-logs', action='store_true',
-                        help='keep the nodes\' logs (else removed unless a start failed)')
+    parser.add_argument(
+        '--keep-logs',
+        action='store_true',
+        help="keep the nodes' logs (else removed unless a start failed)",
+    )
 
 
 def _listener(domain):
@@ -46,18 +55,23 @@ def _listener(domain):
     from std_msgs.msg import String
     from impact_arm import contract
     from impact_arm.tools.runner import simulator_diagnostics
+
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('bench_starts_listener', context=context)
     seen = {'impacts': [], 'diagnostics': []}
-    node.create_subscription(String, contract.IMPACT_REPORT,
-                             lambda m: seen['impacts'].append(json.loads(m.data)),
-                             contract.qos(contract.IMPACT_REPORT).to_rclpy())
+    node.create_subscription(
+        String,
+        contract.IMPACT_REPORT,
+        lambda m: seen['impacts'].append(json.loads(m.data)),
+        contract.qos(contract.IMPACT_REPORT).to_rclpy(),
+    )
 
     def on_diagnostics(msg):
         values = simulator_diagnostics(msg)
         if values is not None:
             seen['diagnostics'].append(values)
+
     node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS, on_diagnostics, 10)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -71,8 +85,12 @@ def start_nodes(procs, env, logdir, prefix=''):
     for name in ('simulator', 'controller'):
         with open(os.path.join(logdir, f'{prefix}{name}.log'), 'wb') as log:
             procs[name] = subprocess.Popen(
-                [sys.executable, '-m', f'impact_arm.nodes.{name}'], env=env,
-                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                [sys.executable, '-m', f'impact_arm.nodes.{name}'],
+                env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+            )
 
 
 def stop_all(procs, rclpy, context, node, executor):
@@ -117,8 +135,11 @@ def one_start(index, env, logdir):
         # one more report, covering the last impact
         last = seen['diagnostics'][-1] if seen['diagnostics'] else None
         deadline = time.monotonic() + 2.5
-        while sim.poll() is None and time.monotonic() < deadline and \
-                (not seen['diagnostics'] or seen['diagnostics'][-1] is last):
+        while (
+            sim.poll() is None
+            and time.monotonic() < deadline
+            and (not seen['diagnostics'] or seen['diagnostics'][-1] is last)
+        ):
             executor.spin_once(timeout_sec=0.05)
     finally:
         stop_all(procs, rclpy, context, node, executor)
@@ -135,7 +156,7 @@ def wakeup_floor(seconds=2.0, period=1e-3, priority=50):
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (AttributeError, OSError):
-        pass                      # no realtime priority here: the nodes fall back likewise
+        pass  # no realtime priority here: the nodes fall back likewise
     late, worst, k = 0, 0.0, 0
     start = time.monotonic()
     try:
@@ -178,16 +199,23 @@ def _row(index, outcome, seen):
     sim_time = float(d.get('sim_time', 0.0))
     periods = int(d.get('periods_published', 0))
     # a missed down-up switch leaves the arm on the surface: a cycle too long or too short
-    missed = len(starts) < min(CYCLES, sim_time / ARTICLE_PERIOD - 1) or \
-        worst_gap > PERIOD_TOLERANCE
+    missed = (
+        len(starts) < min(CYCLES, sim_time / ARTICLE_PERIOD - 1) or worst_gap > PERIOD_TOLERANCE
+    )
     return {
-        'start': index, 'outcome': outcome,
+        'start': index,
+        'outcome': outcome,
         'stopped': not outcome.startswith(('completed', f'{SIM_TIME_LIMIT:g}')),
-        'impacts': len(times), 'cycles': len(starts), 're_strikes': len(times) - len(starts),
+        'impacts': len(times),
+        'cycles': len(starts),
+        're_strikes': len(times) - len(starts),
         'sim_time_s': sim_time,
         'impacts_per_sim_s': len(times) / sim_time if sim_time else 0.0,
-        'cycle_period_s': period, 'worst_cycle_deviation': worst_gap, 'missed_impact': missed,
-        'periods': periods, 'overruns': int(d.get('overruns', -1)),
+        'cycle_period_s': period,
+        'worst_cycle_deviation': worst_gap,
+        'missed_impact': missed,
+        'periods': periods,
+        'overruns': int(d.get('overruns', -1)),
         'periods_skipped': int(d.get('periods_skipped', 0)),
         'periods_without_new_command': int(d.get('periods_without_new_command', 0)),
         # a silence of the controller longer than the watchdog zeroes the torque and the arm
@@ -197,8 +225,10 @@ def _row(index, outcome, seen):
         'longest_command_silence_s': float(d.get('longest_command_silence_s', 'nan')),
         'worst_period_us': float(d.get('compute_worst_us', 'nan')),
         'worst_period_at_s': float(d.get('compute_worst_at_s', 'nan')),
-        'worst_split_us': {part: float(d.get(f'compute_worst_{part}_us', 'nan'))
-                           for part in ('commands', 'physics', 'publish')},
+        'worst_split_us': {
+            part: float(d.get(f'compute_worst_{part}_us', 'nan'))
+            for part in ('commands', 'physics', 'publish')
+        },
         'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
         'kernel': d.get('kernel', '?'),
         'impact_times_s': times,
@@ -208,32 +238,46 @@ def _row(index, outcome, seen):
 def _missed_label(r):
     if not r['missed_impact']:
         return ''
-    return ' MISSED IMPACT' + (' (after a watchdog timeout: the commands stopped and the arm '
-                               'fell)' if r['watchdog_timeouts'] else '')
+    return ' MISSED IMPACT' + (
+        ' (after a watchdog timeout: the commands stopped and the arm fell)'
+        if r['watchdog_timeouts']
+        else ''
+    )
 
 
 def _print_row(r):
     split = ', '.join(f'{k} {v:.0f}' for k, v in r['worst_split_us'].items())
-    print(f"start {r['start']:2d}: {'STOPPED' if r['stopped'] else 'ran'} ({r['outcome']}); "
-          f"{r['impacts']} impacts in {r['sim_time_s']:.2f} s simulated = "
-          f"{r['impacts_per_sim_s']:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), "
-          f"{r['cycles']} cycles, {r['re_strikes']} re-strikes, cycle "
-          f"{r['cycle_period_s']:.4f} s{_missed_label(r)}; "
-          f"{r['overruns']} overruns, {r['periods_skipped']} skipped of {r['periods']} periods, "
-          f"{r['periods_without_new_command']} without a new command, "
-          f"{r['watchdog_timeouts']} watchdog timeouts (longest silence "
-          f"{r['longest_command_silence_s'] * 1e3:.0f} ms); "
-          f"worst period {r['worst_period_us']:.0f} us at t = {r['worst_period_at_s']:.3f} s "
-          f"({split} us)", flush=True)
+    print(
+        f'start {r["start"]:2d}: {"STOPPED" if r["stopped"] else "ran"} ({r["outcome"]}); '
+        f'{r["impacts"]} impacts in {r["sim_time_s"]:.2f} s simulated = '
+        f'{r["impacts_per_sim_s"]:.3f}/s (article {1 / ARTICLE_PERIOD:.3f}/s), '
+        f'{r["cycles"]} cycles, {r["re_strikes"]} re-strikes, cycle '
+        f'{r["cycle_period_s"]:.4f} s{_missed_label(r)}; '
+        f'{r["overruns"]} overruns, {r["periods_skipped"]} skipped of {r["periods"]} periods, '
+        f'{r["periods_without_new_command"]} without a new command, '
+        f'{r["watchdog_timeouts"]} watchdog timeouts (longest silence '
+        f'{r["longest_command_silence_s"] * 1e3:.0f} ms); '
+        f'worst period {r["worst_period_us"]:.0f} us at t = {r["worst_period_at_s"]:.3f} s '
+        f'({split} us)',
+        flush=True,
+    )
     floor = r.get('machine_floor')
     if floor:
-        print(f"          machine just before: {floor['late']} of {floor['periods']} bare 1 ms "
-              f"sleeps woke > 1 ms late ({100 * floor['late'] / floor['periods']:.2f} %), worst "
-              f"{floor['worst_us']:.0f} us", flush=True)
+        print(
+            f'          machine just before: {floor["late"]} of {floor["periods"]} bare 1 ms '
+            f'sleeps woke > 1 ms late ({100 * floor["late"] / floor["periods"]:.2f} %), worst '
+            f'{floor["worst_us"]:.0f} us',
+            flush=True,
+        )
     if (r['missed_impact'] or r['re_strikes']) and r['impact_times_s']:
         gaps = [b - a for a, b in zip(r['impact_times_s'], r['impact_times_s'][1:])]
-        print('          impacts at ' + ', '.join(f'{t:.3f}' for t in r['impact_times_s'])
-              + ' s; gaps ' + ', '.join(f'{g:.3f}' for g in gaps), flush=True)
+        print(
+            '          impacts at '
+            + ', '.join(f'{t:.3f}' for t in r['impact_times_s'])
+            + ' s; gaps '
+            + ', '.join(f'{g:.3f}' for g in gaps),
+            flush=True,
+        )
 
 
 def summary(rows):
@@ -245,37 +289,48 @@ def summary(rows):
         'starts': len(rows),
         'stopped': sum(r['stopped'] for r in rows),
         'missed_impact': sum(r['missed_impact'] for r in rows),
-        'missed_after_watchdog_timeout': sum(r['missed_impact'] and r['watchdog_timeouts'] > 0
-                                             for r in rows),
+        'missed_after_watchdog_timeout': sum(
+            r['missed_impact'] and r['watchdog_timeouts'] > 0 for r in rows
+        ),
         'watchdog_timeouts': sum(r['watchdog_timeouts'] for r in rows),
         're_strikes': sum(r['re_strikes'] for r in rows),
-        'overruns': overruns, 'periods': periods,
+        'overruns': overruns,
+        'periods': periods,
         'periods_without_new_command': sum(r['periods_without_new_command'] for r in rows),
         'overrun_percent': 100.0 * overruns / periods if periods else float('nan'),
         'worst_period_us_median': statistics.median(worst) if worst else float('nan'),
         'worst_period_us_max': max(worst) if worst else float('nan'),
-        'runs_worst_period_within_1ms_percent':
-            100.0 * sum(w <= 1000.0 for w in worst) / len(worst) if worst else float('nan'),
+        'runs_worst_period_within_1ms_percent': 100.0 * sum(w <= 1000.0 for w in worst) / len(worst)
+        if worst
+        else float('nan'),
         'cycle_period_s_median': statistics.median(r['cycle_period_s'] for r in rows),
-        'machine_late_percent': 100.0 * sum(r['machine_floor']['late'] for r in rows)
+        'machine_late_percent': 100.0
+        * sum(r['machine_floor']['late'] for r in rows)
         / sum(r['machine_floor']['periods'] for r in rows)
-        if all('machine_floor' in r for r in rows) else float('nan'),
+        if all('machine_floor' in r for r in rows)
+        else float('nan'),
     }
 
 
 def run(args) -> int:
     from impact_arm.tools.runner import dds_environment
+
     if args.runs < 1:
         print(f'--runs = {args.runs}: must be >= 1', file=sys.stderr)
         return 2
     env = dds_environment()
     from impact_arm.core.scene import load_scene
     from impact_arm.tools.runner import precompile
-    precompile(load_scene('paper'), 1000.0)    # a cold cache compiles here, announced
+
+    precompile(load_scene('paper'), 1000.0)  # a cold cache compiles here, announced
     logdir = tempfile.mkdtemp(prefix='impact_arm_bench_starts_')
-    print(f'bench starts: {args.runs} starts of simulator (realtime 1 kHz) + controller, '
-          f'ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} (localhost); {os.cpu_count()} cores; '
-          f'logs in {logdir}', file=sys.stderr, flush=True)
+    print(
+        f'bench starts: {args.runs} starts of simulator (realtime 1 kHz) + controller, '
+        f'ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} (localhost); {os.cpu_count()} cores; '
+        f'logs in {logdir}',
+        file=sys.stderr,
+        flush=True,
+    )
     rows = []
     for index in range(1, args.runs + 1):
         floor = wakeup_floor()
@@ -283,23 +338,26 @@ def run(args) -> int:
         rows[-1]['machine_floor'] = floor
         _print_row(rows[-1])
     s = summary(rows)
-    print(f"summary: {s['stopped']} of {s['starts']} starts stopped (target 0), "
-          f"{s['missed_impact']} with a missed impact (target 0; "
-          f"{s['missed_after_watchdog_timeout']} of them after a watchdog timeout), "
-          f"{s['re_strikes']} re-strikes, {s['watchdog_timeouts']} watchdog timeouts; "
-          f"overruns {s['overruns']} of "
-          f"{s['periods']} periods = {s['overrun_percent']:.3f} % (target <= 0.1 %); periods without a "
-          f"new command (controller late) {s['periods_without_new_command']}; worst "
-          f"period median {s['worst_period_us_median']:.0f} us, worst "
-          f"{s['worst_period_us_max']:.0f} us; runs with worst period <= 1 ms: "
-          f"{s['runs_worst_period_within_1ms_percent']:.0f} % (target >= 95 %); cycle period "
-          f"median {s['cycle_period_s_median']:.4f} s (article {ARTICLE_PERIOD} s); the machine "
-          f"alone: {s['machine_late_percent']:.3f} % of bare 1 ms sleeps woke > 1 ms late")
+    print(
+        f'summary: {s["stopped"]} of {s["starts"]} starts stopped (target 0), '
+        f'{s["missed_impact"]} with a missed impact (target 0; '
+        f'{s["missed_after_watchdog_timeout"]} of them after a watchdog timeout), '
+        f'{s["re_strikes"]} re-strikes, {s["watchdog_timeouts"]} watchdog timeouts; '
+        f'overruns {s["overruns"]} of '
+        f'{s["periods"]} periods = {s["overrun_percent"]:.3f} % (target <= 0.1 %); periods without a '
+        f'new command (controller late) {s["periods_without_new_command"]}; worst '
+        f'period median {s["worst_period_us_median"]:.0f} us, worst '
+        f'{s["worst_period_us_max"]:.0f} us; runs with worst period <= 1 ms: '
+        f'{s["runs_worst_period_within_1ms_percent"]:.0f} % (target >= 95 %); cycle period '
+        f'median {s["cycle_period_s_median"]:.4f} s (article {ARTICLE_PERIOD} s); the machine '
+        f'alone: {s["machine_late_percent"]:.3f} % of bare 1 ms sleeps woke > 1 ms late'
+    )
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump({'starts': rows, 'summary': s}, f, indent=1)
     failed = s['stopped'] or s['missed_impact']
     if not (failed or args.keep_logs):
         import shutil
+
         shutil.rmtree(logdir, ignore_errors=True)
     return 1 if failed else 0

@@ -16,6 +16,7 @@ results or stop with a clear error naming the limit it crossed. Checked on every
 The fast cases (``FAST``) run in ``make test`` (test/test_stress.py); ``bench stress`` runs the
 full sweep, including a soak of 10 000 impacts, and prints the matrix as a table.
 """
+
 from __future__ import annotations
 
 import copy
@@ -34,12 +35,12 @@ OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
 @dataclass
 class Case:
     name: str
-    changes: dict = field(default_factory=dict)   # {('controller', 'kp'): [...]} on the base
-    top: dict = field(default_factory=dict)       # top-level keys replaced
-    base: str = 'paper'                           # 'paper' or 'strike' (vertical strike)
-    strike_speed: float = 0.0                     # m/s, for base 'strike'
-    expect: str = 'ok'                            # 'ok', 'stop' (a named limit), or 'any'
-    expect_impacts: int | None = None             # exact count the geometry forces
+    changes: dict = field(default_factory=dict)  # {('controller', 'kp'): [...]} on the base
+    top: dict = field(default_factory=dict)  # top-level keys replaced
+    base: str = 'paper'  # 'paper' or 'strike' (vertical strike)
+    strike_speed: float = 0.0  # m/s, for base 'strike'
+    expect: str = 'ok'  # 'ok', 'stop' (a named limit), or 'any'
+    expect_impacts: int | None = None  # exact count the geometry forces
     min_impacts: int = 1
     preset: str = 'balanced'
     note: str = ''
@@ -48,6 +49,7 @@ class Case:
 def paper_dict():
     import yaml
     from impact_arm.core.scene import _SceneLoader, resolve_scene_path
+
     with open(resolve_scene_path('paper'), encoding='utf-8') as f:
         return yaml.load(f.read(), Loader=_SceneLoader)
 
@@ -59,13 +61,15 @@ def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):
     data.update(gravity=0.0, cycles=0, t_max=0.01)
     data['initial'] = {'q_deg': [0.0, -90.0], 'qd': [-v, qd2]}
     data['controller']['law'] = 'none'
-    data['surfaces'] = [{'height': -1.0 - 1e-7, 'law': law, 'mu': mu, 'v_d': 0.02,
-                         'material': 'steel'}]
+    data['surfaces'] = [
+        {'height': -1.0 - 1e-7, 'law': law, 'mu': mu, 'v_d': 0.02, 'material': 'steel'}
+    ]
     return data
 
 
 def build(case: Case):
     from impact_arm.core.scene import parse_scene
+
     data = strike_dict(case.strike_speed) if case.base == 'strike' else paper_dict()
     data = copy.deepcopy(data)
     for path, value in case.changes.items():
@@ -103,55 +107,109 @@ def cases(full=False):
         # modulus with S_y scaled like steel's (S_y/E = 0.0053) is a consistent soft material
         c.append(Case(f'E = {E:g} Pa', top=dict(c2, materials=_two(E)), expect='any'))
         if E < 210e9:
-            c.append(Case(f'E = {E:g} Pa, S_y = {E * 0.0053:g} Pa', expect='any',
-                          top=dict(c2, materials=_mat(E=E, S_y=E * 0.0053))))
+            c.append(
+                Case(
+                    f'E = {E:g} Pa, S_y = {E * 0.0053:g} Pa',
+                    expect='any',
+                    top=dict(c2, materials=_mat(E=E, S_y=E * 0.0053)),
+                )
+            )
     speeds = (1e-3, 1e-2, 0.1, 1.0, 10.0, 50.0) if full else (1e-3, 50.0)
     for v in speeds:
-        c.append(Case(f'impact speed {v:g} m/s', base='strike', strike_speed=v * 0.75,
-                      expect='any', expect_impacts=1))
-    for vd in ((1e-6, 1e-4, 0.02, 1.0) if full else (1e-6, 1.0)):
+        c.append(
+            Case(
+                f'impact speed {v:g} m/s',
+                base='strike',
+                strike_speed=v * 0.75,
+                expect='any',
+                expect_impacts=1,
+            )
+        )
+    for vd in (1e-6, 1e-4, 0.02, 1.0) if full else (1e-6, 1.0):
         c.append(Case(f'v_d = {vd:g} m/s', top=dict(c2, surfaces=_surface(v_d=vd))))
-    for mu in ((0.0, 0.5, 1.0, 2.0) if full else (0.0, 2.0)):
-        if mu == 0.0:   # a frictionless strike (an existing scene shape): Hertz, conserves E
-            c.append(Case('mu = 0 (frictionless Hertz strike)', base='strike',
-                          strike_speed=0.5,
-                          changes={}, top={'surfaces': [{'height': -1.0 - 1e-7, 'law': 'hertz',
-                                                         'mu': 0.0, 'material': 'steel'}]},
-                          expect_impacts=1))
+    for mu in (0.0, 0.5, 1.0, 2.0) if full else (0.0, 2.0):
+        if mu == 0.0:  # a frictionless strike (an existing scene shape): Hertz, conserves E
+            c.append(
+                Case(
+                    'mu = 0 (frictionless Hertz strike)',
+                    base='strike',
+                    strike_speed=0.5,
+                    changes={},
+                    top={
+                        'surfaces': [
+                            {'height': -1.0 - 1e-7, 'law': 'hertz', 'mu': 0.0, 'material': 'steel'}
+                        ]
+                    },
+                    expect_impacts=1,
+                )
+            )
         else:
             c.append(Case(f'mu = {mu:g}', top=dict(c2, surfaces=_surface(mu=mu))))
-    for R in ((1e-4, 1e-3, 0.01, 0.1) if full else (1e-4, 0.1)):
+    for R in (1e-4, 1e-3, 0.01, 0.1) if full else (1e-4, 0.1):
         c.append(Case(f'tip radius {R:g} m', top=dict(c2, tip_radius=R), expect='any'))
     # S_y/E* = 0.096 (the largest yield strain the scene accepts): 1.9 δc > δm, never yields
     c.append(Case('S_y 1.1e10 Pa (stays elastic)', top=dict(c2, materials=_mat(S_y=1.1e10))))
     c.append(Case('S_y 3e8 Pa (yields almost at once)', top=dict(c2, materials=_mat(S_y=3e8))))
-    c.append(Case('S_y 1e5 Pa (yields at once)', top=dict(c2, materials=_mat(S_y=1e5)),
-                  expect='any'))
-    for gap in ((1e-9, 1e-7, 1e-5) if full else (1e-9,)):
+    c.append(
+        Case('S_y 1e5 Pa (yields at once)', top=dict(c2, materials=_mat(S_y=1e5)), expect='any')
+    )
+    for gap in (1e-9, 1e-7, 1e-5) if full else (1e-9,):
         # the tip swings through its lowest point, the floor `gap` above it: a grazing touch
         # whose normal approach speed is ~sqrt(2 gap) * 1 rad/s (4.5e-5 m/s for 1e-9 m)
-        c.append(Case(f'grazing, floor {gap:g} m above the lowest point', base='strike',
-                      strike_speed=0.0,
-                      changes={('initial', 'q_deg'): [0.0, -100.0],
-                               ('initial', 'qd'): [0.0, 1.0]},
-                      top={'t_max': 0.4, 'surfaces': [{'height': -1.0 + gap, 'law': 'hertz',
-                                                       'mu': 0.0, 'material': 'steel'}]},
-                      expect_impacts=1))
-    c.append(Case('pressing into the surface (PD, motors on in contact)',
-                  changes={('controller', 'law'): 'pd',
-                           ('controller', 'up_target_deg'): [-80.0, -70.0]},
-                  top={'actuators_during_contact': True, 'cycles': 0, 't_max': 0.6},
-                  expect='any', note='sustained contact / chatter'))
-    c.append(Case('arm stretched (q1 = q2 = 60 deg)', changes={('initial', 'q_deg'): [60.0, 60.0]},
-                  top=c2))
-    c.append(Case('arm folded (q2 = q1 - 180 deg)',
-                  changes={('initial', 'q_deg'): [60.0, -120.0]}, top=c2))
-    c.append(Case('gains x100', changes={('controller', 'kp'): [60000.0, 30000.0],
-                                         ('controller', 'kd'): [10000.0, 10000.0]},
-                  top=c2, expect='any'))
+        c.append(
+            Case(
+                f'grazing, floor {gap:g} m above the lowest point',
+                base='strike',
+                strike_speed=0.0,
+                changes={('initial', 'q_deg'): [0.0, -100.0], ('initial', 'qd'): [0.0, 1.0]},
+                top={
+                    't_max': 0.4,
+                    'surfaces': [
+                        {'height': -1.0 + gap, 'law': 'hertz', 'mu': 0.0, 'material': 'steel'}
+                    ],
+                },
+                expect_impacts=1,
+            )
+        )
+    c.append(
+        Case(
+            'pressing into the surface (PD, motors on in contact)',
+            changes={('controller', 'law'): 'pd', ('controller', 'up_target_deg'): [-80.0, -70.0]},
+            top={'actuators_during_contact': True, 'cycles': 0, 't_max': 0.6},
+            expect='any',
+            note='sustained contact / chatter',
+        )
+    )
+    c.append(
+        Case(
+            'arm stretched (q1 = q2 = 60 deg)', changes={('initial', 'q_deg'): [60.0, 60.0]}, top=c2
+        )
+    )
+    c.append(
+        Case(
+            'arm folded (q2 = q1 - 180 deg)', changes={('initial', 'q_deg'): [60.0, -120.0]}, top=c2
+        )
+    )
+    c.append(
+        Case(
+            'gains x100',
+            changes={
+                ('controller', 'kp'): [60000.0, 30000.0],
+                ('controller', 'kd'): [10000.0, 10000.0],
+            },
+            top=c2,
+            expect='any',
+        )
+    )
     if full:
-        c.append(Case('soak: 10 000 impacts', top={'cycles': 10000, 't_max': 1e5},
-                      preset='fast', min_impacts=10000))
+        c.append(
+            Case(
+                'soak: 10 000 impacts',
+                top={'cycles': 10000, 't_max': 1e5},
+                preset='fast',
+                min_impacts=10000,
+            )
+        )
     return c
 
 
@@ -161,11 +219,11 @@ FAST = cases(full=False)
 @dataclass
 class Outcome:
     case: str
-    outcome: str          # ok | stopped | FAIL
+    outcome: str  # ok | stopped | FAIL
     message: str
     impacts: int
     wall: float
-    energy_error: float   # worst energy gain over the impacts (relative); nan if n/a
+    energy_error: float  # worst energy gain over the impacts (relative); nan if n/a
     t_end: float
 
 
@@ -175,6 +233,7 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
     from impact_arm.core.integrator import PhaseIntegrator
     from impact_arm.core.metrics import ImpactBuilder
     from impact_arm.core.model import ArmModel
+
     t0 = time.perf_counter()
     model = ArmModel(scene)
     integ = PhaseIntegrator(model, preset=case.preset, trace=True, method=method)
@@ -189,12 +248,19 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
     e_contact = None
 
     def energy(y):
-        q, qd = y[:n].tolist(), y[n:2 * n].tolist()
+        q, qd = y[:n].tolist(), y[n : 2 * n].tolist()
         return float(sum(model.link_energies(q, qd)) + model.potential_energy(q))
 
     def stop(outcome, message):
-        return Outcome(case.name, outcome, message, len(builder.impacts),
-                       time.perf_counter() - t0, worst_gain, integ.state.t)
+        return Outcome(
+            case.name,
+            outcome,
+            message,
+            len(builder.impacts),
+            time.perf_counter() - t0,
+            worst_gain,
+            integ.state.t,
+        )
 
     try:
         while integ.state.t < scene.t_max and (not scene.cycles or cycles < scene.cycles):
@@ -205,10 +271,13 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
             if not np.all(np.isfinite(st.y)):
                 return stop(FAIL, f'non-finite state at t = {st.t:g} s, not reported')
             if st.phase.name == 'FREE' and len(st.levels):
-                y_tip = model.tip(st.y[:n], st.y[n:2 * n])[1]
+                y_tip = model.tip(st.y[:n], st.y[n : 2 * n])[1]
                 if y_tip < min(st.levels) - 1e-9:
-                    return stop(FAIL, f'tip {min(st.levels) - y_tip:.3g} m below a surface '
-                                      f'in free flight at t = {st.t:.6g} s (impact missed)')
+                    return stop(
+                        FAIL,
+                        f'tip {min(st.levels) - y_tip:.3g} m below a surface '
+                        f'in free flight at t = {st.t:.6g} s (impact missed)',
+                    )
             for ev in events:
                 cycles += ev.kind == 'switch'
                 if ev.kind == 'contact':
@@ -220,100 +289,148 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
                 if record is None:
                     continue
                 surf = model.surfaces[ev.surface]
-                want = (['contact', 'yield', 'max_compression', 'separation']
-                        if surf.law == 'elastoplastic' and record['delta_m'] >= 1.9 *
-                        surf.constants.delta_c else ['contact', 'max_compression', 'separation'])
+                want = (
+                    ['contact', 'yield', 'max_compression', 'separation']
+                    if surf.law == 'elastoplastic'
+                    and record['delta_m'] >= 1.9 * surf.constants.delta_c
+                    else ['contact', 'max_compression', 'separation']
+                )
                 if sequence != want:
-                    problems.append(f"impact {record['index']}: phases {sequence}, "
-                                    f"expected {want}")
+                    problems.append(f'impact {record["index"]}: phases {sequence}, expected {want}')
                 rows = integ.trace[:]
                 integ.trace.clear()
                 deltas = [r[2] for r in rows]
                 dm, dr = record['delta_m'], record['delta_r']
-                numbers = [dm, dr, record['F_max'], record['duration']] + \
-                    record['v_after'] + record['T_after']
+                numbers = (
+                    [dm, dr, record['F_max'], record['duration']]
+                    + record['v_after']
+                    + record['T_after']
+                )
                 if not all(math.isfinite(x) for x in numbers):
-                    problems.append(f"impact {record['index']}: non-finite metrics")
+                    problems.append(f'impact {record["index"]}: non-finite metrics')
                 if not dm > 0:
-                    problems.append(f"impact {record['index']}: δm = {dm:g} <= 0")
+                    problems.append(f'impact {record["index"]}: δm = {dm:g} <= 0')
                 if not 0 <= dr < dm:
-                    problems.append(f"impact {record['index']}: δr = {dr:g} not in [0, δm)")
+                    problems.append(f'impact {record["index"]}: δr = {dr:g} not in [0, δm)')
                 if deltas and min(deltas) < -1e-6 * dm:
-                    problems.append(f"impact {record['index']}: δ = {min(deltas):g} < 0")
+                    problems.append(f'impact {record["index"]}: δ = {min(deltas):g} < 0')
                 if not motors_in_contact:
                     e_sep = energy(ev.y)
                     scale = max(abs(e_contact), sum(record['T_before']) / 2, 1e-300)
-                    gain = (abs(e_sep - e_contact) if elastic_frictionless
-                            else e_sep - e_contact) / scale
+                    gain = (
+                        abs(e_sep - e_contact) if elastic_frictionless else e_sep - e_contact
+                    ) / scale
                     worst_gain = max(worst_gain, gain)
                     tol = 1e-6 if case.preset != 'fast' else 1e-4
                     if gain > tol:
-                        problems.append(f"impact {record['index']}: contact added energy "
-                                        f"({gain:.2e} of E)")
+                        problems.append(
+                            f'impact {record["index"]}: contact added energy ({gain:.2e} of E)'
+                        )
                 if problems:
                     return stop(FAIL, '; '.join(problems[:3]))
     except SimulationError as exc:
         if case.expect == 'ok':
             return stop(FAIL, f'stopped unexpectedly: {exc}')
         return stop(STOPPED, str(exc))
-    except Exception as exc:   # anything else is a defect, reported as such
+    except Exception as exc:  # anything else is a defect, reported as such
         return stop(FAIL, f'{type(exc).__name__}: {exc}')
     n_imp = len(builder.impacts)
     if case.expect == 'stop':
         return stop(FAIL, 'expected a named stop, finished instead')
     if case.expect_impacts is not None and n_imp != case.expect_impacts:
-        return stop(FAIL, f'{n_imp} impacts, the geometry forces {case.expect_impacts} '
-                          '(impact missed or repeated)')
+        return stop(
+            FAIL,
+            f'{n_imp} impacts, the geometry forces {case.expect_impacts} '
+            '(impact missed or repeated)',
+        )
     if n_imp < case.min_impacts:
         return stop(FAIL, f'only {n_imp} impacts (expected at least {case.min_impacts})')
     phase = integ.state.phase.name.lower()
-    return stop(OK, f'{n_imp} impacts, t = {integ.state.t:.4g} s, ends in phase {phase}'
-                + (' (sustained contact)' if phase != 'free' else ''))
+    return stop(
+        OK,
+        f'{n_imp} impacts, t = {integ.state.t:.4g} s, ends in phase {phase}'
+        + (' (sustained contact)' if phase != 'free' else ''),
+    )
 
 
 def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
     from impact_arm.core.errors import SceneError
+
     try:
         scene = build(case)
-    except SceneError as exc:   # refused at load: a named limit, too
-        return Outcome(case.name, STOPPED if case.expect != 'ok' else FAIL, str(exc), 0, 0.0,
-                       math.nan, 0.0)
+    except SceneError as exc:  # refused at load: a named limit, too
+        return Outcome(
+            case.name, STOPPED if case.expect != 'ok' else FAIL, str(exc), 0, 0.0, math.nan, 0.0
+        )
     return check_run(case, scene, deadline, method)
 
 
 def format_matrix(outcomes) -> str:
-    body = [[o.case, o.outcome, o.impacts, f'{o.wall:.3f}',
-             'n/a' if math.isnan(o.energy_error) else f'{o.energy_error:.1e}', o.message]
-            for o in outcomes]
-    return common.table(['case', 'outcome', 'impacts', 'wall [s]', 'worst energy gain',
-                         'detail'], body, ['<', '<', '>', '>', '>', '<'])
+    body = [
+        [
+            o.case,
+            o.outcome,
+            o.impacts,
+            f'{o.wall:.3f}',
+            'n/a' if math.isnan(o.energy_error) else f'{o.energy_error:.1e}',
+            o.message,
+        ]
+        for o in outcomes
+    ]
+    return common.table(
+        ['case', 'outcome', 'impacts', 'wall [s]', 'worst energy gain', 'detail'],
+        body,
+        ['<', '<', '>', '>', '>', '<'],
+    )
 
 
 def add_arguments(parser):
-    parser.add_argument('--quick', action='store_true',
-                        help='only the fast cases (the ones make test runs)')
+    parser.add_argument(
+        '--quick', action='store_true', help='only the fast cases (the ones make test runs)'
+    )
     parser.add_argument('--only', metavar='TEXT', help='cases whose name contains TEXT')
-    parser.add_argument('--deadline', type=float, default=300.0,
-                        help='wall seconds allowed per case before it counts as a failure')
+    parser.add_argument(
+        '--deadline',
+        type=float,
+        default=300.0,
+        help='wall seconds allowed per case before it counts as a failure',
+    )
     parser.add_argument('--json', metavar='FILE', help='write the matrix as JSON')
-    parser.add_argument('--method', choices=INTEGRATOR_METHODS, default='dopri5',
-                        help='step method in free flight (integrator.method)')
-    parser.add_argument('--fuzz', type=int, metavar='N', default=0,
-                        help='instead of the matrix: N scenes mutated from paper.yaml, each '
-                             'classified (bench/impact_arm_bench/fuzz.py)')
+    parser.add_argument(
+        '--method',
+        choices=INTEGRATOR_METHODS,
+        default='dopri5',
+        help='step method in free flight (integrator.method)',
+    )
+    parser.add_argument(
+        '--fuzz',
+        type=int,
+        metavar='N',
+        default=0,
+        help='instead of the matrix: N scenes mutated from paper.yaml, each '
+        'classified (bench/impact_arm_bench/fuzz.py)',
+    )
     parser.add_argument('--seed', type=int, default=0, help='seed of --fuzz')
-    parser.add_argument('--fuzz-timeout', type=float, default=20.0, metavar='S',
-                        help='seconds a fuzzed scene may run before it counts as a hang')
+    parser.add_argument(
+        '--fuzz-timeout',
+        type=float,
+        default=20.0,
+        metavar='S',
+        help='seconds a fuzzed scene may run before it counts as a hang',
+    )
     from .flood import add_arguments as flood_arguments
+
     flood_arguments(parser)
 
 
 def run(args) -> int:
     if args.fuzz:
         from .fuzz import report
+
         return report(args)
     if args.flood:
         from .flood import report
+
         return report(args)
     selected = cases(full=not args.quick)
     if args.only:
@@ -325,9 +442,17 @@ def run(args) -> int:
     common.progress_done()
     print(format_matrix(outcomes))
     failed = [o for o in outcomes if o.outcome == FAIL]
-    print(f'\n{len(outcomes)} cases: {len(outcomes) - len(failed)} finished or stopped with a '
-          f'named limit, {len(failed)} failed')
+    print(
+        f'\n{len(outcomes)} cases: {len(outcomes) - len(failed)} finished or stopped with a '
+        f'named limit, {len(failed)} failed'
+    )
     if args.json:
-        common.write_json(args.json, {'benchmark': 'stress', 'machine': common.machine(),
-                                      'cases': [o.__dict__ for o in outcomes]})
+        common.write_json(
+            args.json,
+            {
+                'benchmark': 'stress',
+                'machine': common.machine(),
+                'cases': [o.__dict__ for o in outcomes],
+            },
+        )
     return 1 if failed else 0

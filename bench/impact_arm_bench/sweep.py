@@ -13,6 +13,7 @@ flight, rtol 1e-2, contact_rtol 3e-4) with random μ, E and kp:
    it, a fresh process, wall time including start-up (target < 60 s on 2 cores), and each
    worker's resident memory sampled through the run (target: flat).
 """
+
 from __future__ import annotations
 
 import os
@@ -24,31 +25,51 @@ import time
 
 from . import common
 
-SETTING = {'integrator.preset': 'fast', 'integrator.method': 'rosenbrock',
-           'integrator.rtol': 1e-2, 'integrator.atol': 1e-4, 'integrator.contact_rtol': 3e-4}
+SETTING = {
+    'integrator.preset': 'fast',
+    'integrator.method': 'rosenbrock',
+    'integrator.rtol': 1e-2,
+    'integrator.atol': 1e-4,
+    'integrator.contact_rtol': 3e-4,
+}
 # μ > 0 keeps the friction term, so every run has the base scene's kernel shape
-RANGES = {'surfaces[0].mu': [0.05, 0.5], 'materials.steel.E': [1.5e11, 2.5e11],
-          'controller.kp[0]': [400.0, 800.0], 'controller.kp[1]': [200.0, 400.0]}
+RANGES = {
+    'surfaces[0].mu': [0.05, 0.5],
+    'materials.steel.E': [1.5e11, 2.5e11],
+    'controller.kp[0]': [400.0, 800.0],
+    'controller.kp[1]': [200.0, 400.0],
+}
 
 
 def spec_text(runs: int, seed: int = 1) -> str:
     lines = ['scene: paper', 'set:'] + [f'  {k}: {v!r}' for k, v in SETTING.items()]
-    lines += ['parameters:'] + [f'  {k}: {{random: [{lo!r}, {hi!r}]}}'
-                                for k, (lo, hi) in RANGES.items()]
+    lines += ['parameters:'] + [
+        f'  {k}: {{random: [{lo!r}, {hi!r}]}}' for k, (lo, hi) in RANGES.items()
+    ]
     lines += [f'samples: {runs}', f'seed: {seed}', 'outputs: [runs, impacts]']
     return '\n'.join(lines) + '\n'
 
 
 def add_arguments(parser):
-    parser.add_argument('--runs', type=int, default=10_000,
-                        help='runs of the timed sweep (part 3; default 10000)')
-    parser.add_argument('--per-run', type=int, default=400,
-                        help='runs timed in part 1 (default 400, in blocks of 50)')
-    parser.add_argument('--repeats', type=int, default=3,
-                        help='part 1: times each block of 50 runs is timed per path, the '
-                             'fastest kept (default 3; 1: single timings)')
-    parser.add_argument('--scaling-runs', type=int, default=2000,
-                        help='runs of each sweep in part 2 (default 2000)')
+    parser.add_argument(
+        '--runs', type=int, default=10_000, help='runs of the timed sweep (part 3; default 10000)'
+    )
+    parser.add_argument(
+        '--per-run',
+        type=int,
+        default=400,
+        help='runs timed in part 1 (default 400, in blocks of 50)',
+    )
+    parser.add_argument(
+        '--repeats',
+        type=int,
+        default=3,
+        help='part 1: times each block of 50 runs is timed per path, the '
+        'fastest kept (default 3; 1: single timings)',
+    )
+    parser.add_argument(
+        '--scaling-runs', type=int, default=2000, help='runs of each sweep in part 2 (default 2000)'
+    )
     parser.add_argument('--json', metavar='FILE', help='write the figures as JSON')
 
 
@@ -61,14 +82,15 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
     from impact_arm.core.simulate import run
     from impact_arm.core.study import Study
     from impact_arm.tools import sweep
+
     spec = sweep.Spec(common_spec(count), origin='bench')
     study = Study(spec.scene_data, spec.fixed)
-    study.run(spec.runs[0])                                   # load the kernel
+    study.run(spec.runs[0])  # load the kernel
     sweep.run_chunk(spec.hash, spec.scene_data, spec.fixed, spec.outputs, [(0, spec.runs[0])])
     block = 50
     totals = {'kernel': 0.0, 'api': 0.0, 'worker': 0.0}
     for start in range(0, count, block):
-        items = list(enumerate(spec.runs[start:start + block], start))
+        items = list(enumerate(spec.runs[start : start + block], start))
         scenes = [study.scene(o) for _, o in items]
 
         def api():
@@ -81,8 +103,12 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
             t0 = time.perf_counter()
             sweep.run_chunk(spec.hash, spec.scene_data, spec.fixed, spec.outputs, items)
             return time.perf_counter() - t0
-        paths = {'kernel': lambda: sum(run(s, samples=False).wall_time for s in scenes),
-                 'api': api, 'worker': worker}
+
+        paths = {
+            'kernel': lambda: sum(run(s, samples=False).wall_time for s in scenes),
+            'api': api,
+            'worker': worker,
+        }
         times = {name: [] for name in paths}
         for _ in range(repeats):
             for name, path in paths.items():
@@ -90,13 +116,20 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
         for name in totals:
             totals[name] += min(times[name])
     kernel, api, worker = totals['kernel'], totals['api'], totals['worker']
-    return {'runs': count, 'repeats': repeats, 'kernel_ms': kernel / count * 1e3,
-            'api_ms': api / count * 1e3, 'worker_ms': worker / count * 1e3,
-            'api_ratio': api / kernel, 'worker_ratio': worker / kernel}
+    return {
+        'runs': count,
+        'repeats': repeats,
+        'kernel_ms': kernel / count * 1e3,
+        'api_ms': api / count * 1e3,
+        'worker_ms': worker / count * 1e3,
+        'api_ratio': api / kernel,
+        'worker_ratio': worker / kernel,
+    }
 
 
 def common_spec(runs: int) -> dict:
     import yaml
+
     return yaml.safe_load(spec_text(runs))
 
 
@@ -111,11 +144,15 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
     def cpu():
         usage = resource.getrusage(resource.RUSAGE_CHILDREN)
         return usage.ru_utime + usage.ru_stime
+
     cpu0 = cpu()
     t0 = time.perf_counter()
-    child = subprocess.Popen([sys.executable, '-m', 'impact_arm.tools.cli', 'sweep', path,
-                              '--workers', str(workers)], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
+    child = subprocess.Popen(
+        [sys.executable, '-m', 'impact_arm.tools.cli', 'sweep', path, '--workers', str(workers)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     samples = {}
     done = threading.Event()
 
@@ -125,6 +162,7 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
                 rss = _rss_mb(pid)
                 if rss and _is_worker(pid):
                     samples.setdefault(pid, []).append(rss)
+
     watcher = threading.Thread(target=watch, daemon=True)
     watcher.start()
     out, err = child.communicate()
@@ -139,12 +177,26 @@ def sweep_process(runs: int, workers: int, directory: str, label: str) -> dict:
     summary = out.strip().splitlines()[0] if out.strip() else ''
     rate = float(summary.split('then ')[1].split(' runs/s')[0]) if 'then ' in summary else 0.0
     # memory at a third of each worker's life (past start-up), two thirds, the end
-    return {'runs': runs, 'workers': workers, 'wall': wall, 'runs_per_s': runs / wall,
-            'cpu': cpu_used, 'cpu_ms_per_run': cpu_used / runs * 1e3,
-            'cores_used': cpu_used / wall,
-            'steady_runs_per_s': rate, 'summary': summary,
-            'worker_rss_mb': [{'third': s[len(s) // 3], 'two_thirds': s[2 * len(s) // 3],
-                               'last': s[-1], 'peak': max(s)} for s in samples.values()]}
+    return {
+        'runs': runs,
+        'workers': workers,
+        'wall': wall,
+        'runs_per_s': runs / wall,
+        'cpu': cpu_used,
+        'cpu_ms_per_run': cpu_used / runs * 1e3,
+        'cores_used': cpu_used / wall,
+        'steady_runs_per_s': rate,
+        'summary': summary,
+        'worker_rss_mb': [
+            {
+                'third': s[len(s) // 3],
+                'two_thirds': s[2 * len(s) // 3],
+                'last': s[-1],
+                'peak': max(s),
+            }
+            for s in samples.values()
+        ],
+    }
 
 
 def live_descendants(pid):
@@ -188,20 +240,37 @@ def _rss_mb(pid):
 
 
 def run(args) -> int:
-    result = {'machine': common.machine(), 'setting': SETTING, 'ranges': RANGES,
-              'load_average_before': os.getloadavg()}
-    print('load average before (1, 5, 15 min): %.2f %.2f %.2f (other jobs share the cores)'
-          % result['load_average_before'])
+    result = {
+        'machine': common.machine(),
+        'setting': SETTING,
+        'ranges': RANGES,
+        'load_average_before': os.getloadavg(),
+    }
+    print(
+        'load average before (1, 5, 15 min): %.2f %.2f %.2f (other jobs share the cores)'
+        % result['load_average_before']
+    )
     common.progress(f'per-run cost: {args.per_run} runs')
     cost = result['per_run'] = per_run_costs(args.per_run, args.repeats)
     common.progress_done()
-    print(f"Per run, article's scene at rtol 1e-2 / contact 3e-4, {cost['runs']} random runs "
-          f"(mu, E, kp), fastest of {cost['repeats']} timings of each block of 50:")
-    print(common.table(['path', 'ms per run', 'vs kernel'], [
-        ['event-only kernel (run, samples=False)', f"{cost['kernel_ms']:.3f}", '1.00'],
-        ['Python API (Study.run)', f"{cost['api_ms']:.3f}", f"{cost['api_ratio']:.2f}"],
-        ['sweep worker (run_chunk)', f"{cost['worker_ms']:.3f}",
-         f"{cost['worker_ratio']:.2f}"]]))
+    print(
+        f"Per run, article's scene at rtol 1e-2 / contact 3e-4, {cost['runs']} random runs "
+        f'(mu, E, kp), fastest of {cost["repeats"]} timings of each block of 50:'
+    )
+    print(
+        common.table(
+            ['path', 'ms per run', 'vs kernel'],
+            [
+                ['event-only kernel (run, samples=False)', f'{cost["kernel_ms"]:.3f}', '1.00'],
+                ['Python API (Study.run)', f'{cost["api_ms"]:.3f}', f'{cost["api_ratio"]:.2f}'],
+                [
+                    'sweep worker (run_chunk)',
+                    f'{cost["worker_ms"]:.3f}',
+                    f'{cost["worker_ratio"]:.2f}',
+                ],
+            ],
+        )
+    )
     with tempfile.TemporaryDirectory(prefix='bench_sweep_') as directory:
         rows = []
         for workers in (1, 2):
@@ -209,30 +278,57 @@ def run(args) -> int:
             rows.append(sweep_process(args.scaling_runs, workers, directory, f'w{workers}'))
         common.progress_done()
         result['scaling'] = rows
-        print(f'\nimpact-arm sweep, {args.scaling_runs} runs, fresh process (wall includes '
-              f'start-up):')
-        print(common.table(['workers', 'wall [s]', 'runs/s overall', 'runs/s after start-up',
-                            'CPU ms per run', 'cores used'],
-                           [[r['workers'], f"{r['wall']:.2f}", f"{r['runs_per_s']:.0f}",
-                             f"{r['steady_runs_per_s']:.0f}", f"{r['cpu_ms_per_run']:.2f}",
-                             f"{r['cores_used']:.2f}"] for r in rows]))
-        print(f"2 workers / 1 worker: {rows[1]['runs_per_s'] / rows[0]['runs_per_s']:.2f}x "
-              f"overall, {rows[1]['steady_runs_per_s'] / rows[0]['steady_runs_per_s']:.2f}x "
-              f"after start-up")
+        print(
+            f'\nimpact-arm sweep, {args.scaling_runs} runs, fresh process (wall includes start-up):'
+        )
+        print(
+            common.table(
+                [
+                    'workers',
+                    'wall [s]',
+                    'runs/s overall',
+                    'runs/s after start-up',
+                    'CPU ms per run',
+                    'cores used',
+                ],
+                [
+                    [
+                        r['workers'],
+                        f'{r["wall"]:.2f}',
+                        f'{r["runs_per_s"]:.0f}',
+                        f'{r["steady_runs_per_s"]:.0f}',
+                        f'{r["cpu_ms_per_run"]:.2f}',
+                        f'{r["cores_used"]:.2f}',
+                    ]
+                    for r in rows
+                ],
+            )
+        )
+        print(
+            f'2 workers / 1 worker: {rows[1]["runs_per_s"] / rows[0]["runs_per_s"]:.2f}x '
+            f'overall, {rows[1]["steady_runs_per_s"] / rows[0]["steady_runs_per_s"]:.2f}x '
+            f'after start-up'
+        )
         if rows[1]['cores_used'] < 1.5:
             # a ratio near or below 1 here measures the machine, not the sweep
-            print(f"  (2 workers got only {rows[1]['cores_used']:.2f} cores: other jobs hold "
-                  f"the rest, so this ratio cannot show scaling; measure on an idle machine)")
+            print(
+                f'  (2 workers got only {rows[1]["cores_used"]:.2f} cores: other jobs hold '
+                f'the rest, so this ratio cannot show scaling; measure on an idle machine)'
+            )
         common.progress(f'{args.runs} runs, 2 workers')
         big = result['big'] = sweep_process(args.runs, 2, directory, 'big')
         common.progress_done()
-    print(f"\n{args.runs} runs, 2 workers: {big['wall']:.1f} s wall including start-up "
-          f"({big['runs_per_s']:.0f} runs/s, {big['cores_used']:.2f} cores used); "
-          f"{big['summary']}")
+    print(
+        f'\n{args.runs} runs, 2 workers: {big["wall"]:.1f} s wall including start-up '
+        f'({big["runs_per_s"]:.0f} runs/s, {big["cores_used"]:.2f} cores used); '
+        f'{big["summary"]}'
+    )
     for i, rss in enumerate(big['worker_rss_mb']):
-        print(f"  worker {i + 1}: resident {rss['third']:.0f} MB at a third of the run, "
-              f"{rss['two_thirds']:.0f} MB at two thirds, {rss['last']:.0f} MB at the end, "
-              f"peak {rss['peak']:.0f} MB")
+        print(
+            f'  worker {i + 1}: resident {rss["third"]:.0f} MB at a third of the run, '
+            f'{rss["two_thirds"]:.0f} MB at two thirds, {rss["last"]:.0f} MB at the end, '
+            f'peak {rss["peak"]:.0f} MB'
+        )
     if args.json:
         common.write_json(args.json, result)
     return 0

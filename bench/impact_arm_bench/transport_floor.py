@@ -10,6 +10,7 @@ factor at 1 kHz can never exceed 1 ms / floor. ``bench rates`` prints it next to
 Run as ``python -m impact_arm_bench.transport_floor driver|controller``; ``measure()``
 starts both (local DDS domain, ended by PID) and returns the floor in seconds.
 """
+
 from __future__ import annotations
 
 import os
@@ -31,9 +32,9 @@ def _controller(seconds):
     from std_msgs.msg import Float64MultiArray
 
     from impact_arm.io.wire import PatchedMessage, joint_state_fields, wrench_stamped_fields
+
     node = rclpy.create_node('floor_controller')
-    pub = node.create_publisher(Float64MultiArray, COMMANDS,
-                                contract.qos(COMMANDS).to_rclpy())
+    pub = node.create_publisher(Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy())
     command = PatchedMessage(Float64MultiArray(data=[0.0, 0.0]), ('data',), stamp=None)
     latest_only = contract.qos(JOINT_STATES).to_rclpy()
     latest_only.depth = 1
@@ -41,10 +42,11 @@ def _controller(seconds):
     def on_joint_state(raw):
         joint_state_fields(raw)
         pub.publish(command.fill([0.0, 0.0]))
-    node.create_subscription(WrenchStamped, CONTACT_WRENCH, wrench_stamped_fields,
-                             latest_only, raw=True)
-    node.create_subscription(JointState, JOINT_STATES, on_joint_state, latest_only,
-                             raw=True)
+
+    node.create_subscription(
+        WrenchStamped, CONTACT_WRENCH, wrench_stamped_fields, latest_only, raw=True
+    )
+    node.create_subscription(JointState, JOINT_STATES, on_joint_state, latest_only, raw=True)
     executor = EventsExecutor()
     executor.add_node(node)
     end = time.monotonic() + seconds
@@ -61,16 +63,21 @@ def _driver(periods, clock):
     from std_msgs.msg import Float64MultiArray
 
     from impact_arm.io.wire import PatchedMessage, float64_array_data
+
     node = rclpy.create_node('floor_driver')
 
     def publisher(msg_type, topic):
         return node.create_publisher(msg_type, topic, contract.qos(topic).to_rclpy())
+
     pub_wrench = publisher(WrenchStamped, CONTACT_WRENCH)
     pub_joints = publisher(JointState, JOINT_STATES)
     pub_clock = publisher(Clock, CLOCK) if clock else None
-    joints = PatchedMessage(JointState(name=joint_names(2), position=[0.1, 0.2],
-                                       velocity=[0.0, 0.0], effort=[0.0, 0.0]),
-                            ('position', 'velocity', 'effort'))
+    joints = PatchedMessage(
+        JointState(
+            name=joint_names(2), position=[0.1, 0.2], velocity=[0.0, 0.0], effort=[0.0, 0.0]
+        ),
+        ('position', 'velocity', 'effort'),
+    )
     wrench = PatchedMessage(WrenchStamped(), ('wrench.force.x', 'wrench.force.y'))
     tick = PatchedMessage(Clock(), (), stamp='clock')
     count, times = [0], []
@@ -89,11 +96,16 @@ def _driver(periods, clock):
             times.append(time.perf_counter())
         if count[0] < WARM_UP + periods:
             send()
-    node.create_subscription(Float64MultiArray, COMMANDS, on_command,
-                             contract.qos(COMMANDS).to_rclpy(), raw=True)
+
+    node.create_subscription(
+        Float64MultiArray, COMMANDS, on_command, contract.qos(COMMANDS).to_rclpy(), raw=True
+    )
     deadline = time.monotonic() + 30
-    while (pub_joints.get_subscription_count() < 1 or pub_wrench.get_subscription_count() < 1
-           or node.count_publishers(COMMANDS) < 1):
+    while (
+        pub_joints.get_subscription_count() < 1
+        or pub_wrench.get_subscription_count() < 1
+        or node.count_publishers(COMMANDS) < 1
+    ):
         rclpy.spin_once(node, timeout_sec=0.05)
         if time.monotonic() > deadline:
             raise SystemExit('no controller matched within 30 s')
@@ -114,11 +126,17 @@ def measure(periods=3000, clock=True, env=None) -> float:
     env = dict(env or os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     module = [sys.executable, '-m', __name__]
-    controller = subprocess.Popen(module + ['controller'], env=env, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL)
+    controller = subprocess.Popen(
+        module + ['controller'], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     try:
-        out = subprocess.run(module + ['driver', str(periods)] + (['--clock'] if clock else []),
-                             env=env, capture_output=True, text=True, timeout=120)
+        out = subprocess.run(
+            module + ['driver', str(periods)] + (['--clock'] if clock else []),
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
     finally:
         controller.terminate()
         try:
@@ -133,6 +151,7 @@ def measure(periods=3000, clock=True, env=None) -> float:
 
 def main(argv=None) -> int:
     import rclpy
+
     argv = sys.argv[1:] if argv is None else argv
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     rclpy.init()

@@ -6,6 +6,7 @@ Penetration δ = h - y_B is positive inside the surface. The force laws are zero
 non-positive argument: that *is* the law (no adhesion), and it keeps trial stages of a
 Runge-Kutta step that overshoot separation finite instead of producing NaN.
 """
+
 from __future__ import annotations
 
 import math
@@ -14,19 +15,20 @@ from dataclasses import dataclass
 from .jit import jit_leaf as jit
 from .scene import Material, reduced_modulus
 
-YIELD_ONSET_FACTOR = 1.9   # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
+YIELD_ONSET_FACTOR = 1.9  # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
 
 
 @dataclass(frozen=True)
 class ContactConstants:
     """Everything one tip/surface pairing needs, computed once per scene (docs/model.md)."""
-    E: float          # reduced modulus [Pa]
-    R: float          # reduced radius [m] (flat surface: the tip radius)
-    S_y: float        # yield strength of the weaker material [Pa]
-    nu: float         # Poisson ratio used in C_j (that of the weaker material)
+
+    E: float  # reduced modulus [Pa]
+    R: float  # reduced radius [m] (flat surface: the tip radius)
+    S_y: float  # yield strength of the weaker material [Pa]
+    nu: float  # Poisson ratio used in C_j (that of the weaker material)
     C_j: float
-    delta_c: float    # critical interference at yield onset [m]
-    P_c: float        # critical load [N]
+    delta_c: float  # critical interference at yield onset [m]
+    P_c: float  # critical load [N]
     B: float
 
     @property
@@ -60,9 +62,10 @@ def jackson_green(delta, delta_c, R, S_y, C_j, P_c, B):
     ratio = delta / delta_c
     a = math.sqrt(R * delta * (delta / (YIELD_ONSET_FACTOR * delta_c)) ** B)
     hardness = S_y * (2.84 - 0.92 * (1 - math.cos(math.pi * a / R)))
-    return P_c * (math.exp(-0.25 * ratio ** (5.0 / 12.0)) * ratio ** 1.5
-                  + 4 * hardness / (C_j * S_y) * (1 - math.exp(-ratio ** (5.0 / 9.0) / 25))
-                  * ratio)
+    return P_c * (
+        math.exp(-0.25 * ratio ** (5.0 / 12.0)) * ratio**1.5
+        + 4 * hardness / (C_j * S_y) * (1 - math.exp(-(ratio ** (5.0 / 9.0)) / 25)) * ratio
+    )
 
 
 def jackson_green_force(delta: float, c: ContactConstants) -> float:

@@ -4,6 +4,7 @@ Torques are joint torques τ_i acting from link i-1 on link i (τ_1 = T01, τ_2 
 absolute-angle coordinates of the model they enter Lagrange's equations as
 Q_i = τ_i - τ_{i+1} (article eq. 6).
 """
+
 from __future__ import annotations
 
 import math
@@ -60,6 +61,7 @@ class PidIntegrator:
     ``i_clamp_*`` clamp the integral term (strategy 'legacy'), ``u_clamp_*`` the output; with
     'conditional_integration' a joint's integral is frozen while its output is at a limit
     (so it never winds up against a saturated actuator); 'none' integrates regardless."""
+
     n: int
     i_clamp_max: float = math.inf
     i_clamp_min: float = -math.inf
@@ -70,11 +72,14 @@ class PidIntegrator:
 
     def __post_init__(self):
         if self.antiwindup not in ANTIWINDUP_STRATEGIES:
-            raise ValueError(f'antiwindup_strategy = {self.antiwindup!r}: choose one of '
-                             f'{", ".join(ANTIWINDUP_STRATEGIES)}')
+            raise ValueError(
+                f'antiwindup_strategy = {self.antiwindup!r}: choose one of '
+                f'{", ".join(ANTIWINDUP_STRATEGIES)}'
+            )
         if not self.u_clamp_min <= self.u_clamp_max:
-            raise ValueError(f'u_clamp_min = {self.u_clamp_min:g} > u_clamp_max = '
-                             f'{self.u_clamp_max:g}')
+            raise ValueError(
+                f'u_clamp_min = {self.u_clamp_min:g} > u_clamp_max = {self.u_clamp_max:g}'
+            )
         self.reset()
 
     def saturated(self, output) -> list:
@@ -108,9 +113,22 @@ class CycleController:
     within ``reversal_band`` of the surface); up→down when the tip reaches ``switch_height``.
     """
 
-    def __init__(self, model, law, kp, kd, ki, down_target, up_target, switch_height,
-                 surface_height, space='absolute', force_threshold=1.0, reversal_band=0.01,
-                 integrator: PidIntegrator | None = None):
+    def __init__(
+        self,
+        model,
+        law,
+        kp,
+        kd,
+        ki,
+        down_target,
+        up_target,
+        switch_height,
+        surface_height,
+        space='absolute',
+        force_threshold=1.0,
+        reversal_band=0.01,
+        integrator: PidIntegrator | None = None,
+    ):
         self.model = model
         self.law = law
         self.kp, self.kd, self.ki = list(kp), list(kd), list(ki)
@@ -130,9 +148,18 @@ class CycleController:
     def for_scene(cls, model, spec):
         """The controller a scene's ``controller`` section (``spec``) describes, switching on
         its lowest surface (offline runs and tests; the node builds its own from parameters)."""
-        return cls(model, spec.law, spec.kp, spec.kd, spec.ki, spec.down_target,
-                   spec.up_target, spec.switch_height,
-                   min((s.height for s in model.surfaces), default=None), space=spec.space)
+        return cls(
+            model,
+            spec.law,
+            spec.kp,
+            spec.kd,
+            spec.ki,
+            spec.down_target,
+            spec.up_target,
+            spec.switch_height,
+            min((s.height for s in model.surfaces), default=None),
+            space=spec.space,
+        )
 
     def rearm(self, restart=False):
         """Forget the previous sample (its time, tip velocity, integral), as after a reset:
@@ -154,8 +181,11 @@ class CycleController:
         _, y_tip, _, vy_tip = self.model.tip(q, qd)
         if self.mode == 'down' and self.surface_height is not None:
             hit = normal_force is not None and normal_force > self.force_threshold
-            reversed_near = (self._last_vy is not None and self._last_vy < 0 <= vy_tip
-                             and y_tip < self.surface_height + self.reversal_band)
+            reversed_near = (
+                self._last_vy is not None
+                and self._last_vy < 0 <= vy_tip
+                and y_tip < self.surface_height + self.reversal_band
+            )
             if hit or reversed_near:
                 self._switch('up')
         elif self.mode == 'up' and y_tip >= self.switch_height:
@@ -174,8 +204,15 @@ class CycleController:
         if self.law == 'none':
             return out.tolist()
         if self.law == 'q':
-            q_law(q, qd, target, np.asarray(self.kp, float), np.asarray(self.kd, float),
-                  np.asarray(self.model.gravity_forces(q), float), out)
+            q_law(
+                q,
+                qd,
+                target,
+                np.asarray(self.kp, float),
+                np.asarray(self.kd, float),
+                np.asarray(self.model.gravity_forces(q), float),
+                out,
+            )
             return out.tolist()
         error, rate = np.zeros(n), np.zeros(n)
         pid_error(q, qd, target, self.space == 'joint', error, rate)
@@ -191,4 +228,3 @@ class CycleController:
         pid_law(error, rate, np.asarray(self.integral.value, float), *gains, out)
         self.integral.clamp(out)
         return out.tolist()
-

@@ -10,6 +10,7 @@ for the wrench of its own instant, so the decision never depends on arrival orde
 The controller node parses the messages and hands the fields here; ``send`` gets each
 command (in the order of the command array). Tests drive it with a fake clock.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,17 +20,24 @@ from typing import Callable, Sequence
 from ..contract import to_absolute
 from .control import CycleController
 
-STAMP_EPS = 1e-9                 # stamps are integer nanoseconds: ticks compare to 1 ns
+STAMP_EPS = 1e-9  # stamps are integer nanoseconds: ticks compare to 1 ns
 # A state beyond these is not an arm's: a broken or hostile peer. Angles may wind a few turns;
 # 1e4 rad/s is the scene's own bound on initial rates.
-MAX_ANGLE = 1e3                  # rad
-MAX_RATE = 1e4                   # rad/s
-MAX_FORCE = 1e12                 # N, a contact wrench beyond any scene's
+MAX_ANGLE = 1e3  # rad
+MAX_RATE = 1e4  # rad/s
+MAX_FORCE = 1e12  # N, a contact wrench beyond any scene's
 # samples come at >= 1 Hz (a scene's slowest publish_rate): a longer gap forward, or any step
 # back, is a reset or a bad stamp, and the cycle re-arms at the new time
-MAX_STAMP_GAP = 1.0              # s
-DROPPED = ('malformed_joint_states', 'malformed_wrenches', 'out_of_range_states',
-           'out_of_range_wrenches', 'missing_wrenches', 'stamp_jumps', 'unsafe_torques')
+MAX_STAMP_GAP = 1.0  # s
+DROPPED = (
+    'malformed_joint_states',
+    'malformed_wrenches',
+    'out_of_range_states',
+    'out_of_range_wrenches',
+    'missing_wrenches',
+    'stamp_jumps',
+    'unsafe_torques',
+)
 
 
 def follows(before: float, t: float) -> bool:
@@ -42,12 +50,20 @@ class ControlInputs:
     readers are matched); ``wrench_publishers()`` whether anyone publishes wrenches;
     ``log(text)`` gets the (throttled by the caller) warnings."""
 
-    def __init__(self, ctrl: CycleController, joint_names: Sequence[str], order: Sequence[int],
-                 rate: float, trigger: str, send: Callable[[list[float]], None],
-                 log: Callable[[str], None] = lambda text: None,
-                 ready: Callable[[], bool] = lambda: True,
-                 wrench_publishers: Callable[[], bool] = lambda: True,
-                 startup_hold: float = 0.0, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        ctrl: CycleController,
+        joint_names: Sequence[str],
+        order: Sequence[int],
+        rate: float,
+        trigger: str,
+        send: Callable[[list[float]], None],
+        log: Callable[[str], None] = lambda text: None,
+        ready: Callable[[], bool] = lambda: True,
+        wrench_publishers: Callable[[], bool] = lambda: True,
+        startup_hold: float = 0.0,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.ctrl = ctrl
         self.joint_names = list(joint_names)
         self.order = list(order)
@@ -58,15 +74,15 @@ class ControlInputs:
         self.clock = clock
         self.hold_until = clock() + startup_hold
         self.next_tick = 0.0
-        self.latest: tuple[float, list[float], list[float]] | None = None   # absolute angles
+        self.latest: tuple[float, list[float], list[float]] | None = None  # absolute angles
         # a joint state waiting for its wrench
         self.waiting: tuple[float, list[float], list[float]] | None = None
         self.wrench_stamp = -math.inf
-        self.normal_force: float | None = None   # the largest since the last tick
-        self.wrench_flowing = True         # wait for each state's wrench (see joint_state)
+        self.normal_force: float | None = None  # the largest since the last tick
+        self.wrench_flowing = True  # wait for each state's wrench (see joint_state)
         self.started = False
         self.dropped = dict.fromkeys(DROPPED, 0)
-        self.jump_from: float | None = None   # stamp of a sample that jumped, until confirmed
+        self.jump_from: float | None = None  # stamp of a sample that jumped, until confirmed
 
     def drop(self, counter: str, why: str) -> None:
         self.dropped[counter] += 1
@@ -75,15 +91,19 @@ class ControlInputs:
     # --------------------------------------------------------------------------- inputs
     def wrench(self, sec: int, nanosec: int, force: Sequence[float]) -> bool:
         """A contact wrench sample; True when it completed a waiting state (which ticked)."""
-        if not all(abs(f) <= MAX_FORCE for f in force):     # also false for NaN
-            self.drop('out_of_range_wrenches', f'contact wrench dropped: force {list(force)} N '
-                      f'not finite or beyond {MAX_FORCE:g} N')
+        if not all(abs(f) <= MAX_FORCE for f in force):  # also false for NaN
+            self.drop(
+                'out_of_range_wrenches',
+                f'contact wrench dropped: force {list(force)} N '
+                f'not finite or beyond {MAX_FORCE:g} N',
+            )
             return False
         self.wrench_stamp = sec + nanosec * 1e-9
         # latched until the next tick: an impact is seen even when the wrench sample of its
         # period comes late or after a newer one (the largest force counts)
-        self.normal_force = force[1] if self.normal_force is None else \
-            max(self.normal_force, force[1])
+        self.normal_force = (
+            force[1] if self.normal_force is None else max(self.normal_force, force[1])
+        )
         self.wrench_flowing = True
         if self.waiting is not None and self.wrench_stamp >= self.waiting[0] - STAMP_EPS:
             state, self.waiting = self.waiting, None
@@ -91,22 +111,30 @@ class ControlInputs:
             return True
         return False
 
-    def joint_state(self, sec: int, nanosec: int, names: Sequence[str],
-                    position: Sequence[float], velocity: Sequence[float]) -> None:
+    def joint_state(
+        self,
+        sec: int,
+        nanosec: int,
+        names: Sequence[str],
+        position: Sequence[float],
+        velocity: Sequence[float],
+    ) -> None:
         t = sec + nanosec * 1e-9
         try:
             index = [names.index(j) for j in self.joint_names]
             pos = [position[k] for k in index]
             vel = [velocity[k] for k in index]
         except (ValueError, IndexError):
-            self.log(f'joint state without {self.joint_names} positions and velocities: '
-                     f'ignored')
+            self.log(f'joint state without {self.joint_names} positions and velocities: ignored')
             return
         if not (all(abs(v) <= MAX_ANGLE for v in pos) and all(abs(v) <= MAX_RATE for v in vel)):
             # also false for NaN
-            self.drop('out_of_range_states', f'joint state dropped: positions {pos} / '
-                      f'velocities {vel} not finite or beyond {MAX_ANGLE:g} rad, '
-                      f'{MAX_RATE:g} rad/s')
+            self.drop(
+                'out_of_range_states',
+                f'joint state dropped: positions {pos} / '
+                f'velocities {vel} not finite or beyond {MAX_ANGLE:g} rad, '
+                f'{MAX_RATE:g} rad/s',
+            )
             return
         if self.latest is not None and not follows(self.latest[0], t):
             # a reset, or one bad stamp: a second sample that follows the new one confirms a
@@ -115,14 +143,17 @@ class ControlInputs:
             confirmed = self.jump_from is not None and follows(self.jump_from, t)
             self.jump_from = None if confirmed else t
             if not confirmed:
-                self.drop('stamp_jumps', f'joint state stamp went from {self.latest[0]:.9f} '
-                          f'to {t:.9f} s: dropped unless the next one follows it')
+                self.drop(
+                    'stamp_jumps',
+                    f'joint state stamp went from {self.latest[0]:.9f} '
+                    f'to {t:.9f} s: dropped unless the next one follows it',
+                )
                 return
             self.log(f'joint state stamps restarted at {t:.9f} s: cycle re-armed')
             self.next_tick = t
             self.waiting = None
-            if self.wrench_stamp > t + STAMP_EPS:   # of the old time line (the new one's
-                self.wrench_stamp = -math.inf         # wrench may be here already)
+            if self.wrench_stamp > t + STAMP_EPS:  # of the old time line (the new one's
+                self.wrench_stamp = -math.inf  # wrench may be here already)
                 self.normal_force = None
             # time went back (a simulator ~/reset, a replay restarted): the cycle starts
             # again from its down half
@@ -137,13 +168,15 @@ class ControlInputs:
         # a state still waiting when the next one (or its repetition) arrives is dropped and
         # the newer one ticks without its wrench; states then stop waiting until a wrench
         # arrives again (the loop keeps its rate).
-        if self.waiting is not None:       # (a lockstep driver repeats the same state)
-            self.drop('missing_wrenches', f'no contact wrench for the state at '
-                      f'{self.waiting[0]:.6f} s: ticking on the next state without it, '
-                      f'without waiting until a wrench arrives')
+        if self.waiting is not None:  # (a lockstep driver repeats the same state)
+            self.drop(
+                'missing_wrenches',
+                f'no contact wrench for the state at '
+                f'{self.waiting[0]:.6f} s: ticking on the next state without it, '
+                f'without waiting until a wrench arrives',
+            )
             self.wrench_flowing = False
-        elif self.wrench_flowing and self.wrench_stamp < t - STAMP_EPS and \
-                self.wrench_publishers():
+        elif self.wrench_flowing and self.wrench_stamp < t - STAMP_EPS and self.wrench_publishers():
             self.waiting = self.latest
             return
         self.waiting = None
@@ -163,10 +196,13 @@ class ControlInputs:
             self.started = True
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
-        self.normal_force = None           # the latch covers one tick
+        self.normal_force = None  # the latch covers one tick
         if not all(math.isfinite(v) for v in tau):
-            self.drop('unsafe_torques', f'torques {tau} from the state at {t:.6f} s are not '
-                      f'finite: not sent, cycle re-armed')
+            self.drop(
+                'unsafe_torques',
+                f'torques {tau} from the state at {t:.6f} s are not '
+                f'finite: not sent, cycle re-armed',
+            )
             self.ctrl.rearm()
             return
         self.send([tau[j] for j in self.order])

@@ -5,6 +5,7 @@ The simulator node is a thin shell around ``SimulatedArm``: it decides *when* to
 ``step`` (wall clock or lockstep) and turns what comes back into messages. Joint space here is
 the driver's: relative encoder angles (joint1 = q1, joint2 = q2 - q1), joint torques T01, T12.
 """
+
 from __future__ import annotations
 
 import json
@@ -24,8 +25,12 @@ from .model import ArmModel
 from .scene import Scene
 
 
-def feed_events(integ: PhaseIntegrator, builder: ImpactBuilder, events: Iterable,
-                on_event: Callable | None = None) -> list:
+def feed_events(
+    integ: PhaseIntegrator,
+    builder: ImpactBuilder,
+    events: Iterable,
+    on_event: Callable | None = None,
+) -> list:
     """Feed located ``events`` to the impact ``builder`` (``on_event`` sees each first).
     Returns the impacts completed [(record, trace rows)], each taking the trace so far."""
     impacts = []
@@ -41,8 +46,9 @@ def feed_events(integ: PhaseIntegrator, builder: ImpactBuilder, events: Iterable
     return impacts
 
 
-def advance_period(integ: PhaseIntegrator, builder: ImpactBuilder, t_end: float,
-                   on_event: Callable | None = None) -> tuple[list, tuple[float, float]]:
+def advance_period(
+    integ: PhaseIntegrator, builder: ImpactBuilder, t_end: float, on_event: Callable | None = None
+) -> tuple[list, tuple[float, float]]:
     """The one period loop of every sampled run (the driver's periods, offline held control):
     advance ``integ`` to ``t_end`` and ``feed_events``. Returns the impacts completed and the
     contact impulse (tangential, normal) over the period, which callers divide by the period
@@ -64,12 +70,13 @@ class CommandError(ImpactArmError):
 @dataclass
 class Tick:
     """What the arm's sensors show at the end of one period."""
-    t: float                      # simulated time [s]
-    position: list                # joint angles [rad] (relative, encoder convention)
-    velocity: list                # joint rates [rad/s]
-    effort: list                  # joint torques acting now [N m] (0 while actuators are off)
-    wrench: tuple                 # (tangential, normal) contact force averaged over the period [N]
-    impacts: list = field(default_factory=list)   # [(record, trace rows)] completed this period
+
+    t: float  # simulated time [s]
+    position: list  # joint angles [rad] (relative, encoder convention)
+    velocity: list  # joint rates [rad/s]
+    effort: list  # joint torques acting now [N m] (0 while actuators are off)
+    wrench: tuple  # (tangential, normal) contact force averaged over the period [N]
+    impacts: list = field(default_factory=list)  # [(record, trace rows)] completed this period
 
 
 class SimulatedArm:
@@ -78,9 +85,16 @@ class SimulatedArm:
     Time is counted in whole periods (t = k / rate) so that a long run never drifts from the
     schedule by accumulated rounding."""
 
-    def __init__(self, scene: Scene, rate: float, *, preset: str | None = None,
-                 max_effort: float = math.inf, trace: bool = True,
-                 brake_torque: float = DEFAULT_BRAKE_TORQUE):
+    def __init__(
+        self,
+        scene: Scene,
+        rate: float,
+        *,
+        preset: str | None = None,
+        max_effort: float = math.inf,
+        trace: bool = True,
+        brake_torque: float = DEFAULT_BRAKE_TORQUE,
+    ):
         if not rate > 0:
             raise ValueError(f'rate = {rate}: must be > 0 Hz')
         preset = preset or scene.integrator.preset
@@ -94,13 +108,18 @@ class SimulatedArm:
         self.brake_torque = float(brake_torque)
         # the brake holds with the scene controller's own stiffness: gains known to be
         # stable at the control rate, under the same zero-order hold
-        self._brake_gains = (np.asarray(scene.controller.kp, float),
-                             np.asarray(scene.controller.kd, float))
-        self._brake_at = None                  # absolute link angles the brake holds
+        self._brake_gains = (
+            np.asarray(scene.controller.kp, float),
+            np.asarray(scene.controller.kd, float),
+        )
+        self._brake_at = None  # absolute link angles the brake holds
         spec = scene.integrator
         # the scene's own tolerances apply with its own preset
-        self._options = dict(control='held', trace=trace,
-                             **options_from_spec(spec, None if preset == spec.preset else preset))
+        self._options = dict(
+            control='held',
+            trace=trace,
+            **options_from_spec(spec, None if preset == spec.preset else preset),
+        )
         self.reset()
 
     def reset(self):
@@ -108,15 +127,17 @@ class SimulatedArm:
         self.integrator = PhaseIntegrator(self.model, **self._options)
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
-        self.command = [0.0] * self.n          # the torque being held (after clipping)
+        self.command = [0.0] * self.n  # the torque being held (after clipping)
 
     def warm_up(self):
         """Load every compiled function the stepping path may call (numba loads them from its
         cache on first use: ~0.5 s in all), so that the first period, or the first impact,
         of a real-time run does not pay for it."""
         from .model import kinetic_energy_split
-        scratch = PhaseIntegrator(self.model, self.integrator.state.copy(),
-                                  preset='fast', control='held')
+
+        scratch = PhaseIntegrator(
+            self.model, self.integrator.state.copy(), preset='fast', control='held'
+        )
         scratch.advance(scratch.state.t + 1.0 / self.rate)
         # a whole impact on a scratch copy, released without torque (under gravity the arm
         # falls onto its surface within a second): every Python path an impact takes
@@ -128,10 +149,10 @@ class SimulatedArm:
                 break
         n, y = self.n, scratch.state.y
         scratch.torque()
-        self._brake_torques(y[:n].copy(), y[n:2 * n].copy(), y[:n].copy())
-        scratch.contact_forces(y[:n], y[n:2 * n])
-        kinetic_energy_split(self.model, y[:n], y[n:2 * n])
-        self.model.tip(y[:n], y[n:2 * n])
+        self._brake_torques(y[:n].copy(), y[n : 2 * n].copy(), y[:n].copy())
+        scratch.contact_forces(y[:n], y[n : 2 * n])
+        kinetic_energy_split(self.model, y[:n], y[n : 2 * n])
+        self.model.tip(y[:n], y[n : 2 * n])
         self.model.gravity_forces(y[:n])
 
     # ----------------------------------------------------------------------- commands
@@ -139,8 +160,9 @@ class SimulatedArm:
         """The command as floats, or CommandError saying why it is refused."""
         values = list(values)
         if len(values) != self.n:
-            raise CommandError(f'command has {len(values)} values, expected {self.n} '
-                               f'(one torque per joint)')
+            raise CommandError(
+                f'command has {len(values)} values, expected {self.n} (one torque per joint)'
+            )
         out = [float(v) for v in values]
         bad = [i for i, v in enumerate(out) if not math.isfinite(v)]
         if bad:
@@ -149,8 +171,9 @@ class SimulatedArm:
         # message cut short and zero-padded on the way: its last bytes were zeroed
         tiny = [i for i, v in enumerate(out) if v and abs(v) < sys.float_info.min]
         if tiny:
-            raise CommandError(f'command value(s) {out} subnormal (index {tiny}): a corrupted '
-                               f'or truncated message')
+            raise CommandError(
+                f'command value(s) {out} subnormal (index {tiny}): a corrupted or truncated message'
+            )
         return out
 
     def apply(self, values: Iterable[float]):
@@ -169,7 +192,7 @@ class SimulatedArm:
 
     def engage_brake(self):
         """Hold the joints where they are now, from this period on (``brake``)."""
-        self._brake_at = self.integrator.state.y[:self.n].copy()
+        self._brake_at = self.integrator.state.y[: self.n].copy()
 
     def brake(self) -> list[float]:
         """Apply the brake for the next period and return its joint torques: a stiff hold of
@@ -178,7 +201,7 @@ class SimulatedArm:
         ±``brake_torque``, as a real brake slips beyond its rated torque."""
         y = self.integrator.state.y
         n = self.n
-        tau = self._brake_torques(y[:n].copy(), y[n:2 * n].copy(), self._brake_at)
+        tau = self._brake_torques(y[:n].copy(), y[n : 2 * n].copy(), self._brake_at)
         limit = self.brake_torque
         tau = [min(max(v, -limit), limit) for v in tau]
         self._hold(tau)
@@ -186,8 +209,9 @@ class SimulatedArm:
 
     def _brake_torques(self, q, qd, target) -> list:
         out = np.zeros(self.n)
-        q_law(q, qd, target, *self._brake_gains, np.asarray(self.model.gravity_forces(q), float),
-              out)
+        q_law(
+            q, qd, target, *self._brake_gains, np.asarray(self.model.gravity_forces(q), float), out
+        )
         return out.tolist()
 
     def _hold(self, tau):
@@ -204,8 +228,9 @@ class SimulatedArm:
     def step(self) -> Tick:
         """Advance one period under the held command; raises SimulationError when the physics
         leaves its validity (the state stays at the last good point)."""
-        impacts, (jt, jn) = advance_period(self.integrator, self.builder,
-                                           (self.periods + 1) / self.rate)
+        impacts, (jt, jn) = advance_period(
+            self.integrator, self.builder, (self.periods + 1) / self.rate
+        )
         self.periods += 1
         return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
 
@@ -213,8 +238,13 @@ class SimulatedArm:
         """The sensors' view of the current state."""
         st = self.integrator.state
         n = self.n
-        q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+        q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
         tau = self.integrator.torque()
-        return Tick(st.t, to_joint_space(q), to_joint_space(qd),
-                    list(tau) if tau is not None else [0.0] * n, tuple(wrench), list(impacts))
-
+        return Tick(
+            st.t,
+            to_joint_space(q),
+            to_joint_space(qd),
+            list(tau) if tau is not None else [0.0] * n,
+            tuple(wrench),
+            list(impacts),
+        )

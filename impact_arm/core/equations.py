@@ -18,6 +18,7 @@ source file, so one file per shape gives each shape its own cache entry, which a
 module with runtime flags could not. The kernel's source is ``kernel/`` (split by concern;
 ``kernel/injected.py`` declares what this generator injects).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -32,13 +33,15 @@ GENERATOR_VERSION = '7'
 
 def jit_options():
     from . import jit
+
     return f'numba {jit.AVAILABLE}, {sorted(jit.LEAF_OPTIONS.items())}'
 
 
 def cache_dir() -> str:
     base = os.environ.get('IMPACT_ARM_CACHE') or os.path.join(
         os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache'),
-        'impact_arm')
+        'impact_arm',
+    )
     return base
 
 
@@ -82,8 +85,9 @@ def _derive_source(n: int, gravity: bool) -> str:
     for i in range(n):
         v = centres[i].applyfunc(dt)
         inertia = m[i] * L[i] ** 2 / 12  # uniform rod about its centre
-        link_T.append(sp.Rational(1, 2) * inertia * qd[i] ** 2
-                      + sp.Rational(1, 2) * m[i] * (v.T * v)[0])
+        link_T.append(
+            sp.Rational(1, 2) * inertia * qd[i] ** 2 + sp.Rational(1, 2) * m[i] * (v.T * v)[0]
+        )
     link_T = [sp.trigsimp(sp.expand(t)) for t in link_T]
     T = sum(link_T)
     qg = [sum((-m[j] * g) * sp.diff(centres[j][1], q[i]) for j in range(n)) for i in range(n)]
@@ -120,14 +124,28 @@ def _derive_source(n: int, gravity: bool) -> str:
     state = [(q, 'q'), (qd, 'qd')]
     funcs = []
     if not solve_numerically:
-        funcs.append(function('accel', ['q', 'qd', 'Qx', 'L', 'm', 'g'], qdd,
-                              state + params + [(Qx, 'Qx')]))
-    funcs.append(function('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'],
-                          list(M) + list(rhs), state + params + [(Qx, 'Qx')]))
-    funcs.append(function('tip', ['q', 'qd', 'L'], [tip[0], tip[1], tip_v[0], tip_v[1]],
-                          state + [(L, 'L')]))
-    funcs.append(function('tip_acceleration', ['q', 'qd', 'qdd', 'L'], [tip_a[0], tip_a[1]],
-                          state + [(qdd_s, 'qdd'), (L, 'L')]))
+        funcs.append(
+            function('accel', ['q', 'qd', 'Qx', 'L', 'm', 'g'], qdd, state + params + [(Qx, 'Qx')])
+        )
+    funcs.append(
+        function(
+            'mass_and_rhs',
+            ['q', 'qd', 'Qx', 'L', 'm', 'g'],
+            list(M) + list(rhs),
+            state + params + [(Qx, 'Qx')],
+        )
+    )
+    funcs.append(
+        function('tip', ['q', 'qd', 'L'], [tip[0], tip[1], tip_v[0], tip_v[1]], state + [(L, 'L')])
+    )
+    funcs.append(
+        function(
+            'tip_acceleration',
+            ['q', 'qd', 'qdd', 'L'],
+            [tip_a[0], tip_a[1]],
+            state + [(qdd_s, 'qdd'), (L, 'L')],
+        )
+    )
     funcs.append(function('tip_jacobian', ['q', 'L'], jac[0] + jac[1], [(q, 'q'), (L, 'L')]))
     funcs.append(function('gravity_forces', ['q', 'L', 'm', 'g'], qg, [(q, 'q')] + params))
     funcs.append(function('link_energies', ['q', 'qd', 'L', 'm'], link_T, state + params))
@@ -187,7 +205,7 @@ def _chain_source(n: int, gravity: bool) -> str:
     for i in r:
         for j in range(i + 1, n):
             lines.append(f'    M{i}_{j} = C{i}_{j} * (c{i} * c{j} + s{i} * s{j})')
-            lines.append(f'    sn{i}_{j} = s{i} * c{j} - c{i} * s{j}')   # sin(q_i - q_j)
+            lines.append(f'    sn{i}_{j} = s{i} * c{j} - c{i} * s{j}')  # sin(q_i - q_j)
     for i in r:
         terms = []
         for j in r:
@@ -209,7 +227,7 @@ def _chain_source(n: int, gravity: bool) -> str:
     # the kernel's form: loops, not straight-line code (n² named values cost numba seconds
     # to type and lower: 6 s at 12 links)
     gravity_term = ' - g * L[j] * cos(q[j]) * (0.5 * m[j] + tail)' if gravity else ''
-    funcs.append(f'''@jit_leaf
+    funcs.append(f"""@jit_leaf
 def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     n = q.shape[0]
     tail = 0.0                  # mass of the links beyond link j
@@ -227,33 +245,49 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
             out[i] -= sn * qd[j] * qd[j]
             out[j] += sn * qd[i] * qd[i]
             S[i * n + j] = c * cos(d)
-            S[j * n + i] = S[i * n + j]''')
+            S[j * n + i] = S[i * n + j]""")
     lines = head('tip', ['q', 'qd', 'L'])
     trig(lines)
-    lines.append('    return (' + ' + '.join(f'L[{i}] * c{i}' for i in r) + ', '
-                 + ' + '.join(f'L[{i}] * s{i}' for i in r) + ', '
-                 + ' + '.join(f'-L[{i}] * s{i} * qd[{i}]' for i in r) + ', '
-                 + ' + '.join(f'L[{i}] * c{i} * qd[{i}]' for i in r) + ',)')
+    lines.append(
+        '    return ('
+        + ' + '.join(f'L[{i}] * c{i}' for i in r)
+        + ', '
+        + ' + '.join(f'L[{i}] * s{i}' for i in r)
+        + ', '
+        + ' + '.join(f'-L[{i}] * s{i} * qd[{i}]' for i in r)
+        + ', '
+        + ' + '.join(f'L[{i}] * c{i} * qd[{i}]' for i in r)
+        + ',)'
+    )
     funcs.append('\n'.join(lines))
 
     lines = head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
     trig(lines)
-    lines.append('    return (' + ' + '.join(
-        f'L[{i}] * (-s{i} * qdd[{i}] - c{i} * qd[{i}] * qd[{i}])' for i in r) + ', '
+    lines.append(
+        '    return ('
+        + ' + '.join(f'L[{i}] * (-s{i} * qdd[{i}] - c{i} * qd[{i}] * qd[{i}])' for i in r)
+        + ', '
         + ' + '.join(f'L[{i}] * (c{i} * qdd[{i}] - s{i} * qd[{i}] * qd[{i}])' for i in r)
-        + ',)')
+        + ',)'
+    )
     funcs.append('\n'.join(lines))
 
     lines = head('tip_jacobian', ['q', 'L'])
     trig(lines)
-    lines.append('    return (' + ', '.join([f'-L[{i}] * s{i}' for i in r]
-                                          + [f'L[{i}] * c{i}' for i in r]) + ',)')
+    lines.append(
+        '    return ('
+        + ', '.join([f'-L[{i}] * s{i}' for i in r] + [f'L[{i}] * c{i}' for i in r])
+        + ',)'
+    )
     funcs.append('\n'.join(lines))
 
     lines = head('gravity_forces', ['q', 'L', 'm', 'g'])
     tail_masses(lines)
-    lines.append('    return (' + ', '.join(f'-g * L[{i}] * cos(q[{i}]) * (0.5 * m[{i}] + S{i + 1})'
-                                          for i in r) + ',)')
+    lines.append(
+        '    return ('
+        + ', '.join(f'-g * L[{i}] * cos(q[{i}]) * (0.5 * m[{i}] + S{i + 1})' for i in r)
+        + ',)'
+    )
     funcs.append('\n'.join(lines))
 
     lines = head('link_energies', ['q', 'qd', 'L', 'm'])
@@ -265,8 +299,10 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     for k in r:
         lines.append(f'    vx = jx - 0.5 * L[{k}] * s{k} * qd[{k}]')
         lines.append(f'    vy = jy + 0.5 * L[{k}] * c{k} * qd[{k}]')
-        lines.append(f'    T{k} = 0.5 * m[{k}] * (vx * vx + vy * vy) '
-                     f'+ m[{k}] * L[{k}] * L[{k}] / 24.0 * qd[{k}] * qd[{k}]')
+        lines.append(
+            f'    T{k} = 0.5 * m[{k}] * (vx * vx + vy * vy) '
+            f'+ m[{k}] * L[{k}] * L[{k}] / 24.0 * qd[{k}] * qd[{k}]'
+        )
         lines.append(f'    jx = jx - L[{k}] * s{k} * qd[{k}]')
         lines.append(f'    jy = jy + L[{k}] * c{k} * qd[{k}]')
     lines.append('    return (' + ', '.join(f'T{k}' for k in r) + ',)')
@@ -287,24 +323,32 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
 def _module_header(n, gravity, contact, friction, n_integral):
     """Constants the kernel template reads as compile-time constants."""
     from .layout import shape_offsets
+
     offsets = shape_offsets(n, n_integral)
-    lines = [f'# generated by impact_arm.core.equations v{GENERATOR_VERSION}: n={n}, gravity={gravity},'
-             f' contact={contact}, friction={friction}, integral states={n_integral}.',
-             '# Do not edit: delete the file to regenerate it.',
-             f'# compiled with {jit_options()}',
-             'import math', 'from math import sin, cos, sqrt', 'import numpy as np',
-             # a long chain: the kernel's helpers are compiled once and called instead of
-             # inlined at every call site (numba's inlining copies and re-types their code
-             # each time: a 30 s cold start, growing with the links)
-             'from impact_arm.core.jit import jit, jit_leaf' if n <= SYMBOLIC_LINKS else
-             'from impact_arm.core.jit import jit, jit as jit_leaf  # called, not inlined',
-             'from impact_arm.core.layout import *  # noqa: F401,F403',
-             'from impact_arm.core.contact import (hertz_force, jackson_green, restitution_force,',
-             '                                friction_force, residual, restitution_radius,',
-             '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
-             'from impact_arm.core.control import add_joint_torques, pid_error, pid_law, q_law',
-             f'N = {n}', f'NI = {n_integral}', f'HAS_CONTACT = {contact}',
-             f'HAS_FRICTION = {friction}']
+    lines = [
+        f'# generated by impact_arm.core.equations v{GENERATOR_VERSION}: n={n}, gravity={gravity},'
+        f' contact={contact}, friction={friction}, integral states={n_integral}.',
+        '# Do not edit: delete the file to regenerate it.',
+        f'# compiled with {jit_options()}',
+        'import math',
+        'from math import sin, cos, sqrt',
+        'import numpy as np',
+        # a long chain: the kernel's helpers are compiled once and called instead of
+        # inlined at every call site (numba's inlining copies and re-types their code
+        # each time: a 30 s cold start, growing with the links)
+        'from impact_arm.core.jit import jit, jit_leaf'
+        if n <= SYMBOLIC_LINKS
+        else 'from impact_arm.core.jit import jit, jit as jit_leaf  # called, not inlined',
+        'from impact_arm.core.layout import *  # noqa: F401,F403',
+        'from impact_arm.core.contact import (hertz_force, jackson_green, restitution_force,',
+        '                                friction_force, residual, restitution_radius,',
+        '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
+        'from impact_arm.core.control import add_joint_torques, pid_error, pid_law, q_law',
+        f'N = {n}',
+        f'NI = {n_integral}',
+        f'HAS_CONTACT = {contact}',
+        f'HAS_FRICTION = {friction}',
+    ]
     lines += [f'{k} = {v}' for k, v in offsets.items()]
     return '\n'.join(lines) + '\n\n\n'
 
@@ -322,7 +366,8 @@ def _derivation(n, gravity):
         if text:
             return text + MASS_INTO_WRAPPER
     from .jit import compile_ended, compile_started
-    compile_started()           # sympy: part of the one-time cost the tools announce
+
+    compile_started()  # sympy: part of the one-time cost the tools announce
     try:
         text = _derive_source(n, gravity)
     finally:
@@ -344,11 +389,12 @@ def _write_atomically(path, text):
         return False
 
 
-_LOADED = {}    # (shape, cache directory) -> module: a study builds a model per run
+_LOADED = {}  # (shape, cache directory) -> module: a study builds a model per run
 
 
-def load_equations(n: int, gravity: bool = True, contact: bool = True, friction: bool = True,
-                   n_integral: int = 0) -> types.ModuleType:
+def load_equations(
+    n: int, gravity: bool = True, contact: bool = True, friction: bool = True, n_integral: int = 0
+) -> types.ModuleType:
     """The compiled module for one scene shape: generated equations + the integrator kernel.
 
     Derives (sympy) and writes it on first use; later processes import the cached file, and
@@ -362,9 +408,14 @@ def load_equations(n: int, gravity: bool = True, contact: bool = True, friction:
 
 def _load_equations(n, gravity, contact, friction, n_integral):
     from .kernel import template_source
+
     template = template_source()
-    source = (_module_header(n, gravity, contact, friction, n_integral)
-              + _derivation(n, gravity) + '\n\n' + template)
+    source = (
+        _module_header(n, gravity, contact, friction, n_integral)
+        + _derivation(n, gravity)
+        + '\n\n'
+        + template
+    )
     key = hashlib.sha256(f'{source}{sys.version_info[:2]}'.encode()).hexdigest()[:16]
     name = f'impact_arm_kernel_{n}_{key}'
     if name in sys.modules:

@@ -11,6 +11,7 @@ coarse global stage picks starting points for a bounded trust-region search in l
 (positive parameters); the Jacobian at the optimum gives the covariance, the 95 % intervals,
 correlations and the verdict.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -39,7 +40,7 @@ from .study import Study, parse_key_path
 # contact outside the law's validity): well above any misfit near the start, so that the
 # search never prefers losing impacts to fitting them (30x that for values the scene refuses)
 PENALTY = 30.0
-FIT_RTOL = 1e-8        # loosest tolerance a replay may use (finite-difference Jacobians)
+FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
 
 
 def window_options(model: ArmModel) -> dict:
@@ -67,7 +68,7 @@ class Parameter:
     lo: float
     hi: float
     start: float
-    log: bool            # fitted in log space (positive bounds)
+    log: bool  # fitted in log space (positive bounds)
 
     def to_unit(self, value):
         if self.log:
@@ -97,40 +98,51 @@ def parameter_specs(study: Study, bounds: dict) -> list:
             raise FitError(f'--param {key}: {exc}') from None
         node = study.data
         for depth, part in enumerate(parts):
-            ok = (isinstance(node, dict) and part in node) if isinstance(part, str) else \
-                (isinstance(node, list) and part < len(node))
+            ok = (
+                (isinstance(node, dict) and part in node)
+                if isinstance(part, str)
+                else (isinstance(node, list) and part < len(node))
+            )
             if not ok:
-                where = ''.join(f'[{p}]' if isinstance(p, int) else f'.{p}'
-                                for p in parts[:depth]).lstrip('.') or 'the scene'
-                raise FitError(f'--param {key}: the scene {study.origin} has no {part!r} in '
-                               f'{where} (fit keys the scene states, e.g. surfaces[0].mu, '
-                               f'materials.steel.S_y)')
+                where = (
+                    ''.join(
+                        f'[{p}]' if isinstance(p, int) else f'.{p}' for p in parts[:depth]
+                    ).lstrip('.')
+                    or 'the scene'
+                )
+                raise FitError(
+                    f'--param {key}: the scene {study.origin} has no {part!r} in '
+                    f'{where} (fit keys the scene states, e.g. surfaces[0].mu, '
+                    f'materials.steel.S_y)'
+                )
             node = node[part]
         if isinstance(node, bool) or not isinstance(node, (int, float)):
-            raise FitError(f'--param {key}: the scene\'s value {node!r} is not a number')
+            raise FitError(f"--param {key}: the scene's value {node!r} is not a number")
         lo, hi, start = float(lo), float(hi), float(node)
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise FitError(f'--param {key}={lo:g}:{hi:g}: bounds must be finite with LO < HI')
         if not lo <= start <= hi:
-            raise FitError(f'--param {key}={lo:g}:{hi:g}: the bounds exclude the scene\'s value '
-                           f'{start:g}, the starting point; widen them or edit the scene')
+            raise FitError(
+                f"--param {key}={lo:g}:{hi:g}: the bounds exclude the scene's value "
+                f'{start:g}, the starting point; widen them or edit the scene'
+            )
         specs.append(Parameter(key, lo, hi, start, log=lo > 0))
     return specs
 
 
 @dataclass
 class Prediction:
-    qd: np.ndarray          # joint rates at the compared post-impact samples (m, n) [rad/s]
-    impulse: np.ndarray     # contact impulse (tangential, normal) [N s]
-    v_in: float             # tip normal speed at first contact [m/s]
-    v_out: float            # ... at last separation
+    qd: np.ndarray  # joint rates at the compared post-impact samples (m, n) [rad/s]
+    impulse: np.ndarray  # contact impulse (tangential, normal) [N s]
+    v_in: float  # tip normal speed at first contact [m/s]
+    v_out: float  # ... at last separation
     contacts: int
-    qd_sep: np.ndarray | None = None     # joint rates at the last separation
+    qd_sep: np.ndarray | None = None  # joint rates at the last separation
     error: str = ''
 
 
 EFFORT_TIMINGS = ('linear', 'previous', 'next')
-SUBSTEPS = 8        # torque pieces per sample period (linear timing)
+SUBSTEPS = 8  # torque pieces per sample period (linear timing)
 
 
 class TorqueSchedule:
@@ -175,13 +187,16 @@ class TorqueSchedule:
         grid = [x for x in self.t if t_from < x < t_to]
         if self.timing == 'linear':
             edges = np.concatenate([[t_from], grid, [t_to]])
-            grid = np.concatenate([np.linspace(lo, hi, SUBSTEPS + 1)[1:-1]
-                                   for lo, hi in itertools.pairwise(edges)] + [grid])
+            grid = np.concatenate(
+                [np.linspace(lo, hi, SUBSTEPS + 1)[1:-1] for lo, hi in itertools.pairwise(edges)]
+                + [grid]
+            )
         return sorted({float(x) for x in grid} | {float(t_to)})
 
 
-def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
-                   pre_state=None, dense=None) -> Prediction:
+def predict_impact(
+    model: ArmModel, win: ImpactWindow, timing='linear', pre_state=None, dense=None
+) -> Prediction:
     """Simulate one impact from the recorded state at the last sample before it (the
     pre-impact fit, or ``pre_state`` = (q, q̇) in joint space) under the recorded efforts,
     through every contact, to the compared samples after it. ``dense`` (a list of extra
@@ -195,15 +210,15 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
     if pre_state is not None:
         q, qd = pre_state
     if heights and tip_y(model, T @ q) <= max(heights):
-        return _failed(n, "the scene's surface is above the arm's tip before the recorded "
-                          "contact")
+        return _failed(n, "the scene's surface is above the arm's tip before the recorded contact")
     state = model.initial_state()
     state.t = t0
-    state.y[:n], state.y[n:2 * n] = T @ q, T @ qd
+    state.y[:n], state.y[n : 2 * n] = T @ q, T @ qd
     held = timing != 'controller'
-    state.mode = 'down'          # the scene's controller, if used, is approaching the surface
-    integ = PhaseIntegrator(model, state, control='held' if held else 'continuous',
-                            **window_options(model))
+    state.mode = 'down'  # the scene's controller, if used, is approaching the surface
+    integ = PhaseIntegrator(
+        model, state, control='held' if held else 'continuous', **window_options(model)
+    )
     torque = TorqueSchedule(win, timing)
     first = last = None
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
@@ -214,9 +229,10 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
     try:
         for edge in edges:
             while integ.state.t < edge:
-                if held:    # (ignored by the kernel while actuators are off in contact)
-                    integ.state.held_torque = torque(integ.state.t, edge,
-                                                     'pre' if side == 'pre' else 'post')
+                if held:  # (ignored by the kernel while actuators are off in contact)
+                    integ.state.held_torque = torque(
+                        integ.state.t, edge, 'pre' if side == 'pre' else 'post'
+                    )
                     integ.reset_derivative()
                 for event in integ.advance(edge, stop_at_event=('contact', 'separation')):
                     if event.kind == 'contact':
@@ -227,34 +243,43 @@ def predict_impact(model: ArmModel, win: ImpactWindow, timing='linear',
                         last, side = event, 'post'
             if dense is not None:
                 impulse += integ.take_impulse()
-                path.append([integ.state.t, *np.linalg.solve(T, integ.state.y[n:2 * n]),
-                             *impulse])
+                path.append(
+                    [integ.state.t, *np.linalg.solve(T, integ.state.y[n : 2 * n]), *impulse]
+                )
             if targets and abs(edge - targets[0]) < 1e-12:
                 if side == 'contact':
                     # a contact ending just after the sample in the model, just before it in
                     # the recording (the start state is uncertain by microseconds): let it
                     # end within a tenth of a period and compare there
-                    for event in integ.advance(edge + 0.1 * (win.t_b - win.t_a),
-                                               stop_at_event=('separation',)):
+                    for event in integ.advance(
+                        edge + 0.1 * (win.t_b - win.t_a), stop_at_event=('separation',)
+                    ):
                         if event.kind == 'separation':
                             last, side = event, 'post'
                 if side == 'pre' or last is None:
-                    return _failed(n, 'no contact predicted across the recorded impact' if
-                                   side == 'pre' else 'the contact outlasts the first '
-                                   'sample after it')
+                    return _failed(
+                        n,
+                        'no contact predicted across the recorded impact'
+                        if side == 'pre'
+                        else 'the contact outlasts the first sample after it',
+                    )
                 # else in a further contact begun since: the rates there are continuous in
                 # the parameters (it has only just begun when it appears), compare them
-                rates.append(np.linalg.solve(T, integ.state.y[n:2 * n]))
+                rates.append(np.linalg.solve(T, integ.state.y[n : 2 * n]))
                 targets.pop(0)
     except SimulationError as exc:
         return _failed(n, str(exc))
     impulse += integ.take_impulse()
-    pred = Prediction(np.array(rates), impulse,
-                      tip_normal_speed(model, first.y[:n], first.y[n:2 * n]),
-                      tip_normal_speed(model, last.y[:n], last.y[n:2 * n]), contacts,
-                      np.linalg.solve(T, last.y[n:2 * n]))
+    pred = Prediction(
+        np.array(rates),
+        impulse,
+        tip_normal_speed(model, first.y[:n], first.y[n : 2 * n]),
+        tip_normal_speed(model, last.y[:n], last.y[n : 2 * n]),
+        contacts,
+        np.linalg.solve(T, last.y[n : 2 * n]),
+    )
     pred.path = np.array(path)
-    pred.t_sep, pred.y_sep = last.t, last.y[:2 * n].copy()
+    pred.t_sep, pred.y_sep = last.t, last.y[: 2 * n].copy()
     return pred
 
 
@@ -263,11 +288,12 @@ def free_flight(model: ArmModel, win: ImpactWindow, timing, t0, y0, t1):
     the torque ``timing`` uses after the impact (None if a contact intervenes)."""
     n = model.n
     state = model.initial_state()
-    state.t, state.y[:2 * n] = t0, y0
+    state.t, state.y[: 2 * n] = t0, y0
     held = timing != 'controller'
     state.mode = 'up'
-    integ = PhaseIntegrator(model, state, control='held' if held else 'continuous',
-                            **window_options(model))
+    integ = PhaseIntegrator(
+        model, state, control='held' if held else 'continuous', **window_options(model)
+    )
     torque = TorqueSchedule(win, timing)
     try:
         for edge in torque.boundaries(t0, t1):
@@ -279,7 +305,7 @@ def free_flight(model: ArmModel, win: ImpactWindow, timing, t0, y0, t1):
         return None
     if integ.state.phase != 0:
         return None
-    return np.linalg.solve(joint_to_absolute_matrix(n), integ.state.y[n:2 * n])
+    return np.linalg.solve(joint_to_absolute_matrix(n), integ.state.y[n : 2 * n])
 
 
 def recorded_separation_rates(model: ArmModel, win: ImpactWindow, pred: Prediction, timing):
@@ -295,12 +321,12 @@ def recorded_separation_rates(model: ArmModel, win: ImpactWindow, pred: Predicti
     A = np.zeros((n, n))
     for k in range(n):
         y = pred.y_sep.copy()
-        y[n:2 * n] += T[:, k] * 1e-4          # one joint rate up by 1e-4 rad/s
+        y[n : 2 * n] += T[:, k] * 1e-4  # one joint rate up by 1e-4 rad/s
         moved = free_flight(model, win, timing, pred.t_sep, y, t1)
         if moved is None:
             return None
         A[:, k] = (moved - base) / 1e-4
-    qd_sep = np.linalg.solve(T, pred.y_sep[n:2 * n])
+    qd_sep = np.linalg.solve(T, pred.y_sep[n : 2 * n])
     return qd_sep + np.linalg.solve(A, win.post_qd[0] - base)
 
 
@@ -318,8 +344,7 @@ def tip_y(model, q_abs) -> float:
 
 
 def _failed(n, why) -> Prediction:
-    return Prediction(np.full((1, n), np.nan), np.full(2, np.nan), math.nan, math.nan, 0,
-                      None, why)
+    return Prediction(np.full((1, n), np.nan), np.full(2, np.nan), math.nan, math.nan, 0, None, why)
 
 
 def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
@@ -334,11 +359,12 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
     for k in range(len(win.post_t) - 1):
         state = model.initial_state()
         state.t = win.post_t[k]
-        state.y[:n], state.y[n:2 * n] = T @ q_post[k], T @ win.post_qd[k]
+        state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ win.post_qd[k]
         held = timing != 'controller'
-        state.mode = 'up'        # after an impact the scene's controller lifts the arm
-        integ = PhaseIntegrator(model, state, control='held' if held else 'continuous',
-                                preset='balanced')
+        state.mode = 'up'  # after an impact the scene's controller lifts the arm
+        integ = PhaseIntegrator(
+            model, state, control='held' if held else 'continuous', preset='balanced'
+        )
         try:
             for edge in torque.boundaries(win.post_t[k], win.post_t[k + 1]):
                 if held:
@@ -349,8 +375,9 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
             return math.inf
         if integ.state.phase != 0:
             return math.inf
-        err += float(np.sum((np.linalg.solve(T, integ.state.y[n:2 * n])
-                             - win.post_qd[k + 1]) ** 2))
+        err += float(
+            np.sum((np.linalg.solve(T, integ.state.y[n : 2 * n]) - win.post_qd[k + 1]) ** 2)
+        )
     return err
 
 
@@ -369,13 +396,13 @@ def effort_timing(model: ArmModel, windows) -> tuple:
 
 @dataclass
 class FitOptions:
-    window: int = 15            # samples per side for the free-flight fits
-    use_wrench: bool = True     # when the recording has one
-    starts: int = 3             # local searches from the best points of the global stage
-    global_points: int = 0      # 0: 6 + 4 per parameter
-    z_min: float = 30.0         # impact detection threshold (robust z of the rate step)
-    max_nfev: int = 25          # per local search and parameter
-    post_samples: int = 3       # samples after each impact compared with the model
+    window: int = 15  # samples per side for the free-flight fits
+    use_wrench: bool = True  # when the recording has one
+    starts: int = 3  # local searches from the best points of the global stage
+    global_points: int = 0  # 0: 6 + 4 per parameter
+    z_min: float = 30.0  # impact detection threshold (robust z of the rate step)
+    max_nfev: int = 25  # per local search and parameter
+    post_samples: int = 3  # samples after each impact compared with the model
 
 
 class ImpactSet:
@@ -411,7 +438,7 @@ class ImpactSet:
         self.evaluations += 1
         try:
             model = self.model(values)
-        except FitError as exc:    # a combination the scene's schema refuses: a penalty
+        except FitError as exc:  # a combination the scene's schema refuses: a penalty
             n = self.windows[0].post_qd.shape[1] if self.windows else 1
             return [_failed(n, str(exc)) for _ in self.windows]
         return [predict_impact(model, w, self.timing) for w in self.windows]
@@ -426,20 +453,23 @@ class ImpactSet:
         for w in self.windows:
             w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
-                notes.append(f'impact at t = {w.t_c:.4f} s left out: {base.error} with the '
-                             f'starting scene')
+                notes.append(
+                    f'impact at t = {w.t_c:.4f} s left out: {base.error} with the starting scene'
+                )
                 continue
             ib = getattr(w, 'effort_ib', 2)
             if self.timing == 'next' and any(w.effort_off[k] for k in range(2, ib)):
-                notes.append(f'impact at t = {w.t_c:.4f} s left out: a sample taken during '
-                             f'the contact shows no torque, so the command held after the '
-                             f'contact is not recorded')
+                notes.append(
+                    f'impact at t = {w.t_c:.4f} s left out: a sample taken during '
+                    f'the contact shows no torque, so the command held after the '
+                    f'contact is not recorded'
+                )
                 continue
             # robust weights for the global stage (no linearisation, which a bounce that
             # comes and goes with the parameters would spoil): each recorded rate's noise
             # plus the pre-impact rates' uncertainty, the impulse's noise
             cov_pre = w.pre.state(w.t_a)[2]
-            var = np.tile(sigma_qd ** 2 + np.diag(cov_pre)[model.n:], len(w.post_t))
+            var = np.tile(sigma_qd**2 + np.diag(cov_pre)[model.n :], len(w.post_t))
             if self.wrench_at(w):
                 var = np.concatenate([var, w.impulse_var])
             kept.append(w)
@@ -453,8 +483,13 @@ class ImpactSet:
         after it (a long contact can span several samples): that sample leaves the free
         flight, as long as the model says so."""
         for _ in range(6):
-            side = 'pre' if 'above the arm' in base.error else \
-                'post' if 'outlasts' in base.error else ''
+            side = (
+                'pre'
+                if 'above the arm' in base.error
+                else 'post'
+                if 'outlasts' in base.error
+                else ''
+            )
             wider = w.widened(side) if side and getattr(w, 'widened', None) else None
             if wider is None:
                 break
@@ -491,9 +526,9 @@ class ImpactSet:
                 if not p.error:
                     S[:, k] = (self.outputs(p, w) - y0) / steps[k]
             C = S @ cov_pre @ S.T
-            C[:m * n, :m * n] += np.diag(np.tile(sigma_qd ** 2, m))
+            C[: m * n, : m * n] += np.diag(np.tile(sigma_qd**2, m))
             if self.wrench_at(w):
-                C[m * n:, m * n:] += np.diag(w.impulse_var)
+                C[m * n :, m * n :] += np.diag(w.impulse_var)
             # noise-free data (a simulation) leave C singular: a relative floor keeps it usable
             C += np.eye(len(C)) * max(1e-12 * np.trace(C) / len(C), 1e-30)
             self.whiten[i] = np.linalg.inv(np.linalg.cholesky(C))
@@ -513,10 +548,10 @@ class ImpactSet:
 
 @dataclass
 class FitResult:
-    parameters: dict                 # key -> {value, ci95, identifiable, start, bounds, sigma}
+    parameters: dict  # key -> {value, ci95, identifiable, start, bounds, sigma}
     verdict: str
-    residual_rms: float              # rms of the raw residuals of the joint rates [rad/s]
-    noise_rms: float                 # rms of their expected standard deviation [rad/s]
+    residual_rms: float  # rms of the raw residuals of the joint rates [rad/s]
+    noise_rms: float  # rms of their expected standard deviation [rad/s]
     chi2: float
     dof: int
     impacts_used: int
@@ -534,7 +569,7 @@ class FitResult:
     start_predictions: list = field(default_factory=list, repr=False)
     recording: JointRecording | None = field(default=None, repr=False)
     scene_path: str = ''
-    timing: str = ''                 # how the efforts were read between samples
+    timing: str = ''  # how the efforts were read between samples
     problem: object = field(default=None, repr=False)
 
     @property
@@ -543,20 +578,29 @@ class FitResult:
 
     def to_json(self) -> dict:
         return {
-            'parameters': {k: {'value': v['value'], 'ci95': v['ci95'],
-                               'identifiable': v['identifiable']}
-                           for k, v in self.parameters.items()},
-            'verdict': self.verdict, 'residual_rms': self.residual_rms,
-            'noise_rms': self.noise_rms, 'impacts_used': self.impacts_used,
+            'parameters': {
+                k: {'value': v['value'], 'ci95': v['ci95'], 'identifiable': v['identifiable']}
+                for k, v in self.parameters.items()
+            },
+            'verdict': self.verdict,
+            'residual_rms': self.residual_rms,
+            'noise_rms': self.noise_rms,
+            'impacts_used': self.impacts_used,
             'scene': self.scene_path,
             # beyond the schema: what a reader needs to judge the fit
-            'chi2': self.chi2, 'dof': self.dof, 'used_wrench': self.used_wrench,
+            'chi2': self.chi2,
+            'dof': self.dof,
+            'used_wrench': self.used_wrench,
             'effort_timing': self.timing,
-            'cannot_tell_apart': self.cannot_tell_apart, 'correlations': self.correlations,
-            'noise': self.noise, 'per_impact': self.per_impact, 'notes': self.notes,
-            'details': {k: {kk: v[kk] for kk in ('start', 'bounds', 'sigma_native',
-                                                 'at_bound')}
-                        for k, v in self.parameters.items()},
+            'cannot_tell_apart': self.cannot_tell_apart,
+            'correlations': self.correlations,
+            'noise': self.noise,
+            'per_impact': self.per_impact,
+            'notes': self.notes,
+            'details': {
+                k: {kk: v[kk] for kk in ('start', 'bounds', 'sigma_native', 'at_bound')}
+                for k, v in self.parameters.items()
+            },
         }
 
 
@@ -587,38 +631,47 @@ def contact_test(model: ArmModel, tolerance: float = 0.05):
         v0 = tip_normal_speed(model, T @ q, T @ qd_before)
         v1 = tip_normal_speed(model, T @ q, T @ qd_after)
         return any(abs(y - h) < tolerance * reach for h in heights) and v0 < 0 and v1 > v0
+
     return is_contact
 
 
 def prepare(recording: JointRecording, options: FitOptions, model: ArmModel | None = None):
     """Impacts, noise and impact windows of a recording (refused if it has no impact);
     ``model`` (the scene's kinematics) tells contacts from other steps of the rates."""
-    impacts = find_impacts(recording, options.z_min,
-                           contact_test(model) if model is not None else None)
+    impacts = find_impacts(
+        recording, options.z_min, contact_test(model) if model is not None else None
+    )
     if not impacts:
         steps = len(find_impacts(recording, options.z_min)) if model is not None else 0
-        why = (f'{steps} step(s) of the joint rates, none with the tip near a surface of the '
-               f'scene (check --joints order, the scene\'s links and surface heights)'
-               if steps else 'no step in the joint rates stands out of the noise')
+        why = (
+            f'{steps} step(s) of the joint rates, none with the tip near a surface of the '
+            f"scene (check --joints order, the scene's links and surface heights)"
+            if steps
+            else 'no step in the joint rates stands out of the noise'
+        )
         raise IdentifyError(f'no impact in the recording {recording.source}: {why}')
     noise = estimate_noise(recording, impacts, options.window)
-    windows, notes = impact_windows(recording, noise, impacts, options.window,
-                                    post_samples=options.post_samples)
+    windows, notes = impact_windows(
+        recording, noise, impacts, options.window, post_samples=options.post_samples
+    )
     normal = [w.impulse[1] for w in windows if w.impulse is not None]
     if normal and np.median(normal) < 0:
         # a wrench published as the force on the surface, not on the arm: same law
         for w in windows:
             if w.impulse is not None:
                 w.impulse = -w.impulse
-        notes.append('the recorded wrench points into the surface: its sign is reversed '
-                     '(the simulator publishes the force on the arm)')
+        notes.append(
+            'the recorded wrench points into the surface: its sign is reversed '
+            '(the simulator publishes the force on the arm)'
+        )
     if not windows:
         raise IdentifyError(f'{len(impacts)} impact(s) found but none usable: ' + '; '.join(notes))
     return impacts, noise, windows, notes
 
 
-def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | None = None,
-        progress=None) -> FitResult:
+def fit(
+    recording: JointRecording, scene, bounds: dict, options: FitOptions | None = None, progress=None
+) -> FitResult:
     """Fit the scene keys of ``bounds`` ({key: (lo, hi)}) to the impacts of ``recording``.
 
     ``scene``: path, installed name, Scene or YAML data (the fixed rest and the start)."""
@@ -628,31 +681,39 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
     study = Study(scene)
     specs = parameter_specs(study, bounds)
     if recording.n != study.scene().n_links:
-        raise FitError(f'the recording has {recording.n} joints, the scene {study.origin} '
-                       f'{study.scene().n_links} links')
+        raise FitError(
+            f'the recording has {recording.n} joints, the scene {study.origin} '
+            f'{study.scene().n_links} links'
+        )
     _, noise, windows, notes = prepare(recording, options, ArmModel(study.scene()))
     notes = list(recording.notes) + notes
     if options.use_wrench and recording.wrench is not None:
         missing = sum(w.impulse is None for w in windows)
         if missing:
-            notes.append(f'wrench impulse unusable at {missing} impact(s) (wrench samples '
-                         f'missing there): joint rates only at those')
+            notes.append(
+                f'wrench impulse unusable at {missing} impact(s) (wrench samples '
+                f'missing there): joint rates only at those'
+            )
     problem = ImpactSet(study, specs, windows, options.use_wrench)
     start = np.array([p.start for p in specs])
     say(f'{len(windows)} impacts; reading of the efforts', 0, None)
     start_notes = problem.select(start, noise.velocity)
     notes += start_notes
     if not problem.windows:
-        raise IdentifyError('the starting scene reproduces none of the recorded impacts: '
-                            + '; '.join(start_notes[-3:]))
+        raise IdentifyError(
+            'the starting scene reproduces none of the recorded impacts: '
+            + '; '.join(start_notes[-3:])
+        )
     if len(problem.windows) * problem.windows[0].post_qd.size <= len(specs):
-        raise FitError(f'{len(problem.windows)} usable impact(s) cannot determine '
-                       f'{len(specs)} parameters')
+        raise FitError(
+            f'{len(problem.windows)} usable impact(s) cannot determine {len(specs)} parameters'
+        )
 
     def to_values(u):
         return np.array([p.from_unit(x) for p, x in zip(specs, u)])
+
     r0 = problem.residuals(start)
-    problem.penalty = max(PENALTY, 10 * float(np.sqrt(np.mean(r0 ** 2))))
+    problem.penalty = max(PENALTY, 10 * float(np.sqrt(np.mean(r0**2))))
     u_start = np.array([p.to_unit(p.start) for p in specs])
     n_global = options.global_points or 6 + 4 * len(specs)
     candidates = [u_start] + list(0.02 + 0.96 * _halton(n_global, len(specs)))
@@ -665,18 +726,29 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
     from scipy.optimize import least_squares
 
     def local(u0):
-        sol = least_squares(lambda u: problem.residuals(to_values(u)), u0,
-                            bounds=(0.0, 1.0), diff_step=1e-5, x_scale=0.1,
-                            max_nfev=options.max_nfev * len(specs), xtol=1e-10, ftol=1e-12)
+        sol = least_squares(
+            lambda u: problem.residuals(to_values(u)),
+            u0,
+            bounds=(0.0, 1.0),
+            diff_step=1e-5,
+            x_scale=0.1,
+            max_nfev=options.max_nfev * len(specs),
+            xtol=1e-10,
+            ftol=1e-12,
+        )
         return 2 * sol.cost, sol.x
+
     order = np.argsort(costs)
     best = None
-    for s, idx in enumerate(order[:options.starts]):
+    for s, idx in enumerate(order[: options.starts]):
         cost, u = local(candidates[idx])
         if best is None or cost < best[0]:
             best = (cost, u)
-        say(f'local search {s + 1}/{options.starts}  chi2 {cost:.4g}',
-            len(candidates) + s + 1, total)
+        say(
+            f'local search {s + 1}/{options.starts}  chi2 {cost:.4g}',
+            len(candidates) + s + 1,
+            total,
+        )
     # the full covariance (pre-impact uncertainty through the impact map) is linearised
     # where the model is right: at the optimum, then refined from there, until it settles
     for rounds in range(3):
@@ -684,8 +756,10 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
         cost, u = local(best[1])
         moved = np.max(np.abs(u - best[1]))
         best = (cost, u)
-        say(f'refinement {rounds + 1} at the optimum: chi2 {cost:.4g} over '
-            f'{len(problem.residuals(to_values(u)))} values')
+        say(
+            f'refinement {rounds + 1} at the optimum: chi2 {cost:.4g} over '
+            f'{len(problem.residuals(to_values(u)))} values'
+        )
         if moved < 1e-4:
             break
     u_best = best[1]
@@ -693,8 +767,18 @@ def fit(recording: JointRecording, scene, bounds: dict, options: FitOptions | No
     problem.best = values
     preds = problem.predict(values)
     start_preds = problem.predict(start)
-    return _result(problem, specs, values, u_best, preds, start_preds, noise, notes,
-                   recording, time.perf_counter() - wall0)
+    return _result(
+        problem,
+        specs,
+        values,
+        u_best,
+        preds,
+        start_preds,
+        noise,
+        notes,
+        recording,
+        time.perf_counter() - wall0,
+    )
 
 
 def _jacobian(problem, specs, values):
@@ -715,13 +799,16 @@ def _jacobian(problem, specs, values):
 
 def _result(problem, specs, values, u_best, preds, start_preds, noise, notes, recording, wall):
     from scipy.stats import chi2 as chi2_dist
+
     failing = [i for i, p in enumerate(preds) if p.error]
     if failing and len(failing) <= len(preds) // 3:
         # a few impacts the optimum cannot replay (typically a second contact on the edge of
         # happening, which the recording just missed): left out, said so
         for i in reversed(failing):
-            notes.append(f'impact at t = {problem.windows[i].t_c:.4f} s left out at the '
-                         f'optimum: {preds[i].error}')
+            notes.append(
+                f'impact at t = {problem.windows[i].t_c:.4f} s left out at the '
+                f'optimum: {preds[i].error}'
+            )
             for seq in (problem.windows, problem.whiten, preds, start_preds):
                 del seq[i]
     r = problem.residuals(values, preds)
@@ -733,10 +820,10 @@ def _result(problem, specs, values, u_best, preds, start_preds, noise, notes, re
     tiny = s <= (s.max() if s.size else 0.0) * 1e-8
     keep = ~tiny
     cov = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
-    if tiny.any():   # directions the data do not constrain: infinite variance along them
+    if tiny.any():  # directions the data do not constrain: infinite variance along them
         loose = np.abs(Vt[tiny]).max(axis=0) > 1e-3
         cov[np.ix_(loose, loose)] = np.inf
-    cov = cov * max(1.0, red)        # a fit worse than its noise widens its own intervals
+    cov = cov * max(1.0, red)  # a fit worse than its noise widens its own intervals
     sigma = np.sqrt(np.abs(np.diag(cov)))
     params, corr_out = {}, {}
     d = np.where(np.isfinite(sigma) & (sigma > 0), sigma, np.nan)
@@ -750,10 +837,15 @@ def _result(problem, specs, values, u_best, preds, start_preds, noise, notes, re
         span = (math.log(p.hi) - math.log(p.lo)) if p.log else (p.hi - p.lo)
         identifiable = bool(np.isfinite(sigma[i]) and 2 * 1.96 * sigma[i] < 0.5 * span)
         at_bound = u_best[i] < 1e-3 or u_best[i] > 1 - 1e-3
-        params[p.key] = {'value': float(values[i]), 'ci95': [float(ci[0]), float(ci[1])],
-                         'identifiable': identifiable, 'start': p.start,
-                         'bounds': [p.lo, p.hi], 'sigma_native': float(sigma[i]),
-                         'at_bound': bool(at_bound)}
+        params[p.key] = {
+            'value': float(values[i]),
+            'ci95': [float(ci[0]), float(ci[1])],
+            'identifiable': identifiable,
+            'start': p.start,
+            'bounds': [p.lo, p.hi],
+            'sigma_native': float(sigma[i]),
+            'at_bound': bool(at_bound),
+        }
         for j in range(i + 1, len(specs)):
             rho = float(corr[i, j]) if np.isfinite(corr[i, j]) else math.nan
             corr_out[f'{p.key} ~ {specs[j].key}'] = rho
@@ -769,20 +861,45 @@ def _result(problem, specs, values, u_best, preds, start_preds, noise, notes, re
     verdict = 'fits'
     failed = [x for x in per_impact if x.get('error')]
     if failed:
-        verdict = (f'does not fit: the fitted scene reproduces no contact at {len(failed)} of '
-                   f'{len(per_impact)} impacts ({failed[0]["error"]})')
+        verdict = (
+            f'does not fit: the fitted scene reproduces no contact at {len(failed)} of '
+            f'{len(per_impact)} impacts ({failed[0]["error"]})'
+        )
     elif p_value < 1e-3 and math.sqrt(red) > 1.5:
         verdict = 'does not fit: ' + _why(problem, per_impact, params, red, dof)
-    return FitResult(params, verdict, residual_rms, noise_rms, chi2, dof, len(problem.windows),
-                     per_impact, noise.as_dict(), corr_out, pairs, notes, problem.evaluations,
-                     wall, problem.use_wrench,
-                     {p.key: float(v) for p, v in zip(specs, values)}, problem.windows, preds,
-                     start_preds, recording, timing=problem.timing, problem=problem)
+    return FitResult(
+        params,
+        verdict,
+        residual_rms,
+        noise_rms,
+        chi2,
+        dof,
+        len(problem.windows),
+        per_impact,
+        noise.as_dict(),
+        corr_out,
+        pairs,
+        notes,
+        problem.evaluations,
+        wall,
+        problem.use_wrench,
+        {p.key: float(v) for p, v in zip(specs, values)},
+        problem.windows,
+        preds,
+        start_preds,
+        recording,
+        timing=problem.timing,
+        problem=problem,
+    )
 
 
 def _why(problem, per_impact, params, red, dof) -> str:
-    parts = [(f'residuals {math.sqrt(red):.1f}x the noise (chi2/dof = {red:.3g} over {dof} '
-             f'degrees of freedom)')]
+    parts = [
+        (
+            f'residuals {math.sqrt(red):.1f}x the noise (chi2/dof = {red:.3g} over {dof} '
+            f'degrees of freedom)'
+        )
+    ]
     with_wrench = [x for x in per_impact if 'residual_impulse' in x]
     if with_wrench:
         rate = np.mean([np.sum(np.square(x['whitened'][:-2])) for x in with_wrench])
@@ -793,8 +910,10 @@ def _why(problem, per_impact, params, red, dof) -> str:
         parts.append(f'{", ".join(bounded)} at a bound')
     cors = [x['cor_recorded'] - x['cor_fitted'] for x in per_impact]
     if cors and abs(np.mean(cors)) > 2 * (np.std(cors) / math.sqrt(len(cors)) + 1e-12):
-        parts.append(f'recorded CoR {"above" if np.mean(cors) > 0 else "below"} the fitted by '
-                     f'{abs(np.mean(cors)):.3f} on average')
+        parts.append(
+            f'recorded CoR {"above" if np.mean(cors) > 0 else "below"} the fitted by '
+            f'{abs(np.mean(cors)):.3f} on average'
+        )
     parts.append('the contact law or a fixed parameter does not match the arm')
     return '; '.join(parts)
 
@@ -802,13 +921,17 @@ def _why(problem, per_impact, params, red, dof) -> str:
 def _per_impact(problem, preds, start_preds):
     out, raw, sd = [], [], []
     n = problem.windows[0].effort.shape[1] if problem.windows else 0
-    model = problem.model(problem.best)   # the fitted scene's free flight and kinematics
+    model = problem.model(problem.best)  # the fitted scene's free flight and kinematics
     for w, L, p, p0 in zip(problem.windows, problem.whiten, preds, start_preds):
         T = joint_to_absolute_matrix(n)
         q, qd_pre, _ = w.pre.state(w.t_c)
         v_in = tip_normal_speed(model, T @ q, T @ qd_pre)
-        row = {'t': w.t_c, 'impact_speed': -v_in, 'qd_before': qd_pre.tolist(),
-               'qd_after_recorded': w.post_qd[0].tolist()}
+        row = {
+            't': w.t_c,
+            'impact_speed': -v_in,
+            'qd_before': qd_pre.tolist(),
+            'qd_after_recorded': w.post_qd[0].tolist(),
+        }
         if w.impulse is not None:
             row['impulse_recorded'] = w.impulse.tolist()
         if p.error:
@@ -818,16 +941,22 @@ def _per_impact(problem, preds, start_preds):
         rec = problem.recorded(w)
         diff = problem.outputs(p, w) - rec
         m = len(w.post_t)
-        row.update({'qd_after_fitted': p.qd[0].tolist(), 'qd_separation': p.qd_sep.tolist(),
-                    'impulse_fitted': p.impulse.tolist(),
-                    'cor_recorded': recorded_cor(model, w, p, problem.timing, v_in),
-                    'cor_fitted': -p.v_out / p.v_in if p.v_in else math.nan,
-                    'cor_start': -p0.v_out / p0.v_in if p0.v_in and not p0.error else math.nan,
-                    'residual_rates': diff[:m * n].reshape(m, n).tolist(),
-                    'whitened': (L @ diff).tolist(), 'contacts': p.contacts})
+        row.update(
+            {
+                'qd_after_fitted': p.qd[0].tolist(),
+                'qd_separation': p.qd_sep.tolist(),
+                'impulse_fitted': p.impulse.tolist(),
+                'cor_recorded': recorded_cor(model, w, p, problem.timing, v_in),
+                'cor_fitted': -p.v_out / p.v_in if p.v_in else math.nan,
+                'cor_start': -p0.v_out / p0.v_in if p0.v_in and not p0.error else math.nan,
+                'residual_rates': diff[: m * n].reshape(m, n).tolist(),
+                'whitened': (L @ diff).tolist(),
+                'contacts': p.contacts,
+            }
+        )
         if problem.wrench_at(w):
-            row['residual_impulse'] = diff[m * n:].tolist()
-        raw.extend(diff[:m * n].tolist())
-        sd.extend(w.sigma[:m * n].tolist())
+            row['residual_impulse'] = diff[m * n :].tolist()
+        raw.extend(diff[: m * n].tolist())
+        sd.extend(w.sigma[: m * n].tolist())
         out.append(row)
     return out, raw, sd

@@ -7,6 +7,7 @@ before and just after the contact follow with their uncertainty. ``core/fit.py``
 scene to reproduce the step. Everything here is plain numpy in joint space (relative angles,
 as drivers publish them).
 """
+
 from __future__ import annotations
 
 import math
@@ -23,15 +24,15 @@ class IdentifyError(ImpactArmError):
 
 @dataclass
 class JointRecording:
-    t: np.ndarray                 # [s] from the first sample (stamps of any clock)
-    position: np.ndarray          # (N, n) joint angles [rad], relative convention
-    velocity: np.ndarray          # (N, n) joint rates [rad/s]
-    effort: np.ndarray            # (N, n) joint torques [N m]
-    wrench_t: np.ndarray | None = None   # [s] same origin as t
-    wrench: np.ndarray | None = None     # (M, 2): tangential, normal force [N], period-averaged
+    t: np.ndarray  # [s] from the first sample (stamps of any clock)
+    position: np.ndarray  # (N, n) joint angles [rad], relative convention
+    velocity: np.ndarray  # (N, n) joint rates [rad/s]
+    effort: np.ndarray  # (N, n) joint torques [N m]
+    wrench_t: np.ndarray | None = None  # [s] same origin as t
+    wrench: np.ndarray | None = None  # (M, 2): tangential, normal force [N], period-averaged
     joints: list = field(default_factory=list)
     source: str = ''
-    t0_ns: int = 0                # stamp of the first sample
+    t0_ns: int = 0  # stamp of the first sample
     notes: list = field(default_factory=list)
 
     @property
@@ -45,14 +46,17 @@ class JointRecording:
 
 @dataclass
 class Noise:
-    position: np.ndarray          # per joint [rad]
-    velocity: np.ndarray          # per joint [rad/s]
-    effort: np.ndarray            # per joint [N m]
-    wrench: np.ndarray | None     # tangential, normal [N]
+    position: np.ndarray  # per joint [rad]
+    velocity: np.ndarray  # per joint [rad/s]
+    effort: np.ndarray  # per joint [N m]
+    wrench: np.ndarray | None  # tangential, normal [N]
 
     def as_dict(self) -> dict:
-        out = {'position': self.position.tolist(), 'velocity': self.velocity.tolist(),
-               'effort': self.effort.tolist()}
+        out = {
+            'position': self.position.tolist(),
+            'velocity': self.velocity.tolist(),
+            'effort': self.effort.tolist(),
+        }
         if self.wrench is not None:
             out['wrench'] = self.wrench.tolist()
         return out
@@ -90,7 +94,7 @@ class LocalFit:
     def _rows(self, t):
         tau = (t - self.t_ref) / self.scale
         p = np.arange(self.DEGREE + 1)
-        v = tau ** p
+        v = tau**p
         d = np.zeros_like(v)
         d[1:] = p[1:] * tau ** (p[1:] - 1) / self.scale
         return v, d
@@ -114,6 +118,7 @@ class ImpactWindow:
     """One impact seen in the recording: the last sample before (index a), the first after
     (b), the contact time t_c where the two sides' positions meet, the fits of both sides,
     the effort held before, and the wrench impulse when a wrench was recorded."""
+
     index: int
     a: int
     b: int
@@ -122,11 +127,11 @@ class ImpactWindow:
     t_c: float
     pre: LocalFit
     post: LocalFit
-    effort: np.ndarray                      # (a-1, a, ..., b, ... b+m) efforts [N m]
-    effort_t: np.ndarray                    # their times
-    post_t: np.ndarray                      # first m samples after the impact
-    post_qd: np.ndarray                     # their rates (m, n)
-    impulse: np.ndarray | None = None       # (tangential, normal) [N s]
+    effort: np.ndarray  # (a-1, a, ..., b, ... b+m) efforts [N m]
+    effort_t: np.ndarray  # their times
+    post_t: np.ndarray  # first m samples after the impact
+    post_qd: np.ndarray  # their rates (m, n)
+    impulse: np.ndarray | None = None  # (tangential, normal) [N s]
     impulse_var: np.ndarray | None = None
 
     def jump(self):
@@ -139,12 +144,12 @@ def _window_noise(t, y, starts, length):
     corrected for the median of a chi-square (robust to the odd window with a kink)."""
     variances = []
     for s in starts:
-        tt = t[s:s + length]
+        tt = t[s : s + length]
         tau = (tt - tt[0]) / max(np.ptp(tt), 1e-9)
         V = tau[:, None] ** np.arange(4)
-        coef, *_ = np.linalg.lstsq(V, y[s:s + length], rcond=None)
-        r = y[s:s + length] - V @ coef
-        variances.append(np.sum(r ** 2, axis=0) / (length - 4))
+        coef, *_ = np.linalg.lstsq(V, y[s : s + length], rcond=None)
+        r = y[s : s + length] - V @ coef
+        variances.append(np.sum(r**2, axis=0) / (length - 4))
     if not variances:
         return None
     dof = length - 4
@@ -175,12 +180,12 @@ def rate_steps(rec: JointRecording):
     scale = 1.4826 * np.median(dev, axis=0)
     scale = np.where(scale > 0, scale, max(float(np.max(scale)), 1e-12))
     c0s, c1s = c0 / scale, c1 / scale
-    denom = np.sum(c1s ** 2, axis=1)
+    denom = np.sum(c1s**2, axis=1)
     s = np.where(denom > 0, -np.sum(c0s * c1s, axis=1) / np.where(denom > 0, denom, 1.0), 0.0)
     s = np.clip(s, 0.0, (tb - ta))
     gap = c0s + c1s * s[:, None]
     z = np.zeros(len(t) - 1)
-    z[2:-2] = np.sqrt(np.sum(gap ** 2, axis=1))
+    z[2:-2] = np.sqrt(np.sum(gap**2, axis=1))
     step = np.zeros((len(t) - 1, v.shape[1]))
     step[2:-2] = raw_step
     return z, step
@@ -193,11 +198,13 @@ def find_impacts(rec: JointRecording, z_min: float = 30.0, is_contact=None) -> l
     qd_after)`` (joint space) may reject steps that cannot be contacts (a controller switching
     its target far from any surface makes a torque step, which can look alike at 1 kHz)."""
     if rec.velocity is None:
-        raise IdentifyError('the joint states carry no rates (velocity): impacts are found and '
-                            'fitted from the joint rates')
+        raise IdentifyError(
+            'the joint states carry no rates (velocity): impacts are found and '
+            'fitted from the joint rates'
+        )
     z, _ = rate_steps(rec)
-    rec.step_z = z          # kept: make_window stops its comparison at a further contact
-    candidates = np.flatnonzero(z > z_min)                # gap k lies after sample k
+    rec.step_z = z  # kept: make_window stops its comparison at a further contact
+    candidates = np.flatnonzero(z > z_min)  # gap k lies after sample k
     gaps = []
     for k in candidates:
         if gaps and k - gaps[-1][-1] <= 3:
@@ -221,12 +228,14 @@ def estimate_noise(rec: JointRecording, impacts, window: int = 15) -> Noise:
     N = len(rec.t)
     free = np.ones(N, bool)
     for a in impacts:
-        free[max(0, a - window):a + window + 2] = False
-    starts = [s for s in range(0, N - window, window) if free[s:s + window].all()]
+        free[max(0, a - window) : a + window + 2] = False
+    starts = [s for s in range(0, N - window, window) if free[s : s + window].all()]
     if len(starts) < 3:
-        raise IdentifyError(f'{len(starts)} free-flight windows of {window} samples between the '
-                            f'impacts: too few to estimate the sensor noise (record longer or '
-                            f'at a higher rate)')
+        raise IdentifyError(
+            f'{len(starts)} free-flight windows of {window} samples between the '
+            f'impacts: too few to estimate the sensor noise (record longer or '
+            f'at a higher rate)'
+        )
     # noise-free input (a simulation): floors far below any sensor keep the weights finite
     floor = 1e-12
     sq = np.maximum(_window_noise(rec.t, rec.position, starts, window), 1e-10)
@@ -239,8 +248,11 @@ def estimate_noise(rec: JointRecording, impacts, window: int = 15) -> Noise:
         for a in impacts:
             near |= np.abs(rec.wrench_t - rec.t[a]) < window * rec.period
         idx = np.flatnonzero(~near)
-        w_starts = [idx[i] for i in range(0, len(idx) - window, window)
-                    if idx[i + window - 1] - idx[i] == window - 1]
+        w_starts = [
+            idx[i]
+            for i in range(0, len(idx) - window, window)
+            if idx[i + window - 1] - idx[i] == window - 1
+        ]
         if len(w_starts) >= 3:
             sw = np.maximum(_window_noise(rec.wrench_t, rec.wrench, w_starts, window), floor)
     return Noise(sq, sqd, se, sw)
@@ -257,8 +269,15 @@ def _contact_time(pre: LocalFit, post: LocalFit, t_a, t_b, sigma_q):
     return float(fine[int(np.argmin(miss))])
 
 
-def impact_windows(rec: JointRecording, noise: Noise, impacts, window: int = 15,
-                   min_samples: int = 5, max_gap: float = 5.0, post_samples: int = 3):
+def impact_windows(
+    rec: JointRecording,
+    noise: Noise,
+    impacts,
+    window: int = 15,
+    min_samples: int = 5,
+    max_gap: float = 5.0,
+    post_samples: int = 3,
+):
     """An ``ImpactWindow`` per usable impact and a note per impact left out (too few free
     samples between impacts, a gap of more than ``max_gap`` periods across the contact)."""
     out, notes = [], []
@@ -266,8 +285,9 @@ def impact_windows(rec: JointRecording, noise: Noise, impacts, window: int = 15,
     for i, a in enumerate(impacts):
         lo = impacts[i - 1] + 1 if i else 0
         hi = impacts[i + 1] if i + 1 < len(impacts) else N - 1
-        win, why = make_window(rec, noise, a, a + 1, lo, hi, window, min_samples, max_gap,
-                               post_samples)
+        win, why = make_window(
+            rec, noise, a, a + 1, lo, hi, window, min_samples, max_gap, post_samples
+        )
         if win is None:
             notes.append(f'impact at t = {rec.t[a]:.4f} s left out: {why}')
             continue
@@ -276,16 +296,17 @@ def impact_windows(rec: JointRecording, noise: Noise, impacts, window: int = 15,
     return out, notes
 
 
-def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
-                post_samples=3):
+def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0, post_samples=3):
     """(ImpactWindow, '') for an impact between samples a and b (free samples from lo to
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
     given to the impact on that side, for a contact that spans a sample."""
     N, dt = len(rec.t), rec.period
+
     def off(k):
         return bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))
+
     while b < min(hi, a + 4) and off(b) and not off(a):
-        b += 1          # actuators off at b while driven before: b was taken in the contact
+        b += 1  # actuators off at b while driven before: b was taken in the contact
     v = rec.velocity
     while b < min(hi - 1, a + 4):
         # the step still going on after b in its own direction (by more than a tenth of
@@ -300,33 +321,55 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     if rec.t[b] - rec.t[a] > max_gap * dt:
         return None, f'{rec.t[b] - rec.t[a]:.4g} s without samples across it'
     if len(pre_idx) < min_samples or len(post_idx) < max(min_samples, post_samples + 1):
-        return None, (f'{min(len(pre_idx), len(post_idx))} free samples on one side (another '
-                      f'impact or the end of the recording too close)')
+        return None, (
+            f'{min(len(pre_idx), len(post_idx))} free samples on one side (another '
+            f'impact or the end of the recording too close)'
+        )
     if len(pre_idx) > min_samples and _contact_under_way(rec, noise, pre_idx, b):
         # the contact began before sample a: it is no free-flight sample
-        return make_window(rec, noise, a - 1, b, lo, hi, window, min_samples, max_gap,
-                           post_samples)
-    fits = [LocalFit(rec.t[idx], rec.position[idx], rec.velocity[idx], rec.t[ref],
-                     noise.position, noise.velocity)
-            for idx, ref in ((pre_idx, a), (post_idx, b))]
+        return make_window(rec, noise, a - 1, b, lo, hi, window, min_samples, max_gap, post_samples)
+    fits = [
+        LocalFit(
+            rec.t[idx],
+            rec.position[idx],
+            rec.velocity[idx],
+            rec.t[ref],
+            noise.position,
+            noise.velocity,
+        )
+        for idx, ref in ((pre_idx, a), (post_idx, b))
+    ]
     t_c = _contact_time(*fits, rec.t[a], rec.t[b], noise.position)
-    compare = post_idx[:_before_next_contact(rec, noise, post_idx[:post_samples])]
+    compare = post_idx[: _before_next_contact(rec, noise, post_idx[:post_samples])]
     # efforts from the sample before a to the one after the last compared sample, including
     # any taken during the contact (between a and b)
     e_idx = np.concatenate([[max(a - 1, 0)], np.arange(a, min(compare[-1] + 2, N))])
-    win = ImpactWindow(0, a, b, float(rec.t[a]), float(rec.t[b]), t_c, *fits,
-                       effort=rec.effort[e_idx].copy(), effort_t=rec.t[e_idx].copy(),
-                       post_t=rec.t[compare].copy(), post_qd=rec.velocity[compare].copy())
+    win = ImpactWindow(
+        0,
+        a,
+        b,
+        float(rec.t[a]),
+        float(rec.t[b]),
+        t_c,
+        *fits,
+        effort=rec.effort[e_idx].copy(),
+        effort_t=rec.t[e_idx].copy(),
+        post_t=rec.t[compare].copy(),
+        post_qd=rec.velocity[compare].copy(),
+    )
     win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
     # samples during the contact whose torque is zero within the noise: actuators off
-    win.effort_off = [bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12))
-                      for k in range(len(e_idx))]
+    win.effort_off = [
+        bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12)) for k in range(len(e_idx))
+    ]
     _add_impulse(rec, noise, win)
 
     def widened(side):
         a2, b2 = (a - 1, b) if side == 'pre' else (a, b + 1)
-        return make_window(rec, noise, a2, b2, lo, hi, window, min_samples, max_gap,
-                           post_samples)[0]
+        return make_window(rec, noise, a2, b2, lo, hi, window, min_samples, max_gap, post_samples)[
+            0
+        ]
+
     win.widened = widened
     return win, ''
 
@@ -342,8 +385,9 @@ def _before_next_contact(rec, noise, idx, z_min=30.0) -> int:
             return count
         # a joint torque of zero (within the noise) between driven samples: actuators off,
         # as they are in a contact
-        if np.all(np.abs(rec.effort[j]) < 6 * noise.effort + 1e-12) and \
-                np.any(np.abs(rec.effort[idx[0]]) > 6 * noise.effort + 1e-12):
+        if np.all(np.abs(rec.effort[j]) < 6 * noise.effort + 1e-12) and np.any(
+            np.abs(rec.effort[idx[0]]) > 6 * noise.effort + 1e-12
+        ):
             return count
         if rec.wrench is not None and noise.wrench is not None:
             near = (rec.wrench_t > rec.t[j - 1] + 0.5 * dt) & (rec.wrench_t <= rec.t[j] + 0.5 * dt)
@@ -358,11 +402,17 @@ def _contact_under_way(rec, noise, pre_idx, b, limit=6.0) -> bool:
     step across the impact: noise-free data leave only the cubic's own error): a contact
     already under way."""
     head, last = pre_idx[:-1], pre_idx[-1]
-    fit = LocalFit(rec.t[head], rec.position[head], rec.velocity[head], rec.t[head[-1]],
-                   noise.position, noise.velocity)
+    fit = LocalFit(
+        rec.t[head],
+        rec.position[head],
+        rec.velocity[head],
+        rec.t[head[-1]],
+        noise.position,
+        noise.velocity,
+    )
     _, qd, cov = fit.state(rec.t[last])
     n = rec.n
-    sd = np.sqrt(np.diag(cov)[n:] + noise.velocity ** 2)
+    sd = np.sqrt(np.diag(cov)[n:] + noise.velocity**2)
     floor = 1e-3 * float(np.max(np.abs(rec.velocity[b] - rec.velocity[last])))
     return bool(np.any(np.abs(rec.velocity[last] - qd) > np.maximum(limit * sd, floor)))
 

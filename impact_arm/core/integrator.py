@@ -17,6 +17,7 @@ The stepping loop and the phase machine's transitions are the compiled kernel in
 ``core/kernel/`` (appended to each scene shape's generated module): an impact's four
 switches cost no return to Python. This wrapper turns the kernel's event log into ``Event``s.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,8 +33,9 @@ from .model import ArmModel, ArmState, Phase
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.
 # (the contract's INTEGRATOR_PRESETS, in that order: reference, accurate, balanced, fast)
-PRESETS = dict(zip(INTEGRATOR_PRESETS, ((1e-12, 1e-14), (1e-10, 1e-12), (1e-8, 1e-10),
-                                        (1e-5, 1e-8))))
+PRESETS = dict(
+    zip(INTEGRATOR_PRESETS, ((1e-12, 1e-14), (1e-10, 1e-12), (1e-8, 1e-10), (1e-5, 1e-8)))
+)
 # A preset's own contact-phase rtol, where it differs from its rtol. At rtol 1e-5 the free
 # flight is bound by stability, not accuracy, and the impacts' error came from the contact
 # phases (δm, e 2-3e-5 over the 15 impacts, the motion 1e-6): 3e-7 there costs 3 % more
@@ -51,17 +53,23 @@ def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None
     scene's rtol/atol/contact_rtol overrides) or tolerances of its own. The scene's step method
     and max_step always apply."""
     scene_tolerances = preset is None and rtol is None and atol is None
-    return {'preset': preset or spec.preset,
-            'rtol': rtol if rtol is not None else spec.rtol if scene_tolerances else None,
-            'atol': atol if atol is not None else spec.atol if scene_tolerances else None,
-            'contact_rtol': contact_rtol if contact_rtol is not None
-            else spec.contact_rtol if scene_tolerances else None,
-            'max_step': spec.max_step, 'method': spec.method}
+    return {
+        'preset': preset or spec.preset,
+        'rtol': rtol if rtol is not None else spec.rtol if scene_tolerances else None,
+        'atol': atol if atol is not None else spec.atol if scene_tolerances else None,
+        'contact_rtol': contact_rtol
+        if contact_rtol is not None
+        else spec.contact_rtol
+        if scene_tolerances
+        else None,
+        'max_step': spec.max_step,
+        'method': spec.method,
+    }
 
 
 @dataclass
 class Event:
-    kind: EventKind      # contact | yield | max_compression | separation | switch
+    kind: EventKind  # contact | yield | max_compression | separation | switch
     t: float
     surface: int
     y: np.ndarray
@@ -77,27 +85,39 @@ class Stats:
 
 
 TRACE_CAPACITY = 4096
-OUTPUT_CAPACITY = 4096     # output rows per kernel call (advance splits longer spans)
-EVENT_LOG_CAPACITY = 64    # events one kernel call crosses before Python reads them
+OUTPUT_CAPACITY = 4096  # output rows per kernel call (advance splits longer spans)
+EVENT_LOG_CAPACITY = 64  # events one kernel call crosses before Python reads them
 # A kernel call returns after this many steps (tens of ms), so Ctrl-C and the run budget are
 # honoured while it integrates. The budget allows a burst plus a mean step of 5 us: the
 # article's scene takes ~6 000 steps per simulated second at the reference preset.
 STEPS_PER_CALL = 20_000
 MIN_STEP_BUDGET = 500_000
 STEPS_PER_SIMULATED_SECOND = 200_000
-_KINDS = {layout.EV_SWITCH: EventKind.SWITCH, layout.EV_YIELD: EventKind.YIELD,
-          layout.EV_MAX: EventKind.MAX_COMPRESSION, layout.EV_SEP: EventKind.SEPARATION}
-KIND_BITS = {EventKind.CONTACT: layout.KIND_BIT_CONTACT,
-             **{kind: 1 << (1 + slot) for slot, kind in _KINDS.items()}}
+_KINDS = {
+    layout.EV_SWITCH: EventKind.SWITCH,
+    layout.EV_YIELD: EventKind.YIELD,
+    layout.EV_MAX: EventKind.MAX_COMPRESSION,
+    layout.EV_SEP: EventKind.SEPARATION,
+}
+KIND_BITS = {
+    EventKind.CONTACT: layout.KIND_BIT_CONTACT,
+    **{kind: 1 << (1 + slot) for slot, kind in _KINDS.items()},
+}
 ALL_KINDS_MASK = sum(KIND_BITS.values())
-_LAWS = {'held': layout.LAW_HELD, 'q': layout.LAW_Q, 'pid': layout.LAW_PID,
-         'pd': layout.LAW_PID, 'none': layout.LAW_NONE}
+_LAWS = {
+    'held': layout.LAW_HELD,
+    'q': layout.LAW_Q,
+    'pid': layout.LAW_PID,
+    'pd': layout.LAW_PID,
+    'none': layout.LAW_NONE,
+}
 
 
 def _numba_type(value):
     """numba's type of a kernel argument, built directly: ``numba.typeof`` of an array imports
     numpy.ma (13 ms of a fresh process) to rule out masked arrays."""
     from numba import types
+
     if isinstance(value, np.ndarray):
         dtype = types.int64 if value.dtype == np.int64 else types.float64
         return types.Array(dtype, value.ndim, 'C')
@@ -112,9 +132,17 @@ def scratch_arrays(model):
     size, n = model.size, model.n
     events = model.surface_table.shape[0] + 4
     vectors = [np.zeros(size) for _ in range(6)]
-    return (*vectors, np.zeros((5, size)), np.zeros(model.eq.SCRATCH), np.zeros(events),
-            np.zeros(events), np.zeros(events), np.zeros((2 * size + 2, size)), np.zeros(size),
-            np.zeros(4 * n + n * n))
+    return (
+        *vectors,
+        np.zeros((5, size)),
+        np.zeros(model.eq.SCRATCH),
+        np.zeros(events),
+        np.zeros(events),
+        np.zeros(events),
+        np.zeros((2 * size + 2, size)),
+        np.zeros(size),
+        np.zeros(4 * n + n * n),
+    )
 
 
 class PhaseIntegrator:
@@ -126,9 +154,20 @@ class PhaseIntegrator:
     The stepping itself runs in the compiled kernel of the model's generated module.
     """
 
-    def __init__(self, model: ArmModel, state: ArmState | None = None, *, preset='balanced',
-                 rtol=None, atol=None, max_step=None, control='continuous', trace=False,
-                 method='dopri5', contact_rtol=None):
+    def __init__(
+        self,
+        model: ArmModel,
+        state: ArmState | None = None,
+        *,
+        preset='balanced',
+        rtol=None,
+        atol=None,
+        max_step=None,
+        control='continuous',
+        trace=False,
+        method='dopri5',
+        contact_rtol=None,
+    ):
         if preset not in PRESETS:
             raise ValueError(f'integrator preset {preset!r}: choose one of {", ".join(PRESETS)}')
         if control not in ('continuous', 'held'):
@@ -140,7 +179,7 @@ class PhaseIntegrator:
         self.state = state or model.initial_state()
         self.rtol, self.atol = PRESETS[preset]
         if contact_rtol is None and rtol is None and atol is None:
-            contact_rtol = PRESET_CONTACT_RTOL.get(preset)   # the preset's, as a whole
+            contact_rtol = PRESET_CONTACT_RTOL.get(preset)  # the preset's, as a whole
         self.rtol = rtol if rtol is not None else self.rtol
         self.atol = atol if atol is not None else self.atol
         self.max_step = max_step if max_step is not None else math.inf
@@ -155,14 +194,21 @@ class PhaseIntegrator:
             raise ValueError(f'contact_rtol = {contact_rtol:g}: allowed 1e-14 ... 0.1')
         self.contact_rtol = contact_rtol if contact_rtol is not None else self.rtol
         self.contact_atol = self.atol * self.contact_rtol / self.rtol
-        self._P = model.parameters(self.rtol, self.atol, self.max_step, self.contact_rtol,
-                                   self.contact_atol)
-        self._I = np.array([_LAWS['held' if control == 'held' else spec.law],
-                            1 if spec.space == 'joint' else 0,
-                            1 if model.scene.actuators_during_contact else 0,
-                            1 if trace else 0, METHODS[method]], dtype=np.int64)
-        self._stats = np.zeros(3, dtype=np.int64)     # rhs evaluations, steps, rejected
-        self._T = np.zeros(3)                   # t, next step size (0: choose), f stale flag
+        self._P = model.parameters(
+            self.rtol, self.atol, self.max_step, self.contact_rtol, self.contact_atol
+        )
+        self._I = np.array(
+            [
+                _LAWS['held' if control == 'held' else spec.law],
+                1 if spec.space == 'joint' else 0,
+                1 if model.scene.actuators_during_contact else 0,
+                1 if trace else 0,
+                METHODS[method],
+            ],
+            dtype=np.int64,
+        )
+        self._stats = np.zeros(3, dtype=np.int64)  # rhs evaluations, steps, rejected
+        self._T = np.zeros(3)  # t, next step size (0: choose), f stale flag
         self._f = np.zeros(model.size)
         self._f_valid = False
         self._h = 0.0
@@ -171,12 +217,12 @@ class PhaseIntegrator:
         # each run of a study)
         self._trace_buffer = np.zeros((TRACE_CAPACITY if trace else 1, model.eq.TR_SIZE))
         self._trace_count = np.zeros(1, dtype=np.int64)
-        self._ev = np.zeros(4, dtype=np.int64)      # layout.EV_*: slot, logged, stop mask, steps
+        self._ev = np.zeros(4, dtype=np.int64)  # layout.EV_*: slot, logged, stop mask, steps
         self._ev[layout.EV_STEPS] = STEPS_PER_CALL
         self._evlog = np.zeros((EVENT_LOG_CAPACITY, layout.E_Y + model.size))
         self._W = np.zeros(model.eq.SCRATCH)
         self._scratch = scratch_arrays(model)
-        self._O = np.zeros(3)                   # next output index k, period dt (0: off), rows
+        self._O = np.zeros(3)  # next output index k, period dt (0: off), rows
         self._out = np.zeros((1, self.output_width))
         self._output = []
         self._output_sink = None
@@ -188,15 +234,34 @@ class PhaseIntegrator:
         step, so that timings of the integration do not include it; returns the seconds it
         took in this process (0 once loaded). Without numba: 0."""
         from . import jit
+
         eq = self.model.eq
         if not jit.AVAILABLE or eq.advance.overloads:
             return 0.0
         import time
+
         t0 = time.perf_counter()
         st = self.state
-        args = (self._T, 0.0, st.y, self._f, self._P, self._I, self.model.surface_table, st.c,
-                st.levels, st.held, self._stats, self._trace_buffer, self._trace_count,
-                self._ev, self._evlog, self._O, self._out, *self._scratch)
+        args = (
+            self._T,
+            0.0,
+            st.y,
+            self._f,
+            self._P,
+            self._I,
+            self.model.surface_table,
+            st.c,
+            st.levels,
+            st.held,
+            self._stats,
+            self._trace_buffer,
+            self._trace_count,
+            self._ev,
+            self._evlog,
+            self._O,
+            self._out,
+            *self._scratch,
+        )
         eq.advance.compile(tuple(_numba_type(a) for a in args))
         return time.perf_counter() - t0
 
@@ -227,8 +292,7 @@ class PhaseIntegrator:
 
     def take_output(self) -> np.ndarray:
         """The output rows recorded since the last call (one row per grid time, in order)."""
-        rows = np.concatenate(self._output) if self._output else \
-            np.zeros((0, self.output_width))
+        rows = np.concatenate(self._output) if self._output else np.zeros((0, self.output_width))
         self._output = []
         return rows
 
@@ -244,31 +308,49 @@ class PhaseIntegrator:
     @property
     def stats(self):
         s = self._stats
-        return Stats(int(s[layout.ST_RHS]), int(s[layout.ST_STEPS]), int(s[layout.ST_REJECTED]),
-                     self.events)
+        return Stats(
+            int(s[layout.ST_RHS]), int(s[layout.ST_STEPS]), int(s[layout.ST_REJECTED]), self.events
+        )
 
     # --- evaluation helpers (Python side; the kernel has its own compiled copies) ---------
     def rhs(self, t, y):
         out = np.zeros(self.model.size)
         st = self.state
-        self.model.eq.rhs(t, np.asarray(y, float), out, self._P, self._I,
-                          self.model.surface_table, st.c, st.levels, st.held, self._stats,
-                          self._W)
+        self.model.eq.rhs(
+            t,
+            np.asarray(y, float),
+            out,
+            self._P,
+            self._I,
+            self.model.surface_table,
+            st.c,
+            st.levels,
+            st.held,
+            self._stats,
+            self._W,
+        )
         return out
 
     def contact_forces(self, q, qd):
         """(δ, F_n, F_f, ẋ_B, ẏ_B) for the current contact phase."""
         y = np.concatenate([np.asarray(q, float), np.asarray(qd, float)])
         st = self.state
-        return self.model.eq.contact_forces(y, self._P, self.model.surface_table, st.c,
-                                            st.levels)
+        return self.model.eq.contact_forces(y, self._P, self.model.surface_table, st.c, st.levels)
 
     def torque(self):
         """Joint torques acting at the current state, or None when the actuators are off."""
         st = self.state
         tau = np.zeros(self.model.n)
-        acting = self.model.eq.control_torque(st.y, self._P, self._I, st.c, st.held, tau,
-                                              np.zeros(self.model.n), np.zeros(self.model.n))
+        acting = self.model.eq.control_torque(
+            st.y,
+            self._P,
+            self._I,
+            st.c,
+            st.held,
+            tau,
+            np.zeros(self.model.n),
+            np.zeros(self.model.n),
+        )
         return tuple(tau.tolist()) if acting else None
 
     def contact_force_now(self):
@@ -277,7 +359,7 @@ class PhaseIntegrator:
         if st.phase == Phase.FREE:
             return 0.0, 0.0
         n = self.model.n
-        _, fn, ff, _, _ = self.contact_forces(st.y[:n], st.y[n:2 * n])
+        _, fn, ff, _, _ = self.contact_forces(st.y[:n], st.y[n : 2 * n])
         return ff, fn
 
     def take_impulse(self):
@@ -312,8 +394,9 @@ class PhaseIntegrator:
         st = self.state
         surface = slot if slot < len(self.model.surfaces) else st.surface
         values = np.zeros(4)
-        if not self.model.eq.apply_event(slot, st.t, st.y, self._P, self._I,
-                                         self.model.surface_table, st.c, st.levels, values):
+        if not self.model.eq.apply_event(
+            slot, st.t, st.y, self._P, self._I, self.model.surface_table, st.c, st.levels, values
+        ):
             self._raise(layout.ERR_RESIDUAL)
         kind = self._kind(slot)
         return kind, surface, self._info(kind, values.tolist())
@@ -322,12 +405,19 @@ class PhaseIntegrator:
         count = int(self._ev[layout.EV_COUNT])
         if not count:
             return
-        block = self._evlog[:count].copy()      # each event's state: a row of this copy
-        heads = block[:, :layout.E_Y].tolist()  # slot, surface, t, info as Python numbers
-        for head, y in zip(heads, block[:, layout.E_Y:]):
+        block = self._evlog[:count].copy()  # each event's state: a row of this copy
+        heads = block[:, : layout.E_Y].tolist()  # slot, surface, t, info as Python numbers
+        for head, y in zip(heads, block[:, layout.E_Y :]):
             kind = self._kind(int(head[layout.E_SLOT]))
-            events.append(Event(kind, head[layout.E_T], int(head[layout.E_SURF]), y,
-                                self._info(kind, head[layout.E_INFO:])))
+            events.append(
+                Event(
+                    kind,
+                    head[layout.E_T],
+                    int(head[layout.E_SURF]),
+                    y,
+                    self._info(kind, head[layout.E_INFO :]),
+                )
+            )
         self.events += count
         self._ev[layout.EV_COUNT] = 0
 
@@ -351,8 +441,10 @@ class PhaseIntegrator:
         else:
             unknown = set(stop_at_event) - set(KIND_BITS)
             if unknown:
-                raise ValueError(f'stop_at_event: unknown event kind(s) {sorted(unknown)}; '
-                                 f'choose from {", ".join(KIND_BITS)}')
+                raise ValueError(
+                    f'stop_at_event: unknown event kind(s) {sorted(unknown)}; '
+                    f'choose from {", ".join(KIND_BITS)}'
+                )
             mask = sum(KIND_BITS[kind] for kind in set(stop_at_event))
         if mask and self.trace is not None:
             mask |= KIND_BITS['separation']
@@ -363,10 +455,26 @@ class PhaseIntegrator:
             # with output on, no kernel call may pass more grid times than the buffer holds
             k, dt = O[layout.O_NEXT], O[layout.O_DT]
             t_call = min(t_end, (k + OUTPUT_CAPACITY - 1) * dt) if dt > 0 else t_end
-            status = model.eq.advance(self._T, t_call, st.y, self._f, self._P, self._I,
-                                      model.surface_table, st.c, st.levels, st.held,
-                                      self._stats, self._trace_buffer, self._trace_count,
-                                      self._ev, self._evlog, O, self._out, *self._scratch)
+            status = model.eq.advance(
+                self._T,
+                t_call,
+                st.y,
+                self._f,
+                self._P,
+                self._I,
+                model.surface_table,
+                st.c,
+                st.levels,
+                st.held,
+                self._stats,
+                self._trace_buffer,
+                self._trace_count,
+                self._ev,
+                self._evlog,
+                O,
+                self._out,
+                *self._scratch,
+            )
             st.t, self._h = float(self._T[layout.T_TIME]), float(self._T[layout.T_STEP])
             self._f_valid = self._T[layout.T_STALE] == 0.0
             self._drain_events(events)
@@ -395,11 +503,13 @@ class PhaseIntegrator:
                 f'run budget exceeded: {steps} steps by t = {self.state.t:.6g} s (allowed '
                 f'{MIN_STEP_BUDGET:g} + {STEPS_PER_SIMULATED_SECOND:g} per simulated second; '
                 f'h = {self._h:.3g} s): the scene is too stiff or too small for its tolerances',
-                t=self.state.t, state=self.state.y.copy())
+                t=self.state.t,
+                state=self.state.y.copy(),
+            )
 
     def _raise(self, status):
         st = self.state
-        if status == layout.OUTPUT_FULL:       # advance() splits its calls so this cannot be
+        if status == layout.OUTPUT_FULL:  # advance() splits its calls so this cannot be
             raise RuntimeError('internal error: the output buffer overflowed')
         if status == layout.ERR_RESIDUAL:
             surf = self.model.surfaces[st.surface]
@@ -407,20 +517,26 @@ class PhaseIntegrator:
             raise SimulationError(
                 f'residual indentation fit gives delta_r = {st.delta_r:.4g} m >= delta_m = '
                 f'{delta:.4g} m at t = {st.t:.9g} s: delta_m / delta_c = {ratio:.3g} is '
-                f'beyond the fit\'s range (delta_r < delta_m needs delta_m / delta_c < '
+                f"beyond the fit's range (delta_r < delta_m needs delta_m / delta_c < "
                 f'~9.8e3); the material is far too stiff for its yield strength',
-                t=st.t, state=st.y.copy())
+                t=st.t,
+                state=st.y.copy(),
+            )
         if status == layout.ERR_PENETRATION:
             radius = self.model.surfaces[st.surface].constants.R
             raise SimulationError(
                 f'penetration exceeds the tip radius {radius:g} m at t = {st.t:.9g} s: the '
                 f'contact model is outside its validity (impact too fast or material too soft)',
-                t=st.t, state=st.y.copy())
+                t=st.t,
+                state=st.y.copy(),
+            )
         what = 'non-finite state' if status == layout.ERR_NONFINITE else 'step size underflow'
         raise SimulationError(
             f'{what} at t = {st.t:.9g} s in phase {st.phase.name} (h = {self._h:.3g} s): the '
             f'model is too stiff for rtol = {self.rtol:g} or its state left the finite numbers',
-            t=st.t, state=st.y.copy())
+            t=st.t,
+            state=st.y.copy(),
+        )
 
     def _drain_trace(self):
         count = int(self._trace_count[0])

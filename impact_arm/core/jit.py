@@ -6,6 +6,7 @@ slow twin to keep in step. Set ``IMPACT_ARM_JIT=0`` to force the interpreter (de
 platforms without numba). Compiled code is cached on disk, so only the first run of a scene
 shape pays for compilation.
 """
+
 import os
 import sys
 
@@ -25,12 +26,10 @@ def _load_numba_without_blas():
     sys.modules['scipy.linalg'] = None
     try:
         import numba.np.arraymath  # noqa: F401
-    except ImportError:     # a numba that needs it after all: imported normally later
+    except ImportError:  # a numba that needs it after all: imported normally later
         pass
     finally:
         del sys.modules['scipy.linalg']
-
-
 
 
 def _load_cached_without_refresh():
@@ -47,37 +46,43 @@ def _load_cached_without_refresh():
     ``_load_numba_without_blas`` (only then: a process that just loads never imports
     numba's array library, 27 ms). Only this package's functions are loaded this way."""
     from numba.core import caching
+
     original = caching.Cache.load_overload
     if getattr(original, '_impact_arm', False):
         return
 
     def load_overload(self, sig, target_context):
         if not getattr(self._py_func, '__module__', '').startswith('impact_arm'):
-            return original(self, sig, target_context)    # other packages' functions
+            return original(self, sig, target_context)  # other packages' functions
         loaded = None
         with self._guard_against_spurious_io_errors():
             loaded = self._load_overload(sig, target_context)
-        if loaded is None:      # a compilation follows
+        if loaded is None:  # a compilation follows
             _load_numba_without_blas()
         return loaded
+
     load_overload._impact_arm = True
     caching.Cache.load_overload = load_overload
 
 
-UNAVAILABLE = ''     # why the kernel runs interpreted (empty when compiled)
-FIX = ''             # what the user does about it
+UNAVAILABLE = ''  # why the kernel runs interpreted (empty when compiled)
+FIX = ''  # what the user does about it
 try:
     if not ENABLED:
         raise ImportError('IMPACT_ARM_JIT=0 is set')
     from numba import njit as _njit
+
     _load_cached_without_refresh()
     AVAILABLE = True
 except ImportError as exc:  # interpreter fallback: identical code, ~100x slower
     _njit = None
     AVAILABLE = False
     UNAVAILABLE = str(exc) if not ENABLED else f'numba cannot be imported ({exc})'
-    FIX = ('unset IMPACT_ARM_JIT' if not ENABLED else
-           'install numba (rosdep install --from-paths src -y, or pip install numba)')
+    FIX = (
+        'unset IMPACT_ARM_JIT'
+        if not ENABLED
+        else 'install numba (rosdep install --from-paths src -y, or pip install numba)'
+    )
 
 
 # No numba reference counting (NRT) in the hot path: with it, every array a compiled function

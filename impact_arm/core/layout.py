@@ -3,6 +3,7 @@
 The kernel works on flat float/int arrays (numba compiles them to plain memory access); these
 names keep both sides reading the same slots.
 """
+
 # contact phases (also ``model.Phase``)
 FREE, ELASTIC, ELASTOPLASTIC, RESTITUTION = 0, 1, 2, 3
 LAW_HELD, LAW_Q, LAW_PID, LAW_NONE = 0, 1, 2, 3
@@ -20,8 +21,15 @@ I_SIZE = 5
 # step methods (I_METHOD): Dormand-Prince everywhere, or a Rosenbrock step in free flight
 METHOD_DOPRI5, METHOD_ROSENBROCK = 0, 1
 # kernel status
-DONE, EVENT, TRACE_FULL, ERR_UNDERFLOW, ERR_PENETRATION, ERR_NONFINITE, OUTPUT_FULL = \
-    0, 1, 2, 3, 4, 5, 6
+DONE, EVENT, TRACE_FULL, ERR_UNDERFLOW, ERR_PENETRATION, ERR_NONFINITE, OUTPUT_FULL = (
+    0,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+)
 EVENT_LOG_FULL, ERR_RESIDUAL = 7, 8
 # STEP_BUDGET: the call took ev[EV_STEPS] steps and returns, so that a caller regains control
 # (Ctrl-C, its run budget) within a bounded time
@@ -61,13 +69,34 @@ def shape_offsets(n: int, n_integral: int) -> dict:
     size = 2 * n + n_integral
     return {
         'SIZE': size,
-        'P_L': 0, 'P_M': n, 'P_G': 2 * n, 'P_KP': 2 * n + 1, 'P_KD': 3 * n + 1,
-        'P_KI': 4 * n + 1, 'P_TDOWN': 5 * n + 1, 'P_TUP': 6 * n + 1, 'P_SWITCH': 7 * n + 1,
-        'P_RTOL': 7 * n + 2, 'P_ATOL': 7 * n + 3, 'P_MAXSTEP': 7 * n + 4,
-        'P_CRTOL': 7 * n + 5, 'P_CATOL': 7 * n + 6, 'P_SIZE': 7 * n + 7,
-        'R_T': 0, 'R_Y': 1, 'R_JT': 1 + size, 'R_JN': 2 + size, 'R_TAU': 3 + size,
-        'R_ACT': 3 + size + n, 'R_VTIP': 4 + size + n, 'R_SIZE': 6 + size + n,
-        'W_GEN': 0, 'W_TAU': n, 'W_ERR': 2 * n, 'W_RATE': 3 * n, 'W_MASS': 4 * n,
+        'P_L': 0,
+        'P_M': n,
+        'P_G': 2 * n,
+        'P_KP': 2 * n + 1,
+        'P_KD': 3 * n + 1,
+        'P_KI': 4 * n + 1,
+        'P_TDOWN': 5 * n + 1,
+        'P_TUP': 6 * n + 1,
+        'P_SWITCH': 7 * n + 1,
+        'P_RTOL': 7 * n + 2,
+        'P_ATOL': 7 * n + 3,
+        'P_MAXSTEP': 7 * n + 4,
+        'P_CRTOL': 7 * n + 5,
+        'P_CATOL': 7 * n + 6,
+        'P_SIZE': 7 * n + 7,
+        'R_T': 0,
+        'R_Y': 1,
+        'R_JT': 1 + size,
+        'R_JN': 2 + size,
+        'R_TAU': 3 + size,
+        'R_ACT': 3 + size + n,
+        'R_VTIP': 4 + size + n,
+        'R_SIZE': 6 + size + n,
+        'W_GEN': 0,
+        'W_TAU': n,
+        'W_ERR': 2 * n,
+        'W_RATE': 3 * n,
+        'W_MASS': 4 * n,
         'SCRATCH': 4 * n + n * n,
         'TR_SIZE': TR_ENERGY + n,
     }

@@ -1,5 +1,6 @@
 """Impact metrics (docs/model.md): assembled from the integrator's located events, so every number
 comes from the state at an exactly located phase switch, not from a sampled signal."""
+
 from __future__ import annotations
 
 import math
@@ -30,7 +31,7 @@ class ImpactBuilder:
         y = np.asarray(y, dtype=float)
         model = self.model
         n = model.n
-        q, qd = y[:n], y[n:2 * n]
+        q, qd = y[:n], y[n : 2 * n]
         _, _, vx, vy = self._tip(q, qd, model.L)
         parts = [float(T) for T in self._energies(q, qd, model.L, model.m)]
         return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]
@@ -44,17 +45,24 @@ class ImpactBuilder:
             if self._open is not None:
                 raise RuntimeError(f'contact at t = {event.t:.9g} s inside an open impact')
             q, v, T = self._tip_and_energy(event.y)
-            self._open = {'t_contact': event.t, 'q': q, 'v_before': v, 'T_before': T,
-                          'times': {'contact': event.t}, 'surface': event.surface}
+            self._open = {
+                't_contact': event.t,
+                'q': q,
+                'v_before': v,
+                'T_before': T,
+                'times': {'contact': event.t},
+                'surface': event.surface,
+            }
             return None
         impact = self._open
         if impact is None or kind in impact['times']:
-            raise RuntimeError(f'{kind} at t = {event.t:.9g} s out of order (phase repeated '
-                               f'or no contact)')
+            raise RuntimeError(
+                f'{kind} at t = {event.t:.9g} s out of order (phase repeated or no contact)'
+            )
         impact['times'][kind] = event.t
         impact.update(event.info)
-        if kind == 'max_compression':   # where a viewer draws the impact (io/scene_visuals)
-            impact['q_max'] = np.asarray(event.y[:self.model.n], dtype=float).tolist()
+        if kind == 'max_compression':  # where a viewer draws the impact (io/scene_visuals)
+            impact['q_max'] = np.asarray(event.y[: self.model.n], dtype=float).tolist()
         if kind != 'separation':
             return None
         self._open = None
@@ -82,11 +90,12 @@ class ImpactBuilder:
             'cor_kinematic': -v_after[1] / v_before[1] if v_before[1] else math.nan,
             'T_before': list(T_before),
             'T_after': list(T_after),
-            'cor_energetic': [math.sqrt(a / b) if b > 0 else math.nan
-                              for a, b in zip(T_after, T_before)],
+            'cor_energetic': [
+                math.sqrt(a / b) if b > 0 else math.nan for a, b in zip(T_after, T_before)
+            ],
             'phase_durations': [t_yield - t0, t_max - t_yield, t_sep - t_max],
             'q_max_compression_deg': [math.degrees(a) for a in impact['q_max']],
-            'q_separation_deg': [math.degrees(a) for a in event.y[:self.model.n]],
+            'q_separation_deg': [math.degrees(a) for a in event.y[: self.model.n]],
         }
 
 
@@ -94,12 +103,14 @@ def settle_index(impacts, rel_tol=1e-3, keys=('q_contact_deg', 'v_before')):
     """The number N of the impact (1-based) from which every later impact repeats its
     predecessor's contact angles and velocities to ``rel_tol``: the limit cycle is reached
     after N impacts. None if the run never settles (or has fewer than two impacts)."""
+
     def close(a, b):
         for key in keys:
             for x, y in zip(a[key], b[key]):
                 if abs(x - y) > rel_tol * max(1.0, abs(y)):
                     return False
         return True
+
     # one pass from the end: the earliest k from which every pair still repeats
     settled = len(impacts)
     for j in range(len(impacts) - 1, 0, -1):

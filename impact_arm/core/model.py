@@ -5,6 +5,7 @@ contact constants, compiled equations) and never changes during a run; ``ArmStat
 does (time, coordinates, velocities, integral states, contact phase, the current impact's
 δm/δr and the dent each surface keeps until the tip has left it).
 """
+
 from __future__ import annotations
 
 import math
@@ -21,9 +22,9 @@ from .scene import Scene
 
 class Phase(IntEnum):
     FREE = 0
-    ELASTIC = 1          # Hertz compression
-    ELASTOPLASTIC = 2    # Jackson-Green compression
-    RESTITUTION = 3      # elastic unloading about the residual dent
+    ELASTIC = 1  # Hertz compression
+    ELASTOPLASTIC = 2  # Jackson-Green compression
+    RESTITUTION = 3  # elastic unloading about the residual dent
 
 
 @dataclass(frozen=True)
@@ -46,23 +47,45 @@ class ArmModel:
         self.m = np.array(scene.masses, dtype=float)
         self.g = scene.gravity
         self.surfaces = tuple(
-            SurfaceModel(i, s.height, s.law, s.mu, s.v_d,
-                         contact_constants(scene.arm_material, s.material, scene.tip_radius))
-            for i, s in enumerate(s for s in scene.surfaces if s.law != 'none'))
+            SurfaceModel(
+                i,
+                s.height,
+                s.law,
+                s.mu,
+                s.v_d,
+                contact_constants(scene.arm_material, s.material, scene.tip_radius),
+            )
+            for i, s in enumerate(s for s in scene.surfaces if s.law != 'none')
+        )
         ctrl = scene.controller
         # integral states exist only if a PID is evaluated continuously in the right-hand side
         self.n_integral = self.n if (ctrl.law == 'pid' and ctrl.rate == 0) else 0
         self.size = 2 * self.n + self.n_integral
         # Model only what the scene needs: the generated module has no gravity terms for g = 0,
         # and its kernel no contact code without surfaces, no friction term when every μ = 0.
-        self.eq = load_equations(self.n, gravity=self.g != 0.0, contact=bool(self.surfaces),
-                                 friction=any(s.mu > 0 for s in self.surfaces),
-                                 n_integral=self.n_integral)
+        self.eq = load_equations(
+            self.n,
+            gravity=self.g != 0.0,
+            contact=bool(self.surfaces),
+            friction=any(s.mu > 0 for s in self.surfaces),
+            n_integral=self.n_integral,
+        )
         self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
         for s in self.surfaces:
             c = s.constants
-            self.surface_table[s.index] = (s.height, 0 if s.law == 'elastoplastic' else 1, s.mu,
-                                           s.v_d, c.E, c.R, c.S_y, c.C_j, c.delta_c, c.P_c, c.B)
+            self.surface_table[s.index] = (
+                s.height,
+                0 if s.law == 'elastoplastic' else 1,
+                s.mu,
+                s.v_d,
+                c.E,
+                c.R,
+                c.S_y,
+                c.C_j,
+                c.delta_c,
+                c.P_c,
+                c.B,
+            )
         if not self.surfaces:
             self.surface_table = self.surface_table[:0]
 
@@ -79,31 +102,31 @@ class ArmModel:
         return self.eq.gravity_forces(np.asarray(q, float), self.L, self.m, self.g)
 
     def link_energies(self, q, qd):
-        return self.eq.link_energies(np.asarray(q, float), np.asarray(qd, float), self.L,
-                                     self.m)
+        return self.eq.link_energies(np.asarray(q, float), np.asarray(qd, float), self.L, self.m)
 
     def potential_energy(self, q):
         return self.eq.potential(np.asarray(q, float), self.L, self.m, self.g)[0]
 
     def mass_matrix(self, q):
         n = self.n
-        values = self.eq.mass_and_rhs(np.asarray(q, float), np.zeros(n), np.zeros(n), self.L,
-                                      self.m, self.g)
-        return np.array(values[:n * n]).reshape(n, n)
+        values = self.eq.mass_and_rhs(
+            np.asarray(q, float), np.zeros(n), np.zeros(n), self.L, self.m, self.g
+        )
+        return np.array(values[: n * n]).reshape(n, n)
 
     def parameters(self, rtol, atol, max_step, contact_rtol=None, contact_atol=None):
         """The flat parameter array of the kernel (layout: P_* in the generated module).
         Contact phases use ``contact_rtol`` / ``contact_atol`` (default: rtol / atol)."""
         eq, n, c = self.eq, self.n, self.scene.controller
         P = np.zeros(eq.P_SIZE)
-        P[eq.P_L:eq.P_L + n] = self.L
-        P[eq.P_M:eq.P_M + n] = self.m
+        P[eq.P_L : eq.P_L + n] = self.L
+        P[eq.P_M : eq.P_M + n] = self.m
         P[eq.P_G] = self.g
-        P[eq.P_KP:eq.P_KP + n] = c.kp
-        P[eq.P_KD:eq.P_KD + n] = c.kd
-        P[eq.P_KI:eq.P_KI + n] = c.ki if c.law == 'pid' else 0.0
-        P[eq.P_TDOWN:eq.P_TDOWN + n] = c.down_target
-        P[eq.P_TUP:eq.P_TUP + n] = c.up_target
+        P[eq.P_KP : eq.P_KP + n] = c.kp
+        P[eq.P_KD : eq.P_KD + n] = c.kd
+        P[eq.P_KI : eq.P_KI + n] = c.ki if c.law == 'pid' else 0.0
+        P[eq.P_TDOWN : eq.P_TDOWN + n] = c.down_target
+        P[eq.P_TUP : eq.P_TUP + n] = c.up_target
         P[eq.P_SWITCH] = c.switch_height
         P[eq.P_RTOL], P[eq.P_ATOL], P[eq.P_MAXSTEP] = rtol, atol, max_step
         P[eq.P_CRTOL] = rtol if contact_rtol is None else contact_rtol
@@ -113,8 +136,8 @@ class ArmModel:
     def initial_state(self) -> 'ArmState':
         s = self.scene
         y = np.zeros(self.size)
-        y[:self.n] = s.q0
-        y[self.n:2 * self.n] = s.qd0
+        y[: self.n] = s.q0
+        y[self.n : 2 * self.n] = s.qd0
         return ArmState(0.0, y, [surf.height for surf in self.surfaces], self.n)
 
 
@@ -125,10 +148,10 @@ class ArmState:
     def __init__(self, t, y, levels, n):
         self.t = float(t)
         self.y = np.asarray(y, dtype=float)
-        self.levels = np.array(levels, dtype=float)   # contact height per surface (dent memory)
+        self.levels = np.array(levels, dtype=float)  # contact height per surface (dent memory)
         self.c = np.zeros(layout.C_SIZE)
         self.c[layout.C_SURF] = -1
-        self.held = np.zeros(n)                        # zero-order-hold torque (sampled control)
+        self.held = np.zeros(n)  # zero-order-hold torque (sampled control)
 
     def _field(index, kind=float, doc=''):
         def get(self):
@@ -136,6 +159,7 @@ class ArmState:
 
         def put(self, value):
             self.c[index] = float(value)
+
         return property(get, put, doc=doc)
 
     phase = _field(layout.C_PHASE, lambda v: Phase(int(v)))

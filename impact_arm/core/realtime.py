@@ -6,6 +6,7 @@ and how long each period took.
 simulator node hands it three callables (take the queued commands, publish a period's sensor
 messages, log) and adapts the rest to topics; tests drive it with a fake clock.
 """
+
 from __future__ import annotations
 
 import threading
@@ -19,7 +20,7 @@ from .kinds import TextEnum
 if TYPE_CHECKING:
     from .driver import SimulatedArm, Tick
 
-PERIOD_PARTS = ('commands', 'physics', 'publish')   # where a period's compute goes
+PERIOD_PARTS = ('commands', 'physics', 'publish')  # where a period's compute goes
 
 # How long the driver holds the last command before it zeroes the torques [s]: 20 periods at
 # 1 kHz. Holding longer is what crashes a stiff loop. The middleware sometimes delivers
@@ -34,6 +35,7 @@ DEFAULT_COMMAND_TIMEOUT = 0.02
 class WatchdogState(TextEnum):
     """waiting: no command yet (brakes on); ok: a fresh command is held; timeout: the newest
     command is older than the timeout (the policy acts)."""
+
     WAITING = 'waiting'
     OK = 'ok'
     TIMEOUT = 'timeout'
@@ -43,6 +45,7 @@ class WatchdogPolicy(TextEnum):
     """What the driver does on a command timeout. brake: hold the joints where they are
     (``SimulatedArm.brake``), as a real drive's safe stop does; zero: zero torque, the arm
     falls under gravity (onto the part, where it chatters)."""
+
     BRAKE = 'brake'
     ZERO = 'zero'
 
@@ -52,8 +55,8 @@ class PeriodStats:
 
     def __init__(self, nominal: float | None = None):
         self.lock = threading.Lock()
-        self.intervals: list[float] = []   # wall time between consecutive publications [s]
-        self.computes: list[float] = []    # wall time to step and publish one period [s]
+        self.intervals: list[float] = []  # wall time between consecutive publications [s]
+        self.computes: list[float] = []  # wall time to step and publish one period [s]
         self.published = 0
         self.overruns = 0
         self.worst_compute = 0.0
@@ -61,8 +64,8 @@ class PeriodStats:
         # the worst period's commands, physics, publish
         self.worst_parts: tuple[float, ...] = (0.0, 0.0, 0.0)
         self.last_publish: float | None = None
-        self.t_published = 0.0     # simulated time of the last period counted in ``published``
-        self.nominal = nominal     # the wall period the jitter is measured against [s]
+        self.t_published = 0.0  # simulated time of the last period counted in ``published``
+        self.nominal = nominal  # the wall period the jitter is measured against [s]
         # whole-run jitter |interval - period| as a 1 us histogram (0 ... 20 ms), plus the max
         self.histogram = np.zeros(20001, dtype=np.int64)
         self.jitter_max = 0.0
@@ -76,8 +79,14 @@ class PeriodStats:
         with self.lock:
             return [s / self.part_count if self.part_count else 0.0 for s in self.part_sums]
 
-    def add(self, published_at: float, compute: float, t_sim: float, overrun: bool,
-            parts: Sequence[float] | None = None):
+    def add(
+        self,
+        published_at: float,
+        compute: float,
+        t_sim: float,
+        overrun: bool,
+        parts: Sequence[float] | None = None,
+    ):
         with self.lock:
             if parts is not None:
                 for i, part in enumerate(parts):
@@ -136,8 +145,8 @@ class Watchdog:
         self.brake_peak = 0.0
         # (torques, arrival time) of the newest valid command
         self.pending: tuple[list[float], float] | None = None
-        self.applied: tuple[list[float], float] | None = None   # the pending command the arm holds
-        self.last_command: float | None = None   # arrival time of the newest valid command
+        self.applied: tuple[list[float], float] | None = None  # the pending command the arm holds
+        self.last_command: float | None = None  # arrival time of the newest valid command
         self.silence = self.longest_silence = 0.0
 
     def command(self, torques: list[float], now: float):
@@ -171,7 +180,7 @@ class Watchdog:
             return WatchdogState.TIMEOUT if changed else None
         resumed = self.state is WatchdogState.TIMEOUT
         self.state = WatchdogState.OK
-        if pending is not self.applied:    # a held command is not applied again each period
+        if pending is not self.applied:  # a held command is not applied again each period
             arm.apply_checked(pending[0])  # checked on arrival
             self.applied = pending
         return WatchdogState.OK if resumed else None
@@ -184,8 +193,11 @@ class Watchdog:
         """The state as of ``now``: a loop that has not run since the timeout elapsed will
         zero the torque on its next period. Only reads: the change itself (its log line and
         count) is the loop's, in ``hold``."""
-        if self.state is WatchdogState.OK and self.last_command is not None and \
-                now - self.last_command > self.timeout:
+        if (
+            self.state is WatchdogState.OK
+            and self.last_command is not None
+            and now - self.last_command > self.timeout
+        ):
             return WatchdogState.TIMEOUT
         return self.state
 
@@ -209,17 +221,24 @@ class DriverLoop:
     (initial state at t = 0, brakes on until the next command, statistics and counts reset),
     ``e_stop`` (zero torque whatever the commands, until cleared)."""
 
-    def __init__(self, arm: SimulatedArm, *, wall_period: float, command_timeout: float,
-                 take_command: Callable[[], Any] | None = None,
-                 accept: Callable[[Any, float], bool] | None = None,
-                 publish: Callable[[Tick], None] | None = None,
-                 log: Callable[[str, str], None] | None = None,
-                 clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep,
-                 max_takes: int = 100, take_budget: float = 0.5,
-                 policy: WatchdogPolicy | str = WatchdogPolicy.ZERO):
+    def __init__(
+        self,
+        arm: SimulatedArm,
+        *,
+        wall_period: float,
+        command_timeout: float,
+        take_command: Callable[[], Any] | None = None,
+        accept: Callable[[Any, float], bool] | None = None,
+        publish: Callable[[Tick], None] | None = None,
+        log: Callable[[str, str], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+        max_takes: int = 100,
+        take_budget: float = 0.5,
+        policy: WatchdogPolicy | str = WatchdogPolicy.ZERO,
+    ):
         self.arm = arm
-        self.wall_period = wall_period          # realtime: wall seconds per period
+        self.wall_period = wall_period  # realtime: wall seconds per period
         self.watchdog = Watchdog(command_timeout, policy)
         self.stats = PeriodStats(wall_period)
         self.take_command = take_command or (lambda: None)
@@ -239,12 +258,12 @@ class DriverLoop:
         self.publish = publish or (lambda tick: None)
         self.log = log or (lambda level, text: None)
         self.clock, self.sleep = clock, sleep
-        self.start_wall: float | None = None    # wall time the schedule is counted from
-        self.first_command_wall: float | None = None   # simulated time starts here
+        self.start_wall: float | None = None  # wall time the schedule is counted from
+        self.first_command_wall: float | None = None  # simulated time starts here
         self.commands = 0
         self.impacts = 0
-        self.skipped = 0                        # periods skipped after stalls
-        self.flooded = 0                        # periods that left commands queued
+        self.skipped = 0  # periods skipped after stalls
+        self.flooded = 0  # periods that left commands queued
         # commands taken but never checked: an accepted newer one of the same period
         # replaced them in the zero-order hold
         self.superseded = 0
@@ -257,9 +276,9 @@ class DriverLoop:
         self._steps = 0
         self._reset = threading.Event()
         self._reset_done = threading.Event()
-        self._frozen = 0.0                      # wall time spent paused [s]
+        self._frozen = 0.0  # wall time spent paused [s]
         self._paused_at: float | None = None
-        self._k = 0                             # index of the next period's deadline
+        self._k = 0  # index of the next period's deadline
 
     # -------------------------------------------------------------------- commands in
     def command(self, torques: list[float], now: float):
@@ -307,8 +326,9 @@ class DriverLoop:
             return
         change = self.watchdog.hold(self.arm, self._run_time(now))
         if change is WatchdogState.TIMEOUT:
-            action = 'brakes on' if self.watchdog.policy is WatchdogPolicy.BRAKE \
-                else 'torques zeroed'
+            action = (
+                'brakes on' if self.watchdog.policy is WatchdogPolicy.BRAKE else 'torques zeroed'
+            )
             self.log('warning', f'no command for {self.watchdog.timeout:g} s: {action}')
         elif change is WatchdogState.OK:
             self.log('info', f'commands resumed after {self.watchdog.silence:.3f} s without one')
@@ -352,8 +372,9 @@ class DriverLoop:
             self.arm.reset()
             self.watchdog = Watchdog(self.watchdog.timeout, self.watchdog.policy)
             self.stats = PeriodStats(self.stats.nominal)
-            self.commands = self.impacts = self.skipped = self.flooded = self.stale = \
-                self.superseded = 0
+            self.commands = self.impacts = self.skipped = self.flooded = self.stale = (
+                self.superseded
+            ) = 0
             self.first_command_wall = None
             self._steps = 0
             # a new schedule from now on: the next period is due one period later
@@ -404,8 +425,13 @@ class DriverLoop:
         done = self.clock()
         # late if this period's publication happened after the next one was due
         late = done > deadline + period
-        self.stats.add(done, done - woke, self.arm.t, late,
-                       (stepping - woke, stepped - stepping, done - stepped))
+        self.stats.add(
+            done,
+            done - woke,
+            self.arm.t,
+            late,
+            (stepping - woke, stepped - stepping, done - stepped),
+        )
         self._next_deadline(done, deadline, count=True)
         return self._count(tick)
 
@@ -432,8 +458,11 @@ class DriverLoop:
             self.start_wall = woke
         taken = woke - arrived
         if rate_factor > 0:
-            due = self.start_wall + self._frozen + \
-                (self.arm.periods + 1) / (self.arm.rate * rate_factor)
+            due = (
+                self.start_wall
+                + self._frozen
+                + (self.arm.periods + 1) / (self.arm.rate * rate_factor)
+            )
             if due > woke:
                 self.sleep(due - woke)
                 woke = self.clock()
@@ -443,7 +472,11 @@ class DriverLoop:
         done = self.clock()
         # the wait is what the controller and the transport take (the exchange's round trip)
         last = self.stats.last_publish
-        self.stats.add(done, done - woke, self.arm.t, False,
-                       (taken, stepped - woke, done - stepped,
-                        arrived - last if last is not None else 0.0))
+        self.stats.add(
+            done,
+            done - woke,
+            self.arm.t,
+            False,
+            (taken, stepped - woke, done - stepped, arrived - last if last is not None else 0.0),
+        )
         return self._count(tick)

@@ -9,6 +9,7 @@ name the key path, the value and the allowed range, e.g.::
 Angles are given in degrees in the file (the user-facing edge) and converted to radians here;
 everything after this module is SI.  The schema is documented in ``docs/scene.md``.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,9 +25,9 @@ from ..contract import CONTROL_LAWS, INTEGRATOR_METHODS, INTEGRATOR_PRESETS, PID
 from .errors import SceneError
 
 CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
-MAX_YIELD_STRAIN = 0.1   # S_y / E* beyond which the Jackson-Green law is meaningless
-MAX_FILE_BYTES = 1 << 20     # a scene is a few hundred bytes; /dev/zero must not be read whole
-MAX_YAML_NODES = 100_000     # after alias expansion: an alias bomb is refused, not expanded
+MAX_YIELD_STRAIN = 0.1  # S_y / E* beyond which the Jackson-Green law is meaningless
+MAX_FILE_BYTES = 1 << 20  # a scene is a few hundred bytes; /dev/zero must not be read whole
+MAX_YAML_NODES = 100_000  # after alias expansion: an alias bomb is refused, not expanded
 
 # shown values are cut short: a refusal never prints an unbounded input
 _show = reprlib.Repr()
@@ -38,36 +39,36 @@ _show.maxlong = 40
 
 @dataclass(frozen=True)
 class Material:
-    E: float      # Young's modulus [Pa]
-    nu: float     # Poisson's ratio [-]
-    S_y: float    # yield strength [Pa]
+    E: float  # Young's modulus [Pa]
+    nu: float  # Poisson's ratio [-]
+    S_y: float  # yield strength [Pa]
 
 
 def reduced_modulus(a: Material, b: Material) -> float:
     """E* of a contact pairing: 1/E* = (1 - ν_a²)/E_a + (1 - ν_b²)/E_b (docs/model.md)."""
-    return a.E * b.E / (b.E * (1 - a.nu ** 2) + a.E * (1 - b.nu ** 2))
+    return a.E * b.E / (b.E * (1 - a.nu**2) + a.E * (1 - b.nu**2))
 
 
 @dataclass(frozen=True)
 class Surface:
-    height: float            # y of the horizontal surface [m]; the tip strikes it from above
-    law: str                 # elastoplastic | hertz | none
-    mu: float                # Coulomb friction coefficient (0 = no friction term)
-    v_d: float               # tanh smoothing velocity [m/s]
+    height: float  # y of the horizontal surface [m]; the tip strikes it from above
+    law: str  # elastoplastic | hertz | none
+    mu: float  # Coulomb friction coefficient (0 = no friction term)
+    v_d: float  # tanh smoothing velocity [m/s]
     material: Material
 
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    law: str                       # q | pid | pd | none
-    space: str                     # absolute | joint (angles the PID/PD acts on)
+    law: str  # q | pid | pd | none
+    space: str  # absolute | joint (angles the PID/PD acts on)
     kp: tuple[float, ...]
     kd: tuple[float, ...]
     ki: tuple[float, ...]
     down_target: tuple[float, ...]  # rad, absolute link angles
-    up_target: tuple[float, ...]    # rad
-    switch_height: float            # tip height that ends the up phase [m]
-    rate: float                     # Hz; 0 = continuous (evaluated in the right-hand side)
+    up_target: tuple[float, ...]  # rad
+    switch_height: float  # tip height that ends the up phase [m]
+    rate: float  # Hz; 0 = continuous (evaluated in the right-hand side)
 
 
 @dataclass(frozen=True)
@@ -91,11 +92,11 @@ class Scene:
     surfaces: tuple[Surface, ...]
     actuators_during_contact: bool
     controller: ControllerSpec
-    q0: tuple[float, ...]           # rad, absolute link angles
-    qd0: tuple[float, ...]          # rad/s
+    q0: tuple[float, ...]  # rad, absolute link angles
+    qd0: tuple[float, ...]  # rad/s
     cycles: int
-    t_max: float                    # hard stop of a run [s]
-    publish_rate: float             # Hz of sampled output (joint states)
+    t_max: float  # hard stop of a run [s]
+    publish_rate: float  # Hz of sampled output (joint states)
     integrator: IntegratorSpec
     source_text: str = field(default='', compare=False, repr=False)
     source_path: str = field(default='', compare=False, repr=False)
@@ -126,8 +127,7 @@ MATERIAL = {
 # Absolute bounds below are physical: the model's tolerances are absolute in metres and
 # radians, the contact laws are fitted on lab-scale metal contact, and the numbers must stay far
 # from float64's range; docs/scene.md ("Physical ranges") gives each reason.
-LINK = {'length': _num(1e-3, 1e3, unit='m'),
-        'mass': _num(1e-6, 1e6, unit='kg')}
+LINK = {'length': _num(1e-3, 1e3, unit='m'), 'mass': _num(1e-6, 1e6, unit='kg')}
 SURFACE = {
     'height': _num(-1e3, 1e3, unit='m'),
     'law': _choice(CONTACT_LAWS, 'elastoplastic'),
@@ -165,8 +165,15 @@ SCHEMA = {
     'surfaces': ('list', SURFACE, '', ()),
     'actuators_during_contact': ('bool', None, '', False),
     'controller': ('dict', CONTROLLER, '', REQUIRED),
-    'initial': ('dict', {'q_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
-                         'qd': ('vec', _num(-1e4, 1e4), 'rad/s', None)}, '', REQUIRED),
+    'initial': (
+        'dict',
+        {
+            'q_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
+            'qd': ('vec', _num(-1e4, 1e4), 'rad/s', None),
+        },
+        '',
+        REQUIRED,
+    ),
     'cycles': ('int', (0, 1_000_000), '', 15),
     't_max': _num(0, 1e7, low_open=True, unit='s', default=60.0),
     'publish_rate': _num(1, 1e6, unit='Hz', default=1000.0),
@@ -179,9 +186,9 @@ def _describe_range(constraint, unit):
     unit = f' ({unit})' if unit else ''
     parts = []
     if low is not None:
-        parts.append(f"> {low:g}" if low_open else f">= {low:g}")
+        parts.append(f'> {low:g}' if low_open else f'>= {low:g}')
     if high is not None:
-        parts.append(f"< {high:g}" if high_open else f"<= {high:g}")
+        parts.append(f'< {high:g}' if high_open else f'<= {high:g}')
     return ('must be ' + ' and '.join(parts) + unit) if parts else f'any finite number{unit}'
 
 
@@ -204,20 +211,25 @@ class _Checker:
 
     def number(self, path, value, constraint, unit):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(path, f"= {_show.repr(value)} is not a number; "
-                            f"{_describe_range(constraint, unit)}")
+            self.fail(
+                path, f'= {_show.repr(value)} is not a number; {_describe_range(constraint, unit)}'
+            )
         try:
             value = float(value)
-        except OverflowError:   # an integer beyond float64 (> ~1.8e308)
-            self.fail(path, f"= an integer of {len(str(abs(value)))} digits is out of range: "
-                            f"{_describe_range(constraint, unit)}")
+        except OverflowError:  # an integer beyond float64 (> ~1.8e308)
+            self.fail(
+                path,
+                f'= an integer of {len(str(abs(value)))} digits is out of range: '
+                f'{_describe_range(constraint, unit)}',
+            )
         if not math.isfinite(value):
-            self.fail(path, f"= {value!r} is not finite; {_describe_range(constraint, unit)}")
+            self.fail(path, f'= {value!r} is not finite; {_describe_range(constraint, unit)}')
         low, high, low_open, high_open = constraint
-        bad = ((low is not None and (value < low or (low_open and value == low)))
-               or (high is not None and (value > high or (high_open and value == high))))
+        bad = (low is not None and (value < low or (low_open and value == low))) or (
+            high is not None and (value > high or (high_open and value == high))
+        )
         if bad:
-            self.fail(path, f"= {value:g} is out of range: {_describe_range(constraint, unit)}")
+            self.fail(path, f'= {value:g} is out of range: {_describe_range(constraint, unit)}')
         return value
 
     def leaf(self, path, value, spec):
@@ -226,25 +238,31 @@ class _Checker:
             return self.number(path, value, constraint, unit)
         if kind == 'choice':
             if value not in constraint:
-                self.fail(path, f"= {_show.repr(value)} is not allowed: choose one of {', '.join(constraint)}")
+                self.fail(
+                    path,
+                    f'= {_show.repr(value)} is not allowed: choose one of {", ".join(constraint)}',
+                )
             return value
         if kind == 'str':
             if not isinstance(value, str):
-                self.fail(path, f"= {_show.repr(value)} must be a string")
+                self.fail(path, f'= {_show.repr(value)} must be a string')
             try:
-                value.encode('utf-8')   # a YAML "\ud800" escape gives a lone surrogate
+                value.encode('utf-8')  # a YAML "\ud800" escape gives a lone surrogate
             except UnicodeEncodeError:
-                self.fail(path, f"= {_show.repr(value)} is not valid Unicode text (a lone "
-                                f"surrogate): file names, MCAP and JSON cannot hold it")
+                self.fail(
+                    path,
+                    f'= {_show.repr(value)} is not valid Unicode text (a lone '
+                    f'surrogate): file names, MCAP and JSON cannot hold it',
+                )
             return value
         if kind == 'bool':
             if not isinstance(value, bool):
-                self.fail(path, f"= {_show.repr(value)} must be true or false")
+                self.fail(path, f'= {_show.repr(value)} must be true or false')
             return value
         if kind == 'int':
             low, high = constraint
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-                self.fail(path, f"= {_show.repr(value)} must be an integer in [{low}, {high}]")
+                self.fail(path, f'= {_show.repr(value)} must be an integer in [{low}, {high}]')
             return value
         if self.checked is None:
             return self.container(path, value, kind, constraint, unit)
@@ -252,25 +270,28 @@ class _Checker:
         if known is not None and known[0] is value:
             return known[1]
         result = self.container(path, value, kind, constraint, unit, known)
-        self.checked[path] = (value, result)      # holding the object keeps its identity
+        self.checked[path] = (value, result)  # holding the object keeps its identity
         return result
 
     def container(self, path, value, kind, constraint, unit, known=None):
         if kind == 'vec':
             if not isinstance(value, (list, tuple)) or not value:
-                self.fail(path, f"= {_show.repr(value)} must be a non-empty list of numbers ({unit})")
-            return tuple(self.number(f'{path}[{i}]', v, constraint[1], unit)
-                         for i, v in enumerate(value))
+                self.fail(
+                    path, f'= {_show.repr(value)} must be a non-empty list of numbers ({unit})'
+                )
+            return tuple(
+                self.number(f'{path}[{i}]', v, constraint[1], unit) for i, v in enumerate(value)
+            )
         if kind == 'dict':
             return self.mapping(path, value, constraint, known)
         if kind == 'list':
             if not isinstance(value, (list, tuple)):
-                self.fail(path, f"= {_show.repr(value)} must be a list")
+                self.fail(path, f'= {_show.repr(value)} must be a list')
             entry = ('dict', constraint, '', REQUIRED)
             return tuple(self.leaf(f'{path}[{i}]', v, entry) for i, v in enumerate(value))
         if kind == 'map':
             if not isinstance(value, dict) or not value:
-                self.fail(path, f"= {_show.repr(value)} must be a mapping of names to entries")
+                self.fail(path, f'= {_show.repr(value)} must be a mapping of names to entries')
             entry = ('dict', constraint, '', REQUIRED)
             return {str(k): self.leaf(f'{path}.{k}', v, entry) for k, v in value.items()}
         raise AssertionError(kind)
@@ -281,11 +302,15 @@ class _Checker:
         their checked values."""
         prefix = f'{path}.' if path else ''
         if not isinstance(value, dict):
-            self.fail(path or '<top level>', f"must be a mapping, got {type(value).__name__}")
-        unknown = () if value.keys() <= schema.keys() else \
-            sorted(set(map(str, value)) - set(schema))
+            self.fail(path or '<top level>', f'must be a mapping, got {type(value).__name__}')
+        unknown = (
+            () if value.keys() <= schema.keys() else sorted(set(map(str, value)) - set(schema))
+        )
         if unknown:
-            self.fail(f'{prefix}{unknown[0][:60]}', f"is not a known key; allowed here: {', '.join(schema)}")
+            self.fail(
+                f'{prefix}{unknown[0][:60]}',
+                f'is not a known key; allowed here: {", ".join(schema)}',
+            )
         before, checked = known if known else ({}, None)
         out = {}
         for key, spec in schema.items():
@@ -302,8 +327,14 @@ class _Checker:
         return out
 
 
-def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = '', *,
-                checked: dict | None = None) -> Scene:
+def parse_scene(
+    data: Any,
+    origin: str = '<scene>',
+    text: str = '',
+    path: str = '',
+    *,
+    checked: dict | None = None,
+) -> Scene:
     """Validate a scene already parsed from YAML and build the frozen ``Scene``.
 
     ``checked``: for many variants of one scene's data that share their unchanged parts
@@ -332,22 +363,33 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
 
     arm = material('arm_material', raw['arm_material'])
     surfaces = tuple(
-        Surface(height=s['height'], law=s['law'], mu=s['mu'], v_d=s['v_d'],
-                material=material(f'surfaces[{i}].material', s['material']))
-        for i, s in enumerate(raw['surfaces']))
+        Surface(
+            height=s['height'],
+            law=s['law'],
+            mu=s['mu'],
+            v_d=s['v_d'],
+            material=material(f'surfaces[{i}].material', s['material']),
+        )
+        for i, s in enumerate(raw['surfaces'])
+    )
     heights = [s.height for s in surfaces]
     if len(set(heights)) != len(heights):
         check.fail('surfaces', f'= heights {heights}: two surfaces at the same height')
 
     c = raw['controller']
     controller = ControllerSpec(
-        law=c['law'], space=c['space'],
-        kp=vector('controller.kp', c['kp']), kd=vector('controller.kd', c['kd']),
+        law=c['law'],
+        space=c['space'],
+        kp=vector('controller.kp', c['kp']),
+        kd=vector('controller.kd', c['kd']),
         ki=vector('controller.ki', c['ki'], 0.0),
-        down_target=tuple(map(math.radians, vector('controller.down_target_deg',
-                                                   c['down_target_deg']))),
+        down_target=tuple(
+            map(math.radians, vector('controller.down_target_deg', c['down_target_deg']))
+        ),
         up_target=tuple(map(math.radians, vector('controller.up_target_deg', c['up_target_deg']))),
-        switch_height=c['switch_height'], rate=c['rate'])
+        switch_height=c['switch_height'],
+        rate=c['rate'],
+    )
     if controller.law == 'pid' and not any(controller.ki):
         check.fail('controller.ki', '= all zero with law pid: use law pd, or give integral gains')
 
@@ -356,8 +398,10 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
     reach = sum(l['length'] for l in raw['links'])
     for i, s in enumerate(surfaces):
         if s.law != 'none' and abs(s.height) >= reach:
-            check.fail(f'surfaces[{i}].height',
-                       f'= {s.height:g} is out of reach: must satisfy |height| < {reach:g} (m)')
+            check.fail(
+                f'surfaces[{i}].height',
+                f'= {s.height:g} is out of reach: must satisfy |height| < {reach:g} (m)',
+            )
     for i, s in enumerate(surfaces):
         if s.law != 'elastoplastic':
             continue
@@ -365,26 +409,40 @@ def parse_scene(data: Any, origin: str = '<scene>', text: str = '', path: str = 
         # far beyond it B overflows and the force law means nothing
         strain = min(arm.S_y, s.material.S_y) / reduced_modulus(arm, s.material)
         if strain > MAX_YIELD_STRAIN:
-            check.fail(f'surfaces[{i}].material',
-                       f'= {raw["surfaces"][i]["material"]!r}: yield strain S_y/E* = '
-                       f'{strain:.3g} is out of range: must be <= {MAX_YIELD_STRAIN:g} for the '
-                       f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
-                       f'E and S_y')
+            check.fail(
+                f'surfaces[{i}].material',
+                f'= {raw["surfaces"][i]["material"]!r}: yield strain S_y/E* = '
+                f'{strain:.3g} is out of range: must be <= {MAX_YIELD_STRAIN:g} for the '
+                f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
+                f'E and S_y',
+            )
     _check_physics(check, raw, surfaces, arm)
     integ = IntegratorSpec(**raw['integrator'])
     return Scene(
-        name=raw['name'], lengths=tuple(l['length'] for l in raw['links']),
-        masses=tuple(l['mass'] for l in raw['links']), gravity=raw['gravity'],
-        tip_radius=raw['tip_radius'], arm_material=arm, surfaces=surfaces,
-        actuators_during_contact=raw['actuators_during_contact'], controller=controller,
-        q0=q0, qd0=qd0, cycles=raw['cycles'], t_max=raw['t_max'],
-        publish_rate=raw['publish_rate'], integrator=integ, source_text=text, source_path=path)
+        name=raw['name'],
+        lengths=tuple(l['length'] for l in raw['links']),
+        masses=tuple(l['mass'] for l in raw['links']),
+        gravity=raw['gravity'],
+        tip_radius=raw['tip_radius'],
+        arm_material=arm,
+        surfaces=surfaces,
+        actuators_during_contact=raw['actuators_during_contact'],
+        controller=controller,
+        q0=q0,
+        qd0=qd0,
+        cycles=raw['cycles'],
+        t_max=raw['t_max'],
+        publish_rate=raw['publish_rate'],
+        integrator=integ,
+        source_text=text,
+        source_path=path,
+    )
 
 
-MAX_LENGTH_RATIO = 1e3     # longest / shortest link
-MAX_MASS_RATIO = 1e4       # heaviest / lightest link
-MIN_CONTACT_TIME = 1e-6    # s, Hertz contact duration at 1 m/s
-MAX_LOOP_RATE = 1e5        # 1/s, the control loop's fastest eigenvalue (kd/I, sqrt(kp/I))
+MAX_LENGTH_RATIO = 1e3  # longest / shortest link
+MAX_MASS_RATIO = 1e4  # heaviest / lightest link
+MIN_CONTACT_TIME = 1e-6  # s, Hertz contact duration at 1 m/s
+MAX_LOOP_RATE = 1e5  # 1/s, the control loop's fastest eigenvalue (kd/I, sqrt(kp/I))
 
 
 def _check_physics(check, raw, surfaces, arm):
@@ -392,45 +450,63 @@ def _check_physics(check, raw, surfaces, arm):
     lengths = [l['length'] for l in raw['links']]
     masses = [l['mass'] for l in raw['links']]
     if max(lengths) / min(lengths) > MAX_LENGTH_RATIO:
-        check.fail('links', f'= lengths {min(lengths):g} .. {max(lengths):g} m: ratio '
-                   f'{max(lengths) / min(lengths):.3g} is out of range: must be <= '
-                   f'{MAX_LENGTH_RATIO:g} (the absolute tolerances, in m and rad, cannot suit '
-                   f'both ends of the arm)')
+        check.fail(
+            'links',
+            f'= lengths {min(lengths):g} .. {max(lengths):g} m: ratio '
+            f'{max(lengths) / min(lengths):.3g} is out of range: must be <= '
+            f'{MAX_LENGTH_RATIO:g} (the absolute tolerances, in m and rad, cannot suit '
+            f'both ends of the arm)',
+        )
     if max(masses) / min(masses) > MAX_MASS_RATIO:
-        check.fail('links', f'= masses {min(masses):g} .. {max(masses):g} kg: ratio '
-                   f'{max(masses) / min(masses):.3g} is out of range: must be <= '
-                   f'{MAX_MASS_RATIO:g} (the mass matrix becomes too ill-conditioned to solve)')
+        check.fail(
+            'links',
+            f'= masses {min(masses):g} .. {max(masses):g} kg: ratio '
+            f'{max(masses) / min(masses):.3g} is out of range: must be <= '
+            f'{MAX_MASS_RATIO:g} (the mass matrix becomes too ill-conditioned to solve)',
+        )
     if raw['tip_radius'] > min(lengths):
-        check.fail('tip_radius', f"= {raw['tip_radius']:g} is out of range: must be <= the "
-                   f'shortest link ({min(lengths):g} m): the tip is a sphere on a slender rod')
+        check.fail(
+            'tip_radius',
+            f'= {raw["tip_radius"]:g} is out of range: must be <= the '
+            f'shortest link ({min(lengths):g} m): the tip is a sphere on a slender rod',
+        )
     # Hertz contact duration of the lightest link's mass striking at 1 m/s:
     # t_c = 2.87 (m^2 / (R E*^2 v))^(1/5); the contact phases need steps well below it
     for i, sfc in enumerate(surfaces):
         if sfc.law == 'none':
             continue
         e_red = reduced_modulus(arm, sfc.material)
-        t_c = 2.87 * (min(masses) ** 2 / (raw['tip_radius'] * e_red ** 2)) ** 0.2
+        t_c = 2.87 * (min(masses) ** 2 / (raw['tip_radius'] * e_red**2)) ** 0.2
         if t_c < MIN_CONTACT_TIME:
-            check.fail(f'surfaces[{i}].material',
-                       f'= {raw["surfaces"][i]["material"]!r}: contact lasts ~{t_c:.2g} s '
-                       f'(Hertz, lightest link at 1 m/s), out of range: must be >= '
-                       f'{MIN_CONTACT_TIME:g} s (stiffness E* = {e_red:.3g} Pa against link '
-                       f'masses down to {min(masses):g} kg: steps would fall under the '
-                       f'resolution of t)')
+            check.fail(
+                f'surfaces[{i}].material',
+                f'= {raw["surfaces"][i]["material"]!r}: contact lasts ~{t_c:.2g} s '
+                f'(Hertz, lightest link at 1 m/s), out of range: must be >= '
+                f'{MIN_CONTACT_TIME:g} s (stiffness E* = {e_red:.3g} Pa against link '
+                f'masses down to {min(masses):g} kg: steps would fall under the '
+                f'resolution of t)',
+            )
     c = raw['controller']
     for k, (length, mass) in enumerate(zip(lengths, masses)):
-        inertia = mass * length ** 2 / 3    # a rod about its joint
-        for key, rate in (('kd', c['kd'][k] / inertia if k < len(c['kd']) else 0.0),
-                          ('kp', math.sqrt(c['kp'][k] / inertia) if k < len(c['kp']) else 0.0)):
+        inertia = mass * length**2 / 3  # a rod about its joint
+        for key, rate in (
+            ('kd', c['kd'][k] / inertia if k < len(c['kd']) else 0.0),
+            ('kp', math.sqrt(c['kp'][k] / inertia) if k < len(c['kp']) else 0.0),
+        ):
             if rate > MAX_LOOP_RATE:
-                check.fail(f'controller.{key}[{k}]',
-                           f'= {c[key][k]:g} is out of range: gives a closed-loop rate of '
-                           f'{rate:.3g} 1/s on link {k + 1} (inertia {inertia:.3g} kg m^2); must '
-                           f'be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: beyond the run budget)')
+                check.fail(
+                    f'controller.{key}[{k}]',
+                    f'= {c[key][k]:g} is out of range: gives a closed-loop rate of '
+                    f'{rate:.3g} 1/s on link {k + 1} (inertia {inertia:.3g} kg m^2); must '
+                    f'be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: beyond the run budget)',
+                )
     if 0 < c['rate'] < 1:
-        check.fail('controller.rate', f"= {c['rate']:g} is out of range: must be 0 "
-                   f'(continuous) or >= 1 (Hz): a slower sampled controller holds one torque '
-                   f'for more than a second')
+        check.fail(
+            'controller.rate',
+            f'= {c["rate"]:g} is out of range: must be 0 '
+            f'(continuous) or >= 1 (Hz): a slower sampled controller holds one torque '
+            f'for more than a second',
+        )
 
 
 def read_scene_file(name: str | os.PathLike) -> tuple[str, str]:
@@ -444,8 +520,11 @@ def read_scene_file(name: str | os.PathLike) -> tuple[str, str]:
         hint = ''
         if isinstance(exc, FileNotFoundError) and not os.path.dirname(path):
             names = installed_scenes()
-            hint = (f"; installed scenes: {', '.join(names)} (or give a path to a scene file)"
-                    if names else '')
+            hint = (
+                f'; installed scenes: {", ".join(names)} (or give a path to a scene file)'
+                if names
+                else ''
+            )
         raise SceneError(f"scene '{path}': cannot be read: {exc.strerror}{hint}") from None
     if len(data) > MAX_FILE_BYTES:
         raise SceneError(f"scene '{path}': larger than {MAX_FILE_BYTES} bytes: not a scene file")
@@ -471,10 +550,14 @@ class _SceneLoader(yaml.SafeLoader):
     thing under either reading or is refused, naming the value."""
 
     yaml_implicit_resolvers = {
-        first: [(tag, regexp) for tag, regexp in resolvers
-                if tag not in ('tag:yaml.org,2002:int', 'tag:yaml.org,2002:float',
-                               'tag:yaml.org,2002:bool')]
-        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+        first: [
+            (tag, regexp)
+            for tag, regexp in resolvers
+            if tag
+            not in ('tag:yaml.org,2002:int', 'tag:yaml.org,2002:float', 'tag:yaml.org,2002:bool')
+        ]
+        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+    }
 
     def construct_mapping(self, node, deep=False):
         seen = set()
@@ -482,31 +565,48 @@ class _SceneLoader(yaml.SafeLoader):
             key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
             if key is not None and key in seen:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f'duplicate key {key[:60]!r} (the file would mean only its last '
-                    f'value)', key_node.start_mark)
+                    None,
+                    None,
+                    f'duplicate key {key[:60]!r} (the file would mean only its last value)',
+                    key_node.start_mark,
+                )
             seen.add(key)
         return super().construct_mapping(node, deep)
 
     def construct_ambiguous(self, node):
         raise yaml.constructor.ConstructorError(
-            None, None, f'{node.value[:60]!r} reads differently in YAML 1.1 and 1.2 '
+            None,
+            None,
+            f'{node.value[:60]!r} reads differently in YAML 1.1 and 1.2 '
             f'(sexagesimal, octal, yes/no/on/off, digit separators): write a plain decimal '
-            f'number, true/false, or quote it as a string', node.start_mark)
+            f'number, true/false, or quote it as a string',
+            node.start_mark,
+        )
 
 
 _AMBIGUOUS = 'tag:impact_arm,2026:ambiguous'
 _SceneLoader.add_constructor(_AMBIGUOUS, _SceneLoader.construct_ambiguous)
 for _tag, _pattern, _first in (
-        (_AMBIGUOUS, r'^(?:[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?'
-                     r'|[-+]?0[0-9_]+|[-+]?0b[01_]+|[-+]?[0-9][0-9_]*_[0-9_]*(?:\.[0-9_]*)?'
-                     r'|yes|Yes|YES|no|No|NO|on|On|ON|off|Off|OFF|y|Y|n|N)$',
-         list('-+0123456789yYnNoO')),
-        ('tag:yaml.org,2002:bool', r'^(?:true|True|TRUE|false|False|FALSE)$', list('tTfF')),
-        ('tag:yaml.org,2002:int', r'^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$',
-         list('-+0123456789')),
-        ('tag:yaml.org,2002:float',
-         r'^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?'
-         r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$', list('-+0123456789.'))):
+    (
+        _AMBIGUOUS,
+        r'^(?:[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?'
+        r'|[-+]?0[0-9_]+|[-+]?0b[01_]+|[-+]?[0-9][0-9_]*_[0-9_]*(?:\.[0-9_]*)?'
+        r'|yes|Yes|YES|no|No|NO|on|On|ON|off|Off|OFF|y|Y|n|N)$',
+        list('-+0123456789yYnNoO'),
+    ),
+    ('tag:yaml.org,2002:bool', r'^(?:true|True|TRUE|false|False|FALSE)$', list('tTfF')),
+    (
+        'tag:yaml.org,2002:int',
+        r'^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$',
+        list('-+0123456789'),
+    ),
+    (
+        'tag:yaml.org,2002:float',
+        r'^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?'
+        r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$',
+        list('-+0123456789.'),
+    ),
+):
     _SceneLoader.add_implicit_resolver(_tag, re.compile(_pattern), _first)
 
 
@@ -527,12 +627,13 @@ def _expanded_size(node, sizes) -> int:
     """Nodes the document becomes once aliases are expanded (shared nodes counted each time)."""
     key = id(node)
     if key not in sizes:
-        sizes[key] = 0       # a recursive alias counts as one node here; it is refused later
+        sizes[key] = 0  # a recursive alias counts as one node here; it is refused later
         if isinstance(node, yaml.SequenceNode):
             total = 1 + sum(_expanded_size(child, sizes) for child in node.value)
         elif isinstance(node, yaml.MappingNode):
-            total = 1 + sum(_expanded_size(k, sizes) + _expanded_size(v, sizes)
-                            for k, v in node.value)
+            total = 1 + sum(
+                _expanded_size(k, sizes) + _expanded_size(v, sizes) for k, v in node.value
+            )
         else:
             total = 1
         sizes[key] = min(total, MAX_YAML_NODES + 1)
@@ -558,13 +659,18 @@ def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
         loader = _SceneLoader(text)
         node = loader.get_single_node()
         if node is not None and _expanded_size(node, {}) > MAX_YAML_NODES:
-            raise SceneError(f"{what} '{origin}': more than {MAX_YAML_NODES} YAML nodes once "
-                             f'aliases are expanded: not a scene file')
+            raise SceneError(
+                f"{what} '{origin}': more than {MAX_YAML_NODES} YAML nodes once "
+                f'aliases are expanded: not a scene file'
+            )
         return loader.construct_document(node) if node is not None else None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        where = (f' at line {mark.line + 1}, column {mark.column + 1}'
-                 f'{_near_key(text, mark.line)}') if mark else ''
+        where = (
+            (f' at line {mark.line + 1}, column {mark.column + 1}{_near_key(text, mark.line)}')
+            if mark
+            else ''
+        )
         problem = ' '.join(str(exc.problem or exc.context or 'unreadable').split())
         raise SceneError(f"{what} '{origin}': not valid YAML{where}: {problem[:200]}") from None
     except (yaml.YAMLError, RecursionError, ValueError) as exc:
@@ -603,7 +709,7 @@ def installed_scenes() -> list[str]:
             try:
                 with open(os.path.join(directory, entry), encoding='utf-8') as f:
                     if any(line.startswith('links:') for line in f):
-                        names.add(entry[:-len('.yaml')])
+                        names.add(entry[: -len('.yaml')])
             except (OSError, UnicodeDecodeError):
                 continue
     return sorted(names)
@@ -612,11 +718,15 @@ def installed_scenes() -> list[str]:
 def config_dirs() -> list[str]:
     """Where scene files live: the source tree, the install prefix, the ament share dir."""
     import sys
+
     here = os.path.dirname(os.path.abspath(__file__))
-    dirs = [os.path.join(os.path.dirname(os.path.dirname(here)), 'config'),
-            os.path.join(sys.prefix, 'share', 'impact_arm', 'config')]
+    dirs = [
+        os.path.join(os.path.dirname(os.path.dirname(here)), 'config'),
+        os.path.join(sys.prefix, 'share', 'impact_arm', 'config'),
+    ]
     try:
         from ament_index_python.packages import get_package_share_directory
+
         dirs.append(os.path.join(get_package_share_directory('impact_arm'), 'config'))
     except Exception:  # no ament index (plain venv): the other places suffice
         pass

@@ -11,6 +11,7 @@ period, now or, with a ``recorder_window``, once the recorder has written far en
 
 Both run on any clock: tests drive them with a fake one (test_session.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -26,11 +27,12 @@ from .driver import CommandError, SimulatedArm, Tick
 from .errors import SimulationError
 from .realtime import PERIOD_PARTS, DriverLoop, WatchdogPolicy, WatchdogState
 
-LOCKSTEP_REPEAT_S = 1.0   # lockstep: publish a period again when unanswered this long
+LOCKSTEP_REPEAT_S = 1.0  # lockstep: publish a period again when unanswered this long
 
 
 class Level(IntEnum):
     """Severity of a status, as diagnostic_msgs/DiagnosticStatus numbers it."""
+
     OK = 0
     WARN = 1
     ERROR = 2
@@ -40,6 +42,7 @@ class Level(IntEnum):
 class SessionStatus:
     """One snapshot of a session for /diagnostics: severity, a one-line message and the
     named values (in a fixed order, already formatted)."""
+
     level: Level
     message: str
     values: tuple[tuple[str, str], ...]
@@ -54,6 +57,7 @@ class Outputs:
     ``report(tick)`` its impact reports (after the sensor messages), ``log(level, text)``
     (levels info, warning, waiting: a repeated warning, error); ``failures()`` counts the
     samples the transport refused."""
+
     publish: Callable[[Tick], None] = lambda tick: None
     report: Callable[[Tick], None] = lambda tick: None
     log: Callable[[str, str], None] = lambda level, text: None
@@ -62,32 +66,49 @@ class Outputs:
 
 class Session:
     """What both kinds share: commands, control, failure and status."""
+
     mode = ''
 
-    def __init__(self, arm: SimulatedArm, *, publish_rate: float, rate_factor: float,
-                 command_timeout: float, command_order: list[int],
-                 outputs: Outputs | None = None,
-                 policy: WatchdogPolicy = WatchdogPolicy.ZERO,
-                 take_command: Callable[[], Any] | None = None, max_takes: int = 100,
-                 clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep):
+    def __init__(
+        self,
+        arm: SimulatedArm,
+        *,
+        publish_rate: float,
+        rate_factor: float,
+        command_timeout: float,
+        command_order: list[int],
+        outputs: Outputs | None = None,
+        policy: WatchdogPolicy = WatchdogPolicy.ZERO,
+        take_command: Callable[[], Any] | None = None,
+        max_takes: int = 100,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ):
         self.arm = arm
         self.out = outputs or Outputs()
         self.publish_rate, self.rate_factor = publish_rate, rate_factor
         self.command_order = command_order
         self.clock, self.sleep = clock, sleep
-        self.loop = DriverLoop(arm, wall_period=1.0 / (publish_rate * (rate_factor or 1.0)),
-                               command_timeout=command_timeout, take_command=take_command,
-                               accept=self.offer, publish=self.out.publish,
-                               log=self.out.log, clock=clock, sleep=sleep,
-                               max_takes=max_takes, policy=policy)
+        self.loop = DriverLoop(
+            arm,
+            wall_period=1.0 / (publish_rate * (rate_factor or 1.0)),
+            command_timeout=command_timeout,
+            take_command=take_command,
+            accept=self.offer,
+            publish=self.out.publish,
+            log=self.out.log,
+            clock=clock,
+            sleep=sleep,
+            max_takes=max_takes,
+            policy=policy,
+        )
         self.rejected = self.clipped = 0
-        self.failed = ''                   # why the simulation stopped ('' while it runs)
-        self.scheduling = 'normal'         # set by whoever runs the periods
+        self.failed = ''  # why the simulation stopped ('' while it runs)
+        self.scheduling = 'normal'  # set by whoever runs the periods
         self._last_reject_log = -math.inf
         self._diag_window_start = clock()
         self._diag_published = 0
-        self.last_tick: tuple[Tick, float] | None = None   # (tick, when published)
+        self.last_tick: tuple[Tick, float] | None = None  # (tick, when published)
 
     def publish_initial(self) -> None:
         """The state at t = 0, before anything moves."""
@@ -133,7 +154,7 @@ class Session:
     # -------------------------------------------------------------------------- control
     def set_max_effort(self, limit: float) -> None:
         self.arm.max_effort = limit
-        self.loop.watchdog.reapply()       # re-clip the held command with the new limit
+        self.loop.watchdog.reapply()  # re-clip the held command with the new limit
 
     def set_command_timeout(self, timeout: float) -> None:
         self.loop.watchdog.timeout = timeout
@@ -162,8 +183,11 @@ class Session:
         if self.failed:
             return False, f'stopped: {self.failed}'
         done = self._reset()
-        return done, ('reset to the initial state at t = 0; brakes on until the next command'
-                      if done else 'the loop did not answer within 1 s')
+        return done, (
+            'reset to the initial state at t = 0; brakes on until the next command'
+            if done
+            else 'the loop did not answer within 1 s'
+        )
 
     def _reset(self) -> bool:
         raise NotImplementedError
@@ -188,16 +212,19 @@ class Session:
         if self.loop.e_stop:
             return Level.ERROR, 'e-stop: zero torque until /e_stop false'
         if watchdog is WatchdogState.TIMEOUT:
-            action = 'brakes on' if self.loop.watchdog.policy is WatchdogPolicy.BRAKE \
+            action = (
+                'brakes on'
+                if self.loop.watchdog.policy is WatchdogPolicy.BRAKE
                 else 'torques zeroed'
-            return Level.WARN, (f'no command for more than {self.loop.watchdog.timeout:g} s: '
-                                f'{action}' + (' (lockstep paused)' if self.mode == 'lockstep'
-                                               else ''))
+            )
+            return Level.WARN, (
+                f'no command for more than {self.loop.watchdog.timeout:g} s: '
+                f'{action}' + (' (lockstep paused)' if self.mode == 'lockstep' else '')
+            )
         if watchdog is WatchdogState.WAITING:
             return Level.WARN, 'waiting for the first command (zero torque)'
         if not jit.AVAILABLE:
-            return Level.WARN, f'interpreted kernel ({jit.UNAVAILABLE}): periods overrun; ' \
-                f'{jit.FIX}'
+            return Level.WARN, f'interpreted kernel ({jit.UNAVAILABLE}): periods overrun; {jit.FIX}'
         return Level.OK, 'paused' if self.loop.paused else 'running'
 
     def take_status(self, now: float | None = None) -> SessionStatus:
@@ -209,9 +236,9 @@ class Session:
         intervals, computes = stats.take()
         window = now - self._diag_window_start
         self._diag_window_start = now
-        with stats.lock:   # a consistent pair: periods counted up to this simulated time
+        with stats.lock:  # a consistent pair: periods counted up to this simulated time
             published, t_published = stats.published, stats.t_published
-        if published < self._diag_published:   # a reset
+        if published < self._diag_published:  # a reset
             self._diag_published = 0
         achieved = (published - self._diag_published) / window if window > 0 else 0.0
         self._diag_published = published
@@ -258,12 +285,16 @@ class Session:
             'period_us': f'{nominal * 1e6:.1f}',
             # where a realtime period's time goes (whole-run means): taking commands,
             # the physics, publishing the period's messages
-            **{f'compute_{part}_mean_us': f'{mean * 1e6:.1f}' for part, mean in
-               zip(PERIOD_PARTS, part_means)},
+            **{
+                f'compute_{part}_mean_us': f'{mean * 1e6:.1f}'
+                for part, mean in zip(PERIOD_PARTS, part_means)
+            },
             **({'lockstep_wait_mean_us': f'{part_means[3] * 1e6:.1f}'} if lockstep else {}),
             # and the worst period's (is it the physics of an impact, or a stall?)
-            **{f'compute_worst_{part}_us': f'{t * 1e6:.1f}' for part, t in
-               zip(PERIOD_PARTS, stats.worst_parts)},
+            **{
+                f'compute_worst_{part}_us': f'{t * 1e6:.1f}'
+                for part, t in zip(PERIOD_PARTS, stats.worst_parts)
+            },
             'watchdog': watchdog.value,
             'watchdog_policy': dog.policy.value,
             # each timeout the brake policy answered by holding the joints, and the largest
@@ -279,7 +310,8 @@ class Session:
             **self._extra_values(),
             'sim_time': f'{self.arm.t:.6f}',
             'real_time_factor': f'{self.arm.t / (now - first_command):.3f}'
-            if first_command and now > first_command else '0',
+            if first_command and now > first_command
+            else '0',
             'impacts': str(loop.impacts),
             'rhs_evaluations': str(integ.rhs_evaluations),
             'steps': str(integ.steps),
@@ -295,6 +327,7 @@ class Session:
 
 class RealtimeSession(Session):
     """Periods paced by the wall clock; ``run`` is the loop thread's body."""
+
     mode = 'realtime'
 
     def __init__(self, arm: SimulatedArm, **kwargs: Any) -> None:
@@ -310,7 +343,7 @@ class RealtimeSession(Session):
                 self.out.report(tick)
 
     def _reset(self) -> bool:
-        return self.loop.request_reset(1.0)   # done by the loop thread at its next period
+        return self.loop.request_reset(1.0)  # done by the loop thread at its next period
 
     def run_steps(self, periods: int) -> tuple[bool, str]:
         """``step``, answered once the loop thread has run the periods (simulation_interfaces'
@@ -325,8 +358,10 @@ class RealtimeSession(Session):
         while self.arm.periods < target and self.clock() < end and not self.failed:
             self.sleep(min(period, 0.01))
         if self.arm.periods < target:
-            return False, (f'{target - self.arm.periods} of {periods} period(s) not run '
-                           f'within {limit:.3g} s (brakes stay on until the first command)')
+            return False, (
+                f'{target - self.arm.periods} of {periods} period(s) not run '
+                f'within {limit:.3g} s (brakes stay on until the first command)'
+            )
         return True, f'{periods} period(s) run, t = {self.arm.t:.6f} s'
 
 
@@ -336,19 +371,26 @@ class LockstepSession(Session):
     says it has written (``recorder_progress``): a recorder frozen for seconds holds the run
     instead of losing what the writers' history could no longer resend. ``recorder_present``
     and ``controller_present`` tell whether those peers are still on the graph."""
+
     mode = 'lockstep'
 
-    def __init__(self, arm: SimulatedArm, *, recorder_window: int = 0,
-                 recorder_present: Callable[[], bool] = lambda: True,
-                 controller_present: Callable[[], bool] = lambda: True, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        arm: SimulatedArm,
+        *,
+        recorder_window: int = 0,
+        recorder_present: Callable[[], bool] = lambda: True,
+        controller_present: Callable[[], bool] = lambda: True,
+        **kwargs: Any,
+    ) -> None:
         super().__init__(arm, **kwargs)
-        self.loop.stats.nominal = None     # lockstep has no wall period to jitter around
+        self.loop.stats.nominal = None  # lockstep has no wall period to jitter around
         self.window_ns = round(recorder_window * 1e9 / self.publish_rate)
         self.recorder_window = recorder_window
         self.recorder_present, self.controller_present = recorder_present, controller_present
-        self.recorded_until: int | None = None   # ns, from the recorder's progress
-        self.deferred: float | None = None       # arrival of a command waiting for the recorder
-        self.waits_for_recorder = 0              # periods that waited
+        self.recorded_until: int | None = None  # ns, from the recorder's progress
+        self.deferred: float | None = None  # arrival of a command waiting for the recorder
+        self.waits_for_recorder = 0  # periods that waited
         self.recorder_seen = False
         self.repeats = 0
 
@@ -356,26 +398,26 @@ class LockstepSession(Session):
         if self.failed:
             return
         if self.loop.paused and not self.loop.take_step():
-            return                         # held until resumed or stepped
+            return  # held until resumed or stepped
         self._advance(now)
 
     def pause(self, paused: bool) -> str:
         was = self.loop.paused
         message = super().pause(paused)
         if was and not self.loop.paused and self.loop.watchdog.pending:
-            self._advance(self.clock())    # the exchange waits for a period
+            self._advance(self.clock())  # the exchange waits for a period
         return message
 
     def step(self, periods: int) -> tuple[bool, str]:
         ok, message = super().step(periods)
         if ok and self.loop.watchdog.pending and self.loop.take_step():
-            self._advance(self.clock())    # the exchange waits for a period
+            self._advance(self.clock())  # the exchange waits for a period
         return ok, message
 
     def _reset(self) -> bool:
         self.loop.request_reset(None)
         self.deferred = None
-        self.recorded_until = None         # the recorder's next progress is after the reset
+        self.recorded_until = None  # the recorder's next progress is after the reset
         self.out.publish(self.arm.sample())
         return True
 
@@ -384,9 +426,11 @@ class LockstepSession(Session):
         if not self.window_ns:
             return False
         if self.recorder_seen and not self.recorder_present():
-            return False                   # the recorder left: the run goes on without it
-        return self.recorded_until is None or \
-            round(self.arm.t * 1e9) - self.recorded_until >= self.window_ns
+            return False  # the recorder left: the run goes on without it
+        return (
+            self.recorded_until is None
+            or round(self.arm.t * 1e9) - self.recorded_until >= self.window_ns
+        )
 
     def recorder_progress(self, written_ns: int) -> None:
         """The recorder has written the joint states up to stamp ``written_ns``."""
@@ -430,24 +474,35 @@ class LockstepSession(Session):
                 arrived, self.deferred = self.deferred, None
                 self._period(arrived)
             else:
-                self.out.log('waiting', f'waiting for the recorder: written up to t = '
-                             f'{(self.recorded_until or 0) * 1e-9:.3f} s, simulated '
-                             f'{self.arm.t:.3f} s (recorder_window {self.recorder_window})')
+                self.out.log(
+                    'waiting',
+                    f'waiting for the recorder: written up to t = '
+                    f'{(self.recorded_until or 0) * 1e-9:.3f} s, simulated '
+                    f'{self.arm.t:.3f} s (recorder_window {self.recorder_window})',
+                )
             return
-        if self.last_tick is None:         # (publish_initial not called yet)
+        if self.last_tick is None:  # (publish_initial not called yet)
             return
         now = self.clock() if now is None else now
         tick, published = self.last_tick
         last_command = self.loop.watchdog.last_command or published
-        if now - published > LOCKSTEP_REPEAT_S and now - last_command > LOCKSTEP_REPEAT_S \
-                and self.controller_present():   # not once the controller left
+        if (
+            now - published > LOCKSTEP_REPEAT_S
+            and now - last_command > LOCKSTEP_REPEAT_S
+            and self.controller_present()
+        ):  # not once the controller left
             self.repeats += 1
-            self.out.log('warning', f'no command for {now - published:.1f} s after the period '
-                         f'ending at t = {tick.t:.6f} s: published it again ({self.repeats} '
-                         f'so far)')
+            self.out.log(
+                'warning',
+                f'no command for {now - published:.1f} s after the period '
+                f'ending at t = {tick.t:.6f} s: published it again ({self.repeats} '
+                f'so far)',
+            )
             self.out.publish(tick)
             self.last_tick = (tick, now)
 
     def _extra_values(self) -> dict[str, str]:
-        return {'lockstep_repeats': str(self.repeats),
-                'periods_waiting_for_recorder': str(self.waits_for_recorder)}
+        return {
+            'lockstep_repeats': str(self.repeats),
+            'periods_waiting_for_recorder': str(self.waits_for_recorder),
+        }

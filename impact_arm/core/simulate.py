@@ -6,6 +6,7 @@ Two ways to drive the arm, both on the same integrator:
 * sampled control (``control_rate`` > 0 Hz): a ``CycleController`` sees the sampled joint
   state and contact force and its torques are held between samples, as the ROS loop does.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,11 +29,11 @@ class Sample:
     q: tuple
     qd: tuple
     tau: tuple
-    wrench: tuple    # (F_tangential, F_normal) averaged over the period that ends at t
+    wrench: tuple  # (F_tangential, F_normal) averaged over the period that ends at t
     mode: str
 
 
-MAX_KEPT_SAMPLES = 2e7    # publish_rate * t_max of a run that keeps its samples in memory
+MAX_KEPT_SAMPLES = 2e7  # publish_rate * t_max of a run that keeps its samples in memory
 
 
 class SampleRanges:
@@ -47,8 +48,7 @@ class SampleRanges:
             self.q_min, self.q_max = list(q), list(q)
             self.v_min, self.v_max = list(tip_velocity), list(tip_velocity)
             return
-        for lo, hi, values in ((self.q_min, self.q_max, q),
-                               (self.v_min, self.v_max, tip_velocity)):
+        for lo, hi, values in ((self.q_min, self.q_max, q), (self.v_min, self.v_max, tip_velocity)):
             for k, x in enumerate(values):
                 if x < lo[k]:
                     lo[k] = x
@@ -66,30 +66,32 @@ class SampleRanges:
 
 class StopReason(TextEnum):
     """Why a run ended (a str: it compares equal to its value)."""
+
     CYCLES_COMPLETED = 'cycles completed'
     T_MAX_REACHED = 't_max reached'
-    ERROR = 'error'                  # a SimulationError ended it: ``RunResult.error`` says what
+    ERROR = 'error'  # a SimulationError ended it: ``RunResult.error`` says what
     INTERRUPTED = 'interrupted'
-    FAILED = 'failed'                # outside the physics (a node exited, a time-out, ...)
+    FAILED = 'failed'  # outside the physics (a node exited, a time-out, ...)
 
 
 @dataclass
 class RunResult:
     """What every run returns: the impact records, the samples if kept, the totals and why
     it stopped (``stop_reason``; ``stopped`` is the same in words, with its numbers)."""
+
     scene: Scene
     impacts: list
-    samples: list = field(default_factory=list)    # empty when run(keep_samples=False)
+    samples: list = field(default_factory=list)  # empty when run(keep_samples=False)
     ranges: SampleRanges = field(default_factory=SampleRanges)
-    traces: list = field(default_factory=list)     # one list of trace rows per impact
+    traces: list = field(default_factory=list)  # one list of trace rows per impact
     t_end: float = 0.0
     rhs_evaluations: int = 0
-    wall_time: float = 0.0                         # the integration (and its bookkeeping)
-    load_time: float = 0.0                         # loading the compiled kernel, first run
+    wall_time: float = 0.0  # the integration (and its bookkeeping)
+    load_time: float = 0.0  # loading the compiled kernel, first run
     stop_reason: StopReason | None = None
-    stop_detail: str = ''                          # e.g. '15 cycles completed'
+    stop_detail: str = ''  # e.g. '15 cycles completed'
     error: str = ''
-    exception: SimulationError | None = None       # what ended the run early, if anything
+    exception: SimulationError | None = None  # what ended the run early, if anything
     integrator: PhaseIntegrator | None = None
 
     @property
@@ -130,10 +132,24 @@ class RunResult:
         return settle_index(self.impacts)
 
 
-def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None,
-        preset: str | None = None, rtol=None, atol=None, contact_rtol=None, method=None,
-        max_step=None, publish_rate: float | None = None, trace=False, observer=None,
-        progress=None, t_max: float | None = None, keep_samples=True) -> RunResult:
+def run(
+    scene: Scene,
+    *,
+    samples: bool = True,
+    control_rate: float | None = None,
+    preset: str | None = None,
+    rtol=None,
+    atol=None,
+    contact_rtol=None,
+    method=None,
+    max_step=None,
+    publish_rate: float | None = None,
+    trace=False,
+    observer=None,
+    progress=None,
+    t_max: float | None = None,
+    keep_samples=True,
+) -> RunResult:
     """Simulate ``scene`` for its number of cycles (or until ``t_max``): the one way to run.
 
     ``samples=False`` takes the event-only path (continuous control, no sampled output: the
@@ -154,8 +170,10 @@ def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None
     t_max = scene.t_max if t_max is None else t_max
     if not samples:
         if control_rate or observer is not None or trace:
-            raise ValueError('run(samples=False) runs from event to event with continuous '
-                             'control: no control_rate, observer or trace')
+            raise ValueError(
+                'run(samples=False) runs from event to event with continuous '
+                'control: no control_rate, observer or trace'
+            )
         return _run_events(scene, t_max, options, progress)
     publish_rate = publish_rate or scene.publish_rate
     if keep_samples and publish_rate * t_max > MAX_KEPT_SAMPLES:
@@ -163,10 +181,12 @@ def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None
             f'publish_rate = {publish_rate:g} is out of range with t_max = {t_max:g} s for a '
             f'run that keeps its samples in memory: {publish_rate * t_max:.3g} samples; '
             f'publish_rate * t_max must be <= {MAX_KEPT_SAMPLES:g} (impact-arm simulate '
-            f'streams them: no limit there)')
+            f'streams them: no limit there)'
+        )
     model = ArmModel(scene)
     integ = PhaseIntegrator(
-        model, control='held' if control_rate else 'continuous', trace=True, **options)
+        model, control='held' if control_rate else 'continuous', trace=True, **options
+    )
     st = integ.state
     n = model.n
     ctrl = None
@@ -185,7 +205,7 @@ def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None
     dt_ctl = 1.0 / control_rate if control_rate else math.inf
 
     def apply_control(t):
-        q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+        q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
         fn = impulse_since_ctl[1] / dt_ctl if dt_ctl < math.inf else None
         mode_before = ctrl.mode
         tau = ctrl.update(t, q, qd, normal_force=fn)
@@ -222,8 +242,7 @@ def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None
         # continuous control: nothing happens on the sample grid, so the integrator's own
         # steps run on and the samples come from each step's continuous extension
         try:
-            _run_sampled(scene, integ, dt_pub, t_max, feed, publish, result,
-                         lambda: cycles_done)
+            _run_sampled(scene, integ, dt_pub, t_max, feed, publish, result, lambda: cycles_done)
         except SimulationError as exc:
             result.fail(exc)
         return _finish(result, integ, wall0)
@@ -254,16 +273,23 @@ def run(scene: Scene, *, samples: bool = True, control_rate: float | None = None
                     cycles_done += 1
                 k_ctl += 1
             if t_pub <= t_next:
-                q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+                q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
                 period = t_pub - last_publish
-                wrench = (impulse[0] / period, impulse[1] / period) if period > 0 else \
-                    integ.contact_force_now()
+                wrench = (
+                    (impulse[0] / period, impulse[1] / period)
+                    if period > 0
+                    else integ.contact_force_now()
+                )
                 impulse = [0.0, 0.0]
                 last_publish = t_pub
                 tau = integ.torque()
                 tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
-                publish(Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench,
-                               ctrl.mode if ctrl else st.mode), model.tip(q, qd)[2:])
+                publish(
+                    Sample(
+                        t_pub, tuple(q), tuple(qd), tau_now, wrench, ctrl.mode if ctrl else st.mode
+                    ),
+                    model.tip(q, qd)[2:],
+                )
                 k_pub += 1
             if scene.cycles and cycles_done >= scene.cycles:
                 result.stop(StopReason.CYCLES_COMPLETED, f'{scene.cycles} cycles completed')
@@ -288,24 +314,34 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     ``OUTPUT_CAPACITY`` rows held), events fed as they are located."""
     model, st = integ.model, integ.state
     n, eq = model.n, model.eq
-    mode = st.mode           # samples carry the cycle half at the advance's start
+    mode = st.mode  # samples carry the cycle half at the advance's start
     last_t = 0.0
 
     def publish_rows(rows):
         nonlocal last_t
         for row in rows.tolist():
-            q, qd = tuple(row[eq.R_Y:eq.R_Y + n]), tuple(row[eq.R_Y + n:eq.R_Y + 2 * n])
-            tau = tuple(row[eq.R_TAU:eq.R_TAU + n]) if row[eq.R_ACT] else (0.0,) * n
+            q, qd = tuple(row[eq.R_Y : eq.R_Y + n]), tuple(row[eq.R_Y + n : eq.R_Y + 2 * n])
+            tau = tuple(row[eq.R_TAU : eq.R_TAU + n]) if row[eq.R_ACT] else (0.0,) * n
             wrench = (row[eq.R_JT] / dt, row[eq.R_JN] / dt)
-            publish(Sample(row[eq.R_T], q, qd, tau, wrench, mode),
-                    tuple(row[eq.R_VTIP:eq.R_VTIP + 2]))
+            publish(
+                Sample(row[eq.R_T], q, qd, tau, wrench, mode), tuple(row[eq.R_VTIP : eq.R_VTIP + 2])
+            )
             last_t = row[eq.R_T]
 
     # the sample at t = 0, before anything moves (no period yet: the force acting now)
-    q, qd = st.y[:n].tolist(), st.y[n:2 * n].tolist()
+    q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
     tau = integ.torque()
-    publish(Sample(0.0, tuple(q), tuple(qd), tau if tau is not None else (0.0,) * n,
-                   integ.contact_force_now(), st.mode), model.tip(q, qd)[2:])
+    publish(
+        Sample(
+            0.0,
+            tuple(q),
+            tuple(qd),
+            tau if tau is not None else (0.0,) * n,
+            integ.contact_force_now(),
+            st.mode,
+        ),
+        model.tip(q, qd)[2:],
+    )
     integ.take_impulse()
     last_index = math.floor(t_max / dt * (1 + 1e-12))
     t_final = last_index * dt
@@ -328,30 +364,40 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
 
 def format_table(result: RunResult) -> str:
     """The impact table people read in a terminal."""
-    lines = [f"{'#':>3} {'t [s]':>9} {'q1,q2 [deg]':>15} {'dur [us]':>9} {'dm [um]':>8} "
-             f"{'dr [um]':>8} {'Fmax [kN]':>9} {'vx,vy before':>14} {'vx,vy after':>14} "
-             f"{'e':>6} {'T before->after [J]':>19} {'e_energy':>17}"]
+    lines = [
+        f'{"#":>3} {"t [s]":>9} {"q1,q2 [deg]":>15} {"dur [us]":>9} {"dm [um]":>8} '
+        f'{"dr [um]":>8} {"Fmax [kN]":>9} {"vx,vy before":>14} {"vx,vy after":>14} '
+        f'{"e":>6} {"T before->after [J]":>19} {"e_energy":>17}'
+    ]
     for i in result.impacts:
         lines.append(
-            f"{i['index']:>3} {i['t_contact']:>9.5f} "
-            f"{i['q_contact_deg'][0]:>7.2f},{i['q_contact_deg'][1]:>7.2f} "
-            f"{i['duration'] * 1e6:>9.2f} {i['delta_m'] * 1e6:>8.2f} {i['delta_r'] * 1e6:>8.2f} "
-            f"{i['F_max'] / 1e3:>9.3f} "
-            f"{i['v_before'][0]:>6.3f},{i['v_before'][1]:>7.3f} "
-            f"{i['v_after'][0]:>6.3f},{i['v_after'][1]:>7.3f} {i['cor_kinematic']:>6.3f} "
-            f"{i['T_before'][-1]:>8.3f} -> {i['T_after'][-1]:>7.3f} "
-            f"{', '.join(f'{e:.3f}' for e in i['cor_energetic']):>17}")
+            f'{i["index"]:>3} {i["t_contact"]:>9.5f} '
+            f'{i["q_contact_deg"][0]:>7.2f},{i["q_contact_deg"][1]:>7.2f} '
+            f'{i["duration"] * 1e6:>9.2f} {i["delta_m"] * 1e6:>8.2f} {i["delta_r"] * 1e6:>8.2f} '
+            f'{i["F_max"] / 1e3:>9.3f} '
+            f'{i["v_before"][0]:>6.3f},{i["v_before"][1]:>7.3f} '
+            f'{i["v_after"][0]:>6.3f},{i["v_after"][1]:>7.3f} {i["cor_kinematic"]:>6.3f} '
+            f'{i["T_before"][-1]:>8.3f} -> {i["T_after"][-1]:>7.3f} '
+            f'{", ".join(f"{e:.3f}" for e in i["cor_energetic"]):>17}'
+        )
     s = result.summary()
     lines.append('')
-    lines.append(f"{s['impacts']} impacts in {s['t_end']:.4f} s simulated "
-                 f"({result.stopped}); {s['rhs_evaluations']} right-hand-side evaluations, "
-                 f"{s['wall_time']:.4f} s wall integrating"
-                 + (f" (+{result.load_time:.3f} s loading the compiled kernel, once per "
-                    f"process)" if result.load_time else ''))
+    lines.append(
+        f'{s["impacts"]} impacts in {s["t_end"]:.4f} s simulated '
+        f'({result.stopped}); {s["rhs_evaluations"]} right-hand-side evaluations, '
+        f'{s["wall_time"]:.4f} s wall integrating'
+        + (
+            f' (+{result.load_time:.3f} s loading the compiled kernel, once per process)'
+            if result.load_time
+            else ''
+        )
+    )
     if s['period_last'] is not None:
         settled = result.settled_after
-        lines.append(f"last period {s['period_last']:.5f} s; limit cycle "
-                     + (f"reached after {settled} impacts" if settled else 'not reached'))
+        lines.append(
+            f'last period {s["period_last"]:.5f} s; limit cycle '
+            + (f'reached after {settled} impacts' if settled else 'not reached')
+        )
     if result.error:
         lines.append(f'STOPPED: {result.error}')
     return '\n'.join(lines)

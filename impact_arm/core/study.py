@@ -18,6 +18,7 @@ The YAML is parsed once per study, and what a run's overrides leave alone is val
 (``parse_scene(checked=...)``; the checks across keys run for every run); the compiled kernel
 of a scene shape is loaded once per process (``equations.load_equations``).
 """
+
 from __future__ import annotations
 
 import copy
@@ -48,13 +49,14 @@ def _key_path(path: str) -> tuple:
     while pos < len(path):
         match = _TOKEN.match(path, pos)
         if not match or (pos == 0 and path.startswith('.')):
-            raise SceneError(f"override key {path!r}: not a key path (e.g. surfaces[0].mu, "
-                             f"controller.kp[1])")
+            raise SceneError(
+                f'override key {path!r}: not a key path (e.g. surfaces[0].mu, controller.kp[1])'
+            )
         name, index = match.groups()
         parts.append(name if name is not None else int(index))
         pos = match.end()
     if not parts:
-        raise SceneError('override key \'\': empty key path')
+        raise SceneError("override key '': empty key path")
     return tuple(parts)
 
 
@@ -83,21 +85,29 @@ def apply_overrides(data: dict, overrides: dict) -> dict:
             last = depth == len(parts) - 1
             if isinstance(key, int):
                 if not isinstance(node, list):
-                    raise SceneError(f'override {path!r}: {_where(path, parts, depth)} is '
-                                     f'not a list')
+                    raise SceneError(
+                        f'override {path!r}: {_where(path, parts, depth)} is not a list'
+                    )
                 if key >= len(node):
-                    raise SceneError(f'override {path!r}: {_where(path, parts, depth)} has '
-                                     f'{len(node)} entries')
+                    raise SceneError(
+                        f'override {path!r}: {_where(path, parts, depth)} has {len(node)} entries'
+                    )
             elif not isinstance(node, dict):
-                raise SceneError(f'override {path!r}: {_where(path, parts, depth)} is not a '
-                                 f'mapping')
+                raise SceneError(
+                    f'override {path!r}: {_where(path, parts, depth)} is not a mapping'
+                )
             if last:
                 node[key] = _plain(value)
                 break
             child = node.get(key) if isinstance(node, dict) else node[key]
             child = {} if child is None else child
-            child = list(child) if isinstance(child, (list, tuple)) else \
-                dict(child) if isinstance(child, dict) else child
+            child = (
+                list(child)
+                if isinstance(child, (list, tuple))
+                else dict(child)
+                if isinstance(child, dict)
+                else child
+            )
             node[key] = child
             node = child
     return out
@@ -109,8 +119,9 @@ def _where(path, parts, depth) -> str:
 
 
 def _render(parts) -> str:
-    return ''.join(f'[{p}]' if isinstance(p, int) else (f'.{p}' if i else p)
-                   for i, p in enumerate(parts))
+    return ''.join(
+        f'[{p}]' if isinstance(p, int) else (f'.{p}' if i else p) for i, p in enumerate(parts)
+    )
 
 
 def load_scene_data(scene) -> tuple[dict, str]:
@@ -120,10 +131,12 @@ def load_scene_data(scene) -> tuple[dict, str]:
         return copy.deepcopy(scene), '<scene data>'
     if isinstance(scene, Scene):
         if not scene.source_text:
-            raise SceneError(f"scene '{scene.name}' was built without its YAML text: pass its "
-                             f"file or data")
-        return scene_data(scene.source_text, scene.source_path or scene.name), \
-            scene.source_path or scene.name
+            raise SceneError(
+                f"scene '{scene.name}' was built without its YAML text: pass its file or data"
+            )
+        return scene_data(
+            scene.source_text, scene.source_path or scene.name
+        ), scene.source_path or scene.name
     text, path = read_scene_file(scene)
     return scene_data(text, path), path
 
@@ -133,8 +146,8 @@ class StudyRun:
     overrides: dict
     impacts: list = field(default_factory=list)
     summary: dict = field(default_factory=dict)
-    error: str = ''          # the refusal or simulation error, '' if the run completed
-    error_kind: str = ''     # 'scene' | 'simulation' | ''
+    error: str = ''  # the refusal or simulation error, '' if the run completed
+    error_kind: str = ''  # 'scene' | 'simulation' | ''
 
 
 def summarize(impacts, t_end=math.nan, stats=None, wall=math.nan) -> dict:
@@ -145,7 +158,8 @@ def summarize(impacts, t_end=math.nan, stats=None, wall=math.nan) -> dict:
         'impacts': len(impacts),
         't_end': t_end,
         'period': impacts[-1]['t_contact'] - impacts[-2]['t_contact']
-        if len(impacts) > 1 else math.nan,
+        if len(impacts) > 1
+        else math.nan,
         'settled_after': settle_index(impacts) or 0,
         'cor_kinematic': last['cor_kinematic'] if last else math.nan,
         'cor_energetic': last['cor_energetic'][-1] if last else math.nan,
@@ -179,13 +193,19 @@ class Study:
         try:
             scene = self.scene(overrides)
         except SceneError as exc:
-            return StudyRun(overrides, summary=summarize([], wall=time.perf_counter() - wall0),
-                            error=str(exc), error_kind='scene')
+            return StudyRun(
+                overrides,
+                summary=summarize([], wall=time.perf_counter() - wall0),
+                error=str(exc),
+                error_kind='scene',
+            )
         result = run_scene(scene, samples=False)
-        summary = summarize(result.impacts, result.t_end, result.integrator.stats,
-                            time.perf_counter() - wall0)
-        return StudyRun(overrides, result.impacts, summary, result.error,
-                        'simulation' if result.error else '')
+        summary = summarize(
+            result.impacts, result.t_end, result.integrator.stats, time.perf_counter() - wall0
+        )
+        return StudyRun(
+            overrides, result.impacts, summary, result.error, 'simulation' if result.error else ''
+        )
 
 
 def run(scene='paper', overrides: dict | None = None) -> StudyRun:

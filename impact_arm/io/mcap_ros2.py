@@ -15,6 +15,7 @@ how old that is (the writer checks on each write; a recorder also flushes from a
 
 Topics, types and QoS are the contract's (``impact_arm.contract``).
 """
+
 from __future__ import annotations
 
 import os
@@ -30,9 +31,21 @@ from ..contract import TopicQos
 from ..core.errors import ImpactArmError
 from .msgdefs import message_class, message_definition, serialize_cdr, type_hash, type_name_of
 
-__all__ = ['RawMessage', 'RecordingError', 'Ros2McapWriter', 'TopicInfo', 'iter_raw',
-           'message_class', 'message_definition', 'qos_yaml', 'read_attachments',
-           'read_metadata', 'serialize_cdr', 'topics_info', 'type_name_of']
+__all__ = [
+    'RawMessage',
+    'RecordingError',
+    'Ros2McapWriter',
+    'TopicInfo',
+    'iter_raw',
+    'message_class',
+    'message_definition',
+    'qos_yaml',
+    'read_attachments',
+    'read_metadata',
+    'serialize_cdr',
+    'topics_info',
+    'type_name_of',
+]
 
 MAGIC = b'\x89MCAP0\r\n'
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 BagMetadata version whose QoS YAML uses policy names
@@ -58,6 +71,7 @@ def qos_yaml(profiles) -> str:
 
 def parse_qos_yaml(text: str) -> list:
     import yaml
+
     return [TopicQos.from_dict(d) for d in (yaml.safe_load(text) or [])]
 
 
@@ -66,6 +80,7 @@ def ros_distro() -> str:
         return os.environ['ROS_DISTRO']
     try:  # PyPI wheels (no ROS install) are named ros-<distro>-rclpy
         from importlib.metadata import distributions
+
         for dist in distributions():
             m = re.fullmatch(r'ros-([a-z]+)-rclpy', (dist.metadata['Name'] or '').lower())
             if m:
@@ -78,6 +93,7 @@ def ros_distro() -> str:
 def package_version() -> str:
     try:
         from importlib.metadata import version
+
         return version('impact_arm')
     except Exception:  # noqa: BLE001 - running from a source tree without metadata
         return '0.1.0'
@@ -117,27 +133,39 @@ class Ros2McapWriter:
     (None: only on chunk size, ``flush()`` and ``close()``). Thread safe.
     """
 
-    def __init__(self, path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 flush_interval: Optional[float] = 1.0, library: str = ''):
+    def __init__(
+        self,
+        path,
+        *,
+        compression: str = 'zstd',
+        chunk_size: int = 1 << 20,
+        flush_interval: Optional[float] = 1.0,
+        library: str = '',
+    ):
         self.path = os.fspath(path)
         if compression == 'zstd':
             import zstandard
+
             self._compress = zstandard.ZstdCompressor(level=3).compress
         elif compression == 'lz4':
             import lz4.frame
+
             self._compress = lz4.frame.compress
         elif compression in ('', 'none', None):
             compression, self._compress = '', None
         else:
             raise ValueError(f"compression must be 'zstd', 'lz4' or '', not {compression!r}")
-        self.compression, self.chunk_size, self.flush_interval = compression, chunk_size, \
-            flush_interval
+        self.compression, self.chunk_size, self.flush_interval = (
+            compression,
+            chunk_size,
+            flush_interval,
+        )
         self._lock = threading.RLock()
-        self._channels: dict = {}        # topic -> _Channel
-        self._schema_ids: dict = {}      # type name -> schema id
-        self._pending = bytearray()      # data-section records not yet in the file
-        self._chunk = bytearray()        # uncompressed records of the open chunk
-        self._chunk_index: dict = {}     # channel id -> [(log time, offset in chunk)]
+        self._channels: dict = {}  # topic -> _Channel
+        self._schema_ids: dict = {}  # type name -> schema id
+        self._pending = bytearray()  # data-section records not yet in the file
+        self._chunk = bytearray()  # uncompressed records of the open chunk
+        self._chunk_index: dict = {}  # channel id -> [(log time, offset in chunk)]
         self._chunk_times = [None, None]
         self._summary_schemas = bytearray()
         self._summary_channels = bytearray()
@@ -145,7 +173,7 @@ class Ros2McapWriter:
         self._summary_attachment_indexes = bytearray()
         self._summary_metadata_indexes = bytearray()
         self._counts = {'message': 0, 'chunk': 0, 'attachment': 0, 'metadata': 0}
-        self._times = [None, None]       # first and last log time of the file
+        self._times = [None, None]  # first and last log time of the file
         self._error: Optional[RecordingError] = None
         self._closed = False
         self._fd = None
@@ -157,7 +185,7 @@ class Ros2McapWriter:
             raise self._fail(e, 'cannot create') from None
         lib = library or f'impact_arm {package_version()}'
         head = MAGIC + _rec(0x01, _s('ros2') + _s(lib))
-        self._committed = 0   # end of the data that later flushes never rewrite
+        self._committed = 0  # end of the data that later flushes never rewrite
         self._file_end = 0
         self._tail = b''
         self._pending += head
@@ -177,20 +205,32 @@ class Ros2McapWriter:
             if topic in self._channels:
                 return self._channels[topic].id
             type_name = type_name_of(message_class(type_name))  # validates, normalises
-            qos_list = [contract.qos(topic)] if qos is None else (
-                list(qos) if isinstance(qos, (list, tuple)) else [qos])
+            qos_list = (
+                [contract.qos(topic)]
+                if qos is None
+                else (list(qos) if isinstance(qos, (list, tuple)) else [qos])
+            )
             thash = type_hash(type_name) if type_hash_str is None else type_hash_str
             if type_name not in self._schema_ids:
                 sid = len(self._schema_ids) + 1
-                rec = _rec(0x03, struct.pack('<H', sid) + _s(type_name) + _s('ros2msg')
-                           + _s(message_definition(type_name)))
+                rec = _rec(
+                    0x03,
+                    struct.pack('<H', sid)
+                    + _s(type_name)
+                    + _s('ros2msg')
+                    + _s(message_definition(type_name)),
+                )
                 self._schema_ids[type_name] = sid
                 self._pending += rec
                 self._summary_schemas += rec
             ch = _Channel(len(self._channels) + 1, topic, type_name, qos_list, thash)
-            rec = _rec(0x04, struct.pack('<HH', ch.id, self._schema_ids[type_name]) + _s(topic)
-                       + _s('cdr') + _map({'offered_qos_profiles': qos_yaml(qos_list),
-                                           'topic_type_hash': thash}))
+            rec = _rec(
+                0x04,
+                struct.pack('<HH', ch.id, self._schema_ids[type_name])
+                + _s(topic)
+                + _s('cdr')
+                + _map({'offered_qos_profiles': qos_yaml(qos_list), 'topic_type_hash': thash}),
+            )
             self._pending += rec
             self._summary_channels += rec
             self._channels[topic] = ch
@@ -216,8 +256,9 @@ class Ros2McapWriter:
             if t[1] is None or log_time_ns > t[1]:
                 t[1] = log_time_ns
             if len(self._chunk) >= self.chunk_size or (
-                    self.flush_interval is not None
-                    and time.monotonic() - self._last_flush >= self.flush_interval):
+                self.flush_interval is not None
+                and time.monotonic() - self._last_flush >= self.flush_interval
+            ):
                 self._flush()
 
     def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int = None):
@@ -233,25 +274,47 @@ class Ros2McapWriter:
             raise ValueError("the 'rosbag2' metadata record is written by the writer itself")
         with self._lock:
             rec = _rec(0x0C, _s(name) + _map({str(k): str(v) for k, v in data.items()}))
-            self._summary_metadata_indexes += _rec(0x0D, struct.pack(
-                '<QQ', self._committed + len(self._pending), len(rec)) + _s(name))
+            self._summary_metadata_indexes += _rec(
+                0x0D, struct.pack('<QQ', self._committed + len(self._pending), len(rec)) + _s(name)
+            )
             self._pending += rec
             self._counts['metadata'] += 1
 
-    def add_attachment(self, name: str, data: bytes, media_type: str = 'application/octet-stream',
-                       log_time_ns: int = None, create_time_ns: int = None):
+    def add_attachment(
+        self,
+        name: str,
+        data: bytes,
+        media_type: str = 'application/octet-stream',
+        log_time_ns: int = None,
+        create_time_ns: int = None,
+    ):
         """Store a file (e.g. the scene YAML) as an Attachment record."""
         now = time.time_ns()
         log_time_ns = now if log_time_ns is None else int(log_time_ns)
         create_time_ns = log_time_ns if create_time_ns is None else int(create_time_ns)
         data = data.encode() if isinstance(data, str) else bytes(data)
         with self._lock:
-            body = (struct.pack('<QQ', log_time_ns, create_time_ns) + _s(name) + _s(media_type)
-                    + struct.pack('<Q', len(data)) + data)
+            body = (
+                struct.pack('<QQ', log_time_ns, create_time_ns)
+                + _s(name)
+                + _s(media_type)
+                + struct.pack('<Q', len(data))
+                + data
+            )
             rec = _rec(0x09, body + struct.pack('<I', zlib.crc32(body)))
-            self._summary_attachment_indexes += _rec(0x0A, struct.pack(
-                '<QQQQQ', self._committed + len(self._pending), len(rec), log_time_ns,
-                create_time_ns, len(data)) + _s(name) + _s(media_type))
+            self._summary_attachment_indexes += _rec(
+                0x0A,
+                struct.pack(
+                    '<QQQQQ',
+                    self._committed + len(self._pending),
+                    len(rec),
+                    log_time_ns,
+                    create_time_ns,
+                    len(data),
+                )
+                + _s(name)
+                + _s(media_type),
+            )
             self._pending += rec
             self._counts['attachment'] += 1
 
@@ -300,8 +363,7 @@ class Ros2McapWriter:
 
     # --------------------------------------------------------------- internals
     def _fail(self, err: OSError, what: str) -> RecordingError:
-        self._error = RecordingError(
-            f'{what} MCAP file {self.path}: {err.strerror or err}')
+        self._error = RecordingError(f'{what} MCAP file {self.path}: {err.strerror or err}')
         self._error.errno = err.errno
         return self._error
 
@@ -310,8 +372,13 @@ class Ros2McapWriter:
         raw = bytes(self._chunk)
         data = self._compress(raw) if self._compress else raw
         start, end = self._chunk_times
-        chunk = _rec(0x06, struct.pack('<QQQI', start, end, len(raw), zlib.crc32(raw))
-                     + _s(self.compression) + struct.pack('<Q', len(data)) + data)
+        chunk = _rec(
+            0x06,
+            struct.pack('<QQQI', start, end, len(raw), zlib.crc32(raw))
+            + _s(self.compression)
+            + struct.pack('<Q', len(data))
+            + data,
+        )
         chunk_offset = base + len(out)
         out += chunk
         index_offsets = bytearray()
@@ -320,14 +387,20 @@ class Ros2McapWriter:
             entries = sorted(self._chunk_index[cid])
             flat = [x for e in entries for x in e]
             index_offsets += struct.pack('<HQ', cid, base + len(out))
-            out += _rec(0x07, struct.pack('<HI', cid, 16 * len(entries))
-                        + struct.pack(f'<{len(flat)}Q', *flat))
+            out += _rec(
+                0x07,
+                struct.pack('<HI', cid, 16 * len(entries)) + struct.pack(f'<{len(flat)}Q', *flat),
+            )
             self._counts['message'] += len(entries)
-        self._summary_chunk_indexes += _rec(0x08, struct.pack(
-            '<QQQQ', start, end, chunk_offset, len(chunk)) + struct.pack(
-            '<I', len(index_offsets)) + index_offsets + struct.pack(
-            '<Q', len(out) - index_start) + _s(self.compression) + struct.pack(
-            '<QQ', len(data), len(raw)))
+        self._summary_chunk_indexes += _rec(
+            0x08,
+            struct.pack('<QQQQ', start, end, chunk_offset, len(chunk))
+            + struct.pack('<I', len(index_offsets))
+            + index_offsets
+            + struct.pack('<Q', len(out) - index_start)
+            + _s(self.compression)
+            + struct.pack('<QQ', len(data), len(raw)),
+        )
         self._counts['chunk'] += 1
         t = self._times
         t[0] = start if t[0] is None else min(t[0], start)
@@ -379,64 +452,99 @@ class Ros2McapWriter:
 
     def _bag_metadata(self, pad: int = 0) -> str:
         import yaml
+
         start, end = self._times
         n = self._counts['message']
         start = start or 0
         duration = (end - start) if n else 0
         name = os.path.basename(self.path)
-        topics = [{'topic_metadata': {
-            'name': ch.topic, 'type': ch.type_name, 'serialization_format': 'cdr',
-            'offered_qos_profiles': [q.as_dict() for q in ch.qos],
-            'type_description_hash': ch.type_hash},
-            'message_count': self._flushed_count(ch)} for ch in self._channels.values()]
-        meta = {'version': ROSBAG2_METADATA_VERSION, 'storage_identifier': 'mcap',
-                'duration': {'nanoseconds': duration},
-                'starting_time': {'nanoseconds_since_epoch': start}, 'message_count': n,
-                'topics_with_message_count': topics, 'compression_format': '',
-                'compression_mode': '', 'relative_file_paths': [name],
-                'files': [{'path': name, 'starting_time': {'nanoseconds_since_epoch': start},
-                           'duration': {'nanoseconds': duration}, 'message_count': n}],
-                'custom_data': {'impact_arm_version': package_version()},
-                'ros_distro': _distro()}
+        topics = [
+            {
+                'topic_metadata': {
+                    'name': ch.topic,
+                    'type': ch.type_name,
+                    'serialization_format': 'cdr',
+                    'offered_qos_profiles': [q.as_dict() for q in ch.qos],
+                    'type_description_hash': ch.type_hash,
+                },
+                'message_count': self._flushed_count(ch),
+            }
+            for ch in self._channels.values()
+        ]
+        meta = {
+            'version': ROSBAG2_METADATA_VERSION,
+            'storage_identifier': 'mcap',
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': n,
+            'topics_with_message_count': topics,
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [name],
+            'files': [
+                {
+                    'path': name,
+                    'starting_time': {'nanoseconds_since_epoch': start},
+                    'duration': {'nanoseconds': duration},
+                    'message_count': n,
+                }
+            ],
+            'custom_data': {'impact_arm_version': package_version()},
+            'ros_distro': _distro(),
+        }
         # libyaml's dumper when present: this runs at every flush
         dumper = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
-        return yaml.dump(meta, Dumper=dumper, sort_keys=False,
-                         default_flow_style=False) + ' ' * pad
+        return yaml.dump(meta, Dumper=dumper, sort_keys=False, default_flow_style=False) + ' ' * pad
 
     def _flushed_count(self, ch) -> int:
         return ch.count - len(self._chunk_index.get(ch.id, ()))
 
     def _build_tail(self, base: int, pad: int = 0) -> bytes:
         """rosbag2 metadata record + DataEnd + summary + footer + magic, starting at base."""
-        meta = _rec(0x0C, _s('rosbag2') + _map({'serialized_metadata': self._bag_metadata(pad),
-                                                'ROS_DISTRO': _distro()}))
+        meta = _rec(
+            0x0C,
+            _s('rosbag2')
+            + _map({'serialized_metadata': self._bag_metadata(pad), 'ROS_DISTRO': _distro()}),
+        )
         data_tail = meta + _rec(0x0F, struct.pack('<I', 0))  # 0: data CRC not computed
         summary_start = base + len(data_tail)
         counts = {ch.id: self._flushed_count(ch) for ch in self._channels.values()}
         start, end = self._times
-        stats = _rec(0x0B, struct.pack(
-            '<QHIIII', self._counts['message'], len(self._schema_ids), len(self._channels),
-            self._counts['attachment'], self._counts['metadata'] + 1, self._counts['chunk'])
+        stats = _rec(
+            0x0B,
+            struct.pack(
+                '<QHIIII',
+                self._counts['message'],
+                len(self._schema_ids),
+                len(self._channels),
+                self._counts['attachment'],
+                self._counts['metadata'] + 1,
+                self._counts['chunk'],
+            )
             + struct.pack('<QQ', start or 0, end or 0)
             + struct.pack('<I', 10 * len(counts))
-            + b''.join(struct.pack('<HQ', k, v) for k, v in counts.items()))
+            + b''.join(struct.pack('<HQ', k, v) for k, v in counts.items()),
+        )
         meta_index = _rec(0x0D, struct.pack('<QQ', base, len(meta)) + _s('rosbag2'))
-        groups = [(0x03, bytes(self._summary_schemas)), (0x04, bytes(self._summary_channels)),
-                  (0x0B, stats), (0x08, bytes(self._summary_chunk_indexes)),
-                  (0x0A, bytes(self._summary_attachment_indexes)),
-                  (0x0D, bytes(self._summary_metadata_indexes) + meta_index)]
+        groups = [
+            (0x03, bytes(self._summary_schemas)),
+            (0x04, bytes(self._summary_channels)),
+            (0x0B, stats),
+            (0x08, bytes(self._summary_chunk_indexes)),
+            (0x0A, bytes(self._summary_attachment_indexes)),
+            (0x0D, bytes(self._summary_metadata_indexes) + meta_index),
+        ]
         summary = bytearray()
         offsets = bytearray()
         for op, body in groups:
             if body:
-                offsets += _rec(0x0E, struct.pack('<BQQ', op, summary_start + len(summary),
-                                                  len(body)))
+                offsets += _rec(
+                    0x0E, struct.pack('<BQQ', op, summary_start + len(summary), len(body))
+                )
                 summary += body
-        footer = struct.pack('<BQQQ', 0x02, 20, summary_start,
-                             summary_start + len(summary))
+        footer = struct.pack('<BQQQ', 0x02, 20, summary_start, summary_start + len(summary))
         crc = zlib.crc32(bytes(summary) + bytes(offsets) + footer)
-        return data_tail + bytes(summary) + bytes(offsets) + footer + struct.pack(
-            '<I', crc) + MAGIC
+        return data_tail + bytes(summary) + bytes(offsets) + footer + struct.pack('<I', crc) + MAGIC
 
 
 _DISTRO = []
@@ -457,23 +565,31 @@ class RawMessage(NamedTuple):
     data: bytes
 
 
-def iter_raw(path, topics=None, start_time_ns: int = None,
-             log_time_order: bool = True) -> Iterator[RawMessage]:
+def iter_raw(
+    path, topics=None, start_time_ns: int = None, log_time_order: bool = True
+) -> Iterator[RawMessage]:
     """Serialized messages in log-time order (chunk indexes let the reader sort), or in the
     order they were written with ``log_time_order=False``."""
     from mcap.reader import make_reader
+
     with open(path, 'rb') as f:
         reader = make_reader(f)
         kw = {}
         if start_time_ns is not None:  # inclusive; mcap >= 1.2 renamed the argument
             import inspect
+
             new = 'starting_at' in inspect.signature(reader.iter_messages).parameters
             kw['starting_at' if new else 'start_time'] = int(start_time_ns)
         for schema, channel, message in reader.iter_messages(
-                topics=list(topics) if topics else None, log_time_order=log_time_order,
-                **kw):
-            yield RawMessage(channel.topic, schema.name if schema else '', message.log_time,
-                             message.publish_time, message.data)
+            topics=list(topics) if topics else None, log_time_order=log_time_order, **kw
+        ):
+            yield RawMessage(
+                channel.topic,
+                schema.name if schema else '',
+                message.log_time,
+                message.publish_time,
+                message.data,
+            )
 
 
 class TopicInfo(NamedTuple):
@@ -485,6 +601,7 @@ class TopicInfo(NamedTuple):
 def topics_info(path) -> dict:
     """topic -> TopicInfo(type name, [TopicQos], message count) from the file's summary."""
     from mcap.reader import make_reader
+
     with open(path, 'rb') as f:
         summary = make_reader(f).get_summary()
     if summary is None:
@@ -494,19 +611,22 @@ def topics_info(path) -> dict:
     for cid, ch in summary.channels.items():
         schema = summary.schemas.get(ch.schema_id)
         text = ch.metadata.get('offered_qos_profiles', '')
-        out[ch.topic] = TopicInfo(schema.name if schema else '',
-                                  parse_qos_yaml(text) if text else [], counts.get(cid, 0))
+        out[ch.topic] = TopicInfo(
+            schema.name if schema else '', parse_qos_yaml(text) if text else [], counts.get(cid, 0)
+        )
     return out
 
 
 def read_metadata(path) -> dict:
     """name -> string map of every Metadata record (the last one wins for a repeated name)."""
     from mcap.reader import make_reader
+
     with open(path, 'rb') as f:
         return {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
 
 
 def read_attachments(path) -> dict:
     from mcap.reader import make_reader
+
     with open(path, 'rb') as f:
         return {a.name: bytes(a.data) for a in make_reader(f).iter_attachments()}

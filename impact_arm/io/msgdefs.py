@@ -9,6 +9,7 @@ Kilted) returns the *estimated* buffer size with uninitialised trailing and padd
 reproducible. This writer emits exactly what a DDS publisher sends (XCDR1 little endian,
 8-byte alignment relative to the payload) with zeroed padding.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -58,8 +59,9 @@ def _tf_message():
         class TFMessage:
             STAND_IN = True
             __slots__ = ('transforms',)
-            SLOT_TYPES = (d.UnboundedSequence(
-                d.NamespacedType(['geometry_msgs', 'msg'], 'TransformStamped')),)
+            SLOT_TYPES = (
+                d.UnboundedSequence(d.NamespacedType(['geometry_msgs', 'msg'], 'TransformStamped')),
+            )
 
             @classmethod
             def get_fields_and_field_types(cls):
@@ -86,6 +88,7 @@ def typestore():
     global _TYPESTORE
     if _TYPESTORE is None:
         from rosbags.typesys import Stores, get_typestore
+
         _TYPESTORE = get_typestore(Stores.ROS2_KILTED)
     return _TYPESTORE
 
@@ -110,15 +113,25 @@ def _fields(cls) -> list:
 
 
 # ------------------------------------------------------------------------- definitions
-_IDL_TO_MSG = {'boolean': 'bool', 'octet': 'byte', 'float': 'float32', 'double': 'float64',
-               'long double': 'float64', 'short': 'int16', 'unsigned short': 'uint16',
-               'long': 'int32', 'unsigned long': 'uint32', 'long long': 'int64',
-               'unsigned long long': 'uint64'}
+_IDL_TO_MSG = {
+    'boolean': 'bool',
+    'octet': 'byte',
+    'float': 'float32',
+    'double': 'float64',
+    'long double': 'float64',
+    'short': 'int16',
+    'unsigned short': 'uint16',
+    'long': 'int32',
+    'unsigned long': 'uint32',
+    'long long': 'int64',
+    'unsigned long long': 'uint64',
+}
 
 
 def _msg_type(t, deps: list) -> str:
     """.msg spelling of a rosidl_parser type; nested message types are appended to deps."""
     from rosidl_parser import definition as d
+
     if isinstance(t, d.Array):
         return f'{_msg_type(t.value_type, deps)}[{t.size}]'
     if isinstance(t, d.BoundedSequence):
@@ -126,8 +139,7 @@ def _msg_type(t, deps: list) -> str:
     if isinstance(t, d.UnboundedSequence):
         return f'{_msg_type(t.value_type, deps)}[]'
     if isinstance(t, (d.BoundedString, d.BoundedWString)):
-        return ('wstring' if isinstance(t, d.BoundedWString) else 'string') + \
-            f'<={t.maximum_size}'
+        return ('wstring' if isinstance(t, d.BoundedWString) else 'string') + f'<={t.maximum_size}'
     if isinstance(t, d.UnboundedString):
         return 'string'
     if isinstance(t, d.UnboundedWString):
@@ -173,7 +185,7 @@ def _constant_type(value, declared: Optional[str]) -> str:
         return 'string'
     if isinstance(value, float):
         return 'float64'
-    return 'int32' if -2**31 <= value < 2**31 else ('int64' if value < 2**63 else 'uint64')
+    return 'int32' if -(2**31) <= value < 2**31 else ('int64' if value < 2**63 else 'uint64')
 
 
 def _own_definition(type_name: str) -> tuple:
@@ -185,10 +197,13 @@ def _own_definition(type_name: str) -> tuple:
     msg_file = share_file(type_name, '.msg') if constants else None
     if msg_file:  # the installed .msg, when there is one, knows each constant's declared type
         with open(msg_file, encoding='utf-8') as f:
-            declared = {m.group(2): m.group(1) for m in re.finditer(
-                r'^\s*([\w/<=\[\]]+)\s+([A-Za-z]\w*)\s*=', f.read(), re.M)}
-    lines = [f'{_constant_type(v, declared.get(k))} {k}={_literal(v)}'
-             for k, v in constants.items()]
+            declared = {
+                m.group(2): m.group(1)
+                for m in re.finditer(r'^\s*([\w/<=\[\]]+)\s+([A-Za-z]\w*)\s*=', f.read(), re.M)
+            }
+    lines = [
+        f'{_constant_type(v, declared.get(k))} {k}={_literal(v)}' for k, v in constants.items()
+    ]
     deps = []
     for field, slot in _fields(cls):
         line = f'{_msg_type(slot, deps)} {field}'
@@ -243,16 +258,34 @@ def definition_hash(type_name: str) -> str:
     """RIHS01 hash of ``message_definition(type_name)``, computed by rosbags as ROS does
     (SHA-256 of the type description, nested types included)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_msg(message_definition(type_name), type_name))
     return store.hash_rihs01(type_name)
 
 
 # --------------------------------------------------------------------------------- CDR
-_FORMATS = {'boolean': '?', 'octet': 'B', 'char': 'B', 'uint8': 'B', 'int8': 'b',
-            'int16': 'h', 'uint16': 'H', 'int32': 'i', 'uint32': 'I', 'int64': 'q',
-            'uint64': 'Q', 'float': 'f', 'double': 'd', 'short': 'h', 'unsigned short': 'H',
-            'long': 'i', 'unsigned long': 'I', 'long long': 'q', 'unsigned long long': 'Q'}
+_FORMATS = {
+    'boolean': '?',
+    'octet': 'B',
+    'char': 'B',
+    'uint8': 'B',
+    'int8': 'b',
+    'int16': 'h',
+    'uint16': 'H',
+    'int32': 'i',
+    'uint32': 'I',
+    'int64': 'q',
+    'uint64': 'Q',
+    'float': 'f',
+    'double': 'd',
+    'short': 'h',
+    'unsigned short': 'H',
+    'long': 'i',
+    'unsigned long': 'I',
+    'long long': 'q',
+    'unsigned long long': 'Q',
+}
 _SIZES = {k: struct.calcsize(v) for k, v in _FORMATS.items()}
 
 
@@ -272,6 +305,7 @@ def _octets(values, typename) -> list:
 
 def _write(buf: bytearray, v, t):
     from rosidl_parser import definition as d
+
     if isinstance(t, d.BasicType):
         name = t.typename
         if name not in _FORMATS:
@@ -317,6 +351,7 @@ def serialize_cdr(msg) -> bytes:
         _write_message(buf, msg)
     except NotImplementedError:  # wide characters: let the middleware do it
         from rclpy.serialization import serialize_message
+
         return serialize_message(msg)
     return bytes(buf)
 

@@ -57,6 +57,7 @@ The file is flushed after every impact and at least every ``flush_interval`` sec
 time, so a crashed or killed run keeps what was recorded before (the writer keeps the file a
 complete MCAP after each flush).
 """
+
 from __future__ import annotations
 
 import json
@@ -65,8 +66,18 @@ import os
 
 import numpy as np
 
-from ..contract import (CONTACT_WRENCH, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, TOPICS,
-                        TRACE_QOS, TRACE_TYPE, WRENCH_FRAME, joint_names, to_joint_space)
+from ..contract import (
+    CONTACT_WRENCH,
+    IMPACT_REPORT,
+    IMPACT_TRACE,
+    JOINT_STATES,
+    TOPICS,
+    TRACE_QOS,
+    TRACE_TYPE,
+    WRENCH_FRAME,
+    joint_names,
+    to_joint_space,
+)
 from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 
@@ -79,7 +90,8 @@ OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and th
 def trace_columns(n_links: int) -> list:
     """Column names of an /impact_trace row for an arm of ``n_links`` links."""
     return ['t', 'phase', 'delta', 'F_n', 'F_f', 'v_x', 'v_y'] + [
-        f'T{i + 1}' for i in range(n_links)]
+        f'T{i + 1}' for i in range(n_links)
+    ]
 
 
 def sim_time_ns(t: float) -> int:
@@ -92,9 +104,17 @@ class OfflineRecorder:
     ``control_rate`` / ``preset`` only describe the run in the file's metadata (None: the
     scene's). ``flush_interval``: seconds of wall time between automatic flushes."""
 
-    def __init__(self, path, scene, *, control_rate=None, preset=None,
-                 flush_interval: float = 0.5, compression: str = 'zstd',
-                 tf_rate: float = DEFAULT_TF_RATE):
+    def __init__(
+        self,
+        path,
+        scene,
+        *,
+        control_rate=None,
+        preset=None,
+        flush_interval: float = 0.5,
+        compression: str = 'zstd',
+        tf_rate: float = DEFAULT_TF_RATE,
+    ):
         from .. import __version__
         from .mcap_ros2 import Ros2McapWriter, package_version, ros_distro
 
@@ -106,28 +126,43 @@ class OfflineRecorder:
         self._names = joint_names(self.n)
         self._columns = trace_columns(self.n)
         self.counts = {topic: 0 for topic in OFFLINE_TOPICS}
-        self.writer = Ros2McapWriter(self.path, flush_interval=flush_interval,
-                                     compression=compression)
+        self.writer = Ros2McapWriter(
+            self.path, flush_interval=flush_interval, compression=compression
+        )
         for topic, type_name in OFFLINE_TOPICS.items():
             # the contract's QoS for the contract topics; traces like the reports
             self.writer.add_topic(topic, type_name, TRACE_QOS if topic == IMPACT_TRACE else None)
         rate = scene.controller.rate if control_rate is None else float(control_rate)
         version = package_version() or __version__
-        self.writer.add_metadata('impact_arm', {
-            'version': version, 'ros_distro': ros_distro(), 'node': 'offline',
-            'mode': 'offline', 'control': 'sampled' if rate else 'continuous',
-            'control_rate_hz': repr(float(rate)), 'publish_rate_hz': repr(scene.publish_rate),
-            'preset': preset or scene.integrator.preset, 'scene_name': scene.name,
-            'time': 'simulated (log time = header stamp = sim time)',
-            'trace_columns': ','.join(self._columns), 'tf_rate_hz': repr(float(tf_rate)),
-            'topics': json.dumps(list(OFFLINE_TOPICS))})
+        self.writer.add_metadata(
+            'impact_arm',
+            {
+                'version': version,
+                'ros_distro': ros_distro(),
+                'node': 'offline',
+                'mode': 'offline',
+                'control': 'sampled' if rate else 'continuous',
+                'control_rate_hz': repr(float(rate)),
+                'publish_rate_hz': repr(scene.publish_rate),
+                'preset': preset or scene.integrator.preset,
+                'scene_name': scene.name,
+                'time': 'simulated (log time = header stamp = sim time)',
+                'trace_columns': ','.join(self._columns),
+                'tf_rate_hz': repr(float(tf_rate)),
+                'topics': json.dumps(list(OFFLINE_TOPICS)),
+            },
+        )
         text = scene.source_text or ''
-        scene_file = os.path.basename(scene.source_path) if scene.source_path else \
-            f'{scene.name}.yaml'
-        self.writer.add_metadata('scene', {'path': os.path.abspath(scene.source_path)
-                                           if scene.source_path else '', 'yaml': text})
-        self.writer.add_attachment(scene_file, text.encode('utf-8'), 'application/yaml',
-                                   log_time_ns=0, create_time_ns=0)
+        scene_file = (
+            os.path.basename(scene.source_path) if scene.source_path else f'{scene.name}.yaml'
+        )
+        self.writer.add_metadata(
+            'scene',
+            {'path': os.path.abspath(scene.source_path) if scene.source_path else '', 'yaml': text},
+        )
+        self.writer.add_attachment(
+            scene_file, text.encode('utf-8'), 'application/yaml', log_time_ns=0, create_time_ns=0
+        )
         self.visuals = VisualsWriter(self.writer, scene, tf_rate)
         self.writer.flush()
         self._closed = False
@@ -137,25 +172,30 @@ class OfflineRecorder:
         t_ns = sim_time_ns(sample.t)
         T = self._types
         js = T['sensor_msgs/msg/JointState'](
-            header=self._header(t_ns, ''), name=self._names,
+            header=self._header(t_ns, ''),
+            name=self._names,
             position=np.array(to_joint_space(sample.q)),
             velocity=np.array(to_joint_space(sample.qd)),
-            effort=np.array(sample.tau, dtype=np.float64))
+            effort=np.array(sample.tau, dtype=np.float64),
+        )
         self._write(JOINT_STATES, js, t_ns)
         Vector3 = T['geometry_msgs/msg/Vector3']
         ws = T['geometry_msgs/msg/WrenchStamped'](
             header=self._header(t_ns, WRENCH_FRAME),
             wrench=T['geometry_msgs/msg/Wrench'](
                 force=Vector3(x=float(sample.wrench[0]), y=float(sample.wrench[1]), z=0.0),
-                torque=Vector3(x=0.0, y=0.0, z=0.0)))
+                torque=Vector3(x=0.0, y=0.0, z=0.0),
+            ),
+        )
         self._write(CONTACT_WRENCH, ws, t_ns)
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record, trace_rows):
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])
-        self.visuals.impact(record)   # its frames are stamped from the contact on: first
-        self._write(IMPACT_REPORT, self._types['std_msgs/msg/String'](data=json.dumps(record)),
-                    t_ns)
+        self.visuals.impact(record)  # its frames are stamped from the contact on: first
+        self._write(
+            IMPACT_REPORT, self._types['std_msgs/msg/String'](data=json.dumps(record)), t_ns
+        )
         self._write(IMPACT_TRACE, self.trace_message(trace_rows), t_ns)
         self.writer.flush()  # an impact is never lost, whatever happens later
 
@@ -164,28 +204,33 @@ class OfflineRecorder:
         cols = len(self._columns)
         for row in rows:
             if len(row) != cols:
-                raise ValueError(f'trace row of {len(row)} values, expected {cols} '
-                                 f'({",".join(self._columns)})')
+                raise ValueError(
+                    f'trace row of {len(row)} values, expected {cols} ({",".join(self._columns)})'
+                )
         T = self._types
         Dim = T['std_msgs/msg/MultiArrayDimension']
         return T['std_msgs/msg/Float64MultiArray'](
             layout=T['std_msgs/msg/MultiArrayLayout'](
-                dim=[Dim(label='row', size=len(rows), stride=len(rows) * cols),
-                     Dim(label=','.join(self._columns), size=cols, stride=cols)],
-                data_offset=0),
-            data=np.array(rows, dtype=np.float64).reshape(len(rows) * cols))
+                dim=[
+                    Dim(label='row', size=len(rows), stride=len(rows) * cols),
+                    Dim(label=','.join(self._columns), size=cols, stride=cols),
+                ],
+                data_offset=0,
+            ),
+            data=np.array(rows, dtype=np.float64).reshape(len(rows) * cols),
+        )
 
     def _header(self, t_ns: int, frame_id: str):
         sec, nanosec = divmod(t_ns, 1_000_000_000)
         T = self._types
         return T['std_msgs/msg/Header'](
-            stamp=T['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame_id)
+            stamp=T['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame_id
+        )
 
     def _write(self, topic: str, msg, t_ns: int):
         # rosbags' CDR (a dataclass per type): faster here than building rclpy messages for
         # msgdefs.serialize_cdr, and the same bytes
-        self.writer.write(topic, self._store.serialize_cdr(msg, OFFLINE_TOPICS[topic]),
-                          t_ns, t_ns)
+        self.writer.write(topic, self._store.serialize_cdr(msg, OFFLINE_TOPICS[topic]), t_ns, t_ns)
         self.counts[topic] += 1
 
     def close(self, result=None):
@@ -214,6 +259,11 @@ def run_metadata(result) -> dict:
 
     def clean(v):
         return None if isinstance(v, float) and not math.isfinite(v) else v
-    return {'summary': json.dumps({k: clean(v) if not isinstance(v, list) else v
-                                   for k, v in summary.items()}),
-            'stopped': result.stopped, 'error': result.error or ''}
+
+    return {
+        'summary': json.dumps(
+            {k: clean(v) if not isinstance(v, list) else v for k, v in summary.items()}
+        ),
+        'stopped': result.stopped,
+        'error': result.error or '',
+    }

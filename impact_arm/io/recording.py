@@ -8,6 +8,7 @@ are the headers' (any clock: the times are returned from the first sample on), o
 times when a publisher leaves its stamps at zero. Nothing our simulator writes besides these
 (impact reports, traces, metadata) is used, so a recording of real hardware reads the same.
 """
+
 from __future__ import annotations
 
 import glob
@@ -39,9 +40,12 @@ def mcap_files(path) -> list:
         files = sorted(glob.glob(os.path.join(path, '*.mcap')))
         if files:
             return files
-        raise RecordingInputError(f'recording {path}: a folder with neither metadata.yaml nor '
-                                  f'MCAP files is not a rosbag2 recording')
+        raise RecordingInputError(
+            f'recording {path}: a folder with neither metadata.yaml nor '
+            f'MCAP files is not a rosbag2 recording'
+        )
     import yaml
+
     try:
         with open(meta, encoding='utf-8') as f:
             info = (yaml.safe_load(f) or {}).get('rosbag2_bagfile_information', {})
@@ -49,11 +53,14 @@ def mcap_files(path) -> list:
         raise RecordingInputError(f'recording {meta}: unreadable ({exc})') from None
     storage = info.get('storage_identifier', 'mcap')
     if storage != 'mcap':
-        raise RecordingInputError(f'recording {path}: storage {storage!r} is not supported; '
-                                  f'record with --storage mcap (or convert with ros2 bag convert)')
+        raise RecordingInputError(
+            f'recording {path}: storage {storage!r} is not supported; '
+            f'record with --storage mcap (or convert with ros2 bag convert)'
+        )
     listed = [os.path.join(path, p) for p in info.get('relative_file_paths', [])]
     files = [p for p in listed if os.path.isfile(p)] or sorted(
-        glob.glob(os.path.join(path, '*.mcap')))
+        glob.glob(os.path.join(path, '*.mcap'))
+    )
     if not files:
         raise RecordingInputError(f'recording {path}: no MCAP file in the folder')
     return files
@@ -61,6 +68,7 @@ def mcap_files(path) -> list:
 
 def _topics(files) -> dict:
     from .mcap_ros2 import topics_info
+
     out = {}
     for f in files:
         try:
@@ -88,8 +96,14 @@ def _wrench(raw: bytes):
     return sec * 1_000_000_000 + nanosec, r.unpack('d', 8, 3)
 
 
-def read_recording(path, joints=None, n_joints: int = 2, states_topic: str = JOINT_STATES,
-                   wrench_topic: str | None = None, progress=None) -> JointRecording:
+def read_recording(
+    path,
+    joints=None,
+    n_joints: int = 2,
+    states_topic: str = JOINT_STATES,
+    wrench_topic: str | None = None,
+    progress=None,
+) -> JointRecording:
     """The joint states of ``joints`` (default joint1..jointN) and, if recorded, the wrench.
 
     ``wrench_topic`` None reads ``/contact_wrench`` when the recording has it; a topic named
@@ -99,16 +113,21 @@ def read_recording(path, joints=None, n_joints: int = 2, states_topic: str = JOI
     topics = _topics(files)
     joints = list(joints) if joints else [f'joint{i + 1}' for i in range(n_joints)]
     if states_topic not in topics:
-        raise RecordingInputError(f'--states-topic {states_topic}: not in the recording '
-                                  f'(topics: {", ".join(sorted(topics)) or "none"})')
+        raise RecordingInputError(
+            f'--states-topic {states_topic}: not in the recording '
+            f'(topics: {", ".join(sorted(topics)) or "none"})'
+        )
     explicit = wrench_topic is not None
     wrench_topic = wrench_topic if explicit else CONTACT_WRENCH
     if wrench_topic not in topics:
         if explicit:
-            raise RecordingInputError(f'--wrench-topic {wrench_topic}: not in the recording '
-                                      f'(topics: {", ".join(sorted(topics))})')
+            raise RecordingInputError(
+                f'--wrench-topic {wrench_topic}: not in the recording '
+                f'(topics: {", ".join(sorted(topics))})'
+            )
         wrench_topic = None
     from .mcap_ros2 import iter_raw
+
     wanted = [states_topic] + ([wrench_topic] if wrench_topic else [])
     states, wrenches, seen_names, notes = [], [], set(), []
     for f in files:
@@ -121,20 +140,27 @@ def read_recording(path, joints=None, n_joints: int = 2, states_topic: str = JOI
                     if not all(j in index for j in joints):
                         continue
                     cols = [index[j] for j in joints]
-                    states.append((stamp, m.log_time_ns, *(_pick(v, cols, len(names))
-                                                          for v in (pos, vel, eff))))
+                    states.append(
+                        (
+                            stamp,
+                            m.log_time_ns,
+                            *(_pick(v, cols, len(names)) for v in (pos, vel, eff)),
+                        )
+                    )
                 else:
                     stamp, force = _wrench(m.data)
                     wrenches.append((stamp, m.log_time_ns, force[0], force[1]))
             except ValueError as exc:
-                raise RecordingInputError(f'recording {f}: a {m.topic} message is not a '
-                                          f'{topics[m.topic]} ({exc})') from None
+                raise RecordingInputError(
+                    f'recording {f}: a {m.topic} message is not a {topics[m.topic]} ({exc})'
+                ) from None
     if not states:
         missing = [j for j in joints if j not in seen_names]
         if missing:
             raise RecordingInputError(
                 f'--joints: {", ".join(missing)} not in {states_topic} (its joints: '
-                f'{", ".join(sorted(seen_names)) or "none"})')
+                f'{", ".join(sorted(seen_names)) or "none"})'
+            )
         raise RecordingInputError(f'{states_topic}: no message names all of {joints}')
     return _assemble(states, wrenches, joints, os.fspath(path), notes)
 
@@ -160,14 +186,17 @@ def _assemble(states, wrenches, joints, source, notes) -> JointRecording:
     keep = np.isfinite(pos).all(axis=1)
     if not np.all(np.isnan(vel)):
         keep &= np.isfinite(vel).all(axis=1)
-    keep[1:] &= np.diff(stamps) > 0          # a repeated stamp carries no new time
+    keep[1:] &= np.diff(stamps) > 0  # a repeated stamp carries no new time
     if not keep.all():
-        notes.append(f'{int((~keep).sum())} joint-state samples dropped (non-finite values '
-                     f'or repeated stamps)')
+        notes.append(
+            f'{int((~keep).sum())} joint-state samples dropped (non-finite values '
+            f'or repeated stamps)'
+        )
     stamps, pos, vel, eff = stamps[keep], pos[keep], vel[keep], eff[keep]
     if len(stamps) < 20:
-        raise RecordingInputError(f'recording {source}: {len(stamps)} usable joint-state '
-                                  f'samples; at least 20 are needed')
+        raise RecordingInputError(
+            f'recording {source}: {len(stamps)} usable joint-state samples; at least 20 are needed'
+        )
     if not np.isfinite(eff).all():
         notes.append('efforts missing or not finite: zero torque assumed around the impacts')
         eff = np.where(np.isfinite(eff), eff, 0.0)
@@ -180,7 +209,15 @@ def _assemble(states, wrenches, joints, source, notes) -> JointRecording:
         ws, force = ws[order], force[order]
         good = np.isfinite(force).all(axis=1)
         w_t, w = (ws[good] - t0) * 1e-9, force[good]
-    return JointRecording(t=(stamps - t0) * 1e-9, position=pos,
-                          velocity=vel if np.isfinite(vel).all() else None, effort=eff,
-                          wrench_t=w_t, wrench=w, joints=list(joints), source=source,
-                          t0_ns=t0, notes=notes)
+    return JointRecording(
+        t=(stamps - t0) * 1e-9,
+        position=pos,
+        velocity=vel if np.isfinite(vel).all() else None,
+        effort=eff,
+        wrench_t=w_t,
+        wrench=w,
+        joints=list(joints),
+        source=source,
+        t0_ns=t0,
+        notes=notes,
+    )

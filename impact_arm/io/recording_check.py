@@ -5,6 +5,7 @@ nothing forces a loss (the simulator waits for the recorder), so a gap is a defe
 fails; in realtime the counts say what the run lost. Reads raw MCAP records (no rosbags, no
 rclpy): header stamps straight from the CDR bytes, impact reports as JSON.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,27 +19,31 @@ from .wire import MalformedMessage, header_stamp_ns
 
 @dataclass
 class RecordingCheck:
-    periods: int                       # distinct /joint_states stamps on the period grid
-    missing_periods: list              # period numbers absent between 0 and the last one
+    periods: int  # distinct /joint_states stamps on the period grid
+    missing_periods: list  # period numbers absent between 0 and the last one
     commands: int
     impact_reports: int
-    missing_reports: list = field(default_factory=list)   # impact indices absent
-    out_of_order: int = 0              # messages whose log time precedes the one before
-    lost: dict = field(default_factory=dict)   # topic -> samples the recorder never got
+    missing_reports: list = field(default_factory=list)  # impact indices absent
+    out_of_order: int = 0  # messages whose log time precedes the one before
+    lost: dict = field(default_factory=dict)  # topic -> samples the recorder never got
 
     @property
     def complete(self) -> bool:
-        return not self.missing_periods and not self.missing_reports and \
-            self.commands >= self.periods - 1
+        return (
+            not self.missing_periods
+            and not self.missing_reports
+            and self.commands >= self.periods - 1
+        )
 
     def summary(self) -> str:
-        text = (f'{self.periods} periods from t = 0, {self.commands} commands, '
-                f'{self.impact_reports} impact reports')
+        text = (
+            f'{self.periods} periods from t = 0, {self.commands} commands, '
+            f'{self.impact_reports} impact reports'
+        )
         problems = []
         if self.missing_periods:
             first = self.missing_periods[0]
-            problems.append(f'{len(self.missing_periods)} periods missing (first: period '
-                            f'{first})')
+            problems.append(f'{len(self.missing_periods)} periods missing (first: period {first})')
         if self.commands < self.periods - 1:
             problems.append(f'{self.periods - 1 - self.commands} commands missing')
         if self.missing_reports:
@@ -80,7 +85,7 @@ def check_recording(path, rate: float) -> RecordingCheck:
     known = {i for i in indices if i is not None}
     missing_reports = sorted(set(range(1, max(known, default=0) + 1)) - known)
     losses = read_metadata(path).get(LOSSES_METADATA, {})
-    lost = {key.partition(':')[2]: int(n) for key, n in losses.items()
-            if key.startswith('lost:')}
-    return RecordingCheck(len(stamps), missing, commands, len(indices), missing_reports,
-                          out_of_order, lost)
+    lost = {key.partition(':')[2]: int(n) for key, n in losses.items() if key.startswith('lost:')}
+    return RecordingCheck(
+        len(stamps), missing, commands, len(indices), missing_reports, out_of_order, lost
+    )

@@ -13,6 +13,7 @@ maps elapsed replay seconds back to the recorded time (what ``/clock`` carries).
 ``impact_arm.nodes.replay`` publishes these events; tests and tools can use the schedule
 directly.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,16 +48,17 @@ def check_rate(rate) -> float:
 @dataclass
 class ReplayPlan:
     path: str
-    topics: dict                 # topic -> TopicInfo of the replayed topics
+    topics: dict  # topic -> TopicInfo of the replayed topics
     rate: float
-    start_offset: float          # s of recorded time skipped at the start
+    start_offset: float  # s of recorded time skipped at the start
     loop: bool
-    t_first_ns: int              # first log time of the replayed topics in the file
-    t_last_ns: int               # last log time of the replayed topics
+    t_first_ns: int  # first log time of the replayed topics in the file
+    t_last_ns: int  # last log time of the replayed topics
 
     @classmethod
-    def open(cls, path, *, rate: float = 1.0, start_offset: float = 0.0, topics=None,
-             loop: bool = False) -> 'ReplayPlan':
+    def open(
+        cls, path, *, rate: float = 1.0, start_offset: float = 0.0, topics=None, loop: bool = False
+    ) -> 'ReplayPlan':
         path = os.fspath(path)
         if not os.path.isfile(path):
             raise ReplayError(f'file = {path!r}: no such file')
@@ -80,8 +82,10 @@ class ReplayPlan:
             raise ReplayError(f'file = {path!r}: no messages on {sorted(chosen)}')
         span = (last - first) / 1e9
         if start_offset > span:
-            raise ReplayError(f'start_offset = {start_offset}: must be in [0, {span:.6g}] s '
-                              f'(the recorded duration)')
+            raise ReplayError(
+                f'start_offset = {start_offset}: must be in [0, {span:.6g}] s '
+                f'(the recorded duration)'
+            )
         return cls(path, chosen, rate, start_offset, bool(loop), first, last)
 
     @property
@@ -131,10 +135,12 @@ def _time_range(path, topics: dict) -> tuple:
 
 
 def summarize(plan: ReplayPlan) -> str:
-    return (f'{plan.path}: {plan.message_count} messages on {len(plan.topics)} topics, '
-            f'{plan.duration:.3f} s at rate {plan.rate:g}'
-            + (f' from {plan.start_offset:g} s' if plan.start_offset else '')
-            + (' (loop)' if plan.loop else ''))
+    return (
+        f'{plan.path}: {plan.message_count} messages on {len(plan.topics)} topics, '
+        f'{plan.duration:.3f} s at rate {plan.rate:g}'
+        + (f' from {plan.start_offset:g} s' if plan.start_offset else '')
+        + (' (loop)' if plan.loop else '')
+    )
 
 
 __all__ = ['RawMessage', 'ReplayError', 'ReplayPlan', 'TopicInfo', 'check_rate', 'summarize']

@@ -32,16 +32,31 @@ before the report arrived (live, the report follows its period's joint state) ca
 Each MarkerArray carries every surface and every impact point so far (persistent), so a
 viewer that jumps to any time shows them right from one message.
 """
+
 from __future__ import annotations
 
 import json
 import math
 
-from ..contract import (IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, TF_TYPE, VISUAL_TOPICS,
-                        plane_to_world)
+from ..contract import (
+    IMPACT_MARKERS,
+    ROBOT_DESCRIPTION,
+    TF,
+    TF_STATIC,
+    TF_TYPE,
+    VISUAL_TOPICS,
+    plane_to_world,
+)
 from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
-from .urdf import (SURFACE_THICKNESS_PER_REACH, WORLD, moving_transforms, robot_description,
-                   rod_radius_of, static_transforms, surface_frames)
+from .urdf import (
+    SURFACE_THICKNESS_PER_REACH,
+    WORLD,
+    moving_transforms,
+    robot_description,
+    rod_radius_of,
+    static_transforms,
+    surface_frames,
+)
 
 DEFAULT_TF_RATE = 100.0  # Hz: smooth to the eye, a tenth of the joint-state rate
 ARROW_HALF_FORCE = 1000.0  # N at which the arrow is half the reach long
@@ -53,8 +68,10 @@ IMPACT_EVENTS = ('contact', 'max_compression', 'separation')
 
 def tip_position(lengths, q) -> tuple:
     """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``."""
-    return (math.fsum(L * math.cos(a) for L, a in zip(lengths, q)),
-            math.fsum(L * math.sin(a) for L, a in zip(lengths, q)))
+    return (
+        math.fsum(L * math.cos(a) for L, a in zip(lengths, q)),
+        math.fsum(L * math.sin(a) for L, a in zip(lengths, q)),
+    )
 
 
 def arrow_length(force: float, reach: float) -> float:
@@ -89,24 +106,26 @@ class SceneVisuals:
 
     def __init__(self, scene, tf_rate: float = DEFAULT_TF_RATE, rod_radius=None):
         from .msgdefs import message_class
+
         if not (math.isfinite(tf_rate) and tf_rate > 0):
             raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')
         self.scene = scene
         self.tf_rate = float(tf_rate)
         self.rod_radius = rod_radius_of(scene, rod_radius)
-        self._TF = message_class(TF_TYPE)   # the stand-in where tf2_msgs is missing
+        self._TF = message_class(TF_TYPE)  # the stand-in where tf2_msgs is missing
         from geometry_msgs.msg import Point, TransformStamped
         from std_msgs.msg import String
         from visualization_msgs.msg import Marker
+
         self._TransformStamped, self._String, self._Point = TransformStamped, String, Point
         self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
-        self._next_tf = 0           # index k of the next /tf time k / tf_rate
-        self.impacts = []           # (contact stamp [ns], contact point (x, z), F_max [N])
-        self._events = []           # event frames not yet taken: (stamp [ns], q)
-        self._fixed_markers = []   # surfaces, then impact points, as drawn so far
+        self._next_tf = 0  # index k of the next /tf time k / tf_rate
+        self.impacts = []  # (contact stamp [ns], contact point (x, z), F_max [N])
+        self._events = []  # event frames not yet taken: (stamp [ns], q)
+        self._fixed_markers = []  # surfaces, then impact points, as drawn so far
         self._drawn_points = 0
-        self._prefixes = None      # their CDR, the start of every MarkerArray (see markers)
+        self._prefixes = None  # their CDR, the start of every MarkerArray (see markers)
 
     @property
     def impact_points(self) -> list:
@@ -118,8 +137,9 @@ class SceneVisuals:
         return self._String(data=robot_description(self.scene, rod_radius=self.rod_radius))
 
     def tf_static(self, t_ns: int = 0):
-        return self._TF(transforms=[self._transform(t, t_ns)
-                                    for t in static_transforms(self.scene)])
+        return self._TF(
+            transforms=[self._transform(t, t_ns) for t in static_transforms(self.scene)]
+        )
 
     # ------------------------------------------------------------------ per state
     def due(self, t: float) -> bool:
@@ -131,8 +151,9 @@ class SceneVisuals:
 
     def tf(self, q, t_ns: int):
         """The joint transforms for absolute link angles ``q``."""
-        return self._TF(transforms=[self._transform(t, t_ns)
-                                    for t in moving_transforms(self.scene.lengths, q)])
+        return self._TF(
+            transforms=[self._transform(t, t_ns) for t in moving_transforms(self.scene.lengths, q)]
+        )
 
     def add_impact(self, record):
         """An impact report (the JSON record or its text): its contact point becomes a
@@ -147,11 +168,16 @@ class SceneVisuals:
             x, _, z = plane_to_world(*tip_position(self.scene.lengths, q_contact))
             n = self.scene.n_links
             numbers = [force, x, z] + [a for _, _, q in events for a in q]
-        except (KeyError, TypeError, IndexError, AttributeError, OverflowError,
-                ValueError) as e:   # ValueError: NaN or infinite numbers in the maths
+        except (
+            KeyError,
+            TypeError,
+            IndexError,
+            AttributeError,
+            OverflowError,
+            ValueError,
+        ) as e:  # ValueError: NaN or infinite numbers in the maths
             raise ValueError(f'impact report not usable: {type(e).__name__} {e}') from None
-        if not all(math.isfinite(v) for v in numbers) or \
-                any(len(q) != n for _, _, q in events):
+        if not all(math.isfinite(v) for v in numbers) or any(len(q) != n for _, _, q in events):
             raise ValueError(f'impact report not usable: non-finite values or not {n} angles')
         self.impacts.append((t_contact, (x, z), force))
         self._events.extend((t, q) for _, t, q in events)
@@ -185,9 +211,11 @@ class SceneVisuals:
                 m.scale.x = m.scale.y = m.scale.z = 3 * self.rod_radius
                 self._fixed_markers.append(m)
             self._drawn_points = len(self.impacts)
-            n = len(self._fixed_markers)   # the CDR starts with the count: without, with arrow
-            self._prefixes = (sequence_cdr_prefix(self._fixed_markers, n),
-                              sequence_cdr_prefix(self._fixed_markers, n + 1))
+            n = len(self._fixed_markers)  # the CDR starts with the count: without, with arrow
+            self._prefixes = (
+                sequence_cdr_prefix(self._fixed_markers, n),
+                sequence_cdr_prefix(self._fixed_markers, n + 1),
+            )
         held = self._held_impact(t_ns)
         if held is None:
             return self._prefixes[0]
@@ -223,8 +251,13 @@ class SceneVisuals:
     def _marker(self, ns, marker_id, kind, frame, t_ns, rgba):
         m = self._Marker()
         _stamp(m.header, t_ns)
-        m.header.frame_id, m.ns, m.id, m.type, m.action = frame, ns, marker_id, kind, \
-            self._Marker.ADD
+        m.header.frame_id, m.ns, m.id, m.type, m.action = (
+            frame,
+            ns,
+            marker_id,
+            kind,
+            self._Marker.ADD,
+        )
         m.pose.orientation.w = 1.0
         m.color.r, m.color.g, m.color.b, m.color.a = rgba
         return m
@@ -236,8 +269,9 @@ class VisualsWriter:
     /tf_static first, then /tf and /impact_markers at ``tf_rate`` of the state's stamps and at
     each impact's events."""
 
-    def __init__(self, writer, scene, tf_rate: float = DEFAULT_TF_RATE,
-                 log_time_ns: int = 0, rod_radius=None):
+    def __init__(
+        self, writer, scene, tf_rate: float = DEFAULT_TF_RATE, log_time_ns: int = 0, rod_radius=None
+    ):
         self.visuals = SceneVisuals(scene, tf_rate, rod_radius)
         self.writer = writer
         self.counts = {topic: 0 for topic in VISUAL_TOPICS}
@@ -245,8 +279,8 @@ class VisualsWriter:
             writer.add_topic(topic, type_name, qos)
         self._write(ROBOT_DESCRIPTION, self.visuals.description(), log_time_ns)
         self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
-        self._last = None                # (stamp, q, log time) of the latest state
-        self._shown = None               # stamp of the latest /tf written
+        self._last = None  # (stamp, q, log time) of the latest state
+        self._shown = None  # stamp of the latest /tf written
 
     def state(self, t_ns: int, q, wrench=None, log_time_ns: int = None):
         """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``)."""
@@ -277,8 +311,7 @@ class VisualsWriter:
         self.visuals.add_impact(record)
         offset = 0 if self._last is None else self._last[2] - self._last[0]
         for t_ns, q in self.visuals.take_events():
-            self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None
-                                 else log_time_ns)
+            self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None else log_time_ns)
 
     def _frame_at_event(self, t_ns, q, log):
         self._write(TF, self.visuals.tf(q, t_ns), log)

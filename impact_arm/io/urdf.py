@@ -27,14 +27,21 @@ The ``<ros2_control>`` block names ``topic_based_ros2_control/TopicBasedSystem``
 controller_manager can drive the simulator through its topic-hardware interface
 (docs/ros2_control.md).
 """
+
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
 from typing import NamedTuple
 
-from ..contract import (PLANE_AXIS_IN_WORLD, PLANE_FRAME_ROTATION, WORLD_FRAME, joint_names,
-                        plane_rotation, surface_frame)
+from ..contract import (
+    PLANE_AXIS_IN_WORLD,
+    PLANE_FRAME_ROTATION,
+    WORLD_FRAME,
+    joint_names,
+    plane_rotation,
+    surface_frame,
+)
 from ..core.errors import ImpactArmError
 
 # topic_based_ros2_control's TopicBasedSystem defaults: the simulator listens and publishes
@@ -46,7 +53,7 @@ TIP = 'tip'
 # rods 1 % of the shortest link in radius: 10 mm on the article's 1 m links, thin enough to
 # see the joints and the tip, thick enough to see the arm on a screen-sized view
 ROD_RADIUS_PER_LENGTH = 0.01
-TIP_PER_ROD = 2.5          # the tip sphere's visual radius, at least, in rod radii
+TIP_PER_ROD = 2.5  # the tip sphere's visual radius, at least, in rod radii
 SURFACE_THICKNESS_PER_REACH = 0.02
 
 
@@ -72,9 +79,11 @@ def rod_radius_of(scene, rod_radius=None) -> float:
         return default_rod_radius(scene)
     rod_radius = float(rod_radius)
     if not (math.isfinite(rod_radius) and 0 < rod_radius <= min(scene.lengths)):
-        raise VisualSettingError(f'rod_radius = {rod_radius!r}: must be > 0 and <= the '
-                                 f'shortest link ({min(scene.lengths):g} m), or 0 for the '
-                                 f'default')
+        raise VisualSettingError(
+            f'rod_radius = {rod_radius!r}: must be > 0 and <= the '
+            f'shortest link ({min(scene.lengths):g} m), or 0 for the '
+            f'default'
+        )
     return rod_radius
 
 
@@ -85,6 +94,7 @@ def tip_visual_radius(scene, rod_radius=None) -> float:
 class Transform(NamedTuple):
     """Parent → child in the world's convention: translation (x, y, z) [m], then the rotation
     ``rotation`` (quaternion x, y, z, w)."""
+
     parent: str
     child: str
     x: float
@@ -102,17 +112,35 @@ def moving_transforms(lengths, q) -> list:
     links = link_names(len(lengths))
     out = [Transform(WORLD, links[0], 0.0, 0.0, 0.0, plane_rotation(float(q[0])))]
     for k in range(1, len(lengths)):
-        out.append(Transform(links[k - 1], links[k], float(lengths[k - 1]), 0.0, 0.0,
-                             plane_rotation(float(q[k]) - float(q[k - 1]))))
+        out.append(
+            Transform(
+                links[k - 1],
+                links[k],
+                float(lengths[k - 1]),
+                0.0,
+                0.0,
+                plane_rotation(float(q[k]) - float(q[k - 1])),
+            )
+        )
     return out
 
 
 def static_transforms(scene) -> list:
     """The fixed transforms: the tip on the last link, each surface on the world."""
-    out = [Transform(link_names(scene.n_links)[-1], TIP, float(scene.lengths[-1]), 0.0, 0.0,
-                     (0.0, 0.0, 0.0, 1.0))]
-    out += [Transform(WORLD, name, 0.0, 0.0, float(s.height), PLANE_FRAME_ROTATION)
-            for name, s in zip(surface_frames(scene), scene.surfaces)]
+    out = [
+        Transform(
+            link_names(scene.n_links)[-1],
+            TIP,
+            float(scene.lengths[-1]),
+            0.0,
+            0.0,
+            (0.0, 0.0, 0.0, 1.0),
+        )
+    ]
+    out += [
+        Transform(WORLD, name, 0.0, 0.0, float(s.height), PLANE_FRAME_ROTATION)
+        for name, s in zip(surface_frames(scene), scene.surfaces)
+    ]
     return out
 
 
@@ -138,17 +166,24 @@ def _visual_and_collision(link, origin, geometry_tag, material=None, **size):
             _sub(element, 'material', name=material)
 
 
-def robot_description(scene, *, name: str = 'impact_arm',
-                      joint_commands_topic: str = JOINT_COMMANDS_TOPIC,
-                      joint_states_topic: str = JOINT_STATES_TOPIC,
-                      rod_radius: float | None = None) -> str:
+def robot_description(
+    scene,
+    *,
+    name: str = 'impact_arm',
+    joint_commands_topic: str = JOINT_COMMANDS_TOPIC,
+    joint_states_topic: str = JOINT_STATES_TOPIC,
+    rod_radius: float | None = None,
+) -> str:
     """URDF text of ``scene`` (see the module docstring for frames and conventions)."""
     thickness, reach = _geometry_sizes(scene)
     rod_radius = rod_radius_of(scene, rod_radius)
     axis = ' '.join(_num(a) for a in PLANE_AXIS_IN_WORLD)
     robot = ET.Element('robot', name=name)
-    for colour, rgba in (('rod', '0.25 0.45 0.85 1'), ('tip', '0.9 0.3 0.2 1'),
-                         ('surface', '0.6 0.6 0.6 1')):
+    for colour, rgba in (
+        ('rod', '0.25 0.45 0.85 1'),
+        ('tip', '0.9 0.3 0.2 1'),
+        ('surface', '0.6 0.6 0.6 1'),
+    ):
         _sub(_sub(robot, 'material', name=colour), 'color', rgba=rgba)
     _sub(robot, 'link', name=WORLD)
     links = link_names(scene.n_links)
@@ -160,12 +195,16 @@ def robot_description(scene, *, name: str = 'impact_arm',
         _sub(inertial, 'mass', value=_num(m))
         # a uniform slender rod along x, about its centre: the model's inertia
         i_c = m * L * L / 12
-        _sub(inertial, 'inertia', ixx='0', ixy='0', ixz='0', iyy=_num(i_c), iyz='0',
-             izz=_num(i_c))
+        _sub(inertial, 'inertia', ixx='0', ixy='0', ixz='0', iyy=_num(i_c), iyz='0', izz=_num(i_c))
         # URDF cylinders lie along z: turn by +90° about y to lay the rod along x
-        _visual_and_collision(link, {'xyz': f'{_num(L / 2)} 0 0',
-                                     'rpy': f'0 {_num(math.pi / 2)} 0'},
-                              'cylinder', 'rod', radius=_num(rod_radius), length=_num(L))
+        _visual_and_collision(
+            link,
+            {'xyz': f'{_num(L / 2)} 0 0', 'rpy': f'0 {_num(math.pi / 2)} 0'},
+            'cylinder',
+            'rod',
+            radius=_num(rod_radius),
+            length=_num(L),
+        )
         joint = _sub(robot, 'joint', name=joints[k], type='continuous')
         _sub(joint, 'parent', link=WORLD if k == 0 else links[k - 1])
         _sub(joint, 'child', link=link_name)
@@ -173,24 +212,27 @@ def robot_description(scene, *, name: str = 'impact_arm',
         _sub(joint, 'origin', xyz=f'{_num(x)} 0 0', rpy='0 0 0')
         _sub(joint, 'axis', xyz=axis)
     tip = _sub(robot, 'link', name=TIP)
-    _visual_and_collision(tip, {'xyz': '0 0 0', 'rpy': '0 0 0'}, 'sphere', 'tip',
-                          radius=_num(scene.tip_radius))
+    _visual_and_collision(
+        tip, {'xyz': '0 0 0', 'rpy': '0 0 0'}, 'sphere', 'tip', radius=_num(scene.tip_radius)
+    )
     # drawn at least TIP_PER_ROD rod radii (R1 is a contact curvature, often far smaller)
-    tip.find('visual/geometry/sphere').set('radius',
-                                           _num(tip_visual_radius(scene, rod_radius)))
+    tip.find('visual/geometry/sphere').set('radius', _num(tip_visual_radius(scene, rod_radius)))
     for t in static_transforms(scene):
         if t.child != TIP:
             surface = _sub(robot, 'link', name=t.child)
             # a thin slab whose top face is the surface plane, wide enough for any reach
-            _visual_and_collision(surface, {'xyz': f'0 {_num(-thickness / 2)} 0',
-                                            'rpy': '0 0 0'}, 'box', 'surface',
-                                  size=f'{_num(2 * reach)} {_num(thickness)} {_num(reach / 2)}')
+            _visual_and_collision(
+                surface,
+                {'xyz': f'0 {_num(-thickness / 2)} 0', 'rpy': '0 0 0'},
+                'box',
+                'surface',
+                size=f'{_num(2 * reach)} {_num(thickness)} {_num(reach / 2)}',
+            )
         joint = _sub(robot, 'joint', name=f'{t.child}_joint', type='fixed')
         _sub(joint, 'parent', link=t.parent)
         _sub(joint, 'child', link=t.child)
-        roll = 2 * math.atan2(t.rotation[0], t.rotation[3])   # only rotations about x here
-        _sub(joint, 'origin', xyz=f'{_num(t.x)} {_num(t.y)} {_num(t.z)}',
-             rpy=f'{_num(roll)} 0 0')
+        roll = 2 * math.atan2(t.rotation[0], t.rotation[3])  # only rotations about x here
+        _sub(joint, 'origin', xyz=f'{_num(t.x)} {_num(t.y)} {_num(t.z)}', rpy=f'{_num(roll)} 0 0')
     _ros2_control(robot, joints, joint_commands_topic, joint_states_topic)
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding='unicode') + '\n'
@@ -200,12 +242,14 @@ def _ros2_control(robot, joints, commands_topic, states_topic):
     control = _sub(robot, 'ros2_control', name='impact_arm', type='system')
     hardware = _sub(control, 'hardware')
     _sub(hardware, 'plugin').text = 'topic_based_ros2_control/TopicBasedSystem'
-    for key, value in (('joint_commands_topic', commands_topic),
-                       ('joint_states_topic', states_topic),
-                       # TopicBasedSystem skips a write when the *position* commands are
-                       # within this of the position states; with effort-only commands that
-                       # test means nothing, and a negative threshold sends every command
-                       ('trigger_joint_command_threshold', '-1')):
+    for key, value in (
+        ('joint_commands_topic', commands_topic),
+        ('joint_states_topic', states_topic),
+        # TopicBasedSystem skips a write when the *position* commands are
+        # within this of the position states; with effort-only commands that
+        # test means nothing, and a negative threshold sends every command
+        ('trigger_joint_command_threshold', '-1'),
+    ):
         _sub(hardware, 'param', name=key).text = value
     for joint_name in joints:
         joint = _sub(control, 'joint', name=joint_name)

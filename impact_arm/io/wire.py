@@ -19,6 +19,7 @@ The readers take bytes straight from the network, so any peer can hand them garb
 malformation (short, bad header, absurd sequence length, non-UTF-8 name) ends as one
 ``MalformedMessage`` (a ValueError) with a one-line reason, which a node counts and drops.
 """
+
 from __future__ import annotations
 
 import functools
@@ -34,6 +35,7 @@ class MalformedMessage(ValueError):
 class CdrReader:
     """A cursor over CDR bytes (encapsulation header read, alignment relative to the
     payload)."""
+
     __slots__ = ('data', 'pos', 'endian')
 
     def __init__(self, data):
@@ -57,6 +59,7 @@ class CdrReader:
 
 def _reader(function):
     """Any failure while reading hostile bytes becomes one ``MalformedMessage``."""
+
     @functools.wraps(function)
     def read(raw, *args):
         try:
@@ -64,15 +67,20 @@ def _reader(function):
         except MalformedMessage:
             raise
         except (ValueError, struct.error, IndexError, OverflowError, MemoryError) as exc:
-            reason = ('a name is not UTF-8' if isinstance(exc, UnicodeDecodeError)
-                      else str(exc)[:120] or type(exc).__name__)
+            reason = (
+                'a name is not UTF-8'
+                if isinstance(exc, UnicodeDecodeError)
+                else str(exc)[:120] or type(exc).__name__
+            )
             raise MalformedMessage(f'{len(raw)}-byte payload: {reason}') from None
+
     return read
+
 
 # values nobody publishes, to find where a field's bytes lie in the serialized template
 _SENTINEL_SEC, _SENTINEL_NANOSEC = 0x5A1E7A3C, 0x3B9AC9FF - 0x2A5
-_SENTINEL_BASE = -1.2345678901234567e+299
-_STAMP = struct.Struct('<iI')        # builtin_interfaces/Time: sec, nanosec
+_SENTINEL_BASE = -1.2345678901234567e299
+_STAMP = struct.Struct('<iI')  # builtin_interfaces/Time: sec, nanosec
 
 
 class PatchedMessage:
@@ -85,7 +93,7 @@ class PatchedMessage:
     ``values`` is flat, in the order of ``float_fields`` (a sequence gives all its elements)."""
 
     def __init__(self, msg, float_fields, stamp='header.stamp'):
-        slots = []                      # (object, attribute, index or None) in fill order
+        slots = []  # (object, attribute, index or None) in fill order
         for path in float_fields:
             parent, _, last = path.rpartition('.')
             owner = _resolve(msg, parent)
@@ -100,7 +108,7 @@ class PatchedMessage:
         if stamped:
             time_of = _resolve(msg, stamp)
             time_of.sec, time_of.nanosec = _SENTINEL_SEC, _SENTINEL_NANOSEC
-        sentinels = [_SENTINEL_BASE * (1.0 + k * 2.0 ** -20) for k in range(self.size)]
+        sentinels = [_SENTINEL_BASE * (1.0 + k * 2.0**-20) for k in range(self.size)]
         for (owner, name, index), sentinel in zip(slots, sentinels):
             if index is None:
                 setattr(owner, name, sentinel)
@@ -111,16 +119,16 @@ class PatchedMessage:
         template = serialize_cdr(msg)
         if template[:2] != b'\x00\x01':
             raise ValueError('expected little-endian CDR')
-        self._stamp_at = (_find(template, _STAMP.pack(_SENTINEL_SEC, _SENTINEL_NANOSEC))
-                          if stamped else None)
+        self._stamp_at = (
+            _find(template, _STAMP.pack(_SENTINEL_SEC, _SENTINEL_NANOSEC)) if stamped else None
+        )
         offsets = [_find(template, struct.pack('<d', s)) for s in sentinels]
         # consecutive slots (a sequence's elements, a vector's x y z) are written in one go
         self._runs = []
         start = 0
         for k in range(1, self.size + 1):
             if k == self.size or offsets[k] != offsets[k - 1] + 8:
-                self._runs.append((offsets[start], start, k,
-                                   struct.Struct(f'<{k - start}d')))
+                self._runs.append((offsets[start], start, k, struct.Struct(f'<{k - start}d')))
                 start = k
         self._buffer = bytearray(template)
         self.fill([0.0] * self.size, (0, 0) if stamped else None)
@@ -165,13 +173,13 @@ def float64_array_data(raw: bytes) -> list:
             return list(struct.unpack_from(f'<{n}d', raw, 20)) if n else []
     r = CdrReader(raw)
     (dims,) = r.unpack('I', 4)
-    for _ in range(dims):           # MultiArrayDimension: label, size, stride
+    for _ in range(dims):  # MultiArrayDimension: label, size, stride
         r.align(4)
         _skip(r, r.unpack('I', 4)[0])
         r.align(4)
         r.unpack('I', 4, 2)
     r.align(4)
-    r.unpack('I', 4)                # data_offset
+    r.unpack('I', 4)  # data_offset
     values = _doubles_at(r)[0]
     _ends_at(raw, r.pos)
     return values
@@ -200,22 +208,23 @@ def header_stamp_ns(raw: bytes) -> int:
 
 def _header(r: CdrReader):
     sec, nanosec = r.unpack('i', 4)[0], r.unpack('I', 4)[0]
-    _skip(r, r.unpack('I', 4)[0])    # frame_id
+    _skip(r, r.unpack('I', 4)[0])  # frame_id
     return sec, nanosec
 
 
 def _skip(r: CdrReader, length: int):
     """Step over ``length`` bytes that must lie inside the message."""
     if length > len(r.data) - r.pos:
-        raise MalformedMessage(f'{len(r.data)}-byte payload: a string or sequence of {length} '
-                               f'bytes runs past its end')
+        raise MalformedMessage(
+            f'{len(r.data)}-byte payload: a string or sequence of {length} bytes runs past its end'
+        )
     r.pos += length
 
 
 def _strings(r: CdrReader) -> list:
     r.align(4)
     (n,) = r.unpack('I', 4)
-    if 4 * n > len(r.data) - r.pos:     # each string takes at least its 4-byte length
+    if 4 * n > len(r.data) - r.pos:  # each string takes at least its 4-byte length
         raise MalformedMessage(f'{len(r.data)}-byte payload: {n} strings cannot fit')
     out = []
     for _ in range(n):
@@ -223,7 +232,7 @@ def _strings(r: CdrReader) -> list:
         (length,) = r.unpack('I', 4)
         start = r.pos
         _skip(r, length)
-        out.append(bytes(r.data[start:start + length - 1]).decode() if length else '')
+        out.append(bytes(r.data[start : start + length - 1]).decode() if length else '')
     return out
 
 
@@ -232,24 +241,24 @@ class _JointStateLayout:
     names and sequence lengths every period, so after the first message only the stamp and
     the doubles need reading: the bytes from the frame up to the first position (the layout)
     and the velocity count are compared instead of parsed (15 us -> 1 us)."""
-    __slots__ = ('prefix', 'names', 'position', 'velocity_count_at', 'velocity_count',
-                 'velocity')
+
+    __slots__ = ('prefix', 'names', 'position', 'velocity_count_at', 'velocity_count', 'velocity')
 
     def __init__(self, raw, names, position_at, n_position, velocity_at, n_velocity):
         self.prefix = raw[12:position_at]
         self.names = names
         self.position = (position_at, struct.Struct(f'<{n_position}d'))
         self.velocity_count_at = position_at + 8 * n_position
-        self.velocity_count = raw[self.velocity_count_at:self.velocity_count_at + 4]
+        self.velocity_count = raw[self.velocity_count_at : self.velocity_count_at + 4]
         self.velocity = (velocity_at, struct.Struct(f'<{n_velocity}d'))
 
     def matches(self, raw) -> bool:
         """For a message of the size this layout is kept under."""
         at = self.velocity_count_at
-        return raw[12:self.position[0]] == self.prefix and raw[at:at + 4] == self.velocity_count
+        return raw[12 : self.position[0]] == self.prefix and raw[at : at + 4] == self.velocity_count
 
 
-_joint_state_layouts = {}      # message size -> _JointStateLayout (a few at most)
+_joint_state_layouts = {}  # message size -> _JointStateLayout (a few at most)
 
 
 @_reader
@@ -258,8 +267,12 @@ def joint_state_fields(raw: bytes):
     layout = _joint_state_layouts.get(len(raw))
     if layout is not None and raw[:2] == b'\x00\x01' and layout.matches(raw):
         (p_at, p_struct), (v_at, v_struct) = layout.position, layout.velocity
-        return (*_STAMP.unpack_from(raw, 4), list(layout.names),
-                list(p_struct.unpack_from(raw, p_at)), list(v_struct.unpack_from(raw, v_at)))
+        return (
+            *_STAMP.unpack_from(raw, 4),
+            list(layout.names),
+            list(p_struct.unpack_from(raw, p_at)),
+            list(v_struct.unpack_from(raw, v_at)),
+        )
     r = CdrReader(raw)
     sec, nanosec = _header(r)
     names = _strings(r)
@@ -267,7 +280,8 @@ def joint_state_fields(raw: bytes):
     velocity, velocity_at = _doubles_at(r)
     if r.endian == '<' and position and velocity and len(_joint_state_layouts) < 8:
         _joint_state_layouts[len(raw)] = _JointStateLayout(
-            bytes(raw), names, position_at, len(position), velocity_at, len(velocity))
+            bytes(raw), names, position_at, len(position), velocity_at, len(velocity)
+        )
     return sec, nanosec, names, position, velocity
 
 
@@ -300,8 +314,8 @@ def joint_state_command(raw: bytes, joints) -> list:
     r = CdrReader(raw)
     _header(r)
     names = _strings(r)
-    _doubles_at(r)                   # position
-    _doubles_at(r)                   # velocity
+    _doubles_at(r)  # position
+    _doubles_at(r)  # velocity
     efforts = _doubles_at(r)[0]
     _ends_at(raw, r.pos)
     unknown = [n for n in names if n not in joints]
@@ -310,7 +324,9 @@ def joint_state_command(raw: bytes, joints) -> list:
     if len(set(names)) != len(names) or len(names) != len(joints):
         raise ValueError(f'joint names {names}: must name each of {list(joints)} once')
     if len(efforts) != len(names):
-        raise ValueError(f'{len(efforts)} efforts for {len(names)} joints {names}: '
-                         f'one effort per joint name is required')
+        raise ValueError(
+            f'{len(efforts)} efforts for {len(names)} joints {names}: '
+            f'one effort per joint name is required'
+        )
     by_name = dict(zip(names, efforts))
     return [by_name[j] for j in joints]

@@ -1,6 +1,7 @@
 """The simulator's per-period output: /contact_wrench, /joint_states (and the topic
 hardware's joint states while someone listens there), /clock, /impact_report and the 3D view,
 from pre-serialized messages whose bytes each period only patches with its numbers."""
+
 from __future__ import annotations
 
 import collections
@@ -24,6 +25,7 @@ class PeriodPublishers:
     def __init__(self, node, scene, joint_names, p, lockstep):
         def qos(topic, depth=1):
             return contract.qos(topic).to_rclpy(depth)
+
         self.log = node.get_logger()
         # lockstep: enough history on the per-period streams to repair a starved recorder
         depth = contract.WRITER_REPAIR_DEPTH if lockstep else 1
@@ -31,21 +33,26 @@ class PeriodPublishers:
         self.joints = make(JointState, JOINT_STATES, qos(JOINT_STATES, depth))
         self.wrench = make(WrenchStamped, CONTACT_WRENCH, qos(CONTACT_WRENCH, depth))
         self.impact = make(String, IMPACT_REPORT, qos(IMPACT_REPORT))
-        self.clock = make(Clock, CLOCK, qos(CLOCK)) \
-            if lockstep or p.rate_factor != 1.0 else None
+        self.clock = make(Clock, CLOCK, qos(CLOCK)) if lockstep or p.rate_factor != 1.0 else None
         self.hw_states = make(JointState, p.joint_states_topic, qos(JOINT_STATES, depth))
-        self.hw_states_wanted = False   # someone listens there (updated at tf_rate)
+        self.hw_states_wanted = False  # someone listens there (updated at tf_rate)
         zeros = [0.0] * len(joint_names)
         self.wire_joints = PatchedMessage(
             JointState(name=joint_names, position=zeros, velocity=zeros, effort=zeros),
-            ('position', 'velocity', 'effort'))
+            ('position', 'velocity', 'effort'),
+        )
         wrench = WrenchStamped()
         wrench.header.frame_id = p.frame_id
         self.wire_wrench = PatchedMessage(wrench, ('wrench.force.x', 'wrench.force.y'))
         self.wire_clock = PatchedMessage(Clock(), (), stamp='clock')
-        self.visuals = VisualsPublisher(node, scene, p.tf_rate, p.publish_tf,
-                                        on_timer=self._check_hw_listeners,
-                                        rod_radius=p.rod_radius)
+        self.visuals = VisualsPublisher(
+            node,
+            scene,
+            p.tf_rate,
+            p.publish_tf,
+            on_timer=self._check_hw_listeners,
+            rod_radius=p.rod_radius,
+        )
         self.failures = 0
         self.sent = collections.Counter()  # topic -> samples published (loss accounting)
 
@@ -75,10 +82,13 @@ class PeriodPublishers:
         try:
             publisher.publish(data)
             self.sent[publisher.topic_name] += 1
-        except RuntimeError as exc:        # rclpy's RCLError: the write failed
+        except RuntimeError as exc:  # rclpy's RCLError: the write failed
             self.failures += 1
-            self.log.warning(f'{publisher.topic_name}: sample not published ({exc}); '
-                             f'{self.failures} lost so far', throttle_duration_sec=1.0)
+            self.log.warning(
+                f'{publisher.topic_name}: sample not published ({exc}); '
+                f'{self.failures} lost so far',
+                throttle_duration_sec=1.0,
+            )
 
     def sent_text(self) -> str:
         """What was published, per topic: what the recorder's loss count is checked against."""

@@ -5,6 +5,7 @@ ask other nodes anything. Here SIGINT/SIGTERM only set a flag: the spin loop end
 ``finish`` runs with the middleware still up (final parameter query, closing the file), and the
 process exits with the node's exit code and no traceback.
 """
+
 import gc
 import os
 import signal
@@ -30,6 +31,7 @@ def name_thread(name):
     Python names its threads for itself only."""
     try:
         import ctypes
+
         ctypes.CDLL('libc.so.6', use_errno=True).prctl(15, name.encode()[:15])  # PR_SET_NAME
     except OSError:
         pass
@@ -52,10 +54,16 @@ def reader_node(owner, suffix):
     arguments: launch's ``__node`` remap names the owner, and would give this one the same
     name (``ros2 node list`` showed it twice). The topic remaps among them still apply."""
     import rclpy
-    return rclpy.create_node(f'_{owner.get_name()}_{suffix}', namespace=owner.get_namespace(),
-                             context=owner.context, start_parameter_services=False,
-                             enable_rosout=False, use_global_arguments=False,
-                             cli_args=topic_remaps(sys.argv))
+
+    return rclpy.create_node(
+        f'_{owner.get_name()}_{suffix}',
+        namespace=owner.get_namespace(),
+        context=owner.context,
+        start_parameter_services=False,
+        enable_rosout=False,
+        use_global_arguments=False,
+        cli_args=topic_remaps(sys.argv),
+    )
 
 
 def topic_remaps(argv) -> list:
@@ -81,19 +89,22 @@ def await_acknowledgements(node, publishers, wait):
     import time
 
     from rclpy.duration import Duration
+
     end = time.monotonic() + wait
     for pub in publishers:
         left = end - time.monotonic()
         if left <= 0 or not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
-            node.get_logger().warning(f'{pub.topic_name}: not every reader acknowledged the '
-                                      f'last samples within {wait:g} s')
+            node.get_logger().warning(
+                f'{pub.topic_name}: not every reader acknowledged the '
+                f'last samples within {wait:g} s'
+            )
             return
 
 
 def _threads():
     try:
         return {int(t) for t in os.listdir('/proc/self/task')}
-    except OSError:               # not Linux: nothing to raise
+    except OSError:  # not Linux: nothing to raise
         return set()
 
 
@@ -120,14 +131,16 @@ def guard_parameter_services(node):
                 return callback(request, response)
             except (ValueError, TypeError) as exc:
                 reason = f'malformed request refused: {str(exc)[:200]}'
-                node.get_logger().warning(f'parameter service: {reason}',
-                                          throttle_duration_sec=2.0)
-                if hasattr(response, 'results'):        # SetParameters
-                    response.results = [SetParametersResult(successful=False, reason=reason)
-                                        for _ in request.parameters]
-                elif hasattr(response, 'result'):       # SetParametersAtomically
+                node.get_logger().warning(f'parameter service: {reason}', throttle_duration_sec=2.0)
+                if hasattr(response, 'results'):  # SetParameters
+                    response.results = [
+                        SetParametersResult(successful=False, reason=reason)
+                        for _ in request.parameters
+                    ]
+                elif hasattr(response, 'result'):  # SetParametersAtomically
                     response.result = SetParametersResult(successful=False, reason=reason)
                 return response
+
         return call
 
     for service in node.services:
@@ -142,15 +155,18 @@ def make_executor(context=None, prefer=None):
     argument to internal routine"), which the recorder needs for publish times. The recorder
     drains its queues in each callback, so the single-threaded executor keeps up anyway."""
     import os
+
     # nodes without MessageInfo callbacks (simulator, controller) prefer 'events': several
     # times cheaper per callback, which is what a lockstep round trip is made of
     if (os.environ.get('IMPACT_ARM_EXECUTOR') or prefer) == 'events':
         try:
             from rclpy.experimental import EventsExecutor
+
             return EventsExecutor(context=context)
         except ImportError:
             pass
     from rclpy.executors import SingleThreadedExecutor
+
     return SingleThreadedExecutor(context=context)
 
 
@@ -167,16 +183,20 @@ def run(node_factory, args=None) -> int:
     # ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET explicitly)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     stopped = []
-    previous = {s: signal.signal(s, lambda signum, frame: stopped.append(signum))
-                for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {
+        s: signal.signal(s, lambda signum, frame: stopped.append(signum))
+        for s in (signal.SIGINT, signal.SIGTERM)
+    }
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node, executor, code = None, None, 0
     try:
         before = _threads()
         node = node_factory()
         # a node whose loop runs at realtime priority says so: ``middleware_priority``
-        raise_middleware_threads(_threads() - before - {threading.get_native_id()},
-                                 getattr(node, 'middleware_priority', 0))
+        raise_middleware_threads(
+            _threads() - before - {threading.get_native_id()},
+            getattr(node, 'middleware_priority', 0),
+        )
         guard_parameter_services(node)
         # Everything built so far (numba dispatchers, message classes, the model) lives for
         # the whole process: move it out of the collector's sight, so that a periodic full
@@ -185,9 +205,9 @@ def run(node_factory, args=None) -> int:
         gc.freeze()
         executor = make_executor(prefer=getattr(node, 'executor_kind', None))
         executor.add_node(node)
-        if hasattr(node, 'start'):    # a node with periods of its own starts them now, not
-            node.start()              # under the collection above (it holds the GIL)
-        if hasattr(node, 'spin'):     # a node with its own loop (the realtime simulator)
+        if hasattr(node, 'start'):  # a node with periods of its own starts them now, not
+            node.start()  # under the collection above (it holds the GIL)
+        if hasattr(node, 'spin'):  # a node with its own loop (the realtime simulator)
             node.spin(executor, lambda: bool(stopped) or node.done or not rclpy.ok())
         else:
             while not stopped and not node.done and rclpy.ok():

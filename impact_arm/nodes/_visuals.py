@@ -3,6 +3,7 @@
 latest published period, and at each impact's first contact, maximum compression and
 separation (from the impact report, io/scene_visuals.py), so they cost the realtime loop
 nothing but one reference."""
+
 from __future__ import annotations
 
 import threading
@@ -15,33 +16,36 @@ from ..io.scene_visuals import SceneVisuals
 
 
 class VisualsPublisher:
-    def __init__(self, node, scene, tf_rate, publish_tf, on_timer=lambda: None,
-                 rod_radius=0.0):
+    def __init__(self, node, scene, tf_rate, publish_tf, on_timer=lambda: None, rod_radius=0.0):
         from visualization_msgs.msg import MarkerArray
 
         def qos(topic):
             return VISUAL_TOPICS[topic][1].to_rclpy()
+
         self.visuals = SceneVisuals(scene, tf_rate, rod_radius)
         self.lock = threading.Lock()
-        self.latest = None                 # the latest published period (a Tick)
+        self.latest = None  # the latest published period (a Tick)
         self._stamp = None
         self._on_timer = on_timer
         node.create_publisher(String, ROBOT_DESCRIPTION, qos(ROBOT_DESCRIPTION)).publish(
-            self.visuals.description())
-        self.pub_markers = node.create_publisher(MarkerArray, IMPACT_MARKERS,
-                                                 qos(IMPACT_MARKERS))
+            self.visuals.description()
+        )
+        self.pub_markers = node.create_publisher(MarkerArray, IMPACT_MARKERS, qos(IMPACT_MARKERS))
         tf_class = type(self.visuals.tf_static())
         self.pub_tf = None
         # without tf2_msgs rclpy has no type support for TFMessage, so no live TF: the
         # recordings still hold it (the recorder derives it from /joint_states)
         if publish_tf and has_type_support(tf_class):
             node.create_publisher(tf_class, TF_STATIC, qos(TF_STATIC)).publish(
-                self.visuals.tf_static())
+                self.visuals.tf_static()
+            )
             self.pub_tf = node.create_publisher(tf_class, TF, qos(TF))
-        elif publish_tf:   # (false: robot_state_publisher owns /tf, tf:=rsp)
-            node.get_logger().info('tf2_msgs is not installed: no live /tf or /tf_static '
-                                   '(recordings still hold them; launch with tf:=rsp on a '
-                                   'ROS install)')
+        elif publish_tf:  # (false: robot_state_publisher owns /tf, tf:=rsp)
+            node.get_logger().info(
+                'tf2_msgs is not installed: no live /tf or /tf_static '
+                '(recordings still hold them; launch with tf:=rsp on a '
+                'ROS install)'
+            )
         node.create_timer(1.0 / tf_rate, self._publish)
 
     def observe(self, tick):
@@ -56,16 +60,18 @@ class VisualsPublisher:
 
     def _publish(self):
         self._on_timer()
-        with self.lock:   # each impact's events first: their stamps are older
-            events = [(self.visuals.tf(q, t_ns), self.visuals.markers(t_ns))
-                      for t_ns, q in self.visuals.take_events()]
+        with self.lock:  # each impact's events first: their stamps are older
+            events = [
+                (self.visuals.tf(q, t_ns), self.visuals.markers(t_ns))
+                for t_ns, q in self.visuals.take_events()
+            ]
         for tf, markers in events:
             if self.pub_tf is not None:
                 self.pub_tf.publish(tf)
             self.pub_markers.publish(markers)
         tick = self.latest
         if tick is None or tick.t == self._stamp:
-            return                         # nothing new (paused lockstep, waiting)
+            return  # nothing new (paused lockstep, waiting)
         self._stamp = tick.t
         t_ns = round(tick.t * 1e9)
         if self.pub_tf is not None:

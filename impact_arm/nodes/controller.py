@@ -13,6 +13,7 @@ of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer
 move the arm (ControlInputs); what is dropped is counted on /diagnostics (~1 Hz). On shutdown
 it sends a zero command.
 """
+
 from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -27,19 +28,24 @@ from ..core.control import CycleController, PidIntegrator
 from ..core.control_inputs import ControlInputs
 from ..core.model import ArmModel
 from ..core.scene import load_scene, resolve_scene_path
-from ..io.wire import (MalformedMessage, PatchedMessage, joint_state_fields,
-                       wrench_stamped_fields)
+from ..io.wire import MalformedMessage, PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
 from .params import NODE_OPTIONS, declare, refuse_unknown, validator
 
 # the settings whose change starts a fresh integral
-INTEGRAL_SETTINGS = ('law', 'antiwindup_strategy', 'i_clamp_max', 'i_clamp_min', 'u_clamp_max',
-                     'u_clamp_min')
+INTEGRAL_SETTINGS = (
+    'law',
+    'antiwindup_strategy',
+    'i_clamp_max',
+    'i_clamp_min',
+    'u_clamp_max',
+    'u_clamp_min',
+)
 
 
 class Controller(Node):
-    executor_kind = 'events'   # see _runner.make_executor
+    executor_kind = 'events'  # see _runner.make_executor
     done = False
 
     def __init__(self):
@@ -54,45 +60,71 @@ class Controller(Node):
         names = joint_names(self.n)
         check(p, names)
         refuse_unknown(self, self.table)
-        self.ctrl = CycleController(self.model, p.law, p.p, p.d, p.i, to_absolute(p.down_target),
-                                    to_absolute(p.up_target), p.switch_height,
-                                    p.surface_height, space=p.space,
-                                    force_threshold=p.force_threshold,
-                                    reversal_band=p.reversal_band, integrator=self._integrator(p))
+        self.ctrl = CycleController(
+            self.model,
+            p.law,
+            p.p,
+            p.d,
+            p.i,
+            to_absolute(p.down_target),
+            to_absolute(p.up_target),
+            p.switch_height,
+            p.surface_height,
+            space=p.space,
+            force_threshold=p.force_threshold,
+            reversal_band=p.reversal_band,
+            integrator=self._integrator(p),
+        )
         self._warm_up(scene)
         self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
         self.sent = 0
-        self.pub = self.create_publisher(Float64MultiArray, COMMANDS, contract.qos(
-            COMMANDS).to_rclpy(p.command_history))
+        self.pub = self.create_publisher(
+            Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy(p.command_history)
+        )
         # keep only the newest sample: a controller that fell behind acts on the present
         latest_only = contract.qos(JOINT_STATES).to_rclpy()
         latest_only.depth = 1
         # raw: the callbacks read the few fields they need from the bytes, which costs a
         # fraction of rclpy's conversion to message objects (twice per period)
-        self.sub_wrench = self.create_subscription(WrenchStamped, CONTACT_WRENCH,
-                                                   self._on_wrench, latest_only, raw=True)
-        self.sub_state = self.create_subscription(JointState, JOINT_STATES,
-                                                  self._on_joint_state, latest_only, raw=True)
+        self.sub_wrench = self.create_subscription(
+            WrenchStamped, CONTACT_WRENCH, self._on_wrench, latest_only, raw=True
+        )
+        self.sub_state = self.create_subscription(
+            JointState, JOINT_STATES, self._on_joint_state, latest_only, raw=True
+        )
         self.inputs = ControlInputs(
-            self.ctrl, names, [names.index(j) for j in p.joints], p.rate, p.trigger, self._send,
+            self.ctrl,
+            names,
+            [names.index(j) for j in p.joints],
+            p.rate,
+            p.trigger,
+            self._send,
             log=lambda text: self.get_logger().warning(text, throttle_duration_sec=2.0),
-            ready=self._readers_matched, startup_hold=p.startup_hold,
-            wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0)
+            ready=self._readers_matched,
+            startup_hold=p.startup_hold,
+            wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0,
+        )
         if p.startup_hold > 0:
-            self.get_logger().info(f'first command held {p.startup_hold:g} s after start '
-                                   f'while DDS discovery settles (startup_hold)')
+            self.get_logger().info(
+                f'first command held {p.startup_hold:g} s after start '
+                f'while DDS discovery settles (startup_hold)'
+            )
         if p.trigger == 'timer':
             self.create_timer(1.0 / p.rate, self.inputs.timer)
-        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
-                                              contract.qos(DIAGNOSTICS).to_rclpy())
+        self.pub_diag = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS, contract.qos(DIAGNOSTICS).to_rclpy()
+        )
         self.create_timer(1.0, self._publish_diagnostics)
-        self.wire_command = PatchedMessage(Float64MultiArray(data=[0.0] * self.n), ('data',),
-                                           stamp=None)
+        self.wire_command = PatchedMessage(
+            Float64MultiArray(data=[0.0] * self.n), ('data',), stamp=None
+        )
         # like a controller manager's update loop: the thread that runs the callbacks
         self.scheduling = realtime_priority(p.thread_priority)
-        self.middleware_priority = p.thread_priority    # for the runner (_runner.run)
-        self.get_logger().info(f'law {p.law} at {p.rate:g} Hz ({p.trigger}), '
-                               f'scene {scene.name!r}, scheduling {self.scheduling}')
+        self.middleware_priority = p.thread_priority  # for the runner (_runner.run)
+        self.get_logger().info(
+            f'law {p.law} at {p.rate:g} Hz ({p.trigger}), '
+            f'scene {scene.name!r}, scheduling {self.scheduling}'
+        )
 
     def _warm_up(self, scene):
         """Load the compiled laws and kinematics now: their first call reads numba's cache
@@ -105,8 +137,14 @@ class Controller(Node):
 
     @staticmethod
     def _integrator(p):
-        return PidIntegrator(len(p.p), p.i_clamp_max, p.i_clamp_min, p.antiwindup_strategy,
-                             p.u_clamp_max, p.u_clamp_min)
+        return PidIntegrator(
+            len(p.p),
+            p.i_clamp_max,
+            p.i_clamp_min,
+            p.antiwindup_strategy,
+            p.u_clamp_max,
+            p.u_clamp_min,
+        )
 
     def _set_parameters(self, values):
         p = self.p.replace(**values)
@@ -150,8 +188,9 @@ class Controller(Node):
         """The arm is held until our first command: send it only once the readers we were
         told of (command_readers) and every one the graph already knows of are matched (our
         own view of the graph may not show a recorder yet)."""
-        return self.pub.get_subscription_count() >= max(self.p.command_readers,
-                                                        self.count_subscribers(COMMANDS))
+        return self.pub.get_subscription_count() >= max(
+            self.p.command_readers, self.count_subscribers(COMMANDS)
+        )
 
     def _send(self, values):
         self.pub.publish(self.wire_command.fill([float(v) for v in values]))
@@ -160,24 +199,31 @@ class Controller(Node):
     def finish(self, executor) -> int:
         """Like a deactivated controller: leave the actuators with zero torque."""
         from rclpy.duration import Duration
+
         try:
             self._send([0.0] * self.n)
             self.pub.wait_for_all_acked(Duration(seconds=0.5))
         except Exception:  # noqa: BLE001 - best effort once the middleware is shutting down
             self.get_logger().warning('could not send the zero command on exit')
         dropped = ', '.join(f'{k} {v}' for k, v in self.inputs.dropped.items() if v)
-        self.get_logger().info(f'{self.sent} commands sent; zero command on exit'
-                               + (f'; dropped: {dropped}' if dropped else ''))
+        self.get_logger().info(
+            f'{self.sent} commands sent; zero command on exit'
+            + (f'; dropped: {dropped}' if dropped else '')
+        )
         return 0
 
     def _publish_diagnostics(self):
         dropped = sum(self.inputs.dropped.values())
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK,
-            name=contract.CONTROLLER_STATUS, hardware_id='impact_arm_controller',
+            name=contract.CONTROLLER_STATUS,
+            hardware_id='impact_arm_controller',
             message=f'{dropped} inputs dropped' if dropped else 'running',
-            values=[KeyValue(key='commands_sent', value=str(self.sent)),
-                    *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items())])
+            values=[
+                KeyValue(key='commands_sent', value=str(self.sent)),
+                *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
+            ],
+        )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)

@@ -1,13 +1,20 @@
 """The controller node's parameters, declared once: ``parameter_table(scene)`` gives each its
 default (from the scene's controller section), range and description; ``ControllerParams``
 the typed object the node reads."""
+
 from __future__ import annotations
 
 import math
 
 from .. import contract
-from ..contract import (ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES,
-                        joint_names, to_joint_space)
+from ..contract import (
+    ANTIWINDUP_STRATEGIES,
+    COMMANDS,
+    FEEDBACK_LAWS,
+    PID_SPACES,
+    joint_names,
+    to_joint_space,
+)
 from .params import Param, ParameterError
 
 
@@ -16,68 +23,170 @@ def parameter_table(scene):
     c, n = scene.controller, scene.n_links
     surfaces = [s.height for s in scene.surfaces]
     return (
-        Param('scene', '', 'scene YAML file or installed scene name (empty: paper): the model '
-              'the controller knows (kinematics, gravity) and its default gains', 'str',
-              read_only=True),
-        Param('law', c.law if c.law in FEEDBACK_LAWS else 'q',
-              'q (article eq. 9: PD on link angles + gravity compensation), pid or pd', 'str',
-              choices=FEEDBACK_LAWS),
+        Param(
+            'scene',
+            '',
+            'scene YAML file or installed scene name (empty: paper): the model '
+            'the controller knows (kinematics, gravity) and its default gains',
+            'str',
+            read_only=True,
+        ),
+        Param(
+            'law',
+            c.law if c.law in FEEDBACK_LAWS else 'q',
+            'q (article eq. 9: PD on link angles + gravity compensation), pid or pd',
+            'str',
+            choices=FEEDBACK_LAWS,
+        ),
         Param('rate', 1000.0, 'command rate [Hz]', low=0.1, high=100000.0, read_only=True),
-        Param('trigger', 'joint_states', 'joint_states: compute on each joint state reaching '
-              'the next tick; timer: compute at rate on the node clock', 'str',
-              choices=('joint_states', 'timer'), read_only=True),
-        Param('p', list(c.kp), 'proportional gains per joint [N m/rad]', 'floats', low=0.0,
-              size=n),
-        Param('i', list(c.ki), 'integral gains per joint [N m/(rad s)] (law pid)', 'floats',
-              low=0.0, size=n),
-        Param('d', list(c.kd), 'derivative gains per joint [N m s/rad]', 'floats', low=0.0,
-              size=n),
-        Param('i_clamp_max', math.inf, 'upper clamp of the integral term [N m] (legacy)',
-              high=math.inf),
-        Param('i_clamp_min', -math.inf, 'lower clamp of the integral term [N m] (legacy)',
-              low=-math.inf),
-        Param('u_clamp_max', math.inf, 'upper limit of each joint\'s PID output [N m]',
-              high=math.inf),
-        Param('u_clamp_min', -math.inf, 'lower limit of each joint\'s PID output [N m]',
-              low=-math.inf),
-        Param('antiwindup_strategy', 'none', 'integral anti-windup: none, legacy (i_clamp on '
-              'the integral term), conditional_integration (integral frozen while the output '
-              'is at a u_clamp limit)', 'str',
-              choices=ANTIWINDUP_STRATEGIES),
-        Param('space', c.space, 'angles the PID acts on: absolute link angles or relative '
-              'joint angles', 'str', choices=PID_SPACES),
-        Param('down_target', to_joint_space(c.down_target), 'joint positions aimed at on the '
-              'way down [rad]', 'floats', low=-4 * math.pi, high=4 * math.pi, size=n),
-        Param('up_target', to_joint_space(c.up_target), 'joint positions aimed at on the way '
-              'up [rad]', 'floats', low=-4 * math.pi, high=4 * math.pi, size=n),
-        Param('switch_height', c.switch_height, 'tip height that ends the up phase [m]',
-              low=-1e3, high=1e3),
-        Param('surface_height', min(surfaces) if surfaces else -1e3,
-              'height of the struck surface, for velocity-reversal detection [m]',
-              low=-1e3, high=1e3),
+        Param(
+            'trigger',
+            'joint_states',
+            'joint_states: compute on each joint state reaching '
+            'the next tick; timer: compute at rate on the node clock',
+            'str',
+            choices=('joint_states', 'timer'),
+            read_only=True,
+        ),
+        Param('p', list(c.kp), 'proportional gains per joint [N m/rad]', 'floats', low=0.0, size=n),
+        Param(
+            'i',
+            list(c.ki),
+            'integral gains per joint [N m/(rad s)] (law pid)',
+            'floats',
+            low=0.0,
+            size=n,
+        ),
+        Param('d', list(c.kd), 'derivative gains per joint [N m s/rad]', 'floats', low=0.0, size=n),
+        Param(
+            'i_clamp_max',
+            math.inf,
+            'upper clamp of the integral term [N m] (legacy)',
+            high=math.inf,
+        ),
+        Param(
+            'i_clamp_min',
+            -math.inf,
+            'lower clamp of the integral term [N m] (legacy)',
+            low=-math.inf,
+        ),
+        Param(
+            'u_clamp_max', math.inf, "upper limit of each joint's PID output [N m]", high=math.inf
+        ),
+        Param(
+            'u_clamp_min', -math.inf, "lower limit of each joint's PID output [N m]", low=-math.inf
+        ),
+        Param(
+            'antiwindup_strategy',
+            'none',
+            'integral anti-windup: none, legacy (i_clamp on '
+            'the integral term), conditional_integration (integral frozen while the output '
+            'is at a u_clamp limit)',
+            'str',
+            choices=ANTIWINDUP_STRATEGIES,
+        ),
+        Param(
+            'space',
+            c.space,
+            'angles the PID acts on: absolute link angles or relative joint angles',
+            'str',
+            choices=PID_SPACES,
+        ),
+        Param(
+            'down_target',
+            to_joint_space(c.down_target),
+            'joint positions aimed at on the way down [rad]',
+            'floats',
+            low=-4 * math.pi,
+            high=4 * math.pi,
+            size=n,
+        ),
+        Param(
+            'up_target',
+            to_joint_space(c.up_target),
+            'joint positions aimed at on the way up [rad]',
+            'floats',
+            low=-4 * math.pi,
+            high=4 * math.pi,
+            size=n,
+        ),
+        Param(
+            'switch_height',
+            c.switch_height,
+            'tip height that ends the up phase [m]',
+            low=-1e3,
+            high=1e3,
+        ),
+        Param(
+            'surface_height',
+            min(surfaces) if surfaces else -1e3,
+            'height of the struck surface, for velocity-reversal detection [m]',
+            low=-1e3,
+            high=1e3,
+        ),
         Param('force_threshold', 1.0, 'contact normal force that means impact [N]', low=0.0),
-        Param('reversal_band', 0.01, 'tip velocity reversal within this height above the '
-              'surface means impact [m]', low=0.0, high=10.0),
-        Param('joints', joint_names(n), 'joint order of the command '
-              'array', 'strs', size=n, read_only=True),
-        Param('command_readers', 1, 'readers of the command topic (the driver, a recorder) '
-              'matched before the first command; the arm is held until then, so nothing of the '
-              'run goes unrecorded', 'int', low=1, high=100, read_only=True),
-        Param('startup_hold', contract.STARTUP_HOLD, 'seconds after start before the first '
-              'command: the arm is held while DDS discovery settles, because Fast DDS can '
-              'stop a process\'s reception for 0.33 s when it discovers a participant late '
-              '(docs/nodes.md); impact-arm run and the launch file set 0 in lockstep',
-              low=0.0, high=60.0, read_only=True),
-        Param('command_history', contract.qos(COMMANDS).depth, 'commands the writer keeps to '
-              'resend to a reader that fell behind (a recorder); impact-arm run sets '
-              f'{contract.WRITER_REPAIR_DEPTH} in lockstep. Realtime keeps the default: a '
-              'deep history makes a publish stall ~1 us per sample when acknowledgements '
-              'arrive', 'int', low=1, high=100000, read_only=True),
-        Param('thread_priority', 49, 'SCHED_FIFO priority of the control thread and of the '
-              'middleware threads that deliver its samples (0: normal scheduling; falls back '
-              'when the system refuses); one below the simulator loop\'s default, as a '
-              'controller manager sits below its hardware driver', 'int', low=0, high=99,
-              read_only=True),
+        Param(
+            'reversal_band',
+            0.01,
+            'tip velocity reversal within this height above the surface means impact [m]',
+            low=0.0,
+            high=10.0,
+        ),
+        Param(
+            'joints',
+            joint_names(n),
+            'joint order of the command array',
+            'strs',
+            size=n,
+            read_only=True,
+        ),
+        Param(
+            'command_readers',
+            1,
+            'readers of the command topic (the driver, a recorder) '
+            'matched before the first command; the arm is held until then, so nothing of the '
+            'run goes unrecorded',
+            'int',
+            low=1,
+            high=100,
+            read_only=True,
+        ),
+        Param(
+            'startup_hold',
+            contract.STARTUP_HOLD,
+            'seconds after start before the first '
+            'command: the arm is held while DDS discovery settles, because Fast DDS can '
+            "stop a process's reception for 0.33 s when it discovers a participant late "
+            '(docs/nodes.md); impact-arm run and the launch file set 0 in lockstep',
+            low=0.0,
+            high=60.0,
+            read_only=True,
+        ),
+        Param(
+            'command_history',
+            contract.qos(COMMANDS).depth,
+            'commands the writer keeps to '
+            'resend to a reader that fell behind (a recorder); impact-arm run sets '
+            f'{contract.WRITER_REPAIR_DEPTH} in lockstep. Realtime keeps the default: a '
+            'deep history makes a publish stall ~1 us per sample when acknowledgements '
+            'arrive',
+            'int',
+            low=1,
+            high=100000,
+            read_only=True,
+        ),
+        Param(
+            'thread_priority',
+            49,
+            'SCHED_FIFO priority of the control thread and of the '
+            'middleware threads that deliver its samples (0: normal scheduling; falls back '
+            "when the system refuses); one below the simulator loop's default, as a "
+            'controller manager sits below its hardware driver',
+            'int',
+            low=0,
+            high=99,
+            read_only=True,
+        ),
     )
 
 

@@ -4,14 +4,19 @@ parameter and the allowed range.
 
 Numbers accept ints where floats are meant (``-p publish_rate:=500`` just works).
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
 from dataclasses import dataclass
 
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
@@ -28,12 +33,12 @@ class Param:
     default: object
     description: str
     kind: str = 'float'
-    low: float | None = None          # inclusive bounds
+    low: float | None = None  # inclusive bounds
     high: float | None = None
     choices: tuple = ()
-    size: int | None = None           # arrays: required length (None: any, >= 1)
-    read_only: bool = False           # start-up only (changing it needs a restart)
-    open_low: bool = False            # low bound excluded (e.g. rates > 0)
+    size: int | None = None  # arrays: required length (None: any, >= 1)
+    read_only: bool = False  # start-up only (changing it needs a restart)
+    open_low: bool = False  # low bound excluded (e.g. rates > 0)
 
     def allowed(self) -> str:
         if self.choices:
@@ -45,31 +50,40 @@ class Param:
         if self.high is not None:
             return f'<= {self.high:g}'
         return {'floats': 'a list of numbers', 'strs': 'a list of strings'}.get(
-            self.kind, f'a {self.kind}')
+            self.kind, f'a {self.kind}'
+        )
 
     def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(description=f'{self.description} (allowed: {self.allowed()})',
-                                read_only=self.read_only, dynamic_typing=True)
+        d = ParameterDescriptor(
+            description=f'{self.description} (allowed: {self.allowed()})',
+            read_only=self.read_only,
+            dynamic_typing=True,
+        )
         if self.kind == 'float' and self.low is not None and self.high is not None:
-            d.floating_point_range = [FloatingPointRange(from_value=float(self.low),
-                                                         to_value=float(self.high))]
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(self.low), to_value=float(self.high))
+            ]
         elif self.kind == 'int' and self.low is not None and self.high is not None:
             d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high))]
         return d
 
     def check(self, value):
         """The value converted to the parameter's type, or ParameterError."""
+
         def fail(why):
-            raise ParameterError(f'parameter {self.name} = {value!r}: {why}; allowed: '
-                                 f'{self.allowed()}')
+            raise ParameterError(
+                f'parameter {self.name} = {value!r}: {why}; allowed: {self.allowed()}'
+            )
+
         if self.kind in ('float', 'int'):
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 fail('not a number')
             if self.kind == 'int' and not float(value).is_integer():
                 fail('not an integer')
             number = float(value) if self.kind == 'float' else int(value)
-            unbounded = (number == math.inf and self.high == math.inf) or \
-                (number == -math.inf and self.low == -math.inf)
+            unbounded = (number == math.inf and self.high == math.inf) or (
+                number == -math.inf and self.low == -math.inf
+            )
             if not math.isfinite(number) and not unbounded:
                 fail('not finite')
             self._range(number, fail)
@@ -125,8 +139,7 @@ _TYPES = {'float': float, 'int': int, 'str': str, 'bool': bool, 'floats': list, 
 def values_class(name, table) -> type:
     """The typed object of a parameter table: a frozen dataclass with one field per
     parameter (read as ``p.publish_rate``; a change makes a new one with ``p.replace``)."""
-    cls = dataclasses.make_dataclass(name, [(p.name, _TYPES[p.kind]) for p in table],
-                                     frozen=True)
+    cls = dataclasses.make_dataclass(name, [(p.name, _TYPES[p.kind]) for p in table], frozen=True)
     cls.replace = lambda self, **changes: dataclasses.replace(self, **changes)
     return cls
 
@@ -149,8 +162,9 @@ def declare(node, table, cls=None):
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             # rclpy checks the descriptor's range itself; say it the way the rest of us do
             shown = given if given is not None else '?'
-            raise ParameterError(f'parameter {p.name} = {shown!r}: out of range; allowed: '
-                                 f'{p.allowed()}') from exc
+            raise ParameterError(
+                f'parameter {p.name} = {shown!r}: out of range; allowed: {p.allowed()}'
+            ) from exc
         values[p.name] = p.check(value)
     return (cls or values_class(f'{node.get_name()}_parameters', table))(**values)
 
@@ -165,14 +179,16 @@ def validator(table, apply):
         for param in parameters:
             if not param.name.strip():
                 # rclpy would store it as an undeclared parameter nobody can read back
-                return SetParametersResult(successful=False,
-                                           reason='a parameter name must not be empty')
+                return SetParametersResult(
+                    successful=False, reason='a parameter name must not be empty'
+                )
             spec = by_name.get(param.name)
             if spec is None:
                 continue
             if spec.read_only:
-                return SetParametersResult(successful=False,
-                                           reason=f'{param.name} is fixed at start-up')
+                return SetParametersResult(
+                    successful=False, reason=f'{param.name} is fixed at start-up'
+                )
             try:
                 checked[param.name] = spec.check(param.value)
             except ParameterError as exc:
@@ -183,6 +199,7 @@ def validator(table, apply):
             except ParameterError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
+
     return callback
 
 
@@ -195,16 +212,23 @@ def refuse_unknown(node, table):
     unknown = sorted(declared - known_names)
     if unknown:
         known = ', '.join(sorted(known_names))
-        raise ParameterError(f'unknown parameter(s) {", ".join(unknown)} for node '
-                             f'{node.get_name()}; known: {known}')
+        raise ParameterError(
+            f'unknown parameter(s) {", ".join(unknown)} for node {node.get_name()}; known: {known}'
+        )
 
 
 def _declared_by_ros(context) -> set:
     """The parameters rclpy declares on every node (use_sim_time, ...): those of a bare node."""
     from rclpy.node import Node
+
     # not renamed by a global __node remap (launch gives one), so it never shares a name
-    bare = Node('_impact_arm_parameter_probe', context=context, start_parameter_services=False,
-                enable_rosout=False, use_global_arguments=False)
+    bare = Node(
+        '_impact_arm_parameter_probe',
+        context=context,
+        start_parameter_services=False,
+        enable_rosout=False,
+        use_global_arguments=False,
+    )
     try:
         return set(bare.get_parameters_by_prefix(''))
     finally:

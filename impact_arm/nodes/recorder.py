@@ -24,6 +24,7 @@ cost about as much CPU as the simulator's whole period; in lockstep that CPU is 
 loop being recorded. DDS keeps acknowledging in the background (reader history
 ``RECORDER_MIN_DEPTH``), so nothing waits for the poll.
 """
+
 import functools
 import heapq
 import json
@@ -38,12 +39,16 @@ from rosbags.serde import SerdeError
 
 from .. import contract
 from ..contract import TOPICS, TopicQos
-from ..io.mcap_ros2 import (RecordingError, Ros2McapWriter, message_class, package_version,
-                            ros_distro)
+from ..io.mcap_ros2 import (
+    RecordingError,
+    Ros2McapWriter,
+    message_class,
+    package_version,
+    ros_distro,
+)
 from ..io.msgdefs import typestore
 from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
-from ..io.wire import (MalformedMessage, header_stamp_ns, joint_state_fields,
-                       wrench_stamped_fields)
+from ..io.wire import MalformedMessage, header_stamp_ns, joint_state_fields, wrench_stamped_fields
 from ._runner import reader_node, run, take_raw
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -51,7 +56,7 @@ POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # repair after the recorder was descheduled (contract.WRITER_REPAIR_DEPTH)
 RECORDER_MIN_DEPTH = contract.WRITER_REPAIR_DEPTH
 MATCH_GRACE = 2.0  # s after the start: then name the topics no publisher is matched on yet
-MATCHED_LINE = 'publishers matched on'   # the log lines `impact-arm run` waits for
+MATCHED_LINE = 'publishers matched on'  # the log lines `impact-arm run` waits for
 FLOWING_LINE = 'first samples on'
 
 
@@ -74,31 +79,53 @@ class Recorder(Node):
         super().__init__('recorder')
         stamp = time.strftime('%Y%m%d-%H%M%S')
         self.output = _param(self, 'output', f'runs/{stamp}.mcap', 'MCAP file to write')
-        topics = _param(self, 'topics', list(TOPICS),
-                        'topics to record; "name" or "name:pkg/msg/Type" (contract topics and '
-                        'published topics need no type)')
-        scene = _param(self, 'scene', '', 'scene file or installed scene name to store in the file (optional)')
-        self.param_nodes = _param(self, 'param_nodes', ['simulator', 'controller'],
-                                  'nodes whose parameters are stored at start and at shutdown')
-        interval = _param(self, 'flush_interval', 0.5,
-                          'seconds between flushes: at most this much is lost if killed')
-        tf_rate = _param(self, 'tf_rate', DEFAULT_TF_RATE,
-                         'rate of the derived /tf and /impact_markers [Hz of sim time] '
-                         '(with a scene)')
-        log_time = _param(self, 'log_time', 'stamps',
-                          'log time of each message: "stamps" = the newest /clock or '
-                          '/joint_states stamp received (simulated time, as ros2 bag record '
-                          '--use-sim-time; 0 before the first), "reception" = wall clock')
+        topics = _param(
+            self,
+            'topics',
+            list(TOPICS),
+            'topics to record; "name" or "name:pkg/msg/Type" (contract topics and '
+            'published topics need no type)',
+        )
+        scene = _param(
+            self, 'scene', '', 'scene file or installed scene name to store in the file (optional)'
+        )
+        self.param_nodes = _param(
+            self,
+            'param_nodes',
+            ['simulator', 'controller'],
+            'nodes whose parameters are stored at start and at shutdown',
+        )
+        interval = _param(
+            self,
+            'flush_interval',
+            0.5,
+            'seconds between flushes: at most this much is lost if killed',
+        )
+        tf_rate = _param(
+            self,
+            'tf_rate',
+            DEFAULT_TF_RATE,
+            'rate of the derived /tf and /impact_markers [Hz of sim time] (with a scene)',
+        )
+        log_time = _param(
+            self,
+            'log_time',
+            'stamps',
+            'log time of each message: "stamps" = the newest /clock or '
+            '/joint_states stamp received (simulated time, as ros2 bag record '
+            '--use-sim-time; 0 before the first), "reception" = wall clock',
+        )
         if not interval > 0:
             raise ValueError(f'flush_interval = {interval}: must be > 0 s')
         if log_time not in ('stamps', 'reception'):
             raise ValueError(f'log_time = {log_time!r}: must be "stamps" or "reception"')
         self.by_stamps = log_time == 'stamps'
-        self.now_ns = 0                  # stamps: the newest /clock or /joint_states stamp
+        self.now_ns = 0  # stamps: the newest /clock or /joint_states stamp
         scene_text = None
         if scene:
             from ..core.scene import resolve_scene_path
-            scene = resolve_scene_path(scene)   # an installed scene name, as the simulator's
+
+            scene = resolve_scene_path(scene)  # an installed scene name, as the simulator's
             try:
                 with open(scene, encoding='utf-8') as f:
                     scene_text = f.read()
@@ -108,19 +135,27 @@ class Recorder(Node):
             self.writer = Ros2McapWriter(self.output, flush_interval=interval)
         except RecordingError as e:
             raise RecordingError(f'output = {self.output!r}: {e}') from None
-        self.writer.add_metadata('impact_arm', {
-            'version': package_version(), 'ros_distro': ros_distro(), 'node': 'recorder',
-            'start_time_ns': str(time.time_ns()), 'topics': json.dumps(topics)})
-        self.writer.add_metadata('parameters/recorder', {
-            name: json.dumps(p.value) for name, p in self.get_parameters_by_prefix('').items()})
+        self.writer.add_metadata(
+            'impact_arm',
+            {
+                'version': package_version(),
+                'ros_distro': ros_distro(),
+                'node': 'recorder',
+                'start_time_ns': str(time.time_ns()),
+                'topics': json.dumps(topics),
+            },
+        )
+        self.writer.add_metadata(
+            'parameters/recorder',
+            {name: json.dumps(p.value) for name, p in self.get_parameters_by_prefix('').items()},
+        )
         if scene_text is not None:
             self.writer.add_attachment(os.path.basename(scene), scene_text, 'application/yaml')
-            self.writer.add_metadata('scene', {'path': os.path.abspath(scene),
-                                               'yaml': scene_text})
+            self.writer.add_metadata('scene', {'path': os.path.abspath(scene), 'yaml': scene_text})
         self.failed = False
         self.received = 0
         self.losses = Losses()
-        self.malformed = 0        # samples stored but not drawn (malformed payloads)
+        self.malformed = 0  # samples stored but not drawn (malformed payloads)
         self.wanted = {}  # topic -> type name ('' until discovered)
         for entry in topics:
             name, _, type_name = entry.partition(':')
@@ -128,43 +163,56 @@ class Recorder(Node):
         self.visuals = None
         if scene_text is not None:
             from ..core.scene import scene_from_text
+
             if not tf_rate > 0:
                 raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')
-            self.visuals = VisualsWriter(self.writer, scene_from_text(scene_text, scene),
-                                         tf_rate,
-                                         log_time_ns=0 if self.by_stamps else time.time_ns())
+            self.visuals = VisualsWriter(
+                self.writer,
+                scene_from_text(scene_text, scene),
+                tf_rate,
+                log_time_ns=0 if self.by_stamps else time.time_ns(),
+            )
             derived = sorted(set(self.wanted) & set(contract.VISUAL_TOPICS))
             if derived:
                 self.get_logger().info(f'not subscribing to {derived}: derived from the scene')
             for topic in derived:
                 del self.wanted[topic]
-            self._q = None                   # absolute link angles of the latest joint state
+            self._q = None  # absolute link angles of the latest joint state
             self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
             self._read_string = _string_reader()
         self.subs = {}
         # what has been written, for a lockstep simulator that waits for the recording
         from builtin_interfaces.msg import Time
-        self.progress = self.create_publisher(Time, contract.RECORDER_PROGRESS,
-                                              contract.PROGRESS_QOS.to_rclpy())
-        self.written_until = self.announced = None   # ns: newest /joint_states stamp written
-        self.reader = reader_node(self, 'reader')   # ignores launch's __node remap
+
+        self.progress = self.create_publisher(
+            Time, contract.RECORDER_PROGRESS, contract.PROGRESS_QOS.to_rclpy()
+        )
+        self.written_until = self.announced = None  # ns: newest /joint_states stamp written
+        self.reader = reader_node(self, 'reader')  # ignores launch's __node remap
         self._subscribe_known()
         self.create_timer(interval, self._flush)
-        self.pub_diag = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS,
-                                              contract.qos(contract.DIAGNOSTICS).to_rclpy())
+        self.pub_diag = self.create_publisher(
+            DiagnosticArray, contract.DIAGNOSTICS, contract.qos(contract.DIAGNOSTICS).to_rclpy()
+        )
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_timer(0.5, self._discover)
-        self.matched = set()     # topics whose subscription has matched a publisher
-        self.flowing = set()     # topics a sample has arrived on
+        self.matched = set()  # topics whose subscription has matched a publisher
+        self.flowing = set()  # topics a sample has arrived on
         self.named_unmatched = False
         self.started = time.monotonic()
         self.match_timer = self.create_timer(0.05, self._check_matched)
         self.params = {}  # node -> 'start'/'end' state; queries never block the recording
-        self.param_clients = {n: (self.create_client(ListParameters, f'{n}/list_parameters'),
-                                  self.create_client(GetParameters, f'{n}/get_parameters'))
-                              for n in self.param_nodes}
-        self.get_logger().info(f'subscribed to {len(self.wanted)} topics, writing '
-                               f'{self.output}; waiting for their publishers')
+        self.param_clients = {
+            n: (
+                self.create_client(ListParameters, f'{n}/list_parameters'),
+                self.create_client(GetParameters, f'{n}/get_parameters'),
+            )
+            for n in self.param_nodes
+        }
+        self.get_logger().info(
+            f'subscribed to {len(self.wanted)} topics, writing '
+            f'{self.output}; waiting for their publishers'
+        )
 
     @property
     def done(self):
@@ -176,7 +224,8 @@ class Recorder(Node):
             if type_name and topic not in self.subs:
                 qos = contract.qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
                 self.subs[topic] = self.reader.create_subscription(
-                    message_class(type_name), topic, _never_called, qos, raw=True)
+                    message_class(type_name), topic, _never_called, qos, raw=True
+                )
 
     def _check_matched(self):
         """Say "recording" only once a publisher is matched on every topic: a subscription
@@ -191,22 +240,27 @@ class Recorder(Node):
             self.get_logger().info(f'{MATCHED_LINE} {" ".join(new)}')
         missing = sorted(set(self.wanted) - self.matched)
         if not missing:
-            self.get_logger().info(f'recording {len(self.wanted)} topics to {self.output}: '
-                                   f'every topic has a publisher')
+            self.get_logger().info(
+                f'recording {len(self.wanted)} topics to {self.output}: every topic has a publisher'
+            )
             self.destroy_timer(self.match_timer)
         elif not self.named_unmatched and time.monotonic() - self.started >= MATCH_GRACE:
             self.named_unmatched = True
-            self.get_logger().warning(f'recording to {self.output}; no publisher yet on '
-                                      f'{" ".join(missing)}')
+            self.get_logger().warning(
+                f'recording to {self.output}; no publisher yet on {" ".join(missing)}'
+            )
 
     def _offered_default(self, topic) -> TopicQos:
         """For a topic outside the contract: a QoS every current publisher is compatible with."""
-        offers = [TopicQos.from_rclpy(i.qos_profile)
-                  for i in self.get_publishers_info_by_topic(topic)]
+        offers = [
+            TopicQos.from_rclpy(i.qos_profile) for i in self.get_publishers_info_by_topic(topic)
+        ]
         reliable = offers and all(q.reliability == 'reliable' for q in offers)
         durable = offers and all(q.durability == 'transient_local' for q in offers)
-        return TopicQos(reliability='reliable' if reliable else 'best_effort',
-                        durability='transient_local' if durable else 'volatile')
+        return TopicQos(
+            reliability='reliable' if reliable else 'best_effort',
+            durability='transient_local' if durable else 'volatile',
+        )
 
     def _discover(self):
         """Find the types of topics given without one, once someone publishes them."""
@@ -248,6 +302,7 @@ class Recorder(Node):
             self._store(topic, data, received, published)
         if self.written_until != self.announced and not self.failed:
             from builtin_interfaces.msg import Time
+
             self.announced = self.written_until
             sec, nanosec = divmod(self.written_until, 1_000_000_000)
             self.progress.publish(Time(sec=sec, nanosec=nanosec))
@@ -263,7 +318,7 @@ class Recorder(Node):
                 stamp = header_stamp_ns(data)
             except MalformedMessage:
                 return self.now_ns
-            if 0 <= stamp < 1 << 63:       # a hostile peer's negative stamp is not a time
+            if 0 <= stamp < 1 << 63:  # a hostile peer's negative stamp is not a time
                 self.now_ns = stamp
         return self.now_ns
 
@@ -275,8 +330,12 @@ class Recorder(Node):
                 pubs = self.get_publishers_info_by_topic(topic)
                 offered = [TopicQos.from_rclpy(p.qos_profile) for p in pubs] or None
                 thash = str(pubs[0].topic_type_hash) if pubs else None
-                self.writer.add_topic(topic, self.wanted[topic], offered,
-                                      None if thash in (None, 'INVALID') else thash)
+                self.writer.add_topic(
+                    topic,
+                    self.wanted[topic],
+                    offered,
+                    None if thash in (None, 'INVALID') else thash,
+                )
             self.writer.write(topic, data, received, published)
             self.received += 1
             if topic == contract.JOINT_STATES:
@@ -288,8 +347,10 @@ class Recorder(Node):
         except MalformedMessage as e:
             # stored as it came (a recording keeps what was on the wire), not drawn
             self.malformed += 1
-            self.get_logger().warning(f'{topic}: malformed sample not drawn ({e}); '
-                                      f'{self.malformed} so far', throttle_duration_sec=2.0)
+            self.get_logger().warning(
+                f'{topic}: malformed sample not drawn ({e}); {self.malformed} so far',
+                throttle_duration_sec=2.0,
+            )
 
     def _derive_visuals(self, topic, data, received):
         """Feed the recorded state to the visuals; a wrench may arrive before or after the
@@ -303,7 +364,7 @@ class Recorder(Node):
             try:
                 self._q = contract.to_absolute([by_name[j] for j in self._joints])
             except KeyError:
-                return                       # not this scene's joints: nothing to draw
+                return  # not this scene's joints: nothing to draw
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
         elif topic == contract.IMPACT_REPORT:
             try:
@@ -315,10 +376,12 @@ class Recorder(Node):
         lost = self.losses.lost_total()
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if lost else DiagnosticStatus.OK,
-            name=contract.RECORDER_STATUS, hardware_id='impact_arm_recorder',
+            name=contract.RECORDER_STATUS,
+            hardware_id='impact_arm_recorder',
             message=f'{lost} samples lost' if lost else 'recording, nothing lost',
             values=[KeyValue(key=k, value=v) for k, v in self.losses.as_metadata().items()]
-            + [KeyValue(key='messages_written', value=str(self.received))])
+            + [KeyValue(key='messages_written', value=str(self.received))],
+        )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
@@ -343,8 +406,11 @@ class Recorder(Node):
     def _query_parameters(self, phase):
         """Ask each param node (list, then get) without waiting; results become metadata."""
         for name, (list_cli, get_cli) in self.param_clients.items():
-            if self.params.get(name) in (phase, phase + ' asked') or \
-                    not list_cli.service_is_ready() or not get_cli.service_is_ready():
+            if (
+                self.params.get(name) in (phase, phase + ' asked')
+                or not list_cli.service_is_ready()
+                or not get_cli.service_is_ready()
+            ):
                 continue
             self.params[name] = phase + ' asked'
             future = list_cli.call_async(ListParameters.Request())
@@ -357,10 +423,13 @@ class Recorder(Node):
 
     def _on_get(self, name, phase, names, future):
         from rclpy.parameter import parameter_value_to_python
+
         if future.result() is None or self.failed:
             return
-        values = {n: json.dumps(parameter_value_to_python(v), default=str)
-                  for n, v in zip(names, future.result().values)}
+        values = {
+            n: json.dumps(parameter_value_to_python(v), default=str)
+            for n, v in zip(names, future.result().values)
+        }
         self.writer.add_metadata(f'parameters/{name}/{phase}', values)
         self.params[name] = phase
 
@@ -370,7 +439,8 @@ class Recorder(Node):
             self._query_parameters('end')
             deadline = time.monotonic() + 1.0
             while time.monotonic() < deadline and any(
-                    s == 'end asked' for s in self.params.values()):
+                s == 'end asked' for s in self.params.values()
+            ):
                 executor.spin_once(timeout_sec=POLL_PERIOD)
                 self._drain()
         if not self.failed:
@@ -387,13 +457,14 @@ class Recorder(Node):
         if lost:
             self.get_logger().warning(f'lost on the way: {self.losses.describe()}')
         self.get_logger().info(
-            f'{self.writer.message_count} messages in {self.output}' if not self.failed else
-            f'recording failed; {self.output} holds the data flushed before the error')
+            f'{self.writer.message_count} messages in {self.output}'
+            if not self.failed
+            else f'recording failed; {self.output} holds the data flushed before the error'
+        )
         return 1 if self.failed else 0
 
-
     def destroy_node(self):
-        if getattr(self, 'reader', None) is not None:   # absent if the output was refused
+        if getattr(self, 'reader', None) is not None:  # absent if the output was refused
             self.reader.destroy_node()
         super().destroy_node()
 
@@ -406,16 +477,16 @@ class Losses:
     lost-message events, but exact and independent of the middleware's event support."""
 
     def __init__(self):
-        self.last = {}                     # (topic, writer gid) -> last sequence number
-        self.lost = {}                     # topic -> samples missing between two received
-        self.before_first = {}             # topic -> samples published before the first
+        self.last = {}  # (topic, writer gid) -> last sequence number
+        self.lost = {}  # topic -> samples missing between two received
+        self.before_first = {}  # topic -> samples published before the first
         self.changed = False
 
     def count(self, topic, info):
         seq = info.get('publication_sequence_number')
         gid = (info.get('publisher_gid') or {}).get('data')
         if not seq or gid is None:
-            return                          # an rmw that does not say: nothing to count
+            return  # an rmw that does not say: nothing to count
         key = (topic, bytes(gid))
         last = self.last.get(key)
         if last is None:

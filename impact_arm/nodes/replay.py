@@ -22,6 +22,7 @@ deserialized); timing follows the recorded log times scaled by ``rate``
 Publishing runs in its own thread paced by the monotonic clock, so the executor (parameter
 services) never delays a message; a late message is published at once, never skipped.
 """
+
 from __future__ import annotations
 
 import math
@@ -68,50 +69,65 @@ def _number(name, value, low, high, kind=float):
 
 class Replay(Node):
     def __init__(self, **overrides):
-        super().__init__('replay', parameter_overrides=[
-            Parameter(k, value=v) for k, v in overrides.items()])
-        values = {name: self.declare_parameter(
-            name, default, ParameterDescriptor(description=text, dynamic_typing=True)).value
-            for name, (default, text) in PARAMETERS.items()}
+        super().__init__(
+            'replay', parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()]
+        )
+        values = {
+            name: self.declare_parameter(
+                name, default, ParameterDescriptor(description=text, dynamic_typing=True)
+            ).value
+            for name, (default, text) in PARAMETERS.items()
+        }
         if not values['file']:
-            raise ReplayError('file = "": the MCAP file to replay is required '
-                              '(-p file:=run.mcap)')
+            raise ReplayError('file = "": the MCAP file to replay is required (-p file:=run.mcap)')
         clock = _number('clock', values['clock'], 0, 10000)
         self.delay = _number('delay', values['delay'], 0, 3600)
-        self.wait_subs = _number('wait_for_subscribers', values['wait_for_subscribers'], 0,
-                                 1000, int)
+        self.wait_subs = _number(
+            'wait_for_subscribers', values['wait_for_subscribers'], 0, 1000, int
+        )
         loop = values['loop']
         if not isinstance(loop, bool):
             raise ReplayError(f'loop = {loop!r}: must be true or false')
         topics = values['topics'] or []
         if isinstance(topics, str):
             topics = [topics]
-        self.plan = ReplayPlan.open(values['file'], rate=values['rate'],
-                                    start_offset=values['start_offset'],
-                                    topics=[t for t in topics if t], loop=loop)
+        self.plan = ReplayPlan.open(
+            values['file'],
+            rate=values['rate'],
+            start_offset=values['start_offset'],
+            topics=[t for t in topics if t],
+            loop=loop,
+        )
         self.clock_period = 1.0 / clock if clock else math.inf
         self.publishers_ = {}
         for topic, info in self.plan.topics.items():
             if topic == CLOCK and clock:
-                self.get_logger().warning('not replaying the recorded /clock: clock > 0 '
-                                          'publishes it from the replay')
+                self.get_logger().warning(
+                    'not replaying the recorded /clock: clock > 0 publishes it from the replay'
+                )
                 continue
-            qos = info.qos[0] if info.qos and all(
-                (q.reliability, q.durability) == (info.qos[0].reliability,
-                                                  info.qos[0].durability)
-                for q in info.qos) else contract.qos(topic)
+            qos = (
+                info.qos[0]
+                if info.qos
+                and all(
+                    (q.reliability, q.durability)
+                    == (info.qos[0].reliability, info.qos[0].durability)
+                    for q in info.qos
+                )
+                else contract.qos(topic)
+            )
             cls = message_class(info.type_name)
-            if not has_type_support(cls):   # /tf without tf2_msgs: rclpy cannot publish it
-                self.get_logger().info(f'not replaying {topic}: {info.type_name} is not '
-                                       f'installed here')
+            if not has_type_support(cls):  # /tf without tf2_msgs: rclpy cannot publish it
+                self.get_logger().info(
+                    f'not replaying {topic}: {info.type_name} is not installed here'
+                )
                 continue
-            self.publishers_[topic] = self.create_publisher(cls, topic,
-                                                            qos.to_rclpy(min_depth=10))
+            self.publishers_[topic] = self.create_publisher(cls, topic, qos.to_rclpy(min_depth=10))
         self.clock_pub = None
         if clock:
             from rosgraph_msgs.msg import Clock
-            self.clock_pub = self.create_publisher(Clock, CLOCK,
-                                                   contract.qos(CLOCK).to_rclpy())
+
+            self.clock_pub = self.create_publisher(Clock, CLOCK, contract.qos(CLOCK).to_rclpy())
             self._Clock = Clock
         self.published = 0
         self.error = None
@@ -129,12 +145,13 @@ class Replay(Node):
             return
         end = time.monotonic() + WAIT_SUBSCRIBERS_MAX
         while not self._stop.is_set() and time.monotonic() < end:
-            if all(p.get_subscription_count() >= self.wait_subs
-                   for p in self.publishers_.values()):
+            if all(p.get_subscription_count() >= self.wait_subs for p in self.publishers_.values()):
                 return
             self._stop.wait(0.02)
-        self.get_logger().warning(f'starting without {self.wait_subs} subscribers on '
-                                  f'every topic after {WAIT_SUBSCRIBERS_MAX:g} s')
+        self.get_logger().warning(
+            f'starting without {self.wait_subs} subscribers on '
+            f'every topic after {WAIT_SUBSCRIBERS_MAX:g} s'
+        )
 
     def _play(self):
         try:
@@ -161,8 +178,9 @@ class Replay(Node):
                     pub.publish(m.data)
                     self.published += 1
                     if now >= next_progress:  # the node's log, not a terminal line of its own
-                        self.get_logger().info(f'{self.published} messages replayed, '
-                                               f'{due:.1f} s of the schedule')
+                        self.get_logger().info(
+                            f'{self.published} messages replayed, {due:.1f} s of the schedule'
+                        )
                         next_progress = now + PROGRESS_PERIOD
         except Exception as e:  # noqa: BLE001 - reported by finish(), exit code 1
             self.error = e
@@ -185,32 +203,72 @@ class Replay(Node):
 # ------------------------------------------------------------------- impact-arm replay
 def add_arguments(parser):
     parser.add_argument('file', help='MCAP file to replay')
-    parser.add_argument('--rate', type=float, default=1.0,
-                        help='speed factor, (0, 1000] (default 1.0: recorded speed)')
-    parser.add_argument('--clock', type=float, nargs='?', const=100.0, default=0.0,
-                        metavar='HZ', help='publish /clock with the recorded time '
-                        '(default 100 Hz when given without a value)')
+    parser.add_argument(
+        '--rate',
+        type=float,
+        default=1.0,
+        help='speed factor, (0, 1000] (default 1.0: recorded speed)',
+    )
+    parser.add_argument(
+        '--clock',
+        type=float,
+        nargs='?',
+        const=100.0,
+        default=0.0,
+        metavar='HZ',
+        help='publish /clock with the recorded time (default 100 Hz when given without a value)',
+    )
     parser.add_argument('--loop', action='store_true', help='start again after the end')
-    parser.add_argument('--topics', nargs='+', default=[], metavar='TOPIC',
-                        help='replay only these topics (default: all)')
-    parser.add_argument('--start-offset', type=float, default=0.0, metavar='S',
-                        help='skip this many seconds of recorded time')
-    parser.add_argument('--delay', type=float, default=0.0, metavar='S',
-                        help='wait this long before the first message')
-    parser.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
-                        help='wait (at most 30 s) until every topic has N subscribers')
+    parser.add_argument(
+        '--topics',
+        nargs='+',
+        default=[],
+        metavar='TOPIC',
+        help='replay only these topics (default: all)',
+    )
+    parser.add_argument(
+        '--start-offset',
+        type=float,
+        default=0.0,
+        metavar='S',
+        help='skip this many seconds of recorded time',
+    )
+    parser.add_argument(
+        '--delay',
+        type=float,
+        default=0.0,
+        metavar='S',
+        help='wait this long before the first message',
+    )
+    parser.add_argument(
+        '--wait-for-subscribers',
+        type=int,
+        default=0,
+        metavar='N',
+        help='wait (at most 30 s) until every topic has N subscribers',
+    )
 
 
 def cli(args) -> int:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    overrides = {'file': os.path.abspath(args.file), 'rate': float(args.rate),
-                 'clock': float(args.clock), 'loop': bool(args.loop),
-                 'topics': list(args.topics) or [''], 'start_offset': float(args.start_offset),
-                 'delay': float(args.delay), 'wait_for_subscribers': int(args.wait_for_subscribers)}
+    overrides = {
+        'file': os.path.abspath(args.file),
+        'rate': float(args.rate),
+        'clock': float(args.clock),
+        'loop': bool(args.loop),
+        'topics': list(args.topics) or [''],
+        'start_offset': float(args.start_offset),
+        'delay': float(args.delay),
+        'wait_for_subscribers': int(args.wait_for_subscribers),
+    }
     # the same checks as the node, before any DDS start-up: errors come as one line
-    ReplayPlan.open(overrides['file'], rate=overrides['rate'],
-                    start_offset=overrides['start_offset'],
-                    topics=[t for t in overrides['topics'] if t], loop=overrides['loop'])
+    ReplayPlan.open(
+        overrides['file'],
+        rate=overrides['rate'],
+        start_offset=overrides['start_offset'],
+        topics=[t for t in overrides['topics'] if t],
+        loop=overrides['loop'],
+    )
     _number('clock', overrides['clock'], 0, 10000)
     _number('delay', overrides['delay'], 0, 3600)
     _number('wait_for_subscribers', overrides['wait_for_subscribers'], 0, 1000, int)

@@ -34,6 +34,7 @@ pause, step and its state, the same actions as its ~/reset, ~/pause and ~/step s
   the start or the last reset: brakes on before); lockstep answers at once, the periods then
   run one per command as always.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,40 +42,60 @@ from typing import Callable
 
 # the standard's constants (msg/Result, msg/SimulationState, msg/SimulatorFeatures,
 # srv/ResetSimulation, srv/SetSimulationState), so the mapping needs no package
-RESULT_FEATURE_UNSUPPORTED, RESULT_OK, RESULT_NOT_FOUND, RESULT_INCORRECT_STATE, \
-    RESULT_OPERATION_FAILED = range(5)
-STATE_STOPPED, STATE_PLAYING, STATE_PAUSED, STATE_QUITTING, STATE_NO_WORLD, \
-    STATE_LOADING_WORLD = range(6)
+(
+    RESULT_FEATURE_UNSUPPORTED,
+    RESULT_OK,
+    RESULT_NOT_FOUND,
+    RESULT_INCORRECT_STATE,
+    RESULT_OPERATION_FAILED,
+) = range(5)
+STATE_STOPPED, STATE_PLAYING, STATE_PAUSED, STATE_QUITTING, STATE_NO_WORLD, STATE_LOADING_WORLD = (
+    range(6)
+)
 ALREADY_IN_TARGET_STATE, STATE_TRANSITION_ERROR, INCORRECT_TRANSITION = 101, 102, 103
 SCOPE_DEFAULT, SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 0, 1, 2, 4, 255
 SIMULATION_RESET = 20
 SIMULATION_STATE_GETTING, SIMULATION_STATE_SETTING, SIMULATION_STATE_PAUSE = 24, 25, 26
 STEP_SIMULATION_SINGLE, STEP_SIMULATION_MULTIPLE = 31, 32
-FEATURES = (SIMULATION_RESET, SIMULATION_STATE_GETTING, SIMULATION_STATE_SETTING,
-            SIMULATION_STATE_PAUSE, STEP_SIMULATION_SINGLE, STEP_SIMULATION_MULTIPLE)
-MAX_STEPS = 1_000_000          # periods one call may ask for (1000 s at 1 kHz)
-STATE_NAMES = {STATE_STOPPED: 'stopped', STATE_PLAYING: 'playing', STATE_PAUSED: 'paused',
-               STATE_QUITTING: 'quitting', STATE_NO_WORLD: 'no world',
-               STATE_LOADING_WORLD: 'loading world'}
-SERVICES = {   # name -> simulation_interfaces/srv type
+FEATURES = (
+    SIMULATION_RESET,
+    SIMULATION_STATE_GETTING,
+    SIMULATION_STATE_SETTING,
+    SIMULATION_STATE_PAUSE,
+    STEP_SIMULATION_SINGLE,
+    STEP_SIMULATION_MULTIPLE,
+)
+MAX_STEPS = 1_000_000  # periods one call may ask for (1000 s at 1 kHz)
+STATE_NAMES = {
+    STATE_STOPPED: 'stopped',
+    STATE_PLAYING: 'playing',
+    STATE_PAUSED: 'paused',
+    STATE_QUITTING: 'quitting',
+    STATE_NO_WORLD: 'no world',
+    STATE_LOADING_WORLD: 'loading world',
+}
+SERVICES = {  # name -> simulation_interfaces/srv type
     '/get_simulator_features': 'GetSimulatorFeatures',
     '/get_simulation_state': 'GetSimulationState',
     '/set_simulation_state': 'SetSimulationState',
     '/reset_simulation': 'ResetSimulation',
     '/step_simulation': 'StepSimulation',
 }
-CUSTOM_INFO = ('impact_arm simulator: a planar arm striking a surface; a step is one period '
-               '(1 / publish_rate); std_srvs services ~/reset, ~/pause, ~/step too')
+CUSTOM_INFO = (
+    'impact_arm simulator: a planar arm striking a surface; a step is one period '
+    '(1 / publish_rate); std_srvs services ~/reset, ~/pause, ~/step too'
+)
 
 
 @dataclass
 class SimulationControls:
     """What the services act on; each action answers (done, message)."""
-    reset: Callable[[], tuple]            # initial state, t = 0 (pause kept)
-    pause: Callable[[bool], tuple]        # True: pause, False: run
-    step: Callable[[int], tuple]          # while paused: run n periods
+
+    reset: Callable[[], tuple]  # initial state, t = 0 (pause kept)
+    pause: Callable[[bool], tuple]  # True: pause, False: run
+    step: Callable[[int], tuple]  # while paused: run n periods
     is_paused: Callable[[], bool]
-    failure: Callable[[], str] = lambda: ''   # why the simulation stopped ('' if it runs)
+    failure: Callable[[], str] = lambda: ''  # why the simulation stopped ('' if it runs)
 
 
 class SimulationInterfaces:
@@ -82,7 +103,7 @@ class SimulationInterfaces:
 
     def __init__(self, controls: SimulationControls):
         self.controls = controls
-        self.stopped = False     # paused and reset by a STOPPED request, not moved since
+        self.stopped = False  # paused and reset by a STOPPED request, not moved since
 
     def features(self) -> list:
         return list(FEATURES)
@@ -92,7 +113,7 @@ class SimulationInterfaces:
             return STATE_STOPPED
         if self.controls.is_paused():
             return STATE_STOPPED if self.stopped else STATE_PAUSED
-        self.stopped = False     # resumed through ~/pause
+        self.stopped = False  # resumed through ~/pause
         return STATE_PLAYING
 
     def reset(self, scope: int) -> tuple:
@@ -106,7 +127,8 @@ class SimulationInterfaces:
         if scope not in (SCOPE_DEFAULT, SCOPE_ALL) and scope & both != both:
             return RESULT_FEATURE_UNSUPPORTED, (
                 f'scope = {scope}: the arm resets its time and its state together; use '
-                f'SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME | SCOPE_STATE')
+                f'SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME | SCOPE_STATE'
+            )
         done, message = self.controls.reset()
         return (RESULT_OK if done else RESULT_OPERATION_FAILED), message
 
@@ -130,7 +152,8 @@ class SimulationInterfaces:
         else:
             return RESULT_FEATURE_UNSUPPORTED, (
                 f'state {STATE_NAMES[target]}: not served (one scene, no worlds to load; '
-                f'end the node to quit)')
+                f'end the node to quit)'
+            )
         if not done:
             return STATE_TRANSITION_ERROR, message
         self.stopped = target == STATE_STOPPED
@@ -165,6 +188,7 @@ def attach(node, controls: SimulationControls):
     if not available():
         return None
     from simulation_interfaces import srv
+
     mapping = SimulationInterfaces(controls)
 
     def features(request, response):
@@ -188,11 +212,10 @@ def attach(node, controls: SimulationControls):
         'GetSimulatorFeatures': features,
         'GetSimulationState': get_state,
         'SetSimulationState': lambda request, response: answer(
-            response, mapping.set_state(request.state.state)),
-        'ResetSimulation': lambda request, response: answer(
-            response, mapping.reset(request.scope)),
-        'StepSimulation': lambda request, response: answer(
-            response, mapping.step(request.steps)),
+            response, mapping.set_state(request.state.state)
+        ),
+        'ResetSimulation': lambda request, response: answer(response, mapping.reset(request.scope)),
+        'StepSimulation': lambda request, response: answer(response, mapping.step(request.steps)),
     }
     for name, type_name in SERVICES.items():
         node.create_service(getattr(srv, type_name), name, handlers[type_name])

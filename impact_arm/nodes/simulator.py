@@ -11,6 +11,7 @@ mode realtime: a thread paces the periods by the wall clock and takes each perio
 from readers no executor spins; until the first command the arm is held at its initial state
 (stamp 0). mode lockstep: each command advances one period, in its callback (deterministic).
 """
+
 from __future__ import annotations
 
 import sys
@@ -35,8 +36,14 @@ from ..core.session import LockstepSession, Outputs, RealtimeSession
 from ..io.wire import float64_array_data, joint_state_command
 from . import sim_services
 from ._period_io import PeriodPublishers
-from ._runner import (await_acknowledgements, name_thread, reader_node, realtime_priority, run,
-                      take_raw)
+from ._runner import (
+    await_acknowledgements,
+    name_thread,
+    reader_node,
+    realtime_priority,
+    run,
+    take_raw,
+)
 from .params import NODE_OPTIONS, declare, refuse_unknown, validator
 from .simulator_params import PARAMS, SimulatorParams, check
 
@@ -46,7 +53,7 @@ ACK_WAIT = 4.0
 
 
 class Simulator(Node):
-    executor_kind = 'events'   # see _runner.make_executor
+    executor_kind = 'events'  # see _runner.make_executor
 
     def __init__(self):
         super().__init__('simulator', **NODE_OPTIONS)
@@ -54,9 +61,14 @@ class Simulator(Node):
         scene_path = resolve_scene_path(p.scene or 'paper')
         self.scene = load_scene(scene_path)
         # no contact trace: impact reports are built from the located events
-        arm = self.arm = SimulatedArm(self.scene, p.publish_rate, preset=p.preset or None,
-                                      max_effort=p.max_effort, trace=False,
-                                      brake_torque=p.brake_torque)
+        arm = self.arm = SimulatedArm(
+            self.scene,
+            p.publish_rate,
+            preset=p.preset or None,
+            max_effort=p.max_effort,
+            trace=False,
+            brake_torque=p.brake_torque,
+        )
         names = self.joint_names = joint_names(arm.n)
         check(p, names)
         refuse_unknown(self, PARAMS)
@@ -67,66 +79,112 @@ class Simulator(Node):
 
         def qos(topic):
             return contract.qos(topic).to_rclpy()
+
         self.out = PeriodPublishers(self, self.scene, names, p, lockstep)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, qos(DIAGNOSTICS))
         outputs = Outputs(self.out.publish, self.out.report, self._log, lambda: self.out.failures)
-        common = dict(publish_rate=p.publish_rate, rate_factor=p.rate_factor,
-                      command_timeout=p.command_timeout, outputs=outputs,
-                      command_order=[names.index(j) for j in p.joints],
-                      policy=WatchdogPolicy(p.watchdog_policy),
-                      max_takes=contract.qos(COMMANDS).depth)
+        common = dict(
+            publish_rate=p.publish_rate,
+            rate_factor=p.rate_factor,
+            command_timeout=p.command_timeout,
+            outputs=outputs,
+            command_order=[names.index(j) for j in p.joints],
+            policy=WatchdogPolicy(p.watchdog_policy),
+            max_takes=contract.qos(COMMANDS).depth,
+        )
         subscribe = self.create_subscription
         self.reader_node = None
         if lockstep:
-            self.progress_sub = subscribe(Time, contract.RECORDER_PROGRESS, self._on_progress,
-                                          contract.PROGRESS_QOS.to_rclpy()) \
-                if p.recorder_window else None
+            self.progress_sub = (
+                subscribe(
+                    Time,
+                    contract.RECORDER_PROGRESS,
+                    self._on_progress,
+                    contract.PROGRESS_QOS.to_rclpy(),
+                )
+                if p.recorder_window
+                else None
+            )
             self.session = LockstepSession(
-                arm, recorder_window=p.recorder_window, **common,
+                arm,
+                recorder_window=p.recorder_window,
+                **common,
                 recorder_present=lambda: self.progress_sub.get_publisher_count() > 0,
-                controller_present=lambda: self.command_sub.get_publisher_count() > 0)
+                controller_present=lambda: self.command_sub.get_publisher_count() > 0,
+            )
             offer = self.session.offer
-            self.command_sub = subscribe(Float64MultiArray, COMMANDS, lambda raw: offer(
-                self._array_command(raw)), qos(COMMANDS), raw=True)
-            subscribe(JointState, p.joint_commands_topic, lambda raw: offer(
-                self._named_command(raw)), qos(COMMANDS), raw=True)
+            self.command_sub = subscribe(
+                Float64MultiArray,
+                COMMANDS,
+                lambda raw: offer(self._array_command(raw)),
+                qos(COMMANDS),
+                raw=True,
+            )
+            subscribe(
+                JointState,
+                p.joint_commands_topic,
+                lambda raw: offer(self._named_command(raw)),
+                qos(COMMANDS),
+                raw=True,
+            )
         else:
             # read by the loop thread itself at the start of each period: with the executor
             # delivering commands, two Python threads contended for the GIL each period
             self.reader_node = reader = reader_node(self, 'command_reader')
             self.readers = (
-                (reader.create_subscription(Float64MultiArray, COMMANDS, _unused, qos(COMMANDS),
-                                            raw=True), self._array_command),
-                (reader.create_subscription(JointState, p.joint_commands_topic, _unused,
-                                            qos(COMMANDS), raw=True), self._named_command))
+                (
+                    reader.create_subscription(
+                        Float64MultiArray, COMMANDS, _unused, qos(COMMANDS), raw=True
+                    ),
+                    self._array_command,
+                ),
+                (
+                    reader.create_subscription(
+                        JointState, p.joint_commands_topic, _unused, qos(COMMANDS), raw=True
+                    ),
+                    self._named_command,
+                ),
+            )
             self.session = RealtimeSession(arm, take_command=self._take_command, **common)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
         subscribe(Bool, contract.E_STOP, self._on_e_stop, 10)
-        sim_services.attach(self, sim_services.SimulationControls(
-            self.session.reset, lambda paused: (True, self.session.pause(paused)),
-            self.session.run_steps, lambda: self.session.loop.paused, lambda: self.session.failed))
+        sim_services.attach(
+            self,
+            sim_services.SimulationControls(
+                self.session.reset,
+                lambda paused: (True, self.session.pause(paused)),
+                self.session.run_steps,
+                lambda: self.session.loop.paused,
+                lambda: self.session.failed,
+            ),
+        )
         self.create_timer(p.diagnostics_period, self._publish_diagnostics)
         self._stop = threading.Event()
         self._thread = None
         if not jit.AVAILABLE:
-            self.get_logger().warning(f'running the INTERPRETED kernel: {jit.UNAVAILABLE}; '
-                                      f'realtime periods will overrun. Fix: {jit.FIX}')
-        arm.warm_up()                      # before the clock starts: no cache loads later
-        self.session.publish_initial()     # the state at t = 0, before anything moves
-        self.get_logger().info(f'scene {self.scene.name!r} ({scene_path}), {p.mode} at '
-                               f'{p.publish_rate:g} Hz, preset {arm.integrator.rtol:g} rtol, '
-                               f'watchdog {p.watchdog_policy}')
+            self.get_logger().warning(
+                f'running the INTERPRETED kernel: {jit.UNAVAILABLE}; '
+                f'realtime periods will overrun. Fix: {jit.FIX}'
+            )
+        arm.warm_up()  # before the clock starts: no cache loads later
+        self.session.publish_initial()  # the state at t = 0, before anything moves
+        self.get_logger().info(
+            f'scene {self.scene.name!r} ({scene_path}), {p.mode} at '
+            f'{p.publish_rate:g} Hz, preset {arm.integrator.rtol:g} rtol, '
+            f'watchdog {p.watchdog_policy}'
+        )
 
     def start(self):
         """Start the periods once the process has settled (_runner.run: its last full
         garbage collection held the GIL for 120-170 ms and stalled a loop started earlier)."""
         if isinstance(self.session, LockstepSession):
-            self.create_timer(0.1, lambda: self.session.tick())   # (no TimerInfo)
+            self.create_timer(0.1, lambda: self.session.tick())  # (no TimerInfo)
         else:
-            self._thread = threading.Thread(target=self._realtime_loop, name='sim-loop',
-                                            daemon=True)
+            self._thread = threading.Thread(
+                target=self._realtime_loop, name='sim-loop', daemon=True
+            )
             self._thread.start()
 
     @property
@@ -200,7 +258,7 @@ class Simulator(Node):
         # rclpy fixes each call site's severity at its first call: one site per level
         if level == 'error':
             self.get_logger().error(text)
-            self._publish_diagnostics()    # a failure: say it now
+            self._publish_diagnostics()  # a failure: say it now
         elif level == 'warning':
             self.get_logger().warning(text)
         elif level == 'waiting':
@@ -210,10 +268,17 @@ class Simulator(Node):
 
     def _publish_diagnostics(self):
         status = self.session.take_status(time.monotonic())
-        msg = DiagnosticArray(status=[DiagnosticStatus(
-            level=bytes([status.level]), name=contract.SIMULATOR_STATUS,
-            message=status.message, hardware_id='impact_arm_simulated_arm',
-            values=[KeyValue(key=k, value=v) for k, v in status.values])])
+        msg = DiagnosticArray(
+            status=[
+                DiagnosticStatus(
+                    level=bytes([status.level]),
+                    name=contract.SIMULATOR_STATUS,
+                    message=status.message,
+                    hardware_id='impact_arm_simulated_arm',
+                    values=[KeyValue(key=k, value=v) for k, v in status.values],
+                )
+            ]
+        )
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 
@@ -229,12 +294,15 @@ class Simulator(Node):
             self._thread.join(timeout=2.0)
         if executor is not None:
             self._publish_diagnostics()
-            await_acknowledgements(self, (self.out.impact, self.out.wrench, self.out.joints,
-                                          self.pub_diag), ACK_WAIT)
+            await_acknowledgements(
+                self, (self.out.impact, self.out.wrench, self.out.joints, self.pub_diag), ACK_WAIT
+            )
         loop = self.session.loop
-        self.get_logger().info(f'{self.arm.periods} periods, {loop.impacts} impacts, '
-                               f'{loop.stats.overruns} overruns, t = {self.arm.t:.3f} s; '
-                               f'{self.out.sent_text()}')
+        self.get_logger().info(
+            f'{self.arm.periods} periods, {loop.impacts} impacts, '
+            f'{loop.stats.overruns} overruns, t = {self.arm.t:.3f} s; '
+            f'{self.out.sent_text()}'
+        )
         return 1 if self.session.failed else 0
 
 

@@ -1,5 +1,6 @@
 """The simulator node's parameters, declared once: this table gives each its default,
 range, description (``ros2 param describe``) and the typed object the node reads."""
+
 from .. import contract
 from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES, joint_names
 from ..core.driver import DEFAULT_BRAKE_TORQUE
@@ -9,60 +10,168 @@ from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from .params import Param, ParameterError, values_class
 
 PARAMS = (
-    Param('scene', '', 'scene YAML file or installed scene name (empty: paper, the article)',
-          'str', read_only=True),
-    Param('publish_rate', 1000.0, 'rate of /joint_states and /contact_wrench [Hz]',
-          low=1.0, high=100000.0, read_only=True),
-    Param('mode', 'realtime', 'realtime: paced by the wall clock; lockstep: one period per '
-          'received command', 'str', choices=('realtime', 'lockstep'), read_only=True),
-    Param('rate_factor', 1.0, 'simulated seconds per wall second (lockstep: 0 = as fast as '
-          'commands arrive); /clock is published unless realtime at 1.0',
-          low=0.0, high=1000.0, read_only=True),
+    Param(
+        'scene',
+        '',
+        'scene YAML file or installed scene name (empty: paper, the article)',
+        'str',
+        read_only=True,
+    ),
+    Param(
+        'publish_rate',
+        1000.0,
+        'rate of /joint_states and /contact_wrench [Hz]',
+        low=1.0,
+        high=100000.0,
+        read_only=True,
+    ),
+    Param(
+        'mode',
+        'realtime',
+        'realtime: paced by the wall clock; lockstep: one period per received command',
+        'str',
+        choices=('realtime', 'lockstep'),
+        read_only=True,
+    ),
+    Param(
+        'rate_factor',
+        1.0,
+        'simulated seconds per wall second (lockstep: 0 = as fast as '
+        'commands arrive); /clock is published unless realtime at 1.0',
+        low=0.0,
+        high=1000.0,
+        read_only=True,
+    ),
     # lower bounds: a watchdog under 1 ms fires between 1 kHz commands and a torque limit
     # under 1 mN m clips every command to nothing; either would silently disable control
-    Param('command_timeout', DEFAULT_COMMAND_TIMEOUT, 'seconds without a valid command '
-          'before the watchdog acts (watchdog_policy; a few control periods)',
-          low=1e-3, high=3600.0),
+    Param(
+        'command_timeout',
+        DEFAULT_COMMAND_TIMEOUT,
+        'seconds without a valid command '
+        'before the watchdog acts (watchdog_policy; a few control periods)',
+        low=1e-3,
+        high=3600.0,
+    ),
     # brake by default: zero torque drops the arm onto the part, where it chatters (a 0.33 s
     # middleware stall gave ~300 impact events in one simulated second); a real drive's safe
     # stop holds the joints. zero stays for a controller that must see the arm go limp.
-    Param('watchdog_policy', WatchdogPolicy.BRAKE.value, 'on a command timeout: brake (hold '
-          'the joints where they are, each joint\'s torque limited to brake_torque, until the '
-          'next valid command) or zero (zero torque: the arm falls)', 'str',
-          choices=tuple(p.value for p in WatchdogPolicy), read_only=True),
-    Param('brake_torque', DEFAULT_BRAKE_TORQUE, 'the brake\'s torque limit per joint [N m] '
-          '(watchdog_policy brake)', low=1e-3, high=1e9),
-    Param('max_effort', 5000.0, 'commanded torques are clipped to +-max_effort [N m]',
-          low=1e-3, high=1e9),
-    Param('joints', joint_names(2), 'joint order of the command array', 'strs',
-          read_only=True),
-    Param('preset', '', "integrator preset (empty: the scene's)", 'str',
-          choices=('',) + INTEGRATOR_PRESETS, read_only=True),
-    Param('thread_priority', 50, 'SCHED_FIFO priority of the realtime loop thread and of the '
-          'middleware threads that deliver its commands (0: normal scheduling; needs '
-          'CAP_SYS_NICE or an rtprio limit, else it falls back with a note in /diagnostics)',
-          'int', low=0, high=99, read_only=True),
-    Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages',
-          low=0.05, high=60.0, read_only=True),
-    Param('step_periods', 1, 'periods one ~/step call advances while paused', 'int', low=1,
-          high=1000000),
-    Param('frame_id', contract.WRENCH_FRAME, 'TF frame of /contact_wrench (x tangential, '
-          'y normal)', 'str', read_only=True),
-    Param('joint_commands_topic', JOINT_COMMANDS_TOPIC, 'sensor_msgs/JointState commands '
-          '(effort by joint name), as topic_based_ros2_control sends them', 'str',
-          read_only=True),
-    Param('joint_states_topic', JOINT_STATES_TOPIC, 'joint states again, for '
-          'topic_based_ros2_control (not /joint_states)', 'str', read_only=True),
-    Param('tf_rate', DEFAULT_TF_RATE, 'rate of /tf and /impact_markers [Hz] (wall clock)',
-          low=0.0, high=1000.0, open_low=True, read_only=True),
-    Param('recorder_window', 0, 'lockstep: periods simulated time may run ahead of what the '
-          f'recorder reports written on {contract.RECORDER_PROGRESS}, so a stalled recorder '
-          'holds the run instead of losing samples (0: do not wait for a recorder)', 'int',
-          low=0, high=contract.WRITER_REPAIR_DEPTH // 2, read_only=True),
-    Param('rod_radius', 0.0, 'radius the rods are drawn with [m] (0: 1 % of the shortest '
-          'link)', low=0.0, high=1e3, read_only=True),
-    Param('publish_tf', True, 'publish /tf and /tf_static (false when robot_state_publisher '
-          'does, launch tf:=rsp)', 'bool', read_only=True),
+    Param(
+        'watchdog_policy',
+        WatchdogPolicy.BRAKE.value,
+        'on a command timeout: brake (hold '
+        "the joints where they are, each joint's torque limited to brake_torque, until the "
+        'next valid command) or zero (zero torque: the arm falls)',
+        'str',
+        choices=tuple(p.value for p in WatchdogPolicy),
+        read_only=True,
+    ),
+    Param(
+        'brake_torque',
+        DEFAULT_BRAKE_TORQUE,
+        "the brake's torque limit per joint [N m] (watchdog_policy brake)",
+        low=1e-3,
+        high=1e9,
+    ),
+    Param(
+        'max_effort',
+        5000.0,
+        'commanded torques are clipped to +-max_effort [N m]',
+        low=1e-3,
+        high=1e9,
+    ),
+    Param('joints', joint_names(2), 'joint order of the command array', 'strs', read_only=True),
+    Param(
+        'preset',
+        '',
+        "integrator preset (empty: the scene's)",
+        'str',
+        choices=('',) + INTEGRATOR_PRESETS,
+        read_only=True,
+    ),
+    Param(
+        'thread_priority',
+        50,
+        'SCHED_FIFO priority of the realtime loop thread and of the '
+        'middleware threads that deliver its commands (0: normal scheduling; needs '
+        'CAP_SYS_NICE or an rtprio limit, else it falls back with a note in /diagnostics)',
+        'int',
+        low=0,
+        high=99,
+        read_only=True,
+    ),
+    Param(
+        'diagnostics_period',
+        1.0,
+        'seconds between /diagnostics messages',
+        low=0.05,
+        high=60.0,
+        read_only=True,
+    ),
+    Param(
+        'step_periods',
+        1,
+        'periods one ~/step call advances while paused',
+        'int',
+        low=1,
+        high=1000000,
+    ),
+    Param(
+        'frame_id',
+        contract.WRENCH_FRAME,
+        'TF frame of /contact_wrench (x tangential, y normal)',
+        'str',
+        read_only=True,
+    ),
+    Param(
+        'joint_commands_topic',
+        JOINT_COMMANDS_TOPIC,
+        'sensor_msgs/JointState commands '
+        '(effort by joint name), as topic_based_ros2_control sends them',
+        'str',
+        read_only=True,
+    ),
+    Param(
+        'joint_states_topic',
+        JOINT_STATES_TOPIC,
+        'joint states again, for topic_based_ros2_control (not /joint_states)',
+        'str',
+        read_only=True,
+    ),
+    Param(
+        'tf_rate',
+        DEFAULT_TF_RATE,
+        'rate of /tf and /impact_markers [Hz] (wall clock)',
+        low=0.0,
+        high=1000.0,
+        open_low=True,
+        read_only=True,
+    ),
+    Param(
+        'recorder_window',
+        0,
+        'lockstep: periods simulated time may run ahead of what the '
+        f'recorder reports written on {contract.RECORDER_PROGRESS}, so a stalled recorder '
+        'holds the run instead of losing samples (0: do not wait for a recorder)',
+        'int',
+        low=0,
+        high=contract.WRITER_REPAIR_DEPTH // 2,
+        read_only=True,
+    ),
+    Param(
+        'rod_radius',
+        0.0,
+        'radius the rods are drawn with [m] (0: 1 % of the shortest link)',
+        low=0.0,
+        high=1e3,
+        read_only=True,
+    ),
+    Param(
+        'publish_tf',
+        True,
+        'publish /tf and /tf_static (false when robot_state_publisher does, launch tf:=rsp)',
+        'bool',
+        read_only=True,
+    ),
 )
 SimulatorParams = values_class('SimulatorParams', PARAMS)
 
@@ -70,14 +179,21 @@ SimulatorParams = values_class('SimulatorParams', PARAMS)
 def check(p, names):
     """What no single parameter's range says: ParameterError naming the parameters."""
     if sorted(p.joints) != sorted(names):
-        raise ParameterError(f'parameter joints = {p.joints}: must name each of '
-                             f'{names} once (the order of the command array)')
-    if p.joint_states_topic in (JOINT_STATES, JOINT_STATES.lstrip('/')) or \
-            p.joint_commands_topic == COMMANDS:
+        raise ParameterError(
+            f'parameter joints = {p.joints}: must name each of '
+            f'{names} once (the order of the command array)'
+        )
+    if (
+        p.joint_states_topic in (JOINT_STATES, JOINT_STATES.lstrip('/'))
+        or p.joint_commands_topic == COMMANDS
+    ):
         raise ParameterError(
             f'parameter joint_states_topic = {p.joint_states_topic!r}, '
             f'joint_commands_topic = {p.joint_commands_topic!r}: the topic hardware '
-            f'needs its own topics (not /joint_states, not {COMMANDS})')
+            f'needs its own topics (not /joint_states, not {COMMANDS})'
+        )
     if p.mode == 'realtime' and p.rate_factor == 0.0:
-        raise ParameterError('parameter rate_factor = 0.0: realtime mode needs a pace '
-                             '> 0 (use mode lockstep to run as fast as possible)')
+        raise ParameterError(
+            'parameter rate_factor = 0.0: realtime mode needs a pace '
+            '> 0 (use mode lockstep to run as fast as possible)'
+        )

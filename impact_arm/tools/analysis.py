@@ -19,6 +19,7 @@ the file's scene with its surface taken away, simulated offline. Figures 8-11 co
 again from its ``/impact_report`` contact state (exact when the actuators are off during
 contact, as in the article); when neither is possible the command says why.
 """
+
 from __future__ import annotations
 
 import json
@@ -40,12 +41,13 @@ class AnalysisError(ImpactArmError):
 @dataclass
 class Run:
     """One recording (or an offline run) reduced to arrays. Angles in rad, SI units."""
+
     label: str
-    t: np.ndarray                      # joint state times [s] (header stamps)
-    q: np.ndarray                      # (N, n) absolute link angles
-    qd: np.ndarray                     # (N, n) absolute link rates
+    t: np.ndarray  # joint state times [s] (header stamps)
+    q: np.ndarray  # (N, n) absolute link angles
+    qd: np.ndarray  # (N, n) absolute link rates
     impacts: list = field(default_factory=list)
-    traces: list = field(default_factory=list)   # [(columns, (rows, cols) array)]
+    traces: list = field(default_factory=list)  # [(columns, (rows, cols) array)]
     scene: object = None
     metadata: dict = field(default_factory=dict)
     law: str = ''
@@ -59,6 +61,7 @@ def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
     from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
     from ..io.msgdefs import typestore
+
     deserialize_cdr = typestore().deserialize_cdr
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -81,21 +84,25 @@ def load(path, progress=_quiet) -> Run:
         if m.topic == JOINT_STATES:
             t.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
             pos.append(to_absolute(msg.position))
-            vel.append(to_absolute(msg.velocity) if len(msg.velocity) else
-                       [math.nan] * len(msg.position))
+            vel.append(
+                to_absolute(msg.velocity) if len(msg.velocity) else [math.nan] * len(msg.position)
+            )
         elif m.topic == IMPACT_REPORT:
             try:
                 impacts.append(json.loads(msg.data))
             except ValueError as e:
-                raise AnalysisError(f'{path}: /impact_report message {len(impacts) + 1} is not '
-                                    f'JSON ({e})') from None
+                raise AnalysisError(
+                    f'{path}: /impact_report message {len(impacts) + 1} is not JSON ({e})'
+                ) from None
         else:
             dims = msg.layout.dim
             if len(dims) != 2:
-                raise AnalysisError(f'{path}: {IMPACT_TRACE} message {len(traces) + 1} has '
-                                    f'{len(dims)} dimensions, expected 2')
+                raise AnalysisError(
+                    f'{path}: {IMPACT_TRACE} message {len(traces) + 1} has '
+                    f'{len(dims)} dimensions, expected 2'
+                )
             columns = dims[1].label.split(',')
-            data = np.asarray(msg.data, float)[msg.layout.data_offset:]
+            data = np.asarray(msg.data, float)[msg.layout.data_offset :]
             traces.append((columns, data.reshape(dims[0].size, dims[1].size)))
     if not t:
         raise AnalysisError(f'{path}: /joint_states has no messages')
@@ -105,8 +112,17 @@ def load(path, progress=_quiet) -> Run:
     order = np.argsort(t, kind='stable')
     scene = _scene(metadata)
     law = scene.controller.law if scene is not None else ''
-    return Run(os.path.basename(path), np.asarray(t)[order], np.asarray(pos, float)[order],
-               np.asarray(vel, float)[order], impacts, traces, scene, metadata, law)
+    return Run(
+        os.path.basename(path),
+        np.asarray(t)[order],
+        np.asarray(pos, float)[order],
+        np.asarray(vel, float)[order],
+        impacts,
+        traces,
+        scene,
+        metadata,
+        law,
+    )
 
 
 def _number(value) -> float:
@@ -121,6 +137,7 @@ def _scene(metadata):
     if not text:
         return None
     from ..core.scene import scene_from_text
+
     try:
         return scene_from_text(text, origin='scene stored in the recording')
     except ImpactArmError:
@@ -136,6 +153,7 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     to its down target with the surfaces taken away (no impact: a step response), the
     controller evaluated continuously. ``run.target`` holds the target (rad)."""
     from ..core.simulate import run
+
     if law not in FEEDBACK_LAWS:
         raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
     controller = replace(scene.controller, law=law, rate=0.0)
@@ -147,9 +165,15 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     if result.error:
         raise AnalysisError(f'step response of law {law}: {result.error}')
     samples = result.samples
-    out = Run(LAW_NAMES.get(law, law), np.array([s.t for s in samples]),
-              np.array([s.q for s in samples]), np.array([s.qd for s in samples]),
-              result.impacts, scene=sc, law=law)
+    out = Run(
+        LAW_NAMES.get(law, law),
+        np.array([s.t for s in samples]),
+        np.array([s.q for s in samples]),
+        np.array([s.qd for s in samples]),
+        result.impacts,
+        scene=sc,
+        law=law,
+    )
     out.target = np.asarray(scene.controller.down_target, float)
     return out
 
@@ -170,8 +194,9 @@ def step_metrics(run: Run, band_deg: float = 0.1) -> dict:
             settle = float(run.t[outside[-1] + 1])
         else:
             settle = math.nan
-        out.append({'overshoot_deg': overshoot, 'final_error_deg': float(e[-1]),
-                    'settle_s': settle})
+        out.append(
+            {'overshoot_deg': overshoot, 'final_error_deg': float(e[-1]), 'settle_s': settle}
+        )
     return out
 
 
@@ -179,13 +204,20 @@ def compared_run(scene, law: str, t_max: float, progress=_quiet) -> Run:
     """An offline run of ``scene`` (impacts included) with controller ``law``: for comparing
     recordings of different laws (``--compare``)."""
     from ..core.simulate import run
+
     sc = replace(scene, controller=replace(scene.controller, law=law))
     progress(f'simulating law {law} for {t_max:g} s')
     result = run(sc, t_max=t_max)
     samples = result.samples
-    return Run(f'law {law} (offline)', np.array([s.t for s in samples]),
-               np.array([s.q for s in samples]), np.array([s.qd for s in samples]),
-               result.impacts, scene=sc, law=law)
+    return Run(
+        f'law {law} (offline)',
+        np.array([s.t for s in samples]),
+        np.array([s.q for s in samples]),
+        np.array([s.qd for s in samples]),
+        result.impacts,
+        scene=sc,
+        law=law,
+    )
 
 
 # ------------------------------------------------------------------ impacts of live files
@@ -197,8 +229,10 @@ def trace_missing_reason(run: Run) -> str:
     if run.scene is None:
         return 'the recording stores no scene'
     if run.scene.n_links != 2:
-        return (f'the contact velocity gives the joint rates of 2 links only '
-                f'(this arm has {run.scene.n_links})')
+        return (
+            f'the contact velocity gives the joint rates of 2 links only '
+            f'(this arm has {run.scene.n_links})'
+        )
     if run.scene.actuators_during_contact:
         return 'its scene keeps the actuators on during contact (their torque is not reported)'
     return ''
@@ -215,6 +249,7 @@ def reintegrated_trace(scene, record: dict):
     from ..core.metrics import ImpactBuilder
     from ..core.model import ArmModel
     from ..io.offline_mcap import trace_columns
+
     model = ArmModel(scene)
     n = model.n
     q = np.radians(np.asarray(record['q_contact_deg'], float))
@@ -225,9 +260,10 @@ def reintegrated_trace(scene, record: dict):
     back = 1e-7
     state = model.initial_state()
     state.t = float(record['t_contact']) - back
-    state.y[:n], state.y[n:2 * n] = q - qd * back, qd
-    integ = PhaseIntegrator(model, state, control='held', trace=True,
-                            **options_from_spec(scene.integrator))
+    state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
+    integ = PhaseIntegrator(
+        model, state, control='held', trace=True, **options_from_spec(scene.integrator)
+    )
     builder = ImpactBuilder(model)
     t_end = state.t + 10 * max(float(record['duration']), 1e-6)
     for made, rows in feed_events(integ, builder, integ.advance(t_end, stop_at_event=True)):
@@ -237,8 +273,10 @@ def reintegrated_trace(scene, record: dict):
         if done:
             made, rows = done[0]
             return (trace_columns(n), np.asarray(rows, float)), made
-    raise AnalysisError(f'impact {record.get("index")} did not end when integrated again from '
-                        f'its reported contact state')
+    raise AnalysisError(
+        f'impact {record.get("index")} did not end when integrated again from '
+        f'its reported contact state'
+    )
 
 
 def with_contact_point(columns, rows, record):
@@ -268,8 +306,13 @@ def poincare(t, q, qd, k: int) -> np.ndarray:
     rows = []
     for i in idx:
         s = a[i] / (a[i] - b[i])
-        rows.append([t[i] + s * (t[i + 1] - t[i]), *(q[i] + s * (q[i + 1] - q[i]))[:2],
-                     1.0 if b[i] > a[i] else -1.0])
+        rows.append(
+            [
+                t[i] + s * (t[i + 1] - t[i]),
+                *(q[i] + s * (q[i + 1] - q[i]))[:2],
+                1.0 if b[i] > a[i] else -1.0,
+            ]
+        )
     return np.array(rows).reshape(-1, 4)
 
 
@@ -278,16 +321,20 @@ def limit_cycle(impacts) -> dict:
     times = [i['t_contact'] for i in impacts]
     periods = np.diff(times)
     settled = settle_index(impacts) if len(impacts) > 1 else None
-    after = periods[settled - 1:] if settled else periods[-1:]
-    return {'impacts': len(impacts), 'settled_after': settled,
-            'period': float(np.mean(after)) if len(after) else None,
-            'period_last': float(periods[-1]) if len(periods) else None,
-            'periods': [float(p) for p in periods]}
+    after = periods[settled - 1 :] if settled else periods[-1:]
+    return {
+        'impacts': len(impacts),
+        'settled_after': settled,
+        'period': float(np.mean(after)) if len(after) else None,
+        'period_last': float(periods[-1]) if len(periods) else None,
+        'periods': [float(p) for p in periods],
+    }
 
 
 def impact_table(impacts) -> str:
     """The impact rows exactly as ``impact-arm simulate`` prints them."""
     from ..core.simulate import RunResult, format_table
+
     return format_table(RunResult(scene=None, impacts=impacts)).split('\n\n')[0]
 
 
@@ -305,34 +352,60 @@ def tip_velocity(run: Run) -> np.ndarray | None:
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser):
     parser.add_argument('file', help='MCAP recording (live or simulate --mcap)')
-    parser.add_argument('--out', metavar='DIR',
-                        help='output directory (default: runs/<file name>_analysis)')
-    parser.add_argument('--compare', nargs='+', default=[], metavar='FILE',
-                        help='more recordings (e.g. other controller laws): their link angles '
-                             'beside this one\'s (fig3b_recordings.png)')
-    parser.add_argument('--laws', default='q,pd,pid', metavar='LAWS',
-                        help='the control laws of Figure 3, comma separated (default q,pd,pid; '
-                             'empty: no Figure 3): step responses of the file\'s scene '
-                             'without its surface, simulated offline')
-    parser.add_argument('--compare-time', type=float, default=5.0, metavar='S',
-                        help='simulated seconds of each step response (default 5, (0, 60])')
-    parser.add_argument('--impact', type=int, default=1, metavar='K',
-                        help='impact shown in Figures 8-11 (default 1, the first); from '
-                             '/impact_trace, or re-integrated from /impact_report in a live '
-                             'recording')
-    parser.add_argument('--no-animation', action='store_true',
-                        help='skip animation.gif (impact-arm animate makes it alone)')
+    parser.add_argument(
+        '--out', metavar='DIR', help='output directory (default: runs/<file name>_analysis)'
+    )
+    parser.add_argument(
+        '--compare',
+        nargs='+',
+        default=[],
+        metavar='FILE',
+        help='more recordings (e.g. other controller laws): their link angles '
+        "beside this one's (fig3b_recordings.png)",
+    )
+    parser.add_argument(
+        '--laws',
+        default='q,pd,pid',
+        metavar='LAWS',
+        help='the control laws of Figure 3, comma separated (default q,pd,pid; '
+        "empty: no Figure 3): step responses of the file's scene "
+        'without its surface, simulated offline',
+    )
+    parser.add_argument(
+        '--compare-time',
+        type=float,
+        default=5.0,
+        metavar='S',
+        help='simulated seconds of each step response (default 5, (0, 60])',
+    )
+    parser.add_argument(
+        '--impact',
+        type=int,
+        default=1,
+        metavar='K',
+        help='impact shown in Figures 8-11 (default 1, the first); from '
+        '/impact_trace, or re-integrated from /impact_report in a live '
+        'recording',
+    )
+    parser.add_argument(
+        '--no-animation',
+        action='store_true',
+        help='skip animation.gif (impact-arm animate makes it alone)',
+    )
 
 
 def cli(args) -> int:
     from . import figures
     from .progress import Progress
+
     line = Progress(prefix='analyze: ')
 
     def say(text):
         line.show(text, log=True)
-    out = args.out or os.path.join('runs', os.path.splitext(os.path.basename(args.file))[0]
-                                   + '_analysis')
+
+    out = args.out or os.path.join(
+        'runs', os.path.splitext(os.path.basename(args.file))[0] + '_analysis'
+    )
     if not 0 < args.compare_time <= 60:
         raise AnalysisError(f'--compare-time = {args.compare_time}: must be in (0, 60] s')
     laws = [w.strip() for w in args.laws.split(',') if w.strip()]
@@ -341,32 +414,49 @@ def cli(args) -> int:
             raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
     run = load(args.file, progress=say)
     if run.traces and not 1 <= args.impact <= len(run.traces):
-        raise AnalysisError(f'--impact = {args.impact}: must be in [1, {len(run.traces)}] '
-                            f'(the impacts with a trace in {args.file})')
+        raise AnalysisError(
+            f'--impact = {args.impact}: must be in [1, {len(run.traces)}] '
+            f'(the impacts with a trace in {args.file})'
+        )
     if not run.traces and run.impacts and not 1 <= args.impact <= len(run.impacts):
-        raise AnalysisError(f'--impact = {args.impact}: must be in [1, {len(run.impacts)}] '
-                            f'(the impacts reported in {args.file})')
+        raise AnalysisError(
+            f'--impact = {args.impact}: must be in [1, {len(run.impacts)}] '
+            f'(the impacts reported in {args.file})'
+        )
     others = [load(f, progress=say) for f in args.compare]
     missing = []
     steps = []
     if laws and run.scene is None:
-        missing.append(f'Figure 3 not drawn: {args.file} stores no scene to simulate the '
-                       f'step responses of')
+        missing.append(
+            f'Figure 3 not drawn: {args.file} stores no scene to simulate the step responses of'
+        )
     elif laws:
         steps = [step_response(run.scene, law, args.compare_time, say) for law in laws]
     impact, constants = impact_points(run, args.impact, say)
     if impact is None:
-        missing.append(f'Figures 8-11 not drawn: {args.file} has no /impact_trace, and '
-                       f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
-                       f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE')
+        missing.append(
+            f'Figures 8-11 not drawn: {args.file} has no /impact_trace, and '
+            f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
+            f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE'
+        )
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
         raise AnalysisError(f'--out {out}: cannot create ({e.strerror})') from None
-    written = write_outputs(run, steps, out, impact, figures, progress=say, recordings=others,
-                            constants=constants, missing=missing)
+    written = write_outputs(
+        run,
+        steps,
+        out,
+        impact,
+        figures,
+        progress=say,
+        recordings=others,
+        constants=constants,
+        missing=missing,
+    )
     if not args.no_animation and run.scene is not None:
         from .animation import animate, contact_forces
+
         gif = os.path.join(out, 'animation.gif')
         say(f'animating to {gif}')
         frames = animate(run, gif, contact_forces(args.file), progress=say)
@@ -381,8 +471,11 @@ def cli(args) -> int:
         print(f'Figures 8-11: impact {args.impact} {impact[3]}')
     for line_ in missing:
         print(line_)
-    print(f'wrote {os.path.join(out, "report.md")} ({len(written["figures"])} figures: '
-          + ', '.join(name for name, _ in written['figures']) + ')')
+    print(
+        f'wrote {os.path.join(out, "report.md")} ({len(written["figures"])} figures: '
+        + ', '.join(name for name, _ in written['figures'])
+        + ')'
+    )
     return 0
 
 
@@ -405,14 +498,17 @@ def impact_points(run: Run, k: int, progress=_quiet):
     progress(f'integrating impact {k} again from its /impact_report (no /impact_trace)')
     (columns, rows), made = reintegrated_trace(run.scene, record)
     worst = max(abs(made[key] / record[key] - 1) for key in ('delta_m', 'F_max', 'duration'))
-    note = (f're-integrated from /impact_report (no /impact_trace in the file); δm, F_max '
-            f'and duration within {max(worst, 1e-12):.0e} of the report')
+    note = (
+        f're-integrated from /impact_report (no /impact_trace in the file); δm, F_max '
+        f'and duration within {max(worst, 1e-12):.0e} of the report'
+    )
     return (columns, with_contact_point(columns, rows, record), record, note), constants
 
 
 def _struck_surface(scene, record):
     """Contact constants of the surface the tip met at contact (the nearest height)."""
     from ..core.model import ArmModel
+
     model = ArmModel(scene)
     if not model.surfaces:
         return None
@@ -425,17 +521,25 @@ def _record_from_trace(columns, rows, k):
     """The few record fields the figures need, read off a trace without its report."""
     col = {name: rows[:, i] for i, name in enumerate(columns)}
     energies = [col[c][0] for c in columns if c.startswith('T') and c[1:].isdigit()]
-    return {'index': k, 't_contact': float(col['t'][0]), 'v_before': [col['v_x'][0],
-            col['v_y'][0]], 'T_before': energies + [sum(energies)],
-            'delta_m': float(np.max(col['delta'])), 'delta_r': float(col['delta'][-1]),
-            'F_max': float(np.max(col['F_n']))}
+    return {
+        'index': k,
+        't_contact': float(col['t'][0]),
+        'v_before': [col['v_x'][0], col['v_y'][0]],
+        'T_before': energies + [sum(energies)],
+        'delta_m': float(np.max(col['delta'])),
+        'delta_r': float(col['delta'][-1]),
+        'F_max': float(np.max(col['F_n'])),
+    }
 
 
 def _limit_cycle_text(lc) -> str:
     if not lc['impacts']:
         return 'no impacts recorded'
-    settled = (f'limit cycle reached after {lc["settled_after"]} impacts'
-               if lc['settled_after'] else 'limit cycle not reached')
+    settled = (
+        f'limit cycle reached after {lc["settled_after"]} impacts'
+        if lc['settled_after']
+        else 'limit cycle not reached'
+    )
     period = f'period {lc["period"]:.5f} s' if lc['period'] is not None else 'no period'
     return f'{lc["impacts"]} impacts; {settled}; {period}'
 
@@ -447,8 +551,17 @@ def _write(path, text):
     os.replace(tmp, path)
 
 
-def write_outputs(run: Run, steps, out, impact, figures, progress=_quiet, recordings=(),
-                  constants=None, missing=()) -> dict:
+def write_outputs(
+    run: Run,
+    steps,
+    out,
+    impact,
+    figures,
+    progress=_quiet,
+    recordings=(),
+    constants=None,
+    missing=(),
+) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
     lc = limit_cycle(run.impacts)
@@ -460,60 +573,104 @@ def write_outputs(run: Run, steps, out, impact, figures, progress=_quiet, record
         sections[k] = rows
         lines = ['t_s,q1_deg,q2_deg,direction'] + [
             f'{r[0]:.9g},{math.degrees(r[1]):.9g},{math.degrees(r[2]):.9g},{int(r[3])}'
-            for r in rows]
+            for r in rows
+        ]
         _write(os.path.join(out, f'poincare_qd{k + 1}_zero.csv'), '\n'.join(lines) + '\n')
     v_tip = tip_velocity(run)
-    made = figures.draw_all(run, steps, sections, v_tip, impact, out, progress=progress,
-                            recordings=recordings, constants=constants)
-    _write(os.path.join(out, 'report.md'), report(run, recordings, table, lc, sections, made,
-                                                  steps, missing))
+    made = figures.draw_all(
+        run,
+        steps,
+        sections,
+        v_tip,
+        impact,
+        out,
+        progress=progress,
+        recordings=recordings,
+        constants=constants,
+    )
+    _write(
+        os.path.join(out, 'report.md'),
+        report(run, recordings, table, lc, sections, made, steps, missing),
+    )
     return {'table': table, 'limit_cycle': lc, 'figures': made, 'sections': sections}
 
 
 def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) -> str:
     info = run.metadata.get('impact_arm', {})
-    nonfinite = int(np.count_nonzero(~np.isfinite(run.q)) + np.count_nonzero(
-        ~np.isfinite(run.qd)))
-    lines = [f'# Analysis of {run.label}', '',
-             f'Recorded by impact_arm {info.get("version", "?")} ({info.get("node", "?")}'
-             f', {info.get("mode", "live")}); scene '
-             f'{run.scene.name if run.scene is not None else "not stored"}'
-             f'{", law " + run.law if run.law else ""}; {len(run.t)} joint states over '
-             f'{run.t[-1] - run.t[0]:.4f} s, {len(run.impacts)} impact reports, '
-             f'{len(run.traces)} impact traces.', '']
+    nonfinite = int(np.count_nonzero(~np.isfinite(run.q)) + np.count_nonzero(~np.isfinite(run.qd)))
+    lines = [
+        f'# Analysis of {run.label}',
+        '',
+        f'Recorded by impact_arm {info.get("version", "?")} ({info.get("node", "?")}'
+        f', {info.get("mode", "live")}); scene '
+        f'{run.scene.name if run.scene is not None else "not stored"}'
+        f'{", law " + run.law if run.law else ""}; {len(run.t)} joint states over '
+        f'{run.t[-1] - run.t[0]:.4f} s, {len(run.impacts)} impact reports, '
+        f'{len(run.traces)} impact traces.',
+        '',
+    ]
     if nonfinite:
         lines += [f'**Warning:** {nonfinite} non-finite joint values in /joint_states.', '']
     if run.metadata.get('run', {}).get('error'):
         lines += [f'**The run stopped with an error:** {run.metadata["run"]["error"]}', '']
-    lines += ['## Impacts', '', 'Units: t [s], angles [deg], duration [µs], δm and δr [µm], '
-              'F_max [kN], velocities [m/s], energies [J]; the same table as '
-              '`impact-arm simulate` (all fields in `impacts.json`).', '', '```', table, '```',
-              '', '## Limit cycle', '', _limit_cycle_text(lc) + '.', '']
+    lines += [
+        '## Impacts',
+        '',
+        'Units: t [s], angles [deg], duration [µs], δm and δr [µm], '
+        'F_max [kN], velocities [m/s], energies [J]; the same table as '
+        '`impact-arm simulate` (all fields in `impacts.json`).',
+        '',
+        '```',
+        table,
+        '```',
+        '',
+        '## Limit cycle',
+        '',
+        _limit_cycle_text(lc) + '.',
+        '',
+    ]
     if lc['periods']:
-        lines += ['Times between impacts [s]: ' + ', '.join(f'{p:.5f}' for p in lc['periods']),
-                  '']
+        lines += ['Times between impacts [s]: ' + ', '.join(f'{p:.5f}' for p in lc['periods']), '']
     lines += ['## Poincaré sections', '']
     for k, rows in sections.items():
-        lines.append(f'- q̇{k + 1} = 0: {len(rows)} crossings (`poincare_qd{k + 1}_zero.csv`)'
-                     + (f'; last: q1 = {math.degrees(rows[-1][1]):.3f}°, '
-                        f'q2 = {math.degrees(rows[-1][2]):.3f}°' if len(rows) else ''))
+        lines.append(
+            f'- q̇{k + 1} = 0: {len(rows)} crossings (`poincare_qd{k + 1}_zero.csv`)'
+            + (
+                f'; last: q1 = {math.degrees(rows[-1][1]):.3f}°, '
+                f'q2 = {math.degrees(rows[-1][2]):.3f}°'
+                if len(rows)
+                else ''
+            )
+        )
     lines += ['', '## Figures', '']
     for name, caption in made:
         lines += [f'![{caption}]({name})', '', f'*{caption}*', '']
     if steps:
-        lines += ['Figure 3 (step responses without impact, settling = staying within 0.1° '
-                  'of the target):', '']
+        lines += [
+            'Figure 3 (step responses without impact, settling = staying within 0.1° '
+            'of the target):',
+            '',
+        ]
         for step in steps:
             for k, m in enumerate(step_metrics(step)):
-                settle = (f'settles at {m["settle_s"]:.3f} s' if math.isfinite(m['settle_s'])
-                          else f'does not settle within {step.t[-1]:g} s')
-                lines.append(f'- {step.label}, link {k + 1}: {m["overshoot_deg"]:.3f}° past '
-                             f'the target at most, error at the end '
-                             f'{round(m["final_error_deg"], 3) + 0.0:+.3f}°, {settle}')
+                settle = (
+                    f'settles at {m["settle_s"]:.3f} s'
+                    if math.isfinite(m['settle_s'])
+                    else f'does not settle within {step.t[-1]:g} s'
+                )
+                lines.append(
+                    f'- {step.label}, link {k + 1}: {m["overshoot_deg"]:.3f}° past '
+                    f'the target at most, error at the end '
+                    f'{round(m["final_error_deg"], 3) + 0.0:+.3f}°, {settle}'
+                )
         lines.append('')
     for line in missing:
         lines += [f'**{line}**', '']
     if others:
-        lines += ['Recordings compared (fig3b_recordings.png): '
-                  + ', '.join([run.label] + [o.label for o in others]) + '.', '']
+        lines += [
+            'Recordings compared (fig3b_recordings.png): '
+            + ', '.join([run.label] + [o.label for o in others])
+            + '.',
+            '',
+        ]
     return '\n'.join(lines)

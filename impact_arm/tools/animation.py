@@ -7,6 +7,7 @@ force is the strongest /contact_wrench value since the previous frame, drawn fro
 the same saturating length as the 3D markers (io/scene_visuals.py), so no contact is missed
 between frames. Writes a GIF (pillow, which matplotlib brings) or an MP4 (needs ffmpeg).
 """
+
 from __future__ import annotations
 
 import math
@@ -18,16 +19,22 @@ from ..contract import CONTACT_WRENCH
 from ..core.errors import ImpactArmError
 
 DEFAULT_FPS = 20.0
-DEFAULT_SLOW = 10.0       # frames this much closer near impacts
-DEFAULT_WINDOW = 0.03     # s either side of an impact's contact time
+DEFAULT_SLOW = 10.0  # frames this much closer near impacts
+DEFAULT_WINDOW = 0.03  # s either side of an impact's contact time
 
 
 class AnimationError(ImpactArmError):
     """The animation cannot be made (no scene in the file, bad option, missing writer)."""
 
 
-def frame_times(t0: float, t1: float, impact_times, fps: float = DEFAULT_FPS,
-                slow: float = DEFAULT_SLOW, window: float = DEFAULT_WINDOW) -> np.ndarray:
+def frame_times(
+    t0: float,
+    t1: float,
+    impact_times,
+    fps: float = DEFAULT_FPS,
+    slow: float = DEFAULT_SLOW,
+    window: float = DEFAULT_WINDOW,
+) -> np.ndarray:
     """Simulated times of the frames from ``t0`` to ``t1``: 1/fps apart, 1/(fps·slow) apart
     within ``window`` of an impact time."""
     impacts = np.sort(np.asarray(list(impact_times), float))
@@ -43,6 +50,7 @@ def contact_forces(path):
     """(times [s], (N, 2) tangential and normal force) of /contact_wrench, or None."""
     from ..io.mcap_ros2 import iter_raw, topics_info
     from ..io.wire import wrench_stamped_fields
+
     if CONTACT_WRENCH not in topics_info(path):
         return None
     t, f = [], []
@@ -54,30 +62,43 @@ def contact_forces(path):
     return np.asarray(t)[order], np.asarray(f, float).reshape(-1, 2)[order]
 
 
-def animate(run, out_path, forces=None, fps: float = DEFAULT_FPS, slow: float = DEFAULT_SLOW,
-            window: float = DEFAULT_WINDOW, progress=None) -> int:
+def animate(
+    run,
+    out_path,
+    forces=None,
+    fps: float = DEFAULT_FPS,
+    slow: float = DEFAULT_SLOW,
+    window: float = DEFAULT_WINDOW,
+    progress=None,
+) -> int:
     """Write the animation of ``run`` (analysis.Run, with its scene) to ``out_path`` (.gif or
     .mp4); ``forces`` as ``contact_forces`` returns. Returns the number of frames."""
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     from matplotlib import animation
 
     from ..io.scene_visuals import arrow_length
+
     if run.scene is None:
         raise AnimationError(f'{run.label}: the recording holds no scene (link lengths)')
     if not (fps > 0 and slow >= 1 and window >= 0):
-        raise AnimationError(f'fps = {fps}, slow = {slow}, window = {window}: need fps > 0, '
-                             f'slow >= 1, window >= 0')
+        raise AnimationError(
+            f'fps = {fps}, slow = {slow}, window = {window}: need fps > 0, slow >= 1, window >= 0'
+        )
     ext = os.path.splitext(out_path)[1].lower()
     if ext not in ('.gif', '.mp4'):
         raise AnimationError(f'--out {out_path}: must end in .gif or .mp4')
     scene, lengths = run.scene, np.asarray(run.scene.lengths, float)
     if len(lengths) != run.q.shape[1]:
-        raise AnimationError(f'{run.label}: {run.q.shape[1]} joints recorded, the stored scene '
-                             f'has {len(lengths)} links')
-    times = frame_times(run.t[0], run.t[-1], [i['t_contact'] for i in run.impacts], fps,
-                        slow, window)
+        raise AnimationError(
+            f'{run.label}: {run.q.shape[1]} joints recorded, the stored scene '
+            f'has {len(lengths)} links'
+        )
+    times = frame_times(
+        run.t[0], run.t[-1], [i['t_contact'] for i in run.impacts], fps, slow, window
+    )
     reach = float(lengths.sum())
     fig, ax = plt.subplots(figsize=(5, 5), dpi=80)
     ax.set_xlim(-1.1 * reach, 1.1 * reach)
@@ -87,10 +108,10 @@ def animate(run, out_path, forces=None, fps: float = DEFAULT_FPS, slow: float = 
     ax.set_ylabel('y [m]')
     for s in scene.surfaces:
         ax.axhline(s.height, color='0.5', lw=3)
-    arm, = ax.plot([], [], '-o', lw=3, color='tab:blue', ms=4)
+    (arm,) = ax.plot([], [], '-o', lw=3, color='tab:blue', ms=4)
     tip = plt.Circle((0, 0), max(scene.tip_radius, 0.01 * reach), color='tab:red')
     ax.add_patch(tip)
-    arrow, = ax.plot([], [], '-', lw=2, color='tab:orange')
+    (arrow,) = ax.plot([], [], '-', lw=2, color='tab:orange')
     title = ax.set_title('')
     previous = [-math.inf]
 
@@ -113,8 +134,10 @@ def animate(run, out_path, forces=None, fps: float = DEFAULT_FPS, slow: float = 
                 j = int(np.argmax(mags))
                 if mags[j] > 0:
                     length = arrow_length(mags[j], reach)
-                    arrow.set_data([x[-1], x[-1] + length * f[sel][j, 0] / mags[j]],
-                                   [y[-1], y[-1] + length * f[sel][j, 1] / mags[j]])
+                    arrow.set_data(
+                        [x[-1], x[-1] + length * f[sel][j, 0] / mags[j]],
+                        [y[-1], y[-1] + length * f[sel][j, 1] / mags[j]],
+                    )
         previous[0] = t
         title.set_text(f't = {t:.3f} s')
         if progress and k % 100 == 0:
@@ -127,8 +150,9 @@ def animate(run, out_path, forces=None, fps: float = DEFAULT_FPS, slow: float = 
     else:
         if not animation.FFMpegWriter.isAvailable():
             plt.close(fig)
-            raise AnimationError(f'--out {out_path}: MP4 needs ffmpeg, which is not installed; '
-                                 f'write a .gif instead')
+            raise AnimationError(
+                f'--out {out_path}: MP4 needs ffmpeg, which is not installed; write a .gif instead'
+            )
         writer = animation.FFMpegWriter(fps=fps)
     try:
         anim.save(out_path, writer=writer)
@@ -141,32 +165,50 @@ def animate(run, out_path, forces=None, fps: float = DEFAULT_FPS, slow: float = 
 
 def add_arguments(parser):
     parser.add_argument('file', help='MCAP recording (live or simulate --mcap)')
-    parser.add_argument('--out', metavar='FILE',
-                        help='GIF or MP4 to write (default: runs/<file name>.gif)')
-    parser.add_argument('--fps', type=float, default=DEFAULT_FPS,
-                        help=f'frames per second of simulated time (default {DEFAULT_FPS:g})')
-    parser.add_argument('--slow', type=float, default=DEFAULT_SLOW,
-                        help=f'slow-motion factor near impacts (default {DEFAULT_SLOW:g}; '
-                             f'1 = real time throughout)')
-    parser.add_argument('--window', type=float, default=DEFAULT_WINDOW, metavar='S',
-                        help=f'seconds either side of an impact shown slowed '
-                             f'(default {DEFAULT_WINDOW:g})')
+    parser.add_argument(
+        '--out', metavar='FILE', help='GIF or MP4 to write (default: runs/<file name>.gif)'
+    )
+    parser.add_argument(
+        '--fps',
+        type=float,
+        default=DEFAULT_FPS,
+        help=f'frames per second of simulated time (default {DEFAULT_FPS:g})',
+    )
+    parser.add_argument(
+        '--slow',
+        type=float,
+        default=DEFAULT_SLOW,
+        help=f'slow-motion factor near impacts (default {DEFAULT_SLOW:g}; '
+        f'1 = real time throughout)',
+    )
+    parser.add_argument(
+        '--window',
+        type=float,
+        default=DEFAULT_WINDOW,
+        metavar='S',
+        help=f'seconds either side of an impact shown slowed (default {DEFAULT_WINDOW:g})',
+    )
 
 
 def cli(args) -> int:
     from .analysis import load
+
     out = args.out or os.path.join(
-        'runs', os.path.splitext(os.path.basename(args.file))[0] + '.gif')
+        'runs', os.path.splitext(os.path.basename(args.file))[0] + '.gif'
+    )
     if os.path.dirname(out):
         os.makedirs(os.path.dirname(out), exist_ok=True)
     from .progress import Progress
+
     line = Progress(prefix='animate: ')
 
     def say(text):
         line.show(text, log=True)
+
     run = load(args.file, progress=say)
-    frames = animate(run, out, contact_forces(args.file), args.fps, args.slow, args.window,
-                     progress=say)
+    frames = animate(
+        run, out, contact_forces(args.file), args.fps, args.slow, args.window, progress=say
+    )
     line.end()
     print(f'wrote {out} ({frames} frames)')
     return 0

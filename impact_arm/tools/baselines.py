@@ -5,6 +5,7 @@ Used only by benchmarks, as the baseline our integrator is measured against. It 
 model, the right-hand side and the phase machine's transitions with ``PhaseIntegrator``, so the
 two differ only in how they step and locate events.
 """
+
 from __future__ import annotations
 
 import time
@@ -44,8 +45,9 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
     model = ArmModel(scene)
     atol = rtol * 1e-2 if atol is None else atol
     # the integrator derives the contact atol exactly as for our own runs
-    integ = PhaseIntegrator(model, control='continuous', rtol=rtol, atol=atol,
-                            contact_rtol=contact_rtol)
+    integ = PhaseIntegrator(
+        model, control='continuous', rtol=rtol, atol=atol, contact_rtol=contact_rtol
+    )
     contact_rtol, contact_atol = integ.contact_rtol, integ.contact_atol
     st = integ.state
     builder = ImpactBuilder(model)
@@ -60,6 +62,7 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
         def event(t, y):
             eq.event_values(y, P, I, surf, st.c, st.levels, g)
             return g[slot]
+
         event.terminal = True
         event.direction = 1.0
         return event
@@ -70,7 +73,8 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
     def make_rise(s):
         # the kernel forgets a surface's dent once the tip is back above the surface
         def event(t, y):
-            return eq.tip(y[:model.n], y[model.n:2 * model.n], L)[1] - heights[s]
+            return eq.tip(y[: model.n], y[model.n : 2 * model.n], L)[1] - heights[s]
+
         event.terminal = True
         event.direction = 1.0
         return event
@@ -80,10 +84,15 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
         if st.phase == Phase.FREE:
             slots += [-1 - s for s in range(len(heights)) if st.levels[s] != heights[s]]
         free = st.phase == Phase.FREE
-        sol = solve_ivp(integ.rhs, (st.t, t_max), st.y, method=method,
-                        rtol=rtol if free else contact_rtol, atol=atol if free else contact_atol,
-                        events=[make_event(s) if s >= 0 else make_rise(-1 - s)
-                                for s in slots])
+        sol = solve_ivp(
+            integ.rhs,
+            (st.t, t_max),
+            st.y,
+            method=method,
+            rtol=rtol if free else contact_rtol,
+            atol=atol if free else contact_atol,
+            events=[make_event(s) if s >= 0 else make_rise(-1 - s) for s in slots],
+        )
         nfev += sol.nfev
         if sol.status == -1:
             raise RuntimeError(f'solve_ivp {method} failed at t = {sol.t[-1]}: {sol.message}')

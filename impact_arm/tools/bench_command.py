@@ -2,6 +2,7 @@
 not installed with the package (the package ships the product). Found next to the source
 checkout the package runs from (``pip install -e .``, ``colcon build --symlink-install``, or
 the work tree itself), or in the folder ``IMPACT_ARM_BENCH`` names."""
+
 from __future__ import annotations
 
 import os
@@ -12,8 +13,11 @@ from ..core.errors import ImpactArmError
 
 def bench_folder() -> str | None:
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    for folder in (os.environ.get('IMPACT_ARM_BENCH', ''), os.path.join(here, 'bench'),
-                   os.path.join(os.getcwd(), 'bench')):
+    for folder in (
+        os.environ.get('IMPACT_ARM_BENCH', ''),
+        os.path.join(here, 'bench'),
+        os.path.join(os.getcwd(), 'bench'),
+    ):
         if folder and os.path.isfile(os.path.join(folder, 'impact_arm_bench', '__init__.py')):
             return folder
     return None
@@ -26,6 +30,7 @@ def _benchmarks():
     if folder not in sys.path:
         sys.path.insert(0, folder)
     import impact_arm_bench
+
     return impact_arm_bench
 
 
@@ -39,7 +44,9 @@ def add_arguments(parser) -> None:
 
 def cli(args) -> int:
     if getattr(args, 'bench_run', None) is None:
-        raise ImpactArmError('the benchmarks are not installed with the package: run '
-                             '`impact-arm bench` from a clone of the repository (its bench/ '
-                             'folder), or set IMPACT_ARM_BENCH to that folder')
+        raise ImpactArmError(
+            'the benchmarks are not installed with the package: run '
+            '`impact-arm bench` from a clone of the repository (its bench/ '
+            'folder), or set IMPACT_ARM_BENCH to that folder'
+        )
     return args.bench_run(args)

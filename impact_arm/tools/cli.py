@@ -4,6 +4,7 @@ Each sub-command lives in its own small function; errors meant for the user (bad
 argument, a run that had to stop) are printed as one line on stderr with exit status 2 or 1,
 never as a traceback.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -13,8 +14,8 @@ import os
 import sys
 import time
 
-STARTED = time.perf_counter()      # the command's start, for the timings it prints
-NOTICE = []                        # the command's CompileNotice (how long it compiled)
+STARTED = time.perf_counter()  # the command's start, for the timings it prints
+NOTICE = []  # the command's CompileNotice (how long it compiled)
 
 # (the clock above starts before the package's own imports: they count in the command's time)
 from ..contract import INTEGRATOR_PRESETS  # noqa: E402
@@ -44,9 +45,13 @@ def cmd_simulate(args) -> int:
 
     scene = load_scene(args.scene)
     from ..core import jit
+
     if not jit.AVAILABLE:
-        print(f'impact-arm simulate: warning: interpreted kernel ({jit.UNAVAILABLE}), about '
-              f'100x slower. Fix: {jit.FIX}', file=sys.stderr)
+        print(
+            f'impact-arm simulate: warning: interpreted kernel ({jit.UNAVAILABLE}), about '
+            f'100x slower. Fix: {jit.FIX}',
+            file=sys.stderr,
+        )
     # refused now, not after a long run whose results would then be lost
     args.json = args.json and writable_output(args.json, '--json')
     args.mcap = args.mcap and writable_output(args.mcap, '--mcap')
@@ -57,28 +62,47 @@ def cmd_simulate(args) -> int:
     observer = None
     if args.mcap:
         from ..io.offline_mcap import OfflineRecorder
-        observer = OfflineRecorder(args.mcap, scene, control_rate=args.control_rate,
-                                   preset=args.preset, tf_rate=args.tf_rate)
+
+        observer = OfflineRecorder(
+            args.mcap,
+            scene,
+            control_rate=args.control_rate,
+            preset=args.preset,
+            tf_rate=args.tf_rate,
+        )
 
     line = Progress(prefix='  ', keep=True)
 
     def progress(cycle, cycles, impacts, t):
         line.total = cycles
-        line.show(f'cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  t = {t:.3f} s',
-                  done=cycle)
+        line.show(
+            f'cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  t = {t:.3f} s', done=cycle
+        )
 
     result = None
     try:
         # streamed: the samples go to the MCAP file as they come, none is kept
-        result = run(scene, control_rate=args.control_rate, preset=args.preset,
-                     observer=observer, progress=progress, keep_samples=False)
+        result = run(
+            scene,
+            control_rate=args.control_rate,
+            preset=args.preset,
+            observer=observer,
+            progress=progress,
+            keep_samples=False,
+        )
     finally:
         if observer is not None:
             observer.close(result)  # with the result: its summary is stored in the file
         line.end()
     print(format_table(result))
-    print(_timing(result, load_s, f'integration, {round(result.t_end * scene.publish_rate)} '
-                                  f'samples' + (', MCAP writing' if args.mcap else '')))
+    print(
+        _timing(
+            result,
+            load_s,
+            f'integration, {round(result.t_end * scene.publish_rate)} '
+            f'samples' + (', MCAP writing' if args.mcap else ''),
+        )
+    )
     if args.json:
         write_json(args.json, result.to_json())
         print(f'wrote {args.json}')
@@ -99,19 +123,23 @@ def _check_run_size(scene, args):
     samples = scene.publish_rate * scene.t_max
     if samples <= RUN_SIZE_LIMIT / 10:
         return
-    estimate = (f'publish_rate {scene.publish_rate:g} Hz x t_max {scene.t_max:g} s = '
-                f'{samples:.3g} samples: up to about {samples * SECONDS_PER_SAMPLE:.0f} s'
-                + (f' and {samples * MCAP_BYTES_PER_SAMPLE / 1e9:.1f} GB of MCAP'
-                   if args.mcap else ''))
+    estimate = (
+        f'publish_rate {scene.publish_rate:g} Hz x t_max {scene.t_max:g} s = '
+        f'{samples:.3g} samples: up to about {samples * SECONDS_PER_SAMPLE:.0f} s'
+        + (f' and {samples * MCAP_BYTES_PER_SAMPLE / 1e9:.1f} GB of MCAP' if args.mcap else '')
+    )
     if samples > RUN_SIZE_LIMIT and not args.yes:
-        raise ImpactArmError(f'{estimate}; more than {RUN_SIZE_LIMIT:.0e} samples run only '
-                             f'with --yes (or lower publish_rate or t_max)')
+        raise ImpactArmError(
+            f'{estimate}; more than {RUN_SIZE_LIMIT:.0e} samples run only '
+            f'with --yes (or lower publish_rate or t_max)'
+        )
     print(f'impact-arm simulate: {estimate}', file=sys.stderr)
 
 
 def cmd_urdf(args) -> int:
     from ..core.scene import load_scene
     from ..io.urdf import robot_description
+
     sys.stdout.write(robot_description(load_scene(args.scene), rod_radius=args.rod_radius))
     return 0
 
@@ -121,6 +149,7 @@ def _load_kernel(scene) -> float:
     call in a process reads numba's cache (~0.1-0.3 s), which is start-up, not integration.
     Returns the seconds it took."""
     from ..core.driver import SimulatedArm
+
     t0 = time.perf_counter()
     SimulatedArm(scene, scene.publish_rate, trace=False).warm_up()
     return time.perf_counter() - t0
@@ -130,22 +159,30 @@ def _timing(result, load_s, what) -> str:
     """What the printed times include, in one line."""
     total = time.perf_counter() - STARTED
     compiled = NOTICE[-1].total if NOTICE else 0.0
-    loading = ('compiling the kernel (first use of this scene shape)' if compiled > 1.0
-               else 'loading the compiled kernel')
-    return (f'timing: {result.t_end:.3f} s simulated in {result.wall_time * 1e3:.1f} ms wall '
-            f'({what}); before that {load_s:.2f} s {loading}; '
-            f'{total:.2f} s for the whole command with start-up. Repeated warm runs: '
-            f'impact-arm bench speed')
+    loading = (
+        'compiling the kernel (first use of this scene shape)'
+        if compiled > 1.0
+        else 'loading the compiled kernel'
+    )
+    return (
+        f'timing: {result.t_end:.3f} s simulated in {result.wall_time * 1e3:.1f} ms wall '
+        f'({what}); before that {load_s:.2f} s {loading}; '
+        f'{total:.2f} s for the whole command with start-up. Repeated warm runs: '
+        f'impact-arm bench speed'
+    )
 
 
 def _simulate_without_samples(scene, args, load_s=0.0) -> int:
     from ..core.simulate import format_table, run
+
     rate = scene.controller.rate if args.control_rate is None else args.control_rate
     if rate or args.mcap:
         what = '--mcap' if args.mcap else f'a sampled controller ({rate:g} Hz)'
-        raise ImpactArmError(f'--no-samples runs from event to event with continuous control: '
-                             f'{what} needs the sampled run (drop --no-samples'
-                             + (', or pass --control-rate 0)' if rate else ')'))
+        raise ImpactArmError(
+            f'--no-samples runs from event to event with continuous control: '
+            f'{what} needs the sampled run (drop --no-samples'
+            + (', or pass --control-rate 0)' if rate else ')')
+        )
     result = run(scene, samples=False, preset=args.preset)
     print(format_table(result))
     print(_timing(result, load_s, 'integration only, no samples'))
@@ -163,18 +200,24 @@ def writable_output(path, flag) -> str:
     default, is made when its parent exists (a fresh clone has none)."""
     target = os.path.realpath(path)
     runs = os.path.dirname(target)
-    if os.path.basename(runs) == 'runs' and not os.path.exists(runs) \
-            and os.path.isdir(os.path.dirname(runs)):
+    if (
+        os.path.basename(runs) == 'runs'
+        and not os.path.exists(runs)
+        and os.path.isdir(os.path.dirname(runs))
+    ):
         os.makedirs(runs, exist_ok=True)
     if os.path.isdir(target):
         raise ImpactArmError(f'{flag} {path}: is a directory')
     if os.path.exists(target) and not os.path.isfile(target):
-        raise ImpactArmError(f'{flag} {path}: not a regular file (a FIFO or device is not '
-                             f'replaced)')
+        raise ImpactArmError(
+            f'{flag} {path}: not a regular file (a FIFO or device is not replaced)'
+        )
     directory = os.path.dirname(target)
     if not os.path.isdir(directory):
-        raise ImpactArmError(f'{flag} {path}: {directory} ' + (
-            'is not a directory' if os.path.exists(directory) else 'does not exist'))
+        raise ImpactArmError(
+            f'{flag} {path}: {directory} '
+            + ('is not a directory' if os.path.exists(directory) else 'does not exist')
+        )
     if not os.access(directory, os.W_OK | os.X_OK):
         raise ImpactArmError(f'{flag} {path}: directory {directory} is not writable')
     if os.path.exists(target) and not os.access(target, os.W_OK):
@@ -199,11 +242,13 @@ def write_json(path, data):
     """Written to a temporary file next to ``path`` and renamed over it: a reader never sees
     half a file, and a failure leaves no temporary file behind."""
     import tempfile
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), prefix='.' + os.path.basename(path),
-                               suffix='.tmp')
+
+    fd, tmp = tempfile.mkstemp(
+        dir=os.path.dirname(path), prefix='.' + os.path.basename(path), suffix='.tmp'
+    )
     umask = os.umask(0)
     os.umask(umask)
-    os.fchmod(fd, 0o666 & ~umask)     # as open() would create it, not mkstemp's 0600
+    os.fchmod(fd, 0o666 & ~umask)  # as open() would create it, not mkstemp's 0600
     try:
         with os.fdopen(fd, 'w', encoding='utf-8') as f:
             json.dump(finite_or_null(data), f, indent=1, allow_nan=False)
@@ -219,28 +264,51 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
 
     p = sub.add_parser('simulate', help='integrate a scene offline (no ROS graph needed)')
     p.add_argument('--scene', default=DEFAULT_SCENE, help='scene file or installed scene name')
-    p.add_argument('--control-rate', type=_non_negative, default=None, metavar='HZ',
-                   help='sample the controller at HZ with zero-order hold (0: continuous, '
-                        'as the article; default: the scene\'s controller.rate)')
-    p.add_argument('--preset', default=None,
-                   choices=INTEGRATOR_PRESETS,
-                   help="integrator preset (default: the scene's)")
+    p.add_argument(
+        '--control-rate',
+        type=_non_negative,
+        default=None,
+        metavar='HZ',
+        help='sample the controller at HZ with zero-order hold (0: continuous, '
+        "as the article; default: the scene's controller.rate)",
+    )
+    p.add_argument(
+        '--preset',
+        default=None,
+        choices=INTEGRATOR_PRESETS,
+        help="integrator preset (default: the scene's)",
+    )
     p.add_argument('--json', metavar='FILE', help='write impacts and run summary as JSON')
     p.add_argument('--mcap', metavar='FILE', help='record the run to MCAP (ROS 2 topics)')
-    p.add_argument('--tf-rate', type=_positive, default=100.0, metavar='HZ',
-                   help='rate of /tf and /impact_markers in the MCAP file (default 100)')
-    p.add_argument('--yes', action='store_true',
-                   help=f'run even past {RUN_SIZE_LIMIT:.0e} samples (publish_rate x t_max)')
-    p.add_argument('--no-samples', action='store_true',
-                   help='impacts only: integrate from event to event without sampling or '
-                        'tracing (the fast path of studies; continuous control)')
+    p.add_argument(
+        '--tf-rate',
+        type=_positive,
+        default=100.0,
+        metavar='HZ',
+        help='rate of /tf and /impact_markers in the MCAP file (default 100)',
+    )
+    p.add_argument(
+        '--yes',
+        action='store_true',
+        help=f'run even past {RUN_SIZE_LIMIT:.0e} samples (publish_rate x t_max)',
+    )
+    p.add_argument(
+        '--no-samples',
+        action='store_true',
+        help='impacts only: integrate from event to event without sampling or '
+        'tracing (the fast path of studies; continuous control)',
+    )
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser('urdf', help="print the scene's robot description (URDF)")
     p.add_argument('--scene', default=DEFAULT_SCENE, help='scene file or installed scene name')
-    p.add_argument('--rod-radius', type=float, default=0.0, metavar='M',
-                   help='radius the rods are drawn with [m] (default 0: 1 %% of the shortest '
-                        'link)')
+    p.add_argument(
+        '--rod-radius',
+        type=float,
+        default=0.0,
+        metavar='M',
+        help='radius the rods are drawn with [m] (default 0: 1 %% of the shortest link)',
+    )
     p.set_defaults(func=cmd_urdf)
 
     for name, (module, help_text) in COMMANDS.items():
@@ -253,32 +321,53 @@ def build_parser(selected=None) -> argparse.ArgumentParser:
 # Sub-commands implemented in their own modules: ``add_arguments(parser)`` and
 # ``cli(args) -> int``. Only the selected one is imported, so `simulate` never loads rclpy.
 COMMANDS = {
-    'run': ('impact_arm.tools.runner',
-            'start simulator, controller and recorder over DDS; record to MCAP'),
-    'replay': ('impact_arm.nodes.replay',
-               'republish a recorded MCAP file with its original timing'),
-    'analyze': ('impact_arm.tools.analysis',
-                'impact table, limit cycle, Poincare sections and figures'),
-    'sweep': ('impact_arm.tools.sweep',
-              'many runs of a scene (grid/list/random/LHS) to Parquet; sweep plot'),
-    'animate': ('impact_arm.tools.animation',
-                'draw the arm, the surface and the contact force into a GIF or MP4'),
-    'study': ('impact_arm.tools.contact_study',
-              'shipped studies: contact (the contact laws against published results)'),
-    'fit': ('impact_arm.tools.fit',
-            'fit scene parameters (E, S_y, mu, ...) to the impacts of a recording'),
-    'compare': ('impact_arm.tools.compare',
-                'compare the impacts of two recordings, or of a recording and a scene'),
-    'kernel': ('impact_arm.tools.kernel',
-               "kernel dump: print the generated kernel module of a scene's shape"),
-    'bench': ('impact_arm.tools.bench_command',
-              'benchmarks from the repository\'s bench/ folder: speed, tradeoff, stress, '
-              'rates, fit, peers, ... (docs/benchmarks.md)'),
+    'run': (
+        'impact_arm.tools.runner',
+        'start simulator, controller and recorder over DDS; record to MCAP',
+    ),
+    'replay': (
+        'impact_arm.nodes.replay',
+        'republish a recorded MCAP file with its original timing',
+    ),
+    'analyze': (
+        'impact_arm.tools.analysis',
+        'impact table, limit cycle, Poincare sections and figures',
+    ),
+    'sweep': (
+        'impact_arm.tools.sweep',
+        'many runs of a scene (grid/list/random/LHS) to Parquet; sweep plot',
+    ),
+    'animate': (
+        'impact_arm.tools.animation',
+        'draw the arm, the surface and the contact force into a GIF or MP4',
+    ),
+    'study': (
+        'impact_arm.tools.contact_study',
+        'shipped studies: contact (the contact laws against published results)',
+    ),
+    'fit': (
+        'impact_arm.tools.fit',
+        'fit scene parameters (E, S_y, mu, ...) to the impacts of a recording',
+    ),
+    'compare': (
+        'impact_arm.tools.compare',
+        'compare the impacts of two recordings, or of a recording and a scene',
+    ),
+    'kernel': (
+        'impact_arm.tools.kernel',
+        "kernel dump: print the generated kernel module of a scene's shape",
+    ),
+    'bench': (
+        'impact_arm.tools.bench_command',
+        "benchmarks from the repository's bench/ folder: speed, tradeoff, stress, "
+        'rates, fit, peers, ... (docs/benchmarks.md)',
+    ),
 }
 
 
 def _attach(parser, module):
     import importlib
+
     try:
         mod = importlib.import_module(module)
     except ModuleNotFoundError as exc:

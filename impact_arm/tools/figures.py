@@ -5,6 +5,7 @@ saved without tight cropping. ``draw_all`` returns [(file name, caption)] of wha
 figure whose data the recording lacks (no scene for Figures 3 and 7, neither ``/impact_trace``
 nor a re-integrable ``/impact_report`` for 8–11) is left out, and ``analyze`` says why.
 """
+
 from __future__ import annotations
 
 import math
@@ -20,8 +21,10 @@ PHASE_NAMES = {1: 'elastic compression', 2: 'elasto-plastic compression', 3: 're
 
 def _plt():
     import matplotlib
+
     matplotlib.use('Agg', force=True)
     import matplotlib.pyplot as plt
+
     return plt
 
 
@@ -48,6 +51,7 @@ def fig3_controllers(runs, out):
     its panel, the target dotted, a zoom on the approach to the target where PD's offset and
     PID's overshoot show, and each law's numbers under its panel."""
     from .analysis import step_metrics
+
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=FIGURE_INCHES)
     styles = {'q': ('tab:blue', '-'), 'pd': ('tab:orange', '--'), 'pid': ('tab:green', '-.')}
@@ -58,17 +62,32 @@ def fig3_controllers(runs, out):
         for run in runs:
             color, style = styles.get(run.law, (None, '-'))
             for a in (ax, inset):
-                a.plot(run.t, _deg(run.q[:, k]), style, color=color, lw=1.2,
-                       label=run.label if (a is ax and k == 0) else None)
+                a.plot(
+                    run.t,
+                    _deg(run.q[:, k]),
+                    style,
+                    color=color,
+                    lw=1.2,
+                    label=run.label if (a is ax and k == 0) else None,
+                )
             m = step_metrics(run)[k]
-            settle = (f'within 0.1° from {m["settle_s"]:.2f} s'
-                      if math.isfinite(m['settle_s']) else 'never within 0.1°')
-            lines.append((f'{run.law.upper() if run.law != "q" else "Q"}: '
-                          f'{m["overshoot_deg"]:.2f}° past target, end error '
-                          f'{round(m["final_error_deg"], 2) + 0.0:+.2f}°, {settle}', color))
+            settle = (
+                f'within 0.1° from {m["settle_s"]:.2f} s'
+                if math.isfinite(m['settle_s'])
+                else 'never within 0.1°'
+            )
+            lines.append(
+                (
+                    f'{run.law.upper() if run.law != "q" else "Q"}: '
+                    f'{m["overshoot_deg"]:.2f}° past target, end error '
+                    f'{round(m["final_error_deg"], 2) + 0.0:+.2f}°, {settle}',
+                    color,
+                )
+            )
         for a in (ax, inset):
-            a.axhline(target, color='k', lw=0.8, ls=':',
-                      label='target' if (a is ax and k == 0) else None)
+            a.axhline(
+                target, color='k', lw=0.8, ls=':', label='target' if (a is ax and k == 0) else None
+            )
         inset.set_xlim(runs[0].t[-1] * 0.15, runs[0].t[-1])
         inset.set_ylim(target - 2.5, target + 2.5)
         inset.set_title('zoom: ±2.5° about the target', fontsize=7)
@@ -79,13 +98,23 @@ def fig3_controllers(runs, out):
         ax.set_title(f'({"ab"[k]}) response of link {k + 1} (target {target:g}°)', fontsize=9)
         ax.grid(alpha=0.3)
         for i, (text, color) in enumerate(lines):
-            ax.text(0.0, -0.19 - 0.065 * i, text, transform=ax.transAxes, fontsize=7,
-                    color=color)
-    fig.legend(loc='upper center', ncol=len(runs) + 1, fontsize=8, bbox_to_anchor=(0.5, 0.99),
-               frameon=False)
-    fig.text(0.5, 0.915, 'Step responses without impact (surface removed): from '
-             f'({math.degrees(runs[0].q[0, 0]):.0f}°, {math.degrees(runs[0].q[0, 1]):.0f}°) to '
-             'the down target', ha='center', fontsize=9)
+            ax.text(0.0, -0.19 - 0.065 * i, text, transform=ax.transAxes, fontsize=7, color=color)
+    fig.legend(
+        loc='upper center',
+        ncol=len(runs) + 1,
+        fontsize=8,
+        bbox_to_anchor=(0.5, 0.99),
+        frameon=False,
+    )
+    fig.text(
+        0.5,
+        0.915,
+        'Step responses without impact (surface removed): from '
+        f'({math.degrees(runs[0].q[0, 0]):.0f}°, {math.degrees(runs[0].q[0, 1]):.0f}°) to '
+        'the down target',
+        ha='center',
+        fontsize=9,
+    )
     fig.subplots_adjust(left=0.08, right=0.97, bottom=0.3, top=0.85, wspace=0.3)
     return fig
 
@@ -102,7 +131,7 @@ def fig_recordings(runs, out):
         for k, ax in enumerate(axes):
             ax.plot(t[keep], _deg(run.q[keep, k]), label=label, lw=1)
     for k, ax in enumerate(axes):
-        ax.set_xlabel('t since the recording\'s start [s]')
+        ax.set_xlabel("t since the recording's start [s]")
         ax.set_ylabel(f'q{k + 1} [deg]')
         ax.set_title(f'({"ab"[k]}) link {k + 1}', fontsize=9)
         ax.grid(alpha=0.3)
@@ -126,9 +155,12 @@ def _two_time_series(t, series, ylabels, titles):
 
 
 def fig4_link_angles(run, out):
-    return _two_time_series(run.t, [_deg(run.q[:, k]) for k in (0, 1)],
-                            [f'q{k + 1} [deg]' for k in (0, 1)],
-                            [f'({"ab"[k]}) angle q{k + 1}(t)' for k in (0, 1)])
+    return _two_time_series(
+        run.t,
+        [_deg(run.q[:, k]) for k in (0, 1)],
+        [f'q{k + 1} [deg]' for k in (0, 1)],
+        [f'({"ab"[k]}) angle q{k + 1}(t)' for k in (0, 1)],
+    )
 
 
 def fig5_phase_portraits(run, out):
@@ -163,9 +195,12 @@ def fig6_poincare(run, sections, out):
 
 
 def fig7_tip_velocity(run, v_tip, out):
-    return _two_time_series(run.t, [v_tip[:, k] for k in (0, 1)],
-                            [f'v{"xy"[k]} [m/s]' for k in (0, 1)],
-                            [f'({"ab"[k]}) tip velocity along {"xy"[k]}' for k in (0, 1)])
+    return _two_time_series(
+        run.t,
+        [v_tip[:, k] for k in (0, 1)],
+        [f'v{"xy"[k]} [m/s]' for k in (0, 1)],
+        [f'({"ab"[k]}) tip velocity along {"xy"[k]}' for k in (0, 1)],
+    )
 
 
 PHASE_COLORS = {1: 'tab:green', 2: 'tab:orange', 3: 'tab:blue'}
@@ -190,21 +225,35 @@ def _by_phase(ax, tus, y, phase, scale=1.0, x=None, legend=True, last_is_end=Tru
             continue
         if idx[0] > 0:
             idx = np.concatenate([[idx[0] - 1], idx])
-        ax.plot(x[idx], y[idx] * scale, '.-', ms=3, lw=1, color=PHASE_COLORS[p],
-                label=name if legend else None)
+        ax.plot(
+            x[idx],
+            y[idx] * scale,
+            '.-',
+            ms=3,
+            lw=1,
+            color=PHASE_COLORS[p],
+            label=name if legend else None,
+        )
     switches = np.nonzero(np.diff(phase) != 0)[0]
     ends = np.concatenate([[0], switches] + ([[len(phase) - 1]] if last_is_end else []))
     ends = ends.astype(int)
-    ax.plot(x[ends], y[ends] * scale, 'o', mfc='none', mec='k', ms=6, mew=0.9,
-            label='contact, phase switches, separation' if legend else None)
+    ax.plot(
+        x[ends],
+        y[ends] * scale,
+        'o',
+        mfc='none',
+        mec='k',
+        ms=6,
+        mew=0.9,
+        label='contact, phase switches, separation' if legend else None,
+    )
 
 
 def _note(ax, impact):
     """Where the impact's points come from, when not from /impact_trace: in the figure's
     bottom-left corner, below the axis labels."""
     if impact[3]:
-        ax.figure.text(0.005, 0.004, impact[3], ha='left', va='bottom', fontsize=7,
-                       color='0.35')
+        ax.figure.text(0.005, 0.004, impact[3], ha='left', va='bottom', fontsize=7, color='0.35')
 
 
 def fig8_indentation(impact, out):
@@ -215,21 +264,35 @@ def fig8_indentation(impact, out):
     _by_phase(ax, tus, col['delta'], col['phase'], 1e6)
     ax.set_xlabel('t since contact [µs]')
     ax.set_ylabel('indentation δ [µm]')
-    ax.set_title(f'Indentation during impact {k}: δm = {impact[2]["delta_m"] * 1e6:.1f} µm, '
-                 f'δr = {impact[2]["delta_r"] * 1e6:.1f} µm')
+    ax.set_title(
+        f'Indentation during impact {k}: δm = {impact[2]["delta_m"] * 1e6:.1f} µm, '
+        f'δr = {impact[2]["delta_r"] * 1e6:.1f} µm'
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc='upper left')
     elastic = np.nonzero(col['phase'] == 1)[0]
-    if len(elastic):   # zoom on the short elastic phase, as the article does
+    if len(elastic):  # zoom on the short elastic phase, as the article does
         last = min(elastic[-1] + 3, len(tus) - 1)
         inset = ax.inset_axes([0.6, 0.1, 0.35, 0.4])
-        _by_phase(inset, tus[:last + 1], col['delta'][:last + 1], col['phase'][:last + 1],
-                  1e6, legend=False, last_is_end=False)
+        _by_phase(
+            inset,
+            tus[: last + 1],
+            col['delta'][: last + 1],
+            col['phase'][: last + 1],
+            1e6,
+            legend=False,
+            last_is_end=False,
+        )
         t_yield, d_yield = tus[elastic[-1]], col['delta'][elastic[-1]] * 1e6
         inset.axhline(d_yield, color='k', ls=':', lw=0.8)
-        inset.annotate(f'yield onset δ = 1.9 δc = {d_yield:.2f} µm\nat {t_yield:.2f} µs',
-                       (t_yield, d_yield), xytext=(0.05, 0.7), textcoords='axes fraction',
-                       fontsize=6, arrowprops=dict(arrowstyle='->', lw=0.6))
+        inset.annotate(
+            f'yield onset δ = 1.9 δc = {d_yield:.2f} µm\nat {t_yield:.2f} µs',
+            (t_yield, d_yield),
+            xytext=(0.05, 0.7),
+            textcoords='axes fraction',
+            fontsize=6,
+            arrowprops=dict(arrowstyle='->', lw=0.6),
+        )
         _style_inset(inset, 'zoom: elastic compression (Hertz)', 't [µs]', 'δ [µm]')
     _note(ax, impact)
     _layout(fig)
@@ -245,8 +308,11 @@ def fig9_impact_velocity(impact, out):
         _by_phase(ax, tus, col[name], col['phase'], legend=i == 1)
         ax.set_xlabel('t since contact [µs]')
         ax.set_ylabel(f'{name} [m/s]')
-        ax.set_title(f'({"ab"[i]}) {("tangential", "normal")[i]} tip velocity, impact {k}: '
-                     f'{col[name][0]:.2f} → {col[name][-1]:.2f} m/s', fontsize=9)
+        ax.set_title(
+            f'({"ab"[i]}) {("tangential", "normal")[i]} tip velocity, impact {k}: '
+            f'{col[name][0]:.2f} → {col[name][-1]:.2f} m/s',
+            fontsize=9,
+        )
         ax.grid(alpha=0.3)
     axes[1].legend(fontsize=7, loc='lower right')
     _note(axes[0], impact)
@@ -264,8 +330,7 @@ def fig10_contact_force(impact, out):
         ax.plot(tus, col['F_f'] * 1e-3, 'k--', lw=0.8, label='friction force F_f')
     ax.set_xlabel('t since contact [µs]')
     ax.set_ylabel('contact force: normal F_n, friction F_f [kN]')
-    ax.set_title(f'Contact force during impact {k} (F_max = '
-                 f'{impact[2]["F_max"] * 1e-3:.2f} kN)')
+    ax.set_title(f'Contact force during impact {k} (F_max = {impact[2]["F_max"] * 1e-3:.2f} kN)')
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc='upper left')
     _note(ax, impact)
@@ -276,8 +341,14 @@ def fig10_contact_force(impact, out):
 def fig_force_indentation(impact, constants, out):
     """Normal force against indentation: the points of the impact on the model's three laws
     (Hertz to 1.9 δc, Jackson–Green to δm, restitution from δm down to δr)."""
-    from ..core.contact import (hertz_force, jackson_green_force, residual_indentation,
-                                restitution_force, restitution_radius)
+    from ..core.contact import (
+        hertz_force,
+        jackson_green_force,
+        residual_indentation,
+        restitution_force,
+        restitution_radius,
+    )
+
     plt = _plt()
     col, _ = _trace(impact)
     record = impact[2]
@@ -295,23 +366,43 @@ def fig_force_indentation(impact, constants, out):
         pm = jackson_green_force(dm, c) if dm > c.delta_yield else hertz_force(dm, c.E, c.R)
         rr = restitution_radius(dm, dr, pm, c.E)
         d3 = np.linspace(dr, dm, 400)
-        curves = [(d1, [hertz_force(d, c.E, c.R) for d in d1], 'Hertz (elastic)'),
-                  (d2, [jackson_green_force(d, c) for d in d2], 'Jackson–Green'),
-                  (d3, [restitution_force(d, dr, c.E, rr) for d in d3], 'restitution law')]
+        curves = [
+            (d1, [hertz_force(d, c.E, c.R) for d in d1], 'Hertz (elastic)'),
+            (d2, [jackson_green_force(d, c) for d in d2], 'Jackson–Green'),
+            (d3, [restitution_force(d, dr, c.E, rr) for d in d3], 'restitution law'),
+        ]
         for a in (ax, inset):
             for i, (d, force, _name) in enumerate(curves):
-                a.plot(d * 1e6, np.asarray(force) * 1e-3, color='0.6', lw=2.5, alpha=0.6,
-                       zorder=0, label='the model\'s laws: Hertz, Jackson–Green, restitution'
-                       if a is ax and i == 0 else None)
-            a.plot(d1[-1:] * 1e6, [hertz_force(dy, c.E, c.R) * 1e-3], 'x', color='k',
-                   ms=5, label='1.9 δc (Hertz → Jackson–Green)' if a is ax else None)
+                a.plot(
+                    d * 1e6,
+                    np.asarray(force) * 1e-3,
+                    color='0.6',
+                    lw=2.5,
+                    alpha=0.6,
+                    zorder=0,
+                    label="the model's laws: Hertz, Jackson–Green, restitution"
+                    if a is ax and i == 0
+                    else None,
+                )
+            a.plot(
+                d1[-1:] * 1e6,
+                [hertz_force(dy, c.E, c.R) * 1e-3],
+                'x',
+                color='k',
+                ms=5,
+                label='1.9 δc (Hertz → Jackson–Green)' if a is ax else None,
+            )
     _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta)
-    _by_phase(inset, delta, col['F_n'], col['phase'], 1e-3, x=delta, legend=False,
-              last_is_end=False)
+    _by_phase(
+        inset, delta, col['F_n'], col['phase'], 1e-3, x=delta, legend=False, last_is_end=False
+    )
     ax.set_xlabel('indentation δ [µm]')
     ax.set_ylabel('normal force F_n [kN]')
-    ax.set_title(f'Force against indentation, impact {k} (not in the article): loading, '
-                 f'unloading to δr = {record["delta_r"] * 1e6:.1f} µm', fontsize=10)
+    ax.set_title(
+        f'Force against indentation, impact {k} (not in the article): loading, '
+        f'unloading to δr = {record["delta_r"] * 1e6:.1f} µm',
+        fontsize=10,
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc='lower left', bbox_to_anchor=(0.3, 0.02))
     edge = max(4 * float(np.max(delta[col['phase'] == 1], initial=1.0)), 5.0)
@@ -327,8 +418,9 @@ def fig_force_indentation(impact, constants, out):
 def fig11_kinetic_energy(impact, out):
     plt = _plt()
     col, tus = _trace(impact)
-    links = sorted((c for c in col if c.startswith('T') and c[1:].isdigit()),
-                   key=lambda c: int(c[1:]))
+    links = sorted(
+        (c for c in col if c.startswith('T') and c[1:].isdigit()), key=lambda c: int(c[1:])
+    )
     series = [(f'link {c[1:]}', col[c]) for c in links]
     series.append(('total', np.sum([col[c] for c in links], axis=0)))
     fig, axes = plt.subplots(1, len(series), figsize=FIGURE_INCHES)
@@ -338,21 +430,32 @@ def fig11_kinetic_energy(impact, out):
         ax.set_xlabel('t since contact [µs]')
         ax.set_ylabel('kinetic energy T [J]')
         ratio = math.sqrt(y[-1] / y[0]) if y[0] > 0 and y[-1] >= 0 else math.nan
-        ax.set_title(f'({"abcdefgh"[i]}) {name}: {y[0]:.2f} → {y[-1]:.2f} J, '
-                     f'e = {ratio:.3f}', fontsize=8)
+        ax.set_title(
+            f'({"abcdefgh"[i]}) {name}: {y[0]:.2f} → {y[-1]:.2f} J, e = {ratio:.3f}', fontsize=8
+        )
         ax.grid(alpha=0.3)
-    fig.legend(*axes[0].get_legend_handles_labels(), loc='upper center', ncol=4, fontsize=7,
-               bbox_to_anchor=(0.5, 1.0))
+    fig.legend(
+        *axes[0].get_legend_handles_labels(),
+        loc='upper center',
+        ncol=4,
+        fontsize=7,
+        bbox_to_anchor=(0.5, 1.0),
+    )
     _note(axes[0], impact)
     fig.subplots_adjust(left=0.08, right=0.97, bottom=0.13, top=0.86, wspace=0.4)
     return fig
 
 
-IMPACT_FIGURES = ('fig8_indentation.png', 'fig9_impact_velocity.png', 'fig10_contact_force.png',
-                  'fig10b_force_indentation.png', 'fig11_kinetic_energy.png')
+IMPACT_FIGURES = (
+    'fig8_indentation.png',
+    'fig9_impact_velocity.png',
+    'fig10_contact_force.png',
+    'fig10b_force_indentation.png',
+    'fig11_kinetic_energy.png',
+)
 CAPTIONS = {
     'fig3_controllers.png': 'Fig. 3: step responses of the Q controller, PD and PID without '
-                            'impact, (a) link 1, (b) link 2',
+    'impact, (a) link 1, (b) link 2',
     'fig3b_recordings.png': 'Link angles of the compared recordings',
     'fig4_link_angles.png': 'Fig. 4: link angles q1(t), q2(t)',
     'fig5_phase_portraits.png': 'Fig. 5: phase portraits (q1, q2, q̇1) and (q1, q2, q̇2)',
@@ -362,13 +465,14 @@ CAPTIONS = {
     'fig9_impact_velocity.png': 'Fig. 9: tangential and normal tip velocity during the impact',
     'fig10_contact_force.png': 'Fig. 10: contact force during the impact',
     'fig10b_force_indentation.png': 'Force against indentation on the three contact laws '
-                                    '(not in the article)',
+    '(not in the article)',
     'fig11_kinetic_energy.png': 'Fig. 11: kinetic energies during the impact',
 }
 
 
-def draw_all(run, steps, sections, v_tip, impact, out, progress=None, recordings=(),
-             constants=None):
+def draw_all(
+    run, steps, sections, v_tip, impact, out, progress=None, recordings=(), constants=None
+):
     """Draw every figure the data allows into ``out``; returns [(file name, caption)].
     ``steps``: the step-response runs of Figure 3 (none: no Figure 3); ``impact``: (columns,
     rows, record, note) of the impact for Figures 8–11, or None; ``recordings``: more
@@ -378,20 +482,22 @@ def draw_all(run, steps, sections, v_tip, impact, out, progress=None, recordings
     if steps:
         jobs.append(('fig3_controllers.png', lambda: fig3_controllers(steps, out)))
     if recordings:
-        jobs.append(('fig3b_recordings.png',
-                     lambda: fig_recordings([run] + list(recordings), out)))
-    jobs += [('fig4_link_angles.png', lambda: fig4_link_angles(run, out)),
-             ('fig5_phase_portraits.png', lambda: fig5_phase_portraits(run, out)),
-             ('fig6_poincare.png', lambda: fig6_poincare(run, sections, out))]
+        jobs.append(('fig3b_recordings.png', lambda: fig_recordings([run] + list(recordings), out)))
+    jobs += [
+        ('fig4_link_angles.png', lambda: fig4_link_angles(run, out)),
+        ('fig5_phase_portraits.png', lambda: fig5_phase_portraits(run, out)),
+        ('fig6_poincare.png', lambda: fig6_poincare(run, sections, out)),
+    ]
     if v_tip is not None:
         jobs.append(('fig7_tip_velocity.png', lambda: fig7_tip_velocity(run, v_tip, out)))
     if impact is not None:
-        jobs += [('fig8_indentation.png', lambda: fig8_indentation(impact, out)),
-                 ('fig9_impact_velocity.png', lambda: fig9_impact_velocity(impact, out)),
-                 ('fig10_contact_force.png', lambda: fig10_contact_force(impact, out)),
-                 ('fig10b_force_indentation.png',
-                  lambda: fig_force_indentation(impact, constants, out)),
-                 ('fig11_kinetic_energy.png', lambda: fig11_kinetic_energy(impact, out))]
+        jobs += [
+            ('fig8_indentation.png', lambda: fig8_indentation(impact, out)),
+            ('fig9_impact_velocity.png', lambda: fig9_impact_velocity(impact, out)),
+            ('fig10_contact_force.png', lambda: fig10_contact_force(impact, out)),
+            ('fig10b_force_indentation.png', lambda: fig_force_indentation(impact, constants, out)),
+            ('fig11_kinetic_energy.png', lambda: fig11_kinetic_energy(impact, out)),
+        ]
     made = []
     for i, (name, draw) in enumerate(jobs):
         if progress:
@@ -400,7 +506,8 @@ def draw_all(run, steps, sections, v_tip, impact, out, progress=None, recordings
         caption = CAPTIONS[name]
         if name in IMPACT_FIGURES:
             caption += f' (impact {impact[2].get("index", "?")}' + (
-                f'; {impact[3]})' if impact[3] else ')')
+                f'; {impact[3]})' if impact[3] else ')'
+            )
         made.append((name, caption))
     return made
 

@@ -7,6 +7,7 @@ The method lives in core/fit.py (docs/fit.md); this module reads the recording, 
 with a progress line and writes the JSON, the fitted scene, report.md and the figures.
 Python API: ``fit_recording(...)`` returns the ``FitResult`` and writes the same files.
 """
+
 from __future__ import annotations
 
 import functools
@@ -27,8 +28,9 @@ def parse_param(text: str):
             raise ValueError
         return key.strip(), (float(lo), float(hi))
     except ValueError:
-        raise ImpactArmError(f'--param {text!r}: expected KEY=LO:HI, e.g. '
-                             f'surfaces[0].mu=0.05:1') from None
+        raise ImpactArmError(
+            f'--param {text!r}: expected KEY=LO:HI, e.g. surfaces[0].mu=0.05:1'
+        ) from None
 
 
 def default_out(recording) -> str:
@@ -36,9 +38,20 @@ def default_out(recording) -> str:
     return os.path.join('runs', f'fit_{os.path.splitext(name)[0]}')
 
 
-def fit_recording(recording, scene, params: dict, *, joints=None, states_topic=None,
-                  wrench_topic=None, out=None, json_path=None, options=None, progress=None,
-                  say=print):
+def fit_recording(
+    recording,
+    scene,
+    params: dict,
+    *,
+    joints=None,
+    states_topic=None,
+    wrench_topic=None,
+    out=None,
+    json_path=None,
+    options=None,
+    progress=None,
+    say=print,
+):
     """Read ``recording``, fit ``params`` ({key: (lo, hi)}) of ``scene`` and write
     ``out``/fitted.yaml, fit.json, report.md and the PNGs (``out`` None: the default
     runs/fit_<name>/; False: write nothing). Returns the ``FitResult``."""
@@ -46,6 +59,7 @@ def fit_recording(recording, scene, params: dict, *, joints=None, states_topic=N
     from ..core.fit import fit
     from ..core.study import Study
     from ..io.recording import read_recording
+
     n = Study(scene).scene().n_links
     rec = read_recording(recording, joints, n, states_topic or JOINT_STATES, wrench_topic)
     result = fit(rec, scene, params, options, progress)
@@ -57,6 +71,7 @@ def fit_recording(recording, scene, params: dict, *, joints=None, states_topic=N
     write_fitted_scene(scene, result.scene_overrides, fitted, recording)
     result.scene_path = os.path.abspath(fitted)
     from .cli import write_json
+
     for path in filter(None, [os.path.join(out, 'fit.json'), json_path]):
         write_json(path, result.to_json())
         say(f'wrote {path}')
@@ -76,14 +91,17 @@ def write_fitted_scene(scene, values: dict, path, recording=''):
 
     from ..core.scene import parse_scene
     from ..core.study import Study, apply_overrides
+
     study = Study(scene)
     data = apply_overrides(study.data, values)
-    parse_scene(data, origin=path)          # refuse now rather than hand out a broken file
+    parse_scene(data, origin=path)  # refuse now rather than hand out a broken file
     if isinstance(data.get('name'), str):
         data['name'] = data['name'] + '_fitted'
     text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
-    head = (f'# {os.path.basename(path)}: {study.origin} with values fitted to '
-            f'{os.fspath(recording)} by impact-arm fit\n')
+    head = (
+        f'# {os.path.basename(path)}: {study.origin} with values fitted to '
+        f'{os.fspath(recording)} by impact-arm fit\n'
+    )
     with open(path, 'w', encoding='utf-8') as f:
         f.write(head + ''.join(f'#   {k} = {v:.6g}\n' for k, v in values.items()) + text)
 
@@ -93,51 +111,82 @@ def _fmt(v):
 
 
 def report_text(result, recording, scene) -> str:
-    lines = [f'# Fit of {os.fspath(recording)}', '',
-             f'Scene: `{scene}` → fitted scene `{result.scene_path}`', '',
-             f'**Verdict: {result.verdict}**', '',
-             (f'{result.impacts_used} impacts used; '
-              f'{"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
-             f'χ² = {result.chi2:.4g} over {result.dof} degrees of freedom '
-             f'(χ²/dof = {result.chi2 / result.dof:.3g}); residual rms {result.residual_rms:.3g} '
-             f'rad/s against a noise rms of {result.noise_rms:.3g} rad/s; '
-             f'{result.evaluations} model evaluations in {result.wall_time:.2f} s.'), '',
-             '| parameter | start | fitted | 95 % interval | identified |',
-             '|---|---:|---:|---|---|']
+    lines = [
+        f'# Fit of {os.fspath(recording)}',
+        '',
+        f'Scene: `{scene}` → fitted scene `{result.scene_path}`',
+        '',
+        f'**Verdict: {result.verdict}**',
+        '',
+        (
+            f'{result.impacts_used} impacts used; '
+            f'{"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
+            f'χ² = {result.chi2:.4g} over {result.dof} degrees of freedom '
+            f'(χ²/dof = {result.chi2 / result.dof:.3g}); residual rms {result.residual_rms:.3g} '
+            f'rad/s against a noise rms of {result.noise_rms:.3g} rad/s; '
+            f'{result.evaluations} model evaluations in {result.wall_time:.2f} s.'
+        ),
+        '',
+        '| parameter | start | fitted | 95 % interval | identified |',
+        '|---|---:|---:|---|---|',
+    ]
     for key, p in result.parameters.items():
         ident = 'yes' if p['identifiable'] else f'no ({p.get("why", "correlated")})'
-        lines.append(f'| `{key}` | {_fmt(p["start"])} | {_fmt(p["value"])} | '
-                     f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}] | {ident}'
-                     + (' (at a bound)' if p['at_bound'] else '') + ' |')
+        lines.append(
+            f'| `{key}` | {_fmt(p["start"])} | {_fmt(p["value"])} | '
+            f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}] | {ident}'
+            + (' (at a bound)' if p['at_bound'] else '')
+            + ' |'
+        )
     if result.cannot_tell_apart:
-        lines += ['', 'The data cannot tell apart: ' + '; '.join(
-            ' and '.join(f'`{k}`' for k in pair) for pair in result.cannot_tell_apart)
-            + ' (|correlation| > 0.95): fix one of them in the scene and fit the other.']
+        lines += [
+            '',
+            'The data cannot tell apart: '
+            + '; '.join(' and '.join(f'`{k}`' for k in pair) for pair in result.cannot_tell_apart)
+            + ' (|correlation| > 0.95): fix one of them in the scene and fit the other.',
+        ]
     if result.correlations:
-        lines += ['', 'Correlations: ' + ', '.join(f'{k}: {_fmt(v)}'
-                                                   for k, v in result.correlations.items())]
+        lines += [
+            '',
+            'Correlations: ' + ', '.join(f'{k}: {_fmt(v)}' for k, v in result.correlations.items()),
+        ]
     noise = result.noise
-    lines += ['', f'Noise estimated from the free flight: positions '
-                  f'{", ".join(_fmt(x) for x in noise["position"])} rad, rates '
-                  f'{", ".join(_fmt(x) for x in noise["velocity"])} rad/s, efforts '
-                  f'{", ".join(_fmt(x) for x in noise["effort"])} N m'
-                  + (f', wrench {", ".join(_fmt(x) for x in noise["wrench"])} N'
-                     if 'wrench' in noise else '') + '.',
-              f'Effort timing used between samples: {result.timing}.', '',
-              ('| # | t [s] | impact speed [m/s] | CoR recorded | CoR fitted | '
-              'rate residual [rad/s] | whitened rms |'), '|---:|---:|---:|---:|---:|---|---:|']
+    lines += [
+        '',
+        f'Noise estimated from the free flight: positions '
+        f'{", ".join(_fmt(x) for x in noise["position"])} rad, rates '
+        f'{", ".join(_fmt(x) for x in noise["velocity"])} rad/s, efforts '
+        f'{", ".join(_fmt(x) for x in noise["effort"])} N m'
+        + (f', wrench {", ".join(_fmt(x) for x in noise["wrench"])} N' if 'wrench' in noise else '')
+        + '.',
+        f'Effort timing used between samples: {result.timing}.',
+        '',
+        (
+            '| # | t [s] | impact speed [m/s] | CoR recorded | CoR fitted | '
+            'rate residual [rad/s] | whitened rms |'
+        ),
+        '|---:|---:|---:|---:|---:|---|---:|',
+    ]
     for k, row in enumerate(result.per_impact):
         if row.get('error'):
-            lines.append(f'| {k + 1} | {row["t"]:.4f} | {row["impact_speed"]:.4g} | | | '
-                         f'{row["error"]} | |')
+            lines.append(
+                f'| {k + 1} | {row["t"]:.4f} | {row["impact_speed"]:.4g} | | | {row["error"]} | |'
+            )
             continue
         res = np.array(row['residual_rates'][0])
         wr = float(np.sqrt(np.mean(np.square(row['whitened']))))
-        lines.append(f'| {k + 1} | {row["t"]:.4f} | {row["impact_speed"]:.4g} | '
-                     f'{row["cor_recorded"]:.4f} | {row["cor_fitted"]:.4f} | '
-                     f'{", ".join(f"{x:+.2e}" for x in res)} | {wr:.2f} |')
-    lines += ['', '![joint rates and wrench around the impacts](impacts.png)', '',
-              '![CoR against impact speed](cor.png)', '']
+        lines.append(
+            f'| {k + 1} | {row["t"]:.4f} | {row["impact_speed"]:.4g} | '
+            f'{row["cor_recorded"]:.4f} | {row["cor_fitted"]:.4f} | '
+            f'{", ".join(f"{x:+.2e}" for x in res)} | {wr:.2f} |'
+        )
+    lines += [
+        '',
+        '![joint rates and wrench around the impacts](impacts.png)',
+        '',
+        '![CoR against impact speed](cor.png)',
+        '',
+    ]
     if result.notes:
         lines += ['Notes:', ''] + [f'- {x}' for x in result.notes] + ['']
     return '\n'.join(lines)
@@ -150,36 +199,53 @@ def _ms_from(origin, t):
 def write_figures(result, out) -> list:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
     from ..core.fit import predict_impact
+
     problem = result.problem
     model = problem.model([result.scene_overrides[p.key] for p in problem.specs])
     rec = result.recording
     wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     made = []
     rows = 2 if rec.wrench is not None else 1
-    fig, axes = plt.subplots(rows, max(len(wins), 1), figsize=(4.2 * max(len(wins), 1),
-                                                               3.4 * rows), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, max(len(wins), 1), figsize=(4.2 * max(len(wins), 1), 3.4 * rows), squeeze=False
+    )
     colors = ['tab:blue', 'tab:orange', 'tab:green', 'tab:red']
     for c, w in enumerate(wins):
         dt = w.t_b - w.t_a
         dense = np.linspace(w.t_a, w.post_t[-1], 80)
-        extra = list(dense) + (list(rec.wrench_t[(rec.wrench_t > w.t_a)
-                                                 & (rec.wrench_t <= w.post_t[-1])])
-                               if rec.wrench is not None else [])
+        extra = list(dense) + (
+            list(rec.wrench_t[(rec.wrench_t > w.t_a) & (rec.wrench_t <= w.post_t[-1])])
+            if rec.wrench is not None
+            else []
+        )
         pred = predict_impact(model, w, problem.timing, dense=extra)
         ax = axes[0][c]
         lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
         sel = (rec.t >= lo) & (rec.t <= hi)
         t_ms = functools.partial(_ms_from, w.t_c)
         for j in range(rec.n):
-            ax.plot(t_ms(rec.t[sel]), rec.velocity[sel, j], 'o', ms=3, color=colors[j % 4],
-                    label=f'{rec.joints[j]} recorded')
+            ax.plot(
+                t_ms(rec.t[sel]),
+                rec.velocity[sel, j],
+                'o',
+                ms=3,
+                color=colors[j % 4],
+                label=f'{rec.joints[j]} recorded',
+            )
             if not pred.error:
-                ax.plot(t_ms(pred.path[:, 0]), pred.path[:, 1 + j], '-', color=colors[j % 4],
-                        lw=1, label=f'{rec.joints[j]} fitted')
+                ax.plot(
+                    t_ms(pred.path[:, 0]),
+                    pred.path[:, 1 + j],
+                    '-',
+                    color=colors[j % 4],
+                    lw=1,
+                    label=f'{rec.joints[j]} fitted',
+                )
         ax.set_xlabel('time from contact [ms]')
         ax.set_ylabel('joint rate [rad/s]')
         ax.set_title(f'impact at t = {w.t_c:.3f} s', fontsize=9)
@@ -188,19 +254,38 @@ def write_figures(result, out) -> list:
         if rows == 2:
             ax = axes[1][c]
             wsel = (rec.wrench_t >= lo) & (rec.wrench_t <= hi)
-            ax.plot(t_ms(rec.wrench_t[wsel]), rec.wrench[wsel, 1], 's', ms=3, color='k',
-                    label='normal recorded')
-            ax.plot(t_ms(rec.wrench_t[wsel]), rec.wrench[wsel, 0], '^', ms=3, color='tab:gray',
-                    label='tangential recorded')
+            ax.plot(
+                t_ms(rec.wrench_t[wsel]),
+                rec.wrench[wsel, 1],
+                's',
+                ms=3,
+                color='k',
+                label='normal recorded',
+            )
+            ax.plot(
+                t_ms(rec.wrench_t[wsel]),
+                rec.wrench[wsel, 0],
+                '^',
+                ms=3,
+                color='tab:gray',
+                label='tangential recorded',
+            )
             if not pred.error and len(pred.path):
                 dtw = float(np.median(np.diff(rec.wrench_t)))
                 ts = rec.wrench_t[wsel]
                 ts = ts[(ts > w.t_a) & (ts <= w.post_t[-1])]
                 for col, mark, name in ((4, 'x', 'normal'), (3, '+', 'tangential')):
-                    cum = np.interp(ts, pred.path[:, 0], pred.path[:, col]) - \
-                        np.interp(ts - dtw, pred.path[:, 0], pred.path[:, col])
-                    ax.plot(t_ms(ts), cum / dtw, mark, ms=9,
-                            color='tab:red' if col == 4 else 'tab:purple', label=f'{name} fitted')
+                    cum = np.interp(ts, pred.path[:, 0], pred.path[:, col]) - np.interp(
+                        ts - dtw, pred.path[:, 0], pred.path[:, col]
+                    )
+                    ax.plot(
+                        t_ms(ts),
+                        cum / dtw,
+                        mark,
+                        ms=9,
+                        color='tab:red' if col == 4 else 'tab:purple',
+                        label=f'{name} fitted',
+                    )
             ax.set_xlabel('time from contact [ms]')
             ax.set_ylabel('period-averaged force [N]')
             if c == 0:
@@ -214,12 +299,24 @@ def write_figures(result, out) -> list:
 
     good = [r for r in result.per_impact if not r.get('error')]
     fig, ax = plt.subplots(figsize=(5.5, 4))
-    ax.plot([r['impact_speed'] for r in good], [r['cor_recorded'] for r in good], 'o',
-            label='recorded')
-    ax.plot([r['impact_speed'] for r in good], [r['cor_fitted'] for r in good], 'x', ms=8,
-            label='fitted scene')
-    ax.plot([r['impact_speed'] for r in good], [r['cor_start'] for r in good], '+', ms=8,
-            color='tab:gray', label='starting scene')
+    ax.plot(
+        [r['impact_speed'] for r in good], [r['cor_recorded'] for r in good], 'o', label='recorded'
+    )
+    ax.plot(
+        [r['impact_speed'] for r in good],
+        [r['cor_fitted'] for r in good],
+        'x',
+        ms=8,
+        label='fitted scene',
+    )
+    ax.plot(
+        [r['impact_speed'] for r in good],
+        [r['cor_start'] for r in good],
+        '+',
+        ms=8,
+        color='tab:gray',
+        label='starting scene',
+    )
     ax.set_xlabel('impact speed (tip, normal) [m/s]')
     ax.set_ylabel('kinematic coefficient of restitution [-]')
     ax.set_title('CoR against impact speed', fontsize=10)
@@ -234,30 +331,57 @@ def write_figures(result, out) -> list:
 
 def add_arguments(parser):
     parser.add_argument('recording', help='rosbag2 folder (metadata.yaml + MCAP) or MCAP file')
-    parser.add_argument('--scene', default='paper',
-                        help='scene file or installed name: the fixed rest and the start')
-    parser.add_argument('--param', action='append', default=[], metavar='KEY=LO:HI',
-                        help='a scene key path to fit within bounds (repeat), e.g. '
-                             'surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9')
-    parser.add_argument('--joints', default=None, metavar='A,B,...',
-                        help='joint names in the joint states, base first (default '
-                             'joint1..jointN)')
-    parser.add_argument('--states-topic', default=None, metavar='T',
-                        help='sensor_msgs/JointState topic (default /joint_states)')
-    parser.add_argument('--wrench-topic', default=None, metavar='T',
-                        help='geometry_msgs/WrenchStamped topic (default /contact_wrench if '
-                             'recorded; without it the fit uses the joint states alone)')
-    parser.add_argument('--no-wrench', action='store_true',
-                        help='ignore a recorded wrench: fit from the joint states alone')
+    parser.add_argument(
+        '--scene',
+        default='paper',
+        help='scene file or installed name: the fixed rest and the start',
+    )
+    parser.add_argument(
+        '--param',
+        action='append',
+        default=[],
+        metavar='KEY=LO:HI',
+        help='a scene key path to fit within bounds (repeat), e.g. '
+        'surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9',
+    )
+    parser.add_argument(
+        '--joints',
+        default=None,
+        metavar='A,B,...',
+        help='joint names in the joint states, base first (default joint1..jointN)',
+    )
+    parser.add_argument(
+        '--states-topic',
+        default=None,
+        metavar='T',
+        help='sensor_msgs/JointState topic (default /joint_states)',
+    )
+    parser.add_argument(
+        '--wrench-topic',
+        default=None,
+        metavar='T',
+        help='geometry_msgs/WrenchStamped topic (default /contact_wrench if '
+        'recorded; without it the fit uses the joint states alone)',
+    )
+    parser.add_argument(
+        '--no-wrench',
+        action='store_true',
+        help='ignore a recorded wrench: fit from the joint states alone',
+    )
     parser.add_argument('--json', default=None, metavar='OUT', help='also write the JSON here')
-    parser.add_argument('--out', default=None, metavar='DIR',
-                        help='output folder (default runs/fit_<recording name>/)')
+    parser.add_argument(
+        '--out',
+        default=None,
+        metavar='DIR',
+        help='output folder (default runs/fit_<recording name>/)',
+    )
 
 
 def cli(args) -> int:
     from ..core.fit import FitOptions
     from .cli import writable_output
     from .progress import Progress
+
     params = dict(parse_param(p) for p in args.param)
     if not params:
         raise ImpactArmError('--param: give at least one KEY=LO:HI to fit')
@@ -269,19 +393,31 @@ def cli(args) -> int:
     def progress(text, done=None, total=None):
         line.total = total
         line.show(text, done=done, log=done is None or (total and done == total))
+
     try:
-        result = fit_recording(args.recording, args.scene, params, joints=joints,
-                               states_topic=args.states_topic, wrench_topic=args.wrench_topic,
-                               out=args.out, json_path=args.json,
-                               options=FitOptions(use_wrench=not args.no_wrench),
-                               progress=progress)
+        result = fit_recording(
+            args.recording,
+            args.scene,
+            params,
+            joints=joints,
+            states_topic=args.states_topic,
+            wrench_topic=args.wrench_topic,
+            out=args.out,
+            json_path=args.json,
+            options=FitOptions(use_wrench=not args.no_wrench),
+            progress=progress,
+        )
     finally:
         line.end()
     for key, p in result.parameters.items():
-        print(f'{key} = {p["value"]:.6g}  95 % [{p["ci95"][0]:.6g}, {p["ci95"][1]:.6g}]'
-              + ('' if p['identifiable'] else '  NOT identified by these data'))
+        print(
+            f'{key} = {p["value"]:.6g}  95 % [{p["ci95"][0]:.6g}, {p["ci95"][1]:.6g}]'
+            + ('' if p['identifiable'] else '  NOT identified by these data')
+        )
     if result.cannot_tell_apart:
         print('cannot tell apart: ' + '; '.join(' ~ '.join(p) for p in result.cannot_tell_apart))
-    print(f'{result.impacts_used} impacts, residual rms {result.residual_rms:.3g} rad/s, '
-          f'noise rms {result.noise_rms:.3g} rad/s: {result.verdict}')
+    print(
+        f'{result.impacts_used} impacts, residual rms {result.residual_rms:.3g} rad/s, '
+        f'noise rms {result.noise_rms:.3g} rad/s: {result.verdict}'
+    )
     return 0 if result.fits else 1

@@ -1,6 +1,7 @@
 """impact-arm kernel dump: the generated kernel module of a scene's shape (links, gravity,
 contact, friction, PID integral states), as equations.py writes it: the module numba
 compiles, for reading or for a debugger. ``--path`` prints where the file is instead."""
+
 from __future__ import annotations
 
 import sys
@@ -16,6 +17,7 @@ def add_arguments(parser):
 def cli(args) -> int:
     from ..core.model import ArmModel
     from ..core.scene import load_scene, resolve_scene_path
+
     module = ArmModel(load_scene(resolve_scene_path(args.scene))).eq
     if args.path:
         print(module.__file__)

@@ -5,6 +5,7 @@ the fraction done and an estimate of the time left. Elsewhere (logs, pipes, CI) 
 pile up, so only the updates the caller marks as worth a line (``log=True``) are printed, one
 per line, without ETA noise.
 """
+
 from __future__ import annotations
 
 import sys
@@ -73,20 +74,20 @@ class CompileNotice:
     followed for ``SETTLE`` seconds (a first run compiles in a few bursts: one notice for
     all). A compile that is over within a second says nothing. Use as a context manager."""
 
-    QUIET = 1.0         # s: shorter compiles are not worth a line
-    SETTLE = 1.5        # s without a compile before the notice ends
-    LOG_EVERY = 10.0    # s between lines off a terminal
+    QUIET = 1.0  # s: shorter compiles are not worth a line
+    SETTLE = 1.5  # s without a compile before the notice ends
+    LOG_EVERY = 10.0  # s between lines off a terminal
 
     def __init__(self, stream=None, clock=time.monotonic, prefix=''):
         self.stream = sys.stderr if stream is None else stream
         self.clock = clock
         self.prefix = prefix
         self.tty = self.stream.isatty()
-        self.total = 0.0            # s compiled in this process so far
-        self._burst_start = None    # start of the compile running now
-        self._first = None          # start of the first compile of this notice
-        self._idle_since = None     # end of the last compile (None while one runs)
-        self._compiled = 0.0        # s compiled within this notice
+        self.total = 0.0  # s compiled in this process so far
+        self._burst_start = None  # start of the compile running now
+        self._first = None  # start of the first compile of this notice
+        self._idle_since = None  # end of the last compile (None while one runs)
+        self._compiled = 0.0  # s compiled within this notice
         self._shown = False
         self._logged = 0.0
         self._lock = threading.Lock()
@@ -95,6 +96,7 @@ class CompileNotice:
 
     def __enter__(self):
         from ..core import jit
+
         self._remove = jit.add_compile_hook(self._start, self._end)
         return self
 
@@ -134,8 +136,10 @@ class CompileNotice:
         if self._first is None:
             return
         if self._shown:
-            self._write(f'{COMPILE_NOTICE}: compiled in {self._compiled:.0f} s, cached for '
-                        f'next time', final=True)
+            self._write(
+                f'{COMPILE_NOTICE}: compiled in {self._compiled:.0f} s, cached for next time',
+                final=True,
+            )
         self._first, self._idle_since, self._shown = None, None, False
 
     def _tick(self):
@@ -154,8 +158,7 @@ class CompileNotice:
                 if not self._shown:
                     self._shown = True
                     self._logged = elapsed
-                    self._write(f'{COMPILE_NOTICE} ...' + (f' {elapsed:.0f} s' if self.tty
-                                                            else ''))
+                    self._write(f'{COMPILE_NOTICE} ...' + (f' {elapsed:.0f} s' if self.tty else ''))
                 elif self.tty:
                     self._write(f'{COMPILE_NOTICE} ... {elapsed:.0f} s')
                 elif elapsed - self._logged >= self.LOG_EVERY:

@@ -6,6 +6,7 @@ machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and on a domain nobody else us
 the user chose otherwise. Every child is ended by its PID on success, failure or Ctrl-C, and
 dies with this process even if it is killed (PR_SET_PDEATHSIG).
 """
+
 from __future__ import annotations
 
 import json
@@ -18,12 +19,18 @@ import threading
 import time
 
 from .. import contract
-from ..contract import (COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, FEEDBACK_LAWS, IMPACT_REPORT,
-                        JOINT_STATES)
+from ..contract import (
+    COMMANDS,
+    CONTACT_WRENCH,
+    DIAGNOSTICS,
+    FEEDBACK_LAWS,
+    IMPACT_REPORT,
+    JOINT_STATES,
+)
 from ..core.errors import ImpactArmError
 from .progress import Progress
 
-NODES = ('recorder', 'simulator', 'controller')       # start order (the arm moves with the
+NODES = ('recorder', 'simulator', 'controller')  # start order (the arm moves with the
 # first command, so the controller comes last, once the recorder listens)
 STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, recorder last
 # what the recorder must have matched before the first command (the commands themselves: the
@@ -33,21 +40,37 @@ SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT, DIAGNOSTICS)
 
 def add_arguments(parser):
     parser.add_argument('--scene', default='paper', help='scene file or installed scene name')
-    parser.add_argument('--mode', choices=('realtime', 'lockstep'), default='lockstep',
-                        help='lockstep (default): one period per controller command, '
-                             'deterministic, as fast as the loop allows; realtime: paced by '
-                             'the wall clock like hardware (the article\'s stiff gains need a '
-                             'machine that keeps every 1 ms deadline)')
-    parser.add_argument('--rate', type=float, default=1000.0, metavar='HZ',
-                        help='publish and control rate (default 1000)')
-    parser.add_argument('--law', choices=FEEDBACK_LAWS, default=None,
-                        help="control law (default: the scene's)")
-    parser.add_argument('--name', default=None,
-                        help='recording name: runs/NAME.mcap (default: scene and time)')
+    parser.add_argument(
+        '--mode',
+        choices=('realtime', 'lockstep'),
+        default='lockstep',
+        help='lockstep (default): one period per controller command, '
+        'deterministic, as fast as the loop allows; realtime: paced by '
+        "the wall clock like hardware (the article's stiff gains need a "
+        'machine that keeps every 1 ms deadline)',
+    )
+    parser.add_argument(
+        '--rate',
+        type=float,
+        default=1000.0,
+        metavar='HZ',
+        help='publish and control rate (default 1000)',
+    )
+    parser.add_argument(
+        '--law', choices=FEEDBACK_LAWS, default=None, help="control law (default: the scene's)"
+    )
+    parser.add_argument(
+        '--name', default=None, help='recording name: runs/NAME.mcap (default: scene and time)'
+    )
     parser.add_argument('--out', default='runs', help='directory of the recording')
     parser.add_argument('--no-record', action='store_true', help='do not start the recorder')
-    parser.add_argument('--timeout', type=float, default=None, metavar='S',
-                        help="give up after S wall seconds (default: 3 x the scene's t_max)")
+    parser.add_argument(
+        '--timeout',
+        type=float,
+        default=None,
+        metavar='S',
+        help="give up after S wall seconds (default: 3 x the scene's t_max)",
+    )
 
 
 def cli(args) -> int:
@@ -71,6 +94,7 @@ def cli(args) -> int:
         # raised here, KeyboardInterrupt can land inside an rclpy call, whose pybind11 layer
         # turns it into a RuntimeError traceback: flag it, the run's loops stop between calls
         run.interrupted.set()
+
     # Ctrl-C and SIGTERM stop the run the same orderly way (even if SIGINT was ignored, as
     # for a background job of a non-interactive shell)
     signal.signal(signal.SIGINT, interrupt)
@@ -83,23 +107,36 @@ def cli(args) -> int:
     finally:
         run.line.end()
         codes = run.stop()
-    result = RunResult(scene=scene, impacts=run.impacts, t_end=run.sim_time,
-                       rhs_evaluations=run.rhs_evaluations, wall_time=run.wall,
-                       stop_reason=StopReason.CYCLES_COMPLETED if outcome == 'completed' else
-                       StopReason.INTERRUPTED if outcome == 'interrupted' else
-                       StopReason.FAILED, stop_detail=outcome)
+    result = RunResult(
+        scene=scene,
+        impacts=run.impacts,
+        t_end=run.sim_time,
+        rhs_evaluations=run.rhs_evaluations,
+        wall_time=run.wall,
+        stop_reason=StopReason.CYCLES_COMPLETED
+        if outcome == 'completed'
+        else StopReason.INTERRUPTED
+        if outcome == 'interrupted'
+        else StopReason.FAILED,
+        stop_detail=outcome,
+    )
     print(format_table(result))
     if args.mode == 'lockstep' and run.wall > 0:
-        print(f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
-              f'first command to the last impact; the nodes\' start-up not included), '
-              f'real-time factor {run.sim_time / run.wall:.2f}')
+        print(
+            f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
+            f"first command to the last impact; the nodes' start-up not included), "
+            f'real-time factor {run.sim_time / run.wall:.2f}'
+        )
     elif run.diagnostics:
         d = run.diagnostics
-        print(f"realtime: {d.get('overruns', '?')} overruns; worst period compute "
-              f"{d.get('compute_worst_us', '?')} us of {d.get('period_us', '?')} us")
+        print(
+            f'realtime: {d.get("overruns", "?")} overruns; worst period compute '
+            f'{d.get("compute_worst_us", "?")} us of {d.get("period_us", "?")} us'
+        )
     incomplete = False
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
+
         check = check_recording(output, args.rate)
         print(f'wrote {output}: {check.summary()}')
         # lockstep waits for the recorder: a gap there is a defect, not load
@@ -126,11 +163,21 @@ def precompile(scene, rate):
     run of a scene shape, 20-45 s of silence before the arm moves."""
     from ..core.control import CycleController
     from ..core.driver import SimulatedArm
+
     arm = SimulatedArm(scene, rate, trace=False)
     arm.warm_up()
     c = scene.controller
-    ctrl = CycleController(arm.model, 'q', c.kp, c.kd, c.ki, c.down_target, c.up_target,
-                           c.switch_height, scene.surfaces[0].height if scene.surfaces else 0.0)
+    ctrl = CycleController(
+        arm.model,
+        'q',
+        c.kp,
+        c.kd,
+        c.ki,
+        c.down_target,
+        c.up_target,
+        c.switch_height,
+        scene.surfaces[0].height if scene.surfaces else 0.0,
+    )
     for ctrl.law in ('q', 'pid'):
         ctrl.torque(scene.q0, scene.qd0)
     arm.model.tip(scene.q0, scene.qd0)
@@ -152,6 +199,7 @@ def free_domain(env, tries=5, listen=0.3) -> int:
     """A ROS_DOMAIN_ID in 1..101 on which no participant answers within ``listen`` s."""
     import rclpy
     from rclpy.context import Context
+
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = env['ROS_AUTOMATIC_DISCOVERY_RANGE']
     candidates = random.sample(range(1, 102), tries)
     for domain in candidates:
@@ -173,10 +221,11 @@ def _die_with_parent():
     """In the child: get SIGTERM when the runner dies, however it dies."""
     try:
         import ctypes
+
         ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except OSError:
         pass
-    os.setpgrp()   # Ctrl-C reaches the runner only; it stops the nodes in order
+    os.setpgrp()  # Ctrl-C reaches the runner only; it stops the nodes in order
 
 
 def simulator_diagnostics(msg):
@@ -192,7 +241,7 @@ def simulator_diagnostics(msg):
     return None
 
 
-RECORDER_READER = '_recorder_reader'   # the recorder's reader node (nodes/_runner.reader_node)
+RECORDER_READER = '_recorder_reader'  # the recorder's reader node (nodes/_runner.reader_node)
 
 
 class RecorderProgress:
@@ -202,9 +251,11 @@ class RecorderProgress:
 
     def __init__(self, node):
         from builtin_interfaces.msg import Time
+
         self.written_until = None
         self.subscription = node.create_subscription(
-            Time, contract.RECORDER_PROGRESS, self._on_progress, contract.PROGRESS_QOS.to_rclpy())
+            Time, contract.RECORDER_PROGRESS, self._on_progress, contract.PROGRESS_QOS.to_rclpy()
+        )
 
     def _on_progress(self, msg):
         self.written_until = msg.sec * 1_000_000_000 + msg.nanosec
@@ -212,9 +263,14 @@ class RecorderProgress:
 
 def recorder_subscribed(node) -> set:
     """The simulator topics the recorder's reader subscribes to, as ``node`` sees the graph."""
-    return {topic for topic in SIMULATOR_TOPICS
-            if any(info.node_name == RECORDER_READER
-                   for info in node.get_subscriptions_info_by_topic(topic))}
+    return {
+        topic
+        for topic in SIMULATOR_TOPICS
+        if any(
+            info.node_name == RECORDER_READER
+            for info in node.get_subscriptions_info_by_topic(topic)
+        )
+    }
 
 
 def ready_for_commands(node, recorder=None) -> bool:
@@ -226,19 +282,25 @@ def ready_for_commands(node, recorder=None) -> bool:
     unrecorded: a subscription in the graph is not a matched reader (it may match seconds
     later); a written sample is proof."""
     listeners = 1 if recorder is not None else 0
-    if not (node.count_publishers(JOINT_STATES) >= 1
-            and node.count_subscribers(COMMANDS) >= 1 + listeners):
+    if not (
+        node.count_publishers(JOINT_STATES) >= 1
+        and node.count_subscribers(COMMANDS) >= 1 + listeners
+    ):
         return False
     if recorder is None:
         return True
-    return recorder.written_until is not None and \
-        recorder_subscribed(node) == set(SIMULATOR_TOPICS)
+    return recorder.written_until is not None and recorder_subscribed(node) == set(SIMULATOR_TOPICS)
 
 
 class Run:
     def __init__(self, scene, scene_path, args, output, env):
-        self.scene, self.scene_path, self.args, self.output, self.env = \
-            scene, scene_path, args, output, env
+        self.scene, self.scene_path, self.args, self.output, self.env = (
+            scene,
+            scene_path,
+            args,
+            output,
+            env,
+        )
         self.procs, self.logs = {}, {}
         self.impacts = []
         self.diagnostics = {}
@@ -246,7 +308,7 @@ class Run:
         self.rhs_evaluations = 0
         self.wall = 0.0
         self.node = None
-        self.interrupted = threading.Event()    # set by the CLI's SIGINT/SIGTERM handler
+        self.interrupted = threading.Event()  # set by the CLI's SIGINT/SIGTERM handler
         self._reported = 0
         self.stopping = False
         self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
@@ -254,21 +316,34 @@ class Run:
 
     def command(self, node):
         a = self.args
-        params = {'simulator': [f'scene:={self.scene_path}', f'publish_rate:={a.rate}',
-                                f'mode:={a.mode}',
-                                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}']
-                  # lockstep: the simulator waits for the recorder, so nothing is lost
-                  + ([f'recorder_window:={contract.RECORDER_WINDOW}']
-                     if self.output and a.mode == 'lockstep' else []),
-                  'controller': [f'scene:={self.scene_path}',
-                                 f'rate:={getattr(a, "control_rate", None) or a.rate}']
-                  + ([f'law:={a.law}'] if a.law else [])
-                  + (['command_readers:=2'] if self.output else [])    # simulator + recorder
-                  + ([f'command_history:={contract.WRITER_REPAIR_DEPTH}']
-                     if self.output and a.mode == 'lockstep' else [])
-                  + (['startup_hold:=0.0'] if a.mode == 'lockstep' else [])
-                  + list(getattr(a, 'controller_params', None) or []),
-                  'recorder': [f'output:={self.output}', f'scene:={self.scene_path}']}[node]
+        params = {
+            'simulator': [
+                f'scene:={self.scene_path}',
+                f'publish_rate:={a.rate}',
+                f'mode:={a.mode}',
+                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}',
+            ]
+            # lockstep: the simulator waits for the recorder, so nothing is lost
+            + (
+                [f'recorder_window:={contract.RECORDER_WINDOW}']
+                if self.output and a.mode == 'lockstep'
+                else []
+            ),
+            'controller': [
+                f'scene:={self.scene_path}',
+                f'rate:={getattr(a, "control_rate", None) or a.rate}',
+            ]
+            + ([f'law:={a.law}'] if a.law else [])
+            + (['command_readers:=2'] if self.output else [])  # simulator + recorder
+            + (
+                [f'command_history:={contract.WRITER_REPAIR_DEPTH}']
+                if self.output and a.mode == 'lockstep'
+                else []
+            )
+            + (['startup_hold:=0.0'] if a.mode == 'lockstep' else [])
+            + list(getattr(a, 'controller_params', None) or []),
+            'recorder': [f'output:={self.output}', f'scene:={self.scene_path}'],
+        }[node]
         cmd = [sys.executable, '-m', f'impact_arm.nodes.{node}', '--ros-args']
         for p in params:
             cmd += ['-p', p]
@@ -281,15 +356,19 @@ class Run:
 
         os.makedirs(self.logdir, exist_ok=True)
         from rclpy.signals import SignalHandlerOptions
+
         # Ctrl-C must reach us as KeyboardInterrupt (rclpy's handler would shut the context
         # down under our feet): the nodes are then stopped in order and the table printed
-        rclpy.init(domain_id=int(self.env['ROS_DOMAIN_ID']),
-                   signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(
+            domain_id=int(self.env['ROS_DOMAIN_ID']), signal_handler_options=SignalHandlerOptions.NO
+        )
         self.node = rclpy.create_node('impact_arm_run')
         self.node.create_subscription(
-            String, IMPACT_REPORT, self._on_impact, contract.qos(IMPACT_REPORT).to_rclpy())
-        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics,
-                                      contract.qos(DIAGNOSTICS).to_rclpy())
+            String, IMPACT_REPORT, self._on_impact, contract.qos(IMPACT_REPORT).to_rclpy()
+        )
+        self.node.create_subscription(
+            DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, contract.qos(DIAGNOSTICS).to_rclpy()
+        )
         for node in NODES:
             if node == 'recorder' and not self.output:
                 continue
@@ -298,11 +377,19 @@ class Run:
             self.logs[node] = os.path.join(self.logdir, f'{node}.log')
             with open(self.logs[node], 'wb') as log:
                 self.procs[node] = subprocess.Popen(
-                    self.command(node), env=self.env, stdout=log, stderr=subprocess.STDOUT,
-                    stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent)
-        print(f'impact-arm run: scene {self.scene.name!r}, {self.args.mode} at '
-              f'{self.args.rate:g} Hz, ROS_DOMAIN_ID={self.env["ROS_DOMAIN_ID"]}, '
-              f'logs in {self.logdir}', file=sys.stderr)
+                    self.command(node),
+                    env=self.env,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL,
+                    preexec_fn=_die_with_parent,
+                )
+        print(
+            f'impact-arm run: scene {self.scene.name!r}, {self.args.mode} at '
+            f'{self.args.rate:g} Hz, ROS_DOMAIN_ID={self.env["ROS_DOMAIN_ID"]}, '
+            f'logs in {self.logdir}',
+            file=sys.stderr,
+        )
 
     def _await_graph(self, timeout=60.0):
         """Until the controller may start (``ready_for_commands``)."""
@@ -314,27 +401,30 @@ class Run:
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
-                    return                      # watch() reports it
-        raise ImpactArmError(f'the simulator did not appear or the recorder did not match its '
-                             f'publishers within {timeout:g} s;'
-                             f' see {self.logdir}')
+                    return  # watch() reports it
+        raise ImpactArmError(
+            f'the simulator did not appear or the recorder did not match its '
+            f'publishers within {timeout:g} s;'
+            f' see {self.logdir}'
+        )
 
     def _spin_once(self, timeout):
         """One spin of the run's node; KeyboardInterrupt once the CLI was interrupted."""
         import rclpy
+
         rclpy.spin_once(self.node, timeout_sec=timeout)
         if self.interrupted.is_set():
             raise KeyboardInterrupt
 
     def _on_impact(self, msg):
-        if not self.stopping:   # the arm released by the stopped controller falls: not the run
+        if not self.stopping:  # the arm released by the stopped controller falls: not the run
             self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
-            if not self.stopping:   # the run's time ends with it; the counters with the node
+            if not self.stopping:  # the run's time ends with it; the counters with the node
                 self.sim_time = float(values.get('sim_time', self.sim_time))
             self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
 
@@ -352,8 +442,9 @@ class Run:
                 # count from the moment the simulator itself reports
                 first = now - float(self.diagnostics.get('wall_time', 0.0))
             if self.impacts:
-                self.sim_time = max(self.sim_time, self.impacts[-1]['t_contact']
-                                    + self.impacts[-1]['duration'])
+                self.sim_time = max(
+                    self.sim_time, self.impacts[-1]['t_contact'] + self.impacts[-1]['duration']
+                )
             self.wall = now - (first or start)
             self._progress(cycles)
             if len(self.impacts) >= cycles:
@@ -373,6 +464,7 @@ class Run:
         let the arm fall and chatter on the surface until the simulator stopped too (41 extra
         impacts in one recording); paused, the simulator holds the state."""
         from std_srvs.srv import SetBool
+
         client = self.node.create_client(SetBool, '/simulator/pause')
         try:
             if not client.wait_for_service(timeout_sec=timeout):
@@ -387,8 +479,9 @@ class Run:
     def _progress(self, cycles):
         """One refreshed line on a terminal; otherwise a line per impact (logs stay short)."""
         count = len(self.impacts)
-        line = (f'cycle {min(count + 1, cycles)}/{cycles}  impacts {count}  '
-                f't = {self.sim_time:7.3f} s')
+        line = (
+            f'cycle {min(count + 1, cycles)}/{cycles}  impacts {count}  t = {self.sim_time:7.3f} s'
+        )
         # /diagnostics come at 1 Hz: 'waiting' seen before the first command is stale once
         # impacts arrive, so only a state worth acting on is shown
         watchdog = self.diagnostics.get('watchdog')
@@ -404,12 +497,13 @@ class Run:
         if self.node is None:
             return proc.wait(timeout=timeout)
         import rclpy
+
         end = time.monotonic() + timeout
         while proc.poll() is None:
             if time.monotonic() > end:
                 raise subprocess.TimeoutExpired(proc.args, timeout)
             rclpy.spin_once(self.node, timeout_sec=0.05)
-        for _ in range(4):          # what arrived just before the exit
+        for _ in range(4):  # what arrived just before the exit
             rclpy.spin_once(self.node, timeout_sec=0.05)
         return proc.returncode
 
@@ -423,7 +517,7 @@ class Run:
             if proc is None:
                 continue
             if name == 'recorder':
-                time.sleep(0.3)          # let the last messages reach it
+                time.sleep(0.3)  # let the last messages reach it
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
             try:
@@ -433,6 +527,7 @@ class Run:
                 codes[name] = proc.wait()
         if self.node is not None:
             import rclpy
+
             self.node.destroy_node()
             rclpy.try_shutdown()
         return codes

@@ -2,6 +2,7 @@
 scene variant, its samples become what a driver would publish (relative joint angles, rates,
 efforts, period-averaged wrench) with sensor noise, lost samples and a clock offset, and can
 be written as a single MCAP file (our writer) or a rosbag2 folder (the rosbags library's)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,14 +13,26 @@ from ..core.identify import JointRecording
 REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
 
 
-def synthetic_recording(scene='paper', overrides=None, *, cycles=None, publish_rate=1000.0,
-                        noise=None, drop=0.0, jitter=0.0, clock_offset=0.0, seed=0,
-                        wrench=True, control_rate=None) -> JointRecording:
+def synthetic_recording(
+    scene='paper',
+    overrides=None,
+    *,
+    cycles=None,
+    publish_rate=1000.0,
+    noise=None,
+    drop=0.0,
+    jitter=0.0,
+    clock_offset=0.0,
+    seed=0,
+    wrench=True,
+    control_rate=None,
+) -> JointRecording:
     """Simulate ``scene`` with ``overrides`` and sample it as a driver would, adding Gaussian
     ``noise`` (per signal, see REALISTIC_NOISE), dropping a fraction ``drop`` of the samples,
     jittering the stamps by ``jitter`` seconds (uniform) and offsetting the clock."""
     from ..core.simulate import run
     from ..core.study import Study
+
     over = dict(overrides or {})
     if cycles is not None:
         over['cycles'] = cycles
@@ -35,14 +48,22 @@ def synthetic_recording(scene='paper', overrides=None, *, cycles=None, publish_r
     tau = np.array([x.tau for x in s], float)
     w = np.array([x.wrench for x in s], float)
     noise = REALISTIC_NOISE if noise is None else noise
-    q, qd, tau, w = (_noisy(x, noise.get(name, 0.0), rng) for x, name in
-                     ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench')))
+    q, qd, tau, w = (
+        _noisy(x, noise.get(name, 0.0), rng)
+        for x, name in ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench'))
+    )
     keep = rng.random(len(t)) >= drop
     stamps = t + clock_offset + (rng.uniform(-jitter, jitter, len(t)) if jitter else 0.0)
     w_keep = rng.random(len(t)) >= drop
-    rec = JointRecording(t=stamps[keep] - stamps[keep][0], position=q[keep], velocity=qd[keep],
-                         effort=tau[keep], joints=[f'joint{i + 1}' for i in range(q.shape[1])],
-                         source=f'synthetic {scene}', t0_ns=round(stamps[keep][0] * 1e9))
+    rec = JointRecording(
+        t=stamps[keep] - stamps[keep][0],
+        position=q[keep],
+        velocity=qd[keep],
+        effort=tau[keep],
+        joints=[f'joint{i + 1}' for i in range(q.shape[1])],
+        source=f'synthetic {scene}',
+        t0_ns=round(stamps[keep][0] * 1e9),
+    )
     if wrench:
         rec.wrench_t = stamps[w_keep] - stamps[keep][0]
         rec.wrench = w[w_keep]
@@ -67,12 +88,20 @@ def _messages(rec: JointRecording):
     return out
 
 
-def write_rosbag2(rec: JointRecording, folder, joints=None, states_topic=JOINT_STATES,
-                  wrench_topic=CONTACT_WRENCH, extra_joint=True, frame='surface'):
+def write_rosbag2(
+    rec: JointRecording,
+    folder,
+    joints=None,
+    states_topic=JOINT_STATES,
+    wrench_topic=CONTACT_WRENCH,
+    extra_joint=True,
+    frame='surface',
+):
     """A rosbag2 folder (metadata.yaml + MCAP) written by the rosbags library, not by us; the
     joint states carry an extra joint first (as a real arm's driver may: a gripper)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
+
     store = get_typestore(Stores.ROS2_HUMBLE)
     JS = store.types['sensor_msgs/msg/JointState']
     WS = store.types['geometry_msgs/msg/WrenchStamped']
@@ -85,27 +114,37 @@ def write_rosbag2(rec: JointRecording, folder, joints=None, states_topic=JOINT_S
         names = ['gripper'] + names
     with Writer(folder, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
         cjs = writer.add_connection(states_topic, JS.__msgtype__, typestore=store)
-        cw = writer.add_connection(wrench_topic, WS.__msgtype__, typestore=store) \
-            if rec.wrench is not None else None
+        cw = (
+            writer.add_connection(wrench_topic, WS.__msgtype__, typestore=store)
+            if rec.wrench is not None
+            else None
+        )
         for ns, kind, k in _messages(rec):
             stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
             if kind == 'js':
                 pad = [0.0] if extra_joint else []
-                msg = JS(header=H(stamp=stamp, frame_id=''), name=names,
-                         position=np.array(pad + rec.position[k].tolist()),
-                         velocity=np.array(pad + rec.velocity[k].tolist()),
-                         effort=np.array(pad + rec.effort[k].tolist()))
+                msg = JS(
+                    header=H(stamp=stamp, frame_id=''),
+                    name=names,
+                    position=np.array(pad + rec.position[k].tolist()),
+                    velocity=np.array(pad + rec.velocity[k].tolist()),
+                    effort=np.array(pad + rec.effort[k].tolist()),
+                )
                 writer.write(cjs, ns, store.serialize_cdr(msg, JS.__msgtype__))
             else:
                 fx, fy = rec.wrench[k]
-                msg = WS(header=H(stamp=stamp, frame_id=frame),
-                         wrench=W(force=V(x=float(fx), y=float(fy), z=0.0),
-                                  torque=V(x=0.0, y=0.0, z=0.0)))
+                msg = WS(
+                    header=H(stamp=stamp, frame_id=frame),
+                    wrench=W(
+                        force=V(x=float(fx), y=float(fy), z=0.0), torque=V(x=0.0, y=0.0, z=0.0)
+                    ),
+                )
                 writer.write(cw, ns, store.serialize_cdr(msg, WS.__msgtype__))
 
 
-def driver_recording(scene='paper', overrides=None, *, rate=1000.0, cycles=6, noise=None,
-                     seed=0, t_max=None) -> JointRecording:
+def driver_recording(
+    scene='paper', overrides=None, *, rate=1000.0, cycles=6, noise=None, seed=0, t_max=None
+) -> JointRecording:
     """What the simulator node publishes (``SimulatedArm``: each period's effort is the
     command held over the period that ends at the stamp) under the scene's controller
     sampled at ``rate`` — the reading of efforts of a ros2_control driver."""
@@ -113,6 +152,7 @@ def driver_recording(scene='paper', overrides=None, *, rate=1000.0, cycles=6, no
     from ..core.control import CycleController
     from ..core.driver import SimulatedArm
     from ..core.study import Study
+
     sc = Study(scene).scene(dict(overrides or {}))
     arm = SimulatedArm(sc, rate)
     ctrl = CycleController.for_scene(arm.model, sc.controller)
@@ -121,16 +161,32 @@ def driver_recording(scene='paper', overrides=None, *, rate=1000.0, cycles=6, no
     tick = arm.sample()
     while done < cycles and tick.t < t_end:
         before = ctrl.mode
-        arm.apply(ctrl.update(tick.t, to_absolute(tick.position), to_absolute(tick.velocity),
-                              normal_force=tick.wrench[1]))
+        arm.apply(
+            ctrl.update(
+                tick.t,
+                to_absolute(tick.position),
+                to_absolute(tick.velocity),
+                normal_force=tick.wrench[1],
+            )
+        )
         done += before == 'up' and ctrl.mode == 'down'
         tick = arm.step()
         rows.append((tick.t, tick.position, tick.velocity, tick.effort, tick.wrench))
     noise = REALISTIC_NOISE if noise is None else noise
     t = np.array([r[0] for r in rows])
     q, qd, tau, w = (np.array([r[k] for r in rows], float) for k in range(1, 5))
-    q, qd, tau, w = (_noisy(x, noise.get(name, 0.0), rng) for x, name in
-                     ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench')))
-    return JointRecording(t=t - t[0], position=q, velocity=qd, effort=tau, wrench_t=t - t[0],
-                          wrench=w, joints=[f'joint{i + 1}' for i in range(q.shape[1])],
-                          source=f'driver {scene}', t0_ns=round(t[0] * 1e9))
+    q, qd, tau, w = (
+        _noisy(x, noise.get(name, 0.0), rng)
+        for x, name in ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench'))
+    )
+    return JointRecording(
+        t=t - t[0],
+        position=q,
+        velocity=qd,
+        effort=tau,
+        wrench_t=t - t[0],
+        wrench=w,
+        joints=[f'joint{i + 1}' for i in range(q.shape[1])],
+        source=f'driver {scene}',
+        t0_ns=round(t[0] * 1e9),
+    )

@@ -26,6 +26,7 @@ only after the kinds of event it needs to act on.
 - ``output``: dense output and the rows on the output grid
 - ``loop``: the stepping loop and ``advance``, the entry point
 """
+
 import os
 
 PARTS = ('rhs', 'steps', 'events', 'phases', 'output', 'loop')

@@ -10,6 +10,7 @@ from .injected import *
 from .steps import EPS, trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
+
 @jit
 def event_values(y, P, I, SURF, C, levels, g):
     """Event functions of the current phase; a switch happens when one rises through zero.
@@ -17,7 +18,7 @@ def event_values(y, P, I, SURF, C, levels, g):
     ns = SURF.shape[0]
     for k in range(g.shape[0]):
         g[k] = -1.0
-    tip_state = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])
+    tip_state = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])
     y_tip = tip_state[1]
     phase = int(C[C_PHASE])
     if phase == FREE:
@@ -32,29 +33,51 @@ def event_values(y, P, I, SURF, C, levels, g):
     if phase == ELASTIC:
         if SURF[s, S_LAW] == 0:
             g[ns + EV_YIELD] = delta - YIELD_ONSET * SURF[s, S_DC]
-        g[ns + EV_MAX] = tip_state[3]       # δ̇ = -ẏ_B turns from + to -
+        g[ns + EV_MAX] = tip_state[3]  # δ̇ = -ẏ_B turns from + to -
     elif phase == ELASTOPLASTIC:
         g[ns + EV_MAX] = tip_state[3]
     else:
-        g[ns + EV_SEP] = C[C_DR] - delta    # δ falls through δr
+        g[ns + EV_SEP] = C[C_DR] - delta  # δ falls through δr
 
 
 @jit
 def event_rate(y, f, k, P, SURF):
     """Time derivative of event function k at state y with derivative f (for Newton)."""
     ns = SURF.shape[0]
-    L = P[P_L:P_L + N]
-    vy = tip(y[:N], y[N:2 * N], L)[3]
+    L = P[P_L : P_L + N]
+    vy = tip(y[:N], y[N : 2 * N], L)[3]
     if k < ns or k == ns + EV_YIELD:
-        return -vy                       # δ grows as the tip moves down
+        return -vy  # δ grows as the tip moves down
     if k == ns + EV_MAX:
-        return tip_acceleration(y[:N], y[N:2 * N], f[N:2 * N], L)[1]
-    return vy                            # switch height, separation
+        return tip_acceleration(y[:N], y[N : 2 * N], f[N : 2 * N], L)[1]
+    return vy  # switch height, separation
 
 
 @jit
-def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels,
-           tau_held, stats, W, JW):
+def locate(
+    t,
+    y0,
+    f0,
+    h,
+    k,
+    ga,
+    gb,
+    y_out,
+    f_tmp,
+    err,
+    K,
+    work,
+    g,
+    P,
+    I,
+    SURF,
+    C,
+    levels,
+    tau_held,
+    stats,
+    W,
+    JW,
+):
     """Smallest s in (0, h] with g_k(RK step of size s) >= 0; y_out holds the state there.
 
     Newton's method on real Runge-Kutta steps (the step's FSAL derivative gives ġ for free),
@@ -71,8 +94,9 @@ def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C
     for _ in range(100):
         if not (a < c < b):
             c = 0.5 * (a + b)
-        trial_step(t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
-                   stats, W, JW)
+        trial_step(
+            t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
+        )
         event_values(y_out, P, I, SURF, C, levels, g)
         fc = g[k]
         if fc >= 0.0:
@@ -100,6 +124,7 @@ def locate(t, y0, f0, h, k, ga, gb, y_out, f_tmp, err, K, work, g, P, I, SURF, C
         else:
             c = (a * fb - b * fa) / (fb - fa)
     if b != c:
-        trial_step(t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held,
-                   stats, W, JW)
+        trial_step(
+            t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
+        )
     return b

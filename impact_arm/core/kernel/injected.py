@@ -2,27 +2,31 @@
 editors can follow the template parts. Never used at run time: the generator drops the
 imports above each part's marker, and the values below are placeholders (a two-link shape).
 """
+
 import math
 
 from ..layout import shape_offsets
 
-N = 2                 # links
-NI = 0                # PID integral states (N for a continuous pid law, else 0)
-HAS_CONTACT = True    # the scene has surfaces
-HAS_FRICTION = True   # some surface has friction
-HAS_ACCEL = True      # accel() exists (closed-form q̈, N <= 3); else mass_and_rhs()
+N = 2  # links
+NI = 0  # PID integral states (N for a continuous pid law, else 0)
+HAS_CONTACT = True  # the scene has surfaces
+HAS_FRICTION = True  # some surface has friction
+HAS_ACCEL = True  # accel() exists (closed-form q̈, N <= 3); else mass_and_rhs()
 
 _offsets = shape_offsets(N, NI)
 SIZE = _offsets['SIZE']
-P_L, P_M, P_G, P_KP, P_KD, P_KI = (_offsets[k] for k in ('P_L', 'P_M', 'P_G', 'P_KP', 'P_KD',
-                                                        'P_KI'))
+P_L, P_M, P_G, P_KP, P_KD, P_KI = (
+    _offsets[k] for k in ('P_L', 'P_M', 'P_G', 'P_KP', 'P_KD', 'P_KI')
+)
 P_TDOWN, P_TUP, P_SWITCH = _offsets['P_TDOWN'], _offsets['P_TUP'], _offsets['P_SWITCH']
 P_RTOL, P_ATOL, P_MAXSTEP = _offsets['P_RTOL'], _offsets['P_ATOL'], _offsets['P_MAXSTEP']
 P_CRTOL, P_CATOL, P_SIZE = _offsets['P_CRTOL'], _offsets['P_CATOL'], _offsets['P_SIZE']
 R_T, R_Y, R_JT, R_JN, R_TAU, R_ACT, R_VTIP, R_SIZE = (
-    _offsets[k] for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_SIZE'))
+    _offsets[k] for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_SIZE')
+)
 W_GEN, W_TAU, W_ERR, W_RATE, W_MASS, SCRATCH = (
-    _offsets[k] for k in ('W_GEN', 'W_TAU', 'W_ERR', 'W_RATE', 'W_MASS', 'SCRATCH'))
+    _offsets[k] for k in ('W_GEN', 'W_TAU', 'W_ERR', 'W_RATE', 'W_MASS', 'SCRATCH')
+)
 TR_SIZE = _offsets['TR_SIZE']
 
 

@@ -17,9 +17,41 @@ from .rhs import contact_frequency, rhs
 from .steps import EPS, error_norm, initial_step, phase_tolerances, rosenbrock_now, trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
+
 @jit
-def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev, evlog,
-            O, out, y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp, JW, y_prev, scratch):
+def advance(
+    T,
+    t_end,
+    y,
+    f,
+    P,
+    I,
+    SURF,
+    C,
+    levels,
+    tau_held,
+    stats,
+    trace,
+    tcount,
+    ev,
+    evlog,
+    O,
+    out,
+    y1,
+    f1,
+    err,
+    work,
+    y_root,
+    f_tmp,
+    K,
+    W,
+    g0,
+    g1,
+    g_tmp,
+    JW,
+    y_prev,
+    scratch,
+):
     """Integrate from T[T_TIME] to t_end with step T[T_STEP]; y, f updated in place.
     T[T_STALE] != 0 asks for f to be recomputed first (new phase, new command); T[T_STEP] <= 0
     for a fresh step size. With O[O_DT] = dt > 0, rows of ``out`` are written at the output times k dt (``emit_output``)
@@ -38,11 +70,40 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
     # (``integrator.scratch_arrays``; separate arguments, not a tuple, so that numba's
     # dispatcher types them on its fast path): the kernel allocates nothing, so it needs no
     # reference-counting runtime (loading that runtime cost every process 20-30 ms)
-    JW[JW.shape[0] - 1, 0] = 0.0            # no Jacobian yet (Rosenbrock)
+    JW[JW.shape[0] - 1, 0] = 0.0  # no Jacobian yet (Rosenbrock)
     while True:
-        status = stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
-                               tcount, ev, y1, f1, err, work, y_root, f_tmp, K, W, g0, g1,
-                               g_tmp, JW, O, out, y_prev, scratch)
+        status = stepping_loop(
+            T,
+            t_end,
+            y,
+            f,
+            P,
+            I,
+            SURF,
+            C,
+            levels,
+            tau_held,
+            stats,
+            trace,
+            tcount,
+            ev,
+            y1,
+            f1,
+            err,
+            work,
+            y_root,
+            f_tmp,
+            K,
+            W,
+            g0,
+            g1,
+            g_tmp,
+            JW,
+            O,
+            out,
+            y_prev,
+            scratch,
+        )
         if status != EVENT:
             return status
         slot = ev[EV_SLOT]
@@ -54,8 +115,8 @@ def advance(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcoun
         for i in range(size):
             row[E_Y + i] = y[i]
         ev[EV_COUNT] += 1
-        T[T_STALE] = 1.0                    # the right-hand side changed with the phase
-        JW[JW.shape[0] - 1, 0] = 0.0        # and so did its Jacobian (Rosenbrock)
+        T[T_STALE] = 1.0  # the right-hand side changed with the phase
+        JW[JW.shape[0] - 1, 0] = 0.0  # and so did its Jacobian (Rosenbrock)
         kind_bit = KIND_BIT_CONTACT if slot < ns else 1 << (1 + slot - ns)
         if slot < ns or slot - ns == EV_SEP or slot - ns == EV_SWITCH:
             # and so did its time scale (or, at a switch, the control target jumped): choose
@@ -94,14 +155,43 @@ def copy_into(dst, src):
 
 
 @jit
-def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace, tcount, ev,
-                  y1, f1, err, work, y_root, f_tmp, K, W, g0, g1, g_tmp, JW, O, out, y_prev,
-                  scratch):
+def stepping_loop(
+    T,
+    t_end,
+    y,
+    f,
+    P,
+    I,
+    SURF,
+    C,
+    levels,
+    tau_held,
+    stats,
+    trace,
+    tcount,
+    ev,
+    y1,
+    f1,
+    err,
+    work,
+    y_root,
+    f_tmp,
+    K,
+    W,
+    g0,
+    g1,
+    g_tmp,
+    JW,
+    O,
+    out,
+    y_prev,
+    scratch,
+):
     """``advance`` with its scratch arrays."""
     output = O[O_DT] > 0.0
     # the phase, hence the step method, stays the same through one call (a switch returns)
     in_contact = HAS_CONTACT and int(C[C_PHASE]) != FREE
-    quartic = not rosenbrock_now(I, C)     # Dormand-Prince steps carry a quartic extension
+    quartic = not rosenbrock_now(I, C)  # Dormand-Prince steps carry a quartic extension
     ns = SURF.shape[0]
     rtol, atol = phase_tolerances(P, C)
     max_step = P[P_MAXSTEP]
@@ -138,13 +228,14 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
         clipped = step >= remaining
         if clipped:
             step = remaining
-        trial_step(t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats,
-                   W, JW)
+        trial_step(
+            t, y, f, step, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
+        )
         norm = error_norm(err, y, y1, rtol, atol)
         if not norm <= 1.0:  # also catches NaN
             stats[ST_REJECTED] += 1
             if math.isfinite(norm):
-                h = step * max(0.2, 0.9 * norm ** -expo)
+                h = step * max(0.2, 0.9 * norm**-expo)
             else:
                 h = step * 0.2
             if h < 1e-15 * max(1.0, abs(t)):
@@ -152,15 +243,37 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                 break
             continue
         stats[ST_STEPS] += 1
-        factor = 5.0 if norm == 0.0 else min(5.0, max(0.2, 0.9 * norm ** -expo))
+        factor = 5.0 if norm == 0.0 else min(5.0, max(0.2, 0.9 * norm**-expo))
         h = min(h, step * factor) if clipped else step * factor
         event_values(y1, P, I, SURF, C, levels, g1)
         best_s = step + 1.0
         best_k = last_k = -1
         for k in range(ns + 4):
             if g0[k] < 0.0 <= g1[k]:
-                s_k = locate(t, y, f, step, k, g0[k], g1[k], y_root, f_tmp, err, K, work,
-                             g_tmp, P, I, SURF, C, levels, tau_held, stats, W, JW)
+                s_k = locate(
+                    t,
+                    y,
+                    f,
+                    step,
+                    k,
+                    g0[k],
+                    g1[k],
+                    y_root,
+                    f_tmp,
+                    err,
+                    K,
+                    work,
+                    g_tmp,
+                    P,
+                    I,
+                    SURF,
+                    C,
+                    levels,
+                    tau_held,
+                    stats,
+                    W,
+                    JW,
+                )
                 last_k = k
                 if s_k < best_s:
                     best_s, best_k = s_k, k
@@ -170,8 +283,26 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
                 # locate() leaves the step to its root in y_root, f_tmp and K: take it again
                 # only when a later slot's search overwrote them
                 if last_k != best_k:
-                    trial_step(t, y, f, best_s, y_root, f_tmp, err, K, work, P, I, SURF, C,
-                               levels, tau_held, stats, W, JW)
+                    trial_step(
+                        t,
+                        y,
+                        f,
+                        best_s,
+                        y_root,
+                        f_tmp,
+                        err,
+                        K,
+                        work,
+                        P,
+                        I,
+                        SURF,
+                        C,
+                        levels,
+                        tau_held,
+                        stats,
+                        W,
+                        JW,
+                    )
                 copy_into(y, y_root)
                 end_f = f_tmp
             else:
@@ -182,11 +313,37 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             # the quartic needs this step's stages; locate() overwrote them if best_s == step
             own_stages = quartic and best_s < step
             if in_contact:
-                interpolate(t_prev, best_s, t_prev + 0.5 * best_s, y_prev, f, y, end_f, K,
-                            own_stages, work, 0)
+                interpolate(
+                    t_prev,
+                    best_s,
+                    t_prev + 0.5 * best_s,
+                    y_prev,
+                    f,
+                    y,
+                    end_f,
+                    K,
+                    own_stages,
+                    work,
+                    0,
+                )
                 record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
-            if output and not emit_output(t_prev, best_s, y_prev, f, y, end_f, K, own_stages,
-                                          P, I, C, tau_held, O, out, scratch):
+            if output and not emit_output(
+                t_prev,
+                best_s,
+                y_prev,
+                f,
+                y,
+                end_f,
+                K,
+                own_stages,
+                P,
+                I,
+                C,
+                tau_held,
+                O,
+                out,
+                scratch,
+            ):
                 status = OUTPUT_FULL
                 break
             ev[EV_SLOT] = best_k
@@ -194,13 +351,13 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
             break
         if in_contact or output:
             copy_into(y_prev, y)
-            copy_into(y_root, f)    # the step's start derivative, for the midpoint and output
+            copy_into(y_root, f)  # the step's start derivative, for the midpoint and output
         copy_into(y, y1)
         copy_into(f, f1)
-        JW[jac_valid, 0] = 0.0      # a new point: the Jacobian is due again
+        JW[jac_valid, 0] = 0.0  # a new point: the Jacobian is due again
         t_prev = t
         t = t_stop if clipped else t + step
-        if t == t_prev:         # a step below the resolution of t (max_step ~ 1e-300)
+        if t == t_prev:  # a step below the resolution of t (max_step ~ 1e-300)
             status = ERR_UNDERFLOW
             break
         copy_into(g0, g1)
@@ -208,20 +365,32 @@ def stepping_loop(T, t_end, y, f, P, I, SURF, C, levels, tau_held, stats, trace,
         if HAS_CONTACT:
             if in_contact:
                 # the midpoint state for Simpson's impulse, from the step's extension
-                interpolate(t_prev, t - t_prev, 0.5 * (t_prev + t), y_prev, y_root, y, f, K,
-                            quartic, work, 0)
+                interpolate(
+                    t_prev,
+                    t - t_prev,
+                    0.5 * (t_prev + t),
+                    y_prev,
+                    y_root,
+                    y,
+                    f,
+                    K,
+                    quartic,
+                    work,
+                    0,
+                )
                 delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
                 cap = contact_step_cap(y, P, SURF, C, levels, scratch)
             else:
                 # the dent is forgotten once the tip has risen above the surface again
-                y_tip = tip(y[:N], y[N:2 * N], P[P_L:P_L + N])[1]
+                y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])[1]
                 for s in range(ns):
                     if levels[s] != SURF[s, S_H] and y_tip > SURF[s, S_H]:
                         levels[s] = SURF[s, S_H]
                         g0[s] = levels[s] - y_tip
         # output after the step's impulse is booked, before any early return
-        if output and not emit_output(t_prev, t - t_prev, y_prev, y_root, y, f, K, quartic,
-                                      P, I, C, tau_held, O, out, scratch):
+        if output and not emit_output(
+            t_prev, t - t_prev, y_prev, y_root, y, f, K, quartic, P, I, C, tau_held, O, out, scratch
+        ):
             status = OUTPUT_FULL
             break
         if in_contact:

@@ -7,9 +7,29 @@ from ..jit import jit
 from ..layout import *
 from .injected import *
 from .rhs import control_torque
-from .steps import (D12, D13, D14, D32, D33, D34, D42, D43, D44, D52, D53, D54, D62, D63, D64,
-                    D72, D73, D74, EPS)
+from .steps import (
+    D12,
+    D13,
+    D14,
+    D32,
+    D33,
+    D34,
+    D42,
+    D43,
+    D44,
+    D52,
+    D53,
+    D54,
+    D62,
+    D63,
+    D64,
+    D72,
+    D73,
+    D74,
+    EPS,
+)
 # --- template: equations.py copies what follows into the generated module ---
+
 
 @jit
 def interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, out, at):
@@ -26,8 +46,9 @@ def interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, out, at):
         b6 = s2 * (D62 + s * (D63 + s * D64))
         b7 = s2 * (D72 + s * (D73 + s * D74))
         for i in range(size):
-            out[at + i] = y0[i] + h * (b1 * f0[i] + b3 * K[1, i] + b4 * K[2, i]
-                                       + b5 * K[3, i] + b6 * K[4, i] + b7 * f1[i])
+            out[at + i] = y0[i] + h * (
+                b1 * f0[i] + b3 * K[1, i] + b4 * K[2, i] + b5 * K[3, i] + b6 * K[4, i] + b7 * f1[i]
+            )
     else:
         h00 = (1.0 + 2.0 * s) * (1.0 - s) ** 2
         h10 = s * (1.0 - s) ** 2
@@ -56,7 +77,7 @@ def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, sc
             return False
         row = out[row_index]
         row[R_T] = ts
-        state = row[R_Y:R_Y + size]
+        state = row[R_Y : R_Y + size]
         if abs(ts - t1) <= eps:
             for i in range(size):
                 state[i] = y1[i]
@@ -67,10 +88,11 @@ def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, sc
         row[R_JT], row[R_JN] = C[C_JT], C[C_JN]
         C[C_JT] = 0.0
         C[C_JN] = 0.0
-        acting = control_torque(state, P, I, C, tau_held, row[R_TAU:R_TAU + N],
-                                scratch[:N], scratch[N:2 * N])
+        acting = control_torque(
+            state, P, I, C, tau_held, row[R_TAU : R_TAU + N], scratch[:N], scratch[N : 2 * N]
+        )
         row[R_ACT] = 1.0 if acting else 0.0
-        v = tip(state[:N], state[N:2 * N], P[P_L:P_L + N])
+        v = tip(state[:N], state[N : 2 * N], P[P_L : P_L + N])
         row[R_VTIP], row[R_VTIP + 1] = v[2], v[3]
         O[O_NEXT] += 1.0
         O[O_ROWS] += 1.0

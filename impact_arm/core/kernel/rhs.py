@@ -12,11 +12,12 @@ from ..layout import *
 from .injected import *
 # --- template: equations.py copies what follows into the generated module ---
 
+
 @jit_leaf
 def accelerations(q, qd, generalized, P, out, S):
     """q̈ into ``out``; S is N*N scratch for the general case (no allocation here)."""
-    L = P[P_L:P_L + N]
-    m = P[P_M:P_M + N]
+    L = P[P_L : P_L + N]
+    m = P[P_M : P_M + N]
     if HAS_ACCEL:
         values = accel(q, qd, generalized, L, m, P[P_G])
         for i in range(N):
@@ -50,16 +51,23 @@ def accelerations(q, qd, generalized, P, out, S):
 @jit_leaf
 def contact_forces(y, P, SURF, C, levels):
     """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
-    L = P[P_L:P_L + N]
-    tip_state = tip(y[:N], y[N:2 * N], L)
+    L = P[P_L : P_L + N]
+    tip_state = tip(y[:N], y[N : 2 * N], L)
     s = int(C[C_SURF])
     phase = int(C[C_PHASE])
     delta = levels[s] - tip_state[1]
     if phase == ELASTIC:
         fn = hertz_force(delta, SURF[s, S_E], SURF[s, S_R])
     elif phase == ELASTOPLASTIC:
-        fn = jackson_green(delta, SURF[s, S_DC], SURF[s, S_R], SURF[s, S_SY], SURF[s, S_CJ],
-                           SURF[s, S_PC], SURF[s, S_B])
+        fn = jackson_green(
+            delta,
+            SURF[s, S_DC],
+            SURF[s, S_R],
+            SURF[s, S_SY],
+            SURF[s, S_CJ],
+            SURF[s, S_PC],
+            SURF[s, S_B],
+        )
     else:
         fn = restitution_force(delta, C[C_DR], SURF[s, S_E], C[C_RR])
     ff = 0.0
@@ -89,15 +97,15 @@ def contact_frequency(y, P, SURF, C, levels, work):
     if not fn > 0.0 or not delta > base:
         return 0.0
     q = y[:N]
-    jac = tip_jacobian(q, P[P_L:P_L + N])
-    zero, gen, a1, a0 = work[:N], work[N:2 * N], work[2 * N:3 * N], work[3 * N:4 * N]
+    jac = tip_jacobian(q, P[P_L : P_L + N])
+    zero, gen, a1, a0 = work[:N], work[N : 2 * N], work[2 * N : 3 * N], work[3 * N : 4 * N]
     for i in range(N):
         zero[i] = 0.0
         gen[i] = jac[N + i]
-    solve_accelerations(q, zero, gen, P, a1, work[4 * N:])
+    solve_accelerations(q, zero, gen, P, a1, work[4 * N :])
     for i in range(N):
         gen[i] = 0.0
-    solve_accelerations(q, zero, gen, P, a0, work[4 * N:])
+    solve_accelerations(q, zero, gen, P, a0, work[4 * N :])
     inverse_mass = 0.0
     for i in range(N):
         inverse_mass += jac[N + i] * (a1[i] - a0[i])
@@ -118,18 +126,32 @@ def control_torque(y, P, I, C, tau_held, tau, error, rate):
             tau[i] = tau_held[i]
         return True
     q = y[:N]
-    qd = y[N:2 * N]
-    target = P[P_TUP:P_TUP + N] if C[C_MODE] > 0.5 else P[P_TDOWN:P_TDOWN + N]
+    qd = y[N : 2 * N]
+    target = P[P_TUP : P_TUP + N] if C[C_MODE] > 0.5 else P[P_TDOWN : P_TDOWN + N]
     if law == LAW_Q:
-        q_law(q, qd, target, P[P_KP:P_KP + N], P[P_KD:P_KD + N],
-              gravity_forces(q, P[P_L:P_L + N], P[P_M:P_M + N], P[P_G]), tau)
+        q_law(
+            q,
+            qd,
+            target,
+            P[P_KP : P_KP + N],
+            P[P_KD : P_KD + N],
+            gravity_forces(q, P[P_L : P_L + N], P[P_M : P_M + N], P[P_G]),
+            tau,
+        )
         return True
     pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
     if NI > 0:
-        pid_law(error, rate, y[2 * N:2 * N + NI], P[P_KP:P_KP + N], P[P_KD:P_KD + N],
-                P[P_KI:P_KI + N], tau)
+        pid_law(
+            error,
+            rate,
+            y[2 * N : 2 * N + NI],
+            P[P_KP : P_KP + N],
+            P[P_KD : P_KD + N],
+            P[P_KI : P_KI + N],
+            tau,
+        )
     else:
-        for i in range(N):   # no integral state: PD (the Ki term has nothing to act on)
+        for i in range(N):  # no integral state: PD (the Ki term has nothing to act on)
             tau[i] = -P[P_KD + i] * rate[i] - P[P_KP + i] * error[i]
     return True
 
@@ -140,17 +162,17 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     allocates."""
     stats[ST_RHS] += 1
     q = y[:N]
-    qd = y[N:2 * N]
-    generalized = W[W_GEN:W_GEN + N]
-    tau = W[W_TAU:W_TAU + N]
-    error = W[W_ERR:W_ERR + N]
-    rate = W[W_RATE:W_RATE + N]
+    qd = y[N : 2 * N]
+    generalized = W[W_GEN : W_GEN + N]
+    tau = W[W_TAU : W_TAU + N]
+    error = W[W_ERR : W_ERR + N]
+    rate = W[W_RATE : W_RATE + N]
     for i in range(N):
         generalized[i] = 0.0
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE:
             delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
-            jac = tip_jacobian(q, P[P_L:P_L + N])
+            jac = tip_jacobian(q, P[P_L : P_L + N])
             for i in range(N):
                 generalized[i] += jac[i] * ff + jac[N + i] * fn
     acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
@@ -158,7 +180,7 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
         add_joint_torques(tau, generalized)
     for i in range(N):
         out[i] = qd[i]
-    accelerations(q, qd, generalized, P, out[N:2 * N], W[W_MASS:])
+    accelerations(q, qd, generalized, P, out[N : 2 * N], W[W_MASS:])
     if NI > 0:
         # the integral runs only while the controller acts (it is off during contact);
         # control_torque left the PID error in ``error``

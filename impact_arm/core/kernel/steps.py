@@ -11,7 +11,7 @@ from .injected import *
 from .rhs import rhs
 # --- template: equations.py copies what follows into the generated module ---
 
-EPS = 2.220446049250313e-16      # unit roundoff of a double
+EPS = 2.220446049250313e-16  # unit roundoff of a double
 A21 = 1 / 5
 A31, A32 = 3 / 40, 9 / 40
 A41, A42, A43 = 44 / 45, -56 / 15, 32 / 9
@@ -29,11 +29,9 @@ C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
 # y(t + s h) = y + h sum_j b_j(s) k_j, b_j(s) = s^2 (D_j2 + s (D_j3 + s D_j4)) (+ s for j = 1),
 # for the stages k_1 = f0, k_3 ... k_6 (K[1] ... K[4]), k_7 = f1 (k_2's weights are zero).
 D12, D13, D14 = -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432
-D32, D33, D34 = 131558114200 / 32700410799, -68118460800 / 10900136933, \
-    87487479700 / 32700410799
+D32, D33, D34 = 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799
 D42, D43, D44 = -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072
-D52, D53, D54 = 127303824393 / 49829197408, -318862633887 / 49829197408, \
-    701980252875 / 199316789632
+D52, D53, D54 = 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632
 D62, D63, D64 = -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844
 D72, D73, D74 = 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423
 # Rosenbrock 4(3), Shampine's parameters (Kaps-Rentrop form, as in Numerical Recipes' stiff):
@@ -46,7 +44,7 @@ RC41, RC42, RC43 = -112 / 125, -54 / 125, -2 / 5
 RB1, RB2, RB3, RB4 = 19 / 9, 1 / 2, 25 / 108, 125 / 108
 RE1, RE2, RE4 = 17 / 54, 7 / 36, 125 / 108
 RA2X, RA3X = 1.0, 3 / 5
-FD_STEP = 1.4901161193847656e-08   # sqrt(machine epsilon): finite-difference Jacobian
+FD_STEP = 1.4901161193847656e-08  # sqrt(machine epsilon): finite-difference Jacobian
 
 
 @jit
@@ -66,16 +64,17 @@ def rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, 
         work[i] = y[i] + h * (A51 * f0[i] + A52 * K[0, i] + A53 * K[1, i] + A54 * K[2, i])
     rhs(t + C5 * h, work, K[3], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
-        work[i] = y[i] + h * (A61 * f0[i] + A62 * K[0, i] + A63 * K[1, i] + A64 * K[2, i]
-                              + A65 * K[3, i])
+        work[i] = y[i] + h * (
+            A61 * f0[i] + A62 * K[0, i] + A63 * K[1, i] + A64 * K[2, i] + A65 * K[3, i]
+        )
     rhs(t + h, work, K[4], P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
-        y1[i] = y[i] + h * (B1 * f0[i] + B3 * K[1, i] + B4 * K[2, i] + B5 * K[3, i]
-                            + B6 * K[4, i])
+        y1[i] = y[i] + h * (B1 * f0[i] + B3 * K[1, i] + B4 * K[2, i] + B5 * K[3, i] + B6 * K[4, i])
     rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats, W)
     for i in range(size):
-        err[i] = h * (E1 * f0[i] + E3 * K[1, i] + E4 * K[2, i] + E5 * K[3, i] + E6 * K[4, i]
-                      + E7 * f1[i])
+        err[i] = h * (
+            E1 * f0[i] + E3 * K[1, i] + E4 * K[2, i] + E5 * K[3, i] + E6 * K[4, i] + E7 * f1[i]
+        )
 
 
 @jit_leaf
@@ -122,8 +121,7 @@ def lu_solve(A, piv, b):
 
 
 @jit
-def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W,
-             JW):
+def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW):
     """One Rosenbrock 4(3) step of size h: y1, f1 = f(t+h, y1) and the error vector.
 
     The free flight is stiff (the controller's damping on the links' small inertia puts an
@@ -134,7 +132,7 @@ def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held,
     pivots (row 2n)."""
     n = y.shape[0]
     J = JW[:n]
-    LU = JW[n:2 * n]
+    LU = JW[n : 2 * n]
     piv = JW[2 * n]
     if JW[2 * n + 1, 0] == 0.0:
         for j in range(n):
@@ -142,7 +140,7 @@ def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held,
                 work[i] = y[i]
             d = FD_STEP * max(1.0, abs(y[j]))
             work[j] = y[j] + d
-            d = work[j] - y[j]             # the step actually representable
+            d = work[j] - y[j]  # the step actually representable
             rhs(t, work, f1, P, I, SURF, C, levels, tau_held, stats, W)
             for i in range(n):
                 J[i, j] = (f1[i] - f0[i]) / d
@@ -154,7 +152,7 @@ def ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held,
         LU[i, i] += diag
     if not lu_factor(LU, piv):
         for i in range(n):
-            err[i] = math.inf              # rejected: the caller shrinks the step
+            err[i] = math.inf  # rejected: the caller shrinks the step
         return
     g1, g2, g3, g4, tmp = K[0], K[1], K[2], K[3], K[4]
     for i in range(n):
@@ -188,13 +186,11 @@ def rosenbrock_now(I, C):
 
 
 @jit
-def trial_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W,
-               JW):
+def trial_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW):
     """The step of the current phase's method: Rosenbrock in free flight when chosen, else
     Dormand-Prince (contact forces are not smooth enough for a linearly implicit step)."""
     if rosenbrock_now(I, C):
-        ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats,
-                 W, JW)
+        ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW)
     else:
         rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W)
 
