@@ -1,4 +1,4 @@
-"""The contract every layer shares: topic names, message types and QoS (design §3), joint names
+"""The contract every layer shares: topic names, message types and QoS (docs/topics.md), joint names
 and the joint-angle convention, and the names of integrator presets, control laws and
 anti-windup strategies. Nothing here imports ROS or the rest of the package, so core, io, nodes
 and tools all import their names from this one place.
