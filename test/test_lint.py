@@ -1,6 +1,6 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
-(mypy), and imports point down the layers core -> io -> nodes -> tools, with contract.py at
-the bottom importing nothing of the package."""
+(mypy), every public function of core/ and io/ annotated, and imports point down the layers
+core -> io -> nodes -> tools, with contract.py at the bottom importing nothing of the package."""
 
 import ast
 import os
@@ -38,18 +38,6 @@ def test_typed_modules_type_check():
     assert out.returncode == 0, out.stdout + out.stderr
 
 
-# Modules of core/ and io/ whose public functions are not all annotated yet (shrinks to empty)
-NOT_YET_ANNOTATED = {
-    'io/wire.py',
-    'io/urdf.py',
-    'io/msgdefs.py',
-    'io/offline_mcap.py',
-    'io/recording.py',
-    'io/replay_plan.py',
-    'io/recording_check.py',
-}
-
-
 def unannotated(source):
     """Public functions and methods (nested ones too) of ``source`` missing a parameter or
     return annotation, as (line, name)."""
@@ -64,21 +52,41 @@ def unannotated(source):
                 yield node.lineno, node.name
 
 
+def _core_and_io_modules():
+    """The modules of core/ and io/ but the numba kernel template (its functions are source
+    text compiled per arm shape), as (path relative to the package, path)."""
+    for path, parts in _modules():
+        rel = os.path.relpath(path, PACKAGE).replace(os.sep, '/')
+        if parts[1:2] in (['core'], ['io']) and not rel.startswith('core/kernel/'):
+            yield rel, path
+
+
 def test_public_functions_of_core_and_io_are_annotated():
-    """Every public function of core/ and io/ (not the numba kernel template, whose functions
-    are compiled source text) states its parameter and return types, so mypy checks them."""
-    missing, done = [], []
-    for rel, path, _ in _annotated_modules():
-        found = list(unannotated(open(path, encoding='utf-8').read()))
-        if rel in NOT_YET_ANNOTATED:
-            done += [] if found else [rel]
-        else:
-            missing += [f'{rel}:{line} {name}' for line, name in found]
+    """Every public function of core/ and io/ states its parameter and return types, so that
+    mypy checks its callers and its body."""
+    missing = [
+        f'{rel}:{line} {name}'
+        for rel, path in _core_and_io_modules()
+        for line, name in unannotated(open(path, encoding='utf-8').read())
+    ]
     assert not missing, missing
-    assert not done, f'annotated now: remove from NOT_YET_ANNOTATED and add to mypy.ini: {done}'
+
+
+def test_core_and_io_modules_are_type_checked():
+    """Each module of core/ and io/ is among mypy.ini's files (a new one too)."""
+    config = open(os.path.join(ROOT, 'mypy.ini'), encoding='utf-8').read()
+    files = config.split('files =')[1].split('\nignore_missing_imports')[0]
+    checked = {f.strip() for f in files.split(',')}
+    absent = [
+        rel
+        for rel, _ in _core_and_io_modules()
+        if not rel.endswith('__init__.py') and f'impact_arm/{rel}' not in checked
+    ]
+    assert not absent, f'add to mypy.ini files: {absent}'
 
 
 def test_the_annotation_check_sees_a_missing_annotation():
+    """The check above cannot pass by seeing nothing."""
     source = (
         'def f(x: int) -> int: ...\n'
         'def g(x, y: int) -> int: ...\n'
@@ -86,33 +94,10 @@ def test_the_annotation_check_sees_a_missing_annotation():
         'def _private(x): ...\n'
         'class C:\n'
         '    def m(self, *args) -> None: ...\n'
-        '    def n(self, **kw: int) -> None: ...\n'
+        '    def n(self, **kw: int) -> None:\n'
+        '        def inner(y): ...\n'
     )
-    assert [name for _, name in unannotated(source)] == ['g', 'h', 'm']
-
-
-def _annotated_modules():
-    """core/ and io/ modules (relative to the package; not the kernel template, not the
-    empty __init__ files) as (relative path, path, parts)."""
-    for path, parts in _modules():
-        rel = os.path.relpath(path, PACKAGE).replace(os.sep, '/')
-        if parts[1:2] in (['core'], ['io']) and not rel.startswith('core/kernel/'):
-            yield rel, path, parts
-
-
-def test_annotated_modules_are_type_checked():
-    """A module of core/ or io/ off NOT_YET_ANNOTATED is among mypy.ini's files."""
-    config = open(os.path.join(ROOT, 'mypy.ini'), encoding='utf-8').read()
-    files = config.split('files =')[1].split('\nignore_missing_imports')[0]
-    checked = {f.strip() for f in files.split(',')}
-    absent = [
-        rel
-        for rel, path, _ in _annotated_modules()
-        if rel not in NOT_YET_ANNOTATED
-        and not rel.endswith('__init__.py')
-        and f'impact_arm/{rel}' not in checked
-    ]
-    assert not absent, f'add to mypy.ini files: {absent}'
+    assert [name for _, name in unannotated(source)] == ['g', 'h', 'm', 'inner']
 
 
 def _modules():
