@@ -27,7 +27,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from ..contract import INTEGRATOR_METHODS, INTEGRATOR_PRESETS
 from . import layout
@@ -36,6 +35,8 @@ from .kinds import EventKind
 from .model import ArmModel, ArmState, Phase
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
     from .scene import IntegratorSpec
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.

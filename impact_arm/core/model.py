@@ -9,19 +9,21 @@ does (time, coordinates, velocities, integral states, contact phase, the current
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import math
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from . import layout
 from .contact import ContactConstants, contact_constants
 from .equations import load_equations
 from .scene import Scene
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 class Phase(IntEnum):
