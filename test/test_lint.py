@@ -1,6 +1,6 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
-(mypy), and imports point down the layers core -> io -> nodes -> tools, with contract.py at
-the bottom importing nothing of the package."""
+(mypy), every public function of core/ and io/ annotated, and imports point down the layers
+core -> io -> nodes -> tools, with contract.py at the bottom importing nothing of the package."""
 
 import ast
 import os
@@ -36,6 +36,68 @@ def test_the_tree_is_formatted():
 def test_typed_modules_type_check():
     out = _tool('mypy', '--config-file', 'mypy.ini')
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def unannotated(source):
+    """Public functions and methods (nested ones too) of ``source`` missing a parameter or
+    return annotation, as (line, name)."""
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not node.name.startswith(
+            '_'
+        ):
+            args = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+            args += [a for a in (node.args.vararg, node.args.kwarg) if a is not None]
+            params = [a for a in args if a.arg not in ('self', 'cls')]
+            if node.returns is None or any(a.annotation is None for a in params):
+                yield node.lineno, node.name
+
+
+def _core_and_io_modules():
+    """The modules of core/ and io/ but the numba kernel template (its functions are source
+    text compiled per arm shape), as (path relative to the package, path)."""
+    for path, parts in _modules():
+        rel = os.path.relpath(path, PACKAGE).replace(os.sep, '/')
+        if parts[1:2] in (['core'], ['io']) and not rel.startswith('core/kernel/'):
+            yield rel, path
+
+
+def test_public_functions_of_core_and_io_are_annotated():
+    """Every public function of core/ and io/ states its parameter and return types, so that
+    mypy checks its callers and its body."""
+    missing = [
+        f'{rel}:{line} {name}'
+        for rel, path in _core_and_io_modules()
+        for line, name in unannotated(open(path, encoding='utf-8').read())
+    ]
+    assert not missing, missing
+
+
+def test_core_and_io_modules_are_type_checked():
+    """Each module of core/ and io/ is among mypy.ini's files (a new one too)."""
+    config = open(os.path.join(ROOT, 'mypy.ini'), encoding='utf-8').read()
+    files = config.split('files =')[1].split('\nignore_missing_imports')[0]
+    checked = {f.strip() for f in files.split(',')}
+    absent = [
+        rel
+        for rel, _ in _core_and_io_modules()
+        if not rel.endswith('__init__.py') and f'impact_arm/{rel}' not in checked
+    ]
+    assert not absent, f'add to mypy.ini files: {absent}'
+
+
+def test_the_annotation_check_sees_a_missing_annotation():
+    """The check above cannot pass by seeing nothing."""
+    source = (
+        'def f(x: int) -> int: ...\n'
+        'def g(x, y: int) -> int: ...\n'
+        'def h(x: int): ...\n'
+        'def _private(x): ...\n'
+        'class C:\n'
+        '    def m(self, *args) -> None: ...\n'
+        '    def n(self, **kw: int) -> None:\n'
+        '        def inner(y): ...\n'
+    )
+    assert [name for _, name in unannotated(source)] == ['g', 'h', 'm', 'inner']
 
 
 def _modules():

@@ -49,13 +49,15 @@ def contact_constants(arm: Material, surface: Material, tip_radius: float) -> Co
 
 
 @jit
-def hertz_force(delta, E, R):
+def hertz_force(delta: float, E: float, R: float) -> float:
     """Hertz sphere-on-flat: F = 4/3 E √R δ^1.5."""
     return 4.0 / 3.0 * E * math.sqrt(R) * delta * math.sqrt(delta) if delta > 0 else 0.0
 
 
 @jit
-def jackson_green(delta, delta_c, R, S_y, C_j, P_c, B):
+def jackson_green(
+    delta: float, delta_c: float, R: float, S_y: float, C_j: float, P_c: float, B: float
+) -> float:
     """Elasto-plastic compression force, article eq. 12 with docs/model.md's a and H."""
     if delta <= 0:
         return 0.0
@@ -73,7 +75,7 @@ def jackson_green_force(delta: float, c: ContactConstants) -> float:
 
 
 @jit
-def residual(delta_m, delta_c):
+def residual(delta_m: float, delta_c: float) -> float:
     """δr after unloading from δm (Etsion et al. fit, docs/model.md).
 
     The fit is for contacts that yielded (δm ≥ δc); below δc the contact stayed elastic and
@@ -88,17 +90,17 @@ def residual_indentation(delta_m: float, c: ContactConstants) -> float:
 
 
 @jit
-def restitution_radius(delta_m, delta_r, P_m, E):
+def restitution_radius(delta_m: float, delta_r: float, P_m: float, E: float) -> float:
     """Rr chosen so the restitution curve starts at (δm, Pm): Rr = (3Pm/4E)² / (δm-δr)³."""
     return (3 * P_m / (4 * E)) ** 2 / (delta_m - delta_r) ** 3
 
 
 @jit
-def restitution_force(delta, delta_r, E, R_r):
+def restitution_force(delta: float, delta_r: float, E: float, R_r: float) -> float:
     return hertz_force(delta - delta_r, E, R_r)
 
 
 @jit
-def friction_force(normal_force, slip_velocity, mu, v_d):
+def friction_force(normal_force: float, slip_velocity: float, mu: float, v_d: float) -> float:
     """Tangential force opposing slip: -μ |Fn| tanh(v/v_d) (docs/model.md fixes eq. 14's sign)."""
     return -mu * abs(normal_force) * math.tanh(slip_velocity / v_d)

@@ -7,6 +7,9 @@ Q_i = τ_i - τ_{i+1} (article eq. 6).
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
 import math
 from dataclasses import dataclass, field
 
@@ -15,9 +18,13 @@ import numpy as np
 from ..contract import ANTIWINDUP_STRATEGIES
 from .jit import jit_leaf as jit
 
+if TYPE_CHECKING:
+    from .model import ArmModel
+    from .scene import ControllerSpec
+
 
 @jit
-def add_joint_torques(tau, generalized):
+def add_joint_torques(tau: np.ndarray, generalized: np.ndarray) -> None:
     """Q_i += τ_i - τ_{i+1}: joint i's torque acts on link i and reacts on link i-1."""
     n = tau.shape[0]
     for i in range(n):
@@ -25,7 +32,15 @@ def add_joint_torques(tau, generalized):
 
 
 @jit
-def q_law(q, qd, target, kp, kd, gravity_forces, out):
+def q_law(
+    q: np.ndarray,
+    qd: np.ndarray,
+    target: np.ndarray,
+    kp: np.ndarray,
+    kd: np.ndarray,
+    gravity_forces: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """Article eq. 9 generalised to n links: PD on the absolute angles plus exact gravity
     compensation. τ_i = -Kd_i q̇_i - Kp_i (q_i - q_if) - Σ_{j≥i} Q_jg, so that after the
     mapping Q_i = τ_i - τ_{i+1} the gravity generalized forces cancel exactly."""
@@ -36,7 +51,14 @@ def q_law(q, qd, target, kp, kd, gravity_forces, out):
 
 
 @jit
-def pid_error(q, qd, target, joint_space, error, rate):
+def pid_error(
+    q: np.ndarray,
+    qd: np.ndarray,
+    target: np.ndarray,
+    joint_space: bool,
+    error: np.ndarray,
+    rate: np.ndarray,
+) -> None:
     """Error and its rate in the angles the PID acts on: absolute link angles (article
     eq. 10 as docs/model.md reads it) or relative joint angles (encoder angles)."""
     for i in range(q.shape[0]):
@@ -49,7 +71,15 @@ def pid_error(q, qd, target, joint_space, error, rate):
 
 
 @jit
-def pid_law(error, rate, integral, kp, kd, ki, out):
+def pid_law(
+    error: np.ndarray,
+    rate: np.ndarray,
+    integral: np.ndarray,
+    kp: np.ndarray,
+    kd: np.ndarray,
+    ki: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """τ_i = -Kd_i ė_i - Kp_i e_i - Ki_i ∫e_i (article eq. 10; PD when Ki = 0)."""
     for i in range(error.shape[0]):
         out[i] = -kd[i] * rate[i] - kp[i] * error[i] - ki[i] * integral[i]
@@ -70,7 +100,7 @@ class PidIntegrator:
     u_clamp_min: float = -math.inf
     value: list = field(default_factory=list)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.antiwindup not in ANTIWINDUP_STRATEGIES:
             raise ValueError(
                 f'antiwindup_strategy = {self.antiwindup!r}: choose one of '
@@ -82,18 +112,24 @@ class PidIntegrator:
             )
         self.reset()
 
-    def saturated(self, output) -> list:
+    def saturated(self, output: Iterable[float]) -> list[bool]:
         """Per joint: is this output at (or beyond) a limit?"""
         return [not self.u_clamp_min < u < self.u_clamp_max for u in output]
 
-    def clamp(self, output):
+    def clamp(self, output: np.ndarray) -> None:
         """Limit ``output`` (a float array) to [u_clamp_min, u_clamp_max] in place."""
         np.clip(output, self.u_clamp_min, self.u_clamp_max, out=output)
 
-    def reset(self):
+    def reset(self) -> None:
         self.value = [0.0] * self.n
 
-    def update(self, error, dt, ki, saturated=None):
+    def update(
+        self,
+        error: Sequence[float] | np.ndarray,
+        dt: float,
+        ki: Sequence[float],
+        saturated: Sequence[bool] | None = None,
+    ) -> None:
         for i in range(self.n):
             if self.antiwindup == 'conditional_integration' and saturated and saturated[i]:
                 continue  # hold the integral while the actuator is at its limit
@@ -115,18 +151,18 @@ class CycleController:
 
     def __init__(
         self,
-        model,
-        law,
-        kp,
-        kd,
-        ki,
-        down_target,
-        up_target,
-        switch_height,
-        surface_height,
-        space='absolute',
-        force_threshold=1.0,
-        reversal_band=0.01,
+        model: ArmModel,
+        law: str,
+        kp: Sequence[float],
+        kd: Sequence[float],
+        ki: Sequence[float],
+        down_target: Sequence[float],
+        up_target: Sequence[float],
+        switch_height: float,
+        surface_height: float | None,
+        space: str = 'absolute',
+        force_threshold: float = 1.0,
+        reversal_band: float = 0.01,
         integrator: PidIntegrator | None = None,
     ):
         self.model = model
@@ -141,11 +177,11 @@ class CycleController:
         self.integral = integrator or PidIntegrator(len(kp))
         self.mode = 'down'
         self.switches = 0
-        self._last_t = None
-        self._last_vy = None
+        self._last_t: float | None = None
+        self._last_vy: float | None = None
 
     @classmethod
-    def for_scene(cls, model, spec):
+    def for_scene(cls, model: ArmModel, spec: ControllerSpec) -> CycleController:
         """The controller a scene's ``controller`` section (``spec``) describes, switching on
         its lowest surface (offline runs and tests; the node builds its own from parameters)."""
         return cls(
@@ -161,7 +197,7 @@ class CycleController:
             space=spec.space,
         )
 
-    def rearm(self, restart=False):
+    def rearm(self, restart: bool = False) -> None:
         """Forget the previous sample (its time, tip velocity, integral), as after a reset:
         for a stamp that went backwards or jumped far ahead. ``restart`` also starts the cycle
         again from its down half (time went back: the arm was reset)."""
@@ -176,7 +212,13 @@ class CycleController:
         self.switches += 1
         self.integral.reset()
 
-    def update(self, t, q, qd, normal_force=None):
+    def update(
+        self,
+        t: float,
+        q: Sequence[float] | np.ndarray,
+        qd: Sequence[float] | np.ndarray,
+        normal_force: float | None = None,
+    ) -> list[float]:
         """Torques for the sample at time t (the caller holds them until the next sample)."""
         _, y_tip, _, vy_tip = self.model.tip(q, qd)
         if self.mode == 'down' and self.surface_height is not None:
@@ -195,7 +237,9 @@ class CycleController:
         self._last_t = t
         return self.torque(q, qd, dt)
 
-    def torque(self, q, qd, dt=0.0):
+    def torque(
+        self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray, dt: float = 0.0
+    ) -> list[float]:
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
         n = q.shape[0]

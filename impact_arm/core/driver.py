@@ -122,14 +122,14 @@ class SimulatedArm:
         )
         self.reset()
 
-    def reset(self):
+    def reset(self) -> None:
         """Back to the scene's initial state at t = 0, zero torque, no impact in progress."""
         self.integrator = PhaseIntegrator(self.model, **self._options)
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n  # the torque being held (after clipping)
 
-    def warm_up(self):
+    def warm_up(self) -> None:
         """Load every compiled function the stepping path may call (numba loads them from its
         cache on first use: ~0.5 s in all), so that the first period, or the first impact,
         of a real-time run does not pay for it."""
@@ -176,21 +176,21 @@ class SimulatedArm:
             )
         return out
 
-    def apply(self, values: Iterable[float]):
+    def apply(self, values: Iterable[float]) -> None:
         """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
         self.apply_checked(self.check_command(values))
 
-    def apply_checked(self, tau: list[float]):
+    def apply_checked(self, tau: list[float]) -> None:
         """``apply`` for torques ``check_command`` has already passed (a driver checks each
         command once, when it arrives, and applies it at its next period)."""
         limit = self.max_effort
         self._hold([min(max(v, -limit), limit) for v in tau])
 
-    def release(self):
+    def release(self) -> None:
         """Zero torque (watchdog expired, controller gone)."""
         self._hold([0.0] * self.n)
 
-    def engage_brake(self):
+    def engage_brake(self) -> None:
         """Hold the joints where they are now, from this period on (``brake``)."""
         self._brake_at = self.integrator.state.y[: self.n].copy()
 

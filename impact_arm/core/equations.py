@@ -21,6 +21,9 @@ module with runtime flags could not. The kernel's source is ``kernel/`` (split b
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+from typing import Any
+
 import hashlib
 import importlib.util
 import os
@@ -31,7 +34,7 @@ import types
 GENERATOR_VERSION = '7'
 
 
-def jit_options():
+def jit_options() -> str:
     from . import jit
 
     return f'numba {jit.AVAILABLE}, {sorted(jit.LEAF_OPTIONS.items())}'
@@ -69,10 +72,10 @@ def _derive_source(n: int, gravity: bool) -> str:
     g = sp.Symbol('g')
     Qx = sp.symbols(f'Qx0:{n}')  # non-gravity generalized forces (joint torques, contact)
 
-    def e(i):
+    def e(i: int) -> Any:
         return sp.Matrix([sp.cos(q[i]), sp.sin(q[i])])
 
-    def dt(expr):  # total time derivative along the motion
+    def dt(expr: Any) -> Any:  # total time derivative along the motion
         return sum(sp.diff(expr, q[i]) * qd[i] for i in range(n))
 
     joints = [sp.zeros(2, 1)]
@@ -110,7 +113,9 @@ def _derive_source(n: int, gravity: bool) -> str:
     tip_a = tip_v.applyfunc(lambda e: dt(e) + sum(sp.diff(e, qd[i]) * qdd_s[i] for i in range(n)))
     jac = [[sp.diff(tip[k], q[i]) for i in range(n)] for k in range(2)]
 
-    def function(name, args, outputs, unpacks):
+    def function(
+        name: str, args: Sequence[str], outputs: Sequence[Any], unpacks: Sequence[tuple]
+    ) -> str:
         reps, reduced = sp.cse(outputs, optimizations='basic')
         lines = ['@jit_leaf', f'def {name}({", ".join(args)}):']
         for symbols, source in unpacks:
@@ -125,7 +130,8 @@ def _derive_source(n: int, gravity: bool) -> str:
     funcs = []
     if not solve_numerically:
         funcs.append(
-            function('accel', ['q', 'qd', 'Qx', 'L', 'm', 'g'], qdd, state + params + [(Qx, 'Qx')])
+            # ignored [arg-type]: qdd is set whenever the system is solved symbolically
+            function('accel', ['q', 'qd', 'Qx', 'L', 'm', 'g'], qdd, state + params + [(Qx, 'Qx')])  # type: ignore[arg-type]
         )
     funcs.append(
         function(
@@ -175,21 +181,21 @@ def _chain_source(n: int, gravity: bool) -> str:
     2-4 links (test_equations.py)."""
     r = range(n)
 
-    def head(name, args):
+    def head(name: str, args: Sequence[str]) -> list[str]:
         return ['@jit_leaf', f'def {name}({", ".join(args)}):']
 
-    def trig(lines, rows=r):
+    def trig(lines: list[str], rows: Iterable[int] = r) -> None:
         for i in rows:
             lines.append(f'    c{i} = cos(q[{i}])')
             lines.append(f'    s{i} = sin(q[{i}])')
 
-    def tail_masses(lines):
+    def tail_masses(lines: list[str]) -> None:
         # S{k}: mass of links k .. n-1 (S{n} = 0)
         lines.append(f'    S{n} = 0.0')
         for k in reversed(r):
             lines.append(f'    S{k} = S{k + 1} + m[{k}]')
 
-    def coefficient(i, j):
+    def coefficient(i: int, j: int) -> str:
         if i == j:
             return f'L[{i}] * L[{i}] * (m[{i}] / 3.0 + S{i + 1})'
         a, b = min(i, j), max(i, j)
@@ -389,7 +395,9 @@ def _write_atomically(path, text):
         return False
 
 
-_LOADED = {}  # (shape, cache directory) -> module: a study builds a model per run
+_LOADED: dict[
+    tuple, types.ModuleType
+] = {}  # (shape, cache directory) -> module: a study builds a model per run
 
 
 def load_equations(
@@ -425,7 +433,7 @@ def _load_equations(n, gravity, contact, friction, n_integral):
         path = os.path.join(tempfile.mkdtemp(prefix='impact_arm_'), name + '.py')
         _write_atomically(path, source)  # read-only home: a private temporary copy
     spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]  # a .py path has a spec
     sys.modules[name] = module
-    spec.loader.exec_module(module)
+    spec.loader.exec_module(module)  # type: ignore[union-attr]  # ... and a loader
     return module

@@ -14,6 +14,9 @@ correlations and the verdict.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
 import itertools
 import math
 import time
@@ -26,6 +29,7 @@ from .identify import (
     IdentifyError,
     ImpactWindow,
     JointRecording,
+    Noise,
     estimate_noise,
     find_impacts,
     impact_windows,
@@ -34,6 +38,7 @@ from .identify import (
 )
 from .integrator import PRESETS, PhaseIntegrator, options_from_spec
 from .model import ArmModel
+from .scene import Scene
 from .study import Study, parse_key_path
 
 # The whitened residual of an impact the model cannot replay at some values (no contact, a
@@ -54,7 +59,7 @@ def window_options(model: ArmModel) -> dict:
         rtol = opts['rtol'] if opts['rtol'] is not None else PRESETS[opts['preset']][0]
         if max(rtol, opts['contact_rtol'] or rtol) > FIT_RTOL:
             opts = options_from_spec(spec, preset='balanced')
-        model._fit_options = opts
+        model._fit_options = opts  # type: ignore[attr-defined]  # cached per model instance
     return opts
 
 
@@ -70,17 +75,17 @@ class Parameter:
     start: float
     log: bool  # fitted in log space (positive bounds)
 
-    def to_unit(self, value):
+    def to_unit(self, value: float) -> float:
         if self.log:
             return (math.log(value) - math.log(self.lo)) / (math.log(self.hi) - math.log(self.lo))
         return (value - self.lo) / (self.hi - self.lo)
 
-    def from_unit(self, u):
+    def from_unit(self, u: float) -> float:
         if self.log:
             return math.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
         return self.lo + u * (self.hi - self.lo)
 
-    def to_native(self, value):
+    def to_native(self, value: float) -> float:
         """The coordinate the covariance is stated in: log(value) or value."""
         return math.log(value) if self.log else value
 
@@ -90,7 +95,7 @@ def parameter_specs(study: Study, bounds: dict) -> list:
     (finite, lo < hi, containing the scene's value, which is the starting point)."""
     if not bounds:
         raise FitError('no parameter to fit: give at least one --param KEY=LO:HI')
-    specs = []
+    specs: list[Parameter] = []
     for key, (lo, hi) in bounds.items():
         try:
             parts = parse_key_path(key)
@@ -139,6 +144,10 @@ class Prediction:
     contacts: int
     qd_sep: np.ndarray | None = None  # joint rates at the last separation
     error: str = ''
+    if TYPE_CHECKING:  # set after construction by predict_impact (not dataclass fields)
+        path: np.ndarray = field(init=False)
+        t_sep: float = field(init=False)
+        y_sep: np.ndarray = field(init=False)
 
 
 EFFORT_TIMINGS = ('linear', 'previous', 'next')
@@ -164,7 +173,7 @@ class TorqueSchedule:
             if off[k]:
                 self.tau[k] = self.tau[1] if timing == 'previous' else self.tau[ib]
 
-    def __call__(self, t0, t1, side):
+    def __call__(self, t0: float, t1: float, side: str) -> np.ndarray:
         t, tau, mid, last = self.t, self.tau, 0.5 * (t0 + t1), len(self.t) - 1
         if self.timing == 'previous':
             return tau[min(max(int(np.searchsorted(t, mid, side='left')), 2), last)]
@@ -181,10 +190,10 @@ class TorqueSchedule:
             return tau[j]
         return tau[i] + (tau[j] - tau[i]) * (mid - t[i]) / (t[j] - t[i])
 
-    def boundaries(self, t_from, t_to):
+    def boundaries(self, t_from: float, t_to: float) -> list[float]:
         """Times where the held torque is renewed: every sample, and SUBSTEPS per period for
         'linear'."""
-        grid = [x for x in self.t if t_from < x < t_to]
+        grid: list | np.ndarray = [x for x in self.t if t_from < x < t_to]
         if self.timing == 'linear':
             edges = np.concatenate([[t_from], grid, [t_to]])
             grid = np.concatenate(
@@ -195,7 +204,11 @@ class TorqueSchedule:
 
 
 def predict_impact(
-    model: ArmModel, win: ImpactWindow, timing='linear', pre_state=None, dense=None
+    model: ArmModel,
+    win: ImpactWindow,
+    timing: str = 'linear',
+    pre_state: tuple[np.ndarray, np.ndarray] | None = None,
+    dense: Sequence[float] | None = None,
 ) -> Prediction:
     """Simulate one impact from the recorded state at the last sample before it (the
     pre-impact fit, or ``pre_state`` = (q, q̇) in joint space) under the recorded efforts,
@@ -220,7 +233,8 @@ def predict_impact(
         model, state, control='held' if held else 'continuous', **window_options(model)
     )
     torque = TorqueSchedule(win, timing)
-    first = last = None
+    first: Any = None  # the first and last contact events, once found
+    last: Any = None
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
     targets = list(win.post_t)
     edges = torque.boundaries(t0, targets[-1])
@@ -283,7 +297,9 @@ def predict_impact(
     return pred
 
 
-def free_flight(model: ArmModel, win: ImpactWindow, timing, t0, y0, t1):
+def free_flight(
+    model: ArmModel, win: ImpactWindow, timing: str, t0: float, y0: np.ndarray, t1: float
+) -> np.ndarray | None:
     """Joint rates at ``t1`` after free flight from absolute state ``y0`` at ``t0`` under
     the torque ``timing`` uses after the impact (None if a contact intervenes)."""
     n = model.n
@@ -308,7 +324,9 @@ def free_flight(model: ArmModel, win: ImpactWindow, timing, t0, y0, t1):
     return np.linalg.solve(joint_to_absolute_matrix(n), integ.state.y[n : 2 * n])
 
 
-def recorded_separation_rates(model: ArmModel, win: ImpactWindow, pred: Prediction, timing):
+def recorded_separation_rates(
+    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: str
+) -> np.ndarray | None:
     """The joint rates at the predicted separation that carry the model's free flight onto
     the recorded first sample after the impact (Newton step through the flight's
     sensitivity): the recorded side of the post-impact state, for its CoR."""
@@ -330,7 +348,9 @@ def recorded_separation_rates(model: ArmModel, win: ImpactWindow, pred: Predicti
     return qd_sep + np.linalg.solve(A, win.post_qd[0] - base)
 
 
-def recorded_cor(model: ArmModel, win: ImpactWindow, pred: Prediction, timing, v_in):
+def recorded_cor(
+    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: str, v_in: float
+) -> float:
     n = model.n
     qd = recorded_separation_rates(model, win, pred, timing)
     if qd is None or not v_in:
@@ -339,7 +359,7 @@ def recorded_cor(model: ArmModel, win: ImpactWindow, pred: Prediction, timing, v
     return -tip_normal_speed(model, pred.y_sep[:n], T @ qd) / v_in
 
 
-def tip_y(model, q_abs) -> float:
+def tip_y(model: ArmModel, q_abs: np.ndarray) -> float:
     return float(model.tip(q_abs, np.zeros_like(q_abs))[1])
 
 
@@ -381,7 +401,7 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
     return err
 
 
-def effort_timing(model: ArmModel, windows) -> tuple:
+def effort_timing(model: ArmModel, windows: Sequence[ImpactWindow]) -> tuple[str, dict[str, float]]:
     """The reading of the efforts that best predicts the free motion after the impacts, and
     the error of each: the three readings of the recorded efforts, and the scene's own
     controller when it is a continuous state feedback (a stiff controller changes its torque
@@ -391,7 +411,7 @@ def effort_timing(model: ArmModel, windows) -> tuple:
     if ctrl.rate == 0 and ctrl.law in ('q', 'pd') and model.n_integral == 0:
         timings.append('controller')
     errors = {t: sum(free_flight_error(model, w, t) for w in windows) for t in timings}
-    return min(errors, key=errors.get), errors
+    return min(errors, key=errors.get), errors  # type: ignore[arg-type]  # every key is present
 
 
 @dataclass
@@ -408,6 +428,8 @@ class FitOptions:
 class ImpactSet:
     """The recorded impacts and how a scene variant predicts them, as whitened residuals."""
 
+    best: np.ndarray  # the fitted values, set by fit
+
     def __init__(self, study: Study, specs: list, windows: list, use_wrench: bool):
         self.study, self.specs, self.windows = study, specs, windows
         self.use_wrench = use_wrench and any(w.impulse is not None for w in windows)
@@ -415,7 +437,7 @@ class ImpactSet:
         self.timing = 'linear'
         self.penalty = PENALTY
 
-    def model(self, values) -> ArmModel:
+    def model(self, values: Sequence[float] | np.ndarray) -> ArmModel:
         overrides = {p.key: float(v) for p, v in zip(self.specs, values)}
         try:
             return ArmModel(self.study.scene(overrides))
@@ -426,15 +448,15 @@ class ImpactSet:
         """Whether the wrench impulse of this impact is compared (recorded in full there)."""
         return self.use_wrench and win.impulse is not None
 
-    def outputs(self, pred: Prediction, win: ImpactWindow):
+    def outputs(self, pred: Prediction, win: ImpactWindow) -> np.ndarray:
         qd = pred.qd.ravel()
         return np.concatenate([qd, pred.impulse]) if self.wrench_at(win) else qd
 
-    def recorded(self, win: ImpactWindow):
+    def recorded(self, win: ImpactWindow) -> np.ndarray:
         qd = win.post_qd.ravel()
         return np.concatenate([qd, win.impulse]) if self.wrench_at(win) else qd
 
-    def predict(self, values):
+    def predict(self, values: Sequence[float] | np.ndarray) -> list[Prediction]:
         self.evaluations += 1
         try:
             model = self.model(values)
@@ -443,7 +465,7 @@ class ImpactSet:
             return [_failed(n, str(exc)) for _ in self.windows]
         return [predict_impact(model, w, self.timing) for w in self.windows]
 
-    def select(self, values, sigma_qd):
+    def select(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> list[str]:
         """At the starting ``values``: choose the reading of the efforts, move samples taken
         in a contact out of each impact's comparison, keep the impacts the scene replays and
         give them robust diagonal weights (``calibrate`` refines them at the optimum)."""
@@ -497,7 +519,7 @@ class ImpactSet:
             w, base = wider, predict_impact(model, wider, self.timing)
         return w, base
 
-    def calibrate(self, values, sigma_qd):
+    def calibrate(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> None:
         """The full whitening of each impact's residual at ``values`` (the optimum so far):
         the recorded rates' noise (``sigma_qd`` per joint), the wrench noise, and the
         pre-impact fit's covariance carried through the impact (sensitivities by finite
@@ -534,7 +556,9 @@ class ImpactSet:
             self.whiten[i] = np.linalg.inv(np.linalg.cholesky(C))
             w.sigma = np.sqrt(np.diag(C))
 
-    def residuals(self, values, predictions=None):
+    def residuals(
+        self, values: Sequence[float] | np.ndarray, predictions: list[Prediction] | None = None
+    ) -> np.ndarray:
         preds = predictions if predictions is not None else self.predict(values)
         out = []
         for w, L, p in zip(self.windows, self.whiten, preds):
@@ -618,7 +642,9 @@ def _halton(count, dims, offset=1):
     return out
 
 
-def contact_test(model: ArmModel, tolerance: float = 0.05):
+def contact_test(
+    model: ArmModel, tolerance: float = 0.05
+) -> Callable[[np.ndarray, np.ndarray, np.ndarray], bool]:
     """``is_contact`` for ``find_impacts``: the tip is within ``tolerance`` x the arm's reach
     of a surface's height, moving down before the step and less so after it."""
     n = model.n
@@ -626,7 +652,7 @@ def contact_test(model: ArmModel, tolerance: float = 0.05):
     heights = [s.height for s in model.surfaces]
     reach = float(np.sum(model.L))
 
-    def is_contact(q, qd_before, qd_after):
+    def is_contact(q: np.ndarray, qd_before: np.ndarray, qd_after: np.ndarray) -> bool:
         y = tip_y(model, T @ q)
         v0 = tip_normal_speed(model, T @ q, T @ qd_before)
         v1 = tip_normal_speed(model, T @ q, T @ qd_after)
@@ -635,7 +661,9 @@ def contact_test(model: ArmModel, tolerance: float = 0.05):
     return is_contact
 
 
-def prepare(recording: JointRecording, options: FitOptions, model: ArmModel | None = None):
+def prepare(
+    recording: JointRecording, options: FitOptions, model: ArmModel | None = None
+) -> tuple[list, Noise, list[ImpactWindow], list[str]]:
     """Impacts, noise and impact windows of a recording (refused if it has no impact);
     ``model`` (the scene's kinematics) tells contacts from other steps of the rates."""
     impacts = find_impacts(
@@ -670,7 +698,11 @@ def prepare(recording: JointRecording, options: FitOptions, model: ArmModel | No
 
 
 def fit(
-    recording: JointRecording, scene, bounds: dict, options: FitOptions | None = None, progress=None
+    recording: JointRecording,
+    scene: str | Scene | dict,
+    bounds: dict,
+    options: FitOptions | None = None,
+    progress: Callable[..., Any] | None = None,
 ) -> FitResult:
     """Fit the scene keys of ``bounds`` ({key: (lo, hi)}) to the impacts of ``recording``.
 
@@ -709,7 +741,7 @@ def fit(
             f'{len(problem.windows)} usable impact(s) cannot determine {len(specs)} parameters'
         )
 
-    def to_values(u):
+    def to_values(u: np.ndarray) -> np.ndarray:
         return np.array([p.from_unit(x) for p, x in zip(specs, u)])
 
     r0 = problem.residuals(start)
@@ -725,7 +757,7 @@ def fit(
         say(f'global stage {k + 1}/{len(candidates)}  best chi2 {min(costs):.4g}', k + 1, total)
     from scipy.optimize import least_squares
 
-    def local(u0):
+    def local(u0: np.ndarray) -> tuple[float, np.ndarray]:
         sol = least_squares(
             lambda u: problem.residuals(to_values(u)),
             u0,
@@ -739,7 +771,7 @@ def fit(
         return 2 * sol.cost, sol.x
 
     order = np.argsort(costs)
-    best = None
+    best: Any = None  # (cost, u) of the best local search so far
     for s, idx in enumerate(order[: options.starts]):
         cost, u = local(candidates[idx])
         if best is None or cost < best[0]:

@@ -10,12 +10,18 @@ as drivers publish them).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .errors import ImpactArmError
+
+if TYPE_CHECKING:
+    from .model import ArmModel
 
 
 class IdentifyError(ImpactArmError):
@@ -34,6 +40,8 @@ class JointRecording:
     source: str = ''
     t0_ns: int = 0  # stamp of the first sample
     notes: list = field(default_factory=list)
+    if TYPE_CHECKING:  # set by find_impacts (not a dataclass field)
+        step_z: np.ndarray = field(init=False)
 
     @property
     def n(self) -> int:
@@ -99,7 +107,7 @@ class LocalFit:
         d[1:] = p[1:] * tau ** (p[1:] - 1) / self.scale
         return v, d
 
-    def state(self, t):
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at ``t``: cov is (2n, 2n) over [q, q̇] (joints independent)."""
         v, d = self._rows(t)
         n = self.coef.shape[0]
@@ -133,8 +141,12 @@ class ImpactWindow:
     post_qd: np.ndarray  # their rates (m, n)
     impulse: np.ndarray | None = None  # (tangential, normal) [N s]
     impulse_var: np.ndarray | None = None
+    if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
+        effort_ib: int = field(init=False)
+        effort_off: list[bool] = field(init=False)
+        widened: Callable[[str], ImpactWindow | None] = field(init=False)
 
-    def jump(self):
+    def jump(self) -> np.ndarray:
         """Recorded joint-rate step at the contact time (post minus pre)."""
         return self.post.state(self.t_c)[1] - self.pre.state(self.t_c)[1]
 
@@ -157,7 +169,7 @@ def _window_noise(t, y, starts, length):
     return np.sqrt(np.median(np.array(variances), axis=0) / median_of_chi2)
 
 
-def rate_steps(rec: JointRecording):
+def rate_steps(rec: JointRecording) -> tuple[np.ndarray, np.ndarray]:
     """For each gap k (between samples k and k+1, k = 2..N-4): how far apart the rate lines
     of both sides stay at their closest within the gap, in units of each joint's robust
     scale (normed over the joints). A kink of the rates (a torque step: the controller
@@ -191,7 +203,11 @@ def rate_steps(rec: JointRecording):
     return z, step
 
 
-def find_impacts(rec: JointRecording, z_min: float = 30.0, is_contact=None) -> list:
+def find_impacts(
+    rec: JointRecording,
+    z_min: float = 30.0,
+    is_contact: Callable[[np.ndarray, np.ndarray, np.ndarray], bool] | None = None,
+) -> list[int]:
     """Gaps (a, a+1) holding an impact: a rate step far outside what noise and smooth motion
     give (robust z-score > ``z_min``); neighbouring candidates (the step leaks into the
     slopes of the gaps next to it) are one impact, the strongest gap. ``is_contact(q, qd_before,
@@ -205,14 +221,14 @@ def find_impacts(rec: JointRecording, z_min: float = 30.0, is_contact=None) -> l
     z, _ = rate_steps(rec)
     rec.step_z = z  # kept: make_window stops its comparison at a further contact
     candidates = np.flatnonzero(z > z_min)  # gap k lies after sample k
-    gaps = []
+    gaps: list[list] = []  # groups of numpy integers
     for k in candidates:
         if gaps and k - gaps[-1][-1] <= 3:
             gaps[-1].append(k)
         else:
             gaps.append([k])
     v = rec.velocity
-    found = []
+    found: list = []  # numpy integers
     for group in gaps:
         # the strongest gap of the group that can be a contact (a stiff sampled controller
         # makes steps of its own right after an impact, some larger than the impact's)
@@ -223,7 +239,7 @@ def find_impacts(rec: JointRecording, z_min: float = 30.0, is_contact=None) -> l
     return found
 
 
-def estimate_noise(rec: JointRecording, impacts, window: int = 15) -> Noise:
+def estimate_noise(rec: JointRecording, impacts: Sequence[int], window: int = 15) -> Noise:
     """Sensor noise from free-flight windows (none within ``window`` samples of an impact)."""
     N = len(rec.t)
     free = np.ones(N, bool)
@@ -242,9 +258,9 @@ def estimate_noise(rec: JointRecording, impacts, window: int = 15) -> Noise:
     sqd = np.maximum(_window_noise(rec.t, rec.velocity, starts, window), 1e-8)
     se = _window_noise(rec.t, rec.effort, starts, window)
     sw = None
-    if rec.wrench is not None and len(rec.wrench_t) > 4 * window:
+    if rec.wrench is not None and len(rec.wrench_t) > 4 * window:  # type: ignore[arg-type]
         # wrench samples away from the impacts (their own clock grid)
-        near = np.zeros(len(rec.wrench_t), bool)
+        near: np.ndarray = np.zeros(len(rec.wrench_t), bool)  # type: ignore[arg-type]  # wrench_t comes with wrench
         for a in impacts:
             near |= np.abs(rec.wrench_t - rec.t[a]) < window * rec.period
         idx = np.flatnonzero(~near)
@@ -272,14 +288,16 @@ def _contact_time(pre: LocalFit, post: LocalFit, t_a, t_b, sigma_q):
 def impact_windows(
     rec: JointRecording,
     noise: Noise,
-    impacts,
+    impacts: Sequence[int],
     window: int = 15,
     min_samples: int = 5,
     max_gap: float = 5.0,
     post_samples: int = 3,
-):
+) -> tuple[list[ImpactWindow], list[str]]:
     """An ``ImpactWindow`` per usable impact and a note per impact left out (too few free
     samples between impacts, a gap of more than ``max_gap`` periods across the contact)."""
+    out: list[ImpactWindow]
+    notes: list[str]
     out, notes = [], []
     N, _dt = len(rec.t), rec.period
     for i, a in enumerate(impacts):
@@ -296,13 +314,24 @@ def impact_windows(
     return out, notes
 
 
-def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0, post_samples=3):
+def make_window(
+    rec: JointRecording,
+    noise: Noise,
+    a: int,
+    b: int,
+    lo: int,
+    hi: int,
+    window: int = 15,
+    min_samples: int = 5,
+    max_gap: float = 5.0,
+    post_samples: int = 3,
+) -> tuple[ImpactWindow | None, str]:
     """(ImpactWindow, '') for an impact between samples a and b (free samples from lo to
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
     given to the impact on that side, for a contact that spans a sample."""
     N, dt = len(rec.t), rec.period
 
-    def off(k):
+    def off(k: int) -> bool:
         return bool(np.all(np.abs(rec.effort[k]) < 6 * noise.effort + 1e-12))
 
     while b < min(hi, a + 4) and off(b) and not off(a):
@@ -339,19 +368,20 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
         )
         for idx, ref in ((pre_idx, a), (post_idx, b))
     ]
-    t_c = _contact_time(*fits, rec.t[a], rec.t[b], noise.position)
+    # ignored [call-arg], [misc]: mypy cannot count the items of the list ``fits`` (pre, post)
+    t_c = _contact_time(*fits, rec.t[a], rec.t[b], noise.position)  # type: ignore[call-arg]
     compare = post_idx[: _before_next_contact(rec, noise, post_idx[:post_samples])]
     # efforts from the sample before a to the one after the last compared sample, including
     # any taken during the contact (between a and b)
     e_idx = np.concatenate([[max(a - 1, 0)], np.arange(a, min(compare[-1] + 2, N))])
-    win = ImpactWindow(
+    win = ImpactWindow(  # type: ignore[misc]
         0,
         a,
         b,
         float(rec.t[a]),
         float(rec.t[b]),
         t_c,
-        *fits,
+        *fits,  # type: ignore[arg-type]
         effort=rec.effort[e_idx].copy(),
         effort_t=rec.t[e_idx].copy(),
         post_t=rec.t[compare].copy(),
@@ -364,7 +394,7 @@ def make_window(rec, noise, a, b, lo, hi, window=15, min_samples=5, max_gap=5.0,
     ]
     _add_impulse(rec, noise, win)
 
-    def widened(side):
+    def widened(side: str) -> ImpactWindow | None:
         a2, b2 = (a - 1, b) if side == 'pre' else (a, b + 1)
         return make_window(rec, noise, a2, b2, lo, hi, window, min_samples, max_gap, post_samples)[
             0
@@ -440,12 +470,12 @@ def joint_to_absolute_matrix(n: int) -> np.ndarray:
     return np.tril(np.ones((n, n)))
 
 
-def tip_normal_speed(model, q_abs, qd_abs) -> float:
+def tip_normal_speed(model: ArmModel, q_abs: np.ndarray, qd_abs: np.ndarray) -> float:
     """ẏ of the tip (positive up) for the CoR of a horizontal surface."""
     return float(model.tip(q_abs, qd_abs)[3])
 
 
-def summarize_jump(model, win: ImpactWindow):
+def summarize_jump(model: ArmModel, win: ImpactWindow) -> tuple[float, float]:
     """Recorded impact speed (normal, before) and kinematic CoR, from the fits at t_c."""
     T = joint_to_absolute_matrix(win.effort.shape[1])
     q, qd_pre, _ = win.pre.state(win.t_c)

@@ -20,6 +20,9 @@ switches cost no return to Python. This wrapper turns the kernel's event log int
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any
+
 import math
 from dataclasses import dataclass, field
 
@@ -30,6 +33,11 @@ from . import layout
 from .errors import RunBudgetError, SimulationError
 from .kinds import EventKind
 from .model import ArmModel, ArmState, Phase
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from .scene import IntegratorSpec
 
 # name: (rtol, atol). atol is absolute on angles [rad], rates [rad/s] and integral states.
 # (the contract's INTEGRATOR_PRESETS, in that order: reference, accurate, balanced, fast)
@@ -47,7 +55,13 @@ PRESET_CONTACT_RTOL = {'fast': 3e-7}
 METHODS = dict(zip(INTEGRATOR_METHODS, (layout.METHOD_DOPRI5, layout.METHOD_ROSENBROCK)))
 
 
-def options_from_spec(spec, preset=None, rtol=None, atol=None, contact_rtol=None) -> dict:
+def options_from_spec(
+    spec: IntegratorSpec,
+    preset: str | None = None,
+    rtol: float | None = None,
+    atol: float | None = None,
+    contact_rtol: float | None = None,
+) -> dict:
     """PhaseIntegrator options for a scene's ``integrator`` section (``scene.IntegratorSpec``):
     its own settings, unless the caller names a preset (then the preset's tolerances, not the
     scene's rtol/atol/contact_rtol overrides) or tolerances of its own. The scene's step method
@@ -99,7 +113,7 @@ _KINDS = {
     layout.EV_MAX: EventKind.MAX_COMPRESSION,
     layout.EV_SEP: EventKind.SEPARATION,
 }
-KIND_BITS = {
+KIND_BITS: dict[str, int] = {
     EventKind.CONTACT: layout.KIND_BIT_CONTACT,
     **{kind: 1 << (1 + slot) for slot, kind in _KINDS.items()},
 }
@@ -124,7 +138,7 @@ def _numba_type(value):
     return types.float64
 
 
-def scratch_arrays(model):
+def scratch_arrays(model: ArmModel) -> tuple[np.ndarray, ...]:
     """The kernel's working arrays (``kernel/loop.py``, ``advance``), made once per
     integrator: y1, f1, err, work, y_root, f_tmp (the state's size each), the stages K, the
     right-hand side's scratch W, three rows of event values, the Rosenbrock Jacobian and its
@@ -184,7 +198,7 @@ class PhaseIntegrator:
         self.atol = atol if atol is not None else self.atol
         self.max_step = max_step if max_step is not None else math.inf
         self.control = control
-        self.trace = [] if trace else None
+        self.trace: list | None = [] if trace else None
         spec = model.scene.controller
         # Contact phases may need a tighter tolerance than free flight: the indentation
         # (0.1-1 mm) is a difference of tip coordinates of order L, so the relative tolerance
@@ -224,8 +238,8 @@ class PhaseIntegrator:
         self._scratch = scratch_arrays(model)
         self._O = np.zeros(3)  # next output index k, period dt (0: off), rows
         self._out = np.zeros((1, self.output_width))
-        self._output = []
-        self._output_sink = None
+        self._output: list[np.ndarray] = []
+        self._output_sink: Callable[[np.ndarray], Any] | None = None
         self.events = 0
         self.load_time = self._load_kernel()
 
@@ -267,13 +281,15 @@ class PhaseIntegrator:
 
     # --- output on a time grid, from each step's continuous extension -------------------
     @property
-    def output_width(self):
+    def output_width(self) -> int:
         """Columns of an output row (layout R_*): t, the state, contact impulse (tangential,
         normal) since the previous row, the torque acting (n), actuators acting (1/0), tip
         velocity (2)."""
         return self.model.eq.R_SIZE
 
-    def start_output(self, dt, next_index, sink=None):
+    def start_output(
+        self, dt: float, next_index: int, sink: Callable[[np.ndarray], Any] | None = None
+    ) -> None:
         """Record the state at the times k dt, k >= next_index, as the integration passes them:
         steps are not shortened to land on them in free flight (the step's continuous
         extension gives the state: Dormand-Prince's quartic, or a cubic Hermite after a
@@ -306,14 +322,14 @@ class PhaseIntegrator:
                 self._output.append(self._out[:count].copy())
 
     @property
-    def stats(self):
+    def stats(self) -> Stats:
         s = self._stats
         return Stats(
             int(s[layout.ST_RHS]), int(s[layout.ST_STEPS]), int(s[layout.ST_REJECTED]), self.events
         )
 
     # --- evaluation helpers (Python side; the kernel has its own compiled copies) ---------
-    def rhs(self, t, y):
+    def rhs(self, t: float, y: ArrayLike) -> np.ndarray:
         out = np.zeros(self.model.size)
         st = self.state
         self.model.eq.rhs(
@@ -331,13 +347,13 @@ class PhaseIntegrator:
         )
         return out
 
-    def contact_forces(self, q, qd):
+    def contact_forces(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """(δ, F_n, F_f, ẋ_B, ẏ_B) for the current contact phase."""
         y = np.concatenate([np.asarray(q, float), np.asarray(qd, float)])
         st = self.state
         return self.model.eq.contact_forces(y, self._P, self.model.surface_table, st.c, st.levels)
 
-    def torque(self):
+    def torque(self) -> tuple[float, ...] | None:
         """Joint torques acting at the current state, or None when the actuators are off."""
         st = self.state
         tau = np.zeros(self.model.n)
@@ -353,7 +369,7 @@ class PhaseIntegrator:
         )
         return tuple(tau.tolist()) if acting else None
 
-    def contact_force_now(self):
+    def contact_force_now(self) -> tuple[float, float]:
         """(F_tangential, F_normal) acting at the current state (zero in free motion)."""
         st = self.state
         if st.phase == Phase.FREE:
@@ -362,14 +378,14 @@ class PhaseIntegrator:
         _, fn, ff, _, _ = self.contact_forces(st.y[:n], st.y[n : 2 * n])
         return ff, fn
 
-    def take_impulse(self):
+    def take_impulse(self) -> tuple[float, float]:
         """Contact impulse (tangential, normal) [N s] accumulated since the last call."""
         c = self.state.c
         out = (float(c[layout.C_JT]), float(c[layout.C_JN]))
         c[layout.C_JT] = c[layout.C_JN] = 0.0
         return out
 
-    def reset_derivative(self):
+    def reset_derivative(self) -> None:
         """Call after changing the state or held torque from outside (new command)."""
         self._f_valid = False
 
@@ -422,7 +438,7 @@ class PhaseIntegrator:
         self._ev[layout.EV_COUNT] = 0
 
     # --- public API ---------------------------------------------------------------------------
-    def advance(self, t_end, stop_at_event=False):
+    def advance(self, t_end: float, stop_at_event: bool | Iterable[str] = False) -> list[Event]:
         """Integrate to ``t_end`` (exactly), crossing and reporting every phase switch.
 
         ``stop_at_event`` returns right after the first event (True) or the first event of
@@ -431,7 +447,7 @@ class PhaseIntegrator:
         read at an impact's end are that impact's."""
         st = self.state
         model = self.model
-        events = []
+        events: list[Event] = []
         t_end = float(t_end)
         O = self._O
         if not stop_at_event:

@@ -7,8 +7,14 @@ platforms without numba). Compiled code is cached on disk, so only the first run
 shape pays for compilation.
 """
 
+from __future__ import annotations
+
 import os
 import sys
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+F = TypeVar('F', bound=Callable[..., Any])
 
 ENABLED = os.environ.get('IMPACT_ARM_JIT', '1') != '0'
 
@@ -23,7 +29,7 @@ def _load_numba_without_blas():
     usual in the same process. Skipped when numba or scipy.linalg is already loaded."""
     if 'numba.np.arraymath' in sys.modules or 'scipy.linalg' in sys.modules:
         return
-    sys.modules['scipy.linalg'] = None
+    sys.modules['scipy.linalg'] = None  # type: ignore[assignment]  # import fails: no BLAS
     try:
         import numba.np.arraymath  # noqa: F401
     except ImportError:  # a numba that needs it after all: imported normally later
@@ -51,7 +57,7 @@ def _load_cached_without_refresh():
     if getattr(original, '_impact_arm', False):
         return
 
-    def load_overload(self, sig, target_context):
+    def load_overload(self: Any, sig: Any, target_context: Any) -> Any:
         if not getattr(self._py_func, '__module__', '').startswith('impact_arm'):
             return original(self, sig, target_context)  # other packages' functions
         loaded = None
@@ -61,8 +67,8 @@ def _load_cached_without_refresh():
             _load_numba_without_blas()
         return loaded
 
-    load_overload._impact_arm = True
-    caching.Cache.load_overload = load_overload
+    load_overload._impact_arm = True  # type: ignore[attr-defined]  # marks our patch
+    caching.Cache.load_overload = load_overload  # type: ignore[method-assign]  # the patch
 
 
 UNAVAILABLE = ''  # why the kernel runs interpreted (empty when compiled)
@@ -75,7 +81,7 @@ try:
     _load_cached_without_refresh()
     AVAILABLE = True
 except ImportError as exc:  # interpreter fallback: identical code, ~100x slower
-    _njit = None
+    _njit = None  # type: ignore[assignment]  # no numba: jit is the identity
     AVAILABLE = False
     UNAVAILABLE = str(exc) if not ENABLED else f'numba cannot be imported ({exc})'
     FIX = (
@@ -92,15 +98,15 @@ except ImportError as exc:  # interpreter fallback: identical code, ~100x slower
 # links). Functions built this way must not allocate (np.empty & co. fail to compile): the
 # kernel's scratch comes from its caller (``integrator.scratch_arrays``), so no function of
 # this package needs numba's runtime at all, and loading one never initialises it.
-OPTIONS = dict(cache=True, nogil=True, _nrt=False)
+OPTIONS: dict[str, Any] = dict(cache=True, nogil=True, _nrt=False)
 # Small leaf functions (force laws, control laws, generated equations) are inlined at the IR
 # level into their callers: calls between compiled functions otherwise cost more than the
 # arithmetic of a two-link right-hand side (measured 0.36 -> 0.21 us per call). Inlining the
 # big kernel functions too would make compilation explode, so they stay plain calls.
-LEAF_OPTIONS = dict(OPTIONS, inline='always')
+LEAF_OPTIONS: dict[str, Any] = dict(OPTIONS, inline='always')
 
 
-def jit(func):
+def jit(func: F) -> F:
     """Compile ``func`` in nopython mode with an on-disk cache (identity without numba).
     ``func`` must not allocate arrays (see OPTIONS)."""
     if _njit is None:
@@ -108,7 +114,7 @@ def jit(func):
     return _njit(**OPTIONS)(func)
 
 
-def jit_leaf(func):
+def jit_leaf(func: F) -> F:
     """Like ``jit``, and inlined into compiled callers."""
     if _njit is None:
         return func
@@ -120,34 +126,34 @@ def jit_leaf(func):
 # only notifies (no printing policy here): ``add_compile_hook(on_start, on_end)`` registers
 # callbacks that run when the first compile (numba, or the sympy derivation) starts while none
 # is running, and when the last one ends. Loads from numba's on-disk cache are not compiles.
-_hooks = []
+_hooks: list[tuple[Callable[[], Any], Callable[[], Any]]] = []
 _depth = [0]
 
 
-def add_compile_hook(on_start, on_end):
+def add_compile_hook(on_start: Callable[[], Any], on_end: Callable[[], Any]) -> Callable[[], Any]:
     """Register ``on_start()``/``on_end()`` around every outermost compile; returns a function
     that removes them."""
     _install_numba_listener()
     pair = (on_start, on_end)
     _hooks.append(pair)
-    return lambda: pair in _hooks and _hooks.remove(pair)
+    return lambda: pair in _hooks and _hooks.remove(pair)  # type: ignore[func-returns-value]
 
 
-def compile_started():
+def compile_started() -> None:
     _depth[0] += 1
     if _depth[0] == 1:
         for on_start, _ in list(_hooks):
             on_start()
 
 
-def compile_ended():
+def compile_ended() -> None:
     _depth[0] = max(0, _depth[0] - 1)
     if _depth[0] == 0:
         for _, on_end in list(_hooks):
             on_end()
 
 
-_listener = []
+_listener: list[Any] = []
 
 
 def _install_numba_listener():
@@ -156,10 +162,10 @@ def _install_numba_listener():
     from numba.core import event
 
     class _CompileListener(event.Listener):
-        def on_start(self, ev):
+        def on_start(self, ev: Any) -> None:
             compile_started()
 
-        def on_end(self, ev):
+        def on_end(self, ev: Any) -> None:
             compile_ended()
 
     _listener.append(_CompileListener())

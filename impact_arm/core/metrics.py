@@ -3,11 +3,17 @@ comes from the state at an exactly located phase switch, not from a sampled sign
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import math
 
 import numpy as np
 
 from .model import ArmModel
+
+if TYPE_CHECKING:
+    from .integrator import Event
 
 PHASE_ORDER = ('contact', 'yield', 'max_compression', 'separation')
 
@@ -18,8 +24,8 @@ class ImpactBuilder:
 
     def __init__(self, model: ArmModel):
         self.model = model
-        self.impacts = []
-        self._open = None
+        self.impacts: list[dict] = []
+        self._open: dict | None = None
         # the generated functions' Python originals: two calls per impact cost ~10 us each
         # this way, while their compiled versions would be compiled (a new arm shape: ~1 s
         # each) or loaded (every process: milliseconds) for these calls alone
@@ -36,7 +42,7 @@ class ImpactBuilder:
         parts = [float(T) for T in self._energies(q, qd, model.L, model.m)]
         return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]
 
-    def feed(self, event):
+    def feed(self, event: Event) -> dict | None:
         """Returns the finished impact record when ``event`` completes one, else None."""
         kind = event.kind
         if kind not in PHASE_ORDER:
@@ -99,12 +105,16 @@ class ImpactBuilder:
         }
 
 
-def settle_index(impacts, rel_tol=1e-3, keys=('q_contact_deg', 'v_before')):
+def settle_index(
+    impacts: Sequence[dict],
+    rel_tol: float = 1e-3,
+    keys: Sequence[str] = ('q_contact_deg', 'v_before'),
+) -> int | None:
     """The number N of the impact (1-based) from which every later impact repeats its
     predecessor's contact angles and velocities to ``rel_tol``: the limit cycle is reached
     after N impacts. None if the run never settles (or has fewer than two impacts)."""
 
-    def close(a, b):
+    def close(a: dict, b: dict) -> bool:
         for key in keys:
             for x, y in zip(a[key], b[key]):
                 if abs(x - y) > rel_tol * max(1.0, abs(y)):

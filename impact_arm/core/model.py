@@ -8,6 +8,9 @@ does (time, coordinates, velocities, integral states, contact phase, the current
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
 import math
 from dataclasses import dataclass
 from enum import IntEnum
@@ -18,6 +21,9 @@ from . import layout
 from .contact import ContactConstants, contact_constants
 from .equations import load_equations
 from .scene import Scene
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 class Phase(IntEnum):
@@ -90,31 +96,38 @@ class ArmModel:
             self.surface_table = self.surface_table[:0]
 
     # --- kinematics and energies (thin wrappers over the generated functions) ---
-    def tip(self, q, qd):
+    def tip(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """(x_B, y_B, ẋ_B, ẏ_B) of the tip centre B."""
         return self.eq.tip(np.asarray(q, float), np.asarray(qd, float), self.L)
 
-    def tip_jacobian(self, q):
+    def tip_jacobian(self, q: ArrayLike) -> np.ndarray:
         """(∂x_B/∂q, ∂y_B/∂q) flattened: first n entries x, next n entries y."""
         return self.eq.tip_jacobian(np.asarray(q, float), self.L)
 
-    def gravity_forces(self, q):
+    def gravity_forces(self, q: ArrayLike) -> np.ndarray:
         return self.eq.gravity_forces(np.asarray(q, float), self.L, self.m, self.g)
 
-    def link_energies(self, q, qd):
+    def link_energies(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         return self.eq.link_energies(np.asarray(q, float), np.asarray(qd, float), self.L, self.m)
 
-    def potential_energy(self, q):
+    def potential_energy(self, q: ArrayLike) -> float:
         return self.eq.potential(np.asarray(q, float), self.L, self.m, self.g)[0]
 
-    def mass_matrix(self, q):
+    def mass_matrix(self, q: ArrayLike) -> np.ndarray:
         n = self.n
         values = self.eq.mass_and_rhs(
             np.asarray(q, float), np.zeros(n), np.zeros(n), self.L, self.m, self.g
         )
         return np.array(values[: n * n]).reshape(n, n)
 
-    def parameters(self, rtol, atol, max_step, contact_rtol=None, contact_atol=None):
+    def parameters(
+        self,
+        rtol: float,
+        atol: float,
+        max_step: float,
+        contact_rtol: float | None = None,
+        contact_atol: float | None = None,
+    ) -> np.ndarray:
         """The flat parameter array of the kernel (layout: P_* in the generated module).
         Contact phases use ``contact_rtol`` / ``contact_atol`` (default: rtol / atol)."""
         eq, n, c = self.eq, self.n, self.scene.controller
@@ -145,7 +158,7 @@ class ArmState:
     """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID)]; the
     contact phase machine lives in the flat array ``c`` the kernel reads (layout.C_*)."""
 
-    def __init__(self, t, y, levels, n):
+    def __init__(self, t: float, y: ArrayLike, levels: ArrayLike, n: int):
         self.t = float(t)
         self.y = np.asarray(y, dtype=float)
         self.levels = np.array(levels, dtype=float)  # contact height per surface (dent memory)
@@ -153,11 +166,12 @@ class ArmState:
         self.c[layout.C_SURF] = -1
         self.held = np.zeros(n)  # zero-order-hold torque (sampled control)
 
-    def _field(index, kind=float, doc=''):
-        def get(self):
+    # ignored [misc]: a helper run in the class body (deleted after it), not a method
+    def _field(index: int, kind: Callable[[float], Any] = float, doc: str = '') -> Any:  # type: ignore[misc]
+        def get(self: ArmState) -> Any:
             return kind(self.c[index])
 
-        def put(self, value):
+        def put(self: ArmState, value: float) -> None:
             self.c[index] = float(value)
 
         return property(get, put, doc=doc)
@@ -171,20 +185,20 @@ class ArmState:
     del _field
 
     @property
-    def mode(self):
+    def mode(self) -> str:
         """Cycle half of the continuous controller: 'down' or 'up'."""
         return 'up' if self.c[layout.C_MODE] > 0.5 else 'down'
 
     @mode.setter
-    def mode(self, value):
+    def mode(self, value: str) -> None:
         self.c[layout.C_MODE] = 1.0 if value == 'up' else 0.0
 
     @property
-    def held_torque(self):
+    def held_torque(self) -> tuple[float, ...]:
         return tuple(self.held.tolist())
 
     @held_torque.setter
-    def held_torque(self, tau):
+    def held_torque(self, tau: ArrayLike) -> None:
         self.held[:] = tau
 
     def copy(self) -> 'ArmState':
@@ -194,7 +208,7 @@ class ArmState:
         return other
 
 
-def kinetic_energy_split(model: ArmModel, q, qd):
+def kinetic_energy_split(model: ArmModel, q: ArrayLike, qd: ArrayLike) -> list[float]:
     """[T1, T2, ..., T] with T the total."""
     parts = list(model.link_energies(q, qd))
     return parts + [math.fsum(parts)]

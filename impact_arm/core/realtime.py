@@ -86,7 +86,7 @@ class PeriodStats:
         t_sim: float,
         overrun: bool,
         parts: Sequence[float] | None = None,
-    ):
+    ) -> None:
         with self.lock:
             if parts is not None:
                 for i, part in enumerate(parts):
@@ -149,7 +149,7 @@ class Watchdog:
         self.last_command: float | None = None  # arrival time of the newest valid command
         self.silence = self.longest_silence = 0.0
 
-    def command(self, torques: list[float], now: float):
+    def command(self, torques: list[float], now: float) -> None:
         if self.last_command is not None:
             self.silence = now - self.last_command
             self.longest_silence = max(self.longest_silence, self.silence)
@@ -185,7 +185,7 @@ class Watchdog:
             self.applied = pending
         return WatchdogState.OK if resumed else None
 
-    def reapply(self):
+    def reapply(self) -> None:
         """Apply the held command again at the next period (a new effort limit)."""
         self.applied = None
 
@@ -281,7 +281,7 @@ class DriverLoop:
         self._k = 0  # index of the next period's deadline
 
     # -------------------------------------------------------------------- commands in
-    def command(self, torques: list[float], now: float):
+    def command(self, torques: list[float], now: float) -> None:
         """A valid command (already checked by ``arm.check_command``) arrived at ``now``
         (wall time)."""
         if self.first_command_wall is None:
@@ -334,7 +334,7 @@ class DriverLoop:
             self.log('info', f'commands resumed after {self.watchdog.silence:.3f} s without one')
 
     # -------------------------------------------------------------------- control
-    def set_paused(self, paused: bool):
+    def set_paused(self, paused: bool) -> None:
         """Freeze (True) or resume the physics; the watchdog's and lockstep's clocks leave
         the paused time out, so nothing times out or catches up on resume."""
         now = self.clock()
@@ -346,7 +346,7 @@ class DriverLoop:
             self._steps = 0
         self.paused = paused
 
-    def request_steps(self, n: int):
+    def request_steps(self, n: int) -> None:
         self._steps += n
 
     def take_step(self) -> bool:

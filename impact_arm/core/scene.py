@@ -17,7 +17,8 @@ import os
 import re
 import reprlib
 from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, NoReturn
 
 import yaml
 
@@ -206,10 +207,10 @@ class _Checker:
         self.origin = origin
         self.checked = checked
 
-    def fail(self, path, message):
+    def fail(self, path: str, message: str) -> NoReturn:
         raise SceneError(f"scene '{self.origin}': {path} {message}")
 
-    def number(self, path, value, constraint, unit):
+    def number(self, path: str, value: Any, constraint: tuple, unit: str) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(
                 path, f'= {_show.repr(value)} is not a number; {_describe_range(constraint, unit)}'
@@ -232,7 +233,7 @@ class _Checker:
             self.fail(path, f'= {value:g} is out of range: {_describe_range(constraint, unit)}')
         return value
 
-    def leaf(self, path, value, spec):
+    def leaf(self, path: str, value: Any, spec: tuple) -> Any:
         kind, constraint, unit, _ = spec
         if kind == 'num':
             return self.number(path, value, constraint, unit)
@@ -273,7 +274,15 @@ class _Checker:
         self.checked[path] = (value, result)  # holding the object keeps its identity
         return result
 
-    def container(self, path, value, kind, constraint, unit, known=None):
+    def container(
+        self,
+        path: str,
+        value: Any,
+        kind: str,
+        constraint: Any,
+        unit: str,
+        known: tuple | None = None,
+    ) -> Any:
         if kind == 'vec':
             if not isinstance(value, (list, tuple)) or not value:
                 self.fail(
@@ -296,7 +305,7 @@ class _Checker:
             return {str(k): self.leaf(f'{path}.{k}', v, entry) for k, v in value.items()}
         raise AssertionError(kind)
 
-    def mapping(self, path, value, schema, known=None):
+    def mapping(self, path: str, value: Any, schema: dict, known: tuple | None = None) -> dict:
         """``known``: (mapping, checked value) remembered at ``path``; the entries that
         ``value`` shares with it (the same objects: a copy with one entry changed) keep
         their checked values."""
@@ -347,7 +356,7 @@ def parse_scene(
     if n < 2:
         check.fail('links', f'has {n} entries: an arm needs at least 2 links')
 
-    def vector(path, values, default=None):
+    def vector(path: str, values: Sequence | None, default: Any = None) -> tuple:
         if values is None:
             return tuple(default for _ in range(n))
         if len(values) != n:
@@ -356,7 +365,7 @@ def parse_scene(
 
     materials = {k: Material(**v) for k, v in raw['materials'].items()}
 
-    def material(path, name):
+    def material(path: str, name: str) -> Material:
         if name not in materials:
             check.fail(path, f"= {name!r} names no entry of 'materials' ({', '.join(materials)})")
         return materials[name]
@@ -559,7 +568,7 @@ class _SceneLoader(yaml.SafeLoader):
         for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
     }
 
-    def construct_mapping(self, node, deep=False):
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         seen = set()
         for key_node, _ in node.value:
             key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
@@ -573,7 +582,7 @@ class _SceneLoader(yaml.SafeLoader):
             seen.add(key)
         return super().construct_mapping(node, deep)
 
-    def construct_ambiguous(self, node):
+    def construct_ambiguous(self, node: yaml.ScalarNode) -> NoReturn:
         raise yaml.constructor.ConstructorError(
             None,
             None,
@@ -650,7 +659,7 @@ def _near_key(text: str, line: int) -> str:
     return ''
 
 
-def scene_data(text: str, origin: str = '<scene>', what: str = 'scene'):
+def scene_data(text: str, origin: str = '<scene>', what: str = 'scene') -> Any:
     """The scene's YAML as plain data, not yet validated (studies change values in it), or
     ``SceneError`` in one line with line, column and key. Also reads sweep specs (``what``)."""
     loader = None

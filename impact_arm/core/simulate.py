@@ -9,6 +9,9 @@ Two ways to drive the arm, both on the same integrator:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
 import math
 import time
 from dataclasses import dataclass, field
@@ -16,11 +19,14 @@ from dataclasses import dataclass, field
 from .control import CycleController
 from .driver import advance_period, feed_events
 from .errors import SceneError, SimulationError
-from .integrator import PhaseIntegrator, options_from_spec
+from .integrator import Event, PhaseIntegrator, options_from_spec
 from .kinds import TextEnum
 from .metrics import ImpactBuilder, settle_index
 from .model import ArmModel
 from .scene import Scene
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass
@@ -40,10 +46,16 @@ class SampleRanges:
     """Running ranges of the samples for the run summary (joint angles, tip velocity), so a
     run that streams its samples to an observer holds none of them."""
 
-    def __init__(self):
+    # lists of floats once a sample came (None before): Any, as mypy cannot follow that
+    q_min: Any
+    q_max: Any
+    v_min: Any
+    v_max: Any
+
+    def __init__(self) -> None:
         self.q_min = self.q_max = self.v_min = self.v_max = None
 
-    def add(self, q, tip_velocity):
+    def add(self, q: Sequence[float], tip_velocity: Sequence[float] | np.ndarray) -> None:
         if self.q_min is None:
             self.q_min, self.q_max = list(q), list(q)
             self.v_min, self.v_max = list(tip_velocity), list(tip_velocity)
@@ -55,12 +67,12 @@ class SampleRanges:
                 if x > hi[k]:
                     hi[k] = x
 
-    def q_range_deg(self, k):
+    def q_range_deg(self, k: int) -> list[float]:
         if self.q_min is None or k >= len(self.q_min):
             return []
         return [math.degrees(self.q_min[k]), math.degrees(self.q_max[k])]
 
-    def v_range(self, k):
+    def v_range(self, k: int) -> list[float]:
         return [] if self.v_min is None else [self.v_min[k], self.v_max[k]]
 
 
@@ -99,10 +111,10 @@ class RunResult:
         """Why the run ended, in words ('15 cycles completed', 't_max = 6 s reached')."""
         return self.stop_detail or (self.stop_reason.value if self.stop_reason else '')
 
-    def stop(self, reason: StopReason, detail: str = ''):
+    def stop(self, reason: StopReason, detail: str = '') -> None:
         self.stop_reason, self.stop_detail = reason, detail
 
-    def fail(self, exc: SimulationError):
+    def fail(self, exc: SimulationError) -> None:
         """A simulation error ended the run; what was simulated before it is kept."""
         self.exception, self.error = exc, str(exc)
         self.stop(StopReason.ERROR)
@@ -128,7 +140,7 @@ class RunResult:
         return {'impacts': self.impacts, 'run': self.summary()}
 
     @property
-    def settled_after(self):
+    def settled_after(self) -> int | None:
         return settle_index(self.impacts)
 
 
@@ -138,17 +150,17 @@ def run(
     samples: bool = True,
     control_rate: float | None = None,
     preset: str | None = None,
-    rtol=None,
-    atol=None,
-    contact_rtol=None,
-    method=None,
-    max_step=None,
+    rtol: float | None = None,
+    atol: float | None = None,
+    contact_rtol: float | None = None,
+    method: str | None = None,
+    max_step: float | None = None,
     publish_rate: float | None = None,
-    trace=False,
-    observer=None,
-    progress=None,
+    trace: bool = False,
+    observer: Any = None,
+    progress: Callable[[int, int, int, float], Any] | None = None,
     t_max: float | None = None,
-    keep_samples=True,
+    keep_samples: bool = True,
 ) -> RunResult:
     """Simulate ``scene`` for its number of cycles (or until ``t_max``): the one way to run.
 
@@ -189,7 +201,7 @@ def run(
     )
     st = integ.state
     n = model.n
-    ctrl = None
+    ctrl: Any = None  # a CycleController when the control is sampled
     if control_rate:
         ctrl = CycleController.for_scene(model, scene.controller)
     builder = ImpactBuilder(model)
@@ -204,7 +216,7 @@ def run(
     dt_pub = 1.0 / publish_rate
     dt_ctl = 1.0 / control_rate if control_rate else math.inf
 
-    def apply_control(t):
+    def apply_control(t: float) -> tuple[str, str]:
         q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
         fn = impulse_since_ctl[1] / dt_ctl if dt_ctl < math.inf else None
         mode_before = ctrl.mode
@@ -213,11 +225,11 @@ def run(
         integ.reset_derivative()
         return mode_before, ctrl.mode
 
-    def count_switch(event):
+    def count_switch(event: Event) -> None:
         nonlocal cycles_done
         cycles_done += event.kind == 'switch'
 
-    def report(impacts):
+    def report(impacts: Iterable[tuple[dict, list]]) -> None:
         """Impact records and their trace rows to the result, observers and progress."""
         for record, rows in impacts:
             if trace:
@@ -227,11 +239,11 @@ def run(
             if progress:
                 progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
 
-    def feed(events):
+    def feed(events: Iterable[Event]) -> None:
         """Cycles, impact records, observers and progress for the located events."""
         report(feed_events(integ, builder, events, count_switch))
 
-    def publish(sample, tip_velocity):
+    def publish(sample: Sample, tip_velocity: Sequence[float] | np.ndarray) -> None:
         if keep_samples:
             result.samples.append(sample)
         result.ranges.add(sample.q, tip_velocity)
@@ -317,7 +329,7 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     mode = st.mode  # samples carry the cycle half at the advance's start
     last_t = 0.0
 
-    def publish_rows(rows):
+    def publish_rows(rows: np.ndarray) -> None:
         nonlocal last_t
         for row in rows.tolist():
             q, qd = tuple(row[eq.R_Y : eq.R_Y + n]), tuple(row[eq.R_Y + n : eq.R_Y + 2 * n])

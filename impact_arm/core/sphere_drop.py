@@ -12,6 +12,9 @@ integrator's. What ``impact-arm study contact`` compares with closed forms (docs
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import Any
+
 import math
 from dataclasses import dataclass
 
@@ -56,8 +59,13 @@ def drop(
     """One normal impact at ``speed`` of a ``mass`` on the pairing ``c``."""
     from scipy.integrate import solve_ivp
 
-    def phase(force, events, y0, t0):
-        def rhs(t, y):
+    def phase(
+        force: Callable[[float], float],
+        events: Sequence[Any],  # event functions with solve_ivp's attributes
+        y0: Sequence[float],
+        t0: float,
+    ) -> tuple[int, float, Any]:
+        def rhs(t: float, y: Sequence[float]) -> tuple[float, float]:
             return (y[1], -force(y[0]) / mass)
 
         for event in events:
@@ -79,15 +87,15 @@ def drop(
                 return k, sol.t_events[k][0], sol.y_events[k][0]
         raise SimulationError(f'sphere drop at {speed:g} m/s: no phase end within {span:.3g} s')
 
-    def at_rest(t, y):
+    def at_rest(t: float, y: Sequence[float]) -> float:
         return y[1]
 
-    at_rest.direction = -1.0
+    at_rest.direction = -1.0  # type: ignore[attr-defined]  # read by solve_ivp
     y, t, yielded = (0.0, speed), 0.0, False
     elastic = lambda d: hertz_force(d, c.E, c.R)  # noqa: E731
     if law == 'elastoplastic':
 
-        def onset(t, y):
+        def onset(t: float, y: Sequence[float]) -> float:
             return y[0] - c.delta_yield
 
         which, t, y = phase(elastic, [at_rest, onset], y, t)
@@ -108,10 +116,10 @@ def drop(
         )
     R_r = restitution_radius(delta_m, delta_r, P_m, c.E)
 
-    def separated(t, y):
+    def separated(t: float, y: Sequence[float]) -> float:
         return y[0] - delta_r
 
-    separated.direction = -1.0
+    separated.direction = -1.0  # type: ignore[attr-defined]  # read by solve_ivp
     _, t, y = phase(lambda d: restitution_force(d, delta_r, c.E, R_r), [separated], y, t)
     return Drop(speed, -y[1], delta_m, P_m, delta_r, t, yielded)
 
@@ -161,10 +169,10 @@ def energy_balance_cor(c: ContactConstants, mass: float, speed: float) -> float:
 
     d_y = c.delta_yield
 
-    def loading(d):
+    def loading(d: float) -> float:
         return hertz_force(d, c.E, c.R) if d <= d_y else jackson_green_force(d, c)
 
-    def work(d):
+    def work(d: float) -> float:
         if d <= d_y:
             return 0.4 * hertz_force(d, c.E, c.R) * d
         return (

@@ -21,6 +21,9 @@ of a scene shape is loaded once per process (``equations.load_equations``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import copy
 import functools
 import math
@@ -33,6 +36,9 @@ from .errors import SceneError
 from .metrics import settle_index
 from .scene import Scene, parse_scene, read_scene_file, scene_data
 from .simulate import run as run_scene
+
+if TYPE_CHECKING:
+    from .integrator import Stats
 
 _TOKEN = re.compile(r'\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]')
 
@@ -80,7 +86,7 @@ def apply_overrides(data: dict, overrides: dict) -> dict:
     out = dict(data)
     for path, value in overrides.items():
         parts = _key_path(path)
-        node = out
+        node: Any = out  # a mapping or a list of the data, one level deeper each step
         for depth, key in enumerate(parts):
             last = depth == len(parts) - 1
             if isinstance(key, int):
@@ -124,7 +130,7 @@ def _render(parts) -> str:
     )
 
 
-def load_scene_data(scene) -> tuple[dict, str]:
+def load_scene_data(scene: str | Scene | dict) -> tuple[dict, str]:
     """(YAML data, origin) of a scene given as a path or installed name, a ``Scene`` loaded
     from text, or data already parsed."""
     if isinstance(scene, dict):
@@ -150,7 +156,12 @@ class StudyRun:
     error_kind: str = ''  # 'scene' | 'simulation' | ''
 
 
-def summarize(impacts, t_end=math.nan, stats=None, wall=math.nan) -> dict:
+def summarize(
+    impacts: Sequence[dict],
+    t_end: float = math.nan,
+    stats: Stats | None = None,
+    wall: float = math.nan,
+) -> dict:
     """The per-run numbers of a study: impacts, the last period between contacts (the limit
     cycle's once settled), the impact from which the motion repeats, the final CoRs."""
     last = impacts[-1] if impacts else None
@@ -180,7 +191,7 @@ class Study:
         if overrides:
             self.data = apply_overrides(self.data, overrides)
         # the parts of the data a run's overrides leave alone are checked once per study
-        self._checked = {}
+        self._checked: dict = {}
 
     def scene(self, overrides: dict | None = None) -> Scene:
         data = apply_overrides(self.data, overrides) if overrides else self.data
@@ -201,13 +212,16 @@ class Study:
             )
         result = run_scene(scene, samples=False)
         summary = summarize(
-            result.impacts, result.t_end, result.integrator.stats, time.perf_counter() - wall0
+            result.impacts,
+            result.t_end,
+            result.integrator.stats,  # type: ignore[union-attr]  # run() always sets it
+            time.perf_counter() - wall0,
         )
         return StudyRun(
             overrides, result.impacts, summary, result.error, 'simulation' if result.error else ''
         )
 
 
-def run(scene='paper', overrides: dict | None = None) -> StudyRun:
+def run(scene: str | Scene | dict = 'paper', overrides: dict | None = None) -> StudyRun:
     """One run of ``scene`` with ``overrides`` (see the module's docstring)."""
     return Study(scene).run(overrides)

@@ -24,7 +24,8 @@ import struct
 import threading
 import time
 import zlib
-from typing import Iterator, NamedTuple, Optional
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, Iterator, NamedTuple, Optional
 
 from .. import contract
 from ..contract import TopicQos
@@ -55,7 +56,7 @@ class RecordingError(ImpactArmError, OSError):
     """The MCAP file cannot be written (path, permissions, disk full). Flushed data stays."""
 
 
-def qos_yaml(profiles) -> str:
+def qos_yaml(profiles: Sequence[TopicQos]) -> str:
     """rosbag2's ``offered_qos_profiles`` string: a YAML sequence, laid out as yaml-cpp does."""
     lines = []
     for p in profiles:
@@ -143,6 +144,7 @@ class Ros2McapWriter:
         library: str = '',
     ):
         self.path = os.fspath(path)
+        self._compress: Callable[[bytes], bytes] | None
         if compression == 'zstd':
             import zstandard
 
@@ -166,17 +168,17 @@ class Ros2McapWriter:
         self._pending = bytearray()  # data-section records not yet in the file
         self._chunk = bytearray()  # uncompressed records of the open chunk
         self._chunk_index: dict = {}  # channel id -> [(log time, offset in chunk)]
-        self._chunk_times = [None, None]
+        self._chunk_times: list[Any] = [None, None]  # log times [ns] once a message came
         self._summary_schemas = bytearray()
         self._summary_channels = bytearray()
         self._summary_chunk_indexes = bytearray()
         self._summary_attachment_indexes = bytearray()
         self._summary_metadata_indexes = bytearray()
         self._counts = {'message': 0, 'chunk': 0, 'attachment': 0, 'metadata': 0}
-        self._times = [None, None]  # first and last log time of the file
+        self._times: list[Any] = [None, None]  # first and last log time of the file
         self._error: Optional[RecordingError] = None
         self._closed = False
-        self._fd = None
+        self._fd: Any = None  # the file descriptor once open
         try:
             parent = os.path.dirname(os.path.abspath(self.path))
             os.makedirs(parent, exist_ok=True)
@@ -198,17 +200,23 @@ class Ros2McapWriter:
             raise
 
     # ------------------------------------------------------------------ public API
-    def add_topic(self, topic: str, type_name: str, qos=None, type_hash_str: str = None) -> int:
+    def add_topic(
+        self,
+        topic: str,
+        type_name: str,
+        qos: TopicQos | Sequence[TopicQos] | None = None,
+        type_hash_str: str | None = None,
+    ) -> int:
         """Register ``topic`` (idempotent); ``qos``: a TopicQos, a list of them, or None for the
         contract's. Returns the channel id."""
         with self._lock:
             if topic in self._channels:
                 return self._channels[topic].id
             type_name = type_name_of(message_class(type_name))  # validates, normalises
-            qos_list = (
+            qos_list: list[TopicQos] = (
                 [contract.qos(topic)]
                 if qos is None
-                else (list(qos) if isinstance(qos, (list, tuple)) else [qos])
+                else (list(qos) if isinstance(qos, (list, tuple)) else [qos])  # type: ignore[list-item]
             )
             thash = type_hash(type_name) if type_hash_str is None else type_hash_str
             if type_name not in self._schema_ids:
@@ -236,7 +244,9 @@ class Ros2McapWriter:
             self._channels[topic] = ch
             return ch.id
 
-    def write(self, topic: str, data, log_time_ns: int, publish_time_ns: int = None):
+    def write(
+        self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None
+    ) -> None:
         """Append one serialized (CDR) message on a registered topic."""
         with self._lock:
             if self._error or self._closed:
@@ -261,14 +271,16 @@ class Ros2McapWriter:
             ):
                 self._flush()
 
-    def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int = None):
+    def write_message(
+        self, topic: str, msg: Any, log_time_ns: int, publish_time_ns: int | None = None
+    ) -> None:
         """Serialize a message object (``serialize_cdr``) and write it; registers the topic
         on first use with its contract QoS."""
         if topic not in self._channels:
             self.add_topic(topic, type_name_of(msg))
         self.write(topic, serialize_cdr(msg), log_time_ns, publish_time_ns)
 
-    def add_metadata(self, name: str, data: dict):
+    def add_metadata(self, name: str, data: dict) -> None:
         """Store a named string map (a Metadata record); written at the next flush."""
         if name == 'rosbag2':
             raise ValueError("the 'rosbag2' metadata record is written by the writer itself")
@@ -285,9 +297,9 @@ class Ros2McapWriter:
         name: str,
         data: bytes,
         media_type: str = 'application/octet-stream',
-        log_time_ns: int = None,
-        create_time_ns: int = None,
-    ):
+        log_time_ns: int | None = None,
+        create_time_ns: int | None = None,
+    ) -> None:
         """Store a file (e.g. the scene YAML) as an Attachment record."""
         now = time.time_ns()
         log_time_ns = now if log_time_ns is None else int(log_time_ns)
@@ -325,7 +337,7 @@ class Ros2McapWriter:
     def message_count(self) -> int:
         return self._counts['message'] + sum(len(v) for v in self._chunk_index.values())
 
-    def flush(self):
+    def flush(self) -> None:
         """Write the open chunk and a fresh summary: the file is complete on return."""
         with self._lock:
             if self._error:
@@ -333,7 +345,7 @@ class Ros2McapWriter:
             if not self._closed:
                 self._flush()
 
-    def close(self):
+    def close(self) -> None:
         """Flush and close (idempotent). After a RecordingError it only releases the file."""
         with self._lock:
             if self._closed:
@@ -547,7 +559,7 @@ class Ros2McapWriter:
         return data_tail + bytes(summary) + bytes(offsets) + footer + struct.pack('<I', crc) + MAGIC
 
 
-_DISTRO = []
+_DISTRO: list[str] = []
 
 
 def _distro() -> str:
@@ -566,7 +578,10 @@ class RawMessage(NamedTuple):
 
 
 def iter_raw(
-    path, topics=None, start_time_ns: int = None, log_time_order: bool = True
+    path: str | os.PathLike,
+    topics: Iterable[str] | None = None,
+    start_time_ns: int | None = None,
+    log_time_order: bool = True,
 ) -> Iterator[RawMessage]:
     """Serialized messages in log-time order (chunk indexes let the reader sort), or in the
     order they were written with ``log_time_order=False``."""
@@ -574,7 +589,7 @@ def iter_raw(
 
     with open(path, 'rb') as f:
         reader = make_reader(f)
-        kw = {}
+        kw: dict[str, Any] = {}
         if start_time_ns is not None:  # inclusive; mcap >= 1.2 renamed the argument
             import inspect
 
@@ -598,7 +613,7 @@ class TopicInfo(NamedTuple):
     message_count: int
 
 
-def topics_info(path) -> dict:
+def topics_info(path: str | os.PathLike) -> dict[str, TopicInfo]:
     """topic -> TopicInfo(type name, [TopicQos], message count) from the file's summary."""
     from mcap.reader import make_reader
 
@@ -617,7 +632,7 @@ def topics_info(path) -> dict:
     return out
 
 
-def read_metadata(path) -> dict:
+def read_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
     """name -> string map of every Metadata record (the last one wins for a repeated name)."""
     from mcap.reader import make_reader
 
@@ -625,7 +640,7 @@ def read_metadata(path) -> dict:
         return {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
 
 
-def read_attachments(path) -> dict:
+def read_attachments(path: str | os.PathLike) -> dict[str, bytes]:
     from mcap.reader import make_reader
 
     with open(path, 'rb') as f:

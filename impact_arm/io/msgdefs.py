@@ -18,10 +18,10 @@ import os
 import re
 import struct
 import sys
-from typing import Optional
+from typing import Any, Optional
 
 
-def message_class(type_name: str):
+def message_class(type_name: str) -> type:
     """The Python class of ``pkg/msg/Type`` (also accepts ``pkg/Type``), imported lazily;
     for a type of ``STAND_INS`` whose package is not installed, the stand-in class."""
     parts = type_name.split('/')
@@ -64,7 +64,7 @@ def _tf_message():
             )
 
             @classmethod
-            def get_fields_and_field_types(cls):
+            def get_fields_and_field_types(cls) -> dict[str, str]:
                 return {'transforms': 'sequence<geometry_msgs/TransformStamped>'}
 
             def __init__(self, transforms=()):
@@ -82,7 +82,7 @@ def _tf_message():
 STAND_INS = {'tf2_msgs/msg/TFMessage': _tf_message}
 
 
-def typestore():
+def typestore() -> Any:
     """rosbags' Kilted type store: its CDR (de)serialization, where speed does not matter
     (offline writing, reading files back); the live hot path uses io/wire.py."""
     global _TYPESTORE
@@ -93,10 +93,10 @@ def typestore():
     return _TYPESTORE
 
 
-_TYPESTORE = None
+_TYPESTORE: Any = None
 
 
-def type_name_of(msg_or_class) -> str:
+def type_name_of(msg_or_class: Any) -> str:
     """``pkg/msg/Type`` of a message instance or class."""
     cls = msg_or_class if isinstance(msg_or_class, type) else type(msg_or_class)
     pkg, sub = cls.__module__.split('.')[:2]
@@ -145,8 +145,9 @@ def _msg_type(t, deps: list) -> str:
     if isinstance(t, d.UnboundedWString):
         return 'wstring'
     if isinstance(t, d.NamespacedType):
-        deps.append('/'.join(t.namespaces + [t.name]))
-        return f'{t.namespaces[0]}/{t.name}'
+        # ignored: rosidl_parser declares namespaces an Iterable; it is a list
+        deps.append('/'.join(t.namespaces + [t.name]))  # type: ignore[operator]
+        return f'{t.namespaces[0]}/{t.name}'  # type: ignore[index]
     return _IDL_TO_MSG.get(t.typename, t.typename)
 
 
@@ -204,7 +205,7 @@ def _own_definition(type_name: str) -> tuple:
     lines = [
         f'{_constant_type(v, declared.get(k))} {k}={_literal(v)}' for k, v in constants.items()
     ]
-    deps = []
+    deps: list[str] = []
     for field, slot in _fields(cls):
         line = f'{_msg_type(slot, deps)} {field}'
         default = getattr(cls, field.upper() + '__DEFAULT', None)
@@ -244,7 +245,7 @@ def type_hash(type_name: str) -> str:
     neither is available."""
     path = share_file(type_name, '.json')
     try:
-        with open(path, encoding='utf-8') as f:
+        with open(path, encoding='utf-8') as f:  # type: ignore[arg-type]  # None: TypeError below
             hashes = json.load(f)['type_hashes']
         return next(h['hash_string'] for h in hashes if h['type_name'] == type_name)
     except (TypeError, OSError, ValueError, KeyError, StopIteration):
@@ -344,7 +345,7 @@ def _write_message(buf: bytearray, msg):
         _write(buf, getattr(msg, name), t)
 
 
-def serialize_cdr(msg) -> bytes:
+def serialize_cdr(msg: Any) -> bytes:
     """CDR bytes of a message exactly as DDS carries them (see the module docstring)."""
     buf = bytearray(b'\x00\x01\x00\x00')
     try:
@@ -367,7 +368,7 @@ def sequence_cdr_prefix(items: list, count: int) -> bytes:
     return bytes(buf)
 
 
-def append_cdr(prefix: bytes, msg) -> bytes:
+def append_cdr(prefix: bytes, msg: Any) -> bytes:
     """``prefix`` (CDR so far, encapsulation included) followed by ``msg``'s CDR."""
     buf = bytearray(prefix)
     _write_message(buf, msg)

@@ -60,6 +60,9 @@ complete MCAP after each flush).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import json
 import math
 import os
@@ -80,6 +83,9 @@ from ..contract import (
 )
 from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
+
+if TYPE_CHECKING:
+    from ..core.simulate import RunResult, Sample
 
 OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
     **{topic: TOPICS[topic][0] for topic in (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT)},
@@ -168,7 +174,7 @@ class OfflineRecorder:
         self._closed = False
 
     # --- observer interface of simulate.run -----------------------------------------------
-    def on_sample(self, sample):
+    def on_sample(self, sample: Sample) -> None:
         t_ns = sim_time_ns(sample.t)
         T = self._types
         js = T['sensor_msgs/msg/JointState'](
@@ -190,7 +196,7 @@ class OfflineRecorder:
         self._write(CONTACT_WRENCH, ws, t_ns)
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
-    def on_impact(self, record, trace_rows):
+    def on_impact(self, record: dict, trace_rows: Sequence[Sequence[float]]) -> None:
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])
         self.visuals.impact(record)  # its frames are stamped from the contact on: first
         self._write(
@@ -199,7 +205,7 @@ class OfflineRecorder:
         self._write(IMPACT_TRACE, self.trace_message(trace_rows), t_ns)
         self.writer.flush()  # an impact is never lost, whatever happens later
 
-    def trace_message(self, rows):
+    def trace_message(self, rows: Sequence[Sequence[float]]) -> Any:
         """Float64MultiArray holding ``rows`` row-major (layout in the module docstring)."""
         cols = len(self._columns)
         for row in rows:
@@ -233,7 +239,7 @@ class OfflineRecorder:
         self.writer.write(topic, self._store.serialize_cdr(msg, OFFLINE_TOPICS[topic]), t_ns, t_ns)
         self.counts[topic] += 1
 
-    def close(self, result=None):
+    def close(self, result: RunResult | None = None) -> None:
         """Flush and close (idempotent). With the run's ``RunResult``, also store its summary
         (metadata ``run``) so the analysis can report how the run ended."""
         if self._closed:
@@ -253,11 +259,11 @@ class OfflineRecorder:
         self.close()
 
 
-def run_metadata(result) -> dict:
+def run_metadata(result: RunResult) -> dict[str, str]:
     """The string map stored as metadata ``run`` (values are JSON)."""
     summary = result.summary()
 
-    def clean(v):
+    def clean(v: Any) -> Any:
         return None if isinstance(v, float) and not math.isfinite(v) else v
 
     return {

@@ -11,6 +11,9 @@ times when a publisher leaves its stamps at zero. Nothing our simulator writes b
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import Any
+
 import glob
 import os
 
@@ -26,7 +29,7 @@ class RecordingInputError(ImpactArmError):
     """A recording that cannot be used: the message says what and where, in one line."""
 
 
-def mcap_files(path) -> list:
+def mcap_files(path: str | os.PathLike) -> list[str]:
     """The MCAP files of a recording: the file itself, or a rosbag2 folder's (in the order
     its metadata.yaml lists them)."""
     path = os.fspath(path)
@@ -69,7 +72,7 @@ def mcap_files(path) -> list:
 def _topics(files) -> dict:
     from .mcap_ros2 import topics_info
 
-    out = {}
+    out: dict = {}
     for f in files:
         try:
             for topic, info in topics_info(f).items():
@@ -97,12 +100,12 @@ def _wrench(raw: bytes):
 
 
 def read_recording(
-    path,
-    joints=None,
+    path: str | os.PathLike,
+    joints: Sequence[str] | None = None,
     n_joints: int = 2,
     states_topic: str = JOINT_STATES,
     wrench_topic: str | None = None,
-    progress=None,
+    progress: Callable[..., Any] | None = None,
 ) -> JointRecording:
     """The joint states of ``joints`` (default joint1..jointN) and, if recorded, the wrench.
 
@@ -129,6 +132,7 @@ def read_recording(
     from .mcap_ros2 import iter_raw
 
     wanted = [states_topic] + ([wrench_topic] if wrench_topic else [])
+    notes: list[str]
     states, wrenches, seen_names, notes = [], [], set(), []
     for f in files:
         for m in iter_raw(f, wanted):
@@ -212,7 +216,8 @@ def _assemble(states, wrenches, joints, source, notes) -> JointRecording:
     return JointRecording(
         t=(stamps - t0) * 1e-9,
         position=pos,
-        velocity=vel if np.isfinite(vel).all() else None,
+        # ignored: no rates is possible here; find_impacts refuses such a recording
+        velocity=vel if np.isfinite(vel).all() else None,  # type: ignore[arg-type]
         effort=eff,
         wrench_t=w_t,
         wrench=w,

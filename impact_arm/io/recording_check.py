@@ -9,6 +9,7 @@ rclpy): header stamps straight from the CDR bytes, impact reports as JSON.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 
 from ..contract import COMMANDS, IMPACT_REPORT, JOINT_STATES, LOSSES_METADATA
@@ -55,11 +56,13 @@ class RecordingCheck:
         return text + (f'; lost on the way (counted by the recorder): {lost}' if lost else '')
 
 
-def check_recording(path, rate: float) -> RecordingCheck:
+def check_recording(path: str | os.PathLike, rate: float) -> RecordingCheck:
     """Count what ``path`` holds against a run at ``rate`` Hz that started at stamp 0.
     Period k has stamp k / rate; each period after the first was started by one command.
     (A run with a reset repeats stamps: they count once.)"""
     read_string = None
+    stamps: set[int]
+    indices: list[int | None]  # None: a report that cannot be read
     stamps, commands, indices = set(), 0, []
     out_of_order, last_log = 0, -1
     for m in iter_raw(path, [JOINT_STATES, COMMANDS, IMPACT_REPORT], log_time_order=False):

@@ -19,7 +19,8 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import Iterator
+from collections.abc import Iterable
+from typing import Any, Iterator
 
 from ..core.errors import ImpactArmError
 from .mcap_ros2 import RawMessage, TopicInfo, iter_raw, topics_info
@@ -38,7 +39,7 @@ def _float(name, value, allowed) -> float:
         raise ReplayError(f'{name} = {value!r}: must be a number {allowed}') from None
 
 
-def check_rate(rate) -> float:
+def check_rate(rate: Any) -> float:
     rate = _float('rate', rate, 'in (0, 1000]')
     if not (math.isfinite(rate) and 0.0 < rate <= 1000.0):
         raise ReplayError(f'rate = {rate}: must be in (0, 1000] (1.0 = recorded speed)')
@@ -57,7 +58,13 @@ class ReplayPlan:
 
     @classmethod
     def open(
-        cls, path, *, rate: float = 1.0, start_offset: float = 0.0, topics=None, loop: bool = False
+        cls,
+        path: str | os.PathLike,
+        *,
+        rate: float = 1.0,
+        start_offset: float = 0.0,
+        topics: Iterable[str] | None = None,
+        loop: bool = False,
     ) -> 'ReplayPlan':
         path = os.fspath(path)
         if not os.path.isfile(path):

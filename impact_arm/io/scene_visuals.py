@@ -35,6 +35,9 @@ viewer that jumps to any time shows them right from one message.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from typing import Any
+
 import json
 import math
 
@@ -66,7 +69,7 @@ ARROW_HOLD = 0.35
 IMPACT_EVENTS = ('contact', 'max_compression', 'separation')
 
 
-def tip_position(lengths, q) -> tuple:
+def tip_position(lengths: Sequence[float], q: Sequence[float]) -> tuple[float, float]:
     """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``."""
     return (
         math.fsum(L * math.cos(a) for L, a in zip(lengths, q)),
@@ -80,7 +83,7 @@ def arrow_length(force: float, reach: float) -> float:
     return reach * force / (force + ARROW_HALF_FORCE)
 
 
-def event_states(record) -> list:
+def event_states(record: Mapping[str, Any]) -> list[tuple[str, int, list[float]]]:
     """[(event, stamp [ns], absolute link angles [rad])] of an impact report: first contact,
     maximum compression and separation (the last two only in reports that carry their
     angles). The contact stamp is rounded up and the separation stamp down to the ns, so both
@@ -121,11 +124,11 @@ class SceneVisuals:
         self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
         self._next_tf = 0  # index k of the next /tf time k / tf_rate
-        self.impacts = []  # (contact stamp [ns], contact point (x, z), F_max [N])
-        self._events = []  # event frames not yet taken: (stamp [ns], q)
-        self._fixed_markers = []  # surfaces, then impact points, as drawn so far
+        self.impacts: list[tuple] = []  # (contact stamp [ns], contact point (x, z), F_max [N])
+        self._events: list[tuple] = []  # event frames not yet taken: (stamp [ns], q)
+        self._fixed_markers: list = []  # surfaces, then impact points, as drawn so far
         self._drawn_points = 0
-        self._prefixes = None  # their CDR, the start of every MarkerArray (see markers)
+        self._prefixes: Any = None  # their CDR, the start of every MarkerArray (see markers)
 
     @property
     def impact_points(self) -> list:
@@ -133,10 +136,10 @@ class SceneVisuals:
         return [point for _, point, _ in self.impacts]
 
     # ------------------------------------------------------------------ once per run
-    def description(self):
+    def description(self) -> Any:
         return self._String(data=robot_description(self.scene, rod_radius=self.rod_radius))
 
-    def tf_static(self, t_ns: int = 0):
+    def tf_static(self, t_ns: int = 0) -> Any:
         return self._TF(
             transforms=[self._transform(t, t_ns) for t in static_transforms(self.scene)]
         )
@@ -149,20 +152,21 @@ class SceneVisuals:
         self._next_tf = math.floor(t * self.tf_rate * (1 + 1e-12) + 1e-9) + 1
         return True
 
-    def tf(self, q, t_ns: int):
+    def tf(self, q: Sequence[float], t_ns: int) -> Any:
         """The joint transforms for absolute link angles ``q``."""
         return self._TF(
             transforms=[self._transform(t, t_ns) for t in moving_transforms(self.scene.lengths, q)]
         )
 
-    def add_impact(self, record):
+    def add_impact(self, record: Mapping[str, Any] | str | bytes) -> None:
         """An impact report (the JSON record or its text): its contact point becomes a
         marker, its force the arrow, and its event frames are queued (``take_events``)."""
         if isinstance(record, (str, bytes)):
             record = json.loads(record)
+        # ignored [arg-type], [call-overload, index]: ``record`` is the mapping from here on
         try:
-            events = event_states(record)
-            force = float(record['F_max'])
+            events = event_states(record)  # type: ignore[arg-type]
+            force = float(record['F_max'])  # type: ignore[call-overload,index]
             _, t_contact, q_contact = events[0]
             # the model's contact begins when the tip centre B reaches the surface plane
             x, _, z = plane_to_world(*tip_position(self.scene.lengths, q_contact))
@@ -279,17 +283,23 @@ class VisualsWriter:
             writer.add_topic(topic, type_name, qos)
         self._write(ROBOT_DESCRIPTION, self.visuals.description(), log_time_ns)
         self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
-        self._last = None  # (stamp, q, log time) of the latest state
-        self._shown = None  # stamp of the latest /tf written
+        self._last: tuple | None = None  # (stamp, q, log time) of the latest state
+        self._shown: int | None = None  # stamp of the latest /tf written
 
-    def state(self, t_ns: int, q, wrench=None, log_time_ns: int = None):
+    def state(
+        self,
+        t_ns: int,
+        q: Sequence[float],
+        wrench: Sequence[float] | None = None,
+        log_time_ns: int | None = None,
+    ) -> None:
         """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``)."""
         log = t_ns if log_time_ns is None else log_time_ns
         self._last = (t_ns, q, log)
         if self.visuals.due(t_ns * 1e-9):
             self._frame(t_ns, q, log)
 
-    def finish(self):
+    def finish(self) -> None:
         """The last state, if /tf has not shown it yet: the file ends on the final pose and
         every impact point (the last report comes after the last paced frame)."""
         if self._last is not None and self._last[0] != self._shown:
@@ -300,11 +310,13 @@ class VisualsWriter:
         self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
         self._shown = t_ns
 
-    def force(self, q, wrench):
+    def force(self, q: Sequence[float], wrench: Sequence[float]) -> None:
         """A sampled contact wrench: accepted and not drawn. The arrow comes from the impact
         reports, whose contact point is exact; a period-averaged force belongs to no pose."""
 
-    def impact(self, record, log_time_ns: int = None):
+    def impact(
+        self, record: Mapping[str, Any] | str | bytes, log_time_ns: int | None = None
+    ) -> None:
         """An impact report: writes its event frames (``SceneVisuals.add_impact``). Their log
         time is ``log_time_ns`` if given, else their stamp shifted by the latest state's
         (log time - stamp): the stamp itself where log time is simulated time."""

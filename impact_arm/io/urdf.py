@@ -32,7 +32,8 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from typing import NamedTuple
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 from ..contract import (
     PLANE_AXIS_IN_WORLD,
@@ -43,6 +44,9 @@ from ..contract import (
     surface_frame,
 )
 from ..core.errors import ImpactArmError
+
+if TYPE_CHECKING:
+    from ..core.scene import Scene
 
 # topic_based_ros2_control's TopicBasedSystem defaults: the simulator listens and publishes
 # there unless told otherwise, so the URDF and the node agree out of the box
@@ -61,7 +65,7 @@ def link_names(n_links: int) -> list:
     return [f'link{i + 1}' for i in range(n_links)]
 
 
-def surface_frames(scene) -> list:
+def surface_frames(scene: Scene) -> list[str]:
     return [surface_frame(i) for i in range(len(scene.surfaces))]
 
 
@@ -69,11 +73,11 @@ class VisualSettingError(ImpactArmError, ValueError):
     """A drawing setting out of range."""
 
 
-def default_rod_radius(scene) -> float:
+def default_rod_radius(scene: Scene) -> float:
     return ROD_RADIUS_PER_LENGTH * min(scene.lengths)
 
 
-def rod_radius_of(scene, rod_radius=None) -> float:
+def rod_radius_of(scene: Scene, rod_radius: float | None = None) -> float:
     """``rod_radius`` [m] checked (None or 0: the default for ``scene``)."""
     if rod_radius is None or rod_radius == 0:
         return default_rod_radius(scene)
@@ -87,7 +91,7 @@ def rod_radius_of(scene, rod_radius=None) -> float:
     return rod_radius
 
 
-def tip_visual_radius(scene, rod_radius=None) -> float:
+def tip_visual_radius(scene: Scene, rod_radius: float | None = None) -> float:
     return max(float(scene.tip_radius), TIP_PER_ROD * rod_radius_of(scene, rod_radius))
 
 
@@ -107,7 +111,7 @@ class Transform(NamedTuple):
         return self.rotation
 
 
-def moving_transforms(lengths, q) -> list:
+def moving_transforms(lengths: Sequence[float], q: Sequence[float]) -> list[Transform]:
     """The joint transforms for absolute link angles ``q`` (one per link, chain order)."""
     links = link_names(len(lengths))
     out = [Transform(WORLD, links[0], 0.0, 0.0, 0.0, plane_rotation(float(q[0])))]
@@ -125,7 +129,7 @@ def moving_transforms(lengths, q) -> list:
     return out
 
 
-def static_transforms(scene) -> list:
+def static_transforms(scene: Scene) -> list[Transform]:
     """The fixed transforms: the tip on the last link, each surface on the world."""
     out = [
         Transform(
@@ -167,7 +171,7 @@ def _visual_and_collision(link, origin, geometry_tag, material=None, **size):
 
 
 def robot_description(
-    scene,
+    scene: Scene,
     *,
     name: str = 'impact_arm',
     joint_commands_topic: str = JOINT_COMMANDS_TOPIC,

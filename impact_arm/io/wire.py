@@ -22,6 +22,9 @@ malformation (short, bad header, absurd sequence length, non-UTF-8 name) ends as
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import functools
 import struct
 
@@ -45,10 +48,10 @@ class CdrReader:
         self.endian = '<' if data[1] == 1 else '>'
         self.pos = 4
 
-    def align(self, n):
+    def align(self, n: int) -> None:
         self.pos += -(self.pos - 4) % n
 
-    def unpack(self, fmt, size, count=1):
+    def unpack(self, fmt: str, size: int, count: int = 1) -> tuple:
         end = self.pos + size * count
         if end > len(self.data):
             raise ValueError('CDR message too short for its type')
@@ -61,7 +64,7 @@ def _reader(function):
     """Any failure while reading hostile bytes becomes one ``MalformedMessage``."""
 
     @functools.wraps(function)
-    def read(raw, *args):
+    def read(raw: bytes, *args: Any) -> Any:
         try:
             return function(raw, *args)
         except MalformedMessage:
@@ -93,7 +96,8 @@ class PatchedMessage:
     ``values`` is flat, in the order of ``float_fields`` (a sequence gives all its elements)."""
 
     def __init__(self, msg, float_fields, stamp='header.stamp'):
-        slots = []  # (object, attribute, index or None) in fill order
+        # (object, attribute, index or None) in fill order
+        slots: list[tuple[Any, str, int | None]] = []
         for path in float_fields:
             parent, _, last = path.rpartition('.')
             owner = _resolve(msg, parent)
@@ -133,11 +137,11 @@ class PatchedMessage:
         self._buffer = bytearray(template)
         self.fill([0.0] * self.size, (0, 0) if stamped else None)
 
-    def fill(self, values, stamp=None) -> bytes:
+    def fill(self, values: Sequence[float], stamp: tuple[int, int] | None = None) -> bytes:
         """The message with these float64 values and this stamp (sec, nanosec), serialized."""
         buf = self._buffer
         if stamp is not None:
-            _STAMP.pack_into(buf, self._stamp_at, *stamp)
+            _STAMP.pack_into(buf, self._stamp_at, *stamp)  # type: ignore[arg-type]  # stamped
         for offset, start, end, packer in self._runs:
             packer.pack_into(buf, offset, *values[start:end])
         self.data = bytes(buf)
@@ -252,17 +256,19 @@ class _JointStateLayout:
         self.velocity_count = raw[self.velocity_count_at : self.velocity_count_at + 4]
         self.velocity = (velocity_at, struct.Struct(f'<{n_velocity}d'))
 
-    def matches(self, raw) -> bool:
+    def matches(self, raw: bytes) -> bool:
         """For a message of the size this layout is kept under."""
         at = self.velocity_count_at
         return raw[12 : self.position[0]] == self.prefix and raw[at : at + 4] == self.velocity_count
 
 
-_joint_state_layouts = {}  # message size -> _JointStateLayout (a few at most)
+_joint_state_layouts: dict[
+    int, _JointStateLayout
+] = {}  # message size -> _JointStateLayout (a few at most)
 
 
 @_reader
-def joint_state_fields(raw: bytes):
+def joint_state_fields(raw: bytes) -> tuple[int, int, list[str], list[float], list[float]]:
     """``(sec, nanosec, names, position, velocity)`` of a serialized ``sensor_msgs/JointState``."""
     layout = _joint_state_layouts.get(len(raw))
     if layout is not None and raw[:2] == b'\x00\x01' and layout.matches(raw):
@@ -297,7 +303,7 @@ def _doubles_at(r: CdrReader):
 
 
 @_reader
-def wrench_stamped_fields(raw: bytes):
+def wrench_stamped_fields(raw: bytes) -> tuple[int, int, tuple[float, ...]]:
     """``(sec, nanosec, (fx, fy, fz))`` of a serialized ``geometry_msgs/WrenchStamped``."""
     r = CdrReader(raw)
     sec, nanosec = _header(r)
@@ -306,7 +312,7 @@ def wrench_stamped_fields(raw: bytes):
 
 
 @_reader
-def joint_state_command(raw: bytes, joints) -> list:
+def joint_state_command(raw: bytes, joints: Sequence[str]) -> list[float]:
     """The efforts of a serialized ``sensor_msgs/JointState`` command, in the order of
     ``joints`` (matched by name; position and velocity ignored), as topic_based_ros2_control
     sends them. ValueError names what is wrong: an unknown or repeated joint, a joint left
