@@ -54,7 +54,9 @@ class PeriodPublishers:
             rod_radius=p.rod_radius,
         )
         self.failures = 0
-        self.sent = collections.Counter()  # topic -> samples published (loss accounting)
+        # publisher -> samples published (loss accounting); keyed by the publisher, not its
+        # topic_name, which asks rcl under the handle's lock on every call
+        self.sent = collections.Counter()
 
     def publish(self, tick):
         # the controller waits for this period's wrench and joint state: /clock after them
@@ -81,7 +83,7 @@ class PeriodPublishers:
         and the periods go on (it used to end the stepping thread)."""
         try:
             publisher.publish(data)
-            self.sent[publisher.topic_name] += 1
+            self.sent[publisher] += 1
         except RuntimeError as exc:  # rclpy's RCLError: the write failed
             self.failures += 1
             self.log.warning(
@@ -92,7 +94,8 @@ class PeriodPublishers:
 
     def sent_text(self) -> str:
         """What was published, per topic: what the recorder's loss count is checked against."""
-        return 'samples sent: ' + ', '.join(f'{t} {n}' for t, n in sorted(self.sent.items()))
+        counts = sorted((p.topic_name, n) for p, n in self.sent.items())
+        return 'samples sent: ' + ', '.join(f'{t} {n}' for t, n in counts)
 
     def _check_hw_listeners(self):
         # asking DDS for the subscription count costs ~3 us: at tf_rate, not each period
