@@ -105,6 +105,20 @@ def domain_range():
 _DOMAINS = iter(random.sample(domain_range(), len(domain_range())))
 
 
+# a joint-space PD on the stand-in driver (standin_driver.py), with no surface in reach: what
+# the controller tests drive it with
+STANDIN_PD = (
+    'law:=pd',
+    'space:=joint',
+    'p:=[40.0,40.0]',
+    'd:=[13.0,13.0]',
+    'down_target:=[-0.5,0.3]',
+    'switch_height:=100.0',
+    'surface_height:=-100.0',
+    'rate:=200.0',
+)
+
+
 def make_env(domain=None, **extra) -> dict:
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

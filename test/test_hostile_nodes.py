@@ -9,6 +9,7 @@ import struct
 import time
 
 from ros_helpers import (
+    STANDIN_PD,
     PYTHON,
     controller,
     diagnostics_values,
@@ -59,16 +60,7 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
     from sensor_msgs.msg import JointState
 
     standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '60']
-    params = (
-        'law:=pd',
-        'space:=joint',
-        'p:=[40.0,40.0]',
-        'd:=[13.0,13.0]',
-        'down_target:=[-0.5,0.3]',
-        'switch_height:=100.0',
-        'surface_height:=-100.0',
-        'rate:=200.0',
-    )
+    params = STANDIN_PD
     states = probe.publisher(JointState, '/joint_states')
     with (
         start_process(standin, ros_env, tmp_path, 'standin') as driver,

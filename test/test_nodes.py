@@ -15,6 +15,7 @@ import time
 import pytest
 
 from ros_helpers import (
+    STANDIN_PD,
     PYTHON,
     controller,
     diagnostics_values,
@@ -325,16 +326,7 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
     from rcl_interfaces.srv import SetParameters
 
     standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '60']
-    params = (
-        'law:=pd',
-        'space:=joint',
-        'p:=[40.0,40.0]',
-        'd:=[13.0,13.0]',
-        'down_target:=[-0.5,0.3]',
-        'switch_height:=100.0',
-        'surface_height:=-100.0',
-        'rate:=200.0',
-    )
+    params = STANDIN_PD
     with (
         start_process(standin, ros_env, tmp_path, 'standin') as driver,
         start_process(

@@ -243,22 +243,13 @@ class PhaseIntegrator:
         self.events = 0
         self.load_time = self._load_kernel()
 
-    def _load_kernel(self):
-        """Load the compiled kernel (from numba's cache, or compile it) before the first
-        step, so that timings of the integration do not include it; returns the seconds it
-        took in this process (0 once loaded). Without numba: 0."""
-        from . import jit
-
-        eq = self.model.eq
-        if not jit.AVAILABLE or eq.advance.overloads:
-            return 0.0
-        import time
-
-        t0 = time.perf_counter()
+    def _kernel_args(self, t_end: float, O: np.ndarray) -> tuple:
+        """The arguments of the kernel's ``advance``, in its order: one place for the call
+        and for its compilation ahead of time."""
         st = self.state
-        args = (
+        return (
             self._T,
-            0.0,
+            t_end,
             st.y,
             self._f,
             self._P,
@@ -272,10 +263,24 @@ class PhaseIntegrator:
             self._trace_count,
             self._ev,
             self._evlog,
-            self._O,
+            O,
             self._out,
             *self._scratch,
         )
+
+    def _load_kernel(self):
+        """Load the compiled kernel (from numba's cache, or compile it) before the first
+        step, so that timings of the integration do not include it; returns the seconds it
+        took in this process (0 once loaded). Without numba: 0."""
+        from . import jit
+
+        eq = self.model.eq
+        if not jit.AVAILABLE or eq.advance.overloads:
+            return 0.0
+        import time
+
+        t0 = time.perf_counter()
+        args = self._kernel_args(0.0, self._O)
         eq.advance.compile(tuple(_numba_type(a) for a in args))
         return time.perf_counter() - t0
 
@@ -471,26 +476,7 @@ class PhaseIntegrator:
             # with output on, no kernel call may pass more grid times than the buffer holds
             k, dt = O[layout.O_NEXT], O[layout.O_DT]
             t_call = min(t_end, (k + OUTPUT_CAPACITY - 1) * dt) if dt > 0 else t_end
-            status = model.eq.advance(
-                self._T,
-                t_call,
-                st.y,
-                self._f,
-                self._P,
-                self._I,
-                model.surface_table,
-                st.c,
-                st.levels,
-                st.held,
-                self._stats,
-                self._trace_buffer,
-                self._trace_count,
-                self._ev,
-                self._evlog,
-                O,
-                self._out,
-                *self._scratch,
-            )
+            status = model.eq.advance(*self._kernel_args(t_call, O))
             st.t, self._h = float(self._T[layout.T_TIME]), float(self._T[layout.T_STEP])
             self._f_valid = self._T[layout.T_STALE] == 0.0
             self._drain_events(events)

@@ -25,7 +25,6 @@ class RecordingCheck:
     commands: int
     impact_reports: int
     missing_reports: list = field(default_factory=list)  # impact indices absent
-    out_of_order: int = 0  # messages whose log time precedes the one before
     lost: dict = field(default_factory=dict)  # topic -> samples the recorder never got
 
     @property
@@ -64,11 +63,7 @@ def check_recording(path: str | os.PathLike, rate: float) -> RecordingCheck:
     stamps: set[int]
     indices: list[int | None]  # None: a report that cannot be read
     stamps, commands, indices = set(), 0, []
-    out_of_order, last_log = 0, -1
     for m in iter_raw(path, [JOINT_STATES, COMMANDS, IMPACT_REPORT], log_time_order=False):
-        if m.log_time_ns < last_log:
-            out_of_order += 1
-        last_log = m.log_time_ns
         if m.topic == JOINT_STATES:
             try:
                 stamps.add(round(header_stamp_ns(m.data) * rate * 1e-9))
@@ -89,6 +84,4 @@ def check_recording(path: str | os.PathLike, rate: float) -> RecordingCheck:
     missing_reports = sorted(set(range(1, max(known, default=0) + 1)) - known)
     losses = read_metadata(path).get(LOSSES_METADATA, {})
     lost = {key.partition(':')[2]: int(n) for key, n in losses.items() if key.startswith('lost:')}
-    return RecordingCheck(
-        len(stamps), missing, commands, len(indices), missing_reports, out_of_order, lost
-    )
+    return RecordingCheck(len(stamps), missing, commands, len(indices), missing_reports, lost)

@@ -31,6 +31,7 @@ import json
 import os
 import time
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rcl_interfaces.msg import ParameterDescriptor
@@ -182,8 +183,6 @@ class Recorder(Node):
             self._read_string = _string_reader()
         self.subs = {}
         # what has been written, for a lockstep simulator that waits for the recording
-        from builtin_interfaces.msg import Time
-
         self.progress = self.create_publisher(
             Time, contract.RECORDER_PROGRESS, contract.PROGRESS_QOS.to_rclpy()
         )
@@ -301,30 +300,30 @@ class Recorder(Node):
                 break
             self._store(topic, data, received, published)
         if self.written_until != self.announced and not self.failed:
-            from builtin_interfaces.msg import Time
-
             self.announced = self.written_until
             sec, nanosec = divmod(self.written_until, 1_000_000_000)
             self.progress.publish(Time(sec=sec, nanosec=nanosec))
 
-    def _log_time(self, topic, data, received) -> int:
-        """Simulated time (stamps) or reception time: one clock for the whole file, so that
-        a viewer plays it at 1x and its index is in stamp order."""
-        if not self.by_stamps:
-            return received
-        if topic in (contract.JOINT_STATES, contract.CLOCK):
-            try:
-                # both begin with a builtin_interfaces/Time (Header.stamp, Clock.clock)
-                stamp = header_stamp_ns(data)
-            except MalformedMessage:
-                return self.now_ns
-            if 0 <= stamp < 1 << 63:  # a hostile peer's negative stamp is not a time
-                self.now_ns = stamp
-        return self.now_ns
+    @staticmethod
+    def _stamp(topic, data):
+        """The stamp [ns] of a /joint_states or /clock sample (both begin with a
+        builtin_interfaces/Time), None for other topics and for one that is no time."""
+        if topic not in (contract.JOINT_STATES, contract.CLOCK):
+            return None
+        try:
+            stamp = header_stamp_ns(data)
+        except MalformedMessage:
+            return None
+        return stamp if 0 <= stamp < 1 << 63 else None  # a hostile peer's negative stamp
 
     def _store(self, topic, data, received, published):
         try:
-            received = self._log_time(topic, data, received)
+            stamp = self._stamp(topic, data)
+            if self.by_stamps:
+                # simulated time, one clock for the whole file: a viewer plays it at 1x
+                # and its index is in stamp order
+                self.now_ns = self.now_ns if stamp is None else stamp
+                received = self.now_ns
             if not self.writer.has_topic(topic):
                 # Like rosbag2: store the QoS the publishers actually offer, else the contract's.
                 pubs = self.get_publishers_info_by_topic(topic)
@@ -338,8 +337,8 @@ class Recorder(Node):
                 )
             self.writer.write(topic, data, received, published)
             self.received += 1
-            if topic == contract.JOINT_STATES:
-                self.written_until = header_stamp_ns(data)
+            if topic == contract.JOINT_STATES and stamp is not None:
+                self.written_until = stamp
             if self.visuals is not None:
                 self._derive_visuals(topic, data, received)
         except RecordingError as e:
@@ -388,8 +387,9 @@ class Recorder(Node):
 
     def _flush(self):
         try:
-            if self.losses.changed:
+            if self.losses.changed:  # (the diagnostics read it too: only the file resets it)
                 self.writer.add_metadata(contract.LOSSES_METADATA, self.losses.as_metadata())
+                self.losses.changed = False
             self.writer.flush()
         except RecordingError as e:
             self._fail(e)
@@ -500,7 +500,6 @@ class Losses:
         return sum(self.lost.values())
 
     def as_metadata(self) -> dict:
-        self.changed = False
         out = {f'lost:{t}': str(n) for t, n in sorted(self.lost.items())}
         out.update({f'before_first:{t}': str(n) for t, n in sorted(self.before_first.items())})
         return out

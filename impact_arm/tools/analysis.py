@@ -164,16 +164,7 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     result = run(sc, t_max=t_max)
     if result.error:
         raise AnalysisError(f'step response of law {law}: {result.error}')
-    samples = result.samples
-    out = Run(
-        LAW_NAMES.get(law, law),
-        np.array([s.t for s in samples]),
-        np.array([s.q for s in samples]),
-        np.array([s.qd for s in samples]),
-        result.impacts,
-        scene=sc,
-        law=law,
-    )
+    out = _offline_run(LAW_NAMES.get(law, law), result, sc, law)
     out.target = np.asarray(scene.controller.down_target, float)
     return out
 
@@ -207,15 +198,19 @@ def compared_run(scene, law: str, t_max: float, progress=_quiet) -> Run:
 
     sc = replace(scene, controller=replace(scene.controller, law=law))
     progress(f'simulating law {law} for {t_max:g} s')
-    result = run(sc, t_max=t_max)
+    return _offline_run(f'law {law} (offline)', run(sc, t_max=t_max), sc, law)
+
+
+def _offline_run(label: str, result, scene, law: str) -> Run:
+    """An offline run's samples as a Run (like a recording's)."""
     samples = result.samples
     return Run(
-        f'law {law} (offline)',
+        label,
         np.array([s.t for s in samples]),
         np.array([s.q for s in samples]),
         np.array([s.qd for s in samples]),
         result.impacts,
-        scene=sc,
+        scene=scene,
         law=law,
     )
 
