@@ -29,17 +29,9 @@ class RecordingCheck:
 
     @property
     def complete(self) -> bool:
-        return (
-            not self.missing_periods
-            and not self.missing_reports
-            and self.commands >= self.periods - 1
-        )
+        return not self._problems()
 
-    def summary(self) -> str:
-        text = (
-            f'{self.periods} periods from t = 0, {self.commands} commands, '
-            f'{self.impact_reports} impact reports'
-        )
+    def _problems(self) -> list[str]:
         problems = []
         if self.missing_periods:
             first = self.missing_periods[0]
@@ -48,7 +40,21 @@ class RecordingCheck:
             problems.append(f'{self.periods - 1 - self.commands} commands missing')
         if self.missing_reports:
             problems.append(f'impact reports missing: {self.missing_reports[:10]}')
-        text += ': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems)
+        return problems
+
+    def summary(self, lockstep: bool = True) -> str:
+        """What the file holds; in lockstep also whether it is complete. In realtime a
+        period may run on the previous command (the controller was late: no command is
+        missing) and the recorder's loss count says what was lost."""
+        text = (
+            f'{self.periods} periods from t = 0, {self.commands} commands, '
+            f'{self.impact_reports} impact reports'
+        )
+        if lockstep:
+            problems = self._problems()
+            text += ': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems)
+        else:
+            text += f', {len(self.missing_periods)} periods not in the file'
         # what the recorder counted as never received (a best-effort /clock may lose samples
         # while the periods themselves are all there)
         lost = ', '.join(f'{t} {n}' for t, n in sorted(self.lost.items()) if n)

@@ -138,7 +138,7 @@ def cli(args) -> int:
         from ..io.recording_check import check_recording
 
         check = check_recording(output, args.rate)
-        print(f'wrote {output}: {check.summary()}')
+        print(f'wrote {output}: {check.summary(args.mode == "lockstep")}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
     elif output:
