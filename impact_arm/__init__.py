@@ -1,7 +1,9 @@
 """impact_arm: a planar n-link arm striking a hard surface, simulated like real hardware.
 
-The core (scene, model, contact, control, integrator, simulate, metrics) is plain Python/numpy
-with no rclpy import; ``impact_arm.nodes`` adapts it to ROS 2.
+Three ROS-free packages hold the behaviour: ``physics`` (scene, model, contact, control,
+integrator, simulate, metrics), ``driver`` (the simulated arm as its driver sees it) and
+``calibration`` (impacts identified and fitted, studies); ``impact_arm.nodes`` adapts them to
+ROS 2.
 """
 
 __version__ = '0.1.0'

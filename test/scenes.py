@@ -5,7 +5,7 @@ import os
 
 import yaml
 
-from impact_arm.core.scene import parse_scene
+from impact_arm.physics.scene import parse_scene
 
 PAPER = os.path.join(os.path.dirname(__file__), '..', 'config', 'paper.yaml')
 

@@ -285,7 +285,7 @@ def test_figure_3_data_are_the_articles_comparison_of_the_control_laws():
     """Step responses without impact (the surface taken away): PD settles short of the
     target by exactly gravity / Kp, PID overshoots, the Q controller overshoots by nothing
     worth the name and settles within 0.1° sooner than PID on both links."""
-    from impact_arm.core.scene import load_scene
+    from impact_arm.physics.scene import load_scene
     from impact_arm.tools.analysis import step_response
 
     scene = load_scene('paper')

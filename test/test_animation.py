@@ -5,8 +5,8 @@ import pytest
 import yaml
 from PIL import Image, ImageSequence
 
-from impact_arm.core.scene import scene_from_text
-from impact_arm.core.simulate import run
+from impact_arm.physics.scene import scene_from_text
+from impact_arm.physics.simulate import run
 from impact_arm.io.offline_mcap import OfflineRecorder
 from impact_arm.tools import analysis
 from impact_arm.tools.animation import AnimationError, animate, contact_forces, frame_times

@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from impact_arm.core.scene import load_scene
-from impact_arm.core.simulate import run
+from impact_arm.physics.scene import load_scene
+from impact_arm.physics.simulate import run
 
 # docs/model.md, "What the article reports, and what the package gives" (truncated: 1 % band)
 ARTICLE_FIRST_IMPACT = {

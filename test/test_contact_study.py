@@ -3,7 +3,7 @@ Hertz's impact, and the coefficient of restitution's shape against Thornton (199
 
 import pytest
 
-from impact_arm.core.sphere_drop import thornton_cor
+from impact_arm.physics.sphere_drop import thornton_cor
 from impact_arm.tools.contact_study import cor_table, hertz_case
 
 

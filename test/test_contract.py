@@ -99,7 +99,7 @@ def test_compile_notice_announces_a_long_compile_once_and_its_end():
     import io
     import time
 
-    from impact_arm.core import jit
+    from impact_arm.physics import jit
     from impact_arm.tools.progress import COMPILE_NOTICE, CompileNotice
 
     out = io.StringIO()

@@ -1,11 +1,11 @@
-"""The sampled PID's anti-windup and output limits (core/control.py), against hand values."""
+"""The sampled PID's anti-windup and output limits (physics/control.py), against hand values."""
 
 import math
 
 import pytest
 
-from impact_arm.core.control import CycleController, PidIntegrator
-from impact_arm.core.model import ArmModel
+from impact_arm.physics.control import CycleController, PidIntegrator
+from impact_arm.physics.model import ArmModel
 from scenes import scene_from
 
 TARGET = [0.0, 0.0]

@@ -1,13 +1,13 @@
-"""The ROS-free driver loop (core/realtime.py) on a fake clock: pacing, watchdog, statistics.
+"""The ROS-free driver loop (driver/realtime.py) on a fake clock: pacing, watchdog, statistics.
 
 The arm is the real ``SimulatedArm`` of the article's scene; only the wall clock is fake, so
 every timing below is exact and nothing depends on the machine's load."""
 
 import pytest
 
-from impact_arm.core.driver import SimulatedArm
-from impact_arm.core.realtime import DriverLoop
-from impact_arm.core.scene import load_scene, resolve_scene_path
+from impact_arm.driver.arm import SimulatedArm
+from impact_arm.driver.realtime import DriverLoop
+from impact_arm.physics.scene import load_scene, resolve_scene_path
 
 RATE = 1000.0
 P = 1.0 / RATE
@@ -310,7 +310,7 @@ def _silence_after_the_first_impact(scene, timeout, silence_from, silence=0.333)
     ``silence_from``, then answers again. Returns the impacts seen by t = 1.5 s; a crash
     (the tip through the surface) raises SimulationError."""
     from impact_arm.contract import to_absolute
-    from impact_arm.core.control import CycleController
+    from impact_arm.physics.control import CycleController
 
     clock, published, commands = FakeClock(), [], {}
     loop = make_loop(scene, clock, commands, published, timeout=timeout)
@@ -337,8 +337,8 @@ def test_default_watchdog_survives_a_middleware_silence_right_after_an_impact(sc
     """The middleware sometimes delivers nothing for ~0.33 s. Right after an impact the
     controller has switched to a large 'up' torque; held for 0.1 s (the old default) it swings
     the arm through the floor (seen in CI), zeroed after the default timeout it does not."""
-    from impact_arm.core.errors import SimulationError
-    from impact_arm.core.realtime import DEFAULT_COMMAND_TIMEOUT
+    from impact_arm.physics.errors import SimulationError
+    from impact_arm.driver.realtime import DEFAULT_COMMAND_TIMEOUT
 
     with pytest.raises(SimulationError, match='penetration'):
         _silence_after_the_first_impact(scene, 0.1, silence_from)  # the danger is real

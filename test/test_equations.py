@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from impact_arm.core import equations
+from impact_arm.physics import equations
 
 FUNCTIONS = (
     'mass_and_rhs',

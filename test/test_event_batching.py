@@ -5,11 +5,11 @@ be the same integration; errors the phase machine finds must still stop the run 
 import numpy as np
 import pytest
 
-from impact_arm.core.contact import contact_constants, residual_indentation
-from impact_arm.core.integrator import PhaseIntegrator
-from impact_arm.core.model import ArmModel
-from impact_arm.core.scene import Material
-from impact_arm.core.simulate import run
+from impact_arm.physics.contact import contact_constants, residual_indentation
+from impact_arm.physics.integrator import PhaseIntegrator
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.scene import Material
+from impact_arm.physics.simulate import run
 
 from scenes import scene_from
 

@@ -9,9 +9,9 @@ import re
 
 import pytest
 
-from impact_arm.core.integrator import PhaseIntegrator
-from impact_arm.core.kernel import template_source
-from impact_arm.core.model import ArmModel
+from impact_arm.physics.integrator import PhaseIntegrator
+from impact_arm.physics.kernel import template_source
+from impact_arm.physics.model import ArmModel
 
 from scenes import scene_from
 
@@ -177,11 +177,11 @@ def test_kernel_parts_name_only_what_their_imports_declare():
     import importlib
     import symtable
 
-    from impact_arm.core.kernel import MARKER, PARTS
+    from impact_arm.physics.kernel import MARKER, PARTS
 
     missing = []
     for name in PARTS:
-        module = importlib.import_module(f'impact_arm.core.kernel.{name}')
+        module = importlib.import_module(f'impact_arm.physics.kernel.{name}')
         source = open(module.__file__, encoding='utf-8').read()
         assert MARKER in source
         for func in symtable.symtable(source, module.__file__, 'exec').get_children():

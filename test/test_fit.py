@@ -9,9 +9,9 @@ import os
 import numpy as np
 import pytest
 
-from impact_arm.core.errors import ImpactArmError
-from impact_arm.core.fit import FitError, fit
-from impact_arm.core.identify import IdentifyError, JointRecording, LocalFit, find_impacts
+from impact_arm.physics.errors import ImpactArmError
+from impact_arm.calibration.fit import FitError, fit
+from impact_arm.calibration.identify import IdentifyError, JointRecording, LocalFit, find_impacts
 from impact_arm.io.recording import RecordingInputError, read_recording
 from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
 
@@ -111,8 +111,8 @@ def bag(tmp_path_factory):
 
 
 def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, capsys):
-    from impact_arm.core.scene import load_scene
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.scene import load_scene
+    from impact_arm.physics.simulate import run
     from impact_arm.tools.cli import main
 
     folder, truth = bag
@@ -237,7 +237,7 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
     """The simulator node's reading of efforts (each stamp reports the command held over
     the period before it, sampled 1 kHz control), an aluminium-like arm and floor, other
     targets and start: the reading is told from the free flight, the values come back."""
-    from impact_arm.core.study import Study, apply_overrides
+    from impact_arm.calibration.study import Study, apply_overrides
     from impact_arm.tools.synthetic import driver_recording
 
     variant = {

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from impact_arm.core.errors import SceneError
-from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.scene import load_scene, parse_scene, scene_from_text
 from impact_arm.io.wire import (
     MalformedMessage,
     float64_array_data,
@@ -246,8 +246,8 @@ def test_a_run_that_cannot_progress_stops_with_the_run_budget(monkeypatch):
     """max_step 1e-300 (refused in a scene file, possible through the API) stepped forever:
     the kernel now returns every STEPS_PER_CALL steps and the run stops by name."""
     from dataclasses import replace
-    from impact_arm.core import integrator
-    from impact_arm.core.simulate import run
+    from impact_arm.physics import integrator
+    from impact_arm.physics.simulate import run
     from scenes import scene_from
 
     monkeypatch.setattr(integrator, 'STEPS_PER_CALL', 1000)
@@ -331,7 +331,7 @@ def test_a_command_cut_short_and_zero_padded_is_refused(cut):
     which no check can tell from a valid zero.)"""
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64MultiArray
-    from impact_arm.core.driver import CommandError, SimulatedArm
+    from impact_arm.driver.arm import CommandError, SimulatedArm
 
     raw = serialize_message(Float64MultiArray(data=[1.5, -2.2500001]))
     padded = raw[: len(raw) - cut] + bytes(cut)

@@ -158,7 +158,7 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     import math
     import re
 
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.simulate import run
     from impact_arm.io.offline_mcap import OfflineRecorder
     from scenes import scene_from
 

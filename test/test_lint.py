@@ -1,6 +1,7 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
-(mypy), every public function of core/ and io/ annotated, and imports point down the layers
-core -> io -> nodes -> tools, with contract.py at the bottom importing nothing of the package."""
+(mypy), every public function of physics/, driver/, calibration/ and io/ annotated, and imports
+point down the layers physics -> driver, calibration (side by side) -> io -> nodes -> tools, with
+contract.py at the bottom importing nothing of the package."""
 
 import ast
 import os
@@ -11,7 +12,16 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PACKAGE = os.path.join(ROOT, 'impact_arm')
-LAYERS = {'contract': 0, 'core': 1, 'io': 2, 'nodes': 3, 'tools': 4}
+LAYERS = {
+    'contract': 0,
+    'physics': 1,
+    'driver': 2,
+    'calibration': 2,
+    'io': 3,
+    'nodes': 4,
+    'tools': 5,
+}
+TYPED = ('physics', 'driver', 'calibration', 'io')
 
 
 def _tool(module, *args):
@@ -52,34 +62,34 @@ def unannotated(source):
                 yield node.lineno, node.name
 
 
-def _core_and_io_modules():
-    """The modules of core/ and io/ but the numba kernel template (its functions are source
-    text compiled per arm shape), as (path relative to the package, path)."""
+def _typed_modules():
+    """The modules of the typed packages but the numba kernel template (its functions are
+    source text compiled per arm shape), as (path relative to the package, path)."""
     for path, parts in _modules():
         rel = os.path.relpath(path, PACKAGE).replace(os.sep, '/')
-        if parts[1:2] in (['core'], ['io']) and not rel.startswith('core/kernel/'):
+        if parts[1:2] and parts[1] in TYPED and not rel.startswith('physics/kernel/'):
             yield rel, path
 
 
-def test_public_functions_of_core_and_io_are_annotated():
-    """Every public function of core/ and io/ states its parameter and return types, so that
-    mypy checks its callers and its body."""
+def test_public_functions_of_typed_packages_are_annotated():
+    """Every public function of the typed packages states its parameter and return types, so
+    that mypy checks its callers and its body."""
     missing = [
         f'{rel}:{line} {name}'
-        for rel, path in _core_and_io_modules()
+        for rel, path in _typed_modules()
         for line, name in unannotated(open(path, encoding='utf-8').read())
     ]
     assert not missing, missing
 
 
-def test_core_and_io_modules_are_type_checked():
-    """Each module of core/ and io/ is among mypy.ini's files (a new one too)."""
+def test_typed_modules_are_type_checked():
+    """Each module of the typed packages is among mypy.ini's files (a new one too)."""
     config = open(os.path.join(ROOT, 'mypy.ini'), encoding='utf-8').read()
     files = config.split('files =')[1].split('\nignore_missing_imports')[0]
     checked = {f.strip() for f in files.split(',')}
     absent = [
         rel
-        for rel, _ in _core_and_io_modules()
+        for rel, _ in _typed_modules()
         if not rel.endswith('__init__.py') and f'impact_arm/{rel}' not in checked
     ]
     assert not absent, f'add to mypy.ini files: {absent}'
@@ -135,7 +145,8 @@ def test_imports_point_down_the_layers_only():
         own = layer(parts)
         for target in imported(path, parts):
             theirs = layer(target)
-            if own is not None and theirs is not None and theirs > own:
+            side_by_side = theirs == own and target[1] != parts[1]
+            if own is not None and theirs is not None and (theirs > own or side_by_side):
                 upward.append(f'{".".join(parts)} imports {".".join(target)}')
     assert not upward, upward
 
@@ -149,6 +160,14 @@ def test_the_layer_check_sees_an_upward_import(tmp_path):
     """The checks above cannot pass by seeing nothing."""
     module = tmp_path / 'bad.py'
     module.write_text('from ..nodes import simulator\nfrom .. import contract\n')
-    found = list(imported(str(module), ['impact_arm', 'core', 'bad']))
+    found = list(imported(str(module), ['impact_arm', 'physics', 'bad']))
     assert found == [['impact_arm', 'nodes'], ['impact_arm', 'contract']]
-    assert layer(found[0]) > layer(['impact_arm', 'core', 'bad']) > layer(found[1])
+    assert layer(found[0]) > layer(['impact_arm', 'physics', 'bad']) > layer(found[1])
+
+
+def test_the_layer_check_sees_a_sibling_import(tmp_path):
+    """driver and calibration sit side by side: neither may import the other."""
+    module = tmp_path / 'bad.py'
+    module.write_text('from ..calibration import fit\n')
+    (target,) = imported(str(module), ['impact_arm', 'driver', 'bad'])
+    assert layer(target) == layer(['impact_arm', 'driver', 'bad']) and target[1] != 'driver'

@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from impact_arm.core.model import ArmModel
-from impact_arm.core.scene import load_scene
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.scene import load_scene
 from ros_helpers import controller, simulator, start_process, wait_for
 
 

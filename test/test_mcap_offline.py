@@ -16,8 +16,8 @@ from impact_arm.contract import IMPACT_TRACE as TRACE_TOPIC
 from impact_arm.contract import to_absolute, to_joint_space
 from impact_arm.io.offline_mcap import OFFLINE_TOPICS as TOPICS
 from impact_arm.io.offline_mcap import OfflineRecorder, sim_time_ns, trace_columns
-from impact_arm.core.scene import load_scene
-from impact_arm.core.simulate import run
+from impact_arm.physics.scene import load_scene
+from impact_arm.physics.simulate import run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -28,8 +28,8 @@ from ros_helpers import (
 )
 
 from impact_arm import contract
-from impact_arm.core.scene import load_scene, resolve_scene_path
-from impact_arm.core.simulate import run
+from impact_arm.physics.scene import load_scene, resolve_scene_path
+from impact_arm.physics.simulate import run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 # whole runs over DDS: minutes for the module

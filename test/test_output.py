@@ -4,9 +4,9 @@ checked against integrations that step exactly to each grid time, and against mo
 import numpy as np
 import pytest
 
-from impact_arm.core.integrator import PhaseIntegrator
-from impact_arm.core.model import ArmModel
-from impact_arm.core.simulate import run
+from impact_arm.physics.integrator import PhaseIntegrator
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.simulate import run
 
 from scenes import scene_from
 from test_physics import generalized_momentum, vertical_strike_scene

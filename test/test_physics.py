@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.special import beta
 
-from impact_arm.core.contact import (
+from impact_arm.physics.contact import (
     contact_constants,
     hertz_force,
     jackson_green_force,
@@ -14,10 +14,10 @@ from impact_arm.core.contact import (
     restitution_force,
     restitution_radius,
 )
-from impact_arm.core.integrator import PhaseIntegrator
-from impact_arm.core.model import ArmModel
-from impact_arm.core.scene import Material
-from impact_arm.core.simulate import run
+from impact_arm.physics.integrator import PhaseIntegrator
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.scene import Material
+from impact_arm.physics.simulate import run
 
 from scenes import scene_from
 

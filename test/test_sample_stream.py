@@ -7,8 +7,8 @@ import tracemalloc
 
 import pytest
 
-from impact_arm.core.errors import SceneError
-from impact_arm.core.simulate import MAX_KEPT_SAMPLES, run
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.simulate import MAX_KEPT_SAMPLES, run
 
 from scenes import scene_from
 

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from impact_arm.core.errors import SceneError
-from impact_arm.core.scene import load_scene, parse_scene, scene_from_text
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.scene import load_scene, parse_scene, scene_from_text
 
 from scenes import PAPER, paper_dict
 

@@ -1,5 +1,5 @@
-"""The ROS-free sessions (core/session.py) and the controller's input handling
-(core/control_inputs.py) on a fake clock, as the simulator and controller nodes drive them;
+"""The ROS-free sessions (driver/session.py) and the controller's input handling
+(driver/control_inputs.py) on a fake clock, as the simulator and controller nodes drive them;
 and the watchdog's brake policy against a controller that goes silent in the down-swing."""
 
 import math
@@ -8,13 +8,13 @@ import pytest
 from test_driver import RATE, FakeClock, make_loop
 
 from impact_arm.contract import to_absolute
-from impact_arm.core.control import CycleController
-from impact_arm.core.control_inputs import ControlInputs
-from impact_arm.core.driver import CommandError, SimulatedArm
-from impact_arm.core.model import ArmModel
-from impact_arm.core.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy, WatchdogState
-from impact_arm.core.scene import load_scene, resolve_scene_path
-from impact_arm.core.session import Level, LockstepSession, Outputs, RealtimeSession
+from impact_arm.physics.control import CycleController
+from impact_arm.driver.control_inputs import ControlInputs
+from impact_arm.driver.arm import CommandError, SimulatedArm
+from impact_arm.physics.model import ArmModel
+from impact_arm.driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy, WatchdogState
+from impact_arm.physics.scene import load_scene, resolve_scene_path
+from impact_arm.driver.session import Level, LockstepSession, Outputs, RealtimeSession
 
 P = 1.0 / RATE
 
@@ -336,7 +336,7 @@ def test_the_brake_is_released_by_the_next_valid_command(scene):
 def test_typed_kinds_are_their_text_wherever_text_was_used():
     import json
 
-    from impact_arm.core.kinds import EventKind
+    from impact_arm.physics.kinds import EventKind
 
     kind = EventKind.MAX_COMPRESSION
     assert kind == 'max_compression' and str(kind) == f'{kind}' == 'max_compression'

@@ -4,10 +4,10 @@ Dormand-Prince reference and docs/model.md's first impact, never against their o
 import numpy as np
 import pytest
 
-from impact_arm.core.errors import SceneError
-from impact_arm.core.integrator import PhaseIntegrator
-from impact_arm.core.model import ArmModel
-from impact_arm.core.simulate import run
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.integrator import PhaseIntegrator
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.simulate import run
 
 from scenes import scene_from
 from test_article import ARTICLE_FIRST_IMPACT

@@ -11,10 +11,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from impact_arm.core.errors import SceneError
-from impact_arm.core.scene import parse_scene
-from impact_arm.core.simulate import run as run_scene
-from impact_arm.core.study import Study, apply_overrides, parse_key_path
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.scene import parse_scene
+from impact_arm.physics.simulate import run as run_scene
+from impact_arm.calibration.study import Study, apply_overrides, parse_key_path
 
 from generators import key_paths
 from scenes import paper_dict, scene_from
@@ -453,8 +453,8 @@ def test_sweep_plot_writes_a_png(tmp_path):
 
 
 def test_simulate_no_samples_prints_the_sampled_runs_impacts(tmp_path, capsys):
-    from impact_arm.core.scene import load_scene
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.scene import load_scene
+    from impact_arm.physics.simulate import run
     from impact_arm.tools.cli import main
 
     out = tmp_path / 'fast.json'

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from impact_arm.core.model import ArmModel
+from impact_arm.physics.model import ArmModel
 from impact_arm.io.urdf import moving_transforms, robot_description, static_transforms
 from scenes import scene_from
 

@@ -11,8 +11,8 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from impact_arm.core.model import ArmModel
-from impact_arm.core.simulate import run
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.simulate import run
 from impact_arm.contract import to_absolute
 from impact_arm.io.offline_mcap import OfflineRecorder
 from impact_arm.io.scene_visuals import ARROW_HOLD

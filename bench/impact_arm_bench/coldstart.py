@@ -23,10 +23,10 @@ from . import common
 CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
-from impact_arm.core import equations
-from impact_arm.core.integrator import PhaseIntegrator
-from impact_arm.core.model import ArmModel
-from impact_arm.core.scene import parse_scene
+from impact_arm.physics import equations
+from impact_arm.physics.integrator import PhaseIntegrator
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.scene import parse_scene
 from impact_arm_bench.coldstart import chain_scene
 t1 = time.perf_counter()
 scene = parse_scene(chain_scene(int(sys.argv[1])), origin='chain')
@@ -94,7 +94,7 @@ def run(args) -> int:
             warm = _child(n, cache)
         rows.append({'links': n, 'cold': cold, 'warm': warm})
     common.progress_done()
-    from impact_arm.core.equations import SYMBOLIC_LINKS
+    from impact_arm.physics.equations import SYMBOLIC_LINKS
 
     print(
         'First run of a new arm shape, fresh process each, empty kernel cache (cold) and the '

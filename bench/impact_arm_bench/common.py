@@ -36,7 +36,7 @@ def progress_done() -> None:
 
 
 def load(scene_name: str):
-    from impact_arm.core.scene import load_scene
+    from impact_arm.physics.scene import load_scene
 
     return load_scene(scene_name)
 
@@ -44,7 +44,7 @@ def load(scene_name: str):
 # --- timed runs -----------------------------------------------------------------------------
 def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.simulate import run
 
     best = math.inf
     out = None
@@ -227,7 +227,7 @@ def machine() -> dict:
         nb = numba.__version__
     except ImportError:
         nb = None
-    from impact_arm.core import jit
+    from impact_arm.physics import jit
 
     return {
         'python': platform.python_version(),

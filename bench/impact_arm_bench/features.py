@@ -82,9 +82,9 @@ def add_arguments(parser):
 
 
 def measure(name, make, preset, repeats):
-    from impact_arm.core.integrator import PRESETS
-    from impact_arm.core.model import ArmModel
-    from impact_arm.core.scene import parse_scene
+    from impact_arm.physics.integrator import PRESETS
+    from impact_arm.physics.model import ArmModel
+    from impact_arm.physics.scene import parse_scene
 
     data = make(copy.deepcopy(paper_dict()))
     scene = parse_scene(data, origin=f'features:{name}')

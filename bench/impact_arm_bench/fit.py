@@ -47,7 +47,7 @@ def _drawn(rng):
 def accuracy(cases, impacts, say):
     import numpy as np
 
-    from impact_arm.core.fit import fit
+    from impact_arm.calibration.fit import fit
     from impact_arm.tools.synthetic import synthetic_recording
 
     rng = np.random.default_rng(2026)
@@ -159,7 +159,7 @@ def fresh_process(say):
 
 
 def growth(say):
-    from impact_arm.core.fit import fit
+    from impact_arm.calibration.fit import fit
     from impact_arm.tools.synthetic import synthetic_recording
 
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}

@@ -47,9 +47,9 @@ def _finite(value) -> bool:
 
 def classify(text: str, warm_up=lambda scene: None) -> dict:
     """Load and run one scene text; the class and a one-line detail."""
-    from impact_arm.core.errors import SceneError
-    from impact_arm.core.scene import scene_from_text
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.errors import SceneError
+    from impact_arm.physics.scene import scene_from_text
+    from impact_arm.physics.simulate import run
 
     try:
         scene = scene_from_text(text, origin='fuzz')
@@ -75,8 +75,8 @@ def classify(text: str, warm_up=lambda scene: None) -> dict:
 def worker():
     """Reads one JSON-encoded scene text per line; writes 'start' once the scene's kernel is
     compiled and loaded, then the result (both JSON lines)."""
-    from impact_arm.core.errors import SimulationError
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.errors import SimulationError
+    from impact_arm.physics.simulate import run
 
     shapes = set()
 

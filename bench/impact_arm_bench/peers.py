@@ -176,7 +176,7 @@ def run(args) -> int:
     except ImportError:
         print('bench peers needs MuJoCo: pip install mujoco (an optional extra)')
         return 2
-    from impact_arm.core.integrator import PRESETS
+    from impact_arm.physics.integrator import PRESETS
 
     scene = common.load(args.scene)
     if scene.n_links != 2 or len(scene.surfaces) != 1:

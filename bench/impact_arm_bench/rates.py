@@ -62,7 +62,7 @@ def _session(scene_path, mode, rate, rate_factor=None):
 
 
 def _scene(path):
-    from impact_arm.core.scene import load_scene
+    from impact_arm.physics.scene import load_scene
 
     return load_scene(path)
 
@@ -203,11 +203,11 @@ def _run_fast(scene_path, rate, seconds):
 
 def run(args) -> int:
     from impact_arm.tools.runner import dds_environment
-    from impact_arm.core.scene import resolve_scene_path
+    from impact_arm.physics.scene import resolve_scene_path
 
     scene_path = resolve_scene_path(args.scene)
     env = dds_environment()
-    from impact_arm.core.scene import load_scene
+    from impact_arm.physics.scene import load_scene
     from impact_arm.tools.runner import precompile
 
     precompile(load_scene(scene_path), 1000.0)  # a cold cache compiles here, announced

@@ -81,7 +81,7 @@ def search(scene, ref, levels, methods, log=common.progress):
     """Every setting tried — ours: presets, then each step method with rtol on the grid and a
     tighter contact tolerance; scipy: each method and rtol (and contact rtol) until it reaches
     the tightest level — with its error and a first timing."""
-    from impact_arm.core.integrator import PRESET_CONTACT_RTOL, PRESETS
+    from impact_arm.physics.integrator import PRESET_CONTACT_RTOL, PRESETS
 
     rows = []
     tightest = min(levels)
@@ -221,7 +221,7 @@ def final_timing(scene, groups, repeats):
 
 
 def run(args) -> int:
-    from impact_arm.core.integrator import PRESETS
+    from impact_arm.physics.integrator import PRESETS
 
     scene = common.load(args.scene)
     levels = sorted((float(x) for x in args.levels.split(',')), reverse=True)

@@ -319,7 +319,7 @@ def run(args) -> int:
         print(f'--runs = {args.runs}: must be >= 1', file=sys.stderr)
         return 2
     env = dds_environment()
-    from impact_arm.core.scene import load_scene
+    from impact_arm.physics.scene import load_scene
     from impact_arm.tools.runner import precompile
 
     precompile(load_scene('paper'), 1000.0)  # a cold cache compiles here, announced

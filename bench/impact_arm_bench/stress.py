@@ -48,7 +48,7 @@ class Case:
 
 def paper_dict():
     import yaml
-    from impact_arm.core.scene import _SceneLoader, resolve_scene_path
+    from impact_arm.physics.scene import _SceneLoader, resolve_scene_path
 
     with open(resolve_scene_path('paper'), encoding='utf-8') as f:
         return yaml.load(f.read(), Loader=_SceneLoader)
@@ -68,7 +68,7 @@ def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):
 
 
 def build(case: Case):
-    from impact_arm.core.scene import parse_scene
+    from impact_arm.physics.scene import parse_scene
 
     data = strike_dict(case.strike_speed) if case.base == 'strike' else paper_dict()
     data = copy.deepcopy(data)
@@ -229,10 +229,10 @@ class Outcome:
 
 def check_run(case: Case, scene, deadline=None, method='dopri5'):
     """Run one case event to event, checking every impact. Returns an ``Outcome``."""
-    from impact_arm.core.errors import SimulationError
-    from impact_arm.core.integrator import PhaseIntegrator
-    from impact_arm.core.metrics import ImpactBuilder
-    from impact_arm.core.model import ArmModel
+    from impact_arm.physics.errors import SimulationError
+    from impact_arm.physics.integrator import PhaseIntegrator
+    from impact_arm.physics.metrics import ImpactBuilder
+    from impact_arm.physics.model import ArmModel
 
     t0 = time.perf_counter()
     model = ArmModel(scene)
@@ -354,7 +354,7 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
 
 
 def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
-    from impact_arm.core.errors import SceneError
+    from impact_arm.physics.errors import SceneError
 
     try:
         scene = build(case)

@@ -79,8 +79,8 @@ def per_run_costs(count: int, repeats: int = 3) -> dict:
     kept. Other jobs only ever add time, so on a shared machine the minimum is the
     estimate a load spike during one path's turn does not decide; with ``repeats=1``
     every figure is a single timing, as before."""
-    from impact_arm.core.simulate import run
-    from impact_arm.core.study import Study
+    from impact_arm.physics.simulate import run
+    from impact_arm.calibration.study import Study
     from impact_arm.tools import sweep
 
     spec = sweep.Spec(common_spec(count), origin='bench')

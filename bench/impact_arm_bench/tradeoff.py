@@ -98,7 +98,7 @@ def _row(kind, method, rtol, atol, result, ref):
 
 
 def measure(scene, methods, rtols, repeats, log=common.progress):
-    from impact_arm.core.integrator import PRESET_CONTACT_RTOL, PRESETS
+    from impact_arm.physics.integrator import PRESET_CONTACT_RTOL, PRESETS
 
     ref_rtol, ref_atol = PRESETS['reference']
     log('reference preset')
@@ -148,7 +148,7 @@ def measure(scene, methods, rtols, repeats, log=common.progress):
 def control_rate_trade(scene, rates, ref, log=common.progress):
     """simulate.run with continuous control (rate 0) or sampled control, preset accurate, so
     the differences are the control rate's, not the integrator's."""
-    from impact_arm.core.simulate import run
+    from impact_arm.physics.simulate import run
 
     rows = []
     for rate in rates:

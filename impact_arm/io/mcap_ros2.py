@@ -29,7 +29,7 @@ from typing import Any, Iterator, NamedTuple, Optional
 
 from .. import contract
 from ..contract import TopicQos
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 from .msgdefs import message_class, message_definition, serialize_cdr, type_hash, type_name_of
 
 __all__ = [

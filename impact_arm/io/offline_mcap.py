@@ -85,7 +85,7 @@ from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 
 if TYPE_CHECKING:
-    from ..core.simulate import RunResult, Sample
+    from ..physics.simulate import RunResult, Sample
 
 OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
     **{topic: TOPICS[topic][0] for topic in (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT)},

@@ -20,8 +20,8 @@ import os
 import numpy as np
 
 from ..contract import CONTACT_WRENCH, JOINT_STATES
-from ..core.errors import ImpactArmError
-from ..core.identify import JointRecording
+from ..physics.errors import ImpactArmError
+from ..calibration.identify import JointRecording
 from .wire import CdrReader, _doubles_at, _header, _strings
 
 

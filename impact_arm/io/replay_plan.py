@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from collections.abc import Iterable
 from typing import Any, Iterator
 
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 from .mcap_ros2 import RawMessage, TopicInfo, iter_raw, topics_info
 
 

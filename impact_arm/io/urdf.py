@@ -43,10 +43,10 @@ from ..contract import (
     plane_rotation,
     surface_frame,
 )
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 
 if TYPE_CHECKING:
-    from ..core.scene import Scene
+    from ..physics.scene import Scene
 
 # topic_based_ros2_control's TopicBasedSystem defaults: the simulator listens and publishes
 # there unless told otherwise, so the URDF and the node agree out of the box

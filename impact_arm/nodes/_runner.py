@@ -177,7 +177,7 @@ def run(node_factory, args=None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
-    from ..core.errors import ImpactArmError
+    from ..physics.errors import ImpactArmError
 
     # DDS stays on this machine unless the user chose otherwise (multi-machine set-ups set
     # ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET explicitly)

@@ -1,5 +1,5 @@
 """controller: the down/up striking cycle as an effort controller (docs/nodes.md), a thin ROS
-shell over the ROS-free cycle (core/control.py) and input handling (core/control_inputs.py);
+shell over the ROS-free cycle (physics/control.py) and input handling (driver/control_inputs.py);
 parameters in controller_params.py.
 
 It knows the arm only as a real model-based controller would (kinematics and gravity terms
@@ -24,10 +24,10 @@ from std_msgs.msg import Float64MultiArray
 
 from .. import contract
 from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, joint_names, to_absolute
-from ..core.control import CycleController, PidIntegrator
-from ..core.control_inputs import ControlInputs
-from ..core.model import ArmModel
-from ..core.scene import load_scene, resolve_scene_path
+from ..physics.control import CycleController, PidIntegrator
+from ..driver.control_inputs import ControlInputs
+from ..physics.model import ArmModel
+from ..physics.scene import load_scene, resolve_scene_path
 from ..io.wire import MalformedMessage, PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run, take_raw
 from .controller_params import check, parameter_table

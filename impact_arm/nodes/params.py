@@ -20,7 +20,7 @@ from rcl_interfaces.msg import (
 
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 
 
 class ParameterError(ImpactArmError, ValueError):

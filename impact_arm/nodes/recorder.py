@@ -124,7 +124,7 @@ class Recorder(Node):
         self.now_ns = 0  # stamps: the newest /clock or /joint_states stamp
         scene_text = None
         if scene:
-            from ..core.scene import resolve_scene_path
+            from ..physics.scene import resolve_scene_path
 
             scene = resolve_scene_path(scene)  # an installed scene name, as the simulator's
             try:
@@ -163,7 +163,7 @@ class Recorder(Node):
             self.wanted[name] = type_name or TOPICS.get(name, ('',))[0]
         self.visuals = None
         if scene_text is not None:
-            from ..core.scene import scene_from_text
+            from ..physics.scene import scene_from_text
 
             if not tf_rate > 0:
                 raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')

@@ -34,7 +34,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 from .. import contract
 from ..contract import CLOCK
 from ..io.mcap_ros2 import message_class

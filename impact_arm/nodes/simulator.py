@@ -1,5 +1,5 @@
 """simulator: the arm as a hardware driver presents it (docs/nodes.md): a thin ROS shell
-over a ROS-free session (core/session.py), parameters in simulator_params.py.
+over a ROS-free session (driver/session.py), parameters in simulator_params.py.
 
 Publishes /joint_states, /contact_wrench (averaged over each period), /impact_report (JSON per
 impact), /diagnostics, /clock on simulated time and the 3D view (_period_io.py, _visuals.py);
@@ -28,11 +28,11 @@ from std_srvs.srv import SetBool, Trigger
 
 from .. import contract
 from ..contract import COMMANDS, DIAGNOSTICS, joint_names
-from ..core import jit
-from ..core.driver import SimulatedArm
-from ..core.realtime import WatchdogPolicy
-from ..core.scene import load_scene, resolve_scene_path
-from ..core.session import LockstepSession, Outputs, RealtimeSession
+from ..physics import jit
+from ..driver.arm import SimulatedArm
+from ..driver.realtime import WatchdogPolicy
+from ..physics.scene import load_scene, resolve_scene_path
+from ..driver.session import LockstepSession, Outputs, RealtimeSession
 from ..io.wire import float64_array_data, joint_state_command
 from . import sim_services
 from ._period_io import PeriodPublishers

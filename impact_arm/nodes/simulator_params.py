@@ -3,8 +3,8 @@ range, description (``ros2 param describe``) and the typed object the node reads
 
 from .. import contract
 from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES, joint_names
-from ..core.driver import DEFAULT_BRAKE_TORQUE
-from ..core.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy
+from ..driver.arm import DEFAULT_BRAKE_TORQUE
+from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy
 from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from .params import Param, ParameterError, values_class

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..contract import FEEDBACK_LAWS, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, to_absolute
-from ..core.errors import ImpactArmError
-from ..core.metrics import settle_index
+from ..physics.errors import ImpactArmError
+from ..physics.metrics import settle_index
 
 
 class AnalysisError(ImpactArmError):
@@ -136,7 +136,7 @@ def _scene(metadata):
     text = metadata.get('scene', {}).get('yaml')
     if not text:
         return None
-    from ..core.scene import scene_from_text
+    from ..physics.scene import scene_from_text
 
     try:
         return scene_from_text(text, origin='scene stored in the recording')
@@ -152,7 +152,7 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     """The article's Figure 3 for one law: the arm driven from the scene's initial position
     to its down target with the surfaces taken away (no impact: a step response), the
     controller evaluated continuously. ``run.target`` holds the target (rad)."""
-    from ..core.simulate import run
+    from ..physics.simulate import run
 
     if law not in FEEDBACK_LAWS:
         raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
@@ -194,7 +194,7 @@ def step_metrics(run: Run, band_deg: float = 0.1) -> dict:
 def compared_run(scene, law: str, t_max: float, progress=_quiet) -> Run:
     """An offline run of ``scene`` (impacts included) with controller ``law``: for comparing
     recordings of different laws (``--compare``)."""
-    from ..core.simulate import run
+    from ..physics.simulate import run
 
     sc = replace(scene, controller=replace(scene.controller, law=law))
     progress(f'simulating law {law} for {t_max:g} s')
@@ -239,10 +239,10 @@ def reintegrated_trace(scene, record: dict):
     actuators off during contact (the article's eq. 7) nothing else acts, so the impact is
     the recorded one to the integrator's tolerance. Returns (columns, rows) as /impact_trace
     carries them and the re-integrated record (to compare with the reported one)."""
-    from ..core.driver import feed_events
-    from ..core.integrator import PhaseIntegrator, options_from_spec
-    from ..core.metrics import ImpactBuilder
-    from ..core.model import ArmModel
+    from ..physics.periods import feed_events
+    from ..physics.integrator import PhaseIntegrator, options_from_spec
+    from ..physics.metrics import ImpactBuilder
+    from ..physics.model import ArmModel
     from ..io.offline_mcap import trace_columns
 
     model = ArmModel(scene)
@@ -328,7 +328,7 @@ def limit_cycle(impacts) -> dict:
 
 def impact_table(impacts) -> str:
     """The impact rows exactly as ``impact-arm simulate`` prints them."""
-    from ..core.simulate import RunResult, format_table
+    from ..physics.simulate import RunResult, format_table
 
     return format_table(RunResult(scene=None, impacts=impacts)).split('\n\n')[0]
 
@@ -502,7 +502,7 @@ def impact_points(run: Run, k: int, progress=_quiet):
 
 def _struck_surface(scene, record):
     """Contact constants of the surface the tip met at contact (the nearest height)."""
-    from ..core.model import ArmModel
+    from ..physics.model import ArmModel
 
     model = ArmModel(scene)
     if not model.surfaces:

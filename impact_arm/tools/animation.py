@@ -16,7 +16,7 @@ import os
 import numpy as np
 
 from ..contract import CONTACT_WRENCH
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 
 DEFAULT_FPS = 20.0
 DEFAULT_SLOW = 10.0  # frames this much closer near impacts

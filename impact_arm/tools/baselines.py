@@ -13,11 +13,11 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..core import layout
-from ..core.integrator import Event, PhaseIntegrator
-from ..core.metrics import ImpactBuilder
-from ..core.model import ArmModel, Phase
-from ..core.scene import Scene
+from ..physics import layout
+from ..physics.integrator import Event, PhaseIntegrator
+from ..physics.metrics import ImpactBuilder
+from ..physics.model import ArmModel, Phase
+from ..physics.scene import Scene
 
 SCIPY_METHODS = ('RK45', 'DOP853', 'LSODA', 'Radau')
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 
 
 def bench_folder() -> str | None:

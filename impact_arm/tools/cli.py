@@ -19,7 +19,7 @@ NOTICE = []  # the command's CompileNotice (how long it compiled)
 
 # (the clock above starts before the package's own imports: they count in the command's time)
 from ..contract import INTEGRATOR_PRESETS  # noqa: E402
-from ..core.errors import ImpactArmError  # noqa: E402
+from ..physics.errors import ImpactArmError  # noqa: E402
 from .progress import CompileNotice, Progress  # noqa: E402
 
 DEFAULT_SCENE = 'paper'
@@ -40,11 +40,11 @@ def _non_negative(value):
 
 
 def cmd_simulate(args) -> int:
-    from ..core.scene import load_scene
-    from ..core.simulate import format_table, run
+    from ..physics.scene import load_scene
+    from ..physics.simulate import format_table, run
 
     scene = load_scene(args.scene)
-    from ..core import jit
+    from ..physics import jit
 
     if not jit.AVAILABLE:
         print(
@@ -137,7 +137,7 @@ def _check_run_size(scene, args):
 
 
 def cmd_urdf(args) -> int:
-    from ..core.scene import load_scene
+    from ..physics.scene import load_scene
     from ..io.urdf import robot_description
 
     sys.stdout.write(robot_description(load_scene(args.scene), rod_radius=args.rod_radius))
@@ -148,7 +148,7 @@ def _load_kernel(scene) -> float:
     """Load (or compile, announced) the scene's kernel before the run is timed: the first
     call in a process reads numba's cache (~0.1-0.3 s), which is start-up, not integration.
     Returns the seconds it took."""
-    from ..core.driver import SimulatedArm
+    from ..driver.arm import SimulatedArm
 
     t0 = time.perf_counter()
     SimulatedArm(scene, scene.publish_rate, trace=False).warm_up()
@@ -173,7 +173,7 @@ def _timing(result, load_s, what) -> str:
 
 
 def _simulate_without_samples(scene, args, load_s=0.0) -> int:
-    from ..core.simulate import format_table, run
+    from ..physics.simulate import format_table, run
 
     rate = scene.controller.rate if args.control_rate is None else args.control_rate
     if rate or args.mcap:

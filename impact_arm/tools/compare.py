@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 
 COLUMNS = ('t', 'impact_speed', 'cor', 'impulse_n', 'impulse_t', 'qd_after')
 
@@ -31,9 +31,9 @@ def _is_recording(path) -> bool:
 def recorded_impacts(rec, study, timing=None) -> tuple:
     """Rows of the impacts of a recording; the scene gives the kinematics and the free flight
     that carries the first sample after an impact back to its separation (for the CoR)."""
-    from ..core.fit import FitOptions, ImpactSet, predict_impact, prepare, recorded_cor
-    from ..core.identify import joint_to_absolute_matrix, tip_normal_speed
-    from ..core.model import ArmModel
+    from ..calibration.fit import FitOptions, ImpactSet, predict_impact, prepare, recorded_cor
+    from ..calibration.identify import joint_to_absolute_matrix, tip_normal_speed
+    from ..physics.model import ArmModel
 
     model = ArmModel(study.scene())
     _, noise, windows, notes = prepare(rec, FitOptions(), model)
@@ -62,7 +62,7 @@ def recorded_impacts(rec, study, timing=None) -> tuple:
 
 def replayed_impacts(preds, model) -> list:
     """Rows of the scene's predictions of each recorded impact (from the recorded state)."""
-    from ..core.identify import joint_to_absolute_matrix, tip_normal_speed
+    from ..calibration.identify import joint_to_absolute_matrix, tip_normal_speed
 
     rows = []
     for w, p in preds:
@@ -109,7 +109,7 @@ def compare(
 ) -> dict:
     """Python API: {'a': rows, 'b': rows, 'pairs': [(i, j)], 'table': [...], 'what': text}."""
     from ..contract import JOINT_STATES
-    from ..core.study import Study
+    from ..calibration.study import Study
     from ..io.recording import read_recording
 
     b_is_recording = _is_recording(b)
@@ -130,7 +130,7 @@ def compare(
         b_rows = recorded_impacts(rec_b, study)[0]
         what = f'scene {b} with its own controller'
     else:
-        from ..core.model import ArmModel
+        from ..physics.model import ArmModel
 
         b_rows = replayed_impacts(preds, ArmModel(study.scene()))
         what = f'scene {b} replaying each impact of {a} from its recorded state and efforts'

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import os
 
-from ..core.contact import contact_constants
-from ..core.scene import Material
-from ..core.sphere_drop import (
+from ..physics.contact import contact_constants
+from ..physics.scene import Material
+from ..physics.sphere_drop import (
     RIGID,
     drop,
     energy_balance_cor,

@@ -341,7 +341,7 @@ def fig10_contact_force(impact, out):
 def fig_force_indentation(impact, constants, out):
     """Normal force against indentation: the points of the impact on the model's three laws
     (Hertz to 1.9 δc, Jackson–Green to δm, restitution from δm down to δr)."""
-    from ..core.contact import (
+    from ..physics.contact import (
         hertz_force,
         jackson_green_force,
         residual_indentation,

@@ -3,7 +3,7 @@
     impact-arm fit runs/arm.mcap --scene config/paper.yaml \\
         --param surfaces[0].mu=0.05:1 --param materials.steel.S_y=2e8:5e9
 
-The method lives in core/fit.py (docs/fit.md); this module reads the recording, runs the fit
+The method lives in calibration/fit.py (docs/fit.md); this module reads the recording, runs the fit
 with a progress line and writes the JSON, the fitted scene, report.md and the figures.
 Python API: ``fit_recording(...)`` returns the ``FitResult`` and writes the same files.
 """
@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 
 
 def parse_param(text: str):
@@ -56,8 +56,8 @@ def fit_recording(
     ``out``/fitted.yaml, fit.json, report.md and the PNGs (``out`` None: the default
     runs/fit_<name>/; False: write nothing). Returns the ``FitResult``."""
     from ..contract import JOINT_STATES
-    from ..core.fit import fit
-    from ..core.study import Study
+    from ..calibration.fit import fit
+    from ..calibration.study import Study
     from ..io.recording import read_recording
 
     n = Study(scene).scene().n_links
@@ -89,8 +89,8 @@ def write_fitted_scene(scene, values: dict, path, recording=''):
     """The scene with the fitted values: a file ``impact-arm simulate --scene`` runs."""
     import yaml
 
-    from ..core.scene import parse_scene
-    from ..core.study import Study, apply_overrides
+    from ..physics.scene import parse_scene
+    from ..calibration.study import Study, apply_overrides
 
     study = Study(scene)
     data = apply_overrides(study.data, values)
@@ -203,7 +203,7 @@ def write_figures(result, out) -> list:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from ..core.fit import predict_impact
+    from ..calibration.fit import predict_impact
 
     problem = result.problem
     model = problem.model([result.scene_overrides[p.key] for p in problem.specs])
@@ -378,7 +378,7 @@ def add_arguments(parser):
 
 
 def cli(args) -> int:
-    from ..core.fit import FitOptions
+    from ..calibration.fit import FitOptions
     from .cli import writable_output
     from .progress import Progress
 

@@ -15,8 +15,8 @@ def add_arguments(parser):
 
 
 def cli(args) -> int:
-    from ..core.model import ArmModel
-    from ..core.scene import load_scene, resolve_scene_path
+    from ..physics.model import ArmModel
+    from ..physics.scene import load_scene, resolve_scene_path
 
     module = ArmModel(load_scene(resolve_scene_path(args.scene))).eq
     if args.path:

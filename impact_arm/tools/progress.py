@@ -95,7 +95,7 @@ class CompileNotice:
         self._remove = None
 
     def __enter__(self):
-        from ..core import jit
+        from ..physics import jit
 
         self._remove = jit.add_compile_hook(self._start, self._end)
         return self

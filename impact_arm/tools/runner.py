@@ -27,7 +27,7 @@ from ..contract import (
     IMPACT_REPORT,
     JOINT_STATES,
 )
-from ..core.errors import ImpactArmError
+from ..physics.errors import ImpactArmError
 from .progress import Progress
 
 NODES = ('recorder', 'simulator', 'controller')  # start order (the arm moves with the
@@ -74,8 +74,8 @@ def add_arguments(parser):
 
 
 def cli(args) -> int:
-    from ..core.scene import load_scene, resolve_scene_path
-    from ..core.simulate import RunResult, StopReason, format_table
+    from ..physics.scene import load_scene, resolve_scene_path
+    from ..physics.simulate import RunResult, StopReason, format_table
 
     if not 1.0 <= args.rate <= 100000.0:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
@@ -161,8 +161,8 @@ def precompile(scene, rate):
     """Compile, or load from the cache, what the simulator and controller nodes run, here
     where the CLI announces it: otherwise each node compiles in its own process on the first
     run of a scene shape, 20-45 s of silence before the arm moves."""
-    from ..core.control import CycleController
-    from ..core.driver import SimulatedArm
+    from ..physics.control import CycleController
+    from ..driver.arm import SimulatedArm
 
     arm = SimulatedArm(scene, rate, trace=False)
     arm.warm_up()

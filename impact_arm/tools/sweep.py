@@ -34,8 +34,8 @@ import math
 import os
 import time
 
-from ..core.errors import ImpactArmError
-from ..core.study import Study, load_scene_data, parse_key_path
+from ..physics.errors import ImpactArmError
+from ..calibration.study import Study, load_scene_data, parse_key_path
 from .progress import Progress
 
 KINDS = ('grid', 'list', 'random', 'lhs')
@@ -103,7 +103,7 @@ class Spec:
         end) now, before any run: otherwise every run fails with the same error. Each path is
         tried alone with its first run's value; out-of-range values are the runs' business
         (a sweep may cross the schema's limits on purpose)."""
-        from ..core.errors import SceneError
+        from ..physics.errors import SceneError
 
         first = self.runs[0] if self.runs else {}
         errors = []
@@ -156,7 +156,7 @@ class Spec:
 
     @classmethod
     def load(cls, path: str) -> 'Spec':
-        from ..core.scene import scene_data
+        from ..physics.scene import scene_data
 
         try:
             with open(path, encoding='utf-8') as f:
@@ -543,7 +543,7 @@ COLUMN_UNITS = {
 def column_unit(name: str) -> str:
     """The unit of a table column: a metric's, or a swept key path's from the scene schema
     ('' when dimensionless or unknown)."""
-    from ..core.scene import SCHEMA
+    from ..physics.scene import SCHEMA
 
     base = name.split('[', 1)[0]
     if base in COLUMN_UNITS:

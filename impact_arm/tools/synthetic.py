@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..contract import CONTACT_WRENCH, JOINT_STATES, to_joint_space
-from ..core.identify import JointRecording
+from ..calibration.identify import JointRecording
 
 REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
 
@@ -30,8 +30,8 @@ def synthetic_recording(
     """Simulate ``scene`` with ``overrides`` and sample it as a driver would, adding Gaussian
     ``noise`` (per signal, see REALISTIC_NOISE), dropping a fraction ``drop`` of the samples,
     jittering the stamps by ``jitter`` seconds (uniform) and offsetting the clock."""
-    from ..core.simulate import run
-    from ..core.study import Study
+    from ..physics.simulate import run
+    from ..calibration.study import Study
 
     over = dict(overrides or {})
     if cycles is not None:
@@ -149,9 +149,9 @@ def driver_recording(
     command held over the period that ends at the stamp) under the scene's controller
     sampled at ``rate`` — the reading of efforts of a ros2_control driver."""
     from ..contract import to_absolute
-    from ..core.control import CycleController
-    from ..core.driver import SimulatedArm
-    from ..core.study import Study
+    from ..physics.control import CycleController
+    from ..driver.arm import SimulatedArm
+    from ..calibration.study import Study
 
     sc = Study(scene).scene(dict(overrides or {}))
     arm = SimulatedArm(sc, rate)

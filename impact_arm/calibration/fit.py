@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ImpactArmError, SceneError, SimulationError
+from ..physics.errors import ImpactArmError, SceneError, SimulationError
 from .identify import (
     IdentifyError,
     ImpactWindow,
@@ -36,9 +36,9 @@ from .identify import (
     joint_to_absolute_matrix,
     tip_normal_speed,
 )
-from .integrator import PRESETS, PhaseIntegrator, options_from_spec
-from .model import ArmModel
-from .scene import Scene
+from ..physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
+from ..physics.model import ArmModel
+from ..physics.scene import Scene
 from .study import Study, parse_key_path
 
 # The whitened residual of an impact the model cannot replay at some values (no contact, a
@@ -244,10 +244,9 @@ def predict_impact(
         for edge in edges:
             while integ.state.t < edge:
                 if held:  # (ignored by the kernel while actuators are off in contact)
-                    integ.state.held_torque = torque(
-                        integ.state.t, edge, 'pre' if side == 'pre' else 'post'
+                    integ.set_held_torque(
+                        torque(integ.state.t, edge, 'pre' if side == 'pre' else 'post')
                     )
-                    integ.reset_derivative()
                 for event in integ.advance(edge, stop_at_event=('contact', 'separation')):
                     if event.kind == 'contact':
                         contacts += 1
@@ -314,8 +313,7 @@ def free_flight(
     try:
         for edge in torque.boundaries(t0, t1):
             if held:
-                integ.state.held_torque = torque(integ.state.t, edge, 'post')
-                integ.reset_derivative()
+                integ.set_held_torque(torque(integ.state.t, edge, 'post'))
             integ.advance(edge)
     except SimulationError:
         return None
@@ -388,8 +386,7 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
         try:
             for edge in torque.boundaries(win.post_t[k], win.post_t[k + 1]):
                 if held:
-                    integ.state.held_torque = torque(integ.state.t, edge, 'post')
-                    integ.reset_derivative()
+                    integ.set_held_torque(torque(integ.state.t, edge, 'post'))
                 integ.advance(edge)
         except SimulationError:
             return math.inf

@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from .control import CycleController
-from .driver import advance_period, feed_events
+from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
 from .integrator import Event, PhaseIntegrator, options_from_spec
 from .kinds import TextEnum
@@ -221,8 +221,7 @@ def run(
         fn = impulse_since_ctl[1] / dt_ctl if dt_ctl < math.inf else None
         mode_before = ctrl.mode
         tau = ctrl.update(t, q, qd, normal_force=fn)
-        st.held_torque = tuple(tau)
-        integ.reset_derivative()
+        integ.set_held_torque(tau)
         return mode_before, ctrl.mode
 
     def count_switch(event: Event) -> None:

@@ -7,7 +7,7 @@ before validation, so a refused value is named by its key path like any scene er
 integrate from event to event (no samples, no traces) and return impact records and a summary;
 a refused scene or a simulation error is part of the result, never an exception::
 
-    from impact_arm.core.study import Study
+    from impact_arm.calibration.study import Study
 
     study = Study('paper', {'integrator.rtol': 1e-2, 'integrator.contact_rtol': 3e-4,
                             'integrator.method': 'rosenbrock'})
@@ -32,13 +32,13 @@ import re
 import time
 from dataclasses import dataclass, field
 
-from .errors import SceneError
-from .metrics import settle_index
-from .scene import Scene, parse_scene, read_scene_file, scene_data
-from .simulate import run as run_scene
+from ..physics.errors import SceneError
+from ..physics.metrics import settle_index
+from ..physics.scene import Scene, parse_scene, read_scene_file, scene_data
+from ..physics.simulate import run as run_scene
 
 if TYPE_CHECKING:
-    from .integrator import Stats
+    from ..physics.integrator import Stats
 
 _TOKEN = re.compile(r'\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]')
 

@@ -12,49 +12,18 @@ import json
 import math
 import sys
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Iterable
 
 import numpy as np
 
 from ..contract import to_joint_space
-from .control import q_law
-from .errors import ImpactArmError
-from .integrator import PRESETS, PhaseIntegrator, options_from_spec
-from .metrics import ImpactBuilder
-from .model import ArmModel
-from .scene import Scene
-
-
-def feed_events(
-    integ: PhaseIntegrator,
-    builder: ImpactBuilder,
-    events: Iterable,
-    on_event: Callable | None = None,
-) -> list:
-    """Feed located ``events`` to the impact ``builder`` (``on_event`` sees each first).
-    Returns the impacts completed [(record, trace rows)], each taking the trace so far."""
-    impacts = []
-    for event in events:
-        if on_event is not None:
-            on_event(event)
-        record = builder.feed(event)
-        if record is not None:
-            rows = []
-            if integ.trace is not None:
-                rows, integ.trace[:] = integ.trace[:], []
-            impacts.append((record, rows))
-    return impacts
-
-
-def advance_period(
-    integ: PhaseIntegrator, builder: ImpactBuilder, t_end: float, on_event: Callable | None = None
-) -> tuple[list, tuple[float, float]]:
-    """The one period loop of every sampled run (the driver's periods, offline held control):
-    advance ``integ`` to ``t_end`` and ``feed_events``. Returns the impacts completed and the
-    contact impulse (tangential, normal) over the period, which callers divide by the period
-    for the averaged wrench."""
-    impacts = feed_events(integ, builder, integ.advance(t_end), on_event)
-    return impacts, integ.take_impulse()
+from ..physics.control import q_law
+from ..physics.errors import ImpactArmError
+from ..physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
+from ..physics.metrics import ImpactBuilder
+from ..physics.periods import advance_period
+from ..physics.model import ArmModel
+from ..physics.scene import Scene
 
 
 # Each joint's brake torque limit [N m]: ten times the article arm's largest static gravity
@@ -133,7 +102,7 @@ class SimulatedArm:
         """Load every compiled function the stepping path may call (numba loads them from its
         cache on first use: ~0.5 s in all), so that the first period, or the first impact,
         of a real-time run does not pay for it."""
-        from .model import kinetic_energy_split
+        from ..physics.model import kinetic_energy_split
 
         scratch = PhaseIntegrator(
             self.model, self.integrator.state.copy(), preset='fast', control='held'
@@ -217,8 +186,7 @@ class SimulatedArm:
     def _hold(self, tau):
         if tau != self.command:
             self.command = tau
-            self.integrator.state.held_torque = tau
-            self.integrator.reset_derivative()
+            self.integrator.set_held_torque(tau)
 
     # ----------------------------------------------------------------------------- time
     @property

@@ -15,10 +15,10 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from .kinds import TextEnum
+from ..physics.kinds import TextEnum
 
 if TYPE_CHECKING:
-    from .driver import SimulatedArm, Tick
+    from .arm import SimulatedArm, Tick
 
 PERIOD_PARTS = ('commands', 'physics', 'publish')  # where a period's compute goes
 

@@ -14,7 +14,7 @@ as accurate as any step end. Shaped like scipy's OdeSolver: ``advance(t_end)`` p
 of repeated ``step()`` calls and returns the events it crossed.
 
 The stepping loop and the phase machine's transitions are the compiled kernel in
-``core/kernel/`` (appended to each scene shape's generated module): an impact's four
+``physics/kernel/`` (appended to each scene shape's generated module): an impact's four
 switches cost no return to Python. This wrapper turns the kernel's event log into ``Event``s.
 """
 
@@ -164,7 +164,8 @@ class PhaseIntegrator:
 
     control='continuous' evaluates the scene's control law inside the right-hand side and
     switches its target at located events (the article's set-up); control='held' applies
-    ``state.held_torque`` as a zero-order hold, as a real driver does between commands.
+    the torque given to ``set_held_torque`` as a zero-order hold, as a real driver does between
+    commands.
     The stepping itself runs in the compiled kernel of the model's generated module.
     """
 
@@ -390,9 +391,23 @@ class PhaseIntegrator:
         c[layout.C_JT] = c[layout.C_JN] = 0.0
         return out
 
-    def reset_derivative(self) -> None:
-        """Call after changing the state or held torque from outside (new command)."""
+    def set_held_torque(self, tau: ArrayLike) -> None:
+        """Hold the joint torques ``tau`` from now on (``control='held'``: a new command).
+        The derivative cached at the current state is dropped, since it held the old torque."""
+        self.state.held_torque = tau
         self._f_valid = False
+
+    def set_state(self, t: float, q: ArrayLike, qd: ArrayLike) -> None:
+        """Place the arm at absolute angles ``q`` and rates ``qd`` at time ``t`` (the contact
+        phase and any integral states are kept). The cached derivative is dropped and the
+        next step size chosen afresh."""
+        n = self.model.n
+        st = self.state
+        st.t = float(t)
+        st.y[:n] = q
+        st.y[n : 2 * n] = qd
+        self._f_valid = False
+        self._h = 0.0  # 0: the kernel chooses the first step
 
     # --- phase machine (compiled: the kernel applies it without returning) -----------------
     def _kind(self, slot):

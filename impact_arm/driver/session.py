@@ -22,9 +22,9 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from . import jit
-from .driver import CommandError, SimulatedArm, Tick
-from .errors import SimulationError
+from ..physics import jit
+from .arm import CommandError, SimulatedArm, Tick
+from ..physics.errors import SimulationError
 from .realtime import PERIOD_PARTS, DriverLoop, WatchdogPolicy, WatchdogState
 
 LOCKSTEP_REPEAT_S = 1.0  # lockstep: publish a period again when unanswered this long

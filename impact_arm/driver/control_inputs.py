@@ -18,7 +18,7 @@ import time
 from typing import Callable, Sequence
 
 from ..contract import to_absolute
-from .control import CycleController
+from ..physics.control import CycleController
 
 STAMP_EPS = 1e-9  # stamps are integer nanoseconds: ticks compare to 1 ns
 # A state beyond these is not an arm's: a broken or hostile peer. Angles may wind a few turns;

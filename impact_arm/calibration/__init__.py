@@ -1,0 +1,3 @@
+"""Calibration and studies, free of ROS: impacts identified in a recording (``identify``),
+scene parameters fitted to it (``fit``) and many runs of a scene with values changed
+(``study``). Built on ``physics``."""

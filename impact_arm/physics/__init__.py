@@ -1,0 +1,3 @@
+"""The physics: scene, equations and the generated kernel, contact and control laws, the phase
+integrator, metrics and offline runs. No ROS imports; imports nothing else of the package but
+``contract``."""
