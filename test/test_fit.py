@@ -34,7 +34,7 @@ def recording(truth, seed, cycles=6, **kw):
 
 
 def relative_errors(result, truth):
-    return {k: abs(result.parameters[k]['value'] / v - 1) for k, v in truth.items()}
+    return {k: abs(result.parameters[k].value / v - 1) for k, v in truth.items()}
 
 
 @pytest.mark.parametrize('seed', [11, 12])
@@ -45,9 +45,9 @@ def test_fit_with_wrench_recovers_drawn_parameters(seed):
     assert result.fits, result.verdict
     for key, err in relative_errors(result, truth).items():
         assert err < 0.05, (key, result.parameters[key], truth[key])
-        lo, hi = result.parameters[key]['ci95']
+        lo, hi = result.parameters[key].ci95
         assert lo < truth[key] < hi, (key, lo, truth[key], hi)
-        assert result.parameters[key]['identifiable']
+        assert result.parameters[key].identifiable
 
 
 def test_fit_from_joint_states_alone():
@@ -70,7 +70,7 @@ def test_contact_the_scene_cannot_express_does_not_fit():
     # the same recording fitted with E free fits, and finds E
     free = fit(rec, 'paper', {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.E': (1e10, 5e11)})
     assert free.fits, free.verdict
-    assert abs(free.parameters['materials.steel.E']['value'] / 40e9 - 1) < 0.1
+    assert abs(free.parameters['materials.steel.E'].value / 40e9 - 1) < 0.1
 
 
 def test_local_fit_differentiates_a_cubic_exactly():

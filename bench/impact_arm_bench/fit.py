@@ -74,9 +74,9 @@ def accuracy(cases, impacts, say):
                 p = res.parameters[k]
                 row[k] = {
                     'truth': v,
-                    'value': p['value'],
-                    'error': p['value'] / v - 1,
-                    'covered': p['ci95'][0] <= v <= p['ci95'][1],
+                    'value': p.value,
+                    'error': p.value / v - 1,
+                    'covered': p.ci95[0] <= v <= p.ci95[1],
                 }
             rows.append(row)
         say(
@@ -192,7 +192,7 @@ def growth(say):
                 'params': count,
                 'wall': wall,
                 'evaluations': res.evaluations,
-                'identified': [k for k in keys if res.parameters[k]['identifiable']],
+                'identified': [k for k in keys if res.parameters[k].identifiable],
             }
         )
         say(

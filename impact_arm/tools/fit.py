@@ -3,7 +3,7 @@
     impact-arm fit runs/arm.mcap --scene config/paper.yaml \\
         --param surfaces[0].mu=0.05:1 --param materials.steel.S_y=2e8:5e9
 
-The method lives in calibration/fit.py (docs/fit.md); this module reads the recording, runs the fit
+The method lives in calibration/fit/ (docs/fit.md); this module reads the recording, runs the fit
 with a progress line and writes the JSON, the fitted scene, report.md and the figures.
 Python API: ``fit_recording(...)`` returns the ``FitResult`` and writes the same files.
 """
@@ -131,11 +131,11 @@ def report_text(result, recording, scene) -> str:
         '|---|---:|---:|---|---|',
     ]
     for key, p in result.parameters.items():
-        ident = 'yes' if p['identifiable'] else f'no ({p.get("why", "correlated")})'
+        ident = 'yes' if p.identifiable else f'no ({p.why or "correlated"})'
         lines.append(
-            f'| `{key}` | {_fmt(p["start"])} | {_fmt(p["value"])} | '
-            f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}] | {ident}'
-            + (' (at a bound)' if p['at_bound'] else '')
+            f'| `{key}` | {_fmt(p.start)} | {_fmt(p.value)} | '
+            f'[{_fmt(p.ci95[0])}, {_fmt(p.ci95[1])}] | {ident}'
+            + (' (at a bound)' if p.at_bound else '')
             + ' |'
         )
     if result.cannot_tell_apart:
@@ -205,8 +205,7 @@ def write_figures(result, out) -> list:
 
     from ..calibration.fit import predict_impact
 
-    problem = result.problem
-    model = problem.model([result.scene_overrides[p.key] for p in problem.specs])
+    model = result.model
     rec = result.recording
     wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     made = []
@@ -223,7 +222,7 @@ def write_figures(result, out) -> list:
             if rec.wrench is not None
             else []
         )
-        pred = predict_impact(model, w, problem.timing, dense=extra)
+        pred = predict_impact(model, w, result.timing, dense=extra)
         ax = axes[0][c]
         lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
         sel = (rec.t >= lo) & (rec.t <= hi)
@@ -411,8 +410,8 @@ def cli(args) -> int:
         line.end()
     for key, p in result.parameters.items():
         print(
-            f'{key} = {p["value"]:.6g}  95 % [{p["ci95"][0]:.6g}, {p["ci95"][1]:.6g}]'
-            + ('' if p['identifiable'] else '  NOT identified by these data')
+            f'{key} = {p.value:.6g}  95 % [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]'
+            + ('' if p.identifiable else '  NOT identified by these data')
         )
     if result.cannot_tell_apart:
         print('cannot tell apart: ' + '; '.join(' ~ '.join(p) for p in result.cannot_tell_apart))
