@@ -305,3 +305,83 @@ def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
     d = np.array([r['d_cor'] for r in result['table']])
     assert len(d) == len(result['a']) == len(result['b'])
     assert np.max(np.abs(d)) < 0.01
+
+
+# ------------------------------------------------------------------------- verdicts from statistics
+PAPER_E = 210e9  # config/paper.yaml's steel
+
+
+def limit_cycle_recording(overrides, seed):
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8, **overrides}
+    return truth, recording(truth, seed, cycles=15)
+
+
+def test_fifteen_impacts_of_the_scene_itself_fit_and_cover_the_truth():
+    truth, rec = limit_cycle_recording({}, 5)
+    result = fit(rec, 'paper', BOUNDS)
+    assert result.fits, result.verdict
+    for key in BOUNDS:
+        lo, hi = result.parameters[key].ci95
+        assert lo < truth[key] < hi, (key, lo, truth[key], hi)
+
+
+def test_a_handbook_modulus_7_percent_off_does_not_fit_and_names_the_output():
+    """The recording's E is 7 % above the scene's: the chi-square alone passes (p ~ 0.5 for
+    this seed) while S_y comes out 1.5 % low with an interval of +-0.1 %; the joint rates after
+    the impacts are one-sided, and the verdict says so."""
+    _, rec = limit_cycle_recording({'materials.steel.E': 1.07 * PAPER_E}, 5)
+    result = fit(rec, 'paper', BOUNDS)
+    assert result.verdict.startswith('does not fit: '), result.verdict
+    assert 'rate after the impact is ' in result.verdict
+    assert ' the fitted one at 1' in result.verdict and 'of 15 impacts' in result.verdict
+    biased = [t for t in result.output_tests if t.biased]
+    assert biased and all(t.count == 15 for t in biased)
+
+
+def test_sign_test_is_the_binomial_tail():
+    from scipy.stats import binomtest
+
+    from impact_arm.calibration.fit.verdict import sign_test
+
+    for below, count in ((0, 15), (2, 15), (7, 15), (13, 15), (3, 8), (0, 1)):
+        assert sign_test(below, count) == pytest.approx(binomtest(below, count).pvalue, rel=1e-12)
+
+
+def _rows(z_rates, speeds):
+    return [
+        {
+            'impact_speed': v,
+            'standardized_rates': [-z, 0.0],  # fitted minus recorded
+            'cor_recorded': 0.5,
+            'cor_fitted': 0.5,
+        }
+        for z, v in zip(z_rates, speeds)
+    ]
+
+
+def test_chi_square_in_its_tail_does_not_fit_whatever_the_rms_ratio():
+    from impact_arm.calibration.fit.verdict import VerdictKind, judge
+
+    rng = np.random.default_rng(3)
+    rows = _rows(rng.normal(0, 1, 15), rng.uniform(1, 3, 15))
+    # 1.2x the noise over 400 degrees of freedom: p ~ 1e-9, well inside "rms < 1.5x"
+    verdict = judge(rows, ['joint1', 'joint2'], 1.2**2 * 400, 400)
+    assert verdict.kind is VerdictKind.CHI2_TAIL and 'p = ' in verdict.text
+    assert judge(rows, ['joint1', 'joint2'], 400.0, 400).fits
+
+
+def test_one_sided_and_trending_residuals_are_named():
+    from impact_arm.calibration.fit.verdict import VerdictKind, judge
+
+    rng = np.random.default_rng(4)
+    speeds = rng.uniform(1.0, 3.0, 15)
+    noise = rng.normal(0, 0.3, 15)
+    biased = judge(_rows(-1.0 + noise, speeds), ['shoulder', 'elbow'], 30.0, 30)
+    assert biased.kind is VerdictKind.SYSTEMATIC
+    assert 'the recorded shoulder rate after the impact is below the fitted one at' in biased.text
+    trend = judge(_rows(3.0 * (speeds - speeds.mean()) + noise, speeds), ['a', 'b'], 30.0, 30)
+    assert trend.kind is VerdictKind.SYSTEMATIC
+    assert 'a rate after the impact rises with the impact speed' in trend.text
+    # the same trend at one impact speed (a limit cycle) cannot be seen, and is not claimed
+    flat = judge(_rows(noise, np.full(15, 2.0)), ['a', 'b'], 30.0, 30)
+    assert flat.fits, flat.text

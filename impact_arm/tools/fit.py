@@ -138,6 +138,18 @@ def report_text(result, recording, scene) -> str:
             + (' (at a bound)' if p.at_bound else '')
             + ' |'
         )
+    if result.output_tests:
+        lines += [
+            '',
+            '| output | recorded below fitted | sign test p | mean [σ] | trend with speed [s.e.] |',
+            '|---|---:|---:|---:|---:|',
+        ]
+        for t in result.output_tests:
+            trend = f'{t.trend_t:+.2f}' if math.isfinite(t.trend_t) else 'one speed'
+            lines.append(
+                f'| {t.output} | {t.below} of {t.count} | {t.sign_p:.2g} | {t.mean:+.2f} '
+                f'| {trend} |'
+            )
     if result.cannot_tell_apart:
         lines += [
             '',
