@@ -5,6 +5,7 @@ refused in one line naming what is wrong."""
 
 import json
 import os
+import re
 
 import numpy as np
 import pytest
@@ -385,3 +386,71 @@ def test_one_sided_and_trending_residuals_are_named():
     # the same trend at one impact speed (a limit cycle) cannot be seen, and is not claimed
     flat = judge(_rows(noise, np.full(15, 2.0)), ['a', 'b'], 30.0, 30)
     assert flat.fits, flat.text
+
+
+# ------------------------------------------------------------------------- what the values rest on
+def test_dependence_on_a_fixed_parameter_predicts_the_refit():
+    """The stated change of S_y per 1 % of E is the change a refit with E 2 % higher finds
+    (the whole nonlinear fit against its linearisation at the optimum)."""
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    rec = recording(truth, 91, cycles=8)
+    base = fit(rec, 'paper', BOUNDS)
+    dep = [
+        d
+        for d in base.dependences
+        if d.fitted == 'materials.steel.S_y' and d.fixed == 'materials.steel.E'
+    ]
+    assert len(dep) == 1 and dep[0].relative
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    scene = apply_overrides(Study('paper').data, {'materials.steel.E': 1.02 * PAPER_E})
+    moved = fit(rec, scene, BOUNDS)
+    refit = 100 * (
+        moved.parameters['materials.steel.S_y'].value / base.parameters['materials.steel.S_y'].value
+        - 1
+    )
+    assert refit == pytest.approx(2 * dep[0].per_percent, rel=0.15), (refit, dep[0])
+    assert 'S_y moves' in dep[0].sentence() and 'materials.steel.E' in dep[0].sentence()
+
+
+def test_a_limit_cycle_and_a_value_outside_the_material_are_flagged():
+    # the paper's arm settles into one impact; its S_y here is above any steel's
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 2.6e9}
+    result = fit(recording(truth, 92, cycles=8), 'paper', BOUNDS)
+    assert result.fits, result.verdict
+    text = ' | '.join(result.warnings)
+    assert 'of 8 impacts have the same speed' in text and 'limit cycle' in text
+    assert re.search(
+        r'materials\.steel\.S_y = 2\.[56]\d*e\+09 Pa is outside the handbook range of steel', text
+    )
+
+
+def test_one_impact_is_told_from_impacts_at_several_speeds():
+    from impact_arm.calibration.fit.dependence import one_impact
+
+    rows = [{'impact_speed': 2.0 + 1e-4 * k, 'q_contact': [0.1, 0.2]} for k in range(8)]
+    assert 'have the same speed' in one_impact(rows)
+    spread = [dict(r, impact_speed=1.0 + 0.2 * k) for k, r in enumerate(rows)]
+    assert one_impact(spread) == ''
+    postures = [dict(r, q_contact=[0.1 * k, 0.2]) for k, r in enumerate(rows)]
+    assert one_impact(postures) == ''
+
+
+@pytest.mark.parametrize(
+    'key, value, flagged',
+    [
+        ('materials.steel.E', 200e9, ''),
+        ('materials.steel.E', 70e9, 'outside the handbook range of steel'),
+        ('materials.Al_6061.S_y', 3e8, ''),
+        ('materials.aluminum.S_y', 1.2e9, 'outside the handbook range of aluminium'),
+        ('materials.unobtainium.S_y', 1.2e9, ''),
+        ('surfaces[0].mu', 1.8, 'outside what a friction coefficient can be'),
+        ('joints[2].damping', -0.1, 'outside what a viscous joint friction can be'),
+        ('controller.kp[0]', -5.0, ''),
+    ],
+)
+def test_physical_ranges(key, value, flagged):
+    from impact_arm.calibration.fit.physical import out_of_range
+
+    text = out_of_range(key, value)
+    assert (flagged in text) if flagged else text == '', text

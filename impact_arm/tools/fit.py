@@ -118,6 +118,8 @@ def report_text(result, recording, scene) -> str:
         '',
         f'**Verdict: {result.verdict}**',
         '',
+        *[f'- {w}' for w in result.warnings],
+        *([''] if result.warnings else []),
         (
             f'{result.impacts_used} impacts used; '
             f'{"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
@@ -150,6 +152,19 @@ def report_text(result, recording, scene) -> str:
                 f'| {t.output} | {t.below} of {t.count} | {t.sign_p:.2g} | {t.mean:+.2f} '
                 f'| {trend} |'
             )
+    if result.dependences:
+        lines += [
+            '',
+            'What the fitted values depend on (first order, per 1 % of each fixed parameter; '
+            'tolerance: how well that parameter must be known for its error to stay within '
+            "one standard deviation of the fitted value's):",
+            '',
+            '| fitted | fixed | change per 1 % | tolerance |',
+            '|---|---|---:|---:|',
+        ]
+        for d in result.dependences:
+            change = f'{d.per_percent:+.3g} %' if d.relative else f'{d.per_percent:+.3g}'
+            lines.append(f'| `{d.fitted}` | `{d.fixed}` | {change} | {d.tolerance:.2g} % |')
     if result.cannot_tell_apart:
         lines += [
             '',
@@ -425,6 +440,8 @@ def cli(args) -> int:
             f'{key} = {p.value:.6g}  95 % [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]'
             + ('' if p.identifiable else '  NOT identified by these data')
         )
+    for warning in result.warnings:
+        print(f'warning: {warning}')
     if result.cannot_tell_apart:
         print('cannot tell apart: ' + '; '.join(' ~ '.join(p) for p in result.cannot_tell_apart))
     print(

@@ -56,8 +56,11 @@ class ImpactSet:
         self.timing = 'linear'
         self.penalty = PENALTY
 
-    def model(self, values: Sequence[float] | np.ndarray) -> ArmModel:
-        overrides = {p.key: float(v) for p, v in zip(self.specs, values)}
+    def model(
+        self, values: Sequence[float] | np.ndarray, fixed: dict[str, float] | None = None
+    ) -> ArmModel:
+        """The scene with the fitted keys at ``values`` and ``fixed`` keys moved too."""
+        overrides = {p.key: float(v) for p, v in zip(self.specs, values)} | (fixed or {})
         try:
             return ArmModel(self.study.scene(overrides))
         except SceneError as exc:
@@ -75,10 +78,12 @@ class ImpactSet:
         qd = win.post_qd.ravel()
         return np.concatenate([qd, win.impulse]) if self.wrench_at(win) else qd
 
-    def predict(self, values: Sequence[float] | np.ndarray) -> list[Prediction]:
+    def predict(
+        self, values: Sequence[float] | np.ndarray, fixed: dict[str, float] | None = None
+    ) -> list[Prediction]:
         self.evaluations += 1
         try:
-            model = self.model(values)
+            model = self.model(values, fixed)
         except FitError as exc:  # a combination the scene's schema refuses: a penalty
             n = self.windows[0].post_qd.shape[1] if self.windows else 1
             return [failed(n, FailureKind.SCENE_REFUSED, str(exc)) for _ in self.windows]

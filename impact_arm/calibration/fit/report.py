@@ -11,7 +11,9 @@ import numpy as np
 from ...physics.model import ArmModel
 from ..identify import JointRecording, joint_to_absolute_matrix, tip_normal_speed
 from ..identify import Noise
+from .dependence import Dependence, dependences, one_impact
 from .parameters import Parameter
+from .physical import out_of_range
 from .problem import ImpactSet
 from .replay import Prediction, recorded_cor
 from .verdict import OutputTest, VerdictKind, judge
@@ -74,6 +76,8 @@ class FitResult:
     model: ArmModel | None = field(default=None, repr=False)  # the fitted scene's model
     verdict_kind: VerdictKind = VerdictKind.FITS
     output_tests: list[OutputTest] = field(default_factory=list)  # per output over the impacts
+    dependences: list[Dependence] = field(default_factory=list)  # on the fixed parameters
+    warnings: list[str] = field(default_factory=list)  # what limits the values, to read first
 
     @property
     def fits(self) -> bool:
@@ -99,6 +103,17 @@ class FitResult:
             'notes': self.notes,
             'details': {k: v.details() for k, v in self.parameters.items()},
             'verdict_kind': self.verdict_kind.name.lower(),
+            'warnings': self.warnings,
+            'dependences': [
+                {
+                    'fitted': d.fitted,
+                    'fixed': d.fixed,
+                    'per_percent': d.per_percent,
+                    'unit': '%' if d.relative else 'native',
+                    'tolerance_percent': d.tolerance,
+                }
+                for d in self.dependences
+            ],
             'output_tests': [
                 {
                     'output': t.output,
@@ -202,6 +217,11 @@ def estimate(
     per_impact, raw_rate, sd_rate = _per_impact(problem, preds, start_preds)
     residual_rms = float(np.sqrt(np.mean(np.square(raw_rate)))) if raw_rate else math.nan
     noise_rms = float(np.sqrt(np.mean(np.square(sd_rate)))) if sd_rate else math.nan
+    deps = dependences(problem, specs, values, J, sigma)
+    warnings = [x for x in (one_impact(per_impact),) if x]
+    warnings += [y for y in (out_of_range(p.key, v) for p, v in zip(specs, values)) if y]
+    for p in specs:  # the most demanding fixed parameters of each fitted one
+        warnings += [d.sentence() for d in deps if d.fitted == p.key and d.tolerance < 1.0][:3]
     joints = list(recording.joints) or [f'joint{j + 1}' for j in range(recording.n)]
     verdict = judge(per_impact, joints, chi2, dof, _where(per_impact, params))
     return FitResult(
@@ -229,6 +249,8 @@ def estimate(
         model=problem.model(values),
         verdict_kind=verdict.kind,
         output_tests=verdict.tests,
+        dependences=deps,
+        warnings=warnings,
     )
 
 
