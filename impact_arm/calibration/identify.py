@@ -141,6 +141,7 @@ class ImpactWindow:
     post_qd: np.ndarray  # their rates (m, n)
     impulse: np.ndarray | None = None  # (tangential, normal) [N s]
     impulse_var: np.ndarray | None = None
+    rate_sigma: np.ndarray | None = None  # the rates' noise per joint [rad/s]
     if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
         effort_ib: int = field(init=False)
         effort_off: list[bool] = field(init=False)
@@ -386,6 +387,7 @@ def make_window(
         effort_t=rec.t[e_idx].copy(),
         post_t=rec.t[compare].copy(),
         post_qd=rec.velocity[compare].copy(),
+        rate_sigma=noise.velocity,
     )
     win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
     # samples during the contact whose torque is zero within the noise: actuators off

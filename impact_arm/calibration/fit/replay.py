@@ -20,6 +20,8 @@ from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
 from .efforts import TorqueSchedule
 
 FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
+# A sample this many rate standard deviations short of the model's separation is in the contact
+INSIDE_SIGMAS = 3.0
 
 
 def window_options(model: ArmModel) -> dict:
@@ -127,12 +129,26 @@ def predict_impact(
                 if side == 'contact':
                     # a contact ending just after the sample in the model, just before it in
                     # the recording (the start state is uncertain by microseconds): let it
-                    # end within a tenth of a period and compare there
+                    # end within a tenth of a period and compare there, unless what is left
+                    # of it changes the rates beyond their noise (the sample was then taken
+                    # in the contact, and is no free flight)
+                    first_contact = last is None
+                    at_sample = np.linalg.solve(T, integ.state.y[n : 2 * n])
                     for event in integ.advance(
                         edge + 0.1 * (win.t_b - win.t_a), stop_at_event=('separation',)
                     ):
                         if event.kind == 'separation':
                             last, side = event, 'post'
+                    if first_contact and side == 'post' and win.rate_sigma is not None:
+                        rest = np.linalg.solve(T, last.y[n : 2 * n]) - at_sample
+                        sigmas = float(np.max(np.abs(rest) / win.rate_sigma))
+                        if sigmas > INSIDE_SIGMAS:
+                            return failed(
+                                n,
+                                FailureKind.CONTACT_OUTLASTS,
+                                f'the first sample after the impact is taken in the contact '
+                                f'(the rest of it changes the rates by {sigmas:.3g} σ)',
+                            )
                 if side == 'pre' or last is None:
                     if side == 'pre':
                         return failed(

@@ -40,9 +40,12 @@ class OutputTest:
 
     @property
     def biased(self) -> bool:
+        # the mean on the side of the majority (one wild impact can pull it the other way)
+        majority_below = self.below > self.count - self.below
         return (
             self.count >= MIN_IMPACTS
             and self.sign_p < SIGN_LEVEL
+            and (self.mean < 0) == majority_below
             and abs(self.mean) * math.sqrt(self.count) > BIAS_SE
         )
 
@@ -56,7 +59,8 @@ class OutputTest:
 
     def sentence(self) -> str:
         if self.biased:
-            side, k = ('below', self.below) if self.mean < 0 else ('above', self.count - self.below)
+            below = self.below > self.count - self.below
+            side, k = ('below', self.below) if below else ('above', self.count - self.below)
             return (
                 f'the recorded {self.output} is {side} the fitted one at {k} of {self.count} '
                 f'impacts (sign test p = {self.sign_p:.2g}; mean {self.mean:+.2f} σ)'
