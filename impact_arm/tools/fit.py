@@ -394,6 +394,15 @@ def add_arguments(parser):
         action='store_true',
         help='ignore a recorded wrench: fit from the joint states alone',
     )
+    parser.add_argument(
+        '--leave-out',
+        action='append',
+        type=float,
+        default=[],
+        metavar='T',
+        help='leave the impact at time T [s from the first sample] out of the fit (repeat); '
+        'an outlier impact is named and refitted without in any case',
+    )
     parser.add_argument('--json', default=None, metavar='OUT', help='also write the JSON here')
     parser.add_argument(
         '--out',
@@ -430,7 +439,7 @@ def cli(args) -> int:
             wrench_topic=args.wrench_topic,
             out=args.out,
             json_path=args.json,
-            options=FitOptions(use_wrench=not args.no_wrench),
+            options=FitOptions(use_wrench=not args.no_wrench, leave_out=tuple(args.leave_out)),
             progress=progress,
         )
     finally:

@@ -42,6 +42,8 @@ class FitOptions:
     z_min: float = 30.0  # impact detection threshold (robust z of the rate step)
     max_nfev: int = 25  # per local search and parameter
     post_samples: int = 3  # samples after each impact compared with the model
+    leave_out: tuple[float, ...] = ()  # contact times [s] of impacts not to fit
+    check_outliers: bool = True  # refit without an outlier impact and report both
 
 
 class ImpactSet:

@@ -12,6 +12,7 @@ from ...physics.model import ArmModel
 from ..identify import JointRecording, joint_to_absolute_matrix, tip_normal_speed
 from ..identify import Noise
 from .dependence import Dependence, dependences, one_impact
+from .outliers import Outlier
 from .parameters import Parameter
 from .physical import out_of_range
 from .problem import ImpactSet
@@ -78,6 +79,8 @@ class FitResult:
     output_tests: list[OutputTest] = field(default_factory=list)  # per output over the impacts
     dependences: list[Dependence] = field(default_factory=list)  # on the fixed parameters
     warnings: list[str] = field(default_factory=list)  # what limits the values, to read first
+    outliers: list[Outlier] = field(default_factory=list)
+    without_outliers: FitResult | None = field(default=None, repr=False)  # the refit
 
     @property
     def fits(self) -> bool:
@@ -104,6 +107,21 @@ class FitResult:
             'details': {k: v.details() for k, v in self.parameters.items()},
             'verdict_kind': self.verdict_kind.name.lower(),
             'warnings': self.warnings,
+            'outliers': [
+                {'impact': o.number, 't': o.t, 'chi2': o.chi2, 'outputs': o.outputs, 'p': o.p_value}
+                for o in self.outliers
+            ],
+            'without_outliers': (
+                None
+                if self.without_outliers is None
+                else {
+                    'parameters': {
+                        k: v.as_json() for k, v in self.without_outliers.parameters.items()
+                    },
+                    'verdict': self.without_outliers.verdict,
+                    'impacts_used': self.without_outliers.impacts_used,
+                }
+            ),
             'dependences': [
                 {
                     'fitted': d.fitted,

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from ...physics.model import ArmModel
 from ...physics.scene import Scene
 from .parameters import FitError, parameter_specs
 from .problem import PENALTY, FitOptions, ImpactSet, prepare
+from .outliers import find_outliers
 from .report import FitResult, estimate
 
 
@@ -53,8 +55,44 @@ def fit(
 ) -> FitResult:
     """Fit the scene keys of ``bounds`` ({key: (lo, hi)}) to the impacts of ``recording``.
 
-    ``scene``: path, installed name, Scene or YAML data (the fixed rest and the start)."""
+    ``scene``: path, installed name, Scene or YAML data (the fixed rest and the start).
+    An outlier impact is named, and the fit repeated without it (``without_outliers``)."""
     options = options or FitOptions()
+    wall0 = time.perf_counter()
+    result = _fit_once(recording, scene, bounds, options, progress)
+    outliers = find_outliers(result.per_impact) if options.check_outliers else []
+    if outliers and result.impacts_used - len(outliers) >= 3:
+        say = progress or (lambda text, done=None, total=None: None)
+        say(f'refit without {len(outliers)} outlier impact(s)')
+        again = _fit_once(
+            recording,
+            scene,
+            bounds,
+            replace(options, leave_out=options.leave_out + tuple(o.t for o in outliers)),
+            progress,
+        )
+        values = ', '.join(
+            f'{k} = {p.value:.5g} [{p.ci95[0]:.5g}, {p.ci95[1]:.5g}]'
+            for k, p in again.parameters.items()
+        )
+        said = '; '.join(o.sentence() for o in outliers)
+        result.warnings.insert(0, f'{said}: without it, {values}; {again.verdict}')
+        if not result.fits:
+            result.verdict += f'; {said}, without which the scene ' + (
+                'fits' if again.fits else 'does not fit either'
+            )
+        result.outliers, result.without_outliers = outliers, again
+    result.wall_time = time.perf_counter() - wall0
+    return result
+
+
+def _fit_once(
+    recording: JointRecording,
+    scene: str | Scene | dict,
+    bounds: dict,
+    options: FitOptions,
+    progress: Callable[..., Any] | None = None,
+) -> FitResult:
     say = progress or (lambda text, done=None, total=None: None)
     wall0 = time.perf_counter()
     study = Study(scene)
@@ -66,6 +104,13 @@ def fit(
         )
     _, noise, windows, notes = prepare(recording, options, ArmModel(study.scene()))
     notes = list(recording.notes) + notes
+    if options.leave_out:
+        period = recording.period
+        kept = [w for w in windows if min(abs(w.t_c - t) for t in options.leave_out) > 2 * period]
+        notes += [
+            f'impact at t = {w.t_c:.4f} s left out as asked' for w in windows if w not in kept
+        ]
+        windows = kept
     if options.use_wrench and recording.wrench is not None:
         missing = sum(w.impulse is None for w in windows)
         if missing:
