@@ -107,6 +107,11 @@ class LocalFit:
         d[1:] = p[1:] * tau ** (p[1:] - 1) / self.scale
         return v, d
 
+    def positions(self, t: np.ndarray) -> np.ndarray:
+        """q at each of the times ``t``: (len(t), n)."""
+        tau = (np.asarray(t, float) - self.t_ref) / self.scale
+        return (tau[:, None] ** np.arange(self.DEGREE + 1)) @ self.coef.T
+
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at ``t``: cov is (2n, 2n) over [q, q̇] (joints independent)."""
         v, d = self._rows(t)
@@ -277,13 +282,15 @@ def estimate_noise(rec: JointRecording, impacts: Sequence[int], window: int = 15
 
 def _contact_time(pre: LocalFit, post: LocalFit, t_a, t_b, sigma_q):
     """Where the positions of both sides meet (rates step at the contact, positions do not)."""
+
+    def miss(t: np.ndarray) -> np.ndarray:
+        return np.sum(((pre.positions(t) - post.positions(t)) / sigma_q) ** 2, axis=1)
+
     grid = np.linspace(t_a, t_b, 201)
-    miss = [np.sum(((pre.state(t)[0] - post.state(t)[0]) / sigma_q) ** 2) for t in grid]
-    k = int(np.argmin(miss))
+    k = int(np.argmin(miss(grid)))
     lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
     fine = np.linspace(lo, hi, 41)
-    miss = [np.sum(((pre.state(t)[0] - post.state(t)[0]) / sigma_q) ** 2) for t in fine]
-    return float(fine[int(np.argmin(miss))])
+    return float(fine[int(np.argmin(miss(fine)))])
 
 
 def impact_windows(

@@ -225,10 +225,10 @@ def _ms_from(origin, t):
 
 def write_figures(result, out) -> list:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    # the object API with the Agg canvas, not pyplot: no backend machinery to import in the
+    # fresh process a fit runs in
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     from ..calibration.fit import predict_impact
 
@@ -237,9 +237,9 @@ def write_figures(result, out) -> list:
     wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     made = []
     rows = 2 if rec.wrench is not None else 1
-    fig, axes = plt.subplots(
-        rows, max(len(wins), 1), figsize=(4.2 * max(len(wins), 1), 3.4 * rows), squeeze=False
-    )
+    fig = Figure(figsize=(4.2 * max(len(wins), 1), 3.4 * rows))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, max(len(wins), 1), squeeze=False)
     colors = ['tab:blue', 'tab:orange', 'tab:green', 'tab:red']
     for c, w in enumerate(wins):
         dt = w.t_b - w.t_a
@@ -317,14 +317,17 @@ def write_figures(result, out) -> list:
             if c == 0:
                 ax.legend(fontsize=7)
     fig.suptitle('Recorded and fitted around the impacts', fontsize=10)
-    fig.tight_layout()
+    # fixed margins: tight_layout lays every label out again, the costliest step of the fit's
+    # outputs in a fresh process
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.9, wspace=0.3, hspace=0.35)
     path = os.path.join(out, 'impacts.png')
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     made.append(path)
 
     good = [r for r in result.per_impact if not r.get('error')]
-    fig, ax = plt.subplots(figsize=(5.5, 4))
+    fig = Figure(figsize=(5.5, 4))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
     ax.plot(
         [r['impact_speed'] for r in good], [r['cor_recorded'] for r in good], 'o', label='recorded'
     )
@@ -347,10 +350,9 @@ def write_figures(result, out) -> list:
     ax.set_ylabel('kinematic coefficient of restitution [-]')
     ax.set_title('CoR against impact speed', fontsize=10)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.14, right=0.97, bottom=0.13, top=0.92)
     path = os.path.join(out, 'cor.png')
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     made.append(path)
     return made
 

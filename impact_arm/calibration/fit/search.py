@@ -166,6 +166,11 @@ def _fit_once(
     best: Any = None  # (cost, u) of the best local search so far
     for s, idx in enumerate(order[: options.starts]):
         cost, u = local(candidates[idx])
+        # a second start that ends where an earlier one did: that minimum is the basin's
+        # of both, and the further starts (ranked worse) are skipped
+        again = best is not None and (
+            np.max(np.abs(u - best[1])) < 1e-3 and abs(cost - best[0]) <= 1e-6 * best[0] + 1e-9
+        )
         if best is None or cost < best[0]:
             best = (cost, u)
         say(
@@ -173,6 +178,8 @@ def _fit_once(
             len(candidates) + s + 1,
             total,
         )
+        if again:
+            break
     # the full covariance (pre-impact uncertainty through the impact map) is linearised
     # where the model is right: at the optimum, then refined from there, until it settles
     for rounds in range(3):
@@ -182,7 +189,7 @@ def _fit_once(
         best = (cost, u)
         say(
             f'refinement {rounds + 1} at the optimum: chi2 {cost:.4g} over '
-            f'{len(problem.residuals(to_values(u)))} values'
+            f'{sum(len(L) for L in problem.whiten)} values'
         )
         if moved < 1e-4:
             break
