@@ -230,7 +230,10 @@ def test_param_syntax_is_refused_in_one_line():
 
     with pytest.raises(ImpactArmError, match="--param 'surfaces\\[0\\].mu=0.1': expected"):
         parse_param('surfaces[0].mu=0.1')
+    with pytest.raises(ImpactArmError, match='KEY=LO:HI@START'):
+        parse_param('surfaces[0].mu=0.1:1@')
     assert parse_param('tip_radius=1e-3:1e-2') == ('tip_radius', (1e-3, 1e-2))
+    assert parse_param('surfaces[0].mu=0.05:1@0.5') == ('surfaces[0].mu', (0.05, 1.0, 0.5))
     assert os.sep not in parse_param('a.b=1:2')[0]
 
 
@@ -506,3 +509,47 @@ def test_an_outlier_impact_is_named_with_the_fit_without_it():
         assert lo < truth[key] < hi, (key, lo, truth[key], hi)
     if not result.fits:
         assert 'without which the scene fits' in result.verdict
+
+
+# ------------------------------------------------------------------------- start, digits, keys
+def test_a_search_started_away_from_the_truth_finds_it():
+    """The README's demo: the article's scene recorded, the search started at mu 0.5 and S_y
+    2.5 GPa (the scene states 0.2 and 1.12 GPa, the truth)."""
+    rec = recording({}, 93)
+    away = {'surfaces[0].mu': (0.05, 1.0, 0.5), 'materials.steel.S_y': (2e8, 5e9, 2.5e9)}
+    result = fit(rec, 'paper', away)
+    assert result.fits, result.verdict
+    assert result.parameters['surfaces[0].mu'].start == 0.5
+    for key, value in {'surfaces[0].mu': 0.2, 'materials.steel.S_y': 1.12e9}.items():
+        lo, hi = result.parameters[key].ci95
+        assert lo < value < hi, (key, lo, value, hi)
+
+
+@pytest.mark.parametrize(
+    'value, lo, hi',
+    [(0.2, 0.2 - 1.1e-11, 0.2 + 1.1e-11), (1.12e9, 1.1199958e9, 1.1200026e9), (0.3, 0.29, 0.31)],
+)
+def test_intervals_are_printed_with_digits_that_tell_their_ends_apart(value, lo, hi):
+    from impact_arm.tools.fit import interval_text
+
+    text = interval_text(value, lo, hi)
+    ends = text.split('[')[1].rstrip(']').split(', ')
+    assert ends[0] != ends[1], text
+    assert float(ends[0]) == pytest.approx(lo, rel=1e-3 * (hi - lo) / abs(value))
+    assert float(ends[1]) == pytest.approx(hi, rel=1e-3 * (hi - lo) / abs(value))
+
+
+def test_a_key_the_scene_leaves_out_is_fitted_from_the_schema_default():
+    """Any key of the scene schema is fittable: a scene without surfaces[0].mu means the
+    schema's 0 there; fitted from a start inside the bounds, the truth comes back."""
+    from impact_arm.calibration.study import Study
+
+    data = Study('paper').data
+    data = {**data, 'surfaces': [{k: v for k, v in data['surfaces'][0].items() if k != 'mu'}]}
+    rec = recording({'surfaces[0].mu': 0.3}, 94)
+    with pytest.raises(FitError, match="the bounds exclude the scene's value 0, the start"):
+        fit(rec, data, {'surfaces[0].mu': (0.05, 1.0)})
+    result = fit(rec, data, {'surfaces[0].mu': (0.05, 1.0, 0.5)})
+    assert result.fits, result.verdict
+    lo, hi = result.parameters['surfaces[0].mu'].ci95
+    assert lo < 0.3 < hi

@@ -20,17 +20,37 @@ from ..physics.errors import ImpactArmError
 
 
 def parse_param(text: str):
-    """'KEY=LO:HI' -> (key, (lo, hi)); one-line error naming the argument."""
-    key, eq, rng = text.partition('=')
+    """'KEY=LO:HI' -> (key, (lo, hi)), 'KEY=LO:HI@START' -> (key, (lo, hi, start)); a
+    one-line error naming the argument."""
+    key, eq, rest = text.partition('=')
+    rng, at, start = rest.partition('@')
     lo, colon, hi = rng.partition(':')
     try:
-        if not (key and eq and colon):
+        if not (key and eq and colon) or (at and not start):
             raise ValueError
-        return key.strip(), (float(lo), float(hi))
+        bounds = (float(lo), float(hi)) + ((float(start),) if at else ())
+        return key.strip(), bounds
     except ValueError:
         raise ImpactArmError(
-            f'--param {text!r}: expected KEY=LO:HI, e.g. surfaces[0].mu=0.05:1'
+            f'--param {text!r}: expected KEY=LO:HI or KEY=LO:HI@START, e.g. '
+            f'surfaces[0].mu=0.05:1 or surfaces[0].mu=0.05:1@0.5'
         ) from None
+
+
+def interval_digits(value: float, lo: float, hi: float) -> int:
+    """Significant digits that tell an interval's ends apart (two digits of its width), at
+    least 4."""
+    width = abs(hi - lo)
+    scale = max(abs(value), abs(lo), abs(hi))
+    if math.isfinite(width) and width > 0 and math.isfinite(scale) and scale > 0:
+        return min(max(4, math.ceil(math.log10(scale / width)) + 2), 15)
+    return 4
+
+
+def interval_text(value: float, lo: float, hi: float) -> str:
+    """'value  95 % [lo, hi]' with ``interval_digits`` significant digits."""
+    d = interval_digits(value, lo, hi)
+    return f'{value:.{d}g}  95 % [{lo:.{d}g}, {hi:.{d}g}]'
 
 
 def default_out(recording) -> str:
@@ -134,9 +154,10 @@ def report_text(result, recording, scene) -> str:
     ]
     for key, p in result.parameters.items():
         ident = 'yes' if p.identifiable else f'no ({p.why or "correlated"})'
+        d = interval_digits(p.value, *p.ci95)
         lines.append(
-            f'| `{key}` | {_fmt(p.start)} | {_fmt(p.value)} | '
-            f'[{_fmt(p.ci95[0])}, {_fmt(p.ci95[1])}] | {ident}'
+            f'| `{key}` | {_fmt(p.start)} | {p.value:.{d}g} | '
+            f'[{p.ci95[0]:.{d}g}, {p.ci95[1]:.{d}g}] | {ident}'
             + (' (at a bound)' if p.at_bound else '')
             + ' |'
         )
@@ -368,9 +389,10 @@ def add_arguments(parser):
         '--param',
         action='append',
         default=[],
-        metavar='KEY=LO:HI',
+        metavar='KEY=LO:HI[@START]',
         help='a scene key path to fit within bounds (repeat), e.g. '
-        'surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9',
+        "surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9; '@START' starts the search "
+        "there instead of at the scene's value, e.g. surfaces[0].mu=0.05:1@0.5",
     )
     parser.add_argument(
         '--joints',
@@ -448,7 +470,7 @@ def cli(args) -> int:
         line.end()
     for key, p in result.parameters.items():
         print(
-            f'{key} = {p.value:.6g}  95 % [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]'
+            f'{key} = {interval_text(p.value, *p.ci95)}'
             + ('' if p.identifiable else '  NOT identified by these data')
         )
     for warning in result.warnings:

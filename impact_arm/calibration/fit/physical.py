@@ -1,8 +1,9 @@
 """What the fit knows of each scene key a physical parameter lives at: its unit, the range a
-real value can take, the value that means 'absent' (a key a scene may leave out), and for the
-materials, the handbook range of the named material. A new scene key becomes fittable,
-checked and part of the dependence analysis by one entry of ``KEYS``; nothing else in the fit
-names keys."""
+real value can take, and for the
+materials, the handbook range of the named material. Any numeric scene key is fittable
+(parameters.py reads a key the scene leaves out at the schema's default); an entry of ``KEYS``
+adds the range check and makes the key part of the dependence analysis. Nothing else in the
+fit names keys."""
 
 from __future__ import annotations
 
@@ -22,7 +23,6 @@ class PhysicalKey:
     unit: str
     lo: float  # the range a real value can take (a fitted value outside it is flagged)
     hi: float
-    absent: float | None = None  # the value a scene that leaves the key out means (off)
 
 
 KEYS = (
@@ -35,9 +35,9 @@ KEYS = (
     PhysicalKey('tip_radius', 'tip radius', 'm', 0.0, INF),
     PhysicalKey('links[*].mass', 'link mass', 'kg', 0.0, INF),
     PhysicalKey('links[*].length', 'link length', 'm', 0.0, INF),
-    PhysicalKey('joints[*].damping', 'viscous joint friction', 'N m s/rad', 0.0, INF, 0.0),
-    PhysicalKey('joints[*].friction', 'Coulomb joint friction', 'N m', 0.0, INF, 0.0),
-    PhysicalKey('joints[*].armature', 'reflected rotor inertia', 'kg m^2', 0.0, INF, 0.0),
+    PhysicalKey('joints[*].damping', 'viscous joint friction', 'N m s/rad', 0.0, INF),
+    PhysicalKey('joints[*].friction', 'Coulomb joint friction', 'N m', 0.0, INF),
+    PhysicalKey('joints[*].armature', 'reflected rotor inertia', 'kg m^2', 0.0, INF),
     PhysicalKey('surfaces[*].mount.stiffness', 'mount stiffness', 'N/m', 0.0, INF),
     PhysicalKey('surfaces[*].mount.mass', 'mount mass', 'kg', 0.0, INF),
     PhysicalKey('surfaces[*].mount.damping_ratio', 'mount damping ratio', '', 0.0, INF),
