@@ -530,9 +530,9 @@ def test_a_search_started_away_from_the_truth_finds_it():
     [(0.2, 0.2 - 1.1e-11, 0.2 + 1.1e-11), (1.12e9, 1.1199958e9, 1.1200026e9), (0.3, 0.29, 0.31)],
 )
 def test_intervals_are_printed_with_digits_that_tell_their_ends_apart(value, lo, hi):
-    from impact_arm.tools.fit import interval_text
+    from impact_arm.calibration.fit.report import ParameterEstimate
 
-    text = interval_text(value, lo, hi)
+    text = ParameterEstimate('k', value, (lo, hi), True, value, (0, 1), 0.1, False).interval_text()
     ends = text.split('[')[1].rstrip(']').split(', ')
     assert ends[0] != ends[1], text
     assert float(ends[0]) == pytest.approx(lo, rel=1e-3 * (hi - lo) / abs(value))

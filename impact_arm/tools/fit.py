@@ -37,22 +37,6 @@ def parse_param(text: str):
         ) from None
 
 
-def interval_digits(value: float, lo: float, hi: float) -> int:
-    """Significant digits that tell an interval's ends apart (two digits of its width), at
-    least 4."""
-    width = abs(hi - lo)
-    scale = max(abs(value), abs(lo), abs(hi))
-    if math.isfinite(width) and width > 0 and math.isfinite(scale) and scale > 0:
-        return min(max(4, math.ceil(math.log10(scale / width)) + 2), 15)
-    return 4
-
-
-def interval_text(value: float, lo: float, hi: float) -> str:
-    """'value  95 % [lo, hi]' with ``interval_digits`` significant digits."""
-    d = interval_digits(value, lo, hi)
-    return f'{value:.{d}g}  95 % [{lo:.{d}g}, {hi:.{d}g}]'
-
-
 def default_out(recording) -> str:
     name = os.path.basename(os.path.normpath(os.fspath(recording)))
     return os.path.join('runs', f'fit_{os.path.splitext(name)[0]}')
@@ -154,7 +138,7 @@ def report_text(result, recording, scene) -> str:
     ]
     for key, p in result.parameters.items():
         ident = 'yes' if p.identifiable else f'no ({p.why or "correlated"})'
-        d = interval_digits(p.value, *p.ci95)
+        d = p.digits()
         lines.append(
             f'| `{key}` | {_fmt(p.start)} | {p.value:.{d}g} | '
             f'[{p.ci95[0]:.{d}g}, {p.ci95[1]:.{d}g}] | {ident}'
@@ -470,7 +454,7 @@ def cli(args) -> int:
         line.end()
     for key, p in result.parameters.items():
         print(
-            f'{key} = {interval_text(p.value, *p.ci95)}'
+            f'{key} = {p.interval_text()}'
             + ('' if p.identifiable else '  NOT identified by these data')
         )
     for warning in result.warnings:

@@ -20,6 +20,16 @@ from .replay import Prediction, recorded_cor
 from .verdict import OutputTest, VerdictKind, judge
 
 
+def interval_digits(value: float, lo: float, hi: float) -> int:
+    """Significant digits that tell an interval's ends apart (two digits of its width), at
+    least 4."""
+    width = abs(hi - lo)
+    scale = max(abs(value), abs(lo), abs(hi))
+    if math.isfinite(width) and width > 0 and math.isfinite(scale) and scale > 0:
+        return min(max(4, math.ceil(math.log10(scale / width)) + 2), 15)
+    return 4
+
+
 @dataclass
 class ParameterEstimate:
     """One fitted parameter: its value, 95 % interval and whether the data determine it."""
@@ -36,6 +46,16 @@ class ParameterEstimate:
 
     def as_json(self) -> dict:
         return {'value': self.value, 'ci95': list(self.ci95), 'identifiable': self.identifiable}
+
+    def digits(self) -> int:
+        """Significant digits that tell the interval's ends apart (two digits of its width),
+        at least 4."""
+        return interval_digits(self.value, *self.ci95)
+
+    def interval_text(self) -> str:
+        """'value  95 % [lo, hi]' with ``digits`` significant digits."""
+        d = self.digits()
+        return f'{self.value:.{d}g}  95 % [{self.ci95[0]:.{d}g}, {self.ci95[1]:.{d}g}]'
 
     def details(self) -> dict:
         return {

@@ -64,18 +64,21 @@ def fit(
     if outliers and result.impacts_used - len(outliers) >= 3:
         say = progress or (lambda text, done=None, total=None: None)
         say(f'refit without {len(outliers)} outlier impact(s)')
-        again = _fit_once(
-            recording,
-            scene,
-            bounds,
-            replace(options, leave_out=options.leave_out + tuple(o.t for o in outliers)),
-            progress,
-        )
-        values = ', '.join(
-            f'{k} = {p.value:.5g} [{p.ci95[0]:.5g}, {p.ci95[1]:.5g}]'
-            for k, p in again.parameters.items()
-        )
         said = '; '.join(o.sentence() for o in outliers)
+        try:
+            again = _fit_once(
+                recording,
+                scene,
+                bounds,
+                replace(options, leave_out=options.leave_out + tuple(o.t for o in outliers)),
+                progress,
+            )
+        except (FitError, IdentifyError) as exc:  # too little left to fit: say so, keep going
+            result.warnings.insert(0, f'{said}: no fit without it ({exc})')
+            result.outliers = outliers
+            result.wall_time = time.perf_counter() - wall0
+            return result
+        values = ', '.join(f'{k} = {p.interval_text()}' for k, p in again.parameters.items())
         result.warnings.insert(0, f'{said}: without it, {values}; {again.verdict}')
         if not result.fits:
             result.verdict += f'; {said}, without which the scene ' + (
