@@ -553,3 +553,18 @@ def test_a_key_the_scene_leaves_out_is_fitted_from_the_schema_default():
     assert result.fits, result.verdict
     lo, hi = result.parameters['surfaces[0].mu'].ci95
     assert lo < 0.3 < hi
+
+
+def test_a_heavier_link_does_not_fit_until_its_mass_is_fitted_too():
+    """The elbow link is 2 % heavier than the scene says: with the contact alone free the
+    fit is refused, naming the one-sided outputs; with links[1].mass free it fits and every
+    interval covers the truth."""
+    truth, rec = limit_cycle_recording({'links[1].mass': 1.02}, 5)
+    contact_only = fit(rec, 'paper', BOUNDS)
+    assert contact_only.verdict.startswith('does not fit: '), contact_only.verdict
+    assert 'rate after the impact is ' in contact_only.verdict
+    freed = fit(rec, 'paper', BOUNDS | {'links[1].mass': (0.5, 2.0)})
+    assert freed.fits, freed.verdict
+    for key, value in truth.items():
+        lo, hi = freed.parameters[key].ci95
+        assert lo < value < hi, (key, lo, value, hi)
