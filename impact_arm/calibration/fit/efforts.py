@@ -111,5 +111,10 @@ def effort_timing(model: ArmModel, windows: Sequence[ImpactWindow]) -> tuple[str
     ctrl = model.scene.controller
     if ctrl.rate == 0 and ctrl.law in ('q', 'pd') and model.n_integral == 0:
         timings.append('controller')
-    errors = {t: sum(free_flight_error(model, w, t) for w in windows) for t in timings}
+    each = {t: [free_flight_error(model, w, t) for w in windows] for t in timings}
+    # an impact after which one reading's flight meets the surface again (inf) says nothing
+    # of the readings: compared over the impacts every reading flies through (all of them
+    # when there is none such)
+    common = [k for k in range(len(windows)) if all(math.isfinite(each[t][k]) for t in timings)]
+    errors = {t: sum(each[t][k] for k in (common or range(len(windows)))) for t in timings}
     return min(errors, key=errors.get), errors  # type: ignore[arg-type]  # every key is present
