@@ -507,8 +507,10 @@ def test_an_outlier_impact_is_named_with_the_fit_without_it():
     for key in BOUNDS:
         lo, hi = again.parameters[key].ci95
         assert lo < truth[key] < hi, (key, lo, truth[key], hi)
-    if not result.fits:
+    if not result.fits:  # the outlier is blamed, not the law
+        assert result.verdict.startswith('does not fit: impact 7 at t = '), result.verdict
         assert 'without which the scene fits' in result.verdict
+        assert 'the contact law' not in result.verdict
 
 
 # ------------------------------------------------------------------------- start, digits, keys

@@ -30,6 +30,7 @@ from .parameters import FitError, parameter_specs
 from .problem import PENALTY, FitOptions, ImpactSet, prepare
 from .outliers import find_outliers
 from .report import FitResult, estimate
+from .verdict import DOES_NOT_FIT, MISMATCH
 
 
 def _halton(count, dims, offset=1):
@@ -80,10 +81,12 @@ def fit(
             return result
         values = ', '.join(f'{k} = {p.interval_text()}' for k, p in again.parameters.items())
         result.warnings.insert(0, f'{said}: without it, {values}; {again.verdict}')
-        if not result.fits:
-            result.verdict += f'; {said}, without which the scene ' + (
-                'fits' if again.fits else 'does not fit either'
-            )
+        if not result.fits and again.fits:
+            # the outlier is the reason, not the law: said first, and the law is not blamed
+            rest = result.verdict.removeprefix(DOES_NOT_FIT).removesuffix(f'; {MISMATCH}')
+            result.verdict = f'{DOES_NOT_FIT}{said}, without which the scene fits; {rest}'
+        elif not result.fits:
+            result.verdict += f'; {said}, without which the scene does not fit either'
         result.outliers, result.without_outliers = outliers, again
     result.wall_time = time.perf_counter() - wall0
     return result

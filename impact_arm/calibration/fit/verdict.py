@@ -18,6 +18,8 @@ SIGN_LEVEL = 1e-2  # two-sided sign test of one output's residuals over the impa
 BIAS_SE = 3.0  # ... and their mean beyond this many standard errors (a bias, not a fluke)
 TREND_LEVEL = 1e-3  # two-sided test of the slope of one output's residuals on impact speed
 MIN_IMPACTS = 6  # fewer impacts: no per-output test (a sign test cannot reach its level)
+MISMATCH = 'the contact law or a fixed parameter does not match the arm'  # the last reason
+DOES_NOT_FIT = 'does not fit: '
 
 
 class VerdictKind(enum.Enum):
@@ -206,5 +208,5 @@ def judge(
     if cor:
         reasons.append(cor)
     reasons += list(context)
-    reasons.append('the contact law or a fixed parameter does not match the arm')
-    return Verdict(kind, 'does not fit: ' + '; '.join(reasons), tests)
+    reasons.append(MISMATCH)
+    return Verdict(kind, DOES_NOT_FIT + '; '.join(reasons), tests)
