@@ -589,3 +589,17 @@ def test_the_reading_of_the_efforts_is_not_lost_to_one_impact_that_meets_the_sur
     for key, value in truth.items():
         lo, hi = result.parameters[key].ci95
         assert lo < value < hi, (key, lo, value, hi)
+
+
+def test_one_wild_impact_does_not_turn_the_direction_of_a_bias():
+    from impact_arm.calibration.fit.verdict import output_test
+
+    speeds = np.linspace(1.0, 3.0, 15)
+    z = np.full(15, -0.5)
+    z[7] = 20.0  # the mean is positive, the majority below
+    test = output_test('joint1 rate after the impact', z, speeds)
+    assert test.below == 14 and test.mean > 0
+    assert not test.biased
+    z[7] = -0.5  # all below, and their mean beyond 3 standard errors
+    test = output_test('joint1 rate after the impact', z - 0.5, speeds)
+    assert test.biased and 'is below the fitted one at 15 of 15' in test.sentence()
