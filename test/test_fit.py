@@ -4,6 +4,7 @@ the targets; a contact the scene cannot express must be refused as a fit; bad in
 refused in one line naming what is wrong."""
 
 import json
+import math
 import os
 import re
 
@@ -197,12 +198,20 @@ def test_bad_recording_input_is_refused_in_one_line(bag, kwargs, message):
         ({'materials.brass.E': (1e9, 1e12)}, "no 'brass' in materials"),
         ({'surfaces[0].mu': (0.3, 1.0)}, "the bounds exclude the scene's value 0.2"),
         ({'surfaces[0].mu': (1.0, 0.3)}, 'bounds must be finite with LO < HI'),
+        ({'surfaces[0].mu': (0.05, 1.0, 1.5)}, 'the bounds exclude the start'),
+        ({'surfaces[0].mu': (0.05, 1.0), 'leave_out': 0.1}, '--leave-out 0.1: no impact within'),
+        ({'surfaces[0].mu': (0.05, 1.0), 'leave_out': math.nan}, '--leave-out nan: no impact'),
     ],
 )
 def test_bad_parameters_are_refused_in_one_line(bounds, message):
+    from impact_arm.calibration.fit import FitOptions
+
     rec = recording({}, 51, cycles=2)
+    bounds = dict(bounds)
+    leave_out = bounds.pop('leave_out', None)
+    options = FitOptions(leave_out=() if leave_out is None else (leave_out,))
     with pytest.raises(FitError) as exc:
-        fit(rec, 'paper', bounds)
+        fit(rec, 'paper', bounds, options)
     assert message in str(exc.value) and '\n' not in str(exc.value)
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import math
 import time
 from dataclasses import replace
 
@@ -112,6 +113,13 @@ def _fit_once(
     notes = list(recording.notes) + notes
     if options.leave_out:
         period = recording.period
+        for t in options.leave_out:
+            if not any(abs(w.t_c - t) <= 2 * period for w in windows):
+                near = min(windows, key=lambda w: abs(w.t_c - t) if math.isfinite(t) else 0.0)
+                raise FitError(
+                    f'--leave-out {t:g}: no impact within {2 * period:.3g} s of it (must be an '
+                    f"impact's time in s from the first sample, e.g. {near.t_c:.4f})"
+                )
         kept = [w for w in windows if min(abs(w.t_c - t) for t in options.leave_out) > 2 * period]
         notes += [
             f'impact at t = {w.t_c:.4f} s left out as asked' for w in windows if w not in kept
