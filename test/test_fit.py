@@ -612,3 +612,19 @@ def test_one_wild_impact_does_not_turn_the_direction_of_a_bias():
     z[7] = -0.5  # all below, and their mean beyond 3 standard errors
     test = output_test('joint1 rate after the impact', z - 0.5, speeds)
     assert test.biased and 'is below the fitted one at 15 of 15' in test.sentence()
+
+
+def test_dependence_on_a_fixed_parameter_set_to_zero_is_per_an_amount():
+    """A frictionless scene (mu 0): S_y's dependence on mu is stated per 0.01 of it (1 % of
+    0 is no step), and predicts a refit with mu 0.01."""
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    rec = recording({'surfaces[0].mu': 0.0, 'materials.steel.S_y': 9e8}, 95, cycles=8)
+    key = 'materials.steel.S_y'
+    scenes = [apply_overrides(Study('paper').data, {'surfaces[0].mu': mu}) for mu in (0.0, 0.01)]
+    base, moved = (fit(rec, scene, {key: BOUNDS[key]}) for scene in scenes)
+    dep = [d for d in base.dependences if d.fixed == 'surfaces[0].mu']
+    assert len(dep) == 1 and dep[0].step == 0.01 and dep[0].unit == ''
+    assert 'per 0.01 of surfaces[0].mu' in dep[0].sentence()
+    refit = 100 * (moved.parameters[key].value / base.parameters[key].value - 1)
+    assert refit == pytest.approx(dep[0].change, rel=0.15), (refit, dep[0])

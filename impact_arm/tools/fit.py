@@ -164,12 +164,15 @@ def report_text(result, recording, scene) -> str:
             'tolerance: how well that parameter must be known for its error to stay within '
             "one standard deviation of the fitted value's):",
             '',
-            '| fitted | fixed | change per 1 % | tolerance |',
+            '| fitted | fixed | change per 1 % (or per the amount given) | tolerance |',
             '|---|---|---:|---:|',
         ]
         for d in result.dependences:
-            change = f'{d.per_percent:+.3g} %' if d.relative else f'{d.per_percent:+.3g}'
-            lines.append(f'| `{d.fitted}` | `{d.fixed}` | {change} | {d.tolerance:.2g} % |')
+            change = f'{d.change:+.3g} %' if d.relative else f'{d.change:+.3g}'
+            per = '' if d.unit == '%' else f' per {d.step:g} {d.unit}'
+            lines.append(
+                f'| `{d.fitted}` | `{d.fixed}` | {change}{per} | {d.tolerance:.2g} {d.unit} |'
+            )
     if result.cannot_tell_apart:
         lines += [
             '',

@@ -23,24 +23,27 @@ class PhysicalKey:
     unit: str
     lo: float  # the range a real value can take (a fitted value outside it is flagged)
     hi: float
+    # the amount the dependence analysis moves it by where the scene sets it to 0 (an effect
+    # switched off; a relative step of 0 is none): a small real value; None: not moved
+    zero_step: float | None = None
 
 
 KEYS = (
     PhysicalKey('materials.*.E', "Young's modulus", 'Pa', 1e6, 1.2e12),
     PhysicalKey('materials.*.nu', "Poisson's ratio", '', 0.0, 0.5),
     PhysicalKey('materials.*.S_y', 'yield strength', 'Pa', 1e5, 1e10),
-    PhysicalKey('surfaces[*].mu', 'friction coefficient', '', 0.0, 1.5),
+    PhysicalKey('surfaces[*].mu', 'friction coefficient', '', 0.0, 1.5, 0.01),
     PhysicalKey('surfaces[*].v_d', 'friction regularisation speed', 'm/s', 0.0, 1.0),
-    PhysicalKey('surfaces[*].height', 'surface height', 'm', -INF, INF),
+    PhysicalKey('surfaces[*].height', 'surface height', 'm', -INF, INF, 1e-3),
     PhysicalKey('tip_radius', 'tip radius', 'm', 0.0, INF),
     PhysicalKey('links[*].mass', 'link mass', 'kg', 0.0, INF),
     PhysicalKey('links[*].length', 'link length', 'm', 0.0, INF),
-    PhysicalKey('joints[*].damping', 'viscous joint friction', 'N m s/rad', 0.0, INF),
-    PhysicalKey('joints[*].friction', 'Coulomb joint friction', 'N m', 0.0, INF),
-    PhysicalKey('joints[*].armature', 'reflected rotor inertia', 'kg m^2', 0.0, INF),
+    PhysicalKey('joints[*].damping', 'viscous joint friction', 'N m s/rad', 0.0, INF, 0.01),
+    PhysicalKey('joints[*].friction', 'Coulomb joint friction', 'N m', 0.0, INF, 0.01),
+    PhysicalKey('joints[*].armature', 'reflected rotor inertia', 'kg m^2', 0.0, INF, 1e-4),
     PhysicalKey('surfaces[*].mount.stiffness', 'mount stiffness', 'N/m', 0.0, INF),
     PhysicalKey('surfaces[*].mount.mass', 'mount mass', 'kg', 0.0, INF),
-    PhysicalKey('surfaces[*].mount.damping_ratio', 'mount damping ratio', '', 0.0, INF),
+    PhysicalKey('surfaces[*].mount.damping_ratio', 'mount damping ratio', '', 0.0, INF, 0.01),
 )
 
 # Handbook ranges over the common alloys of each family (E [Pa], nu, S_y [Pa]): a fitted value

@@ -146,9 +146,11 @@ class FitResult:
                 {
                     'fitted': d.fitted,
                     'fixed': d.fixed,
-                    'per_percent': d.per_percent,
-                    'unit': '%' if d.relative else 'native',
-                    'tolerance_percent': d.tolerance,
+                    'change': d.change,
+                    'change_unit': '%' if d.relative else 'native',
+                    'per': d.step,
+                    'per_unit': d.unit,
+                    'tolerance': d.tolerance,
                 }
                 for d in self.dependences
             ],
@@ -259,7 +261,7 @@ def estimate(
     warnings = [x for x in (one_impact(per_impact),) if x]
     warnings += [y for y in (out_of_range(p.key, v) for p, v in zip(specs, values)) if y]
     for p in specs:  # the most demanding fixed parameters of each fitted one
-        warnings += [d.sentence() for d in deps if d.fitted == p.key and d.tolerance < 1.0][:3]
+        warnings += [d.sentence() for d in deps if d.fitted == p.key and d.demanding][:3]
     joints = list(recording.joints) or [f'joint{j + 1}' for j in range(recording.n)]
     verdict = judge(per_impact, joints, chi2, dof, _where(per_impact, params))
     return FitResult(
