@@ -1,0 +1,212 @@
+"""Hardware-like sensing (driver/sensors.py, the scene's ``sensors`` section): the simulated
+driver reports quantised, noisy, finite-difference or filtered, late readings of the state,
+and the physics underneath is the same."""
+
+import math
+
+import numpy as np
+import pytest
+
+from impact_arm.driver.arm import SimulatedArm
+from impact_arm.driver.sensors import Sensors, latency_periods, sensed_series
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.scene import RateReading, SensorSpec
+from scenes import scene_from
+
+RATE = 1000.0
+
+
+def run_arm(sensors=None, periods=400, torque=(30.0, -8.0), rate=RATE):
+    """The article's arm released under a constant torque (no contact within ``periods``):
+    the published ticks and the true state of each period, joint space."""
+    scene = scene_from(sensors=sensors) if sensors is not None else scene_from()
+    arm = SimulatedArm(scene, rate, trace=False)
+    arm.apply(torque)
+    ticks, truth = [arm.sample()], []
+    n = arm.n
+    truth.append(_true(arm, n))
+    for _ in range(periods):
+        ticks.append(arm.step())
+        truth.append(_true(arm, n))
+    return ticks, truth
+
+
+def _true(arm, n):
+    from impact_arm.contract import to_joint_space
+
+    y = arm.integrator.state.y
+    return to_joint_space(y[:n].tolist()), to_joint_space(y[n : 2 * n].tolist())
+
+
+def series(ticks, field):
+    return np.array([getattr(t, field) for t in ticks], float)
+
+
+def test_ideal_sensors_publish_the_exact_state():
+    ticks, truth = run_arm(periods=50)
+    assert series(ticks, 'position').tolist() == [q for q, _ in truth]
+    assert series(ticks, 'velocity').tolist() == [qd for _, qd in truth]
+
+
+def test_positions_are_quantised_to_the_encoder_step():
+    counts = 4096
+    step = 2 * math.pi / counts
+    ticks, truth = run_arm({'counts_per_revolution': counts}, periods=300)
+    q = series(ticks, 'position')
+    # every published position is a whole number of counts, the nearest to the true angle
+    counts_read = q / step
+    assert np.max(np.abs(counts_read - np.round(counts_read))) < 1e-6
+    assert np.max(np.abs(q - np.array([p for p, _ in truth]))) <= step / 2 * (1 + 1e-9)
+    # the smallest change a joint shows is one count
+    moves = np.abs(np.diff(q, axis=0))
+    assert np.min(moves[moves > 0]) == pytest.approx(step, rel=1e-9)
+
+
+def test_noise_has_the_stated_deviation_and_is_reproducible():
+    sigma_q, sigma_qd, sigma_e = 1e-3, 0.05, 0.2
+    spec = {'position_noise': sigma_q, 'rate_noise': sigma_qd, 'effort_noise': sigma_e, 'seed': 7}
+    ticks, truth = run_arm(spec, periods=2000)
+    again, _ = run_arm(spec, periods=2000)
+    assert series(ticks, 'position').tolist() == series(again, 'position').tolist()
+    errors = {
+        'position': (series(ticks, 'position') - np.array([q for q, _ in truth]), sigma_q),
+        'velocity': (series(ticks, 'velocity') - np.array([qd for _, qd in truth]), sigma_qd),
+    }
+    ideal, _ = run_arm(periods=2000)
+    errors['effort'] = (series(ticks, 'effort') - series(ideal, 'effort'), sigma_e)
+    for name, (err, sigma) in errors.items():
+        # 2 x 2001 draws: the sample deviation is within 5 standard errors (sigma / sqrt(2N))
+        n = err.size
+        assert abs(np.std(err) - sigma) < 5 * sigma / math.sqrt(2 * n), name
+        assert abs(np.mean(err)) < 5 * sigma / math.sqrt(n), name
+    other, _ = run_arm({**spec, 'seed': 8}, periods=50)
+    assert series(other, 'position').tolist() != series(ticks, 'position')[:51].tolist()
+
+
+def test_difference_rates_are_the_differences_of_the_published_positions():
+    ticks, truth = run_arm(
+        {'counts_per_revolution': 1 << 17, 'position_noise': 1e-5, 'rate': 'difference'}
+    )
+    q, qd = series(ticks, 'position'), series(ticks, 'velocity')
+    assert qd[0].tolist() == [0.0, 0.0]
+    assert qd[1:].tolist() == ((q[1:] - q[:-1]) * RATE).tolist()  # bit for bit
+    # and they follow the true rates (half a period behind, on the average)
+    true_qd = np.array([v for _, v in truth])
+    mid = 0.5 * (true_qd[1:] + true_qd[:-1])
+    assert np.median(np.abs(qd[1:] - mid)) < 0.05
+
+
+def test_filtered_rates_are_a_first_order_low_pass_of_the_differences():
+    cutoff = 50.0
+    spec = {'counts_per_revolution': 1 << 14, 'rate': 'filtered', 'rate_cutoff': cutoff}
+    ticks, _ = run_arm(spec, periods=300)
+    q, qd = series(ticks, 'position'), series(ticks, 'velocity')
+    diff = np.vstack([np.zeros(2), (q[1:] - q[:-1]) * RATE])
+    alpha = 1 - math.exp(-2 * math.pi * cutoff / RATE)
+    y = np.zeros(2)
+    expected = []
+    for d in diff:
+        y = y + alpha * (d - y)
+        expected.append(y)
+    assert np.allclose(qd, expected, rtol=0, atol=1e-9)
+    # smoother than the differences: the quantisation steps are filtered out
+    assert np.std(np.diff(qd[100:, 0])) < 0.5 * np.std(np.diff(diff[100:, 0]))
+
+
+@pytest.mark.parametrize('latency, periods', [(0.003, 3), (0.0025, 3), (0.001, 1)])
+def test_state_latency_shifts_the_published_states_by_whole_periods(latency, periods):
+    ideal, _ = run_arm(periods=200)
+    late, _ = run_arm({'state_latency': latency}, periods=200)
+    assert latency_periods(latency, RATE) == periods
+    for field in ('position', 'velocity'):
+        a, b = series(ideal, field), series(late, field)
+        assert b[periods:].tolist() == a[:-periods].tolist()
+        assert (b[:periods] == a[0]).all()  # the first reading until the delay has passed
+    # the stamps, the efforts and the physics are not delayed
+    assert series(late, 't').tolist() == series(ideal, 't').tolist()
+    assert series(late, 'effort').tolist() == series(ideal, 'effort').tolist()
+
+
+def test_effort_and_wrench_latency_delay_their_own_readings():
+    scene = scene_from(sensors={'effort_latency': 0.002, 'wrench_latency': 0.001})
+    arm = SimulatedArm(scene, RATE, trace=False)
+    ideal = SimulatedArm(scene_from(), RATE, trace=False)
+    late_ticks, ideal_ticks = [], []
+    for k in range(120):
+        tau = [10.0 * math.sin(k / 7.0), 2.0 * k / 120]  # a torque that changes every period
+        for a, out in ((arm, late_ticks), (ideal, ideal_ticks)):
+            a.apply(tau)
+            out.append(a.step())
+    e_late, e = series(late_ticks, 'effort'), series(ideal_ticks, 'effort')
+    assert e_late[2:].tolist() == e[:-2].tolist()
+    w_late, w = series(late_ticks, 'wrench'), series(ideal_ticks, 'wrench')
+    assert w_late[1:].tolist() == w[:-1].tolist()
+    assert series(late_ticks, 'position').tolist() == series(ideal_ticks, 'position').tolist()
+
+
+def test_a_repeated_sample_in_one_period_repeats_the_reading():
+    arm = SimulatedArm(scene_from(sensors={'position_noise': 1e-3}), RATE, trace=False)
+    first = arm.sample()
+    assert arm.sample().position == first.position  # the lockstep driver republishes
+    stepped = arm.step()
+    assert arm.sample().position == stepped.position != first.position
+    arm.reset()
+    assert arm.sample().position == first.position  # the seed's sequence again
+
+
+def test_the_series_helper_is_the_drivers_chain():
+    spec = SensorSpec(
+        counts_per_revolution=2048, position_noise=1e-4, rate=RateReading.DIFFERENCE, seed=3
+    )
+    ticks, truth = run_arm(
+        {'counts_per_revolution': 2048, 'position_noise': 1e-4, 'rate': 'difference', 'seed': 3},
+        periods=100,
+    )
+    ideal, _ = run_arm(periods=100)
+    q, qd, _, _ = sensed_series(
+        spec,
+        RATE,
+        series(ideal, 'position'),
+        series(ideal, 'velocity'),
+        series(ideal, 'effort'),
+        series(ideal, 'wrench'),
+    )
+    assert q.tolist() == series(ticks, 'position').tolist()
+    assert qd.tolist() == series(ticks, 'velocity').tolist()
+
+
+@pytest.mark.parametrize(
+    'section, key',
+    [
+        ({'counts_per_revolution': 0}, 'sensors.counts_per_revolution'),
+        ({'counts_per_revolution': 1.5}, 'sensors.counts_per_revolution'),
+        ({'position_noise': -1e-3}, 'sensors.position_noise'),
+        ({'position_noise': float('nan')}, 'sensors.position_noise'),
+        ({'rate': 'kalman'}, 'sensors.rate'),
+        ({'rate': 'filtered'}, 'sensors.rate_cutoff'),
+        ({'rate_cutoff': 10.0}, 'sensors.rate_cutoff'),
+        ({'rate': 'difference', 'rate_noise': 0.1}, 'sensors.rate_noise'),
+        ({'state_latency': 1.5}, 'sensors.state_latency'),
+        ({'effort_latency': float('inf')}, 'sensors.effort_latency'),
+        ({'seed': -1}, 'sensors.seed'),
+        ({'latency': 0.001}, 'sensors.latency'),
+    ],
+)
+def test_bad_sensor_keys_are_refused_in_one_line_naming_the_key(section, key):
+    with pytest.raises(SceneError) as err:
+        scene_from(sensors=section)
+    message = str(err.value)
+    assert key in message and '\n' not in message
+
+
+def test_sensor_keys_are_override_keys():
+    from impact_arm.calibration.study import Study
+
+    scene = Study('paper').scene({'sensors.counts_per_revolution': 1 << 17, 'sensors.seed': 4})
+    assert scene.sensors.counts_per_revolution == 1 << 17 and scene.sensors.seed == 4
+    assert Study('paper').scene().sensors == SensorSpec() and SensorSpec().ideal
+
+
+def test_sensors_refuse_a_bad_rate():
+    with pytest.raises(ValueError, match='rate'):
+        Sensors(SensorSpec(), 0.0, 2)
