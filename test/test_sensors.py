@@ -210,3 +210,32 @@ def test_sensor_keys_are_override_keys():
 def test_sensors_refuse_a_bad_rate():
     with pytest.raises(ValueError, match='rate'):
         Sensors(SensorSpec(), 0.0, 2)
+
+
+# ------------------------------------------------------------------ synthetic recordings
+def test_synthetic_recordings_carry_the_scenes_sensor_effects():
+    from impact_arm.tools.synthetic import synthetic_recording
+
+    exact = synthetic_recording(cycles=1, noise={})
+    late = synthetic_recording(
+        cycles=1,
+        overrides={
+            'sensors.effort_latency': 0.002,
+            'sensors.rate': 'difference',
+            'sensors.counts_per_revolution': 1 << 16,
+        },
+    )
+    assert late.effort[2:].tolist() == exact.effort[:-2].tolist()
+    step = 2 * math.pi / (1 << 16)
+    counts = late.position / step
+    assert np.max(np.abs(counts - np.round(counts))) < 1e-6
+    rate = 1000.0  # the publish rate
+    assert late.velocity[1:].tolist() == ((late.position[1:] - late.position[:-1]) * rate).tolist()
+
+
+def test_driver_recordings_read_through_the_same_sensors():
+    from impact_arm.tools.synthetic import driver_recording
+
+    rec = driver_recording(cycles=1, overrides={'sensors.rate': 'difference'}, t_max=0.3)
+    rate = 1000.0  # the driver's rate
+    assert rec.velocity[1:].tolist() == ((rec.position[1:] - rec.position[:-1]) * rate).tolist()
