@@ -6,11 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from impact_arm.driver.arm import SimulatedArm
 from impact_arm.driver.sensors import Sensors, latency_periods, sensed_series
 from impact_arm.physics.errors import SceneError
-from impact_arm.physics.scene import RateReading, SensorSpec
+from impact_arm.physics.scene import SENSORS, RateReading, SensorSpec
 from scenes import scene_from
 
 RATE = 1000.0
@@ -239,3 +241,98 @@ def test_driver_recordings_read_through_the_same_sensors():
     rec = driver_recording(cycles=1, overrides={'sensors.rate': 'difference'}, t_max=0.3)
     rate = 1000.0  # the driver's rate
     assert rec.velocity[1:].tolist() == ((rec.position[1:] - rec.position[:-1]) * rate).tolist()
+
+
+# --------------------------------------------------------------------------- fuzzing
+SENSOR_VALUES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.text(max_size=6),
+    st.sampled_from(['exact', 'difference', 'filtered']),
+    st.integers(min_value=-(2**70), max_value=2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(min_value=0, max_value=1.5),
+    st.sampled_from([5e-324, -0.0, 1e308, 1e-300, 2.0**64, 1e-3, 1e6]),
+)
+
+
+@settings(
+    max_examples=150, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck)
+)
+@given(st.dictionaries(st.sampled_from(sorted(SENSORS) + ['latency']), SENSOR_VALUES, max_size=6))
+def test_fuzzed_sensor_sections_are_refused_in_one_line_or_read_finite(section):
+    try:
+        scene = scene_from(sensors=section)
+    except SceneError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 600
+        return
+    # accepted: the chain turns finite states into finite readings at any publish rate
+    for rate in (1.0, 1000.0, 1e6):
+        k = np.arange(50)[:, None]
+        q, qd, tau, w = sensed_series(
+            scene.sensors,
+            rate,
+            np.hstack([1e-3 * k, -2e-3 * k]),
+            np.full((50, 2), 3.0),
+            np.full((50, 2), -20.0),
+            np.full((50, 2), 100.0),
+        )
+        assert all(np.isfinite(x).all() for x in (q, qd, tau, w)), (section, rate)
+
+
+# ------------------------------------------------------------------------------- over DDS
+def test_the_simulator_node_publishes_what_its_sensors_read(probe, ros_env, tmp_path):
+    """A lockstep simulator of a scene with a 4096-count encoder, difference rates and efforts
+    2 ms late, answered by a stand-in controller whose torque counts the periods: the joint
+    states on the wire are on the encoder's grid, their rates are the differences of their
+    positions, and each effort is the command of three periods before (one period of hold,
+    two of latency)."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from ros_helpers import simulator, start_process, stamp, wait_for
+    from scenes import PAPER
+
+    counts = 4096
+    scene = tmp_path / 'sensed.yaml'
+    scene.write_text(
+        open(PAPER, encoding='utf-8').read()
+        + f'\nsensors:\n  counts_per_revolution: {counts}\n  rate: difference\n'
+        + '  effort_latency: 0.002\n'
+    )
+    pub = probe.publisher(Float64MultiArray, '/effort_controller/commands')
+    states, answered = {}, set()
+
+    def command(k):
+        return [0.1 * k, -0.05 * k]
+
+    def on_state(msg):
+        k = round(stamp(msg) * RATE)
+        states.setdefault(k, msg)
+        if k not in answered:
+            answered.add(k)
+            pub.publish(Float64MultiArray(data=command(k)))
+
+    with probe.lock:
+        sub = probe.node.create_subscription(JointState, '/joint_states', on_state, 100)
+    try:
+        with start_process(
+            simulator('mode:=lockstep', 'rate_factor:=0.0', f'scene:={scene}'),
+            ros_env,
+            tmp_path,
+            'sim',
+        ) as sim:
+            assert wait_for(lambda: len(states) > 40 or not sim.alive(), timeout=90), sim.stderr
+    finally:
+        with probe.lock:
+            probe.node.destroy_subscription(sub)
+    ks = sorted(states)[:40]
+    assert ks == list(range(40))
+    q = np.array([list(states[k].position) for k in ks])
+    qd = np.array([list(states[k].velocity) for k in ks])
+    effort = np.array([list(states[k].effort) for k in ks])
+    step = 2 * math.pi / counts
+    assert np.max(np.abs(q / step - np.round(q / step))) < 1e-6
+    assert qd[1:].tolist() == ((q[1:] - q[:-1]) * RATE).tolist()
+    for k in range(4, 40):
+        assert effort[k].tolist() == pytest.approx(command(k - 3), abs=1e-12), k
