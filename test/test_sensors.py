@@ -336,3 +336,15 @@ def test_the_simulator_node_publishes_what_its_sensors_read(probe, ros_env, tmp_
     assert qd[1:].tolist() == ((q[1:] - q[:-1]) * RATE).tolist()
     for k in range(4, 40):
         assert effort[k].tolist() == pytest.approx(command(k - 3), abs=1e-12), k
+
+
+def test_bench_fit_takes_sensor_keys_for_its_recordings():
+    from impact_arm.physics.errors import ImpactArmError
+    from impact_arm_bench.fit import sensor_overrides
+
+    assert sensor_overrides(['rate=difference', 'effort_latency=0.002']) == {
+        'sensors.rate': 'difference',
+        'sensors.effort_latency': 0.002,
+    }
+    with pytest.raises(ImpactArmError, match="--sensor 'rate'"):
+        sensor_overrides(['rate'])
