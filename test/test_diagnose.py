@@ -92,6 +92,14 @@ def test_late_efforts_are_named_with_their_delay(latency, plain, model):
     assert abs(diagnose(plain, model).estimates[FindingKind.EFFORT_DELAY]) < 0.3e-3
 
 
+def test_efforts_unrelated_to_the_motion_give_no_delay(plain, model):
+    """Efforts that are noise: some delay balances the energy least, by chance, but no better
+    than the noise explains (F far below its threshold)."""
+    rng = np.random.default_rng(3)
+    rec = dataclasses.replace(plain, effort=rng.normal(0.0, 5.0, plain.effort.shape))
+    assert FindingKind.EFFORT_DELAY not in kinds(rec, model)
+
+
 def test_late_joint_states_show_as_early_efforts(model):
     diagnosis = diagnose(recording({'sensors.state_latency': 0.003}), model)
     assert diagnosis.estimates[FindingKind.EFFORT_DELAY] == pytest.approx(-0.003, abs=0.3e-3)
@@ -129,6 +137,25 @@ def test_a_wrench_that_lags_the_impacts_is_named(latency, plain, model):
     assert FindingKind.WRENCH_LAG in diagnosis.kinds()
     assert diagnosis.estimates[FindingKind.WRENCH_LAG] == pytest.approx(latency, abs=0.2e-3)
     assert diagnose(plain, model).estimates[FindingKind.WRENCH_LAG] == 0.0
+
+
+def test_joint_samples_lost_after_the_contacts_are_no_wrench_lag(plain, model):
+    """The first two joint samples after each impact lost: the wrench still rises between the
+    last sample before and the first after, on time."""
+    from impact_arm.calibration.identify import find_impacts
+
+    lost = {k for a in find_impacts(plain) for k in (a + 1, a + 2)}
+    keep = np.array([k not in lost for k in range(len(plain.t))])
+    rec = dataclasses.replace(
+        plain,
+        t=plain.t[keep],
+        position=plain.position[keep],
+        velocity=plain.velocity[keep],
+        effort=plain.effort[keep],
+    )
+    diagnosis = diagnose(rec, model)
+    assert FindingKind.WRENCH_LAG in diagnosis.checked
+    assert diagnosis.estimates[FindingKind.WRENCH_LAG] == 0.0
 
 
 def test_without_a_wrench_or_a_scene_the_checks_say_why_not(model):

@@ -55,6 +55,9 @@ JITTER_FLOOR = 1e-6  # s
 NOISE_PER_STEP = 3.0  # position noise (rms) beyond this many encoder steps is "far above"
 FREE_MARGIN = 15  # samples either side of an impact left out of the free flight
 SEARCH_PERIODS = 20  # effort delays searched within +- this many periods
+# F statistic a delay must reach against none (1 parameter over thousands of intervals: the
+# 0.1 % tail is F ~ 11; the intervals share their samples, so well beyond it)
+DELAY_F_MIN = 100.0
 
 
 class FindingKind(str, Enum):
@@ -273,10 +276,12 @@ def _free(rec: JointRecording, impacts: list[int]) -> np.ndarray:
 def effort_delay(
     rec: JointRecording, model: ArmModel, impacts: list[int]
 ) -> tuple[float, float] | None:
-    """(delay of the efforts behind the joint states [s], how much better it explains the
-    power balance than no delay: cost(0) / cost(delay)), or None when the free flight holds
-    too little work of the torques. Between two consecutive free samples the change of the
-    arm's energy equals the joint torques' work, tau(t_mid + delay) . (q[k] - q[k-1])."""
+    """(delay of the efforts behind the joint states [s], F statistic of the delay against
+    the best reading within half a period of none), or None when the free flight holds too
+    little work of the torques. Between two consecutive free samples the change of the arm's
+    energy equals the joint torques' work, tau(t_mid + delay) . (q[k] - q[k-1]); the delay
+    is the one that balances it best (least squares). F = (cost(none) - cost(delay)) /
+    (cost(delay) / (intervals - 1)): how much more the delay explains than the noise does."""
     k, period = _consecutive(rec)
     free = _free(rec, impacts)
     k = k[free[k] & free[k - 1]]
@@ -293,8 +298,7 @@ def effort_delay(
     d_energy = energy[k] - energy[k - 1]
     dq = rec.position[k] - rec.position[k - 1]
     mid = 0.5 * (rec.t[k] + rec.t[k - 1])
-    work = np.array([np.interp(mid, rec.t, rec.effort[:, j]) * dq[:, j] for j in range(rec.n)])
-    if not np.any(work):
+    if not np.any(rec.effort[k]) or not np.any(dq):
         return None
     shifts = np.arange(-SEARCH_PERIODS, SEARCH_PERIODS + 0.01, 0.25) * period
 
@@ -303,13 +307,15 @@ def effort_delay(
         return float(np.sum((d_energy - w) ** 2))
 
     costs = np.array([cost(s) for s in shifts])
-    at_zero = float(np.min(costs[np.abs(shifts) <= 0.5 * period + 1e-12]))
+    # no delay: the best reading within half a period, as finely searched as the delay
+    at_zero = min(cost(s) for s in np.linspace(-0.5, 0.5, 41) * period)
     # then finer around the best of the coarse grid
     coarse = float(shifts[int(np.argmin(costs))])
     fine = coarse + np.linspace(-0.25, 0.25, 26) * period
     fine_costs = np.array([cost(s) for s in fine])
     best = int(np.argmin(fine_costs))
-    return float(fine[best]), at_zero / max(float(fine_costs[best]), 1e-300)
+    residual = max(float(fine_costs[best]), 1e-300) / (len(k) - 1)
+    return float(fine[best]), (at_zero - float(fine_costs[best])) / residual
 
 
 def check_effort_delay(
@@ -318,11 +324,11 @@ def check_effort_delay(
     found = effort_delay(rec, model, impacts)
     if found is None:
         return None, None
-    delay, gain = found
+    delay, f_stat = found
     period = rec.period
-    # a real delay explains the power balance clearly better than any reading within half a
-    # period (the fit's readings of the efforts cover that much)
-    if abs(delay) < DELAY_PERIODS * period or gain < 1.5:
+    # a real delay explains the power balance far better than any reading within half a
+    # period (the fit's readings of the efforts cover that much) and than noise could
+    if abs(delay) < DELAY_PERIODS * period or f_stat < DELAY_F_MIN:
         return None, delay
     late = 'late' if delay > 0 else 'early'
     return (
@@ -331,8 +337,8 @@ def check_effort_delay(
             delay,
             's',
             f'the efforts are {abs(delay) * 1e3:.3g} ms {late} against the joint states '
-            f'({abs(delay) / period:.2g} periods; from the power balance of the free flight, '
-            f'{gain:.3g}x closer than without a delay)',
+            f'({abs(delay) / period:.2g} periods; from the power balance of the free flight: '
+            f'F = {f_stat:.3g} against no delay)',
             f'fit with --effort-latency {delay:.6g} (if the delay is known, give its value); '
             f'mid-contact samples would otherwise be read with the wrong torque',
         ),
@@ -391,15 +397,16 @@ def check_position_noise(
 
 
 def wrench_lag(rec: JointRecording, impacts: list[int]) -> float | None:
-    """Median over the impacts of the time from the first sample after the step of the rates
-    to the wrench's rise (the first sample above half its peak there) [s]."""
+    """Median over the impacts of how late the wrench rises (its first sample above half its
+    peak) after the first joint sample after the step of the rates [s]; negative: how early
+    before one period after the last sample before the step."""
     if rec.wrench is None or rec.wrench_t is None or not impacts:
         return None
     period = rec.period
     lags = []
     normal = np.abs(rec.wrench[:, 1])
     for a in impacts:
-        t_b = rec.t[a + 1]
+        t_a, t_b = rec.t[a], rec.t[a + 1]
         sel = np.flatnonzero(
             (rec.wrench_t > t_b - SEARCH_PERIODS * period)
             & (rec.wrench_t < t_b + SEARCH_PERIODS * period)
@@ -409,8 +416,10 @@ def wrench_lag(rec: JointRecording, impacts: list[int]) -> float | None:
         peak = float(np.max(normal[sel]))
         if peak <= 0:
             continue
-        rise = sel[np.flatnonzero(normal[sel] >= 0.5 * peak)[0]]
-        lags.append(rec.wrench_t[rise] - t_b)
+        rise = float(rec.wrench_t[sel[np.flatnonzero(normal[sel] >= 0.5 * peak)[0]]])
+        # on time: stamped from one period after the last sample before the contact to the
+        # first sample after it (later when samples around the contact are lost)
+        lags.append(rise - t_b if rise > t_b else min(rise - (t_a + period), 0.0))
     return float(np.median(lags)) if lags else None
 
 
