@@ -15,6 +15,7 @@ from impact_arm.calibration.diagnose import (
     central_rates,
     correct,
     diagnose,
+    stamp_jitter,
 )
 from impact_arm.calibration.study import Study
 from impact_arm.physics.model import ArmModel
@@ -81,6 +82,25 @@ def test_jittered_stamps_are_named_with_their_rms(plain, model):
     # fit's effort readings and free-flight fits do not feel it)
     assert FindingKind.STAMP_JITTER not in kinds(plain, model)
     assert FindingKind.STAMP_JITTER not in kinds(recording(jitter=5e-6), model)
+
+
+def test_irregular_sampling_with_true_stamps_is_no_jitter(model):
+    """Samples taken at irregular times and stamped truly (picked from a 4 kHz run, a quarter
+    period early or late at random): the positions advance with the stamps, nothing to
+    correct."""
+    fine = recording(publish_rate=4000.0, noise={})
+    rng = np.random.default_rng(1)
+    pick = np.arange(4, len(fine.t) - 4, 4) + rng.integers(-1, 2, (len(fine.t) - 8 + 3) // 4)
+    rec = dataclasses.replace(
+        fine,
+        t=fine.t[pick] - fine.t[pick[0]],
+        position=fine.position[pick],
+        velocity=fine.velocity[pick],
+        effort=fine.effort[pick],
+    )
+    jitter, follows = stamp_jitter(rec)
+    assert jitter > 1e-4 and follows == 'stamps'
+    assert FindingKind.STAMP_JITTER not in kinds(rec, model)
 
 
 @pytest.mark.parametrize('latency', [0.002, 0.005])
