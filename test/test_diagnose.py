@@ -12,6 +12,7 @@ import pytest
 from impact_arm.calibration.diagnose import (
     Corrections,
     FindingKind,
+    SampleTimes,
     central_rates,
     correct,
     diagnose,
@@ -99,7 +100,7 @@ def test_irregular_sampling_with_true_stamps_is_no_jitter(model):
         effort=fine.effort[pick],
     )
     jitter, follows = stamp_jitter(rec)
-    assert jitter > 1e-4 and follows == 'stamps'
+    assert jitter > 1e-4 and follows is SampleTimes.STAMPS
     assert FindingKind.STAMP_JITTER not in kinds(rec, model)
 
 

@@ -15,8 +15,8 @@ do about it.
 * ``WRENCH_LAG``: the wrench rises later (or earlier) than the impacts the joint rates show.
 
 ``diagnose`` only reports; ``correct`` applies the corrections the user asks for (a known
-effort or wrench latency, rates from the positions, regular stamps) to a copy of the
-recording. Nothing is changed unless asked.
+effort or wrench latency, difference rates read as the mean rates of their periods, regular
+stamps) to a copy of the recording. Nothing is changed unless asked.
 """
 
 from __future__ import annotations
@@ -108,9 +108,17 @@ class Diagnosis:
         return {f.kind for f in self.findings}
 
     def lines(self) -> list[str]:
-        if not self.findings:
-            return [f'recording diagnosis: nothing found ({len(self.checked)} checks)']
-        return [f'recording diagnosis: {f.text()}' for f in self.findings]
+        """What the command line says: each finding, or that there is none, and the checks
+        that could not run."""
+        out = [f'recording diagnosis: {f.text()}' for f in self.findings] or [
+            f'recording diagnosis: nothing found ({len(self.checked)} checks)'
+        ]
+        if self.skipped:
+            out.append(
+                'recording diagnosis: not checked: '
+                + '; '.join(f'{k.value} ({why})' for k, why in self.skipped.items())
+            )
+        return out
 
     def markdown(self) -> list[str]:
         """The fit report's section on the recording itself."""
@@ -150,7 +158,7 @@ class Corrections:
                 raise ValueError(f'{option} = {value}: must be a finite delay within +-1 s')
 
     @property
-    def any(self) -> bool:
+    def requested(self) -> bool:
         return self != Corrections()
 
 
@@ -207,10 +215,18 @@ def check_difference_rates(rec: JointRecording) -> Finding | None:
     return None
 
 
-def stamp_jitter(rec: JointRecording) -> tuple[float, str]:
-    """(rms of the stamps about a regular grid [s], what the values follow: 'grid', 'stamps'
-    or 'either'). The values follow the grid when the positions advance by the rates times
-    the period rather than times the stamps' difference."""
+class SampleTimes(str, Enum):
+    """What the values of a recording follow in time."""
+
+    GRID = 'grid'  # a regular grid: the stamps' scatter is the stamps' own error
+    STAMPS = 'stamps'  # the stamps: irregular sampling, truly stamped
+    EITHER = 'either'  # the data cannot tell (noise above what the jitter moves)
+
+
+def stamp_jitter(rec: JointRecording) -> tuple[float, SampleTimes]:
+    """(rms of the stamps about a regular grid [s], what the values follow). The values
+    follow the grid when the positions advance by the rates times the period rather than
+    times the stamps' difference."""
     k, period = _consecutive(rec)
     dev = np.diff(rec.t)[k - 1] - period
     # difference of two stamps' errors: sqrt(2) times one stamp's
@@ -220,21 +236,20 @@ def stamp_jitter(rec: JointRecording) -> tuple[float, str]:
     dt = np.diff(rec.t)[k - 1][:, None]
     e_stamps = float(np.sum((dq - mean_rate * dt) ** 2))
     e_grid = float(np.sum((dq - mean_rate * period) ** 2))
-    follows = (
-        'grid' if e_grid < 0.5 * e_stamps else 'stamps' if e_stamps < 0.5 * e_grid else 'either'
-    )
-    return jitter, follows
+    if e_grid < 0.5 * e_stamps:
+        return jitter, SampleTimes.GRID
+    return jitter, SampleTimes.STAMPS if e_stamps < 0.5 * e_grid else SampleTimes.EITHER
 
 
 def check_stamp_jitter(rec: JointRecording) -> tuple[Finding | None, float]:
     jitter, follows = stamp_jitter(rec)
     period = rec.period
-    if jitter <= max(JITTER_SHARE * period, JITTER_FLOOR) or follows == 'stamps':
+    if jitter <= max(JITTER_SHARE * period, JITTER_FLOOR) or follows is SampleTimes.STAMPS:
         # a regular clock, or irregular sampling stamped truly: nothing to correct
         return None, jitter
     values = (
         'the positions advance with the regular period, not with the stamps'
-        if follows == 'grid'
+        if follows is SampleTimes.GRID
         else 'the data cannot tell whether the values follow the stamps or a regular grid'
     )
     return (
@@ -498,7 +513,7 @@ def correct(
 ) -> JointRecording:
     """A copy of ``rec`` with the asked ``corrections`` applied, each named in its notes (and
     in ``diagnosis.corrections``, whose findings are marked corrected)."""
-    if not corrections.any:
+    if not corrections.requested:
         return rec
     out = dataclasses.replace(rec, notes=list(rec.notes))
     done: list[tuple[str, FindingKind, str]] = []
