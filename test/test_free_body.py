@@ -277,3 +277,41 @@ def test_the_shipped_square_drop_scene_loads_and_strikes():
         EventKind.MAX_COMPRESSION,
         EventKind.SEPARATION,
     ]
+
+
+def _oblique(angle_deg: float, speed: float = 3.9) -> tuple[float, float, float, float]:
+    """The shipped sphere-on-flat scene at an incidence angle: (tangential CoR, normal CoR,
+    spin after, the sphere's radius)."""
+    import os
+
+    from impact_arm.physics.bodies.scene import load_body_scene
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    scene = load_body_scene(os.path.join(root, 'config', 'oblique_sphere.yaml'))
+    r = scene.body.corner_radius
+    a = math.radians(angle_deg)
+    vx, vz = speed * math.sin(a), -speed * math.cos(a)
+    run = simulate_body(build_model(scene), BodyState(0.0, r + 1e-9, 0.0, vx, vz, 0.0), settle=1e-5)
+    return run.state.vx / vx, -run.state.vz / vz, run.state.omega, r
+
+
+@pytest.mark.parametrize('angle_deg', [45.0, 60.0])
+def test_an_oblique_sphere_that_slides_throughout_follows_rigid_coulomb(angle_deg):
+    """Sliding all through the contact: the tangential impulse is μ times the normal one,
+    e_t = 1 - μ (1 + e) / tan α, and the spin 5 μ (1 + e) v_n / (2 R)."""
+    mu, e = 0.092, 0.98
+    et, en, omega, r = _oblique(angle_deg)
+    a = math.radians(angle_deg)
+    assert en == pytest.approx(e, rel=1e-6)
+    assert et == pytest.approx(1 - mu * (1 + e) / math.tan(a), rel=1e-4)
+    assert -omega == pytest.approx(5 * mu * (1 + e) * 3.9 * math.cos(a) / (2 * r), rel=1e-4)
+
+
+@pytest.mark.parametrize('angle_deg', [5.0, 20.0])
+def test_an_oblique_sphere_that_stops_sliding_leaves_rolling(angle_deg):
+    """Below tan α = 7/2 μ (1 + e) the slip stops: a solid sphere leaves rolling, at 5/7 of
+    its tangential speed (no tangential compliance, so no reversal of the slip)."""
+    et, _, omega, r = _oblique(angle_deg)
+    assert et == pytest.approx(5 / 7, rel=2e-3)
+    vx = 3.9 * math.sin(math.radians(angle_deg)) * et
+    assert -omega * r == pytest.approx(vx, rel=5e-3)

@@ -66,6 +66,10 @@ SUBCOMMANDS = {
         'impact_arm_bench.validate',
         'contact laws vs recorded drops of a square, beside rigid-body impact laws',
     ),
+    'oblique': (
+        'impact_arm_bench.oblique',
+        'a sphere striking a flat obliquely vs measured rebounds (tangential CoR, spin)',
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',

@@ -124,6 +124,22 @@ def run(args) -> int:
         fit_s, per = timings[model]
         print(f'{model.value:14}{cells}  ({fit_s:.1f} s, {per * 1e3:.3f} ms)')
     print()
+    tilt = np.array([tilt_deg(i.pre.theta) for i in test])
+    classes = ((0.0, 5.0), (5.0, 15.0), (15.0, 45.0))
+    print('median / 90th percentile by tilt (edge to floor before the impact; 0 deg: flat)')
+    for low, high in classes:
+        chosen = (tilt >= low) & (tilt <= high)
+        print(f'  tilt {low:g}-{high:g} deg: {int(chosen.sum())} impacts')
+        for model in Model:
+            e = errors[model][chosen]
+            if not len(e):
+                continue
+            cells = ''.join(
+                f'{np.nanmedian(e[:, k]):>9.3f} / {np.nanpercentile(e[:, k], 90):<8.3f}'
+                for k in range(4)
+            )
+            print(f'    {model.value:14}{cells}')
+    print()
     for model in Model:
         params = ', '.join(f'{k} = {v:.4g}' for k, v in fits[model].params.items())
         print(f'fitted {model.value}: {params} ({fits[model].evaluations} evaluations)')
@@ -136,6 +152,13 @@ def run(args) -> int:
     if args.plots:
         _plots(args.plots, test, measured, predictions, errors, args.side)
     return 0
+
+
+def tilt_deg(theta: float) -> float:
+    """Angle between the square's nearest edge and the floor, 0 (flat) to 45 deg (on a
+    corner)."""
+    a = math.degrees(theta) % 90.0
+    return min(a, 90.0 - a)
 
 
 def _finite(values):
@@ -233,6 +256,43 @@ def _plots(folder, test, measured, predictions, errors, side):
                 ax.legend(fontsize=8)
     fig.tight_layout()
     path = os.path.join(folder, 'validation_error_vs_angle_speed.png')
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    print(f'wrote {path}')
+    # the normal CoR of corner impacts against their normal speed: what tells the laws apart
+    corner = np.array([tilt_deg(i.pre.theta) >= 15.0 for i in test])
+    normal_speed = -approach[:, 1]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    x = normal_speed[corner]
+    cor_m = np.array([normal_cor(i, m, side) for i, m in zip(test, measured, strict=True)])
+    ax.plot(x, cor_m[corner], '.', ms=3, color='0.6', label='measured, each impact')
+    edges = np.quantile(x, np.linspace(0, 1, 9))
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    bins = [(x >= a) & (x <= b) for a, b in zip(edges[:-1], edges[1:])]
+    ax.plot(
+        centres,
+        [np.nanmedian(cor_m[corner][b]) for b in bins],
+        'ks-',
+        ms=4,
+        label='measured, median per bin',
+    )
+    for model, pred in predictions.items():
+        cor_p = np.array([normal_cor(i, p, side) for i, p in zip(test, pred, strict=True)])
+        ax.plot(
+            centres,
+            [np.nanmedian(cor_p[corner][b]) for b in bins],
+            'o-',
+            ms=3,
+            color=COLORS[model.value],
+            label=f'{model.value}, median per bin',
+        )
+    ax.set_ylim(0, 1.2)
+    ax.set_xlabel('normal speed of the lowest corner before the impact [m/s]')
+    ax.set_ylabel('normal CoR of the lowest corner')
+    ax.set_title('corner impacts (tilt >= 15 deg), test drops', fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = os.path.join(folder, 'validation_cor_vs_speed.png')
     fig.savefig(path, dpi=90)
     plt.close(fig)
     print(f'wrote {path}')
