@@ -36,10 +36,11 @@ from enum import Enum
 import numpy as np
 
 from ..physics.bodies.impulse import Restitution, point_impact
-from ..physics.bodies.model import BodyModel, build_model, simulate_body
+from ..physics.bodies.model import BodyModel, BodyRun, build_model, simulate_body
 from ..physics.bodies.scene import BodyIntegratorSpec, BodyScene, BodySpec, BodyState, LineSurface
 from ..physics.contact import contact_constants
 from ..physics.errors import SimulationError
+from ..physics.kinds import EventKind
 from ..physics.scene import Material
 
 HEADER = ('x', 'z', 'th', 'vx', 'vz', 'vth')
@@ -92,6 +93,9 @@ class Impact:
     t: float  # [s] from the file's first row
     pre: BodyState  # at the impact
     post: tuple[float, float, float]  # vx, vz, ω after the impact, at the same instant
+    # from the impact to the first row of the fit after it: every contact before that row is
+    # in the measured velocities after the impact, so a prediction runs this long
+    horizon: float = 0.0
 
     def contact_point(self, side: float, radius: float = 0.0) -> tuple[float, float]:
         """The lowest corner's contact point from the centre of mass."""
@@ -205,7 +209,14 @@ def find_impacts(
             omega=pre[2, 1],
         )
         after = (post[0, 1], post[1, 1] - g * s, post[2, 1])
-        impact = Impact(os.path.basename(file), len(impacts) + 1, t0 + s, state, after)
+        impact = Impact(
+            os.path.basename(file),
+            len(impacts) + 1,
+            t0 + s,
+            state,
+            after,
+            horizon=float(t_rows[post_rows[0]] - t0 - s),
+        )
         if impact.approach(side)[1] > -MIN_APPROACH:
             continue
         impacts.append(impact)
@@ -286,8 +297,10 @@ def predict(
     settle: float = 2e-3,
 ) -> np.ndarray:
     """(n, 3) velocities (vx, vz, ω) after each impact as ``model`` predicts them, at the
-    impact's instant (a simulated impact's velocities are carried back over its duration
-    ballistically). NaN where the model cannot say (a simulation that fails)."""
+    impact's instant. The free body runs over the impact's ``horizon`` (the contacts the
+    measured velocities after it include), at least until every contact has been over for
+    ``settle``; its velocities are carried back ballistically to the impact's instant. NaN
+    where the model cannot say (a simulation that fails)."""
     out = np.full((len(impacts), 3), np.nan)
     radius = params['corner_radius']
     if model in (Model.NEWTON, Model.POISSON):
@@ -305,12 +318,20 @@ def predict(
         _, rz = lowest_corner(p.theta, side, radius)
         start = BodyState(0.0, -rz + 1e-9, p.theta, p.vx, p.vz, p.omega)
         try:
-            run = simulate_body(body, start, 0.05, settle=settle)
+            run = simulate_body(body, start, impact.horizon, settle=0.0)
+            if any(e.kind == EventKind.CONTACT for e in run.events) and not _all_free(run):
+                run = simulate_body(body, start, 0.05, settle=settle)
         except SimulationError:
             continue
         s = run.state
         out[i] = (s.vx, s.vz + GRAVITY * run.t, s.omega)
     return out
+
+
+def _all_free(run: BodyRun) -> bool:
+    """Whether no contact is open at the end of ``run`` (each contact has its separation)."""
+    opened = sum(e.kind == EventKind.CONTACT for e in run.events)
+    return opened == sum(e.kind == EventKind.SEPARATION for e in run.events)
 
 
 def residuals(
