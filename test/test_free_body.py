@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from impact_arm.physics.bodies.model import build_model, energy, simulate_body
 from impact_arm.physics.bodies.scene import BodyState, parse_body_scene
 from impact_arm.physics.contact import contact_constants
-from impact_arm.physics.errors import SceneError
+from impact_arm.physics.errors import SceneError, SimulationError
 from impact_arm.physics.kinds import EventKind
 from impact_arm.physics.scene import Material
 from impact_arm.physics.sphere_drop import drop
@@ -260,6 +260,13 @@ def test_mutated_body_scenes_are_accepted_finite_or_refused_in_one_line(data):
     numbers = [result.body.mass, result.body.inertia, *result.initial.as_tuple()]
     numbers += [v for s in result.surfaces for v in (*s.normal, *s.point, s.mu, s.v_d)]
     assert all(math.isfinite(v) for v in numbers)
+    # an accepted scene runs to a finite state, or stops by name
+    try:
+        run = simulate_body(build_model(result), t_end=min(result.t_max, 0.05))
+    except SimulationError as exc:
+        assert '\n' not in str(exc)
+        return
+    assert all(math.isfinite(v) for v in run.state.as_tuple())
 
 
 def test_the_shipped_square_drop_scene_loads_and_strikes():
@@ -277,6 +284,33 @@ def test_the_shipped_square_drop_scene_loads_and_strikes():
         EventKind.MAX_COMPRESSION,
         EventKind.SEPARATION,
     ]
+
+
+@pytest.mark.parametrize('half_angle_deg', [30.0, 60.0])
+def test_a_sphere_dropped_into_a_v_groove_strikes_both_walls_at_once_and_bounces_straight_back(
+    half_angle_deg,
+):
+    """Two surfaces: a frictionless elastic sphere falling into a symmetric groove touches
+    both walls together; their forces' horizontal parts cancel, so it leaves straight up at
+    its impact speed."""
+    a = math.radians(half_angle_deg)
+    data = square()
+    data['body']['corners'] = [[0.0, 0.0]]
+    walls = [
+        {'point': [0.0, 0.0], 'normal': [-math.cos(a), math.sin(a)], 'law': 'hertz'},
+        {'point': [0.0, 0.0], 'normal': [math.cos(a), math.sin(a)], 'law': 'hertz'},
+    ]
+    data['surfaces'] = walls
+    height = RADIUS / math.sin(a)  # the centre's height where the sphere touches both walls
+    data['initial'] = {'z': height + 1e-6}
+    run = simulate_body(
+        model_of(data), BodyState(0.0, height + 1e-6, 0.0, 0.0, -1.5, 0.0), 0.05, settle=1e-3
+    )
+    contacts = [e for e in run.events if e.kind == EventKind.CONTACT]
+    assert sorted(e.surface for e in contacts) == [0, 1]
+    assert contacts[0].t == contacts[1].t
+    assert run.state.vz == pytest.approx(1.5, rel=1e-7)
+    assert abs(run.state.vx) < 1e-12
 
 
 def _oblique(angle_deg: float, speed: float = 3.9) -> tuple[float, float, float, float]:
