@@ -349,3 +349,34 @@ def test_an_oblique_sphere_that_stops_sliding_leaves_rolling(angle_deg):
     assert et == pytest.approx(5 / 7, rel=2e-3)
     vx = 3.9 * math.sin(math.radians(angle_deg)) * et
     assert -omega * r == pytest.approx(vx, rel=5e-3)
+
+
+def test_impact_arm_body_prints_the_events_and_writes_them(tmp_path):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = tmp_path / 'body.json'
+    args = ['body', '--scene', 'square_drop', '--t-end', '0.13', '--json', str(out)]
+    result = subprocess.run(
+        [sys.executable, '-m', 'impact_arm.tools.cli', *args],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    assert 'max_compression' in result.stdout and 'theta' in result.stdout
+    data = json.loads(out.read_text())
+    assert [e['kind'] for e in data['events']][:2] == ['contact', 'yield']
+    refused = subprocess.run(
+        [sys.executable, '-m', 'impact_arm.tools.cli', 'body', '--scene', 'paper'],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        timeout=300,
+    )
+    assert refused.returncode == 2
+    assert 'is not a known key' in refused.stderr and '\n' not in refused.stderr.strip()
