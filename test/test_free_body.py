@@ -164,6 +164,24 @@ def test_one_corner_dropped_normally_matches_the_independent_sphere_drop():
     assert maximum.values[2] == pytest.approx(reference.delta_r, rel=1e-6)
 
 
+def test_a_dent_is_forgotten_once_the_corner_rises_above_the_surface():
+    """Each bounce of an elasto-plastic sphere starts where the surface was (as the arm's
+    impacts do): the dent of the first does not lower the second's contact."""
+    data = square(law='elastoplastic')
+    data['gravity'] = 9.81
+    data['body']['corners'] = [[0.0, 0.0]]
+    model = model_of(data)
+    run = simulate_body(
+        model, BodyState(0.0, RADIUS + 1e-4, 0.0, 0.0, -2.0, 0.0), 0.2, trace=50_000
+    )
+    contacts = [e.t for e in run.events if e.kind == EventKind.CONTACT]
+    separations = [e for e in run.events if e.kind == EventKind.SEPARATION]
+    assert len(contacts) >= 2 and separations[0].values[2] > 0  # a dent was left
+    at = {row[0]: row for row in run.trace}
+    for t in contacts:
+        assert at[t][2] - RADIUS == pytest.approx(0.0, abs=1e-12)
+
+
 def test_the_constant_cor_law_rebounds_with_its_coefficient():
     data = square(law='constant_cor', cor=0.65)
     data['body']['corners'] = [[0.0, 0.0]]

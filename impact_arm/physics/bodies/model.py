@@ -8,7 +8,7 @@ accepted step. Plain numpy around the compiled ``kernel``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -101,11 +101,6 @@ def build_model(scene: BodyScene) -> BodyModel:
         corners=np.array(body.corners, dtype=float).reshape(-1, 2),
         pairs=np.array(rows).reshape(-1, K.PT_COLUMNS),
     )
-
-
-def with_surfaces(model: BodyModel, surfaces: tuple[LineSurface, ...]) -> BodyModel:
-    """The same body against other surfaces (a fit changes their laws' parameters)."""
-    return build_model(replace(model.scene, surfaces=surfaces))
 
 
 def simulate_body(
