@@ -201,13 +201,21 @@ def test_bench_validate_writes_every_test_impact_in_the_issue_shape(drops, tmp_p
     assert all(len(d['measured']) == 3 and d['impact'] >= 1 for d in data['drops'])
 
 
-def test_bench_validate_refuses_a_missing_folder(tmp_path):
+@pytest.mark.parametrize(
+    'extra, words',
+    [
+        (['--train', 'nope'], "--train = 'nope' is not a folder"),
+        (['--train', '.', '--json', 'no/such/folder/v.json'], 'its folder does not exist'),
+        (['--train', '.', '--side', '-1'], '--side = -1 is out of range'),
+    ],
+)
+def test_bench_validate_refuses_bad_arguments_in_one_line(extra, words):
     result = subprocess.run(
-        [sys.executable, '-m', 'impact_arm.tools.cli', 'bench', 'validate', '--train', 'nope'],
+        [sys.executable, '-m', 'impact_arm.tools.cli', 'bench', 'validate', *extra],
         capture_output=True,
         text=True,
         cwd=ROOT,
         timeout=120,
     )
-    assert result.returncode != 0
-    assert "--train = 'nope' is not a folder" in result.stderr
+    assert result.returncode == 2
+    assert words in result.stderr and len(result.stderr.strip().splitlines()) == 1

@@ -71,6 +71,8 @@ def run(args) -> int:
     for flag, folder in (('--train', args.train), ('--test', args.test)):
         if folder is not None and not os.path.isdir(folder):
             return _refuse(f'{flag} = {folder!r} is not a folder')
+    if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
+        return _refuse(f'--json = {args.json!r}: its folder does not exist')
     started = time.perf_counter()
     train_files = drop_files(args.train)
     if args.test is None:
