@@ -31,7 +31,6 @@ import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from enum import Enum
 
 import numpy as np
 
@@ -40,7 +39,7 @@ from ..physics.bodies.model import BodyModel, BodyRun, build_model, simulate_bod
 from ..physics.bodies.scene import BodyIntegratorSpec, BodyScene, BodySpec, BodyState, LineSurface
 from ..physics.contact import contact_constants
 from ..physics.errors import SimulationError
-from ..physics.kinds import EventKind
+from ..physics.kinds import EventKind, TextEnum
 from ..physics.scene import Material
 
 HEADER = ('x', 'z', 'th', 'vx', 'vz', 'vth')
@@ -58,7 +57,7 @@ NOMINAL_MATERIAL = Material(E=70e9, nu=0.3, S_y=0.3e9)
 NOMINAL_FLOOR = Material(E=1e30, nu=0.0, S_y=1e30)  # rigid: E* is the body's
 
 
-class Model(str, Enum):
+class Model(TextEnum):
     OURS = 'ours'
     NEWTON = 'newton'
     POISSON = 'poisson'

@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum
+
+from ..kinds import TextEnum
 
 
-class Restitution(str, Enum):
+class Restitution(TextEnum):
     NEWTON = 'newton'
     POISSON = 'poisson'
 
