@@ -353,6 +353,10 @@ COMMANDS = {
         'impact_arm.tools.compare',
         'compare the impacts of two recordings, or of a recording and a scene',
     ),
+    'body': (
+        'impact_arm.tools.body',
+        'run a free-body scene (a rigid body whose corners strike surfaces)',
+    ),
     'kernel': (
         'impact_arm.tools.kernel',
         "kernel dump: print the generated kernel module of a scene's shape",
