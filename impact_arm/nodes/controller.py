@@ -23,15 +23,21 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from .. import contract
-from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, joint_names, to_absolute
+from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, to_absolute
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
-from ..physics.scene import load_scene, resolve_scene_path
 from ..io.wire import MalformedMessage, PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
-from .params import NODE_OPTIONS, declare, refuse_unknown, validator
+from .params import (
+    NODE_OPTIONS,
+    declare,
+    refuse_unknown,
+    scene_joint_names,
+    startup_scene,
+    validator,
+)
 
 # the settings whose change starts a fresh integral
 INTEGRAL_SETTINGS = (
@@ -51,14 +57,13 @@ class Controller(Node):
     def __init__(self):
         super().__init__('controller', **NODE_OPTIONS)
         # the scene (given at start-up, hence already declared) sets the table's defaults
-        name = self.get_parameter('scene').value if self.has_parameter('scene') else ''
-        scene = load_scene(resolve_scene_path(str(name) or 'paper'))
+        _, scene = startup_scene(self)
         self.table = parameter_table(scene)
         p = self.p = declare(self, self.table)
         self.n = scene.n_links
         self.model = ArmModel(scene)
-        names = joint_names(self.n)
-        check(p, names)
+        names = self.joint_names = scene_joint_names(scene)
+        command_order = check(p, names)
         refuse_unknown(self, self.table)
         self.ctrl = CycleController(
             self.model,
@@ -95,7 +100,7 @@ class Controller(Node):
         self.inputs = ControlInputs(
             self.ctrl,
             names,
-            [names.index(j) for j in p.joints],
+            command_order,
             p.rate,
             p.trigger,
             self._send,
@@ -148,7 +153,7 @@ class Controller(Node):
 
     def _set_parameters(self, values):
         p = self.p.replace(**values)
-        check(p, joint_names(self.n))
+        check(p, self.joint_names)
         c = self.ctrl
         if any(getattr(p, k) != getattr(self.p, k) for k in INTEGRAL_SETTINGS):
             c.integral = self._integrator(p)

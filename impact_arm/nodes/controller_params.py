@@ -7,15 +7,8 @@ from __future__ import annotations
 import math
 
 from .. import contract
-from ..contract import (
-    ANTIWINDUP_STRATEGIES,
-    COMMANDS,
-    FEEDBACK_LAWS,
-    PID_SPACES,
-    joint_names,
-    to_joint_space,
-)
-from .params import Param, ParameterError
+from ..contract import ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES, to_joint_space
+from .params import Param, ParameterError, check_joints, scene_joint_names
 
 
 def parameter_table(scene):
@@ -134,8 +127,8 @@ def parameter_table(scene):
         ),
         Param(
             'joints',
-            joint_names(n),
-            'joint order of the command array',
+            scene_joint_names(scene),
+            "joint order of the command array (default: the scene's joints, base first)",
             'strs',
             size=n,
             read_only=True,
@@ -191,10 +184,11 @@ def parameter_table(scene):
 
 
 def check(p, names):
-    """What no single parameter's range says: ParameterError naming the parameters."""
-    if sorted(p.joints) != names:
-        raise ParameterError(f'parameter joints = {p.joints}: must name each of {names} once')
+    """What no single parameter's range says: ParameterError naming the parameters.
+    Returns the command order (the index in ``names`` of each entry of ``joints``)."""
+    order = check_joints(p.joints, names)
     for name in ('i_clamp', 'u_clamp'):
         low, high = getattr(p, f'{name}_min'), getattr(p, f'{name}_max')
         if low > high:
             raise ParameterError(f'{name}_min = {low:g} > {name}_max = {high:g}')
+    return order

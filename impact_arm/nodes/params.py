@@ -20,6 +20,7 @@ from rcl_interfaces.msg import (
 
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
+from ..contract import joint_names
 from ..physics.errors import ImpactArmError
 
 
@@ -125,6 +126,41 @@ class Param:
             fail('out of range')
         if self.high is not None and number > self.high:
             fail('out of range')
+
+
+def scene_joint_names(scene) -> list:
+    """The joint names of ``scene``'s arm, base first: every node names the joints by this
+    one function (the scene's number of links decides how many)."""
+    return joint_names(scene.n_links)
+
+
+def check_joints(given, names, parameter='joints') -> list:
+    """The one joint check of every node: ``given`` (a node's joint order parameter) must
+    name each of ``names`` (the scene's joints) exactly once. Returns, for each position of
+    ``given``, the index of that joint in ``names``; ParameterError naming the parameter."""
+    if sorted(given) != sorted(names):
+        raise ParameterError(
+            f"parameter {parameter} = {list(given)}: must name each of the scene's "
+            f'{len(names)} joints {list(names)} once (the order of the command array)'
+        )
+    return [list(names).index(j) for j in given]
+
+
+def startup_scene(node, default='paper'):
+    """(path, scene) of the node's ``scene`` parameter as given at start-up (declared from
+    the command line or parameter file by ``NODE_OPTIONS``), before the node's table is
+    declared: the scene sets defaults of the table (joint names, gains). Empty: ``default``
+    (None: no scene, returns (None, None))."""
+    from ..physics.scene import load_scene, resolve_scene_path
+
+    name = node.get_parameter('scene').value if node.has_parameter('scene') else ''
+    if name is not None and not isinstance(name, str):
+        raise ParameterError(f'parameter scene = {name!r}: not a string; allowed: a str')
+    name = name or default
+    if not name:
+        return None, None
+    path = resolve_scene_path(name)
+    return path, load_scene(path)
 
 
 # Node options of a node whose parameters ``declare`` and ``refuse_unknown`` handle: every

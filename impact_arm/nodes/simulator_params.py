@@ -1,15 +1,35 @@
-"""The simulator node's parameters, declared once: this table gives each its default,
-range, description (``ros2 param describe``) and the typed object the node reads."""
+"""The simulator node's parameters, declared once: ``parameter_table(scene)`` gives each its
+default (the joint names from the scene), range, description (``ros2 param describe``) and,
+through ``params.declare``, the typed object the node reads."""
 
 from .. import contract
-from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES, joint_names
+from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES
 from ..driver.arm import DEFAULT_BRAKE_TORQUE
 from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy
 from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
-from .params import Param, ParameterError, values_class
+from .params import Param, ParameterError, check_joints, scene_joint_names
 
-PARAMS = (
+
+def parameter_table(scene):
+    """The simulator's parameters; the joint names and their number come from ``scene``."""
+    return (
+        _PARAMS_BEFORE_JOINTS
+        + (
+            Param(
+                'joints',
+                scene_joint_names(scene),
+                "joint order of the command array (default: the scene's joints, base first)",
+                'strs',
+                size=scene.n_links,
+                read_only=True,
+            ),
+        )
+        + _PARAMS_AFTER_JOINTS
+    )
+
+
+_PARAMS_BEFORE_JOINTS = (
     Param(
         'scene',
         '',
@@ -79,7 +99,8 @@ PARAMS = (
         low=1e-3,
         high=1e9,
     ),
-    Param('joints', joint_names(2), 'joint order of the command array', 'strs', read_only=True),
+)
+_PARAMS_AFTER_JOINTS = (
     Param(
         'preset',
         '',
@@ -173,16 +194,12 @@ PARAMS = (
         read_only=True,
     ),
 )
-SimulatorParams = values_class('SimulatorParams', PARAMS)
 
 
 def check(p, names):
-    """What no single parameter's range says: ParameterError naming the parameters."""
-    if sorted(p.joints) != sorted(names):
-        raise ParameterError(
-            f'parameter joints = {p.joints}: must name each of '
-            f'{names} once (the order of the command array)'
-        )
+    """What no single parameter's range says: ParameterError naming the parameters.
+    Returns the command order (the index in ``names`` of each entry of ``joints``)."""
+    order = check_joints(p.joints, names)
     if (
         p.joint_states_topic in (JOINT_STATES, JOINT_STATES.lstrip('/'))
         or p.joint_commands_topic == COMMANDS
@@ -197,3 +214,4 @@ def check(p, names):
             'parameter rate_factor = 0.0: realtime mode needs a pace '
             '> 0 (use mode lockstep to run as fast as possible)'
         )
+    return order
