@@ -133,26 +133,32 @@ def cli(args) -> int:
             f'realtime: {d.get("overruns", "?")} overruns; worst period compute '
             f'{d.get("compute_worst_us", "?")} us of {d.get("period_us", "?")} us'
         )
+    failed = {n: c for n, c in codes.items() if c not in (0, None)}
+    # a run a node failed in is no complete run, whatever the file holds
+    why_failed = '; '.join(
+        ([] if outcome in ('completed', 'interrupted') else [outcome])
+        + [f'{node} exited with status {code}' for node, code in failed.items()]
+    )
     incomplete = False
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
 
         check = check_recording(output, args.rate)
-        print(f'wrote {output}: {check.summary(args.mode == "lockstep")}')
+        print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
     elif output:
         print(f'no recording: {output} was not written')
-    failed = {n: c for n, c in codes.items() if c not in (0, None)}
     if outcome == 'interrupted':
         print('interrupted: nodes stopped, recording closed', file=sys.stderr)
         return 130
+    if why_failed:
+        print(f'the run failed: {why_failed}', file=sys.stderr)
+        for node in failed:
+            print(f'{node} log: {run.logs[node]}', file=sys.stderr)
+        return 1
     if incomplete:
         print('the lockstep recording is incomplete', file=sys.stderr)
-        return 1
-    if failed or outcome not in ('completed',):
-        for node, code in failed.items():
-            print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
         return 1
     return 0
 
@@ -374,6 +380,8 @@ class Run:
                 continue
             if node == 'controller':
                 self._await_graph()
+            if any(proc.poll() is not None for proc in self.procs.values()):
+                break  # a node already failed: watch() reports it, start nothing more
             self.logs[node] = os.path.join(self.logdir, f'{node}.log')
             with open(self.logs[node], 'wb') as log:
                 self.procs[node] = subprocess.Popen(
