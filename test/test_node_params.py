@@ -73,3 +73,21 @@ def test_shipped_parameter_files_fit_an_arm_of_any_number_of_links(node, n):
     table = {p.name: p for p in SCENE_TABLES[node](SCENES[n])}
     for name, value in given.items():
         table[name].check(value)
+
+
+def test_docs_parameter_tables_are_generated_from_the_nodes_tables():
+    """docs/nodes.md and docs/topics.md show each node's table as the node declares it
+    (regenerate with python -m impact_arm.nodes.param_docs)."""
+    from impact_arm.nodes import param_docs
+
+    assert param_docs.main(['--check']) == 0
+
+
+def test_every_node_declares_its_parameters_through_one_table():
+    from impact_arm.nodes import param_docs
+
+    for node, (_, table) in param_docs.tables().items():
+        names = [p.name for p in table]
+        assert len(names) == len(set(names)), node
+        for p in table:  # each default passes its own check
+            p.check(list(p.default) if isinstance(p.default, tuple) else p.default)

@@ -30,6 +30,7 @@ def parameter_table(scene):
             'q (article eq. 9: PD on link angles + gravity compensation), pid or pd',
             'str',
             choices=FEEDBACK_LAWS,
+            shown_default="scene's",
         ),
         Param('rate', 1000.0, 'command rate [Hz]', low=0.1, high=100000.0, read_only=True),
         Param(
@@ -41,7 +42,15 @@ def parameter_table(scene):
             choices=('joint_states', 'timer'),
             read_only=True,
         ),
-        Param('p', list(c.kp), 'proportional gains per joint [N m/rad]', 'floats', low=0.0, size=n),
+        Param(
+            'p',
+            list(c.kp),
+            'proportional gains per joint [N m/rad]',
+            'floats',
+            low=0.0,
+            size=n,
+            shown_default="scene's",
+        ),
         Param(
             'i',
             list(c.ki),
@@ -49,8 +58,17 @@ def parameter_table(scene):
             'floats',
             low=0.0,
             size=n,
+            shown_default="scene's",
         ),
-        Param('d', list(c.kd), 'derivative gains per joint [N m s/rad]', 'floats', low=0.0, size=n),
+        Param(
+            'd',
+            list(c.kd),
+            'derivative gains per joint [N m s/rad]',
+            'floats',
+            low=0.0,
+            size=n,
+            shown_default="scene's",
+        ),
         Param(
             'i_clamp_max',
             math.inf,
@@ -64,10 +82,18 @@ def parameter_table(scene):
             low=-math.inf,
         ),
         Param(
-            'u_clamp_max', math.inf, "upper limit of each joint's PID output [N m]", high=math.inf
+            'u_clamp_max',
+            math.inf,
+            "upper limit of each joint's PID output [N m]",
+            high=math.inf,
+            doc=' (laws pid, pd)',
         ),
         Param(
-            'u_clamp_min', -math.inf, "lower limit of each joint's PID output [N m]", low=-math.inf
+            'u_clamp_min',
+            -math.inf,
+            "lower limit of each joint's PID output [N m]",
+            low=-math.inf,
+            doc=' (laws pid, pd)',
         ),
         Param(
             'antiwindup_strategy',
@@ -84,6 +110,7 @@ def parameter_table(scene):
             'angles the PID acts on: absolute link angles or relative joint angles',
             'str',
             choices=PID_SPACES,
+            shown_default="scene's",
         ),
         Param(
             'down_target',
@@ -93,6 +120,7 @@ def parameter_table(scene):
             low=-4 * math.pi,
             high=4 * math.pi,
             size=n,
+            shown_default="scene's",
         ),
         Param(
             'up_target',
@@ -102,6 +130,7 @@ def parameter_table(scene):
             low=-4 * math.pi,
             high=4 * math.pi,
             size=n,
+            shown_default="scene's",
         ),
         Param(
             'switch_height',
@@ -109,6 +138,7 @@ def parameter_table(scene):
             'tip height that ends the up phase [m]',
             low=-1e3,
             high=1e3,
+            shown_default="scene's",
         ),
         Param(
             'surface_height',
@@ -116,6 +146,7 @@ def parameter_table(scene):
             'height of the struck surface, for velocity-reversal detection [m]',
             low=-1e3,
             high=1e3,
+            shown_default='lowest surface',
         ),
         Param('force_threshold', 1.0, 'contact normal force that means impact [N]', low=0.0),
         Param(
@@ -132,6 +163,7 @@ def parameter_table(scene):
             'strs',
             size=n,
             read_only=True,
+            shown_default="the scene's: `[joint1, …, jointN]`",
         ),
         Param(
             'command_readers',
@@ -143,6 +175,7 @@ def parameter_table(scene):
             low=1,
             high=100,
             read_only=True,
+            doc='. `impact-arm run` and the launch file set 2 when they record',
         ),
         Param(
             'startup_hold',

@@ -40,6 +40,9 @@ class Param:
     size: int | None = None  # arrays: required length (None: any, >= 1)
     read_only: bool = False  # start-up only (changing it needs a restart)
     open_low: bool = False  # low bound excluded (e.g. rates > 0)
+    # for the generated tables of docs/*.md (param_docs.py), not for ``ros2 param describe``:
+    doc: str = ''  # what the documentation says beyond the description (markdown)
+    shown_default: str = ''  # the default in words, where the scene or the time sets it
 
     def allowed(self) -> str:
         if self.choices:
@@ -50,9 +53,14 @@ class Param:
             return f'{">" if self.open_low else ">="} {self.low:g}'
         if self.high is not None:
             return f'<= {self.high:g}'
-        return {'floats': 'a list of numbers', 'strs': 'a list of strings'}.get(
-            self.kind, f'a {self.kind}'
-        )
+        return {
+            'floats': 'a list of numbers',
+            'strs': 'a list of strings',
+            'str': 'a string',
+            'bool': 'true or false',
+            'int': 'an integer',
+            'float': 'a number',
+        }[self.kind]
 
     def descriptor(self) -> ParameterDescriptor:
         d = ParameterDescriptor(

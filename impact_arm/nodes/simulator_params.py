@@ -23,6 +23,7 @@ def parameter_table(scene):
                 'strs',
                 size=scene.n_links,
                 read_only=True,
+                shown_default="the scene's: `[joint1, …, jointN]`",
             ),
         )
         + _PARAMS_AFTER_JOINTS
@@ -71,6 +72,7 @@ _PARAMS_BEFORE_JOINTS = (
         'before the watchdog acts (watchdog_policy; a few control periods)',
         low=1e-3,
         high=3600.0,
+        doc='; /diagnostics then WARNs. 20 periods at 1 kHz: a few periods of your controller',
     ),
     # brake by default: zero torque drops the arm onto the part, where it chatters (a 0.33 s
     # middleware stall gave ~300 impact events in one simulated second); a real drive's safe
@@ -84,6 +86,7 @@ _PARAMS_BEFORE_JOINTS = (
         'str',
         choices=tuple(p.value for p in WatchdogPolicy),
         read_only=True,
+        doc=' (see "The watchdog" below)',
     ),
     Param(
         'brake_torque',
@@ -91,6 +94,7 @@ _PARAMS_BEFORE_JOINTS = (
         "the brake's torque limit per joint [N m] (watchdog_policy brake)",
         low=1e-3,
         high=1e9,
+        doc='; /diagnostics reports it and the largest brake torque used',
     ),
     Param(
         'max_effort',
@@ -98,6 +102,7 @@ _PARAMS_BEFORE_JOINTS = (
         'commanded torques are clipped to +-max_effort [N m]',
         low=1e-3,
         high=1e9,
+        doc=" (the article's Q law peaks near 2 kN m)",
     ),
 )
 _PARAMS_AFTER_JOINTS = (
@@ -119,6 +124,8 @@ _PARAMS_AFTER_JOINTS = (
         low=0,
         high=99,
         read_only=True,
+        doc='. Under load, middleware threads at normal scheduling held samples back '
+        'for 100–450 ms',
     ),
     Param(
         'diagnostics_period',
@@ -142,6 +149,7 @@ _PARAMS_AFTER_JOINTS = (
         'TF frame of /contact_wrench (x tangential, y normal)',
         'str',
         read_only=True,
+        doc=' (docs/topics.md, "Frames")',
     ),
     Param(
         'joint_commands_topic',
@@ -150,6 +158,7 @@ _PARAMS_AFTER_JOINTS = (
         '(effort by joint name), as topic_based_ros2_control sends them',
         'str',
         read_only=True,
+        doc=' (docs/ros2_control.md)',
     ),
     Param(
         'joint_states_topic',
@@ -157,6 +166,7 @@ _PARAMS_AFTER_JOINTS = (
         'joint states again, for topic_based_ros2_control (not /joint_states)',
         'str',
         read_only=True,
+        doc='; published while someone subscribes',
     ),
     Param(
         'tf_rate',
@@ -166,6 +176,8 @@ _PARAMS_AFTER_JOINTS = (
         high=1000.0,
         open_low=True,
         read_only=True,
+        doc=", from a timer outside the realtime loop; also at each impact's first contact, "
+        'maximum compression and separation (docs/topics.md, "Markers")',
     ),
     Param(
         'recorder_window',
@@ -177,6 +189,7 @@ _PARAMS_AFTER_JOINTS = (
         low=0,
         high=contract.WRITER_REPAIR_DEPTH // 2,
         read_only=True,
+        doc=f'. `impact-arm run` and the launch file set {contract.RECORDER_WINDOW} in lockstep',
     ),
     Param(
         'rod_radius',
