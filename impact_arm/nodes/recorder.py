@@ -50,7 +50,14 @@ from ..io.msgdefs import typestore
 from ..io.scene_visuals import VisualsWriter
 from ..io.wire import MalformedMessage, header_stamp_ns, joint_state_fields, wrench_stamped_fields
 from ._runner import reader_node, run, take_raw
-from .params import NODE_OPTIONS, ParameterError, declare, refuse_unknown, validator
+from .params import (
+    NODE_OPTIONS,
+    ParameterError,
+    declare,
+    refuse_unknown,
+    scene_joint_names,
+    validator,
+)
 from .recorder_params import PARAMS
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -144,7 +151,7 @@ class Recorder(Node):
             for topic in derived:
                 del self.wanted[topic]
             self._q = None  # absolute link angles of the latest joint state
-            self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
+            self._joints = scene_joint_names(self.visuals.visuals.scene)
             self._read_string = _string_reader()
         self.subs = {}
         # what has been written, for a lockstep simulator that waits for the recording
