@@ -4,8 +4,9 @@ parameters in controller_params.py.
 
 It knows the arm only as a real model-based controller would (kinematics and gravity terms
 from the scene) and talks only through topics: /joint_states and, if anyone publishes it,
-/contact_wrench in; /effort_controller/commands out, [τ_joint1, τ_joint2] in the order of
-``joints`` — what ros2_control's forward_command_controller named ``effort_controller`` takes.
+/contact_wrench in; /effort_controller/commands out, [τ_joint1, …, τ_jointN] (the scene's
+joints) in the order of ``joints``: what ros2_control's forward_command_controller named
+``effort_controller`` takes.
 
 trigger joint_states (default): one command per joint state whose stamp reaches the next tick
 of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer: a timer at
