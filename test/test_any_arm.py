@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from ros_helpers import PYTHON
+
+from impact_arm import contract
 from scenes import arm_dict, write_arm_scene
 from test_visuals import stamp_ns, tip_in_world
-
-pytestmark = pytest.mark.slow
 
 
 def impact_arm_run(argv, env, cwd, timeout=400):
@@ -58,6 +58,7 @@ def tip_from_angles(lengths, q_abs):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('n_links', [3, 4])
 def test_lockstep_run_of_an_arm_of_n_links_completes_records_and_draws_it(
     ros_env, tmp_path, n_links
@@ -82,10 +83,20 @@ def test_lockstep_run_of_an_arm_of_n_links_completes_records_and_draws_it(
     commands = by_topic['/effort_controller/commands']
     assert len(commands) >= stamps[-1] and all(len(c.data) == n_links for c in commands)
 
-    # the impact reports, numbered, at least one per cycle
+    # the impact reports, numbered, at least one per cycle; the run went on until the
+    # controller had struck in every cycle (an arm that bounces reports more impacts)
     reports = [json.loads(m.data) for m in by_topic['/impact_report']]
     assert [r['index'] for r in reports] == list(range(1, len(reports) + 1))
     assert len(reports) >= cycles
+    strikes = [
+        int(value.value)
+        for m in by_topic['/diagnostics']
+        for status in m.status
+        if status.name == contract.CONTROLLER_STATUS
+        for value in status.values
+        if value.key == 'strikes'
+    ]
+    assert strikes and max(strikes) >= cycles, strikes
 
     # TF: at each impact, a frame inside its contact puts the tip on the surface, where the
     # link lengths and the reported contact angles put the end of the arm
@@ -108,6 +119,7 @@ def test_lockstep_run_of_an_arm_of_n_links_completes_records_and_draws_it(
         assert first_contact == pytest.approx(tip_from_angles(lengths, q_contact), abs=1e-9)
 
 
+@pytest.mark.slow
 def test_run_in_which_a_node_failed_is_not_complete_and_exits_non_zero(ros_env, tmp_path):
     """The controller refuses its joints at start: the run must say it failed, never call
     the recording complete, and exit 1."""
@@ -133,3 +145,25 @@ def test_run_in_which_a_node_failed_is_not_complete_and_exits_non_zero(ros_env, 
     assert proc.returncode == 1, out
     assert 'controller exited with status 2' in out and 'the run failed' in out, out
     assert ': complete' not in out, out
+
+
+def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
+    """The runner's end of a run: cycles are the controller's strikes, not impact reports (an
+    arm that bounces reports several per cycle), and the strike's own report must be in."""
+    from impact_arm.tools.runner import Run
+
+    def report(t):
+        return {'t_contact': t, 'duration': 1e-4}
+
+    run = Run.__new__(Run)  # the counting alone: no processes, no DDS
+    run.strikes, run.down_half_start = 0, {}
+    # cycle 1: the strike's impact and two bounces while the arm goes up again
+    run.impacts = [report(0.211), report(0.213), report(0.216)]
+    assert not run._struck(2) and not run._struck(1)
+    run.strikes, run.down_half_start[1] = 1, 0.0
+    assert run._struck(1) and not run._struck(2)
+    # cycle 2 (its down half began at 0.41 s): the controller's count arrives first
+    run.strikes, run.down_half_start[2] = 2, 0.41
+    assert not run._struck(2)
+    run.impacts.append(report(0.619))
+    assert run._struck(2)

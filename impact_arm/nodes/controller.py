@@ -84,6 +84,13 @@ class Controller(Node):
         self._warm_up(scene)
         self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
         self.sent = 0
+        # down halves ended by a detected impact (the cycles struck) and the stamp at which
+        # the latest down half began: `impact-arm run` ends a run on them (an arm that
+        # bounces reports several impacts per cycle; its strike is the first contact after
+        # the down half began)
+        self.strikes = 0
+        self.down_half_start = 0.0
+        self._mode = self.ctrl.mode
         self.pub = self.create_publisher(
             Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy(p.command_history)
         )
@@ -201,6 +208,13 @@ class Controller(Node):
     def _send(self, values):
         self.pub.publish(self.wire_command.fill([float(v) for v in values]))
         self.sent += 1
+        mode, self._mode = self._mode, self.ctrl.mode
+        if mode != self._mode:
+            if self._mode == 'up':
+                self.strikes += 1
+                self._publish_diagnostics()  # now: a run ends on its count
+            elif self.inputs.latest is not None:
+                self.down_half_start = self.inputs.latest[0]
 
     def finish(self, executor) -> int:
         """Like a deactivated controller: leave the actuators with zero torque."""
@@ -227,6 +241,8 @@ class Controller(Node):
             message=f'{dropped} inputs dropped' if dropped else 'running',
             values=[
                 KeyValue(key='commands_sent', value=str(self.sent)),
+                KeyValue(key='strikes', value=str(self.strikes)),
+                KeyValue(key='down_half_start', value=repr(self.down_half_start)),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )
