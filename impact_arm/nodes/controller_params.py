@@ -41,6 +41,7 @@ def parameter_table(scene):
             'str',
             choices=('joint_states', 'timer'),
             read_only=True,
+            doc=' (joint_states: sensor-synchronous, deterministic on simulated time)',
         ),
         Param(
             'p',
@@ -50,6 +51,7 @@ def parameter_table(scene):
             low=0.0,
             size=n,
             shown_default="scene's",
+            doc=' (control_toolbox names: `p`, `i`, `d`)',
         ),
         Param(
             'i',
@@ -74,12 +76,14 @@ def parameter_table(scene):
             math.inf,
             'upper clamp of the integral term [N m] (legacy)',
             high=math.inf,
+            doc=' (with `antiwindup_strategy: legacy`)',
         ),
         Param(
             'i_clamp_min',
             -math.inf,
             'lower clamp of the integral term [N m] (legacy)',
             low=-math.inf,
+            doc=' (with `antiwindup_strategy: legacy`)',
         ),
         Param(
             'u_clamp_max',
@@ -103,6 +107,7 @@ def parameter_table(scene):
             'is at a u_clamp limit)',
             'str',
             choices=ANTIWINDUP_STRATEGIES,
+            doc='; none integrates regardless',
         ),
         Param(
             'space',
@@ -121,6 +126,7 @@ def parameter_table(scene):
             high=4 * math.pi,
             size=n,
             shown_default="scene's",
+            doc=' (relative: joint1 = q1, joint_k = q_k − q_(k−1))',
         ),
         Param(
             'up_target',
