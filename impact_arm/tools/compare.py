@@ -105,15 +105,17 @@ def match(a_rows, b_rows) -> list:
 
 
 def compare(
-    a, b, *, scene='paper', joints=None, controller=False, states_topic=None, wrench_topic=None
+    a, b, *, scene=None, joints=None, controller=False, states_topic=None, wrench_topic=None
 ) -> dict:
     """Python API: {'a': rows, 'b': rows, 'pairs': [(i, j)], 'table': [...], 'what': text}."""
     from ..contract import JOINT_STATES
     from ..calibration.study import Study
     from ..io.recording import read_recording
 
+    from .fit import scene_of
+
     b_is_recording = _is_recording(b)
-    kin_scene = scene if b_is_recording else b
+    kin_scene = scene_of(a, scene)[0] if b_is_recording else b
     study = Study(kin_scene)
     n = study.scene().n_links
     rec_a = read_recording(a, joints, n, states_topic or JOINT_STATES, wrench_topic)
@@ -218,8 +220,9 @@ def add_arguments(parser):
     parser.add_argument('b', help='second recording, or a scene (file or installed name)')
     parser.add_argument(
         '--scene',
-        default='paper',
-        help='scene for the kinematics when both are recordings (default paper)',
+        default=None,
+        help='scene for the kinematics when both are recordings (default: the scene A '
+        'stores, else paper)',
     )
     parser.add_argument(
         '--controller',

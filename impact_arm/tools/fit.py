@@ -33,6 +33,20 @@ def parse_param(text: str):
         ) from None
 
 
+def scene_of(recording, scene=None):
+    """The scene to read ``recording`` with: ``scene`` when given (path or installed name),
+    else the one the recording stores (the recorder and ``simulate --mcap`` store it), else
+    the article's. Returns (scene for ``Study``, its name for the user)."""
+    if scene:
+        return scene, str(scene)
+    from ..io.recording import recorded_scene
+
+    stored = recorded_scene(recording)
+    if stored is None:
+        return 'paper', 'paper (the recording stores no scene)'
+    return stored, f'{stored.name!r}, stored in the recording'
+
+
 def default_out(recording) -> str:
     name = os.path.basename(os.path.normpath(os.fspath(recording)))
     return os.path.join('runs', f'fit_{os.path.splitext(name)[0]}')
@@ -65,6 +79,7 @@ def fit_recording(
     from ..io.recording import read_recording
     from ..physics.model import ArmModel
 
+    scene, scene_name = scene_of(recording, scene)
     base = Study(scene).scene()
     rec = read_recording(
         recording, joints, base.n_links, states_topic or JOINT_STATES, wrench_topic
@@ -91,7 +106,7 @@ def fit_recording(
         say(f'wrote {path}')
     report = os.path.join(out, 'report.md')
     with open(report, 'w', encoding='utf-8') as f:
-        f.write(report_text(result, recording, scene, diagnosis))
+        f.write(report_text(result, recording, scene_name, diagnosis))
     say(f'wrote {report}')
     return result
 
@@ -348,8 +363,9 @@ def add_arguments(parser):
     parser.add_argument('recording', help='rosbag2 folder (metadata.yaml + MCAP) or MCAP file')
     parser.add_argument(
         '--scene',
-        default='paper',
-        help='scene file or installed name: the fixed rest and the start',
+        default=None,
+        help='scene file or installed name: the fixed rest and the start (default: the '
+        'scene the recording stores, else paper)',
     )
     parser.add_argument(
         '--param',
