@@ -12,7 +12,9 @@ impact record each: the table is exactly the one ``simulate`` prints), ``/impact
 Outputs in DIR (default: ``runs/<FILE name without .mcap>_analysis``): ``report.md``,
 ``impacts.json`` (``{"impacts": [...]}``, the records as published), ``impact_table.txt``,
 ``poincare_qd1_zero.csv`` / ``poincare_qd2_zero.csv`` and the figures ``fig3_controllers.png``
-… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each). Figure 3 is the
+… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each; ``--format svg|pdf``,
+``--dpi``). The impact table and the limit cycle are printed before any figure is drawn;
+the animation is a step of its own (``impact-arm animate``, or ``--animation``). Figure 3 is the
 article's comparison of the control laws (``--laws``, default q, pd, pid): step responses of
 the file's scene with its surface taken away, simulated offline. Figures 8-11 come from
 ``/impact_trace`` (offline recordings) or, in a live recording, from the impact integrated
@@ -51,6 +53,7 @@ class Run:
     scene: object = None
     metadata: dict = field(default_factory=dict)
     law: str = ''
+    topics: tuple = ()  # the topics the file holds (with or without messages)
 
 
 def _quiet(text):
@@ -122,6 +125,7 @@ def load(path, progress=_quiet) -> Run:
         scene,
         metadata,
         law,
+        tuple(sorted(info)),
     )
 
 
@@ -383,9 +387,35 @@ def add_arguments(parser):
         'recording',
     )
     parser.add_argument(
+        '--animation',
+        action='store_true',
+        help='also write animation.gif (slow, about a minute; impact-arm animate makes it alone)',
+    )
+    parser.add_argument(
         '--no-animation',
         action='store_true',
-        help='skip animation.gif (impact-arm animate makes it alone)',
+        help='no animation.gif: the default since --animation (accepted for older scripts)',
+    )
+    figure_options(parser)
+
+
+def figure_options(parser):
+    """--format and --dpi, shared with the commands that draw figures."""
+    from .figures import DPI, FORMATS
+
+    parser.add_argument(
+        '--format',
+        default='png',
+        choices=FORMATS,
+        help='file format of the figures (default png; svg and pdf are vector graphics)',
+    )
+    parser.add_argument(
+        '--dpi',
+        type=float,
+        default=DPI,
+        metavar='N',
+        help=f'resolution of png figures in dots per inch (default {DPI}, [50, 1200]); '
+        f'sets the size in pixels, not the layout',
     )
 
 
@@ -403,6 +433,8 @@ def cli(args) -> int:
     )
     if not 0 < args.compare_time <= 60:
         raise AnalysisError(f'--compare-time = {args.compare_time}: must be in (0, 60] s')
+    if not 50 <= args.dpi <= 1200:
+        raise AnalysisError(f'--dpi = {args.dpi:g}: must be in [50, 1200]')
     laws = [w.strip() for w in args.laws.split(',') if w.strip()]
     for law in laws:
         if law not in FEEDBACK_LAWS:
@@ -419,6 +451,16 @@ def cli(args) -> int:
             f'(the impacts reported in {args.file})'
         )
     others = [load(f, progress=say) for f in args.compare]
+    # the table first: it needs nothing but the file, the figures take seconds
+    table = impact_table(run.impacts)
+    lc = limit_cycle(run.impacts)
+    line.end()
+    if run.impacts:
+        print(f'impact table ({len(run.impacts)} impacts):')
+        print(table)
+    else:
+        print(f'no impacts in {args.file}: {no_impact_reason(run)}')
+    print(_limit_cycle_text(lc), flush=True)
     missing = []
     steps = []
     if laws and run.scene is None:
@@ -429,11 +471,7 @@ def cli(args) -> int:
         steps = [step_response(run.scene, law, args.compare_time, say) for law in laws]
     impact, constants = impact_points(run, args.impact, say)
     if impact is None:
-        missing.append(
-            f'Figures 8-11 not drawn: {args.file} has no /impact_trace, and '
-            f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
-            f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE'
-        )
+        missing.append(_no_impact_figures(run, args.file))
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
@@ -448,20 +486,9 @@ def cli(args) -> int:
         recordings=others,
         constants=constants,
         missing=missing,
+        style=figures.Style(args.format, args.dpi),
     )
-    if not args.no_animation and run.scene is not None:
-        from .animation import animate, contact_forces
-
-        gif = os.path.join(out, 'animation.gif')
-        say(f'animating to {gif}')
-        frames = animate(run, gif, contact_forces(args.file), progress=say)
-        line.end()
-        print(f'animation: {gif} ({frames} frames)')
     line.end()
-    print(f'impact table ({len(run.impacts)} impacts):')
-    print(written['table'])
-    lc = written['limit_cycle']
-    print(_limit_cycle_text(lc))
     if impact is not None and impact[3]:
         print(f'Figures 8-11: impact {args.impact} {impact[3]}')
     for line_ in missing:
@@ -469,9 +496,38 @@ def cli(args) -> int:
     print(
         f'wrote {os.path.join(out, "report.md")} ({len(written["figures"])} figures: '
         + ', '.join(name for name, _ in written['figures'])
-        + ')'
+        + ')',
+        flush=True,
     )
+    if args.animation and run.scene is not None:
+        from .animation import animate, contact_forces
+
+        gif = os.path.join(out, 'animation.gif')
+        say(f'animating to {gif}')
+        frames = animate(run, gif, contact_forces(args.file), progress=say)
+        line.end()
+        print(f'animation: {gif} ({frames} frames)')
+    elif args.animation:
+        print(f'animation not drawn: {args.file} stores no scene (link lengths)')
     return 0
+
+
+def no_impact_reason(run: Run) -> str:
+    """Why a recording has no impact record: no /impact_report topic at all (a recording
+    of joint states only), or the topic is there and the arm never struck."""
+    if IMPACT_REPORT in run.topics or IMPACT_TRACE in run.topics:
+        return f'the arm struck no surface ({IMPACT_REPORT} was recorded, with no message)'
+    return f'it has no {IMPACT_REPORT} topic'
+
+
+def _no_impact_figures(run: Run, path) -> str:
+    if not run.impacts and not run.traces and IMPACT_REPORT in run.topics:
+        return f'Figures 8-11 not drawn: {path} has no impact to show (the arm struck no surface)'
+    return (
+        f'Figures 8-11 not drawn: {path} has no /impact_trace, and '
+        f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
+        f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE'
+    )
 
 
 def impact_points(run: Run, k: int, progress=_quiet):
@@ -556,6 +612,7 @@ def write_outputs(
     recordings=(),
     constants=None,
     missing=(),
+    style=None,
 ) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
@@ -582,12 +639,17 @@ def write_outputs(
         progress=progress,
         recordings=recordings,
         constants=constants,
+        style=style,
     )
     _write(
         os.path.join(out, 'report.md'),
         report(run, recordings, table, lc, sections, made, steps, missing),
     )
     return {'table': table, 'limit_cycle': lc, 'figures': made, 'sections': sections}
+
+
+def _figure_named(made, stem) -> str:
+    return next((name for name, _ in made if name.startswith(stem + '.')), stem + '.png')
 
 
 def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) -> str:
@@ -663,7 +725,7 @@ def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) ->
         lines += [f'**{line}**', '']
     if others:
         lines += [
-            'Recordings compared (fig3b_recordings.png): '
+            f'Recordings compared ({_figure_named(made, "fig3b_recordings")}): '
             + ', '.join([run.label] + [o.label for o in others])
             + '.',
             '',

@@ -1,7 +1,8 @@
-"""PNG figures like the article's Figures 3–11 (matplotlib, Agg backend, no display needed).
+"""Figures like the article's Figures 3–11 (matplotlib, Agg backend, no display needed).
 
-Every figure is ``FIGURE_SIZE`` pixels (width, height): a fixed size in inches at a fixed dpi,
-saved without tight cropping. ``draw_all`` returns [(file name, caption)] of what it drew; a
+Every figure is ``FIGURE_INCHES`` in size, saved without tight cropping, as PNG (``FIGURE_SIZE``
+pixels at the default ``DPI``; ``Style.dpi`` scales the pixels, not the layout), SVG or PDF
+(``Style.format``). ``draw_all`` returns [(file name, caption)] of what it drew; a
 figure whose data the recording lacks (no scene for Figures 3 and 7, neither ``/impact_trace``
 nor a re-integrable ``/impact_report`` for 8–11) is left out, and ``analyze`` says why.
 """
@@ -10,12 +11,30 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 DPI = 100
 FIGURE_INCHES = (9.0, 5.5)
 FIGURE_SIZE = (int(FIGURE_INCHES[0] * DPI), int(FIGURE_INCHES[1] * DPI))  # pixels
+FORMATS = ('png', 'svg', 'pdf')
+
+
+@dataclass(frozen=True)
+class Style:
+    """How the figures are written: file format (``FORMATS``) and the dpi of raster output."""
+
+    format: str = 'png'
+    dpi: float = DPI
+
+    def __post_init__(self):
+        if self.format not in FORMATS:
+            raise ValueError(f'figure format {self.format!r}: choose one of {", ".join(FORMATS)}')
+        if not 50 <= self.dpi <= 1200:
+            raise ValueError(f'figure dpi = {self.dpi:g}: must be in [50, 1200]')
+
+
 PHASE_NAMES = {1: 'elastic compression', 2: 'elasto-plastic compression', 3: 'restitution'}
 
 
@@ -28,10 +47,14 @@ def _plt():
     return plt
 
 
-def _save(fig, out, name):
+def _save(fig, out, name, style=Style()):
     path = os.path.join(out, name)
-    tmp = path + '.tmp.png'
-    fig.savefig(tmp, dpi=DPI)
+    tmp = path + '.tmp.' + style.format
+    # no creation date in vector files: the same run gives the same file
+    metadata = {'CreationDate': None} if style.format == 'pdf' else None
+    if style.format == 'svg':
+        metadata = {'Date': None}
+    fig.savefig(tmp, dpi=style.dpi, format=style.format, metadata=metadata)
     _plt().close(fig)
     os.replace(tmp, path)
     return path
@@ -447,64 +470,76 @@ def fig11_kinetic_energy(impact, out):
 
 
 IMPACT_FIGURES = (
-    'fig8_indentation.png',
-    'fig9_impact_velocity.png',
-    'fig10_contact_force.png',
-    'fig10b_force_indentation.png',
-    'fig11_kinetic_energy.png',
+    'fig8_indentation',
+    'fig9_impact_velocity',
+    'fig10_contact_force',
+    'fig10b_force_indentation',
+    'fig11_kinetic_energy',
 )
 CAPTIONS = {
-    'fig3_controllers.png': 'Fig. 3: step responses of the Q controller, PD and PID without '
+    'fig3_controllers': 'Fig. 3: step responses of the Q controller, PD and PID without '
     'impact, (a) link 1, (b) link 2',
-    'fig3b_recordings.png': 'Link angles of the compared recordings',
-    'fig4_link_angles.png': 'Fig. 4: link angles q1(t), q2(t)',
-    'fig5_phase_portraits.png': 'Fig. 5: phase portraits (q1, q2, q̇1) and (q1, q2, q̇2)',
-    'fig6_poincare.png': 'Fig. 6: Poincaré maps, q1 and q2 at q̇1 = 0 and at q̇2 = 0',
-    'fig7_tip_velocity.png': 'Fig. 7: tip velocity vx(t), vy(t)',
-    'fig8_indentation.png': 'Fig. 8: indentation during the impact, elastic phase zoomed',
-    'fig9_impact_velocity.png': 'Fig. 9: tangential and normal tip velocity during the impact',
-    'fig10_contact_force.png': 'Fig. 10: contact force during the impact',
-    'fig10b_force_indentation.png': 'Force against indentation on the three contact laws '
+    'fig3b_recordings': 'Link angles of the compared recordings',
+    'fig4_link_angles': 'Fig. 4: link angles q1(t), q2(t)',
+    'fig5_phase_portraits': 'Fig. 5: phase portraits (q1, q2, q̇1) and (q1, q2, q̇2)',
+    'fig6_poincare': 'Fig. 6: Poincaré maps, q1 and q2 at q̇1 = 0 and at q̇2 = 0',
+    'fig7_tip_velocity': 'Fig. 7: tip velocity vx(t), vy(t)',
+    'fig8_indentation': 'Fig. 8: indentation during the impact, elastic phase zoomed',
+    'fig9_impact_velocity': 'Fig. 9: tangential and normal tip velocity during the impact',
+    'fig10_contact_force': 'Fig. 10: contact force during the impact',
+    'fig10b_force_indentation': 'Force against indentation on the three contact laws '
     '(not in the article)',
-    'fig11_kinetic_energy.png': 'Fig. 11: kinetic energies during the impact',
+    'fig11_kinetic_energy': 'Fig. 11: kinetic energies during the impact',
 }
 
 
 def draw_all(
-    run, steps, sections, v_tip, impact, out, progress=None, recordings=(), constants=None
+    run,
+    steps,
+    sections,
+    v_tip,
+    impact,
+    out,
+    progress=None,
+    recordings=(),
+    constants=None,
+    style=None,
 ):
     """Draw every figure the data allows into ``out``; returns [(file name, caption)].
     ``steps``: the step-response runs of Figure 3 (none: no Figure 3); ``impact``: (columns,
     rows, record, note) of the impact for Figures 8–11, or None; ``recordings``: more
     recordings to compare with ``run``; ``constants``: the impacted surface's contact
-    constants (the model's curves in the force–indentation plot)."""
+    constants (the model's curves in the force–indentation plot); ``style``: format and dpi
+    (default: PNG at ``DPI``)."""
+    style = style or Style()
     jobs = []
     if steps:
-        jobs.append(('fig3_controllers.png', lambda: fig3_controllers(steps, out)))
+        jobs.append(('fig3_controllers', lambda: fig3_controllers(steps, out)))
     if recordings:
-        jobs.append(('fig3b_recordings.png', lambda: fig_recordings([run] + list(recordings), out)))
+        jobs.append(('fig3b_recordings', lambda: fig_recordings([run] + list(recordings), out)))
     jobs += [
-        ('fig4_link_angles.png', lambda: fig4_link_angles(run, out)),
-        ('fig5_phase_portraits.png', lambda: fig5_phase_portraits(run, out)),
-        ('fig6_poincare.png', lambda: fig6_poincare(run, sections, out)),
+        ('fig4_link_angles', lambda: fig4_link_angles(run, out)),
+        ('fig5_phase_portraits', lambda: fig5_phase_portraits(run, out)),
+        ('fig6_poincare', lambda: fig6_poincare(run, sections, out)),
     ]
     if v_tip is not None:
-        jobs.append(('fig7_tip_velocity.png', lambda: fig7_tip_velocity(run, v_tip, out)))
+        jobs.append(('fig7_tip_velocity', lambda: fig7_tip_velocity(run, v_tip, out)))
     if impact is not None:
         jobs += [
-            ('fig8_indentation.png', lambda: fig8_indentation(impact, out)),
-            ('fig9_impact_velocity.png', lambda: fig9_impact_velocity(impact, out)),
-            ('fig10_contact_force.png', lambda: fig10_contact_force(impact, out)),
-            ('fig10b_force_indentation.png', lambda: fig_force_indentation(impact, constants, out)),
-            ('fig11_kinetic_energy.png', lambda: fig11_kinetic_energy(impact, out)),
+            ('fig8_indentation', lambda: fig8_indentation(impact, out)),
+            ('fig9_impact_velocity', lambda: fig9_impact_velocity(impact, out)),
+            ('fig10_contact_force', lambda: fig10_contact_force(impact, out)),
+            ('fig10b_force_indentation', lambda: fig_force_indentation(impact, constants, out)),
+            ('fig11_kinetic_energy', lambda: fig11_kinetic_energy(impact, out)),
         ]
     made = []
-    for i, (name, draw) in enumerate(jobs):
+    for i, (stem, draw) in enumerate(jobs):
+        name = f'{stem}.{style.format}'
         if progress:
             progress(f'figure {i + 1}/{len(jobs)}: {name}')
-        _save(draw(), out, name)
-        caption = CAPTIONS[name]
-        if name in IMPACT_FIGURES:
+        _save(draw(), out, name, style)
+        caption = CAPTIONS[stem]
+        if stem in IMPACT_FIGURES:
             caption += f' (impact {impact[2].get("index", "?")}' + (
                 f'; {impact[3]})' if impact[3] else ')'
             )
