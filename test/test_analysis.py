@@ -373,3 +373,34 @@ def test_a_recording_in_which_the_arm_struck_nothing_says_so(tmp_path):
     assert f'no impacts in {path}: the arm struck no surface' in ana.stdout
     assert 'has no impact to show' in ana.stdout
     assert 'impact-arm simulate --scene SCENE' not in ana.stdout
+
+
+def test_the_elastic_phase_is_drawn_from_a_fine_grid_of_the_integrators_output(article):
+    """Impact 1's elastic phase, which its trace holds as one step (contact to 1.9 δc), on
+    80 grid points: it starts with the normal velocity before impact as its rate (δ̇ = -v_y,
+    nothing else moves the tip into the surface at first), ends on 1.9 δc of the scene's
+    constants after the reported elastic duration, and its force follows Hertz in time."""
+    from impact_arm.physics.contact import YIELD_ONSET_FACTOR
+    from impact_arm.physics.model import ArmModel
+    from impact_arm.tools import analysis
+
+    d, _, _ = article
+    run = analysis.load(d / 'paper.mcap')
+    record = run.impacts[0]
+    curve = analysis.elastic_curve(run.scene, record)
+    assert curve is not None and curve.end == 'yield' and len(curve.t) >= 80
+    columns, rows = run.traces[0]
+    phase = rows[:, columns.index('phase')]
+    assert np.count_nonzero(phase == 1) <= 2  # what the trace alone would draw: a segment
+    assert curve.t[-1] - curve.t[0] == pytest.approx(record['phase_durations'][0], rel=1e-6)
+    c = ArmModel(run.scene).surfaces[0].constants
+    assert curve.delta[-1] == pytest.approx(YIELD_ONSET_FACTOR * c.delta_c, rel=1e-6)
+    rate = np.diff(curve.delta) / np.diff(curve.t)
+    assert rate[0] == pytest.approx(-record['v_before'][1], rel=1e-4)
+    # at a nearly constant rate δ ∝ t, so F ∝ t^1.5: half way in time the force is
+    # 0.5^1.5 = 0.354 of the end's, where the straight segment between the two step ends
+    # would give 0.5
+    middle = np.interp(0.5 * (curve.t[0] + curve.t[-1]), curve.t, curve.force)
+    assert middle / curve.force[-1] == pytest.approx(0.5**1.5, rel=0.02)
+    # Hertz (eq. 11): F = 4/3 E* sqrt(R) δ^(3/2)
+    assert curve.force == pytest.approx(4 / 3 * c.E * math.sqrt(c.R) * curve.delta**1.5)

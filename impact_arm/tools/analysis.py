@@ -278,6 +278,71 @@ def reintegrated_trace(scene, record: dict):
     )
 
 
+@dataclass(frozen=True)
+class ElasticCurve:
+    """The elastic (Hertz) phase of one impact on a fine time grid: the integrator's output
+    between contact and the end of the phase (yield at 1.9 δc, or maximum compression for a
+    contact that stays elastic). The phase lasts ~1 µs, a step or two of the integrator: its
+    step ends alone draw it as a straight segment."""
+
+    t: np.ndarray  # [s]
+    delta: np.ndarray  # indentation [m]
+    force: np.ndarray  # normal force [N], Hertz at delta
+    end: str  # the event that ends the phase: 'yield' or 'max_compression'
+
+
+def elastic_curve(scene, record: dict, points: int = 80) -> ElasticCurve | None:
+    """Integrate impact ``record`` again from its reported contact state (as
+    ``reintegrated_trace``) with output on a grid of ``points`` times over its elastic phase
+    (the integrator's continuous extension; contact steps end on the grid). None when the
+    record cannot be integrated again (``trace_missing_reason``) or has no elastic phase."""
+    from ..physics.contact import hertz_force
+    from ..physics.integrator import PhaseIntegrator, options_from_spec
+    from ..physics.model import ArmModel
+
+    if scene is None or scene.n_links != 2 or scene.actuators_during_contact:
+        return None
+    durations = record.get('phase_durations') or []
+    if not durations or not durations[0] > 0 or 'q_contact_deg' not in record:
+        return None
+    model = ArmModel(scene)
+    n = model.n
+    q = np.radians(np.asarray(record['q_contact_deg'], float))
+    v = np.asarray(record['v_before'], float)
+    qd = np.linalg.solve(np.asarray(model.tip_jacobian(q), float).reshape(2, n), v)
+    back = 1e-7  # start a moment before contact, as reintegrated_trace does
+    state = model.initial_state()
+    state.t = float(record['t_contact']) - back
+    state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
+    integ = PhaseIntegrator(model, state, control='held', **options_from_spec(scene.integrator))
+    dt = float(durations[0]) / points
+    integ.start_output(dt, math.ceil(float(record['t_contact']) / dt))
+    t_end = state.t + 10 * max(float(record['duration']), 1e-6)
+    contact = end = None
+    while state.t < t_end and end is None:
+        for event in integ.advance(t_end, stop_at_event=True):
+            if event.kind == 'contact' and contact is None:
+                contact = event
+            elif contact is not None and event.kind in ('yield', 'max_compression'):
+                end = event
+                break
+    if contact is None or end is None:
+        return None
+    rows = integ.take_output()
+    surface = model.surfaces[contact.surface]
+    level = float(state.levels[contact.surface])
+
+    def indentation(y):
+        return level - float(np.sum(model.L * np.sin(y[:n])))
+
+    t = [contact.t] + [r[0] for r in rows if contact.t < r[0] < end.t] + [end.t]
+    ys = [contact.y] + [r[1 : 1 + model.size] for r in rows if contact.t < r[0] < end.t] + [end.y]
+    delta = np.array([max(indentation(y), 0.0) for y in ys])
+    c = surface.constants
+    force = np.array([hertz_force(d, c.E, c.R) for d in delta])
+    return ElasticCurve(np.asarray(t), delta, force, end.kind)
+
+
 def with_contact_point(columns, rows, record):
     """The trace with its first point at contact (δ = 0, no force, the velocities and
     energies before impact from the record): the kernel records points at step ends, so the
@@ -487,6 +552,7 @@ def cli(args) -> int:
         constants=constants,
         missing=missing,
         style=figures.Style(args.format, args.dpi),
+        elastic=elastic_curve(run.scene, impact[2]) if impact is not None else None,
     )
     line.end()
     if impact is not None and impact[3]:
@@ -613,6 +679,7 @@ def write_outputs(
     constants=None,
     missing=(),
     style=None,
+    elastic=None,
 ) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
@@ -640,6 +707,7 @@ def write_outputs(
         recordings=recordings,
         constants=constants,
         style=style,
+        elastic=elastic,
     )
     _write(
         os.path.join(out, 'report.md'),
