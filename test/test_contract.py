@@ -16,6 +16,7 @@ def test_topic_names_are_spelled_only_in_the_contract():
     names = [
         contract.JOINT_STATES,
         contract.CONTACT_WRENCH,
+        contract.CONTACT_FORCE_PEAK,
         contract.IMPACT_REPORT,
         contract.TF,
         contract.ROBOT_DESCRIPTION,
