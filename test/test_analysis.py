@@ -213,7 +213,7 @@ def test_what_the_data_allows_compare_and_errors(article, tmp_path):
         ([tmp_path / 'none.mcap'], 'no such file'),
         ([d / 'paper.mcap', '--impact', 16], '--impact = 16: must be in [1, 15]'),
         ([d / 'paper.mcap', '--laws', 'lqr'], "--laws: 'lqr' is not one of"),
-        ([d / 'paper.json'], 'not a readable MCAP file'),
+        ([d / 'paper.json'], 'paper.json: not an MCAP file'),
         ([small, '--dpi', 10], '--dpi = 10: must be in [50, 1200]'),
     ):
         bad = cli('analyze', *argv, cwd=tmp_path)
@@ -404,3 +404,26 @@ def test_the_elastic_phase_is_drawn_from_a_fine_grid_of_the_integrators_output(a
     assert middle / curve.force[-1] == pytest.approx(0.5**1.5, rel=0.02)
     # Hertz (eq. 11): F = 4/3 E* sqrt(R) δ^(3/2)
     assert curve.force == pytest.approx(4 / 3 * c.E * math.sqrt(c.R) * curve.delta**1.5)
+
+
+def test_an_empty_or_truncated_file_is_named_with_what_is_wrong(article, tmp_path):
+    """One line naming the file and the fault, from every command that reads recordings."""
+    d, _, _ = article
+    whole = (d / 'paper.mcap').read_bytes()
+    empty, cut = tmp_path / 'empty.mcap', tmp_path / 'cut.mcap'
+    empty.write_bytes(b'')
+    cut.write_bytes(whole[: len(whole) // 3])  # a recorder killed mid-write, unrecovered
+    for path, fault in (
+        (empty, 'empty file (0 bytes)'),
+        (cut, f'truncated MCAP file: {len(whole) // 3} bytes ending without the MCAP footer'),
+    ):
+        for argv in (
+            ['analyze', path],
+            ['animate', path],
+            ['fit', path, '--param', 'surfaces[0].mu=0.05:1'],
+            ['replay', path],
+        ):
+            bad = cli(*argv, cwd=tmp_path)
+            lines = bad.stderr.strip().splitlines()
+            assert bad.returncode == 2 and len(lines) == 1, bad.stderr
+            assert path.name in lines[0] and fault in lines[0], lines[0]

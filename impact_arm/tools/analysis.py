@@ -62,7 +62,7 @@ def _quiet(text):
 
 def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
-    from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
+    from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info, unreadable_reason
     from ..io.msgdefs import typestore
 
     deserialize_cdr = typestore().deserialize_cdr
@@ -73,7 +73,7 @@ def load(path, progress=_quiet) -> Run:
         info = topics_info(path)
         metadata = read_metadata(path)
     except Exception as e:  # noqa: BLE001 - any reader failure: not an MCAP file we can use
-        raise AnalysisError(f'{path}: not a readable MCAP file ({e})') from None
+        raise AnalysisError(f'{path}: {unreadable_reason(path, e)}') from None
     if JOINT_STATES not in info:
         raise AnalysisError(f'{path}: no /joint_states recorded (topics: {sorted(info)})')
     total = sum(i.message_count for i in info.values()) or 1
