@@ -130,8 +130,10 @@ def test_report_states_table_cycle_and_sections(article):
         '## Poincaré sections',
         'poincare_qd1_zero.csv',
         'scene paper, law q',
+        '(offline run, impact-arm simulate --mcap)',
     ):
         assert needle in text, needle
+    assert '(offline, offline)' not in text
 
 
 def test_poincare_crossings_of_a_known_signal():

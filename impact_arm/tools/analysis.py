@@ -716,6 +716,15 @@ def write_outputs(
     return {'table': table, 'limit_cycle': lc, 'figures': made, 'sections': sections}
 
 
+def _origin(info: dict) -> str:
+    """Who recorded the file and how: 'offline run, simulate --mcap' for an offline file
+    (its node and mode are both 'offline'), else 'NODE, MODE'."""
+    node, mode = info.get('node', '?'), info.get('mode', 'live')
+    if node == 'offline':
+        return 'offline run, impact-arm simulate --mcap'
+    return f'{node}, {mode}' if mode != node else node
+
+
 def _figure_named(made, stem) -> str:
     return next((name for name, _ in made if name.startswith(stem + '.')), stem + '.png')
 
@@ -726,8 +735,7 @@ def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) ->
     lines = [
         f'# Analysis of {run.label}',
         '',
-        f'Recorded by impact_arm {info.get("version", "?")} ({info.get("node", "?")}'
-        f', {info.get("mode", "live")}); scene '
+        f'Recorded by impact_arm {info.get("version", "?")} ({_origin(info)}); scene '
         f'{run.scene.name if run.scene is not None else "not stored"}'
         f'{", law " + run.law if run.law else ""}; {len(run.t)} joint states over '
         f'{run.t[-1] - run.t[0]:.4f} s, {len(run.impacts)} impact reports, '
