@@ -28,7 +28,6 @@ setup(
     description='Planar two-link impacting arm: physics core, ROS 2 nodes, MCAP record/replay.',
     license='Apache-2.0',
     python_requires='>=3.10',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'impact-arm = impact_arm.tools.cli:main',
