@@ -464,7 +464,7 @@ def fig10_contact_force(impact, out, elastic=None):
     return fig
 
 
-def fig_force_indentation(impact, constants, out):
+def fig_force_indentation(impact, constants, out, elastic=None):
     """Normal force against indentation: the points of the impact on the model's three laws
     (Hertz to 1.9 δc, Jackson–Green to δm, restitution from δm down to δr)."""
     from ..physics.contact import (
@@ -518,9 +518,18 @@ def fig_force_indentation(impact, constants, out):
                 ms=5,
                 label='1.9 δc (Hertz → Jackson–Green)' if a is ax else None,
             )
-    _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta)
+    curves = {1: (elastic.delta * 1e6, elastic.force)} if elastic is not None else None
+    _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta, curves=curves)
     _by_phase(
-        inset, delta, col['F_n'], col['phase'], 1e-3, x=delta, legend=False, last_is_end=False
+        inset,
+        delta,
+        col['F_n'],
+        col['phase'],
+        1e-3,
+        x=delta,
+        legend=False,
+        last_is_end=False,
+        curves=curves,
     )
     ax.set_xlabel('indentation δ [µm]')
     ax.set_ylabel('normal force F_n [kN]')
@@ -636,7 +645,10 @@ def draw_all(
             ('fig8_indentation', lambda: fig8_indentation(impact, out, elastic)),
             ('fig9_impact_velocity', lambda: fig9_impact_velocity(impact, out)),
             ('fig10_contact_force', lambda: fig10_contact_force(impact, out, elastic)),
-            ('fig10b_force_indentation', lambda: fig_force_indentation(impact, constants, out)),
+            (
+                'fig10b_force_indentation',
+                lambda: fig_force_indentation(impact, constants, out, elastic),
+            ),
             ('fig11_kinetic_energy', lambda: fig11_kinetic_energy(impact, out)),
         ]
     made = []
