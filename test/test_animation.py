@@ -136,3 +136,14 @@ def test_refuses_an_unknown_format(recording, tmp_path):
     run_ = analysis.load(str(recording), progress=lambda _: None)
     with pytest.raises(AnimationError, match='.gif or .mp4'):
         animate(run_, str(tmp_path / 'arm.avi'))
+
+
+def test_analyze_animates_only_when_asked(recording, tmp_path):
+    """analyze writes animation.gif with --animation, after the report; not by default."""
+    plain, animated = tmp_path / 'plain', tmp_path / 'animated'
+    assert main(['analyze', str(recording), '--out', str(plain), '--laws', '']) == 0
+    assert (plain / 'report.md').is_file() and not (plain / 'animation.gif').exists()
+    argv = ['analyze', str(recording), '--out', str(animated), '--laws', '', '--animation']
+    assert main(argv) == 0
+    gif = Image.open(animated / 'animation.gif')
+    assert gif.n_frames > DEFAULT_CONTACT_FRAMES  # real-time frames and the contact's own
