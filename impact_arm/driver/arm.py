@@ -47,6 +47,7 @@ class Tick:
     effort: list  # joint torques acting now [N m] (0 while actuators are off)
     wrench: tuple  # (tangential, normal) contact force averaged over the period [N]
     impacts: list = field(default_factory=list)  # [(record, trace rows)] completed this period
+    force_peak: float = 0.0  # the largest normal contact force in the period [N]
 
 
 class SimulatedArm:
@@ -206,7 +207,9 @@ class SimulatedArm:
             self.integrator, self.builder, (self.periods + 1) / self.rate
         )
         self.periods += 1
-        return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
+        tick = self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
+        tick.force_peak = self.integrator.take_peak()
+        return tick
 
     def sample(self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable = ()) -> Tick:
         """The sensors' view of the current state (``driver/sensors.py``: one reading per

@@ -72,6 +72,7 @@ import os
 import numpy as np
 
 from ..contract import (
+    CONTACT_FORCE_PEAK,
     CONTACT_WRENCH,
     IMPACT_REPORT,
     IMPACT_TRACE,
@@ -91,7 +92,10 @@ if TYPE_CHECKING:
     from ..physics.simulate import RunResult, Sample
 
 OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
-    **{topic: TOPICS[topic][0] for topic in (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT)},
+    **{
+        topic: TOPICS[topic][0]
+        for topic in (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, IMPACT_REPORT)
+    },
     IMPACT_TRACE: TRACE_TYPE,
 }
 
@@ -211,6 +215,14 @@ class OfflineRecorder:
             ),
         )
         self._write(CONTACT_WRENCH, ws, t_ns)
+        peak = T['geometry_msgs/msg/WrenchStamped'](
+            header=self._header(t_ns, WRENCH_FRAME),
+            wrench=T['geometry_msgs/msg/Wrench'](
+                force=Vector3(x=0.0, y=float(sample.force_peak), z=0.0),
+                torque=Vector3(x=0.0, y=0.0, z=0.0),
+            ),
+        )
+        self._write(CONTACT_FORCE_PEAK, peak, t_ns)
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record: dict, trace_rows: Sequence[Sequence[float]]) -> None:

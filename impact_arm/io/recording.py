@@ -70,7 +70,7 @@ def mcap_files(path: str | os.PathLike) -> list[str]:
 
 
 def _topics(files) -> dict:
-    from .mcap_ros2 import topics_info
+    from .mcap_ros2 import topics_info, unreadable_reason
 
     out: dict = {}
     for f in files:
@@ -78,7 +78,7 @@ def _topics(files) -> dict:
             for topic, info in topics_info(f).items():
                 out.setdefault(topic, info.type_name)
         except Exception as exc:  # noqa: BLE001 - any reader failure: not an MCAP file
-            raise RecordingInputError(f'recording {f}: not a readable MCAP file ({exc})') from None
+            raise RecordingInputError(f'recording {f}: {unreadable_reason(f, exc)}') from None
     return out
 
 

@@ -22,6 +22,7 @@ import time
 from .. import contract
 from ..contract import (
     COMMANDS,
+    CONTACT_FORCE_PEAK,
     CONTACT_WRENCH,
     DIAGNOSTICS,
     FEEDBACK_LAWS,
@@ -36,7 +37,7 @@ NODES = ('recorder', 'simulator', 'controller')  # start order (the arm moves wi
 STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, recorder last
 # what the recorder must have matched before the first command (the commands themselves: the
 # controller waits for its two readers)
-SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT, DIAGNOSTICS)
+SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, IMPACT_REPORT, DIAGNOSTICS)
 
 
 def add_arguments(parser):
