@@ -3,7 +3,7 @@
 From sampled joint states alone (any clock, missing and jittered samples): the sensor noise,
 the impacts (a step in the joint rates that the positions do not show), and around each
 impact a local polynomial fit of the free flight on either side, from which the state just
-before and just after the contact follow with their uncertainty. ``calibration/fit.py`` then asks a
+before and just after the contact follow with their uncertainty. ``calibration/fit/`` then asks a
 scene to reproduce the step. Everything here is plain numpy in joint space (relative angles,
 as drivers publish them).
 """
