@@ -14,7 +14,14 @@ from impact_arm.driver.arm import CommandError, SimulatedArm
 from impact_arm.physics.model import ArmModel
 from impact_arm.driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy, WatchdogState
 from impact_arm.physics.scene import load_scene, resolve_scene_path
-from impact_arm.driver.session import Level, LockstepSession, Outputs, RealtimeSession
+from impact_arm.driver.session import (
+    JointCommand,
+    Level,
+    LockstepSession,
+    Outputs,
+    RealtimeSession,
+    Release,
+)
 
 P = 1.0 / RATE
 
@@ -343,3 +350,46 @@ def test_typed_kinds_are_their_text_wherever_text_was_used():
     assert {'max_compression': 1}[kind] == 1 and json.dumps([kind]) == '["max_compression"]'
     assert EventKind('separation') is EventKind.SEPARATION
     assert WatchdogState.TIMEOUT == 'timeout' and f'{WatchdogPolicy.BRAKE}' == 'brake'
+
+
+@pytest.mark.parametrize('kind', [RealtimeSession, LockstepSession])
+def test_zero_joint_commands_leave_the_arm_braked_with_time_stopped(scene, kind):
+    """Topic hardware writes zeros from its activation on, before any controller runs: with
+    the default release rule they neither release the brakes nor start time, in either mode;
+    the first command with a torque does. Command arrays keep starting on the first one."""
+    clock, published = FakeClock(), []
+    s = session(kind, scene, clock, published, release=Release.NONZERO_JOINT_COMMAND)
+    s.publish_initial()
+    q0 = list(published[0].position)
+    for _ in range(50):
+        assert s.offer(JointCommand(lambda: [0.0, 0.0]))
+        if kind is RealtimeSession:
+            s.loop.realtime_period()
+    assert s.arm.periods == 0 and s.arm.t == 0.0 and not s.released()
+    assert all(tick.t == 0.0 and list(tick.position) == q0 for tick in published)
+    assert s.zero_before_release == 50 and s.loop.commands == 0
+    assert s.take_status().value('zero_commands_before_release') == '50'
+    assert s.offer(JointCommand(lambda: [0.0, 1.0]))  # a controller drives it
+    if kind is RealtimeSession:
+        s.loop.realtime_period()
+    assert s.arm.periods == 1 and s.released()
+    assert s.offer(JointCommand(lambda: [0.0, 0.0]))  # once released, zeros are commands
+    if kind is RealtimeSession:
+        s.loop.realtime_period()
+    assert s.arm.periods == 2 and s.arm.command == [0.0, 0.0]
+    # a command array starts at once under this rule, and any command under first_command
+    for release, read in (
+        (Release.NONZERO_JOINT_COMMAND, lambda: [0.0, 0.0]),
+        (Release.FIRST_COMMAND, JointCommand(lambda: [0.0, 0.0])),
+    ):
+        other = session(kind, scene, clock, [], release=release)
+        other.offer(read)
+        if kind is RealtimeSession:
+            other.loop.realtime_period()
+        assert other.arm.periods == 1
+    # nonzero_command holds arrays too
+    held = session(kind, scene, clock, [], release=Release.NONZERO_COMMAND)
+    held.offer(lambda: [0.0, 0.0])
+    if kind is RealtimeSession:
+        held.loop.realtime_period()
+    assert held.arm.periods == 0

@@ -32,7 +32,7 @@ from ..physics import jit
 from ..driver.arm import SimulatedArm
 from ..driver.realtime import WatchdogPolicy
 from ..physics.scene import load_scene, resolve_scene_path
-from ..driver.session import LockstepSession, Outputs, RealtimeSession
+from ..driver.session import JointCommand, LockstepSession, Outputs, RealtimeSession
 from ..io.wire import float64_array_data, joint_state_command
 from . import sim_services
 from ._period_io import PeriodPublishers
@@ -91,6 +91,7 @@ class Simulator(Node):
             command_order=[names.index(j) for j in p.joints],
             policy=WatchdogPolicy(p.watchdog_policy),
             max_takes=contract.qos(COMMANDS).depth,
+            release=p.release_on,
         )
         subscribe = self.create_subscription
         self.reader_node = None
@@ -196,7 +197,9 @@ class Simulator(Node):
         return lambda: self.session.ordered(float64_array_data(raw))
 
     def _named_command(self, raw):
-        return lambda: self.arm.check_command(joint_state_command(raw, self.joint_names))
+        return JointCommand(
+            lambda: self.arm.check_command(joint_state_command(raw, self.joint_names))
+        )
 
     def _take_command(self):
         """The oldest queued command, arrays first (one controller uses one topic; in a
