@@ -114,6 +114,7 @@ class Session:
         take_command: Callable[[], Any] | None = None,
         max_takes: int = 100,
         release: Release = Release.FIRST_COMMAND,
+        command_latency: int = 0,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
     ):
@@ -136,6 +137,7 @@ class Session:
             sleep=sleep,
             max_takes=max_takes,
             policy=policy,
+            latency=command_latency,
         )
         self.rejected = self.clipped = 0
         self.failed = ''  # why the simulation stopped ('' while it runs)

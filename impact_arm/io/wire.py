@@ -291,6 +291,19 @@ def joint_state_fields(raw: bytes) -> tuple[int, int, list[str], list[float], li
     return sec, nanosec, names, position, velocity
 
 
+@_reader
+def joint_state_effort(raw: bytes) -> list[float]:
+    """The ``effort`` of a serialized ``sensor_msgs/JointState`` (in the order of its names):
+    the torques a driver says act now, read only by a controller that measures its command
+    latency from them."""
+    r = CdrReader(raw)
+    _header(r)
+    _strings(r)
+    _doubles_at(r)
+    _doubles_at(r)
+    return _doubles_at(r)[0]
+
+
 def _doubles_at(r: CdrReader):
     """A float64 sequence and the offset of its first element."""
     r.align(4)

@@ -28,7 +28,13 @@ from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
 from ..physics.scene import load_scene, resolve_scene_path
-from ..io.wire import MalformedMessage, PatchedMessage, joint_state_fields, wrench_stamped_fields
+from ..io.wire import (
+    MalformedMessage,
+    PatchedMessage,
+    joint_state_effort,
+    joint_state_fields,
+    wrench_stamped_fields,
+)
 from ._runner import realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
 from .params import NODE_OPTIONS, declare, refuse_unknown, validator
@@ -103,6 +109,8 @@ class Controller(Node):
             ready=self._readers_matched,
             startup_hold=p.startup_hold,
             wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0,
+            latency_periods=p.latency_periods,
+            wrench_tolerance=p.wrench_tolerance,
         )
         if p.startup_hold > 0:
             self.get_logger().info(
@@ -178,10 +186,12 @@ class Controller(Node):
     def _on_joint_state(self, raw):
         try:
             fields = joint_state_fields(raw)
+            # the acting torques, only to measure the latency from them
+            effort = joint_state_effort(raw) if self.p.latency_periods == -1 else ()
         except MalformedMessage as exc:
             self.inputs.drop('malformed_joint_states', f'joint state dropped: {exc}')
             return
-        self.inputs.joint_state(*fields)
+        self.inputs.joint_state(*fields, effort)
 
     # ------------------------------------------------------------------------ output
     def _readers_matched(self):
@@ -221,6 +231,10 @@ class Controller(Node):
             message=f'{dropped} inputs dropped' if dropped else 'running',
             values=[
                 KeyValue(key='commands_sent', value=str(self.sent)),
+                # the driver's repetitions of a sample, not taken as new periods
+                KeyValue(key='repeated_states', value=str(self.inputs.repeated)),
+                # commands in flight the latest command was predicted over
+                KeyValue(key='latency_periods', value=str(len(self.inputs.in_flight()))),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )

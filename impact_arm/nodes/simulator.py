@@ -92,6 +92,7 @@ class Simulator(Node):
             policy=WatchdogPolicy(p.watchdog_policy),
             max_takes=contract.qos(COMMANDS).depth,
             release=p.release_on,
+            command_latency=p.command_latency_periods,
         )
         subscribe = self.create_subscription
         self.reader_node = None

@@ -88,6 +88,17 @@ PARAMS = (
         read_only=True,
     ),
     Param(
+        'command_latency_periods',
+        0,
+        "periods a command takes to reach the actuators: a driver stack's latency, "
+        "simulated (each period's newest command acts this many periods later; the first "
+        'command, which releases the brakes, at once)',
+        'int',
+        low=0,
+        high=1000,
+        read_only=True,
+    ),
+    Param(
         'max_effort',
         5000.0,
         'commanded torques are clipped to +-max_effort [N m]',
