@@ -110,6 +110,7 @@ class ControlInputs:
             raise ValueError(f'latency_periods = {latency_periods}: must be >= -1')
         self.latency_periods = latency_periods
         self.measured_latency = 0
+        self.latency_max = 0  # the largest measured
         self.sent: deque[list[float]] = deque(maxlen=SENT_HISTORY)  # joint order, newest last
         self.predictor = StatePredictor(ctrl.model, self.period) if latency_periods else None
 
@@ -157,13 +158,13 @@ class ControlInputs:
         except (ValueError, IndexError):
             self.log(f'joint state without {self.joint_names} positions and velocities: ignored')
             return
+        same = pos == self.latest_joint[0] and vel == self.latest_joint[1]
         if (
-            self.started  # (before, the held state's repetitions let the first tick retry)
+            same
+            and self.started  # (before, the held state's repetitions let the first tick retry)
             and self.waiting is None
-            and pos == self.latest_joint[0]
-            and vel == self.latest_joint[1]
             and self.latest is not None
-            and t < self.latest[0] + REPEAT_WINDOW * min(self.period, self.sample_gap)
+            and t < self.latest[0] + REPEAT_WINDOW * self._spacing()
         ):
             # the same sample again under a newer stamp (a broadcaster republishing each
             # update) or the same stamp (a lockstep driver's repetition): no new period. A
@@ -203,7 +204,7 @@ class ControlInputs:
             # again from its down half
             self.ctrl.rearm(restart=t < self.latest[0])
         self.jump_from = None
-        if self.latest is not None and t > self.latest[0]:
+        if self.latest is not None and t > self.latest[0] and not same:
             self.sample_gap = t - self.latest[0]
         self.latest = (t, to_absolute(pos), to_absolute(vel))
         self.latest_joint = (pos, vel)
@@ -235,6 +236,11 @@ class ControlInputs:
             return
         self.waiting = None
         self._tick(*self.latest)
+
+    def _spacing(self) -> float:
+        """The stamp spacing of the driver's new samples: a control period, or the stream's
+        own when coarser (a simulator slower than real time behind a wall-clock broadcaster)."""
+        return self.period if math.isinf(self.sample_gap) else max(self.period, self.sample_gap)
 
     def timer(self) -> None:
         """Trigger timer: tick on the latest state."""
@@ -290,4 +296,5 @@ class ControlInputs:
                 if back > 0 and sent[back - 1] == acting:
                     return
                 self.measured_latency = len(sent) - 1 - back
+                self.latency_max = max(self.latency_max, self.measured_latency)
                 return

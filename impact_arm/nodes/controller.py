@@ -235,6 +235,7 @@ class Controller(Node):
                 KeyValue(key='repeated_states', value=str(self.inputs.repeated)),
                 # commands in flight the latest command was predicted over
                 KeyValue(key='latency_periods', value=str(len(self.inputs.in_flight()))),
+                KeyValue(key='latency_periods_max', value=str(self.inputs.latency_max)),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )

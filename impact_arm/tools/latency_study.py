@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+import random
 from collections import deque
 from dataclasses import dataclass
 
@@ -56,11 +57,21 @@ class LoopResult:
 
 
 def closed_loop(
-    scene: Scene, latency: int, predicted: int, t_max: float = 10.0, rate: float = 1000.0
+    scene: Scene,
+    latency: int,
+    predicted: int,
+    t_max: float = 10.0,
+    rate: float = 1000.0,
+    jitter: float = 0.0,
+    seed: int = 0,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
-    controller predicting ``predicted`` periods ahead (0: no prediction; -1: measured)."""
+    controller predicting ``predicted`` periods ahead (0: no prediction; -1: measured).
+
+    ``jitter`` > 0: each command takes one period more with this probability (an
+    unsynchronised controller manager), so that some periods hold the previous command and
+    some commands are superseded before they act (the driver applies a period's newest)."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
     ctrl = CycleController.for_scene(model, scene.controller)
@@ -81,7 +92,7 @@ def closed_loop(
         command_timeout=math.inf,
         command_order=list(range(arm.n)),
         outputs=Outputs(publish=ticks.append, report=report),
-        command_latency=latency,
+        command_latency=0 if jitter else latency,
         clock=lambda: 0.0,
         sleep=lambda s: None,
     )
@@ -96,6 +107,10 @@ def closed_loop(
         latency_periods=predicted,
         clock=lambda: 0.0,
     )
+    rng = random.Random(seed)
+    line: list[tuple[int, int, list[float]]] = []  # (period it acts from, order, torques)
+    sent = 0
+    acting: list[float] = []
     session.publish_initial()
     while not session.failed and arm.t < t_max - 0.5 / rate:
         while ticks:
@@ -105,8 +120,21 @@ def closed_loop(
             inputs.joint_state(sec, nsec, names, tick.position, tick.velocity, tick.effort)
         if not commands:
             return _result(latency, predicted, t_max, contacts, 'the controller sent nothing')
+        if not jitter:
+            while commands:
+                session.offer(functools.partial(list, commands.popleft()))
+            continue
+        # the delay line: each command acts from the period it arrives in, the newest wins
         while commands:
-            session.offer(functools.partial(list, commands.popleft()))
+            sent += 1
+            delay = latency + (rng.random() < jitter) if sent > 1 else 0  # the release: at once
+            line.append((arm.periods + delay, sent, commands.popleft()))
+        arrived = [c for c in line if c[0] <= arm.periods]
+        if arrived:
+            newest = max(arrived, key=lambda c: c[1])
+            line[:] = [c for c in line if c[1] > newest[1]]
+            acting = newest[2]
+        session.offer(functools.partial(list, acting))
     return _result(latency, predicted, t_max, contacts, session.failed)
 
 
