@@ -132,10 +132,10 @@ STANDIN_CYCLES = 5  # impacts (the article's cycle strikes every ~0.4 s)
 
 def test_the_controller_drives_the_arm_through_a_ros2_control_standin(probe, ros_env, tmp_path):
     """Hardware and controller manager first (zero commands from activation on, each
-    update), then the simulator, then the controller remapped to the broadcaster's states and the effort
-    controller's commands: the arm stays braked with time stopped until the controller's
-    first command, then strikes once per cycle; commands act two periods late, states are
-    stamped on the wall clock, the wrench on the simulated clock."""
+    update), then the simulator, then the controller remapped to the broadcaster's states
+    and the effort controller's commands: the arm stays braked with time stopped until the
+    controller's first command, then strikes once per cycle; commands act two periods late,
+    states are stamped on the wall clock, the wrench on the simulated clock."""
     import json
 
     from diagnostic_msgs.msg import DiagnosticArray
