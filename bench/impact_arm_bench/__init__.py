@@ -62,6 +62,10 @@ SUBCOMMANDS = {
         'impact_arm_bench.peers',
         'MuJoCo on the same scene beside this project (optional: pip install mujoco)',
     ),
+    'latency': (
+        'impact_arm_bench.latency',
+        'limit cycle against command latency 0-3 periods, with and without prediction',
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',
