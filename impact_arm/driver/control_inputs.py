@@ -84,7 +84,10 @@ class ControlInputs:
         self.send, self.log, self.ready = send, log, ready
         self.wrench_publishers = wrench_publishers
         self.clock = clock
-        self.hold_until = clock() + startup_hold
+        self.created = clock()
+        self.hold_until = self.created + startup_hold
+        # when the first command went, by this clock, after the inputs were created
+        self.first_command_after: float | None = None
         self.next_tick = 0.0
         self.latest: tuple[float, list[float], list[float]] | None = None  # absolute angles
         self.latest_joint: tuple[list[float], list[float]] = ([], [])  # as received
@@ -251,9 +254,11 @@ class ControlInputs:
     def _tick(self, t: float, q: list[float], qd: list[float]) -> None:
         if not self.started:
             # the driver repeats its held state, which brings us back here
-            if self.clock() < self.hold_until or not self.ready():
+            now = self.clock()
+            if now < self.hold_until or not self.ready():
                 return
             self.started = True
+            self.first_command_after = now - self.created
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         ahead = self.in_flight()
         if ahead and self.predictor is not None:

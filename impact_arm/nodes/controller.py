@@ -205,6 +205,11 @@ class Controller(Node):
     def _send(self, values):
         self.pub.publish(self.wire_command.fill([float(v) for v in values]))
         self.sent += 1
+        if self.sent == 1 and self.inputs.first_command_after is not None:
+            self.get_logger().info(
+                f'first command sent {self.inputs.first_command_after:.3f} s after start '
+                f'(startup_hold {self.p.startup_hold:g} s)'
+            )
 
     def finish(self, executor) -> int:
         """Like a deactivated controller: leave the actuators with zero torque."""
