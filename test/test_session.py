@@ -475,3 +475,24 @@ def test_prediction_keeps_the_limit_cycle_under_command_latency(scene):
         assert not run.failed and run.second_strikes == 0
         assert run.impacts == base.impacts
         assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
+
+
+def test_a_stale_echo_or_a_wild_prediction_does_not_steer_the_arm(scene):
+    """An effort matching a command sent long ago (a driver holding an old one) is no
+    latency; a prediction that leaves any arm's range (torques in flight no arm could take)
+    is not acted on: the sampled state is, and the fall-back is counted."""
+    sent = []
+    c = inputs(scene, sent, wrench_publishers=lambda: False, latency_periods=-1)
+    for k in range(20):
+        state(c, k * 0.001, effort=sent[-1] if sent else ())
+    assert c.measured_latency == 0 and len(sent) == 20
+    state(c, 0.020, effort=sent[-12])  # eleven commands back: a stale echo
+    assert c.measured_latency == 0
+    state(c, 0.021, effort=sent[-4])
+    assert c.measured_latency == 3
+    wild = inputs(scene, [], wrench_publishers=lambda: False, latency_periods=2)
+    state(wild, 0.0)
+    wild.sent.extend([[1e9, -1e9], [1e9, -1e9]])
+    state(wild, 0.001)
+    assert wild.dropped['unsafe_predictions'] == 1
+    assert all(math.isfinite(v) and abs(v) < 1e5 for v in wild.sent[-1])

@@ -37,6 +37,8 @@ MAX_STAMP_GAP = 1.0  # s
 TICK_TOLERANCE = 0.4
 # a sample equal to the previous one within this many periods is the driver's repetition
 REPEAT_WINDOW = 1.5
+# the most commands in flight a measurement counts (8 ms at 1 kHz)
+MAX_MEASURED_LATENCY = 8
 # commands kept to predict and to match the efforts a driver reports against
 SENT_HISTORY = 32
 DROPPED = (
@@ -47,6 +49,7 @@ DROPPED = (
     'missing_wrenches',
     'stamp_jumps',
     'unsafe_torques',
+    'unsafe_predictions',
 )
 
 
@@ -264,8 +267,18 @@ class ControlInputs:
         if ahead and self.predictor is not None:
             # act on the state this command will meet: the driver applies it only after
             # the commands still on their way
-            q, qd = self.predictor.ahead(q, qd, ahead)
-            t += len(ahead) * self.period
+            q_ahead, qd_ahead = self.predictor.ahead(q, qd, ahead)
+            if all(abs(v) <= MAX_ANGLE for v in q_ahead) and all(
+                abs(v) <= MAX_RATE for v in qd_ahead
+            ):  # (also false for NaN)
+                q, qd = q_ahead, qd_ahead
+                t += len(ahead) * self.period
+            else:  # the model's free motion left any arm's range: act on the sample itself
+                self.drop(
+                    'unsafe_predictions',
+                    f'state predicted {len(ahead)} periods ahead of {t:.6f} s out of '
+                    f'range: acting on the sampled state',
+                )
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
         self.normal_force = None  # the latch covers one tick
         if not all(math.isfinite(v) for v in tau):
@@ -294,7 +307,9 @@ class ControlInputs:
         except IndexError:
             return
         sent = self.sent
-        for back in range(len(sent) - 1, -1, -1):
+        # a match further back is no latency but a driver holding an old command (its
+        # brake, a stall): not counted
+        for back in range(len(sent) - 1, max(len(sent) - 2 - MAX_MEASURED_LATENCY, -1), -1):
             if sent[back] == acting:
                 if back + 1 < len(sent) and sent[back + 1] == acting:
                     return
