@@ -45,6 +45,8 @@ from ..contract import (
 )
 from ..physics.errors import ImpactArmError
 
+from ..physics.scene import JointSpec
+
 if TYPE_CHECKING:
     from ..physics.scene import Scene
 
@@ -131,13 +133,14 @@ def moving_transforms(lengths: Sequence[float], q: Sequence[float]) -> list[Tran
 
 def static_transforms(scene: Scene) -> list[Transform]:
     """The fixed transforms: the tip on the last link, each surface on the world."""
+    along, across = scene.contact_point
     out = [
         Transform(
             link_names(scene.n_links)[-1],
             TIP,
-            float(scene.lengths[-1]),
+            float(along),
             0.0,
-            0.0,
+            float(across),  # the model's across (e⊥) is the link frame's +z
             (0.0, 0.0, 0.0, 1.0),
         )
     ]
@@ -192,13 +195,16 @@ def robot_description(
     _sub(robot, 'link', name=WORLD)
     links = link_names(scene.n_links)
     joints = joint_names(scene.n_links)
-    for k, (link_name, L, m) in enumerate(zip(links, scene.lengths, scene.masses)):
+    for k, (link_name, L, m, (cx, cy), i_c) in enumerate(
+        zip(links, scene.lengths, scene.masses, scene.link_com, scene.link_inertias)
+    ):
         link = _sub(robot, 'link', name=link_name)
         inertial = _sub(link, 'inertial')
-        _sub(inertial, 'origin', xyz=f'{_num(L / 2)} 0 0', rpy='0 0 0')
+        # the model's along / across the link are the link frame's x / z
+        _sub(inertial, 'origin', xyz=f'{_num(cx)} 0 {_num(cy) if cy else 0}', rpy='0 0 0')
         _sub(inertial, 'mass', value=_num(m))
-        # a uniform slender rod along x, about its centre: the model's inertia
-        i_c = m * L * L / 12
+        # about the centre, about y (the joint axis) the model's inertia; about z the same,
+        # as for a slender body along x (the model does not read it)
         _sub(inertial, 'inertia', ixx='0', ixy='0', ixz='0', iyy=_num(i_c), iyz='0', izz=_num(i_c))
         # URDF cylinders lie along z: turn by +90° about y to lay the rod along x
         _visual_and_collision(
@@ -209,12 +215,31 @@ def robot_description(
             radius=_num(rod_radius),
             length=_num(L),
         )
-        joint = _sub(robot, 'joint', name=joints[k], type='continuous')
+        spec = scene.joints[k] if scene.joints else JointSpec(joints[k])
+        limited = spec.lower is not None and spec.upper is not None
+        joint = _sub(robot, 'joint', name=joints[k], type='revolute' if limited else 'continuous')
         _sub(joint, 'parent', link=WORLD if k == 0 else links[k - 1])
         _sub(joint, 'child', link=link_name)
         x = 0.0 if k == 0 else scene.lengths[k - 1]
         _sub(joint, 'origin', xyz=f'{_num(x)} 0 0', rpy='0 0 0')
         _sub(joint, 'axis', xyz=axis)
+        limit = {
+            key: _num(value)
+            for key, value in (
+                ('lower', spec.lower if limited else None),
+                ('upper', spec.upper if limited else None),
+                ('effort', spec.effort),
+                ('velocity', spec.velocity),
+            )
+            if value is not None
+        }
+        if limit:
+            if limited:  # URDF requires both on a revolute joint's limit
+                limit.setdefault('effort', '0')
+                limit.setdefault('velocity', '0')
+            _sub(joint, 'limit', **limit)
+        if spec.damping or spec.friction:
+            _sub(joint, 'dynamics', damping=_num(spec.damping), friction=_num(spec.friction))
     tip = _sub(robot, 'link', name=TIP)
     _visual_and_collision(
         tip, {'xyz': '0 0 0', 'rpy': '0 0 0'}, 'sphere', 'tip', radius=_num(scene.tip_radius)

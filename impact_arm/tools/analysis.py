@@ -508,7 +508,7 @@ def _struck_surface(scene, record):
     if not model.surfaces:
         return None
     q = np.radians(np.asarray(record['q_contact_deg'], float))
-    y_tip = float(np.sum(model.L * np.sin(q)))
+    y_tip = float(model.tip(q, np.zeros_like(q))[1])
     return min(model.surfaces, key=lambda s: abs(s.height - y_tip)).constants
 
 

@@ -1,0 +1,360 @@
+"""The arm from its URDF (scene key ``arm``): read into the scene, checked against Pinocchio
+(which reads the same file itself), written back by ``robot_description`` and read again,
+and refused, naming the joint and why, when it is not a planar chain the model can be."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from impact_arm.io.urdf import robot_description
+from impact_arm.physics.errors import SceneError
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.scene import parse_scene
+from scenes import paper_dict
+
+
+def num(value):
+    return repr(float(value))
+
+
+def random_urdf(rng, n, base_height=0.3):
+    """A planar arm written by hand, as a user's description might be: a base link fixed to
+    the world (with mass: the ground's), links with centres of mass off their axis (also out
+    of the plane, which the planar model ignores) and full inertia tensors given in turned
+    inertial frames, limits and dynamics on some joints, a sensor frame, and a tool link
+    fixed to the last link carrying the contact sphere. Returns (text, lengths, tip)."""
+    lengths = rng.uniform(0.3, 1.0, n)
+    tip = (rng.uniform(0.6, 1.1) * lengths[-1], rng.uniform(-0.1, 0.1))
+    parts = [
+        '<robot name="hand_written">',
+        '<link name="world"/>',
+        '<link name="base"><inertial><mass value="5"/>'
+        '<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>',
+        f'<joint name="base_joint" type="fixed"><parent link="world"/><child link="base"/>'
+        f'<origin xyz="0.1 0 {base_height}" rpy="0 0 0"/></joint>',
+    ]
+    for k in range(n):
+        mass = rng.uniform(0.3, 2.0)
+        com = (
+            rng.uniform(-0.2, 0.9) * lengths[k],
+            rng.uniform(-0.05, 0.05),
+            rng.uniform(-0.2, 0.2) * lengths[k],
+        )
+        principal = rng.uniform(0.01, 0.1, 3)
+        principal[2] = rng.uniform(
+            abs(principal[0] - principal[1]) + 1e-3, principal[0] + principal[1]
+        )
+        rpy = rng.uniform(-math.pi, math.pi, 3)
+        parts.append(
+            f'<link name="l{k}"><inertial><origin xyz="{num(com[0])} {num(com[1])} {num(com[2])}" '
+            f'rpy="{num(rpy[0])} {num(rpy[1])} {num(rpy[2])}"/><mass value="{num(mass)}"/>'
+            f'<inertia ixx="{num(principal[0])}" ixy="0" ixz="0" iyy="{num(principal[1])}" iyz="0" '
+            f'izz="{num(principal[2])}"/></inertial></link>'
+        )
+        parent = 'base' if k == 0 else f'l{k - 1}'
+        x = 0.0 if k == 0 else lengths[k - 1]
+        kind = 'revolute' if k % 2 else 'continuous'
+        limit = '<limit lower="-2.5" upper="2.0" effort="40" velocity="6"/>' if k % 2 else ''
+        dynamics = f'<dynamics damping="{num(0.1 * k)}" friction="{num(0.05 * k)}"/>' if k else ''
+        parts.append(
+            f'<joint name="j{k}" type="{kind}"><parent link="{parent}"/><child link="l{k}"/>'
+            f'<origin xyz="{num(x)} 0 0" rpy="0 0 0"/><axis xyz="0 -1 0"/>{limit}{dynamics}</joint>'
+        )
+    last = f'l{n - 1}'
+    parts += [
+        '<link name="camera"/>',
+        '<joint name="camera_joint" type="fixed"><parent link="l0"/><child link="camera"/>'
+        '<origin xyz="0.1 0.05 0.02" rpy="0.3 -1.0 0.2"/></joint>',
+        '<link name="tool"><collision><origin xyz="0 0 0"/><geometry><sphere radius="0.006"/>'
+        '</geometry></collision></link>',
+        f'<joint name="tool_joint" type="fixed"><parent link="{last}"/><child link="tool"/>'
+        f'<origin xyz="{num(tip[0])} 0 {num(tip[1])}" rpy="0 0 0"/></joint>',
+        '</robot>',
+    ]
+    return '\n'.join(parts), lengths, tip
+
+
+def scene_data(urdf_path, n, **contact):
+    data = copy.deepcopy(paper_dict())
+    del data['links'], data['tip_radius']
+    data['arm'] = {'urdf': str(urdf_path), 'contact': {'link': 'tool', **contact}}
+    controller = data['controller']
+    for key in ('kp', 'kd', 'ki', 'down_target_deg', 'up_target_deg'):
+        controller[key] = (controller[key] * n)[:n]
+    data['initial'] = {'q_deg': [60.0 - 10 * k for k in range(n)]}
+    data['surfaces'] = [{'height': -0.25, 'material': 'steel'}]
+    return data
+
+
+def load(tmp_path, text, n, **contact):
+    path = tmp_path / 'arm.urdf'
+    path.write_text(text)
+    return parse_scene(scene_data(path, n, **contact), origin='test', path=str(tmp_path / 's.yaml'))
+
+
+@pytest.mark.parametrize('n', [2, 3, 4, 6])
+def test_mass_matrix_and_bias_match_pinocchio_on_the_same_urdf(tmp_path, n):
+    """Pinocchio builds the arm from the same file (its own parser and algorithms, gravity
+    -9.81 along the world's -z): CRBA's mass matrix and RNEA at zero acceleration (velocity
+    terms and gravity) in relative joint angles θ against the generated equations in
+    absolute angles q = T θ: M_θ = Tᵀ M_q T and RNEA = −Tᵀ (Q_g − b)."""
+    pin = pytest.importorskip('pinocchio')
+    rng = np.random.default_rng(40 + n)
+    text, lengths, tip = random_urdf(rng, n)
+    scene = load(tmp_path, text, n)
+    assert scene.general_links and scene.n_links == n
+    assert scene.lengths[:-1] == pytest.approx(lengths[:-1], rel=1e-15)
+    assert scene.contact_point == pytest.approx(tip, rel=1e-15)
+    arm = ArmModel(scene)
+    model = pin.buildModelFromXML(text)
+    data = model.createData()
+    T = np.tril(np.ones((n, n)))
+    for _ in range(10):
+        q, qd = rng.uniform(-math.pi, math.pi, n), rng.uniform(-3, 3, n)
+        theta, theta_d = np.linalg.solve(T, q), np.linalg.solve(T, qd)
+        # continuous joints are (cos, sin) pairs in Pinocchio's configuration
+        config = np.concatenate(
+            [[a] if k % 2 else [math.cos(a), math.sin(a)] for k, a in enumerate(theta)]
+        )
+        M = pin.crba(model, data, config)
+        M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper half
+        want = T.T @ arm.mass_matrix(q) @ T
+        assert np.max(np.abs(M - want)) <= 1e-12 * np.max(np.abs(want))
+        bias = pin.rnea(model, data, config, theta_d, np.zeros(n))
+        want = -T.T @ arm.free_forces(q, qd)
+        assert np.max(np.abs(bias - want)) <= 1e-12 * np.max(np.abs(want))
+        # the contact point: Pinocchio's frame 'tool' in the world's x-z plane
+        pin.framesForwardKinematics(model, data, config)
+        tool = data.oMf[model.getFrameId('tool')].translation
+        x, y = arm.tip(q, qd)[:2]
+        base = data.oMf[model.getFrameId('base')].translation  # the model's origin O
+        assert tool - base == pytest.approx([x, 0.0, y], abs=1e-12)
+
+
+def test_joints_keep_limits_and_dynamics_and_the_urdf_names(tmp_path):
+    text, _, _ = random_urdf(np.random.default_rng(1), 3)
+    scene = load(tmp_path, text, 3)
+    assert [j.name for j in scene.joints] == ['j0', 'j1', 'j2']
+    assert scene.link_names == ('l0', 'l1', 'l2')
+    assert scene.joints[0].lower is None and scene.joints[0].upper is None  # continuous
+    assert (scene.joints[1].lower, scene.joints[1].upper) == (-2.5, 2.0)
+    assert (scene.joints[1].effort, scene.joints[1].velocity) == (40.0, 6.0)
+    assert [j.damping for j in scene.joints] == [0.0, 0.1, 0.2]
+    assert [j.friction for j in scene.joints] == [0.0, 0.05, 0.1]
+    assert scene.tip_radius == 0.006  # the tool's collision sphere
+
+
+def general_yaml_scene(n, rng):
+    data = copy.deepcopy(paper_dict())
+    data['links'] = [
+        {
+            'length': float(L),
+            'mass': float(rng.uniform(0.3, 2.0)),
+            'com_x': float(rng.uniform(0.1, 0.9) * L),
+            'com_y': float(rng.uniform(-0.1, 0.1) * L),
+            'inertia': float(rng.uniform(0.01, 0.2)),
+        }
+        for L in rng.uniform(0.3, 1.0, n)
+    ]
+    controller = data['controller']
+    for key in ('kp', 'kd', 'ki', 'down_target_deg', 'up_target_deg'):
+        controller[key] = (controller[key] * n)[:n]
+    data['initial'] = {'q_deg': [60.0 - 10 * k for k in range(n)]}
+    data['surfaces'] = [
+        {'height': -0.25, 'material': 'steel'},
+        {'height': 0.2, 'law': 'none', 'material': 'steel'},
+    ]
+    return data
+
+
+@pytest.mark.parametrize('n', [2, 3, 5])
+@pytest.mark.parametrize('kind', ['rods', 'general'])
+def test_scene_to_urdf_to_scene_round_trips(tmp_path, n, kind):
+    """Scene → ``impact-arm urdf``'s text → a scene taking its arm from that file: the same
+    arm, to the last bit (the URDF holds each number's repr)."""
+    rng = np.random.default_rng(n)
+    data = general_yaml_scene(n, rng)
+    if kind == 'rods':
+        for link in data['links']:
+            del link['com_x'], link['com_y'], link['inertia']
+    original = parse_scene(data, origin='yaml')
+    assert original.general_links == (kind == 'general')
+    path = tmp_path / 'arm.urdf'
+    path.write_text(robot_description(original))
+    again_data = copy.deepcopy(data)
+    del again_data['links'], again_data['tip_radius']
+    again_data['arm'] = {'urdf': str(path), 'contact': {'link': 'tip'}}
+    again = parse_scene(again_data, origin='urdf')
+    for key in ('lengths', 'masses', 'link_com', 'link_inertias', 'contact_point', 'tip_radius'):
+        assert getattr(again, key) == getattr(original, key), key
+    assert again.general_links == original.general_links  # rods stay the rods' equations
+    assert [j.name for j in again.joints] == [j.name for j in original.joints]
+    assert again.surfaces == original.surfaces
+    # the same file again gives the same text: nothing drifts
+    assert robot_description(again) == robot_description(original)
+
+
+def test_limits_and_dynamics_round_trip_through_the_written_urdf(tmp_path):
+    text, _, _ = random_urdf(np.random.default_rng(2), 4)
+    scene = load(tmp_path, text, 4)
+    path = tmp_path / 'written.urdf'
+    path.write_text(robot_description(scene))
+    data = scene_data(path, 4)
+    data['arm']['contact'] = {'link': 'tip'}
+    again = parse_scene(data, origin='again')
+    for key in ('lengths', 'masses', 'link_com', 'link_inertias', 'contact_point', 'tip_radius'):
+        assert getattr(again, key) == getattr(scene, key), key  # repr: every bit
+    for a, b in zip(again.joints, scene.joints):
+        assert (a.lower, a.upper, a.effort, a.velocity, a.damping, a.friction) == (
+            b.lower,
+            b.upper,
+            b.effort,
+            b.velocity,
+            b.damping,
+            b.friction,
+        )
+
+
+ROD = (
+    '<inertial><origin xyz="0.5 0 0"/><mass value="1"/>'
+    '<inertia ixx="0" ixy="0" ixz="0" iyy="0.08" iyz="0" izz="0.08"/></inertial>'
+)
+GOOD = (
+    '<robot name="r"><link name="world"/>\n'
+    f'<link name="a">{ROD}</link>\n'
+    f'<link name="b">{ROD}\n'
+    '<collision><origin xyz="1.0 0 0"/><geometry><sphere radius="0.005"/></geometry>'
+    '</collision></link>\n'
+    '<joint name="ja" type="continuous"><parent link="world"/><child link="a"/>'
+    '<axis xyz="0 -1 0"/></joint>\n'
+    '<joint name="jb" type="continuous"><parent link="a"/><child link="b"/>'
+    '<origin xyz="1 0 0"/><axis xyz="0 -1 0"/></joint>\n'
+    '</robot>'
+)
+EXTRA_LINK = (
+    '<link name="c"><inertial><mass value="1"/>'
+    '<inertia ixx="0" ixy="0" ixz="0" iyy="0.08" iyz="0" izz="0.08"/></inertial></link>'
+)
+
+
+@pytest.mark.parametrize(
+    'change, message',
+    [
+        (
+            ('type="continuous"><parent link="a"', 'type="prismatic"><parent link="a"'),
+            "joint 'jb' is of type 'prismatic'",
+        ),
+        (
+            ('type="continuous"><parent link="a"', 'type="floating"><parent link="a"'),
+            "joint 'jb' is of type 'floating'",
+        ),
+        (
+            (
+                '<origin xyz="1 0 0"/><axis xyz="0 -1 0"/>',
+                '<origin xyz="1 0 0"/><axis xyz="0 0 1"/>',
+            ),
+            "joint 'jb' axis = 0 0 1: must be 0 -1 0",
+        ),
+        (
+            (
+                '<origin xyz="1 0 0"/><axis xyz="0 -1 0"/>',
+                '<origin xyz="1 0 0"/><axis xyz="0 1 0"/>',
+            ),
+            "joint 'jb' axis = 0 1 0: turns the other way",
+        ),
+        (
+            ('<origin xyz="1 0 0"/>', '<origin xyz="1 0 0.2"/>'),
+            "joint 'jb' origin xyz = 1 0 0.2: must be x 0 0",
+        ),
+        (
+            ('<origin xyz="1 0 0"/>', '<origin xyz="1 0 0" rpy="0 0.3 0"/>'),
+            "joint 'jb' origin rpy = 0 0.3 0: must be 0 0 0",
+        ),
+        (
+            (
+                '</robot>',
+                EXTRA_LINK + '<joint name="jc" type="revolute"><parent link="a"/>'
+                '<child link="c"/><axis xyz="0 -1 0"/></joint></robot>',
+            ),
+            "joints 'jb', 'jc' all move link 'a': the model is one serial chain",
+        ),
+        (
+            (
+                '</robot>',
+                EXTRA_LINK + '<joint name="jc" type="fixed"><parent link="b"/>'
+                '<child link="c"/></joint></robot>',
+            ),
+            "fixed joint 'jc' carries link 'c' of mass 1 kg",
+        ),
+        (('<child link="b"/>', '<child link="a"/>'), "link 'a' is already the child of joint 'ja'"),
+        ((f'{ROD}\n<collision>', '<collision>'), "link 'b' has no <inertial> mass"),
+        (
+            (
+                '<mass value="1"/><inertia ixx="0" ixy="0" ixz="0" iyy="0.08" iyz="0" izz="0.08"/>'
+                '</inertial>\n<collision>',
+                '<mass value="nan"/></inertial>\n<collision>',
+            ),
+            "link 'b' mass = 'nan' is not finite",
+        ),
+        (
+            ('<sphere radius="0.005"/>', '<box size="1 1 1"/>'),
+            "arm.contact.radius is missing and link 'b' has no collision sphere",
+        ),
+        (('<robot name="r">', '<robot name="r"'), 'not valid XML'),
+    ],
+)
+def test_what_is_not_a_planar_chain_is_refused_naming_the_joint_and_why(tmp_path, change, message):
+    old, new = change
+    assert old in GOOD
+    path = tmp_path / 'bad.urdf'
+    path.write_text(GOOD.replace(old, new, 1))
+    data = scene_data(path, 2)
+    del data['arm']['contact']
+    with pytest.raises(SceneError) as refused:
+        parse_scene(data, origin='s.yaml')
+    text = str(refused.value)
+    assert message in text and '\n' not in text
+    assert text.startswith(f"scene 's.yaml': arm.urdf '{path}'") or 'arm.urdf' in text
+    path.write_text(GOOD)
+    assert parse_scene(data, origin='s.yaml').n_links == 2  # the unchanged file loads
+
+
+def test_the_scene_gives_its_arm_once_and_the_contact_on_the_last_link(tmp_path):
+    path = tmp_path / 'arm.urdf'
+    path.write_text(GOOD)
+    data = scene_data(path, 2)
+    both = dict(data, links=paper_dict()['links'])
+    with pytest.raises(SceneError, match='links is given with arm.urdf'):
+        parse_scene(both, origin='s')
+    with pytest.raises(SceneError, match='tip_radius is given with arm.urdf'):
+        parse_scene(dict(data, tip_radius=0.005), origin='s')
+    neither = dict(data)
+    del neither['arm']
+    with pytest.raises(SceneError, match=r'links is missing \(required unless arm.urdf'):
+        parse_scene(neither, origin='s')
+    data['arm']['contact'] = {'link': 'a'}
+    with pytest.raises(SceneError, match="arm.contact.link = 'a' is not the last moving link 'b'"):
+        parse_scene(data, origin='s')
+    data['arm']['contact'] = {'link': 'b', 'point': [0.7, 0.0, 0.1], 'radius': 0.004}
+    scene = parse_scene(data, origin='s')
+    assert scene.contact_point == (0.7, 0.1) and scene.tip_radius == 0.004
+    data['arm']['contact'] = {'link': 'b', 'point': [0.7, 0.1]}
+    with pytest.raises(SceneError, match=r'arm.contact.point has 2 entries'):
+        parse_scene(data, origin='s')
+    data['arm']['contact'] = {'link': 'b', 'point': [0.7, 0.1, 0.0]}
+    with pytest.raises(SceneError, match='off the x-z plane'):
+        parse_scene(data, origin='s')
+    data['arm'] = {'urdf': str(tmp_path / 'missing.urdf')}
+    with pytest.raises(SceneError, match="arm.urdf = '.*missing.urdf': cannot be read"):
+        parse_scene(data, origin='s')
+
+
+def test_a_relative_urdf_path_is_relative_to_the_scene_file(tmp_path):
+    (tmp_path / 'arms').mkdir()
+    (tmp_path / 'arms' / 'two.urdf').write_text(GOOD)
+    data = scene_data('arms/two.urdf', 2)
+    del data['arm']['contact']
+    scene = parse_scene(data, origin='s', path=str(tmp_path / 'scene.yaml'))
+    assert scene.lengths == (1.0, 1.0)
