@@ -87,6 +87,21 @@ def _resize_links(data, n, rng):
                 data[section][key] = [vector[min(k, len(vector) - 1)] for k in range(n)]
 
 
+def _general_links(data, rng):
+    """Links that are not uniform rods: centres of mass off mid-length and off the axis,
+    inertias from a point-like to a far-spread mass (then open to the mutations below)."""
+    links = data.get('links')
+    if not isinstance(links, list):
+        return
+    for link in links:
+        length, mass = (link.get(k) if isinstance(link, dict) else None for k in ('length', 'mass'))
+        if not all(isinstance(v, float) and math.isfinite(v) for v in (length, mass)):
+            continue
+        link['com_x'] = length * rng.uniform(-0.3, 1.2)
+        link['com_y'] = length * rng.uniform(-0.3, 0.3)
+        link['inertia'] = mass * length * length * rng.choice((1e-7, 1e-3, 0.05, 0.3, 2.0))
+
+
 def mutate(base: dict, rng: random.Random) -> str:
     """One mutated scene, as YAML text."""
     import copy
@@ -96,6 +111,8 @@ def mutate(base: dict, rng: random.Random) -> str:
     data = copy.deepcopy(base)
     if rng.random() < 0.3:
         _resize_links(data, rng.randint(3, 8), rng)
+    if rng.random() < 0.3:
+        _general_links(data, rng)
     if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:
         data['surfaces'][0]['height'] = rng.choice((-3.0, -2.0, -50.0, 1e6))  # out of reach
     for _ in range(rng.choice((0, 1, 1, 2, 3))):  # 0: only the links or surfaces changed

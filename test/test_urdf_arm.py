@@ -4,9 +4,14 @@ and refused, naming the joint and why, when it is not a planar chain the model c
 
 import copy
 import math
+import os
+import re
+import tempfile
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from impact_arm.io.urdf import robot_description
 from impact_arm.physics.errors import SceneError
@@ -358,3 +363,146 @@ def test_a_relative_urdf_path_is_relative_to_the_scene_file(tmp_path):
     del data['arm']['contact']
     scene = parse_scene(data, origin='s', path=str(tmp_path / 'scene.yaml'))
     assert scene.lengths == (1.0, 1.0)
+
+
+# ------------------------------------------------------------------------ hostile input
+BOUNDED = settings(
+    max_examples=150, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck)
+)
+WILD = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.text(max_size=8),
+    st.integers(min_value=-(2**80), max_value=2**1100),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([5e-324, -0.0, 1e308, 1e-300, 2.0**64, 0.0, 1e-12]),
+)
+
+
+def general_numbers(scene):
+    return [
+        *scene.lengths,
+        *scene.masses,
+        *(c for centre in scene.link_com for c in centre),
+        *scene.link_inertias,
+        *scene.contact_point,
+        scene.tip_radius,
+    ]
+
+
+@BOUNDED
+@given(st.data())
+def test_mutated_general_links_are_finite_or_refused_in_one_line(data):
+    """The new link keys (com_x, com_y, inertia) under the scene fuzzing's mutations: a scene
+    loads with finite numbers and a positive definite mass matrix, or is refused in one line."""
+    scene = general_yaml_scene(data.draw(st.integers(2, 4)), np.random.default_rng(0))
+    for _ in range(data.draw(st.integers(1, 3))):
+        k = data.draw(st.integers(0, len(scene['links']) - 1))
+        key = data.draw(st.sampled_from(['com_x', 'com_y', 'inertia', 'length', 'mass']))
+        if data.draw(st.booleans()):
+            scene['links'][k].pop(key, None)
+        else:
+            scene['links'][k][key] = data.draw(WILD)
+    try:
+        result = parse_scene(scene, origin='fuzz')
+    except SceneError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 600
+        return
+    assert all(math.isfinite(x) for x in general_numbers(result))
+    M = ArmModel(result).mass_matrix(result.q0)
+    assert np.all(np.isfinite(M)) and np.all(np.linalg.eigvalsh(M) > 0)
+
+
+URDF_NUMBERS = re.compile(r'(?<==")-?[0-9][0-9.e+-]*(?: -?[0-9][0-9.e+-]*)*(?=")')
+
+
+@BOUNDED
+@given(st.data())
+def test_mutated_urdf_numbers_are_finite_or_refused_in_one_line(data):
+    """A description's numbers (origins, axes, masses, inertias, radii, limits) replaced by
+    wild values, or its elements cut: the scene loads with finite numbers, or is refused in
+    one line naming the description."""
+    text, _, _ = random_urdf(np.random.default_rng(3), 3)
+    spans = [m.span() for m in URDF_NUMBERS.finditer(text)]
+    for _ in range(data.draw(st.integers(1, 3))):
+        start, end = data.draw(st.sampled_from(spans))
+        value = data.draw(WILD)
+        replacement = str(value) if not isinstance(value, float) else repr(value)
+        text = text[:start] + replacement[:40] + text[end:]
+        spans = [m.span() for m in URDF_NUMBERS.finditer(text)] or [(0, 0)]
+    if data.draw(st.booleans()):
+        cut = data.draw(st.integers(0, len(text)))
+        text = text[:cut]
+    with tempfile.TemporaryDirectory() as directory:
+        path = os.path.join(directory, 'arm.urdf')
+        with open(path, 'w', encoding='utf-8') as f:
+            f.write(text)
+        try:
+            result = parse_scene(scene_data(path, 3), origin='fuzz')
+        except SceneError as exc:
+            assert '\n' not in str(exc) and len(str(exc)) < 1000
+            assert 'arm.urdf' in str(exc)
+            return
+    assert all(math.isfinite(x) for x in general_numbers(result))
+
+
+@pytest.mark.parametrize(
+    'link, message',
+    [
+        ({'com_x': 11.0}, r'links\[1\].com_x = \(11, 0.*must lie within 10 link lengths'),
+        (
+            {'com_x': 0.0, 'com_y': 0.0, 'inertia': 1e-9},
+            r'links\[1\].inertia = 1e-09 .*must be >= 1e-06 m L\^2',
+        ),
+        ({'inertia': 0.0}, r'links\[1\].inertia = 0 is out of range: must be >= 1e-12'),
+        ({'com_y': math.nan}, r'links\[1\].com_y = nan is not finite'),
+        ({'com_z': 0.1}, r'links\[1\].com_z is not a known key'),
+    ],
+)
+def test_general_link_keys_are_refused_out_of_range(link, message):
+    data = copy.deepcopy(paper_dict())
+    data['links'][1].update(link)
+    with pytest.raises(SceneError, match=message):
+        parse_scene(data, origin='s')
+
+
+def test_rod_keys_given_explicitly_are_the_rods():
+    """A link whose keys say what the shorthand means is the same scene, rod equations and
+    all; a link that differs in a key is a general link."""
+    data = copy.deepcopy(paper_dict())
+    plain = parse_scene(data, origin='s')
+    data['links'][1].update({'com_x': 0.5, 'com_y': 0.0, 'inertia': 1.0 / 12})
+    explicit = parse_scene(data, origin='s')
+    assert not plain.general_links and not explicit.general_links
+    assert explicit.link_com == plain.link_com and explicit.link_inertias == plain.link_inertias
+    data['links'][1]['com_y'] = 0.01
+    assert parse_scene(data, origin='s').general_links
+
+
+def test_fit_and_sweep_keys_address_link_masses_centres_and_inertias():
+    """``--param links[1].mass`` as before; the new keys also when the scene leaves them to
+    the rod's defaults (the fit starts from the default), and as overrides of a study."""
+    from impact_arm.calibration.fit import FitError, parameter_specs
+    from impact_arm.calibration.study import Study
+
+    study = Study('paper')
+    specs = parameter_specs(
+        study,
+        {
+            'links[1].mass': (0.5, 2.0),
+            'links[1].com_x': (0.3, 0.7),
+            'links[0].com_y': (-0.1, 0.1),
+            'links[1].inertia': (0.01, 0.2),
+        },
+    )
+    assert [s.start for s in specs] == [1.0, 0.5, 0.0, 1.0 / 12]
+    assert [s.log for s in specs] == [True, True, False, True]
+    with pytest.raises(FitError, match=r'links\[1\].com_x=0.6:0.7: the bounds exclude .* 0.5'):
+        parameter_specs(study, {'links[1].com_x': (0.6, 0.7)})
+    with pytest.raises(FitError, match=r"no 'com_z' in links\[1\]"):
+        parameter_specs(study, {'links[1].com_z': (0.0, 1.0)})
+    with pytest.raises(FitError, match='has no 5 in links'):
+        parameter_specs(study, {'links[5].com_x': (0.0, 1.0)})
+    scene = study.scene({'links[1].com_y': 0.05, 'links[1].inertia': 0.2, 'links[0].mass': 1.1})
+    assert scene.link_com[1] == (0.5, 0.05) and scene.link_inertias == (1.1 / 12, 0.2)
+    assert scene.general_links

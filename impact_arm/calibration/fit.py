@@ -90,6 +90,33 @@ class Parameter:
         return math.log(value) if self.log else value
 
 
+# link keys with a default that follows from the others (docs/scene.md): a fit may start
+# from it without the scene stating it
+_LINK_DEFAULTS: dict[str, Callable[[Scene, int], float]] = {
+    'com_x': lambda scene, k: scene.link_com[k][0],
+    'com_y': lambda scene, k: scene.link_com[k][1],
+    'inertia': lambda scene, k: scene.link_inertias[k],
+}
+
+
+def _link_default_key(parts: Sequence, depth: int) -> bool:
+    return (
+        len(parts) == 3
+        and depth == 2
+        and parts[0] == 'links'
+        and isinstance(parts[1], int)
+        and parts[2] in _LINK_DEFAULTS
+    )
+
+
+def _link_default(study: Study, parts: Sequence) -> float:
+    try:
+        scene = study.scene()
+    except SceneError as exc:
+        raise FitError(f'--param {parts[0]}: {exc}') from None
+    return _LINK_DEFAULTS[parts[2]](scene, parts[1])
+
+
 def parameter_specs(study: Study, bounds: dict) -> list:
     """Check each key against the scene (it must exist and hold a number) and its bounds
     (finite, lo < hi, containing the scene's value, which is the starting point)."""
@@ -108,6 +135,10 @@ def parameter_specs(study: Study, bounds: dict) -> list:
                 if isinstance(part, str)
                 else (isinstance(node, list) and part < len(node))
             )
+            if not ok and isinstance(node, dict) and _link_default_key(parts, depth):
+                # a link key the scene leaves to its default (a rod's): fitted from there
+                node = {part: _link_default(study, parts)}
+                ok = True
             if not ok:
                 where = (
                     ''.join(

@@ -658,6 +658,7 @@ MAX_LOOP_RATE = 1e5  # 1/s, the control loop's fastest eigenvalue (kd/I, sqrt(kp
 # a link's inertia about its joint, at least, in m L^2 (a rod has 1/3): below it the link
 # turns almost freely about its joint and the mass matrix is near singular
 MIN_JOINT_INERTIA = 1e-6
+MAX_COM_DISTANCE = 10.0  # a link's centre of mass from its joint, at most, in link lengths
 
 
 def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
@@ -667,15 +668,18 @@ def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
         zip(links.lengths, links.masses, links.com, links.inertias)
     ):
         rod = (cx, cy) == (length / 2, 0.0) and inertia == mass * length * length / 12
+        where = f'links[{k}]' if links.key == 'links' else f"arm.urdf link '{links.link_names[k]}'"
+        if math.hypot(cx, cy) > MAX_COM_DISTANCE * length:
+            check.fail(
+                f'{where}.com_x' if links.key == 'links' else f'{where} centre of mass',
+                f'= ({cx:g}, {cy:g}) m is out of range: must lie within '
+                f'{MAX_COM_DISTANCE:g} link lengths ({MAX_COM_DISTANCE * length:g} m) of the '
+                f"link's joint (a link's mass lies on or near the link)",
+            )
         about_joint = mass * length**2 / 3 if rod else inertia + mass * (cx * cx + cy * cy)
         if about_joint < MIN_JOINT_INERTIA * mass * length**2:
-            where = (
-                f'links[{k}].inertia'
-                if links.key == 'links'
-                else f"arm.urdf link '{links.link_names[k]}' inertia"
-            )
             check.fail(
-                where,
+                f'{where}.inertia' if links.key == 'links' else f'{where} inertia',
                 f'= {inertia:g} with the centre of mass at ({cx:g}, {cy:g}) m: the inertia '
                 f'about the joint, {about_joint:.3g} kg m^2, is out of range: must be >= '
                 f'{MIN_JOINT_INERTIA:g} m L^2 = {MIN_JOINT_INERTIA * mass * length**2:.3g} '
