@@ -506,3 +506,63 @@ def test_fit_and_sweep_keys_address_link_masses_centres_and_inertias():
     scene = study.scene({'links[1].com_y': 0.05, 'links[1].inertia': 0.2, 'links[0].mass': 1.1})
     assert scene.link_com[1] == (0.5, 0.05) and scene.link_inertias == (1.1 / 12, 0.2)
     assert scene.general_links
+
+
+EXAMPLE = os.path.join(os.path.dirname(__file__), '..', 'examples', 'three_link.yaml')
+
+
+def example_data():
+    from impact_arm.physics.scene import read_scene_file, scene_data as yaml_data
+
+    text, path = read_scene_file(EXAMPLE)
+    return yaml_data(text, path), path
+
+
+def test_the_example_arm_is_read_from_its_urdf_beside_the_scene():
+    from impact_arm.physics.scene import load_scene
+
+    scene = load_scene(EXAMPLE)
+    assert scene.lengths == (0.7, 0.7, 0.6) and scene.masses == (2.0, 1.5, 0.8)
+    assert scene.link_com == ((0.32, 0.01), (0.30, -0.005), (0.25, 0.0))
+    assert scene.link_inertias == (0.09, 0.065, 0.03) and scene.tip_radius == 0.005
+    assert [j.name for j in scene.joints] == ['shoulder', 'elbow', 'wrist']
+    assert scene.general_links and scene.urdf_path == 'three_link.urdf'
+
+
+def test_a_general_arm_conserves_energy_in_the_kernel(tmp_path):
+    """The example's arm swinging freely (no control, no surface) through the compiled
+    kernel: T + V constant to the reference preset's error, with T and V from the generated
+    functions on the Python side; wrong geometry or masses in the kernel's parameter block
+    (P_L holds NL values for general links) would break the balance."""
+    from impact_arm.physics.simulate import run
+
+    data, path = example_data()
+    data.update(surfaces=[], cycles=0, t_max=3.0, publish_rate=100.0)
+    data['controller']['law'] = 'none'
+    scene = parse_scene(data, origin='free', path=path)
+    result = run(scene, preset='reference')
+    model = ArmModel(scene)
+    energy = [
+        sum(model.link_energies(s.q, s.qd)) + model.potential_energy(s.q) for s in result.samples
+    ]
+    scale = max(abs(model.potential_energy(s.q)) for s in result.samples)
+    assert result.samples[-1].t == pytest.approx(3.0)
+    assert max(abs(e - energy[0]) for e in energy) / scale < 1e-8
+    assert max(sum(model.link_energies(s.q, s.qd)) for s in result.samples) > 5.0
+
+
+def test_impact_arm_urdf_writes_the_general_arm(tmp_path, capsys):
+    from impact_arm.tools.cli import main
+
+    assert main(['urdf', '--scene', EXAMPLE]) == 0
+    text = capsys.readouterr().out
+    path = tmp_path / 'written.urdf'
+    path.write_text(text)
+    data, scene_path = example_data()
+    data['arm'] = {'urdf': str(path), 'contact': {'link': 'tip'}}
+    again = parse_scene(data, origin='again')
+    original = parse_scene(example_data()[0], origin='example', path=scene_path)
+    for key in ('lengths', 'masses', 'link_com', 'link_inertias', 'contact_point', 'tip_radius'):
+        assert getattr(again, key) == getattr(original, key), key
+    assert [j.damping for j in again.joints] == [0.05, 0.05, 0.02]
+    assert [(j.lower, j.upper) for j in again.joints] == [(None, None), (-2.6, 2.6), (-2.6, 2.6)]

@@ -11,13 +11,22 @@ Frames follow REP 103 (z up, gravity along -z); the model's plane is the world's
   encoder angles of the wire and link k's x axis points along the model's absolute angle q_k.
   Every joint axis is ``0 -1 0`` (the model's z): a positive angle lifts the rod towards +z,
   as it lifts it towards the model's +y;
-* ``tip`` — fixed to linkN at x = L_N: the centre B of the tip sphere (radius R1);
+* ``tip`` — fixed to linkN at the contact point (x = L_N for rods): the centre B of the tip
+  sphere (radius R1);
 * ``surface1`` … — fixed to world, one per scene surface, at z = height (the surface plane),
   with the model's axes (``contract.PLANE_FRAME_ROTATION``): x tangential, y the outward
   normal (world +z). /contact_wrench is given in ``surface1``.
 
 The joints are URDF ``continuous`` joints (revolute without position limits): the model has
-none, and effort clipping is the simulator's ``max_effort`` parameter.
+none, and effort clipping is the simulator's ``max_effort`` parameter. A scene whose arm came
+from a URDF with limits or ``<dynamics>`` (``Scene.joints``) gets them written back
+(``revolute`` with its ``<limit>``), though the model does not act on them.
+
+Each link's ``<inertial>`` is the model's: the centre of mass at (along, 0, across) of the link
+frame (a rod's: mid-length), ``iyy`` the inertia about it about the joint axis (``izz`` the
+same, as for a body slender along x). ``tip`` sits at the scene's contact point on the last
+link (a rod's end unless the scene says otherwise); a scene reading this file back with
+``arm: {urdf: ..., contact: {link: tip}}`` is the same arm (physics/urdf_arm.py).
 
 Rods are drawn as cylinders of ``rod_radius`` (a visual setting: the model's rods are lines;
 default ``ROD_RADIUS_PER_LENGTH`` of the shortest link). The tip sphere's collision radius is

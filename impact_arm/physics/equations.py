@@ -5,8 +5,10 @@ d/dt(dT/dq̇) - dT/dq = Q give  M(q) q̈ = Q - b(q, q̇)  with b the velocity-pr
 Gravity enters through its generalized forces Q_g = Σ G_j · ∂r_Cj/∂q_i (docs/model.md), never
 through a hand-typed formula.
 
-The derivation keeps lengths, masses and g as symbols, so one derivation serves every scene
-with the same number of links and the same features; sympy is slow to import and to
+The derivation keeps lengths, masses and g as symbols (for general links also the centres of
+mass, inertias and contact point: ``GEOMETRY``), so one derivation serves every scene with the
+same number of links and the same features; a scene of uniform rods gets the rods' equations,
+exactly as before general links existed; sympy is slow to import and to
 differentiate, so the generated Python source is cached on disk (``cache_dir()``) keyed by a
 hash of what it was generated from. A warm start imports no sympy at all.
 

@@ -943,7 +943,7 @@ def resolve_scene_path(name: str | os.PathLike) -> str:
 
 def installed_scenes() -> list[str]:
     """Names of the scene files in the installed config directories (the node parameter
-    files there are not scenes: a scene has a top-level ``links:``)."""
+    files there are not scenes: a scene has a top-level ``links:`` or ``arm:``)."""
     names = set()
     for directory in config_dirs():
         for entry in os.listdir(directory):
@@ -951,7 +951,7 @@ def installed_scenes() -> list[str]:
                 continue
             try:
                 with open(os.path.join(directory, entry), encoding='utf-8') as f:
-                    if any(line.startswith('links:') for line in f):
+                    if any(line.startswith(('links:', 'arm:')) for line in f):
                         names.add(entry[: -len('.yaml')])
             except (OSError, UnicodeDecodeError):
                 continue
