@@ -566,3 +566,53 @@ def test_impact_arm_urdf_writes_the_general_arm(tmp_path, capsys):
         assert getattr(again, key) == getattr(original, key), key
     assert [j.damping for j in again.joints] == [0.05, 0.05, 0.02]
     assert [(j.lower, j.upper) for j in again.joints] == [(None, None), (-2.6, 2.6), (-2.6, 2.6)]
+
+
+def test_a_recording_carries_the_arms_urdf_in_its_scene(tmp_path):
+    """What a recording stores (``self_contained_text``): the scene with the URDF's text as
+    ``arm.description``, which loads to the same arm with the file gone; a scene without a
+    URDF is stored as it was written."""
+    from impact_arm.physics.scene import load_scene, scene_from_text, self_contained_text
+
+    urdf = tmp_path / 'arm.urdf'
+    urdf.write_text(open(os.path.join(os.path.dirname(EXAMPLE), 'three_link.urdf')).read())
+    scene_file = tmp_path / 'three.yaml'
+    scene_file.write_text(open(EXAMPLE).read().replace('three_link.urdf', 'arm.urdf'))
+    scene = load_scene(str(scene_file))
+    text = self_contained_text(scene)
+    urdf.unlink()
+    again = scene_from_text(text, origin='stored')
+    for key in ('lengths', 'masses', 'link_com', 'link_inertias', 'contact_point', 'joints'):
+        assert getattr(again, key) == getattr(scene, key), key
+    assert again.controller == scene.controller and again.surfaces == scene.surfaces
+    assert self_contained_text(again) == text  # an inline description stays as it is
+    paper = load_scene('paper')
+    assert self_contained_text(paper) == paper.source_text
+    data = scene_data(tmp_path / 'x.urdf', 2)
+    data['arm']['description'] = GOOD
+    with pytest.raises(SceneError, match='arm gives both urdf and description'):
+        parse_scene(data, origin='s')
+    del data['arm']['urdf'], data['arm']['description']
+    with pytest.raises(SceneError, match=r'arm needs urdf \(a URDF file\) or description'):
+        parse_scene(data, origin='s')
+
+
+def test_an_offline_recording_of_a_urdf_arm_reads_back_without_the_file(tmp_path, capsys):
+    """``impact-arm simulate --mcap`` of a scene whose URDF is then gone: the recording's own
+    scene (read with rosbags, as analyze and fit read it) is the arm."""
+    from impact_arm.tools.analysis import load as load_recording
+    from impact_arm.tools.cli import main
+
+    for name in ('three_link.yaml', 'three_link.urdf'):
+        text = open(os.path.join(os.path.dirname(EXAMPLE), name)).read()
+        (tmp_path / name).write_text(text.replace('cycles: 5', 'cycles: 2'))
+    mcap = tmp_path / 'run.mcap'
+    assert (
+        main(['simulate', '--scene', str(tmp_path / 'three_link.yaml'), '--mcap', str(mcap)]) == 0
+    )
+    (tmp_path / 'three_link.urdf').unlink()
+    (tmp_path / 'three_link.yaml').unlink()
+    run = load_recording(str(mcap))
+    assert run.scene is not None and run.scene.general_links
+    assert run.scene.link_com == ((0.32, 0.01), (0.30, -0.005), (0.25, 0.0))
+    assert len(run.impacts) == 2

@@ -81,6 +81,7 @@ from ..contract import (
     joint_names,
     to_joint_space,
 )
+from ..physics.scene import self_contained_text
 from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
 
@@ -158,7 +159,7 @@ class OfflineRecorder:
                 'topics': json.dumps(list(OFFLINE_TOPICS)),
             },
         )
-        text = scene.source_text or ''
+        text = self_contained_text(scene) or ''  # an arm's URDF inlined
         scene_file = (
             os.path.basename(scene.source_path) if scene.source_path else f'{scene.name}.yaml'
         )

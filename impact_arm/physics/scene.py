@@ -122,7 +122,8 @@ class Scene:
     tip_point: tuple[float, float] | None = None
     joints: tuple[JointSpec, ...] = ()  # empty: joint1..N, continuous, no dynamics
     link_names: tuple[str, ...] = ()  # the URDF's names of the moving links
-    urdf_path: str = ''  # the file the arm came from ('' : the scene's links)
+    urdf_path: str = ''  # the file the arm came from ('' : the scene's links or arm.description)
+    urdf_text: str = field(default='', compare=False, repr=False)  # the URDF the arm came from
     source_text: str = field(default='', compare=False, repr=False)
     source_path: str = field(default='', compare=False, repr=False)
 
@@ -196,8 +197,9 @@ LINK = {
     'inertia': _num(1e-12, 1e12, unit='kg m^2', default=None),
 }
 TIP_RADIUS_RANGE = (1e-6, 1, False, False)  # m
-ARM = {
-    'urdf': ('str', None, '', REQUIRED),
+ARM: dict[str, Any] = {
+    'urdf': ('str', None, '', None),  # a file, or
+    'description': ('str', None, '', None),  # its text (recordings store the scene so)
     'contact': (
         'dict',
         {
@@ -529,6 +531,7 @@ def parse_scene(
         joints=links.joints,
         link_names=links.link_names,
         urdf_path=links.urdf_path,
+        urdf_text=links.urdf_text,
         source_text=text,
         source_path=path,
     )
@@ -548,6 +551,7 @@ class _ArmLinks:
     link_names: tuple[str, ...]
     urdf_path: str
     key: str  # the scene key the links come from, for refusals
+    urdf_text: str = ''
 
 
 def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
@@ -567,16 +571,25 @@ def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
                 'arm.contact.point',
                 f"has {len(point)} entries: must be x y z (m) in the contact link's frame",
             )
-        urdf = _urdf_arm(
+        given = [key for key in ('urdf', 'description') if raw['arm'][key] is not None]
+        if len(given) != 1:
+            check.fail(
+                'arm',
+                'gives both urdf and description: give one of them'
+                if given
+                else 'needs urdf (a URDF file) or description (its text)',
+            )
+        urdf, urdf_text = _urdf_arm(
             check.origin,
             raw['arm']['urdf'],
+            raw['arm']['description'],
             scene_path,
             contact.get('link'),
             point,
             contact.get('radius'),
         )
         for k, name in enumerate(urdf.link_names):
-            where = f"arm.urdf link '{name}'"
+            where = f"arm.{given[0]} link '{name}'"
             length = 'contact point distance' if k == len(urdf.link_names) - 1 else 'length'
             for what, value, spec in (
                 (length, urdf.lengths[k], LINK['length']),
@@ -596,8 +609,9 @@ def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
             urdf.tip_radius,
             urdf.joints,
             urdf.link_names,
-            raw['arm']['urdf'],
-            'arm.urdf',
+            raw['arm']['urdf'] or '',
+            f'arm.{given[0]}',
+            urdf_text,
         )
     for key in ('links', 'tip_radius'):
         if raw[key] is None:
@@ -632,23 +646,47 @@ def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
 _URDF_CACHE: dict[tuple, Any] = {}  # a study loads one scene many times: read its URDF once
 
 
-def _urdf_arm(origin, path, scene_path, link, point, radius):
+def _urdf_arm(origin, path, description, scene_path, link, point, radius):
+    """(the parsed arm, the URDF text) of ``arm.urdf`` (a file) or ``arm.description``."""
     from .urdf_arm import parse_urdf_arm, read_urdf_file, resolve_urdf_path
 
-    full = resolve_urdf_path(path, scene_path)
-    try:
-        info = os.stat(full)
-        stamp: tuple = (info.st_mtime_ns, info.st_size)
-    except OSError:
-        stamp = ()
-    key = (os.path.abspath(full), stamp, link, point, radius)
+    if path is None:
+        key: tuple = (hash(description), description, link, point, radius)
+    else:
+        full = resolve_urdf_path(path, scene_path)
+        try:
+            info = os.stat(full)
+            stamp: tuple = (info.st_mtime_ns, info.st_size)
+        except OSError:
+            stamp = ()
+        key = (os.path.abspath(full), stamp, link, point, radius)
     if key not in _URDF_CACHE:
-        where = f"scene '{origin}': arm.urdf"
-        text = read_urdf_file(full, where)
+        if path is None:
+            text, where = description, f"scene '{origin}': arm.description"
+        else:
+            text = read_urdf_file(full, f"scene '{origin}': arm.urdf")
+            where = f"scene '{origin}': arm.urdf '{path}'"
         if len(_URDF_CACHE) > 64:
             _URDF_CACHE.clear()
-        _URDF_CACHE[key] = parse_urdf_arm(text, f"{where} '{path}'", link, point, radius)
+        _URDF_CACHE[key] = (parse_urdf_arm(text, where, link, point, radius), text)
     return _URDF_CACHE[key]
+
+
+def self_contained_text(scene: Scene) -> str:
+    """The scene's YAML text as a recording stores it: unchanged, but for an arm read from
+    a URDF file, whose text it carries as ``arm.description`` instead of the file's path, so
+    that the recording's scene loads wherever the file is not."""
+    if not scene.urdf_path or not scene.source_text:
+        return scene.source_text
+    data = scene_data(scene.source_text, scene.source_path or scene.name)
+    arm = dict(data['arm'])
+    del arm['urdf']
+    arm['description'] = scene.urdf_text
+    data['arm'] = arm
+    header = (
+        f'# {scene.name}: the arm of {scene.urdf_path} inlined as arm.description (docs/scene.md)\n'
+    )
+    return header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
 
 
 MAX_LENGTH_RATIO = 1e3  # longest / shortest link
@@ -668,7 +706,9 @@ def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
         zip(links.lengths, links.masses, links.com, links.inertias)
     ):
         rod = (cx, cy) == (length / 2, 0.0) and inertia == mass * length * length / 12
-        where = f'links[{k}]' if links.key == 'links' else f"arm.urdf link '{links.link_names[k]}'"
+        where = (
+            f'links[{k}]' if links.key == 'links' else f"{links.key} link '{links.link_names[k]}'"
+        )
         if math.hypot(cx, cy) > MAX_COM_DISTANCE * length:
             check.fail(
                 f'{where}.com_x' if links.key == 'links' else f'{where} centre of mass',

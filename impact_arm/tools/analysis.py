@@ -139,7 +139,13 @@ def _scene(metadata):
     from ..physics.scene import scene_from_text
 
     try:
-        return scene_from_text(text, origin='scene stored in the recording')
+        # a file the scene names (an older recording's arm.urdf) is found beside the scene
+        # file the recording was made from
+        return scene_from_text(
+            text,
+            origin='scene stored in the recording',
+            path=metadata.get('scene', {}).get('path') or '',
+        )
     except ImpactArmError:
         return None
 
