@@ -555,7 +555,7 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     return '\n\n\n'.join(funcs) + '\n'
 
 
-def _module_header(n, gravity, contact, friction, n_integral, general):
+def _module_header(n, gravity, contact, friction, n_integral, general=False):
     """Constants the kernel template reads as compile-time constants."""
     from .layout import shape_offsets
 
