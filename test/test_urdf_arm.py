@@ -605,7 +605,8 @@ def test_an_offline_recording_of_a_urdf_arm_reads_back_without_the_file(tmp_path
 
     for name in ('three_link.yaml', 'three_link.urdf'):
         text = open(os.path.join(os.path.dirname(EXAMPLE), name)).read()
-        (tmp_path / name).write_text(text.replace('cycles: 5', 'cycles: 2'))
+        text = text.replace('cycles: 5', 'cycles: 2')  # and the tip 2 cm off the axis:
+        (tmp_path / name).write_text(text.replace('xyz="0.6 0 0"', 'xyz="0.6 0 0.02"'))
     mcap = tmp_path / 'run.mcap'
     assert (
         main(['simulate', '--scene', str(tmp_path / 'three_link.yaml'), '--mcap', str(mcap)]) == 0
@@ -615,4 +616,11 @@ def test_an_offline_recording_of_a_urdf_arm_reads_back_without_the_file(tmp_path
     run = load_recording(str(mcap))
     assert run.scene is not None and run.scene.general_links
     assert run.scene.link_com == ((0.32, 0.01), (0.30, -0.005), (0.25, 0.0))
+    assert run.scene.contact_point == (0.6, 0.02)
     assert len(run.impacts) == 2
+    # the analysis's tip velocity is the contact point's (off the last link's end here)
+    from impact_arm.tools.analysis import tip_velocity
+
+    model, v = ArmModel(run.scene), tip_velocity(run)
+    for i in range(0, len(run.t), max(1, len(run.t) // 20)):
+        assert v[i] == pytest.approx(model.tip(run.q[i], run.qd[i])[2:], rel=1e-12, abs=1e-12)

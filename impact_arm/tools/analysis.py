@@ -345,6 +345,14 @@ def tip_velocity(run: Run) -> np.ndarray | None:
     if run.scene is None or len(run.scene.lengths) != run.q.shape[1]:
         return None
     L = np.asarray(run.scene.lengths, float)
+    if run.scene.general_links:  # the tip B off the last link's end: its point's velocity
+        along, across = run.scene.contact_point
+        q, w = run.q[:, -1], run.qd[:, -1]
+        vx = -(L[:-1] * np.sin(run.q[:, :-1]) * run.qd[:, :-1]).sum(axis=1)
+        vy = (L[:-1] * np.cos(run.q[:, :-1]) * run.qd[:, :-1]).sum(axis=1)
+        vx -= (along * np.sin(q) + across * np.cos(q)) * w
+        vy += (along * np.cos(q) - across * np.sin(q)) * w
+        return np.stack([vx, vy], axis=1)
     vx = -(L * np.sin(run.q) * run.qd).sum(axis=1)
     vy = (L * np.cos(run.q) * run.qd).sum(axis=1)
     return np.stack([vx, vy], axis=1)

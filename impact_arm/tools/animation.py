@@ -123,6 +123,10 @@ def animate(
         q = run.q[i]
         x = np.concatenate([[0.0], np.cumsum(lengths * np.cos(q))])
         y = np.concatenate([[0.0], np.cumsum(lengths * np.sin(q))])
+        if scene.general_links:  # the tip B: the contact point on the last link
+            along, across = scene.contact_point
+            c, s = math.cos(q[-1]), math.sin(q[-1])
+            x[-1], y[-1] = x[-2] + along * c - across * s, y[-2] + along * s + across * c
         arm.set_data(x, y)
         tip.center = (x[-1], y[-1])
         arrow.set_data([], [])
