@@ -624,3 +624,18 @@ def test_an_offline_recording_of_a_urdf_arm_reads_back_without_the_file(tmp_path
     model, v = ArmModel(run.scene), tip_velocity(run)
     for i in range(0, len(run.t), max(1, len(run.t) // 20)):
         assert v[i] == pytest.approx(model.tip(run.q[i], run.qd[i])[2:], rel=1e-12, abs=1e-12)
+
+
+def test_fit_recovers_a_contact_parameter_of_a_urdf_arm():
+    """A recording of the example's URDF arm with friction 0.3 (sampled as a driver reports):
+    the fit, starting from the scene's 0.2, finds 0.3 within its interval."""
+    from impact_arm.calibration.fit import fit
+    from impact_arm.tools.synthetic import synthetic_recording
+
+    rec = synthetic_recording(
+        EXAMPLE, {'surfaces[0].mu': 0.3}, cycles=3, seed=5, control_rate=1000.0
+    )
+    result = fit(rec, EXAMPLE, {'surfaces[0].mu': (0.05, 1.0)})
+    mu = result.parameters['surfaces[0].mu']
+    assert mu['ci95'][0] <= 0.3 <= mu['ci95'][1] and mu['identifiable']
+    assert abs(mu['value'] - 0.3) < 0.01
