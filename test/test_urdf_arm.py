@@ -308,6 +308,17 @@ EXTRA_LINK = (
             "arm.contact.radius is missing and link 'b' has no collision sphere",
         ),
         (('<robot name="r">', '<robot name="r"'), 'not valid XML'),
+        (
+            ('<robot name="r">', '<robot name="r"><xacro:property name="l" value="1"/>'),
+            'not valid XML: unbound prefix: line 1, column 16 (a xacro file? expand it first',
+        ),
+        (
+            (
+                '<origin xyz="1 0 0"/><axis xyz="0 -1 0"/>',
+                '<axis xyz="0 -1 0"/><mimic joint="ja"/>',
+            ),
+            "joint 'jb' mimics another joint",
+        ),
     ],
 )
 def test_what_is_not_a_planar_chain_is_refused_naming_the_joint_and_why(tmp_path, change, message):

@@ -160,7 +160,8 @@ def parse_urdf_arm(
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
-        fail(f'not valid XML: {exc}')
+        hint = ' (a xacro file? expand it first: xacro FILE > FILE.urdf)' if 'xacro' in text else ''
+        fail(f'not valid XML: {exc}{hint}')
     if root.tag != 'robot':
         fail(f'the top element is <{root.tag[:40]}>, not <robot>: not a URDF')
     links: dict[str, ET.Element] = {}
@@ -238,6 +239,11 @@ def parse_urdf_arm(
         return mass_of(name) + sum(subtree_mass(j.child) for j in children[name])
 
     def check_kind(joint: _Joint) -> None:
+        if joint.element.find('mimic') is not None:
+            fail(
+                f"joint '{joint.name}' mimics another joint: the model's joints move "
+                f'independently, each driven by its own torque'
+            )
         if joint.kind not in MOVING + ('fixed',):
             fail(
                 f"joint '{joint.name}' is of type {joint.kind!r}: the model is a planar "
