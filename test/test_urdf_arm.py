@@ -650,3 +650,32 @@ def test_fit_recovers_a_contact_parameter_of_a_urdf_arm():
     mu = result.parameters['surfaces[0].mu']
     assert mu['ci95'][0] <= 0.3 <= mu['ci95'][1] and mu['identifiable']
     assert abs(mu['value'] - 0.3) < 0.01
+
+
+def test_a_urdf_arms_link_values_are_scene_keys_for_fit_and_sweep():
+    """``arm.links[i].mass`` (com_x, com_y, inertia) states a value instead of the file's: a
+    fit finds a link 5 % heavier than the URDF says, starting from the URDF's mass."""
+    from impact_arm.calibration.fit import fit, parameter_specs
+    from impact_arm.calibration.study import Study, load_scene_data
+    from impact_arm.tools.synthetic import synthetic_recording
+
+    data, _ = load_scene_data(EXAMPLE)
+    data['arm']['urdf'] = os.path.join(os.path.dirname(EXAMPLE), 'three_link.urdf')
+    truth = copy.deepcopy(data)
+    truth['arm']['links'] = [{}, {'mass': 1.5 * 1.05}, {'com_y': 0.0}]
+    scene = parse_scene(truth, origin='truth')
+    assert scene.masses == (2.0, 1.5 * 1.05, 0.8) and scene.link_com[2] == (0.25, 0.0)
+    study = Study(EXAMPLE)
+    specs = parameter_specs(
+        study, {'arm.links[1].mass': (1.0, 2.5), 'arm.links[0].com_x': (0.2, 0.5)}
+    )
+    assert [s.start for s in specs] == [1.5, 0.32]
+    rec = synthetic_recording(truth, None, cycles=4, seed=5, control_rate=1000.0)
+    mass = fit(rec, EXAMPLE, {'arm.links[1].mass': (1.0, 2.5)}).parameters['arm.links[1].mass']
+    assert mass['ci95'][0] <= 1.575 <= mass['ci95'][1]
+    truth['arm']['links'] = [{}, {}]
+    with pytest.raises(SceneError, match=r'arm.links has 2 entries: must have one per moving link'):
+        parse_scene(truth, origin='s')
+    truth['arm']['links'] = [{}, {'mass': -1.0}, {}]
+    with pytest.raises(SceneError, match=r'arm.links\[1\].mass = -1 is out of range'):
+        parse_scene(truth, origin='s')

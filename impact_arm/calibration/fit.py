@@ -39,7 +39,7 @@ from .identify import (
 from ..physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
 from ..physics.model import ArmModel
 from ..physics.scene import Scene
-from .study import Study, parse_key_path
+from .study import Study, apply_overrides, parse_key_path
 
 # The whitened residual of an impact the model cannot replay at some values (no contact, a
 # contact outside the law's validity): well above any misfit near the start, so that the
@@ -99,13 +99,19 @@ _LINK_DEFAULTS: dict[str, Callable[[Scene, int], float]] = {
 }
 
 
+_LINK_DEFAULTS['mass'] = lambda scene, k: scene.masses[k]  # a URDF arm's: the file's
+
+
 def _link_default_key(parts: Sequence, depth: int) -> bool:
+    """``links[i].KEY`` left to a rod's default, or ``arm.links[i].KEY`` to the URDF's."""
+    head = ('links',) if parts[0] == 'links' else ('arm', 'links')
     return (
-        len(parts) == 3
-        and depth == 2
-        and parts[0] == 'links'
-        and isinstance(parts[1], int)
-        and parts[2] in _LINK_DEFAULTS
+        tuple(parts[: len(head)]) == head
+        and len(parts) == len(head) + 2
+        and depth == len(parts) - 1
+        and isinstance(parts[-2], int)
+        and parts[-1] in _LINK_DEFAULTS
+        and (head == ('arm', 'links') or parts[-1] != 'mass')
     )
 
 
@@ -114,7 +120,20 @@ def _link_default(study: Study, parts: Sequence) -> float:
         scene = study.scene()
     except SceneError as exc:
         raise FitError(f'--param {parts[0]}: {exc}') from None
-    return _LINK_DEFAULTS[parts[2]](scene, parts[1])
+    return _LINK_DEFAULTS[parts[-1]](scene, parts[-2])
+
+
+def _state_arm_links(study: Study, parts: Sequence) -> None:
+    """A fit of ``arm.links[i].KEY`` of a scene that states no ``arm.links``: the study's
+    data gets one empty entry per link (the URDF's values stand), for the fit to set."""
+    arm = study.data.get('arm') if isinstance(study.data, dict) else None
+    if tuple(parts[:2]) != ('arm', 'links') or not isinstance(arm, dict) or 'links' in arm:
+        return
+    try:
+        n = study.scene().n_links
+    except SceneError as exc:
+        raise FitError(f'--param arm.links: {exc}') from None
+    study.data = apply_overrides(study.data, {'arm.links': [{} for _ in range(n)]})
 
 
 def parameter_specs(study: Study, bounds: dict) -> list:
@@ -128,6 +147,7 @@ def parameter_specs(study: Study, bounds: dict) -> list:
             parts = parse_key_path(key)
         except SceneError as exc:
             raise FitError(f'--param {key}: {exc}') from None
+        _state_arm_links(study, parts)
         node = study.data
         for depth, part in enumerate(parts):
             ok = (

@@ -197,9 +197,17 @@ LINK = {
     'inertia': _num(1e-12, 1e12, unit='kg m^2', default=None),
 }
 TIP_RADIUS_RANGE = (1e-6, 1, False, False)  # m
+# values of a URDF arm's link that a scene (a fit, a sweep) sets instead of the file's
+ARM_LINK = {
+    'mass': ('num', LINK['mass'][1], 'kg', None),
+    'com_x': ('num', LINK['com_x'][1], 'm', None),
+    'com_y': ('num', LINK['com_y'][1], 'm', None),
+    'inertia': ('num', LINK['inertia'][1], 'kg m^2', None),
+}
 ARM: dict[str, Any] = {
     'urdf': ('str', None, '', None),  # a file, or
     'description': ('str', None, '', None),  # its text (recordings store the scene so)
+    'links': ('list', ARM_LINK, '', None),  # one per moving link: values instead of the file's
     'contact': (
         'dict',
         {
@@ -588,6 +596,7 @@ def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
             point,
             contact.get('radius'),
         )
+        urdf = _with_link_values(check, urdf, raw['arm']['links'])
         for k, name in enumerate(urdf.link_names):
             where = f"arm.{given[0]} link '{name}'"
             length = 'contact point distance' if k == len(urdf.link_names) - 1 else 'length'
@@ -641,6 +650,32 @@ def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
         '',
         'links',
     )
+
+
+def _with_link_values(check: _Checker, urdf: Any, values: Sequence[dict] | None) -> Any:
+    """The URDF's arm with the values ``arm.links`` states instead of the file's."""
+    from dataclasses import replace
+
+    if values is None:
+        return urdf
+    n = len(urdf.link_names)
+    if len(values) != n:
+        check.fail(
+            'arm.links',
+            f'has {len(values)} entries: must have one per moving link of the URDF ({n}: '
+            f'{", ".join(urdf.link_names)})',
+        )
+    masses, com, inertias = list(urdf.masses), list(urdf.com), list(urdf.inertias)
+    for k, entry in enumerate(values):
+        if entry['mass'] is not None:
+            masses[k] = entry['mass']
+        com[k] = (
+            com[k][0] if entry['com_x'] is None else entry['com_x'],
+            com[k][1] if entry['com_y'] is None else entry['com_y'],
+        )
+        if entry['inertia'] is not None:
+            inertias[k] = entry['inertia']
+    return replace(urdf, masses=tuple(masses), com=tuple(com), inertias=tuple(inertias))
 
 
 _URDF_CACHE: dict[tuple, Any] = {}  # a study loads one scene many times: read its URDF once
