@@ -679,3 +679,26 @@ def test_a_urdf_arms_link_values_are_scene_keys_for_fit_and_sweep():
     truth['arm']['links'] = [{}, {'mass': -1.0}, {}]
     with pytest.raises(SceneError, match=r'arm.links\[1\].mass = -1 is out of range'):
         parse_scene(truth, origin='s')
+
+
+@BOUNDED
+@given(st.data())
+def test_mutated_arm_link_values_are_finite_or_refused_in_one_line(data):
+    path = os.path.join(os.path.dirname(EXAMPLE), 'three_link.urdf')
+    scene = scene_data(path, 3)
+    scene['arm']['contact'] = {'link': 'tool'}
+    links = [{} for _ in range(data.draw(st.integers(2, 4)))]
+    for _ in range(data.draw(st.integers(1, 4))):
+        entry = data.draw(st.sampled_from(links))
+        entry[data.draw(st.sampled_from(['mass', 'com_x', 'com_y', 'inertia', 'length']))] = (
+            data.draw(WILD)
+        )
+    scene['arm']['links'] = links
+    try:
+        result = parse_scene(scene, origin='fuzz')
+    except SceneError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 600
+        return
+    assert all(math.isfinite(x) for x in general_numbers(result))
+    M = ArmModel(result).mass_matrix(result.q0)
+    assert np.all(np.isfinite(M)) and np.all(np.linalg.eigvalsh(M) > 0)
