@@ -7,9 +7,11 @@ import math
 import os
 import re
 import tempfile
+import time
 
 import numpy as np
 import pytest
+import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -702,3 +704,31 @@ def test_mutated_arm_link_values_are_finite_or_refused_in_one_line(data):
     assert all(math.isfinite(x) for x in general_numbers(result))
     M = ArmModel(result).mass_matrix(result.q0)
     assert np.all(np.isfinite(M)) and np.all(np.linalg.eigvalsh(M) > 0)
+
+
+def test_the_recorder_node_stores_a_urdf_arms_description(ros_env, tmp_path):
+    """The recorder (a real node in its own process) given a scene whose arm comes from a
+    URDF file: the file's scene metadata loads the arm with the files gone."""
+    from mcap.reader import make_reader
+    from ros_helpers import node_args, start_process, wait_for
+
+    for name in ('three_link.yaml', 'three_link.urdf'):
+        (tmp_path / name).write_text(open(os.path.join(os.path.dirname(EXAMPLE), name)).read())
+    out = tmp_path / 'rec.mcap'
+    args = node_args(
+        'impact_arm.nodes.recorder',
+        f'output:={out}',
+        f'scene:={tmp_path / "three_link.yaml"}',
+        'flush_interval:=0.2',
+        'param_nodes:=[""]',
+    )
+    with start_process(args, ros_env, tmp_path, 'recorder') as rec:
+        assert wait_for(lambda: out.exists() and out.stat().st_size > 0, 30), rec.stderr
+        time.sleep(1.0)  # a flush or two
+    (tmp_path / 'three_link.urdf').unlink()
+    (tmp_path / 'three_link.yaml').unlink()
+    with open(out, 'rb') as f:
+        stored = {m.name: m.metadata for m in make_reader(f).iter_metadata()}['scene']['yaml']
+    assert 'description:' in stored and 'urdf:' not in stored
+    scene = parse_scene(yaml.safe_load(stored), origin='stored')
+    assert scene.link_com == ((0.32, 0.01), (0.30, -0.005), (0.25, 0.0))
