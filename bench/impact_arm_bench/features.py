@@ -71,14 +71,19 @@ EXTRA = {'free motion, no gravity': _no_gravity}
 
 
 def add_arguments(parser):
-    parser.add_argument('--preset', default='balanced', choices=INTEGRATOR_PRESETS)
-    parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument(
+        '--preset',
+        default='balanced',
+        choices=INTEGRATOR_PRESETS,
+        help='integrator preset of every run (default balanced)',
+    )
+    parser.add_argument('--repeats', type=int, default=5, help='timed runs per feature (default 5)')
     parser.add_argument(
         '--three-links',
         action='store_true',
         help='add a three-link arm (compiles a new scene shape on first use)',
     )
-    parser.add_argument('--json', metavar='FILE')
+    parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
 
 
 def measure(name, make, preset, repeats):

@@ -8,10 +8,11 @@ names keep both sides reading the same slots.
 FREE, ELASTIC, ELASTOPLASTIC, RESTITUTION = 0, 1, 2, 3
 LAW_HELD, LAW_Q, LAW_PID, LAW_NONE = 0, 1, 2, 3
 # contact-state array C: phase, surface, cycle mode (0 down, 1 up), restitution
-# parameters, peak force, last impulse point, accumulated impulses
+# parameters, peak force of the impact, last impulse point, accumulated impulses, peak normal
+# force since the last output row or take_peak (the period's peak: /contact_force_peak)
 C_PHASE, C_SURF, C_MODE, C_DR, C_RR, C_DM, C_PM, C_PEAK = 0, 1, 2, 3, 4, 5, 6, 7
-C_IMP_T, C_IMP_FF, C_IMP_FN, C_JT, C_JN = 8, 9, 10, 11, 12
-C_SIZE = 13
+C_IMP_T, C_IMP_FF, C_IMP_FN, C_JT, C_JN, C_PERIOD_PEAK = 8, 9, 10, 11, 12, 13
+C_SIZE = 14
 # surface table columns
 S_H, S_LAW, S_MU, S_VD, S_E, S_R, S_SY, S_CJ, S_DC, S_PC, S_B = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
 S_SIZE = 11
@@ -72,9 +73,9 @@ def shape_offsets(n: int, n_integral: int, general: bool = False) -> dict:
     P_*: the flat parameter array (link geometry (NL values), masses, g, gains, targets,
     switch height, tolerances, maximum step). R_*: an output row (``emit_output``): t, the
     state, the contact impulse since the previous row (tangential, normal), the torque
-    acting, actuators acting (1/0), the tip velocity (x, y). W_*: the right-hand side's
-    scratch (generalized forces, torques, PID error and rate, then N*N for the mass matrix
-    factor)."""
+    acting, actuators acting (1/0), the tip velocity (x, y), the peak normal contact force
+    since the previous row. W_*: the right-hand side's scratch (generalized forces, torques,
+    PID error and rate, then N*N for the mass matrix factor)."""
     size = 2 * n + n_integral
     nl = geometry_size(n, general)
     p = nl - n  # the parameters after the geometry block move by its extra entries
@@ -103,7 +104,8 @@ def shape_offsets(n: int, n_integral: int, general: bool = False) -> dict:
         'R_TAU': 3 + size,
         'R_ACT': 3 + size + n,
         'R_VTIP': 4 + size + n,
-        'R_SIZE': 6 + size + n,
+        'R_FPEAK': 6 + size + n,
+        'R_SIZE': 7 + size + n,
         'W_GEN': 0,
         'W_TAU': n,
         'W_ERR': 2 * n,

@@ -37,6 +37,7 @@ class Sample:
     tau: tuple
     wrench: tuple  # (F_tangential, F_normal) averaged over the period that ends at t
     mode: str
+    force_peak: float = 0.0  # the largest normal contact force in that period [N]
 
 
 MAX_KEPT_SAMPLES = 2e7  # publish_rate * t_max of a run that keeps its samples in memory
@@ -295,10 +296,9 @@ def run(
                 last_publish = t_pub
                 tau = integ.torque()
                 tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
+                mode = ctrl.mode if ctrl else st.mode
                 publish(
-                    Sample(
-                        t_pub, tuple(q), tuple(qd), tau_now, wrench, ctrl.mode if ctrl else st.mode
-                    ),
+                    Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench, mode, integ.take_peak()),
                     model.tip(q, qd)[2:],
                 )
                 k_pub += 1
@@ -335,7 +335,8 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
             tau = tuple(row[eq.R_TAU : eq.R_TAU + n]) if row[eq.R_ACT] else (0.0,) * n
             wrench = (row[eq.R_JT] / dt, row[eq.R_JN] / dt)
             publish(
-                Sample(row[eq.R_T], q, qd, tau, wrench, mode), tuple(row[eq.R_VTIP : eq.R_VTIP + 2])
+                Sample(row[eq.R_T], q, qd, tau, wrench, mode, row[eq.R_FPEAK]),
+                tuple(row[eq.R_VTIP : eq.R_VTIP + 2]),
             )
             last_t = row[eq.R_T]
 
@@ -350,10 +351,12 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
             tau if tau is not None else (0.0,) * n,
             integ.contact_force_now(),
             st.mode,
+            integ.contact_force_now()[1],
         ),
         model.tip(q, qd)[2:],
     )
     integ.take_impulse()
+    integ.take_peak()
     last_index = math.floor(t_max / dt * (1 + 1e-12))
     t_final = last_index * dt
     integ.start_output(dt, 1, sink=publish_rows)

@@ -22,8 +22,9 @@ P_L, P_M, P_G, P_KP, P_KD, P_KI = (
 P_TDOWN, P_TUP, P_SWITCH = _offsets['P_TDOWN'], _offsets['P_TUP'], _offsets['P_SWITCH']
 P_RTOL, P_ATOL, P_MAXSTEP = _offsets['P_RTOL'], _offsets['P_ATOL'], _offsets['P_MAXSTEP']
 P_CRTOL, P_CATOL, P_SIZE = _offsets['P_CRTOL'], _offsets['P_CATOL'], _offsets['P_SIZE']
-R_T, R_Y, R_JT, R_JN, R_TAU, R_ACT, R_VTIP, R_SIZE = (
-    _offsets[k] for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_SIZE')
+R_T, R_Y, R_JT, R_JN, R_TAU, R_ACT, R_VTIP, R_FPEAK, R_SIZE = (
+    _offsets[k]
+    for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_FPEAK', 'R_SIZE')
 )
 W_GEN, W_TAU, W_ERR, W_RATE, W_MASS, SCRATCH = (
     _offsets[k] for k in ('W_GEN', 'W_TAU', 'W_ERR', 'W_RATE', 'W_MASS', 'SCRATCH')
