@@ -3,6 +3,7 @@
 and refused, naming the joint and why, when it is not a planar chain the model can be."""
 
 import copy
+import json
 import math
 import os
 import re
@@ -732,3 +733,42 @@ def test_the_recorder_node_stores_a_urdf_arms_description(ros_env, tmp_path):
     assert 'description:' in stored and 'urdf:' not in stored
     scene = parse_scene(yaml.safe_load(stored), origin='stored')
     assert scene.link_com == ((0.32, 0.01), (0.30, -0.005), (0.25, 0.0))
+
+
+@pytest.mark.slow
+def test_impact_arm_run_of_a_urdf_arm_completes_and_puts_its_tip_on_the_surface(ros_env, tmp_path):
+    """The example's URDF arm, its tip 2 cm off the last link's axis, through ``impact-arm
+    run`` (simulator, controller and recorder over DDS, lockstep): complete, and at each
+    impact's first contact the recorded TF puts frame 'tip' on the surface, where Pinocchio
+    puts the contact sphere of the same URDF for the reported contact angles."""
+    pin = pytest.importorskip('pinocchio')
+    from test_any_arm import impact_arm_run, read_back
+    from test_visuals import stamp_ns, tip_in_world
+
+    urdf = open(os.path.join(os.path.dirname(EXAMPLE), 'three_link.urdf')).read()
+    urdf = urdf.replace('xyz="0.6 0 0"', 'xyz="0.6 0 0.02"')
+    (tmp_path / 'three_link.urdf').write_text(urdf)
+    (tmp_path / 'three.yaml').write_text(open(EXAMPLE).read().replace('cycles: 5', 'cycles: 2'))
+    code, out = impact_arm_run(
+        ['--scene', 'three.yaml', '--mode', 'lockstep', '--name', 'arm', '--out', 'runs'],
+        ros_env,
+        tmp_path,
+    )
+    assert code == 0 and ': complete' in out, out
+    by_topic = read_back(tmp_path / 'runs' / 'arm.mcap')
+    reports = [json.loads(m.data) for m in by_topic['/impact_report']]
+    assert len(reports) >= 2
+    (static,) = by_topic['/tf_static']
+    tip = next(t for t in static.transforms if t.child_frame_id == 'tip')
+    model = pin.buildModelFromXML(urdf)
+    data = model.createData()
+    for report in reports:
+        t0 = round(report['t_contact'] * 1e9)
+        first = next(m for m in by_topic['/tf'] if stamp_ns(m.transforms[0].header) >= t0 - 1)
+        at_contact = tip_in_world(first, tip)
+        assert at_contact[2] == pytest.approx(-1.2, abs=1e-6)  # the surface's height
+        q = np.radians(report['q_contact_deg'])
+        theta = np.concatenate([[q[0]], np.diff(q)])  # joint values: relative angles
+        config = np.array([math.cos(theta[0]), math.sin(theta[0]), theta[1], theta[2]])
+        pin.framesForwardKinematics(model, data, config)
+        assert at_contact == pytest.approx(data.oMf[model.getFrameId('tool')].translation, abs=1e-9)
