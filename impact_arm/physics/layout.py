@@ -57,35 +57,46 @@ ST_RHS, ST_STEPS, ST_REJECTED = 0, 1, 2
 TR_T, TR_PHASE, TR_DELTA, TR_FN, TR_FF, TR_VX, TR_VY, TR_ENERGY = 0, 1, 2, 3, 4, 5, 6, 7
 
 
-def shape_offsets(n: int, n_integral: int) -> dict:
-    """Offsets that depend on the scene shape (n links, n_integral PID integral states).
-    The generator writes them into each kernel module as compile-time constants; Python code
-    reads them from that module (``model.eq``) or from here.
+def geometry_size(n: int, general: bool) -> int:
+    """Entries of the link-geometry block P_L: the n lengths for uniform rods; for general
+    links also each link's centre of mass (along, across) and inertia about it, then the
+    contact point on the last link (along, across): ``equations.GEOMETRY``."""
+    return 4 * n + 2 if general else n
 
-    P_*: the flat parameter array (lengths, masses, g, gains, targets, switch height,
-    tolerances, maximum step). R_*: an output row (``emit_output``): t, the state, the contact
-    impulse since the previous row (tangential, normal), the torque acting, actuators acting
-    (1/0), the tip velocity (x, y), the peak normal contact force since the previous row.
-    W_*: the right-hand side's scratch (generalized forces,
-    torques, PID error and rate, then N*N for the mass matrix factor)."""
+
+def shape_offsets(n: int, n_integral: int, general: bool = False) -> dict:
+    """Offsets that depend on the scene shape (n links, n_integral PID integral states,
+    general links or uniform rods). The generator writes them into each kernel module as
+    compile-time constants; Python code reads them from that module (``model.eq``) or from
+    here.
+
+    P_*: the flat parameter array (link geometry (NL values), masses, g, gains, targets,
+    switch height, tolerances, maximum step). R_*: an output row (``emit_output``): t, the
+    state, the contact impulse since the previous row (tangential, normal), the torque
+    acting, actuators acting (1/0), the tip velocity (x, y), the peak normal contact force
+    since the previous row. W_*: the right-hand side's scratch (generalized forces, torques,
+    PID error and rate, then N*N for the mass matrix factor)."""
     size = 2 * n + n_integral
+    nl = geometry_size(n, general)
+    p = nl - n  # the parameters after the geometry block move by its extra entries
     return {
         'SIZE': size,
+        'NL': nl,
         'P_L': 0,
-        'P_M': n,
-        'P_G': 2 * n,
-        'P_KP': 2 * n + 1,
-        'P_KD': 3 * n + 1,
-        'P_KI': 4 * n + 1,
-        'P_TDOWN': 5 * n + 1,
-        'P_TUP': 6 * n + 1,
-        'P_SWITCH': 7 * n + 1,
-        'P_RTOL': 7 * n + 2,
-        'P_ATOL': 7 * n + 3,
-        'P_MAXSTEP': 7 * n + 4,
-        'P_CRTOL': 7 * n + 5,
-        'P_CATOL': 7 * n + 6,
-        'P_SIZE': 7 * n + 7,
+        'P_M': p + n,
+        'P_G': p + 2 * n,
+        'P_KP': p + 2 * n + 1,
+        'P_KD': p + 3 * n + 1,
+        'P_KI': p + 4 * n + 1,
+        'P_TDOWN': p + 5 * n + 1,
+        'P_TUP': p + 6 * n + 1,
+        'P_SWITCH': p + 7 * n + 1,
+        'P_RTOL': p + 7 * n + 2,
+        'P_ATOL': p + 7 * n + 3,
+        'P_MAXSTEP': p + 7 * n + 4,
+        'P_CRTOL': p + 7 * n + 5,
+        'P_CATOL': p + 7 * n + 6,
+        'P_SIZE': p + 7 * n + 7,
         'R_T': 0,
         'R_Y': 1,
         'R_JT': 1 + size,

@@ -382,7 +382,7 @@ def stepping_loop(
                 cap = contact_step_cap(y, P, SURF, C, levels, scratch)
             else:
                 # the dent is forgotten once the tip has risen above the surface again
-                y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])[1]
+                y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
                 for s in range(ns):
                     if levels[s] != SURF[s, S_H] and y_tip > SURF[s, S_H]:
                         levels[s] = SURF[s, S_H]

@@ -33,7 +33,7 @@ def record_point(t, y, P, I, SURF, C, levels, trace, tcount, y_mid):
         row = trace[tcount[0]]
         row[TR_T], row[TR_PHASE], row[TR_DELTA] = t, C[C_PHASE], delta
         row[TR_FN], row[TR_FF], row[TR_VX], row[TR_VY] = fn, ff, vx, vy
-        energies = link_energies(y[:N], y[N : 2 * N], P[P_L : P_L + N], P[P_M : P_M + N])
+        energies = link_energies(y[:N], y[N : 2 * N], P[P_L : P_L + NL], P[P_M : P_M + N])
         for i in range(N):
             row[TR_ENERGY + i] = energies[i]
         tcount[0] += 1
@@ -88,7 +88,7 @@ def apply_event(slot, t, y, P, I, SURF, C, levels, info):
             # located separation leaves y_B on the new level to rounding, and a +1e-20 there
             # made the next contact undetectable (the tip of a controller pressing down
             # tunnelled through the floor). Keep the level strictly below the tip.
-            y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])[1]
+            y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
             levels[s] = min(levels[s] - C[C_DR], y_tip - 4.0 * np.spacing(abs(y_tip)))
             info[0], info[1], info[2] = C[C_PEAK], C[C_DM], C[C_DR]
             C[C_PHASE], C[C_SURF] = FREE, -1.0

@@ -16,7 +16,7 @@ from .injected import *
 @jit_leaf
 def accelerations(q, qd, generalized, P, out, S):
     """q̈ into ``out``; S is N*N scratch for the general case (no allocation here)."""
-    L = P[P_L : P_L + N]
+    L = P[P_L : P_L + NL]
     m = P[P_M : P_M + N]
     if HAS_ACCEL:
         values = accel(q, qd, generalized, L, m, P[P_G])
@@ -51,7 +51,7 @@ def accelerations(q, qd, generalized, P, out, S):
 @jit_leaf
 def contact_forces(y, P, SURF, C, levels):
     """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
-    L = P[P_L : P_L + N]
+    L = P[P_L : P_L + NL]
     tip_state = tip(y[:N], y[N : 2 * N], L)
     s = int(C[C_SURF])
     phase = int(C[C_PHASE])
@@ -97,7 +97,7 @@ def contact_frequency(y, P, SURF, C, levels, work):
     if not fn > 0.0 or not delta > base:
         return 0.0
     q = y[:N]
-    jac = tip_jacobian(q, P[P_L : P_L + N])
+    jac = tip_jacobian(q, P[P_L : P_L + NL])
     zero, gen, a1, a0 = work[:N], work[N : 2 * N], work[2 * N : 3 * N], work[3 * N : 4 * N]
     for i in range(N):
         zero[i] = 0.0
@@ -135,7 +135,7 @@ def control_torque(y, P, I, C, tau_held, tau, error, rate):
             target,
             P[P_KP : P_KP + N],
             P[P_KD : P_KD + N],
-            gravity_forces(q, P[P_L : P_L + N], P[P_M : P_M + N], P[P_G]),
+            gravity_forces(q, P[P_L : P_L + NL], P[P_M : P_M + N], P[P_G]),
             tau,
         )
         return True
@@ -172,7 +172,7 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE:
             delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
-            jac = tip_jacobian(q, P[P_L : P_L + N])
+            jac = tip_jacobian(q, P[P_L : P_L + NL])
             for i in range(N):
                 generalized[i] += jac[i] * ff + jac[N + i] * fn
     acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
