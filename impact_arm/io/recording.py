@@ -182,10 +182,13 @@ def recorded_scene(path: str | os.PathLike) -> Any:
     """The scene a recording stores (the recorder's and ``simulate --mcap``'s ``scene``
     metadata), as a ``Scene``; None when it stores none."""
     from ..physics.scene import scene_from_text
-    from .mcap_ros2 import read_metadata
+    from .mcap_ros2 import read_metadata, unreadable_reason
 
     for f in mcap_files(path):
-        stored = read_metadata(f).get('scene', {})
+        try:
+            stored = read_metadata(f).get('scene', {})
+        except Exception as exc:  # noqa: BLE001 - any reader failure: not an MCAP file
+            raise RecordingInputError(f'recording {f}: {unreadable_reason(f, exc)}') from None
         if stored.get('yaml'):
             return scene_from_text(
                 stored['yaml'], origin=f'the scene stored in {f}', path=stored.get('path', '')
