@@ -24,12 +24,20 @@ from .common import table
 
 
 def add_arguments(parser):
-    parser.add_argument('--scene', default='paper')
+    parser.add_argument('--scene', default='paper', help='scene file or installed name')
     parser.add_argument('--seconds', type=float, default=10.0, help='simulated s per run')
-    parser.add_argument('--latencies', type=int, nargs='*', default=[0, 1, 2, 3])
+    parser.add_argument(
+        '--latencies',
+        type=int,
+        nargs='*',
+        default=[0, 1, 2, 3],
+        help='command latencies to run, in control periods',
+    )
     parser.add_argument('--jitter', type=float, default=0.3, help='offline jitter runs')
     parser.add_argument('--dds', action='store_true', help='also over DDS (nodes)')
-    parser.add_argument('--dds-seconds', type=float, default=4.0)
+    parser.add_argument(
+        '--dds-seconds', type=float, default=4.0, help='simulated s per run over DDS'
+    )
 
 
 def _row(kind, latency, prediction, impacts, contacts, delta_m, failed=''):
