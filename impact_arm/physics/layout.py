@@ -62,10 +62,14 @@ def shape_offsets(n: int, n_integral: int) -> dict:
     reads them from that module (``model.eq``) or from here.
 
     P_*: the flat parameter array (lengths, masses, g, gains, targets, switch height,
-    tolerances, maximum step). R_*: an output row (``emit_output``): t, the state, the contact
-    impulse since the previous row (tangential, normal), the torque acting, actuators acting
-    (1/0), the tip velocity (x, y). W_*: the right-hand side's scratch (generalized forces,
-    torques, PID error and rate, then N*N for the mass matrix factor)."""
+    tolerances, maximum step, then the joints' damping, Coulomb friction, its smoothing rate
+    and armature, and two switches: P_JFRIC_ON (some joint has damping or friction) and
+    P_ARM_ON (some joint has armature)). Joint values are values, not shape: zero is off, and
+    a scene that changes them never compiles a new kernel. R_*: an output row
+    (``emit_output``): t, the state, the contact impulse since the previous row (tangential,
+    normal), the torque acting, actuators acting (1/0), the tip velocity (x, y). W_*: the
+    right-hand side's scratch (generalized forces, torques, PID error and rate, then N*N for
+    the mass matrix factor)."""
     size = 2 * n + n_integral
     return {
         'SIZE': size,
@@ -83,7 +87,13 @@ def shape_offsets(n: int, n_integral: int) -> dict:
         'P_MAXSTEP': 7 * n + 4,
         'P_CRTOL': 7 * n + 5,
         'P_CATOL': 7 * n + 6,
-        'P_SIZE': 7 * n + 7,
+        'P_DAMP': 7 * n + 7,
+        'P_FRIC': 8 * n + 7,
+        'P_FVD': 9 * n + 7,
+        'P_ARM': 10 * n + 7,
+        'P_JFRIC_ON': 11 * n + 7,
+        'P_ARM_ON': 11 * n + 8,
+        'P_SIZE': 11 * n + 9,
         'R_T': 0,
         'R_Y': 1,
         'R_JT': 1 + size,

@@ -39,7 +39,10 @@ class ImpactBuilder:
         n = model.n
         q, qd = y[:n], y[n : 2 * n]
         _, _, vx, vy = self._tip(q, qd, model.L)
-        parts = [float(T) for T in self._energies(q, qd, model.L, model.m)]
+        rotors = model.rotor_energies(qd)  # a joint's rotor turns with its link
+        parts = [
+            float(T) + float(J) for T, J in zip(self._energies(q, qd, model.L, model.m), rotors)
+        ]
         return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]
 
     def feed(self, event: Event) -> dict | None:

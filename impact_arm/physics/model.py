@@ -52,6 +52,11 @@ class ArmModel:
         self.L = np.array(scene.lengths, dtype=float)
         self.m = np.array(scene.masses, dtype=float)
         self.g = scene.gravity
+        joints = scene.joint_specs
+        self.damping = np.array([j.damping for j in joints], dtype=float)
+        self.friction = np.array([j.friction for j in joints], dtype=float)
+        self.friction_v_d = np.array([j.friction_v_d for j in joints], dtype=float)
+        self.armature = np.array([j.armature for j in joints], dtype=float)
         self.surfaces = tuple(
             SurfaceModel(
                 i,
@@ -108,7 +113,24 @@ class ArmModel:
         return self.eq.gravity_forces(np.asarray(q, float), self.L, self.m, self.g)
 
     def link_energies(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
-        return self.eq.link_energies(np.asarray(q, float), np.asarray(qd, float), self.L, self.m)
+        """Kinetic energy of each link, its joint's rotor (armature) included."""
+        qd = np.asarray(qd, float)
+        links = np.asarray(self.eq.link_energies(np.asarray(q, float), qd, self.L, self.m))
+        return links + self.rotor_energies(qd)
+
+    def joint_rates(self, qd: ArrayLike) -> np.ndarray:
+        """ω_i = q̇_i - q̇_(i-1): each joint's relative rate (q̇_0 = 0)."""
+        qd = np.asarray(qd, float)
+        return np.diff(qd, prepend=0.0)
+
+    def rotor_energies(self, qd: ArrayLike) -> np.ndarray:
+        """½ J_i ω_i²: the kinetic energy of each joint's rotor."""
+        return 0.5 * self.armature * self.joint_rates(qd) ** 2
+
+    def joint_friction_torques(self, qd: ArrayLike) -> np.ndarray:
+        """τ_i = -(d_i ω_i + f_i tanh(ω_i / v_i)): what each joint's bearing applies."""
+        omega = self.joint_rates(qd)
+        return -(self.damping * omega + self.friction * np.tanh(omega / self.friction_v_d))
 
     def potential_energy(self, q: ArrayLike) -> float:
         return self.eq.potential(np.asarray(q, float), self.L, self.m, self.g)[0]
@@ -118,7 +140,9 @@ class ArmModel:
         values = self.eq.mass_and_rhs(
             np.asarray(q, float), np.zeros(n), np.zeros(n), self.L, self.m, self.g
         )
-        return np.array(values[: n * n]).reshape(n, n)
+        M = np.array(values[: n * n]).reshape(n, n)
+        T = np.eye(n) - np.eye(n, k=-1)  # ω = T q̇
+        return M + T.T @ np.diag(self.armature) @ T
 
     def parameters(
         self,
@@ -144,6 +168,12 @@ class ArmModel:
         P[eq.P_RTOL], P[eq.P_ATOL], P[eq.P_MAXSTEP] = rtol, atol, max_step
         P[eq.P_CRTOL] = rtol if contact_rtol is None else contact_rtol
         P[eq.P_CATOL] = atol if contact_atol is None else contact_atol
+        P[eq.P_DAMP : eq.P_DAMP + n] = self.damping
+        P[eq.P_FRIC : eq.P_FRIC + n] = self.friction
+        P[eq.P_FVD : eq.P_FVD + n] = self.friction_v_d
+        P[eq.P_ARM : eq.P_ARM + n] = self.armature
+        P[eq.P_JFRIC_ON] = 1.0 if self.damping.any() or self.friction.any() else 0.0
+        P[eq.P_ARM_ON] = 1.0 if self.armature.any() else 0.0
         return P
 
     def initial_state(self) -> 'ArmState':

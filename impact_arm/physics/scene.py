@@ -60,6 +60,17 @@ class Surface:
 
 
 @dataclass(frozen=True)
+class JointSpec:
+    """What a real joint adds to the ideal one (all zero: the article's frictionless joint).
+    Each acts on the joint's relative rate ω_i = q̇_i - q̇_(i-1) (docs/model.md)."""
+
+    damping: float = 0.0  # viscous [N m s/rad]
+    friction: float = 0.0  # Coulomb [N m], smoothed as friction tanh(ω / friction_v_d)
+    friction_v_d: float = 0.01  # smoothing rate [rad/s]
+    armature: float = 0.0  # rotor inertia reflected to the joint [kg m^2]
+
+
+@dataclass(frozen=True)
 class ControllerSpec:
     law: str  # q | pid | pd | none
     space: str  # absolute | joint (angles the PID/PD acts on)
@@ -99,12 +110,18 @@ class Scene:
     t_max: float  # hard stop of a run [s]
     publish_rate: float  # Hz of sampled output (joint states)
     integrator: IntegratorSpec
+    joints: tuple[JointSpec, ...] = ()  # one per link; () is the ideal joints
     source_text: str = field(default='', compare=False, repr=False)
     source_path: str = field(default='', compare=False, repr=False)
 
     @property
     def n_links(self) -> int:
         return len(self.lengths)
+
+    @property
+    def joint_specs(self) -> tuple[JointSpec, ...]:
+        """One ``JointSpec`` per joint (ideal ones when the scene gives no ``joints``)."""
+        return self.joints or tuple(JointSpec() for _ in self.lengths)
 
 
 # --- schema -----------------------------------------------------------------------------
@@ -129,6 +146,12 @@ MATERIAL = {
 # radians, the contact laws are fitted on lab-scale metal contact, and the numbers must stay far
 # from float64's range; docs/scene.md ("Physical ranges") gives each reason.
 LINK = {'length': _num(1e-3, 1e3, unit='m'), 'mass': _num(1e-6, 1e6, unit='kg')}
+JOINT = {
+    'damping': _num(0, 1e6, unit='N m s/rad', default=0.0),
+    'friction': _num(0, 1e6, unit='N m', default=0.0),
+    'friction_v_d': _num(1e-6, 10, unit='rad/s', default=0.01),
+    'armature': _num(0, 1e6, unit='kg m^2', default=0.0),
+}
 SURFACE = {
     'height': _num(-1e3, 1e3, unit='m'),
     'law': _choice(CONTACT_LAWS, 'elastoplastic'),
@@ -160,6 +183,7 @@ SCHEMA = {
     'description': ('str', None, '', ''),
     'gravity': _num(0, 1000, unit='m/s^2', default=9.81),
     'links': ('list', LINK, '', REQUIRED),
+    'joints': ('list', JOINT, '', ()),
     'tip_radius': _num(1e-6, 1, unit='m'),
     'materials': ('map', MATERIAL, '', REQUIRED),
     'arm_material': ('str', None, '', 'arm'),
@@ -425,6 +449,9 @@ def parse_scene(
                 f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
                 f'E and S_y',
             )
+    joints = tuple(JointSpec(**j) for j in raw['joints'])
+    if joints and len(joints) != n:
+        check.fail('joints', f'has {len(joints)} entries: must have one per link ({n}) or none')
     _check_physics(check, raw, surfaces, arm)
     integ = IntegratorSpec(**raw['integrator'])
     return Scene(
@@ -443,6 +470,7 @@ def parse_scene(
         t_max=raw['t_max'],
         publish_rate=raw['publish_rate'],
         integrator=integ,
+        joints=joints,
         source_text=text,
         source_path=path,
     )
@@ -509,6 +537,34 @@ def _check_physics(check, raw, surfaces, arm):
                     f'{rate:.3g} 1/s on link {k + 1} (inertia {inertia:.3g} kg m^2); must '
                     f'be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: beyond the run budget)',
                 )
+    for k, joint in enumerate(raw['joints'][: len(lengths)]):
+        inertia = masses[k] * lengths[k] ** 2 / 3 + joint['armature']
+        # near ω = 0 smoothed Coulomb friction is a damper of slope friction / friction_v_d
+        for key, rate in (
+            ('damping', joint['damping'] / inertia),
+            ('friction', joint['friction'] / joint['friction_v_d'] / inertia),
+        ):
+            if rate > MAX_LOOP_RATE:
+                check.fail(
+                    f'joints[{k}].{key}',
+                    f'= {joint[key]:g} is out of range: gives a decay rate of {rate:.3g} 1/s '
+                    f'on link {k + 1} (inertia {inertia:.3g} kg m^2'
+                    + (
+                        f', friction_v_d {joint["friction_v_d"]:g} rad/s'
+                        if key == 'friction'
+                        else ''
+                    )
+                    + f'); must be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: '
+                    f'beyond the run budget)',
+                )
+        rod = masses[k] * lengths[k] ** 2 / 12  # link k about its centre
+        if joint['armature'] > MAX_MASS_RATIO * rod:
+            check.fail(
+                f'joints[{k}].armature',
+                f'= {joint["armature"]:g} is out of range: must be <= {MAX_MASS_RATIO:g} times '
+                f"link {k + 1}'s own inertia ({MAX_MASS_RATIO * rod:.3g} kg m^2: the mass "
+                f'matrix becomes too ill-conditioned to solve)',
+            )
     if 0 < c['rate'] < 1:
         check.fail(
             'controller.rate',

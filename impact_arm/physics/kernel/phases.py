@@ -32,8 +32,12 @@ def record_point(t, y, P, I, SURF, C, levels, trace, tcount, y_mid):
         row[TR_T], row[TR_PHASE], row[TR_DELTA] = t, C[C_PHASE], delta
         row[TR_FN], row[TR_FF], row[TR_VX], row[TR_VY] = fn, ff, vx, vy
         energies = link_energies(y[:N], y[N : 2 * N], P[P_L : P_L + N], P[P_M : P_M + N])
+        previous = 0.0
         for i in range(N):
-            row[TR_ENERGY + i] = energies[i]
+            # a joint's rotor (armature) turns with its link: its energy is booked there
+            omega = y[N + i] - previous
+            previous = y[N + i]
+            row[TR_ENERGY + i] = energies[i] + 0.5 * P[P_ARM + i] * omega * omega
         tcount[0] += 1
     return delta
 
