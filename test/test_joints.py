@@ -1,10 +1,13 @@
 """Joint damping, Coulomb friction and armature (scene ``joints``): checked against closed forms,
 an energy balance and Pinocchio, never against numbers the code produced."""
 
+import json
 import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from impact_arm.physics.errors import SceneError
 from impact_arm.physics.integrator import PhaseIntegrator
@@ -285,3 +288,66 @@ def test_reported_effort_is_the_motor_torque_not_the_friction():
     tick = arm.step()
     assert tick.effort == [3.0, -1.0]
     assert any(abs(v) > 0.01 for v in tick.velocity)  # it moved: friction was acting
+
+
+JOINT_LEAVES = st.one_of(
+    st.sampled_from([0.0, 1e-4, 0.01, 1.0, 100 / 12, 1e3, 1e6, -1.0, 5e-324, 1e308]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.none(),
+    st.text(max_size=3),
+)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(
+    st.lists(
+        st.dictionaries(
+            st.sampled_from(['damping', 'friction', 'friction_v_d', 'armature', 'extra']),
+            JOINT_LEAVES,
+            max_size=4,
+        ),
+        min_size=1,
+        max_size=3,
+    )
+)
+def test_any_joints_run_to_a_finite_end_or_are_refused_in_one_line(entries):
+    """Fuzzed ``joints`` on the article's scene: refused in one line, or a run (its first
+    impact, with the article's controller) whose every number is finite or which stops by
+    name at a limit."""
+    from impact_arm.physics.simulate import run
+
+    try:
+        scene = scene_from(joints=entries, cycles=1, t_max=0.6)
+    except SceneError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 600
+        return
+    result = run(scene, keep_samples=False)
+    if result.error:
+        assert '\n' not in result.error
+        return
+    values = json.dumps(result.to_json())
+    assert 'NaN' not in values and 'Infinity' not in values
+
+
+def test_joint_values_are_sweep_keys_even_where_the_scene_states_no_joints():
+    """A sweep over joints[1].damping on the article's scene (which has no ``joints``): the
+    run is the scene with that joint damped: its first impact comes at another time."""
+    from impact_arm.calibration.study import Study
+
+    study = Study('paper')
+    scene = study.scene({'joints[1].damping': 2.0})
+    assert [j.damping for j in scene.joint_specs] == [0.0, 2.0]
+    ideal, damped = study.run({'cycles': 1}), study.run({'cycles': 1, 'joints[1].damping': 2.0})
+    assert not ideal.error and not damped.error
+    assert abs(damped.impacts[0]['t_contact'] - ideal.impacts[0]['t_contact']) > 1e-3
+    refused = study.run({'joints[2].damping': 2.0})
+    assert 'joints[2]' in refused.error and 'has 2 entries' in refused.error
+
+
+def test_joint_values_are_fit_parameters():
+    from impact_arm.calibration.fit import parameter_specs
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    scene = apply_overrides(Study('paper').data, {'joints[0].friction': 0.5})
+    (spec,) = parameter_specs(Study(scene), {'joints[0].friction': (0.0, 3.0)})
+    assert (spec.key, spec.start) == ('joints[0].friction', 0.5)
