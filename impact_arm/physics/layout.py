@@ -12,9 +12,11 @@ LAW_HELD, LAW_Q, LAW_PID, LAW_NONE = 0, 1, 2, 3
 C_PHASE, C_SURF, C_MODE, C_DR, C_RR, C_DM, C_PM, C_PEAK = 0, 1, 2, 3, 4, 5, 6, 7
 C_IMP_T, C_IMP_FF, C_IMP_FN, C_JT, C_JN = 8, 9, 10, 11, 12
 C_SIZE = 13
-# surface table columns
+# surface table columns; a mounted surface's plate: index of its displacement z in the state
+# (its rate follows; -1: rigidly mounted), mass, stiffness, damping coefficient
 S_H, S_LAW, S_MU, S_VD, S_E, S_R, S_SY, S_CJ, S_DC, S_PC, S_B = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
-S_SIZE = 11
+S_MOUNT, S_MM, S_MK, S_MC = 11, 12, 13, 14
+S_SIZE = 15
 # integer options I
 I_LAW, I_SPACE, I_ACT, I_TRACE, I_METHOD = 0, 1, 2, 3, 4
 I_SIZE = 5
@@ -56,8 +58,10 @@ ST_RHS, ST_STEPS, ST_REJECTED = 0, 1, 2
 TR_T, TR_PHASE, TR_DELTA, TR_FN, TR_FF, TR_VX, TR_VY, TR_ENERGY = 0, 1, 2, 3, 4, 5, 6, 7
 
 
-def shape_offsets(n: int, n_integral: int) -> dict:
-    """Offsets that depend on the scene shape (n links, n_integral PID integral states).
+def shape_offsets(n: int, n_integral: int, n_mount: int = 0) -> dict:
+    """Offsets that depend on the scene shape (n links, n_integral PID integral states,
+    n_mount mounted surfaces: the state is q, q̇, the integrals, then each plate's z, ż from
+    Y_MOUNT on).
     The generator writes them into each kernel module as compile-time constants; Python code
     reads them from that module (``model.eq``) or from here.
 
@@ -70,9 +74,10 @@ def shape_offsets(n: int, n_integral: int) -> dict:
     normal), the torque acting, actuators acting (1/0), the tip velocity (x, y). W_*: the
     right-hand side's scratch (generalized forces, torques, PID error and rate, then N*N for
     the mass matrix factor)."""
-    size = 2 * n + n_integral
+    size = 2 * n + n_integral + 2 * n_mount
     return {
         'SIZE': size,
+        'Y_MOUNT': 2 * n + n_integral,
         'P_L': 0,
         'P_M': n,
         'P_G': 2 * n,

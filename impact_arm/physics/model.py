@@ -20,7 +20,7 @@ import numpy as np
 from . import layout
 from .contact import ContactConstants, contact_constants
 from .equations import load_equations
-from .scene import Scene
+from .scene import Mount, Scene
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -41,6 +41,8 @@ class SurfaceModel:
     mu: float
     v_d: float
     constants: ContactConstants
+    mount: Mount | None = None  # None: rigid
+    mount_state: int = -1  # index of the plate's z in the state (ż follows), -1: rigid
 
 
 class ArmModel:
@@ -57,6 +59,16 @@ class ArmModel:
         self.friction = np.array([j.friction for j in joints], dtype=float)
         self.friction_v_d = np.array([j.friction_v_d for j in joints], dtype=float)
         self.armature = np.array([j.armature for j in joints], dtype=float)
+        ctrl = scene.controller
+        # integral states exist only if a PID is evaluated continuously in the right-hand side
+        self.n_integral = self.n if (ctrl.law == 'pid' and ctrl.rate == 0) else 0
+        struck = [s for s in scene.surfaces if s.law != 'none']
+        # each mounted surface's plate adds z, ż to the state, after the integrals
+        mount_states, k = [], 2 * self.n + self.n_integral
+        for surface in struck:
+            mount_states.append(k if surface.mount is not None else -1)
+            k += 2 if surface.mount is not None else 0
+        self.n_mount = len([surface for surface in struck if surface.mount is not None])
         self.surfaces = tuple(
             SurfaceModel(
                 i,
@@ -65,13 +77,12 @@ class ArmModel:
                 s.mu,
                 s.v_d,
                 contact_constants(scene.arm_material, s.material, scene.tip_radius),
+                s.mount,
+                mount_states[i],
             )
-            for i, s in enumerate(s for s in scene.surfaces if s.law != 'none')
+            for i, s in enumerate(struck)
         )
-        ctrl = scene.controller
-        # integral states exist only if a PID is evaluated continuously in the right-hand side
-        self.n_integral = self.n if (ctrl.law == 'pid' and ctrl.rate == 0) else 0
-        self.size = 2 * self.n + self.n_integral
+        self.size = 2 * self.n + self.n_integral + 2 * self.n_mount
         # Model only what the scene needs: the generated module has no gravity terms for g = 0,
         # and its kernel no contact code without surfaces, no friction term when every μ = 0.
         self.eq = load_equations(
@@ -80,6 +91,7 @@ class ArmModel:
             contact=bool(self.surfaces),
             friction=any(s.mu > 0 for s in self.surfaces),
             n_integral=self.n_integral,
+            n_mount=self.n_mount,
         )
         self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
         for s in self.surfaces:
@@ -96,6 +108,10 @@ class ArmModel:
                 c.delta_c,
                 c.P_c,
                 c.B,
+                s.mount_state,
+                s.mount.mass if s.mount else 0.0,
+                s.mount.stiffness if s.mount else 0.0,
+                s.mount.damping if s.mount else 0.0,
             )
         if not self.surfaces:
             self.surface_table = self.surface_table[:0]
@@ -185,7 +201,8 @@ class ArmModel:
 
 
 class ArmState:
-    """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID)]; the
+    """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID), then z, ż
+    of each mounted surface's plate (``SurfaceModel.mount_state``)]; the
     contact phase machine lives in the flat array ``c`` the kernel reads (layout.C_*)."""
 
     def __init__(self, t: float, y: ArrayLike, levels: ArrayLike, n: int):

@@ -51,12 +51,28 @@ def reduced_modulus(a: Material, b: Material) -> float:
 
 
 @dataclass(frozen=True)
+class Mount:
+    """A surface's compliant mount: the surface is a plate of ``mass`` on a spring-damper
+    along its normal, at rest at its height at t = 0 (docs/model.md)."""
+
+    mass: float  # [kg]
+    stiffness: float  # [N/m]
+    damping_ratio: float = 0.0  # c = 2 damping_ratio sqrt(stiffness mass)
+
+    @property
+    def damping(self) -> float:
+        """The damping coefficient c [N s/m]."""
+        return 2.0 * self.damping_ratio * math.sqrt(self.stiffness * self.mass)
+
+
+@dataclass(frozen=True)
 class Surface:
     height: float  # y of the horizontal surface [m]; the tip strikes it from above
     law: str  # elastoplastic | hertz | none
     mu: float  # Coulomb friction coefficient (0 = no friction term)
     v_d: float  # tanh smoothing velocity [m/s]
     material: Material
+    mount: Mount | None = None  # None: rigidly mounted
 
 
 @dataclass(frozen=True)
@@ -158,6 +174,16 @@ SURFACE = {
     'mu': _num(0, 10, unit='-', default=0.0),
     'v_d': _num(1e-6, 10, unit='m/s', default=0.02),
     'material': ('str', None, '', 'surface'),
+    'mount': (
+        'dict',
+        {
+            'mass': _num(1e-6, 1e6, unit='kg'),
+            'stiffness': _num(0, 1e13, unit='N/m'),
+            'damping_ratio': _num(0, 10, unit='-', default=0.0),
+        },
+        '',
+        None,
+    ),
 }
 CONTROLLER = {
     'law': _choice(CONTROL_LAWS, 'q'),
@@ -402,6 +428,7 @@ def parse_scene(
             mu=s['mu'],
             v_d=s['v_d'],
             material=material(f'surfaces[{i}].material', s['material']),
+            mount=Mount(**s['mount']) if s['mount'] is not None else None,
         )
         for i, s in enumerate(raw['surfaces'])
     )
@@ -522,6 +549,29 @@ def _check_physics(check, raw, surfaces, arm):
                 f'{MIN_CONTACT_TIME:g} s (stiffness E* = {e_red:.3g} Pa against link '
                 f'masses down to {min(masses):g} kg: steps would fall under the '
                 f'resolution of t)',
+            )
+    for i, sfc in enumerate(surfaces):
+        if sfc.mount is None or sfc.law == 'none':
+            continue
+        mount = sfc.mount
+        omega = math.sqrt(mount.stiffness / mount.mass)
+        for key, rate in (('stiffness', omega), ('damping_ratio', 2 * mount.damping_ratio * omega)):
+            if rate > MAX_LOOP_RATE:
+                check.fail(
+                    f'surfaces[{i}].mount.{key}',
+                    f'= {getattr(mount, key):g} is out of range: gives the plate a rate of '
+                    f'{rate:.3g} 1/s (mass {mount.mass:g} kg, stiffness {mount.stiffness:g} '
+                    f'N/m); must be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: beyond '
+                    f'the run budget)',
+                )
+        e_red = reduced_modulus(arm, sfc.material)
+        t_c = 2.87 * (mount.mass**2 / (raw['tip_radius'] * e_red**2)) ** 0.2
+        if t_c < MIN_CONTACT_TIME:
+            check.fail(
+                f'surfaces[{i}].mount.mass',
+                f'= {mount.mass:g} is out of range: the tip would bounce off the plate in '
+                f'~{t_c:.2g} s (Hertz at 1 m/s); must be >= {MIN_CONTACT_TIME:g} s: steps '
+                f'would fall under the resolution of t',
             )
     c = raw['controller']
     for k, (length, mass) in enumerate(zip(lengths, masses)):

@@ -87,13 +87,44 @@ def add_joint_friction(qd, P, generalized):
 
 
 @jit_leaf
+def plate_displacement(y, SURF, s):
+    """z of surface s's plate from its rest height (0 when rigidly mounted)."""
+    if HAS_MOUNT:
+        k = int(SURF[s, S_MOUNT])
+        if k >= 0:
+            return y[k]
+    return 0.0
+
+
+@jit_leaf
+def surface_level(y, SURF, levels, s):
+    """Height of surface s where the tip meets it now: its level (lowered by a dent), moved
+    with its plate's displacement z when it is mounted."""
+    if HAS_MOUNT:
+        k = int(SURF[s, S_MOUNT])
+        if k >= 0:
+            return levels[s] + y[k]
+    return levels[s]
+
+
+@jit_leaf
+def surface_rate(y, SURF, s):
+    """ż of surface s's plate (0 when rigidly mounted)."""
+    if HAS_MOUNT:
+        k = int(SURF[s, S_MOUNT])
+        if k >= 0:
+            return y[k + 1]
+    return 0.0
+
+
+@jit_leaf
 def contact_forces(y, P, SURF, C, levels):
     """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
     L = P[P_L : P_L + N]
     tip_state = tip(y[:N], y[N : 2 * N], L)
     s = int(C[C_SURF])
     phase = int(C[C_PHASE])
-    delta = levels[s] - tip_state[1]
+    delta = surface_level(y, SURF, levels, s) - tip_state[1]
     if phase == ELASTIC:
         fn = hertz_force(delta, SURF[s, S_E], SURF[s, S_R])
     elif phase == ELASTOPLASTIC:
@@ -147,6 +178,10 @@ def contact_frequency(y, P, SURF, C, levels, work):
     inverse_mass = 0.0
     for i in range(N):
         inverse_mass += jac[N + i] * (a1[i] - a0[i])
+    if HAS_MOUNT:
+        s = int(C[C_SURF])
+        if SURF[s, S_MOUNT] >= 0:
+            inverse_mass += 1.0 / SURF[s, S_MM]  # the plate recoils too: two masses in series
     return math.sqrt(max(0.0, 1.5 * fn / (delta - base) * inverse_mass))
 
 
@@ -207,6 +242,7 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     rate = W[W_RATE : W_RATE + N]
     for i in range(N):
         generalized[i] = 0.0
+    fn = 0.0
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE:
             delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
@@ -226,3 +262,14 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
         # control_torque left the PID error in ``error``
         for i in range(NI):
             out[2 * N + i] = error[i] if acting else 0.0
+    if HAS_MOUNT:
+        # each plate on its spring-damper about rest; the one struck carries the contact force
+        struck = int(C[C_SURF]) if int(C[C_PHASE]) != FREE else -1
+        for s in range(SURF.shape[0]):
+            k = int(SURF[s, S_MOUNT])
+            if k >= 0:
+                force = -SURF[s, S_MK] * y[k] - SURF[s, S_MC] * y[k + 1]
+                if s == struck:
+                    force -= fn
+                out[k] = y[k + 1]
+                out[k + 1] = force / SURF[s, S_MM]
