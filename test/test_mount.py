@@ -161,3 +161,66 @@ def test_the_plate_rings_at_its_natural_frequency_after_the_impact():
     peaks = [np.max(np.abs(z[cross[i] : cross[i + 1]])) for i in range(len(cross) - 1)]
     ratios = np.array(peaks[1:]) / np.array(peaks[:-1])
     assert np.allclose(ratios, math.exp(-zeta * omega * math.pi / omega_d), rtol=1e-3)
+
+
+def mounted_paper_scene(**mount):
+    surface = {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.2, 'material': 'steel'}
+    surface['mount'] = {'mass': 5.0, 'stiffness': 2e7, 'damping_ratio': 0.05, **mount}
+    return scene_from(surfaces=[surface], cycles=2, t_max=1.5, publish_rate=2000.0)
+
+
+def test_an_offline_recording_holds_the_plate_and_its_moving_frame(tmp_path):
+    """simulate --mcap of a mounted floor, read back with rosbags: /surface_mounts has one
+    sample per joint state, named by the surface's frame, its z the state the run sampled;
+    the surface frame leaves /tf_static for /tf, at its rest height plus z."""
+    from pathlib import Path
+
+    from rosbags.highlevel import AnyReader
+
+    from impact_arm.contract import SURFACE_MOUNTS
+    from impact_arm.io.offline_mcap import OfflineRecorder
+    from impact_arm.physics.simulate import run
+
+    scene = mounted_paper_scene()
+    path = tmp_path / 'mounted.mcap'
+    rec = OfflineRecorder(path, scene)
+    result = None
+    try:
+        result = run(scene, observer=rec)
+    finally:
+        rec.close(result)
+    assert len(result.impacts) == 2
+    z_run = {round(s.t * 1e9): s.plates[0] for s in result.samples}
+    assert max(abs(z) for z in z_run.values()) > 1e-7  # the plate did move
+    plates, surface_tf, static = {}, {}, []
+    with AnyReader([Path(path)]) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == SURFACE_MOUNTS:
+                assert list(msg.name) == ['surface1']
+                stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                plates[stamp] = (msg.position[0], msg.velocity[0])
+            elif conn.topic == '/tf':
+                for t in msg.transforms:
+                    if t.child_frame_id == 'surface1':
+                        stamp = t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec
+                        surface_tf[stamp] = t.transform.translation.z
+            elif conn.topic == '/tf_static':
+                static += [t.child_frame_id for t in msg.transforms]
+    assert len(plates) == len(result.samples)
+    assert all(plates[t][0] == z for t, z in z_run.items())
+    assert 'surface1' not in static and 'tip' in static
+    paced = [t for t in surface_tf if t in z_run]
+    assert len(paced) > 50  # 100 Hz over the run
+    assert all(surface_tf[t] == pytest.approx(-1.0 + z_run[t], abs=1e-15) for t in paced)
+
+
+def test_the_driver_reports_the_plate_it_steps():
+    from impact_arm.driver.arm import SimulatedArm
+
+    scene = mounted_paper_scene()
+    arm = SimulatedArm(scene, rate=1000.0)
+    tick = arm.step()
+    assert tick.plates == (0.0, 0.0)  # at rest until struck
+    model = arm.model
+    assert model.plate_states(arm.integrator.state.y) == tick.plates

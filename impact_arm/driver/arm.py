@@ -46,6 +46,7 @@ class Tick:
     effort: list  # joint torques acting now [N m] (0 while actuators are off)
     wrench: tuple  # (tangential, normal) contact force averaged over the period [N]
     impacts: list = field(default_factory=list)  # [(record, trace rows)] completed this period
+    plates: tuple = ()  # (z, ż) of each mounted surface's plate (ArmModel.plate_states)
 
 
 class SimulatedArm:
@@ -215,4 +216,5 @@ class SimulatedArm:
             list(tau) if tau is not None else [0.0] * n,
             tuple(wrench),
             list(impacts),
+            self.model.plate_states(st.y),
         )

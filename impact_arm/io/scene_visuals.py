@@ -36,7 +36,7 @@ viewer that jumps to any time shows them right from one message.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import json
 import math
@@ -47,6 +47,7 @@ from ..contract import (
     TF,
     TF_STATIC,
     TF_TYPE,
+    PLANE_FRAME_ROTATION,
     VISUAL_TOPICS,
     plane_to_world,
 )
@@ -54,12 +55,16 @@ from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (
     SURFACE_THICKNESS_PER_REACH,
     WORLD,
+    Transform,
     moving_transforms,
     robot_description,
     rod_radius_of,
     static_transforms,
     surface_frames,
 )
+
+if TYPE_CHECKING:
+    from ..physics.scene import Scene
 
 DEFAULT_TF_RATE = 100.0  # Hz: smooth to the eye, a tenth of the joint-state rate
 ARROW_HALF_FORCE = 1000.0  # N at which the arrow is half the reach long
@@ -99,6 +104,17 @@ def event_states(record: Mapping[str, Any]) -> list[tuple[str, int, list[float]]
     return [(kind, int(t), [math.radians(a) for a in q]) for kind, t, q in out]
 
 
+def mounted_surfaces(scene: Scene) -> list[tuple[str, float]]:
+    """(frame, rest height [m]) of each surface on a compliant mount, in the order of the
+    plates' states (``ArmModel.plate_states``, /surface_mounts): their frames move on /tf."""
+    frames = surface_frames(scene)
+    return [
+        (frames[i], float(s.height))
+        for i, s in enumerate(scene.surfaces)
+        if s.mount is not None and s.law != 'none'
+    ]
+
+
 def _stamp(header, t_ns: int):
     header.stamp.sec, header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
 
@@ -123,6 +139,7 @@ class SceneVisuals:
         self._TransformStamped, self._String, self._Point = TransformStamped, String, Point
         self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
+        self.mounted = mounted_surfaces(scene)
         self._next_tf = 0  # index k of the next /tf time k / tf_rate
         self.impacts: list[tuple] = []  # (contact stamp [ns], contact point (x, z), F_max [N])
         self._events: list[tuple] = []  # event frames not yet taken: (stamp [ns], q)
@@ -140,8 +157,14 @@ class SceneVisuals:
         return self._String(data=robot_description(self.scene, rod_radius=self.rod_radius))
 
     def tf_static(self, t_ns: int = 0) -> Any:
+        """The fixed transforms; a mounted surface's frame moves, so it is on /tf instead."""
+        moving = {frame for frame, _ in self.mounted}
         return self._TF(
-            transforms=[self._transform(t, t_ns) for t in static_transforms(self.scene)]
+            transforms=[
+                self._transform(t, t_ns)
+                for t in static_transforms(self.scene)
+                if t.child not in moving
+            ]
         )
 
     # ------------------------------------------------------------------ per state
@@ -152,11 +175,15 @@ class SceneVisuals:
         self._next_tf = math.floor(t * self.tf_rate * (1 + 1e-12) + 1e-9) + 1
         return True
 
-    def tf(self, q: Sequence[float], t_ns: int) -> Any:
-        """The joint transforms for absolute link angles ``q``."""
-        return self._TF(
-            transforms=[self._transform(t, t_ns) for t in moving_transforms(self.scene.lengths, q)]
-        )
+    def tf(self, q: Sequence[float], t_ns: int, plates: Sequence[float] = ()) -> Any:
+        """The joint transforms for absolute link angles ``q``, then each mounted surface's
+        frame at its rest height moved by its plate's z (``plates``: (z, ż) per mounted
+        surface, flat; () or missing: at rest)."""
+        transforms = moving_transforms(self.scene.lengths, q)
+        for j, (frame, height) in enumerate(self.mounted):
+            z = float(plates[2 * j]) if len(plates) > 2 * j else 0.0
+            transforms.append(Transform(WORLD, frame, 0.0, 0.0, height + z, PLANE_FRAME_ROTATION))
+        return self._TF(transforms=[self._transform(t, t_ns) for t in transforms])
 
     def add_impact(self, record: Mapping[str, Any] | str | bytes) -> None:
         """An impact report (the JSON record or its text): its contact point becomes a
@@ -285,6 +312,7 @@ class VisualsWriter:
         self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
         self._last: tuple | None = None  # (stamp, q, log time) of the latest state
         self._shown: int | None = None  # stamp of the latest /tf written
+        self.plates: Sequence[float] = ()  # the latest (z, ż) of the mounted surfaces
 
     def state(
         self,
@@ -292,8 +320,12 @@ class VisualsWriter:
         q: Sequence[float],
         wrench: Sequence[float] | None = None,
         log_time_ns: int | None = None,
+        plates: Sequence[float] | None = None,
     ) -> None:
-        """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``)."""
+        """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``;
+        ``plates``: the mounted surfaces' (z, ż) at it, None: the latest given)."""
+        if plates is not None:
+            self.plates = plates
         log = t_ns if log_time_ns is None else log_time_ns
         self._last = (t_ns, q, log)
         if self.visuals.due(t_ns * 1e-9):
@@ -306,7 +338,7 @@ class VisualsWriter:
             self._frame(*self._last)
 
     def _frame(self, t_ns, q, log):
-        self._write(TF, self.visuals.tf(q, t_ns), log)
+        self._write(TF, self.visuals.tf(q, t_ns, self.plates), log)
         self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
         self._shown = t_ns
 
@@ -326,7 +358,7 @@ class VisualsWriter:
             self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None else log_time_ns)
 
     def _frame_at_event(self, t_ns, q, log):
-        self._write(TF, self.visuals.tf(q, t_ns), log)
+        self._write(TF, self.visuals.tf(q, t_ns, self.plates), log)
         self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
 
     def _write(self, topic, msg, log_time_ns):

@@ -8,7 +8,7 @@ does (time, coordinates, velocities, integral states, contact phase, the current
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import math
@@ -115,6 +115,18 @@ class ArmModel:
             )
         if not self.surfaces:
             self.surface_table = self.surface_table[:0]
+
+    @property
+    def mounted(self) -> tuple[SurfaceModel, ...]:
+        """The surfaces on a compliant mount, in surface order."""
+        return tuple(s for s in self.surfaces if s.mount is not None)
+
+    def plate_states(self, y: Sequence[float] | np.ndarray) -> tuple[float, ...]:
+        """(z, ż) of each mounted surface's plate from a state ``y``, flat, in surface
+        order; () for a rigid scene."""
+        if not self.n_mount:
+            return ()
+        return tuple(float(y[s.mount_state + k]) for s in self.mounted for k in (0, 1))
 
     # --- kinematics and energies (thin wrappers over the generated functions) ---
     def tip(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
