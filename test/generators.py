@@ -74,6 +74,24 @@ JOINT_VALUES = {
 }
 
 
+# a struck plate's mount (scene ``surfaces[i].mount``): from a free plate (stiffness 0) to one
+# far stiffer than the contact (1e11 N/m under 10 kg), light and heavy plates, over-damped
+MOUNT_VALUES = {
+    'mass': (0.01, 1.0, 10.0, 1e3, 1e-6),
+    'stiffness': (0.0, 1e5, 1e8, 1e11, 1e13),
+    'damping_ratio': (0.0, 0.05, 1.0, 10.0),
+}
+
+
+def random_mount(rng):
+    """A ``mount`` mapping; its last, extreme values drawn rarely."""
+    return {
+        k: values[-1] if rng.random() < 0.1 else rng.choice(values[:-1])
+        for k, values in MOUNT_VALUES.items()
+        if k != 'damping_ratio' or rng.random() < 0.7
+    }
+
+
 def random_joints(n, rng):
     """A ``joints`` list for n links, each key present or left to its default; the last,
     extreme value of each key is drawn rarely, so that most such scenes run."""
@@ -123,6 +141,10 @@ def mutate(base: dict, rng: random.Random) -> str:
     data = copy.deepcopy(base)
     if rng.random() < 0.3 and isinstance(data.get('links'), list):
         data['joints'] = random_joints(len(data['links']), rng)
+    surfaces = data.get('surfaces')
+    if rng.random() < 0.2 and isinstance(surfaces, list) and surfaces:
+        if isinstance(surfaces[0], dict):
+            surfaces[0]['mount'] = random_mount(rng)
     if rng.random() < 0.3:
         _resize_links(data, rng.randint(3, 8), rng)
     if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from impact_arm.physics.errors import SceneError
 from impact_arm.physics.integrator import PhaseIntegrator
@@ -224,3 +226,66 @@ def test_the_driver_reports_the_plate_it_steps():
     assert tick.plates == (0.0, 0.0)  # at rest until struck
     model = arm.model
     assert model.plate_states(arm.integrator.state.y) == tick.plates
+
+
+MOUNT_LEAVES = st.one_of(
+    st.sampled_from([0.0, 1e-6, 0.01, 1.0, 10.0, 1e5, 1e8, 1e11, 1e13, 1e14, -1.0, 5e-324]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.none(),
+    st.text(max_size=3),
+)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(
+    st.dictionaries(
+        st.sampled_from(['mass', 'stiffness', 'damping_ratio', 'extra']), MOUNT_LEAVES, max_size=4
+    )
+)
+def test_any_mount_runs_to_a_finite_end_or_is_refused_in_one_line(mount):
+    """Fuzzed mounts under the article's floor (e.g. 1e11 N/m under 10 kg: stiffer than the
+    contact; a free plate): refused in one line, or the first impact runs to a finite end or
+    stops by name at a limit."""
+    import json
+
+    from impact_arm.physics.simulate import run
+
+    surface = {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.2, 'material': 'steel'}
+    try:
+        scene = scene_from(surfaces=[{**surface, 'mount': mount}], cycles=1, t_max=0.6)
+    except SceneError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 600
+        return
+    result = run(scene, keep_samples=False)
+    if result.error:
+        assert '\n' not in result.error
+        return
+    text = json.dumps(result.to_json())
+    assert 'NaN' not in text and 'Infinity' not in text
+
+
+def test_stiffer_than_the_contact_and_free_plates_run():
+    from impact_arm.physics.simulate import run
+
+    surface = {'height': -1.0, 'law': 'elastoplastic', 'mu': 0.2, 'material': 'steel'}
+    for mount in ({'mass': 10.0, 'stiffness': 1e11}, {'mass': 1.0, 'stiffness': 0.0}):
+        scene = scene_from(surfaces=[{**surface, 'mount': mount}], cycles=1, t_max=0.6)
+        result = run(scene, keep_samples=False)
+        assert not result.error and len(result.impacts) == 1
+
+
+def test_mount_values_are_sweep_keys_and_fit_parameters():
+    from impact_arm.calibration.fit import parameter_specs
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    study = Study('paper')
+    mount = {'mass': 5.0, 'stiffness': 2e7}
+    soft = study.run({'cycles': 1, 'surfaces[0].mount': mount})
+    stiff = study.run({'cycles': 1, 'surfaces[0].mount': {**mount, 'stiffness': 2e9}})
+    assert not soft.error and not stiff.error
+    assert soft.impacts[0]['F_max'] < stiff.impacts[0]['F_max']
+    missing = study.run({'surfaces[0].mount.stiffness': 1e8})
+    assert 'surfaces[0].mount.mass is missing' in missing.error
+    scene = apply_overrides(study.data, {'surfaces[0].mount': mount})
+    (spec,) = parameter_specs(Study(scene), {'surfaces[0].mount.stiffness': (1e6, 1e9)})
+    assert spec.start == 2e7 and spec.log

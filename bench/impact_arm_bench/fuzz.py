@@ -2,7 +2,8 @@
 
 N scene files are mutated from config/paper.yaml with a seeded generator (deleted keys, wrong
 types, huge / tiny / denormal / NaN / inf numbers, integers beyond float64, extra and duplicate
-keys, YAML tags, aliases and 1.1-only spellings, 3-8 links, unreachable surfaces) and each is
+keys, YAML tags, aliases and 1.1-only spellings, 3-8 links, unreachable surfaces, joint
+friction and armature, mounted surfaces) and each is
 loaded and run offline as ``impact-arm simulate`` would. Every one must end in one of
 
 * accepted-finite: the run finished and every number it reports is finite;
@@ -89,7 +90,7 @@ def worker():
             scene.controller.law,
             scene.controller.rate > 0,
             scene.integrator.method,
-            tuple((s.law, s.mu > 0) for s in scene.surfaces),
+            tuple((s.law, s.mu > 0, s.mount is not None) for s in scene.surfaces),
         )
         if shape not in shapes:
             shapes.add(shape)
