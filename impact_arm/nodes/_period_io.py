@@ -72,12 +72,12 @@ class PeriodPublishers:
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
-        self._send(self.joints, states)
-        if self.mounts is not None:
+        if self.mounts is not None:  # before the joint state a recorder draws the frame at
             msg = self.mount_state
             msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
             msg.position, msg.velocity = list(tick.plates[0::2]), list(tick.plates[1::2])
             self._send(self.mounts, msg)
+        self._send(self.joints, states)
         if self.hw_states_wanted:
             self._send(self.hw_states, states)
         self.visuals.observe(tick)

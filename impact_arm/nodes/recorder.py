@@ -369,6 +369,8 @@ class Recorder(Node):
                 return  # not this scene's joints: nothing to draw
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
         elif topic == contract.SURFACE_MOUNTS:
+            # published before the period's joint state; should it arrive after it, the
+            # surface frame of that one state shows the plate a period late
             _, _, _, position, velocity = joint_state_fields(data)
             self.visuals.plates = [v for pair in zip(position, velocity) for v in pair]
         elif topic == contract.IMPACT_REPORT:
