@@ -144,7 +144,7 @@ class ArmModel:
         """Kinetic energy of each link, its joint's rotor (armature) included."""
         qd = np.asarray(qd, float)
         links = np.asarray(self.eq.link_energies(np.asarray(q, float), qd, self.L, self.m))
-        return links + self.rotor_energies(qd)
+        return links + self.rotor_energies(qd) if self.armature.any() else links
 
     def joint_rates(self, qd: ArrayLike) -> np.ndarray:
         """ω_i = q̇_i - q̇_(i-1): each joint's relative rate (q̇_0 = 0)."""
