@@ -351,3 +351,25 @@ def test_joint_values_are_fit_parameters():
     scene = apply_overrides(Study('paper').data, {'joints[0].friction': 0.5})
     (spec,) = parameter_specs(Study(scene), {'joints[0].friction': (0.0, 3.0)})
     assert (spec.key, spec.start) == ('joints[0].friction', 0.5)
+
+
+def test_a_recording_of_an_arm_with_joint_friction_fits_once_the_scene_has_it():
+    """A recording of the article's arm with 1 N m of Coulomb friction in both joints: fitted
+    with ideal joints it does not fit (the fit blames the contact); with the joints' friction
+    free it fits, finds the contact's μ and S_y, and its intervals hold the friction drawn."""
+    from impact_arm.calibration.fit import fit
+    from impact_arm.calibration.study import Study, apply_overrides
+    from impact_arm.tools.synthetic import synthetic_recording
+
+    truth = {'joints[0].friction': 1.0, 'joints[1].friction': 1.0}
+    rec = synthetic_recording('paper', truth, cycles=6, drop=0.02, clock_offset=1.7e9, seed=5)
+    contact = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
+    assert fit(rec, 'paper', contact).verdict.startswith('does not fit')
+    scene = apply_overrides(Study('paper').data, {k: 0.5 for k in truth})
+    result = fit(rec, scene, {**contact, **{k: (0.0, 3.0) for k in truth}})
+    assert result.fits, result.verdict
+    assert result.parameters['surfaces[0].mu']['value'] == pytest.approx(0.2, rel=0.02)
+    assert result.parameters['materials.steel.S_y']['value'] == pytest.approx(1.12e9, rel=0.03)
+    for key in truth:
+        lo, hi = result.parameters[key]['ci95']
+        assert lo < 1.0 < hi
