@@ -18,17 +18,16 @@ setup(
     # rclpy and the message packages come from the ROS install (package.xml) or, without ROS,
     # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
     install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib',
-                      'numba', 'rosbags'],
+                      'Pillow', 'numba', 'rosbags'],
     # studies (impact-arm sweep): Parquet tables and the Dask scheduler; imported lazily, so
     # the nodes and `simulate` never load them
     extras_require={'studies': ['pyarrow', 'dask[distributed]']},
     zip_safe=True,
     maintainer='impact_arm developers',
     maintainer_email='impact-arm@example.com',
-    description='Planar two-link impacting arm: physics core, ROS 2 nodes, MCAP record/replay.',
+    description='Planar n-link impacting arm: physics core, ROS 2 nodes, MCAP record/replay.',
     license='Apache-2.0',
     python_requires='>=3.10',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'impact-arm = impact_arm.tools.cli:main',

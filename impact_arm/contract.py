@@ -53,6 +53,9 @@ from typing import Optional
 # ------------------------------------------------------------------------------- topics
 JOINT_STATES = '/joint_states'
 CONTACT_WRENCH = '/contact_wrench'
+# the largest normal contact force of each period (WrenchStamped like /contact_wrench, force.y):
+# an impact's peak beside the period average, which spreads its ~0.15 ms over the period
+CONTACT_FORCE_PEAK = '/contact_force_peak'
 IMPACT_REPORT = '/impact_report'
 DIAGNOSTICS = '/diagnostics'
 # the names of the nodes' DiagnosticStatus (both publish on /diagnostics)
@@ -213,6 +216,7 @@ LATCHED_100 = TopicQos(durability='transient_local', depth=100)
 TOPICS = {  # topic -> (type, QoS) of every topic the nodes exchange; see the docstring
     JOINT_STATES: (JOINT_STATE_TYPE, RELIABLE_100),
     CONTACT_WRENCH: (WRENCH_TYPE, RELIABLE_100),
+    CONTACT_FORCE_PEAK: (WRENCH_TYPE, RELIABLE_100),
     IMPACT_REPORT: (STRING_TYPE, LATCHED_100),
     DIAGNOSTICS: (DIAGNOSTICS_TYPE, TopicQos(depth=10)),
     CLOCK: (CLOCK_TYPE, TopicQos(reliability='best_effort', depth=1)),

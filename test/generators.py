@@ -132,6 +132,29 @@ def _resize_links(data, n, rng):
             data['joints'] = [joints[min(k, len(joints) - 1)] for k in range(n)]
 
 
+def _sensors_section(rng: random.Random) -> dict:
+    """A ``sensors`` section of extreme but mostly valid values (the mutations below may then
+    break it): 1-count encoders, 1 rad noise, a filter far above or below the rate, 1 s of
+    latency."""
+    rate = rng.choice(('exact', 'difference', 'filtered'))
+    section = {
+        'counts_per_revolution': rng.choice((1, 3, 4096, 2**40)),
+        'position_noise': rng.choice((0.0, 1e-9, 1.0)),
+        'effort_noise': rng.choice((0.0, 1e6)),
+        'wrench_noise': rng.choice((0.0, 1e9)),
+        'rate': rate,
+        'state_latency': rng.choice((0.0, 1e-9, 1.0)),
+        'effort_latency': rng.choice((0.0, 0.0025, 1.0)),
+        'wrench_latency': rng.choice((0.0, 1.0)),
+        'seed': rng.choice((0, 2**32 - 1)),
+    }
+    if rate == 'filtered':
+        section['rate_cutoff'] = rng.choice((1e-3, 1e6))
+    elif rate == 'exact':
+        section['rate_noise'] = rng.choice((0.0, 1e3))
+    return section
+
+
 def mutate(base: dict, rng: random.Random) -> str:
     """One mutated scene, as YAML text."""
     import copy
@@ -147,6 +170,8 @@ def mutate(base: dict, rng: random.Random) -> str:
             surfaces[0]['mount'] = random_mount(rng)
     if rng.random() < 0.3:
         _resize_links(data, rng.randint(3, 8), rng)
+    if rng.random() < 0.2:  # a driver's sensors, at the edges of their ranges
+        data['sensors'] = _sensors_section(rng)
     if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:
         data['surfaces'][0]['height'] = rng.choice((-3.0, -2.0, -50.0, 1e6))  # out of reach
     for _ in range(rng.choice((0, 1, 1, 2, 3))):  # 0: only the links or surfaces changed

@@ -26,3 +26,49 @@ def scene_from(changes=None, **top):
         node[path[-1]] = value
     data.update(top)
     return parse_scene(data, origin='test')
+
+
+# arms of more links, for the paths that must run any arm the offline path runs: link
+# lengths and masses, then per joint (kp, kd, ki, down target, up target, initial angle)
+# with absolute angles in degrees
+_ARMS = {
+    3: (
+        [(0.7, 1.0), (0.7, 1.0), (0.6, 0.8)],
+        [(600, 100, 1000, -80, 80, 60), (300, 100, 120, -70, 70, 45), (150, 50, 60, -60, 60, 30)],
+    ),
+    4: (
+        [(0.6, 1.0), (0.5, 1.0), (0.5, 0.8), (0.4, 0.8)],
+        [
+            (600, 100, 1000, -80, 80, 60),
+            (300, 60, 120, -70, 70, 45),
+            (150, 30, 60, -60, 60, 30),
+            (60, 8, 30, -50, 50, 20),
+        ],
+    ),
+}
+
+
+def arm_dict(n_links, cycles=2, t_max=10.0):
+    """The article's scene with an arm of ``n_links`` (3 or 4) links and its controller,
+    ``cycles`` down/up cycles: YAML data for a scene file."""
+    links, joints = _ARMS[n_links]
+    data = copy.deepcopy(paper_dict())
+    data['name'] = f'arm{n_links}'
+    data['description'] = f'{n_links}-link arm striking the floor (test scene)'
+    data['links'] = [{'length': length, 'mass': mass} for length, mass in links]
+    controller = data['controller']
+    for key, column in (('kp', 0), ('kd', 1), ('ki', 2)):
+        controller[key] = [float(j[column]) for j in joints]
+    controller['down_target_deg'] = [float(j[3]) for j in joints]
+    controller['up_target_deg'] = [float(j[4]) for j in joints]
+    data['initial'] = {'q_deg': [float(j[5]) for j in joints], 'qd': [0.0] * n_links}
+    data['cycles'], data['t_max'] = cycles, t_max
+    return data
+
+
+def write_arm_scene(directory, n_links, **kwargs) -> str:
+    """``arm_dict`` written as DIRECTORY/armN.yaml; returns the path."""
+    path = os.path.join(os.fspath(directory), f'arm{n_links}.yaml')
+    with open(path, 'w', encoding='utf-8') as f:
+        yaml.safe_dump(arm_dict(n_links, **kwargs), f, sort_keys=False)
+    return path

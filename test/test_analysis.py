@@ -69,7 +69,8 @@ def test_impact_table_is_exactly_the_simulated_one(article):
     assert rows in ana.stdout
     with open(d / 'out' / 'impact_table.txt', encoding='utf-8') as f:
         assert f.read().strip('\n') == rows
-    assert (d / 'out' / 'animation.gif').stat().st_size > 0  # analyze animates too
+    # the animation is a step of its own (impact-arm animate, or analyze --animation)
+    assert not (d / 'out' / 'animation.gif').exists()
 
 
 def test_limit_cycle_and_poincare_sections(article):
@@ -129,8 +130,10 @@ def test_report_states_table_cycle_and_sections(article):
         '## Poincaré sections',
         'poincare_qd1_zero.csv',
         'scene paper, law q',
+        '(offline run, impact-arm simulate --mcap)',
     ):
         assert needle in text, needle
+    assert '(offline, offline)' not in text
 
 
 def test_poincare_crossings_of_a_known_signal():
@@ -184,10 +187,15 @@ def test_what_the_data_allows_compare_and_errors(article, tmp_path):
         '--compare',
         small,
         '--no-animation',
+        '--dpi',
+        50,
         cwd=tmp_path,
     )
     assert ok.returncode == 0, ok.stderr
     made = sorted(p.name for p in (tmp_path / 'cmp').glob('*.png'))
+    # --dpi sets the pixels, not the layout: half the default's on each side
+    assert png_size(tmp_path / 'cmp' / 'fig4_link_angles.png') == tuple(n // 2 for n in FIGURE_SIZE)
+    assert 'no impacts in' in ok.stdout and 'no /impact_report topic' in ok.stdout
     # no scene: no Figs. 3 and 7; no traces and no reports: no Figs. 8-11; each said why
     assert made == sorted(['fig3b_recordings.png'] + FIGURES[1:4])
     assert 'Figure 3 not drawn' in ok.stdout and 'stores no scene' in ok.stdout
@@ -207,7 +215,8 @@ def test_what_the_data_allows_compare_and_errors(article, tmp_path):
         ([tmp_path / 'none.mcap'], 'no such file'),
         ([d / 'paper.mcap', '--impact', 16], '--impact = 16: must be in [1, 15]'),
         ([d / 'paper.mcap', '--laws', 'lqr'], "--laws: 'lqr' is not one of"),
-        ([d / 'paper.json'], 'not a readable MCAP file'),
+        ([d / 'paper.json'], 'paper.json: not an MCAP file'),
+        ([small, '--dpi', 10], '--dpi = 10: must be in [50, 1200]'),
     ):
         bad = cli('analyze', *argv, cwd=tmp_path)
         assert bad.returncode == 2 and needle in bad.stderr, bad.stderr
@@ -319,3 +328,104 @@ def test_figure_3_data_are_the_articles_comparison_of_the_control_laws():
         assert past_target(runs['q'], k) < 5e-4 * abs(step[k])
         assert abs(np.degrees(runs['q'].q[-1, k] - target[k])) < 0.01
         assert settled_at(runs['q'], k) < settled_at(runs['pid'], k)
+
+
+def test_the_table_comes_first_and_figures_as_pdf(article, tmp_path):
+    """The impact table is printed before the first figure is drawn; --format pdf writes
+    every figure as a PDF (and the report links them)."""
+    d, _, _ = article
+    out = tmp_path / 'pdf'
+    ana = subprocess.run(
+        [sys.executable, '-m', 'impact_arm.tools.cli', 'analyze', str(d / 'paper.mcap')]
+        + ['--out', str(out), '--laws', 'pd', '--format', 'pdf'],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=tmp_path,
+        timeout=300,
+    )
+    assert ana.returncode == 0, ana.stdout
+    text = ana.stdout
+    assert text.index('impact table (15 impacts)') < text.index('limit cycle reached')
+    assert text.index('limit cycle reached') < text.index('figure 1/10')
+    assert text.index('figure 1/10') < text.index('wrote ')
+    names = [name.replace('.png', '.pdf') for name in FIGURES]
+    for name in names:
+        assert (out / name).read_bytes()[:5] == b'%PDF-', name
+    assert not list(out.glob('*.png'))
+    report = (out / 'report.md').read_text(encoding='utf-8')
+    assert all(f'({name})' in report for name in names)
+
+
+def test_a_recording_in_which_the_arm_struck_nothing_says_so(tmp_path):
+    """/impact_report recorded, without a message: 'no impacts', and why, not a hint to
+    record the trace."""
+    from impact_arm.io.mcap_ros2 import Ros2McapWriter, iter_raw, topics_info
+
+    src = small_recording(tmp_path / 'small.mcap')
+    path = tmp_path / 'quiet.mcap'
+    with Ros2McapWriter(path) as w:
+        for topic, ti in topics_info(src).items():
+            w.add_topic(topic, ti.type_name, ti.qos or None)
+        w.add_topic('/impact_report', 'std_msgs/msg/String')
+        for m in iter_raw(src):
+            w.write(m.topic, m.data, m.log_time_ns)
+    ana = cli('analyze', path, '--out', tmp_path / 'out', '--laws', '', cwd=tmp_path)
+    assert ana.returncode == 0, ana.stderr
+    assert f'no impacts in {path}: the arm struck no surface' in ana.stdout
+    assert 'has no impact to show' in ana.stdout
+    assert 'impact-arm simulate --scene SCENE' not in ana.stdout
+
+
+def test_the_elastic_phase_is_drawn_from_a_fine_grid_of_the_integrators_output(article):
+    """Impact 1's elastic phase, which its trace holds as one step (contact to 1.9 δc), on
+    80 grid points: it starts with the normal velocity before impact as its rate (δ̇ = -v_y,
+    nothing else moves the tip into the surface at first), ends on 1.9 δc of the scene's
+    constants after the reported elastic duration, and its force follows Hertz in time."""
+    from impact_arm.physics.contact import YIELD_ONSET_FACTOR
+    from impact_arm.physics.model import ArmModel
+    from impact_arm.tools import analysis
+
+    d, _, _ = article
+    run = analysis.load(d / 'paper.mcap')
+    record = run.impacts[0]
+    curve = analysis.elastic_curve(run.scene, record)
+    assert curve is not None and curve.end == 'yield' and len(curve.t) >= 80
+    columns, rows = run.traces[0]
+    phase = rows[:, columns.index('phase')]
+    assert np.count_nonzero(phase == 1) <= 2  # what the trace alone would draw: a segment
+    assert curve.t[-1] - curve.t[0] == pytest.approx(record['phase_durations'][0], rel=1e-6)
+    c = ArmModel(run.scene).surfaces[0].constants
+    assert curve.delta[-1] == pytest.approx(YIELD_ONSET_FACTOR * c.delta_c, rel=1e-6)
+    rate = np.diff(curve.delta) / np.diff(curve.t)
+    assert rate[0] == pytest.approx(-record['v_before'][1], rel=1e-4)
+    # at a nearly constant rate δ ∝ t, so F ∝ t^1.5: half way in time the force is
+    # 0.5^1.5 = 0.354 of the end's, where the straight segment between the two step ends
+    # would give 0.5
+    middle = np.interp(0.5 * (curve.t[0] + curve.t[-1]), curve.t, curve.force)
+    assert middle / curve.force[-1] == pytest.approx(0.5**1.5, rel=0.02)
+    # Hertz (eq. 11): F = 4/3 E* sqrt(R) δ^(3/2)
+    assert curve.force == pytest.approx(4 / 3 * c.E * math.sqrt(c.R) * curve.delta**1.5)
+
+
+def test_an_empty_or_truncated_file_is_named_with_what_is_wrong(article, tmp_path):
+    """One line naming the file and the fault, from every command that reads recordings."""
+    d, _, _ = article
+    whole = (d / 'paper.mcap').read_bytes()
+    empty, cut = tmp_path / 'empty.mcap', tmp_path / 'cut.mcap'
+    empty.write_bytes(b'')
+    cut.write_bytes(whole[: len(whole) // 3])  # a recorder killed mid-write, unrecovered
+    for path, fault in (
+        (empty, 'empty file (0 bytes)'),
+        (cut, f'truncated MCAP file: {len(whole) // 3} bytes ending without the MCAP footer'),
+    ):
+        for argv in (
+            ['analyze', path],
+            ['animate', path],
+            ['fit', path, '--param', 'surfaces[0].mu=0.05:1'],
+            ['replay', path],
+        ):
+            bad = cli(*argv, cwd=tmp_path)
+            lines = bad.stderr.strip().splitlines()
+            assert bad.returncode == 2 and len(lines) == 1, bad.stderr
+            assert path.name in lines[0] and fault in lines[0], lines[0]

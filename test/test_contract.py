@@ -16,6 +16,7 @@ def test_topic_names_are_spelled_only_in_the_contract():
     names = [
         contract.JOINT_STATES,
         contract.CONTACT_WRENCH,
+        contract.CONTACT_FORCE_PEAK,
         contract.IMPACT_REPORT,
         contract.TF,
         contract.ROBOT_DESCRIPTION,
@@ -123,3 +124,30 @@ def test_compile_notice_announces_a_long_compile_once_and_its_end():
     assert lines[-1].endswith(' s, cached for next time')
     assert sum(COMPILE_NOTICE in line for line in lines) == 2
     assert notice.total > 1.7
+
+
+def test_progress_lines_wait_for_the_compile_notice_to_end():
+    """A progress line shown while the compile notice counts (its counter runs in a thread)
+    comes after the notice's last line, never between its lines."""
+    import io
+    import time
+
+    from impact_arm.physics import jit
+    from impact_arm.tools.progress import COMPILE_NOTICE, CompileNotice
+
+    out = io.StringIO()
+    line = Progress(prefix='analyze: ', stream=out)
+    with CompileNotice(stream=out) as notice:
+        notice.SETTLE = 0.6
+        line.show('before the compile', log=True)
+        jit.compile_started()
+        time.sleep(1.6)  # announced
+        line.show('figure 1/2', log=True)  # the main thread goes on while the notice is open
+        jit.compile_ended()
+        line.show('figure 2/2', log=True)  # compiled, the notice not settled yet
+        time.sleep(1.5)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == 'analyze: before the compile'
+    assert lines[1] == f'{COMPILE_NOTICE} ...'
+    assert lines[2].startswith(f'{COMPILE_NOTICE}: compiled in ')
+    assert lines[3:] == ['analyze: figure 1/2', 'analyze: figure 2/2']

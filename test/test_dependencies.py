@@ -17,6 +17,7 @@ ROSDEP_KEY = {
     'sympy': 'python3-sympy',
     'yaml': 'python3-yaml',
     'matplotlib': 'python3-matplotlib',
+    'PIL': 'python3-pil',  # the animation's frames (matplotlib brings Pillow too)
     'numba': 'python3-numba',
     'rosbags': 'python3-rosbags-pip',
     # rosdep has no key for the mcap library: mcap-ros2-support's pip install brings it, and

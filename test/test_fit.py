@@ -305,3 +305,58 @@ def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
     d = np.array([r['d_cor'] for r in result['table']])
     assert len(d) == len(result['a']) == len(result['b'])
     assert np.max(np.abs(d)) < 0.01
+
+
+# ------------------------------------------------------------------ an arm of three links
+@pytest.fixture(scope='module')
+def three_link_recording(tmp_path_factory):
+    """A recording of a three-link arm with its scene stored in it, as `impact-arm run`'s
+    recorder and `simulate --mcap` write it; the scene's S_y is not the article's."""
+    import yaml
+
+    from impact_arm.tools.cli import main
+    from scenes import arm_dict
+
+    folder = tmp_path_factory.mktemp('three')
+    data = arm_dict(3)
+    data['materials']['steel']['S_y'] = 8.0e8
+    scene = folder / 'arm3.yaml'
+    scene.write_text(yaml.safe_dump(data, sort_keys=False))
+    mcap = folder / 'arm3.mcap'
+    assert (
+        main(['simulate', '--scene', str(scene), '--control-rate', '1000', '--mcap', str(mcap)])
+        == 0
+    )
+    return mcap
+
+
+def test_fit_and_compare_read_a_three_link_arm_with_the_scene_it_stores(
+    three_link_recording, tmp_path, capsys
+):
+    from impact_arm.tools.cli import main
+    from impact_arm.tools.compare import compare
+
+    mcap = three_link_recording
+    code = main(
+        [
+            'fit',
+            str(mcap),
+            '--param',
+            'materials.steel.S_y=2e8:5e9',
+            '--json',
+            str(tmp_path / 'r.json'),
+            '--out',
+            str(tmp_path / 'fit'),
+        ]
+    )
+    assert code == 0, capsys.readouterr().out
+    result = json.loads((tmp_path / 'r.json').read_text())
+    assert result['verdict'] == 'fits' and result['impacts_used'] >= 2
+    assert result['parameters']['materials.steel.S_y']['value'] == pytest.approx(8e8, rel=0.01)
+    both = compare(mcap, mcap)
+    assert both['pairs'] and all(i == j for i, j in both['pairs'])
+
+
+def test_a_recording_of_more_joints_than_the_scene_has_is_refused(three_link_recording):
+    with pytest.raises(RecordingInputError, match=r'names joint3 besides .*--scene'):
+        read_recording(three_link_recording, n_joints=2)

@@ -180,6 +180,16 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     assert three_d['followTf'] == 'world'
     assert three_d['topics']['/robot_description']['visible']
     assert three_d['topics']['/impact_markers']['visible']
+    # the full /tf history read ahead, so that seeking shows the arm where it was
+    assert three_d['scene']['transforms']['enablePreloading'] is True
+    # every panel's title shows in Foxglove and in Lichtblick (each reads its own key)
+    for config in layout['configById'].values():
+        title = config['foxglovePanelTitle']
+        assert title and config['lichtblickPanelTitle'] == title
+    # the force plot: each period's peak beside its average
+    forces = [e['value'] for e in layout['configById']['Plot!force']['paths']]
+    assert '/contact_force_peak.wrench.force.y' in forces
+    assert '/contact_wrench.wrench.force.y' in forces
     # the topics the panels and the table's script read are in a recording
     path = tmp_path / 'run.mcap'
     scene = scene_from(cycles=1)

@@ -24,6 +24,7 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
     reports = probe.listen(String, '/impact_report', transient=True)
     markers = probe.listen(MarkerArray, '/impact_markers')
     wrenches = probe.listen(WrenchStamped, '/contact_wrench', depth=100)
+    peaks = probe.listen(WrenchStamped, '/contact_force_peak', depth=100)
     with (
         start_process(
             simulator('mode:=lockstep', 'rate_factor:=0.0'), ros_env, tmp_path, 'sim'
@@ -40,7 +41,7 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
             ),
             timeout=10,
         )
-    probe.forget(reports, markers, wrenches)
+    probe.forget(reports, markers, wrenches, peaks)
     scene = load_scene('paper')
     model, height = ArmModel(scene), scene.surfaces[0].height
     arrows = {
@@ -57,3 +58,8 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
         assert start.z == pytest.approx(height, abs=1e-6)  # on the surface, z up
         assert arrow.lifetime.sec + arrow.lifetime.nanosec * 1e-9 >= 0.3
     assert {w.header.frame_id for _, w in wrenches} == {'surface1'}
+    # each period's peak force: the impacts' F_max among them (the probe may miss a period)
+    assert {w.header.frame_id for _, w in peaks} == {'surface1'}
+    assert all(w.wrench.force.x == 0.0 and w.wrench.force.y >= 0.0 for _, w in peaks)
+    f_max = {round(json.loads(msg.data)['F_max'], 3) for _, msg in reports}
+    assert f_max & {round(w.wrench.force.y, 3) for _, w in peaks}

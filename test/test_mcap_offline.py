@@ -47,6 +47,7 @@ def test_topics_types_and_counts(offline):
     assert got == {
         '/joint_states': (TOPICS['/joint_states'], n),
         '/contact_wrench': (TOPICS['/contact_wrench'], n),
+        '/contact_force_peak': (TOPICS['/contact_force_peak'], n),
         '/impact_report': (TOPICS['/impact_report'], k),
         TRACE_TOPIC: (TOPICS[TRACE_TOPIC], k),
         '/robot_description': ('std_msgs/msg/String', 1),
@@ -58,11 +59,12 @@ def test_topics_types_and_counts(offline):
 
 def test_field_values_equal_what_the_run_computed(offline):
     path, scene, result = offline
-    js, ws, reports, traces = [], [], [], []
+    js, ws, peaks, reports, traces = [], [], [], [], []
     with AnyReader([Path(path)]) as reader:
         wanted = {
             '/joint_states': js,
             '/contact_wrench': ws,
+            '/contact_force_peak': peaks,
             '/impact_report': reports,
             TRACE_TOPIC: traces,
         }
@@ -75,6 +77,11 @@ def test_field_values_equal_what_the_run_computed(offline):
         assert list(m.velocity) == to_joint_space(s.qd)
         assert list(m.effort) == list(s.tau)
         assert to_absolute(m.position) == pytest.approx(list(s.q), abs=1e-15)
+    assert len(peaks) == len(ws) == len(result.samples)
+    for (t, m), s in zip(peaks, result.samples):
+        assert t == sim_time_ns(s.t) and m.header.frame_id == 'surface1'
+        assert (m.wrench.force.x, m.wrench.force.y, m.wrench.force.z) == (0.0, s.force_peak, 0.0)
+    assert max(m.wrench.force.y for _, m in peaks) == max(r['F_max'] for r in result.impacts)
     for (t, m), s in zip(ws, result.samples):
         assert (m.wrench.force.x, m.wrench.force.y) == tuple(s.wrench)
         assert m.header.frame_id == 'surface1'  # the TF frame of the surface
@@ -114,7 +121,7 @@ def test_metadata_scene_and_summary_indexes(offline):
     assert (
         bag['message_count']
         == summary.statistics.message_count
-        == 2 * len(result.samples) + 2 * 15 + 2 + 2 * n_tf
+        == 3 * len(result.samples) + 2 * 15 + 2 + 2 * n_tf
     )  # + description, static, tf, markers
     assert summary.chunk_indexes and all(c.message_index_offsets for c in summary.chunk_indexes)
 

@@ -292,9 +292,9 @@ def test_mount_values_are_sweep_keys_and_fit_parameters():
 
 
 def test_a_recording_of_a_plate_on_a_stiff_mount_is_fitted_with_the_mount_in_the_scene():
-    """The article's floor as 10 kg on 1e8 N/m (ζ 0.05): fitted as a rigid floor, S_y comes back off by
-    far more than its interval (the plate's recoil is read as the contact's yielding); with
-    the mount in the scene S_y and μ come back within their intervals."""
+    """The article's floor as 10 kg on 1e8 N/m (ζ 0.05): fitted as a rigid floor, S_y comes
+    back off by far more than its interval (the plate's recoil is read as the contact's
+    yielding); with the mount in the scene S_y and μ come back within their intervals."""
     from impact_arm.calibration.fit import fit
     from impact_arm.calibration.study import Study, apply_overrides
     from impact_arm.tools.synthetic import synthetic_recording

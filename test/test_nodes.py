@@ -305,6 +305,10 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
         ('controller', 'law:=lqr', 'law'),
         ('controller', 'p:=[1.0]', 'p'),
         ('controller', 'rate:=0.0', 'rate'),
+        ('recorder', 'flush_intervall:=1.0', 'flush_intervall'),  # ignored before: typo
+        ('recorder', 'log_time:=wall', 'log_time'),
+        ('replay', 'rate:=-1.0', 'rate'),
+        ('replay', 'loops:=true', 'loops'),
     ],
 )
 def test_invalid_parameters_refused_clearly(ros_env, tmp_path, node, param, name):

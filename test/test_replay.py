@@ -85,7 +85,7 @@ def test_missing_or_broken_file(tmp_path):
         ReplayPlan.open(tmp_path / 'nope.mcap')
     bad = tmp_path / 'bad.mcap'
     bad.write_bytes(b'not an mcap file at all')
-    with pytest.raises(ReplayError, match='not a readable MCAP'):
+    with pytest.raises(ReplayError, match='not an MCAP file'):
         ReplayPlan.open(bad)
 
 

@@ -104,3 +104,15 @@ def test_cli_reports_bad_scene_without_traceback(tmp_path, capsys):
     assert main(['simulate', '--scene', str(bad)]) == 2
     err = capsys.readouterr().err
     assert 'links[0].mass' in err and 'Traceback' not in err
+
+
+def test_shipped_three_link_example_strikes_the_floor_through_its_cycles():
+    """config/three_link.yaml, the example of an arm other than the article's: its
+    controller completes every cycle, each with an impact on the floor."""
+    from impact_arm.physics.simulate import StopReason, run
+
+    scene = load_scene('three_link')
+    assert scene.n_links == 3 and [round(x, 3) for x in scene.lengths] == [0.7, 0.7, 0.6]
+    result = run(scene, control_rate=1000.0, keep_samples=False)
+    assert result.stop_reason == StopReason.CYCLES_COMPLETED, result.stop_detail
+    assert len(result.impacts) >= scene.cycles

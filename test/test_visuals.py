@@ -214,9 +214,15 @@ def test_markers_show_the_surface_the_contact_force_and_every_impact(recording):
     last = markers[-1].markers
     points = [m for m in last if m.ns == 'impact_points']
     assert len(points) == len(result.impacts)
+    reach = sum(scene.lengths)
     for m in points:
-        assert m.pose.position.z == pytest.approx(height, abs=1e-9)
+        # below the surface, its top at the contact point: apart from the tip and the arrow
+        assert m.pose.position.z + m.scale.z / 2 == pytest.approx(height, abs=1e-9)
         assert m.pose.position.y == 0.0
+        # large enough to see in the shipped view (6.5 m away): 4 % of the reach
+        assert m.scale.x == m.scale.z == pytest.approx(0.04 * reach)
+        assert m.color.b > 0.5 > m.color.r  # cyan, where the arrow is red
+        assert arrows[0].color.r > 0.5 > arrows[0].color.b
     assert sum(m.ns == 'surface' for m in last) == len(scene.surfaces)
 
 

@@ -62,6 +62,14 @@ SUBCOMMANDS = {
         'impact_arm_bench.peers',
         'MuJoCo on the same scene beside this project (optional: pip install mujoco)',
     ),
+    'validate': (
+        'impact_arm_bench.validate',
+        'contact laws vs recorded drops of a square, beside rigid-body impact laws',
+    ),
+    'oblique': (
+        'impact_arm_bench.oblique',
+        'a sphere striking a flat obliquely vs measured rebounds (tangential CoR, spin)',
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',

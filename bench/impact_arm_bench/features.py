@@ -100,8 +100,13 @@ ARTICLE = "article's scene (elasto-plastic + friction)"
 
 
 def add_arguments(parser):
-    parser.add_argument('--preset', default='balanced', choices=INTEGRATOR_PRESETS)
-    parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument(
+        '--preset',
+        default='balanced',
+        choices=INTEGRATOR_PRESETS,
+        help='integrator preset of every run (default balanced)',
+    )
+    parser.add_argument('--repeats', type=int, default=5, help='timed runs per feature (default 5)')
     parser.add_argument(
         '--three-links',
         action='store_true',
@@ -113,7 +118,7 @@ def add_arguments(parser):
         help='add the article with joint friction, with armature, with a mounted floor (the '
         'mounted floor compiles a new scene shape on first use)',
     )
-    parser.add_argument('--json', metavar='FILE')
+    parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
 
 
 def measure(name, make, preset, repeats):

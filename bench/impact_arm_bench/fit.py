@@ -3,7 +3,9 @@
 * accuracy: ``--cases`` recordings of the article's arm with drawn μ and S_y (12 impacts at
   1 kHz, sensor noise σ 2e-5 rad, 2e-3 rad/s, 0.05 N m, 2 N; 2 % of the samples lost, a
   wall-clock offset), fitted with and without the wrench: relative errors, how often the
-  95 % intervals hold the truth, verdicts;
+  95 % intervals hold the truth, verdicts; ``--sensor KEY=VALUE`` makes them through the
+  scene's sensors section instead of that noise (encoder counts, difference rates,
+  latencies: docs/scene.md);
 * cost: 2 parameters and 15 impacts in a fresh process (``impact-arm fit`` on a rosbag2
   folder: imports, the compiled kernel's loading, reading, fitting, writing the report);
 * growth: fitting time in one process against the number of impacts and of parameters.
@@ -32,6 +34,15 @@ def add_arguments(parser):
         '--impacts', type=int, default=12, help='impacts per accuracy case (default 12)'
     )
     parser.add_argument('--skip-fresh', action='store_true', help='skip the fresh-process timing')
+    parser.add_argument(
+        '--sensor',
+        action='append',
+        default=[],
+        metavar='KEY=VALUE',
+        help="a key of the scene's sensors section for the accuracy recordings (repeat), e.g. "
+        "rate=difference, effort_latency=0.002: recordings like a real arm's driver makes "
+        '(they then carry only the noise these keys give)',
+    )
     parser.add_argument('--json', default=None, metavar='FILE', help='write the figures here')
 
 
@@ -44,7 +55,22 @@ def _drawn(rng):
     }
 
 
-def accuracy(cases, impacts, say):
+def sensor_overrides(items) -> dict:
+    """'KEY=VALUE' items as scene overrides of the sensors section (values read as YAML)."""
+    import yaml
+
+    from impact_arm.physics.errors import ImpactArmError
+
+    out = {}
+    for item in items:
+        key, eq, value = item.partition('=')
+        if not (key and eq):
+            raise ImpactArmError(f'--sensor {item!r}: expected KEY=VALUE, e.g. rate=difference')
+        out[f'sensors.{key.strip()}'] = yaml.safe_load(value)
+    return out
+
+
+def accuracy(cases, impacts, say, sensors=None):
     import numpy as np
 
     from impact_arm.calibration.fit import fit
@@ -55,7 +81,12 @@ def accuracy(cases, impacts, say):
     for case in range(cases):
         truth = _drawn(rng)
         rec = synthetic_recording(
-            'paper', truth, cycles=impacts, drop=0.02, clock_offset=1.7e9, seed=100 + case
+            'paper',
+            {**truth, **(sensors or {})},
+            cycles=impacts,
+            drop=0.02,
+            clock_offset=1.7e9,
+            seed=100 + case,
         )
         for wrench in (True, False):
             if not wrench:
@@ -207,6 +238,11 @@ def run(args) -> int:
     def say(text):
         print(text, flush=True)
 
+    sensors = sensor_overrides(args.sensor)
+    if sensors:  # a bad key or value refused now, in one line, not after the timings
+        from impact_arm.calibration.study import Study
+
+        Study('paper').scene(sensors)
     report = {}
     if not args.skip_fresh:
         say('fresh process (2 parameters, 15 impacts):')
@@ -214,7 +250,9 @@ def run(args) -> int:
     say('growth:')
     report['growth'] = growth(say)
     say(f'accuracy over {args.cases} drawn cases ({args.impacts} impacts each):')
-    rows = accuracy(args.cases, args.impacts, say)
+    if sensors:
+        say(f'  recordings through the sensors {sensors}')
+    rows = accuracy(args.cases, args.impacts, say, sensors)
     report['accuracy'] = summarize(rows)
     for name, s in report['accuracy'].items():
         say(f'{name}: {s["fits"]}/{s["cases"]} fit, median {s["wall_median"]:.2f} s')

@@ -2,9 +2,10 @@
 
 N scene files are mutated from config/paper.yaml with a seeded generator (deleted keys, wrong
 types, huge / tiny / denormal / NaN / inf numbers, integers beyond float64, extra and duplicate
-keys, YAML tags, aliases and 1.1-only spellings, 3-8 links, unreachable surfaces, joint
-friction and armature, mounted surfaces) and each is
-loaded and run offline as ``impact-arm simulate`` would. Every one must end in one of
+keys, YAML tags, aliases and 1.1-only spellings, 3-8 links, unreachable surfaces, extreme
+``sensors`` sections, joint friction and armature, mounted surfaces) and each is loaded and run
+offline as ``impact-arm simulate`` would, its sensors section read over a second of states as
+the simulated driver would. Every one must end in one of
 
 * accepted-finite: the run finished and every number it reports is finite;
 * refused: the scene was refused in one line (SceneError);
@@ -68,9 +69,32 @@ def classify(text: str, warm_up=lambda scene: None) -> dict:
             return {'class': 'stopped-at-limit', 'detail': result.error[:300]}
         if not _finite(result.to_json()):
             return {'class': 'non-finite', 'detail': json.dumps(result.summary())[:300]}
+        if not sensors_finite(scene):
+            return {'class': 'non-finite', 'detail': f'sensor readings of {scene.sensors}'[:300]}
         return {'class': 'accepted-finite', 'detail': f'{len(result.impacts)} impacts'}
     except Exception:  # noqa: BLE001 - that is what this benchmark counts
         return {'class': 'traceback', 'detail': traceback.format_exc()[-300:]}
+
+
+def sensors_finite(scene) -> bool:
+    """The scene's sensors section (the simulated driver's readings, which an offline run does
+    not take) turns a second of finite states at the scene's publish rate into finite
+    readings."""
+    import numpy as np
+
+    from impact_arm.contract import to_joint_space
+    from impact_arm.driver.sensors import sensed_series
+
+    if scene.sensors.ideal:
+        return True
+    rows = min(int(scene.publish_rate), 2000)
+    k = np.arange(rows)[:, None] / scene.publish_rate
+    q = np.array(to_joint_space(scene.q0)) + k * np.linspace(1.0, 2.0, scene.n_links)
+    ones = np.ones((rows, scene.n_links))
+    readings = sensed_series(
+        scene.sensors, scene.publish_rate, q, 3.0 * ones, -20.0 * ones, 100.0 * np.ones((rows, 2))
+    )
+    return all(np.isfinite(x).all() for x in readings)
 
 
 def worker():

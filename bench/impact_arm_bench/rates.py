@@ -33,7 +33,7 @@ PERIOD_PARTS = ('commands', 'physics', 'publish')
 
 def add_arguments(parser):
     parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
-    parser.add_argument('--scene', default='paper')
+    parser.add_argument('--scene', default='paper', help='scene file or name (default paper)')
     parser.add_argument(
         '--fast-seconds',
         type=float,
@@ -42,7 +42,11 @@ def add_arguments(parser):
         help='duration of the 5 kHz run (default 5)',
     )
     parser.add_argument(
-        '--skip', nargs='*', default=[], choices=('realtime', 'fast', 'lockstep', 'floor')
+        '--skip',
+        nargs='*',
+        default=[],
+        choices=('realtime', 'fast', 'lockstep', 'floor'),
+        help='measurements to leave out',
     )
 
 

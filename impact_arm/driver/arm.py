@@ -24,6 +24,7 @@ from ..physics.metrics import ImpactBuilder
 from ..physics.periods import advance_period
 from ..physics.model import ArmModel
 from ..physics.scene import Scene
+from .sensors import Sensors
 
 
 # Each joint's brake torque limit [N m]: ten times the article arm's largest static gravity
@@ -46,6 +47,7 @@ class Tick:
     effort: list  # joint torques acting now [N m] (0 while actuators are off)
     wrench: tuple  # (tangential, normal) contact force averaged over the period [N]
     impacts: list = field(default_factory=list)  # [(record, trace rows)] completed this period
+    force_peak: float = 0.0  # the largest normal contact force in the period [N]
     plates: tuple = ()  # (z, ż) of each mounted surface's plate (ArmModel.plate_states)
 
 
@@ -75,6 +77,9 @@ class SimulatedArm:
         self.n = self.model.n
         self.rate = float(rate)
         self.max_effort = float(max_effort)
+        # how the driver reports the state (the scene's sensors section; ideal by default)
+        self.sensors = Sensors(scene.sensors, self.rate, self.n)
+        self._reading: tuple | None = None  # (period, state bytes, reading) of the last one
         self.brake_torque = float(brake_torque)
         # the brake holds with the scene controller's own stiffness: gains known to be
         # stable at the control rate, under the same zero-order hold
@@ -98,6 +103,8 @@ class SimulatedArm:
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n  # the torque being held (after clipping)
+        self.sensors.reset()
+        self._reading = None
 
     def warm_up(self) -> None:
         """Load every compiled function the stepping path may call (numba loads them from its
@@ -201,20 +208,33 @@ class SimulatedArm:
             self.integrator, self.builder, (self.periods + 1) / self.rate
         )
         self.periods += 1
-        return self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
+        tick = self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
+        tick.force_peak = self.integrator.take_peak()
+        return tick
 
     def sample(self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable = ()) -> Tick:
-        """The sensors' view of the current state."""
+        """The sensors' view of the current state (``driver/sensors.py``: one reading per
+        period; asked again in the same period, they repeat it, as a driver republishing its
+        last sample does)."""
         st = self.integrator.state
         n = self.n
         q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
         tau = self.integrator.torque()
-        return Tick(
-            st.t,
-            to_joint_space(q),
-            to_joint_space(qd),
-            list(tau) if tau is not None else [0.0] * n,
-            tuple(wrench),
-            list(impacts),
-            self.model.plate_states(st.y),
-        )
+        effort = list(tau) if tau is not None else [0.0] * n
+        plates = self.model.plate_states(st.y)
+        if self.sensors.ideal:
+            return Tick(
+                st.t,
+                to_joint_space(q),
+                to_joint_space(qd),
+                effort,
+                tuple(wrench),
+                list(impacts),
+                plates=plates,
+            )
+        key = (self.periods, st.y.tobytes())
+        if self._reading is None or self._reading[:2] != key:
+            reading = self.sensors.read(to_joint_space(q), to_joint_space(qd), effort, wrench)
+            self._reading = (*key, reading)
+        r = self._reading[2]
+        return Tick(st.t, r.position, r.velocity, r.effort, r.wrench, list(impacts), plates=plates)

@@ -613,6 +613,31 @@ class TopicInfo(NamedTuple):
     message_count: int
 
 
+def unreadable_reason(path: str | os.PathLike, exc: BaseException) -> str:
+    """What is wrong with an MCAP file a reader failed on, in a few words for a one-line
+    message: empty, not MCAP at all, cut off before its footer (a recording stopped
+    mid-write and never closed), or the reader's own words."""
+    try:
+        size = os.path.getsize(path)
+        with open(path, 'rb') as f:
+            head = f.read(len(MAGIC))
+            f.seek(max(size - len(MAGIC), 0))
+            tail = f.read(len(MAGIC))
+    except OSError as e:
+        return f'cannot be read ({e.strerror})'
+    if size == 0:
+        return 'empty file (0 bytes), not an MCAP recording'
+    if head != MAGIC:
+        return 'not an MCAP file (it does not start with the MCAP magic bytes)'
+    if tail != MAGIC or size < 2 * len(MAGIC):
+        return (
+            f'truncated MCAP file: {size} bytes ending without the MCAP footer (a recording '
+            f'cut off while it was written)'
+        )
+    words = ' '.join(str(exc).split()) or type(exc).__name__
+    return f'unreadable MCAP file ({words})'
+
+
 def topics_info(path: str | os.PathLike) -> dict[str, TopicInfo]:
     """topic -> TopicInfo(type name, [TopicQos], message count) from the file's summary."""
     from mcap.reader import make_reader

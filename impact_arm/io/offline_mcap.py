@@ -13,7 +13,9 @@ Topics
 ``publish_rate``): names ``joint1`` … ``jointN``; position and velocity are the *relative*
 encoder angles (joint1 = q1, joint_k = q_k − q_(k−1)) and their rates; effort = the joint
 torques applied at that instant (T01, T12 …; zero while the actuators are off in contact).
-Header stamp = sample time, frame_id ''.
+Header stamp = sample time, frame_id ''. A ``sensors`` section in the scene makes these, and the
+wrench below, what a real driver reports (``driver/sensors.py``: encoder counts, noise,
+difference rates, latencies); the 3D view and the impact reports stay exact.
 
 ``/contact_wrench`` (geometry_msgs/msg/WrenchStamped), one per sample: force.x = tangential
 (friction) force, force.y = normal force on the tip in the surface frame, both averaged over the
@@ -70,6 +72,7 @@ import os
 import numpy as np
 
 from ..contract import (
+    CONTACT_FORCE_PEAK,
     CONTACT_WRENCH,
     IMPACT_REPORT,
     IMPACT_TRACE,
@@ -84,6 +87,7 @@ from ..contract import (
     joint_names,
     to_joint_space,
 )
+from ..driver.sensors import Sensors
 from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter, mounted_surfaces
 
@@ -91,7 +95,10 @@ if TYPE_CHECKING:
     from ..physics.simulate import RunResult, Sample
 
 OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
-    **{topic: TOPICS[topic][0] for topic in (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT)},
+    **{
+        topic: TOPICS[topic][0]
+        for topic in (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, IMPACT_REPORT)
+    },
     IMPACT_TRACE: TRACE_TYPE,
 }
 
@@ -185,6 +192,10 @@ class OfflineRecorder:
             scene_file, text.encode('utf-8'), 'application/yaml', log_time_ns=0, create_time_ns=0
         )
         self.visuals = VisualsWriter(self.writer, scene, tf_rate)
+        # the scene's sensors section: the joint states and wrench as a driver reports them
+        self.sensors = (
+            None if scene.sensors.ideal else Sensors(scene.sensors, scene.publish_rate, self.n)
+        )
         self.writer.flush()
         self._closed = False
 
@@ -192,23 +203,41 @@ class OfflineRecorder:
     def on_sample(self, sample: Sample) -> None:
         t_ns = sim_time_ns(sample.t)
         T = self._types
+        position, velocity = to_joint_space(sample.q), to_joint_space(sample.qd)
+        effort, wrench = list(sample.tau), tuple(sample.wrench)
+        if self.sensors is not None:
+            read = self.sensors.read(position, velocity, effort, wrench)
+            position, velocity, effort, wrench = (
+                read.position,
+                read.velocity,
+                read.effort,
+                read.wrench,
+            )
         js = T['sensor_msgs/msg/JointState'](
             header=self._header(t_ns, ''),
             name=self._names,
-            position=np.array(to_joint_space(sample.q)),
-            velocity=np.array(to_joint_space(sample.qd)),
-            effort=np.array(sample.tau, dtype=np.float64),
+            position=np.array(position),
+            velocity=np.array(velocity),
+            effort=np.array(effort, dtype=np.float64),
         )
         self._write(JOINT_STATES, js, t_ns)
         Vector3 = T['geometry_msgs/msg/Vector3']
         ws = T['geometry_msgs/msg/WrenchStamped'](
             header=self._header(t_ns, WRENCH_FRAME),
             wrench=T['geometry_msgs/msg/Wrench'](
-                force=Vector3(x=float(sample.wrench[0]), y=float(sample.wrench[1]), z=0.0),
+                force=Vector3(x=float(wrench[0]), y=float(wrench[1]), z=0.0),
                 torque=Vector3(x=0.0, y=0.0, z=0.0),
             ),
         )
         self._write(CONTACT_WRENCH, ws, t_ns)
+        peak = T['geometry_msgs/msg/WrenchStamped'](
+            header=self._header(t_ns, WRENCH_FRAME),
+            wrench=T['geometry_msgs/msg/Wrench'](
+                force=Vector3(x=0.0, y=float(sample.force_peak), z=0.0),
+                torque=Vector3(x=0.0, y=0.0, z=0.0),
+            ),
+        )
+        self._write(CONTACT_FORCE_PEAK, peak, t_ns)
         if self._mount_frames:
             plates = sample.plates
             mounts = T['sensor_msgs/msg/JointState'](

@@ -19,7 +19,7 @@ import os
 
 import numpy as np
 
-from ..contract import CONTACT_WRENCH, JOINT_STATES
+from ..contract import CONTACT_WRENCH, JOINT_STATES, joint_names
 from ..physics.errors import ImpactArmError
 from ..calibration.identify import JointRecording
 from .wire import CdrReader, _doubles_at, _header, _strings
@@ -70,7 +70,7 @@ def mcap_files(path: str | os.PathLike) -> list[str]:
 
 
 def _topics(files) -> dict:
-    from .mcap_ros2 import topics_info
+    from .mcap_ros2 import topics_info, unreadable_reason
 
     out: dict = {}
     for f in files:
@@ -78,7 +78,7 @@ def _topics(files) -> dict:
             for topic, info in topics_info(f).items():
                 out.setdefault(topic, info.type_name)
         except Exception as exc:  # noqa: BLE001 - any reader failure: not an MCAP file
-            raise RecordingInputError(f'recording {f}: not a readable MCAP file ({exc})') from None
+            raise RecordingInputError(f'recording {f}: {unreadable_reason(f, exc)}') from None
     return out
 
 
@@ -114,7 +114,8 @@ def read_recording(
     ``notes``; refused in one line: a missing topic, joints not in the messages, no samples."""
     files = mcap_files(path)
     topics = _topics(files)
-    joints = list(joints) if joints else [f'joint{i + 1}' for i in range(n_joints)]
+    given = bool(joints)
+    joints = list(joints) if joints else joint_names(n_joints)
     if states_topic not in topics:
         raise RecordingInputError(
             f'--states-topic {states_topic}: not in the recording '
@@ -166,7 +167,30 @@ def read_recording(
                 f'{", ".join(sorted(seen_names)) or "none"})'
             )
         raise RecordingInputError(f'{states_topic}: no message names all of {joints}')
+    more = sorted(set(joint_names(len(seen_names))) & seen_names - set(joints))
+    if not given and more:
+        # the default names of an arm of more links than the scene has: the scene is not
+        # this arm's (reading the first joints only would fit another arm's motion)
+        raise RecordingInputError(
+            f"{states_topic} names {', '.join(more)} besides the scene's {len(joints)} "
+            f"joints: give the recorded arm's scene (--scene) or its joints (--joints)"
+        )
     return _assemble(states, wrenches, joints, os.fspath(path), notes)
+
+
+def recorded_scene(path: str | os.PathLike) -> Any:
+    """The scene a recording stores (the recorder's and ``simulate --mcap``'s ``scene``
+    metadata), as a ``Scene``; None when it stores none."""
+    from ..physics.scene import scene_from_text
+    from .mcap_ros2 import read_metadata
+
+    for f in mcap_files(path):
+        stored = read_metadata(f).get('scene', {})
+        if stored.get('yaml'):
+            return scene_from_text(
+                stored['yaml'], origin=f'the scene stored in {f}', path=stored.get('path', '')
+            )
+    return None
 
 
 def _pick(values, cols, count):

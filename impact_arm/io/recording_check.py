@@ -42,15 +42,18 @@ class RecordingCheck:
             problems.append(f'impact reports missing: {self.missing_reports[:10]}')
         return problems
 
-    def summary(self, lockstep: bool = True) -> str:
+    def summary(self, lockstep: bool = True, failed: str = '') -> str:
         """What the file holds; in lockstep also whether it is complete. In realtime a
         period may run on the previous command (the controller was late: no command is
-        missing) and the recorder's loss count says what was lost."""
+        missing) and the recorder's loss count says what was lost. ``failed``: why the run
+        failed, if it did; the file then never counts as complete."""
         text = (
             f'{self.periods} periods from t = 0, {self.commands} commands, '
             f'{self.impact_reports} impact reports'
         )
-        if lockstep:
+        if failed:
+            text += f': INCOMPLETE, the run failed ({failed})'
+        elif lockstep:
             problems = self._problems()
             text += ': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems)
         else:

@@ -23,7 +23,7 @@ from collections.abc import Iterable
 from typing import Any, Iterator
 
 from ..physics.errors import ImpactArmError
-from .mcap_ros2 import RawMessage, TopicInfo, iter_raw, topics_info
+from .mcap_ros2 import RawMessage, TopicInfo, iter_raw, topics_info, unreadable_reason
 
 
 class ReplayError(ImpactArmError, ValueError):
@@ -76,7 +76,7 @@ class ReplayPlan:
         try:
             info = topics_info(path)
         except Exception as e:  # noqa: BLE001 - any reader failure means "not a usable file"
-            raise ReplayError(f'file = {path!r}: not a readable MCAP file ({e})') from None
+            raise ReplayError(f'file = {path!r}: {unreadable_reason(path, e)}') from None
         if not info:
             raise ReplayError(f'file = {path!r}: no topics recorded')
         selected = [t for t in (topics or []) if t]

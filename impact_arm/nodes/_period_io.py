@@ -13,7 +13,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from .. import contract
-from ..contract import CLOCK, CONTACT_WRENCH, IMPACT_REPORT, JOINT_STATES
+from ..contract import CLOCK, CONTACT_FORCE_PEAK, CONTACT_WRENCH, IMPACT_REPORT, JOINT_STATES
 from ..io.scene_visuals import mounted_surfaces
 from ..io.wire import PatchedMessage
 from ._visuals import VisualsPublisher
@@ -33,6 +33,7 @@ class PeriodPublishers:
         make = node.create_publisher
         self.joints = make(JointState, JOINT_STATES, qos(JOINT_STATES, depth))
         self.wrench = make(WrenchStamped, CONTACT_WRENCH, qos(CONTACT_WRENCH, depth))
+        self.peak = make(WrenchStamped, CONTACT_FORCE_PEAK, qos(CONTACT_FORCE_PEAK, depth))
         self.impact = make(String, IMPACT_REPORT, qos(IMPACT_REPORT))
         self.clock = make(Clock, CLOCK, qos(CLOCK)) if lockstep or p.rate_factor != 1.0 else None
         self.hw_states = make(JointState, p.joint_states_topic, qos(JOINT_STATES, depth))
@@ -45,6 +46,9 @@ class PeriodPublishers:
         wrench = WrenchStamped()
         wrench.header.frame_id = p.frame_id
         self.wire_wrench = PatchedMessage(wrench, ('wrench.force.x', 'wrench.force.y'))
+        peak = WrenchStamped()  # force.y only: the rest stays 0
+        peak.header.frame_id = p.frame_id
+        self.wire_peak = PatchedMessage(peak, ('wrench.force.y',))
         self.wire_clock = PatchedMessage(Clock(), (), stamp='clock')
         # a scene with mounted surfaces: their plates' z, ż each period (contract.SURFACE_MOUNTS)
         self.mounts = None
@@ -71,6 +75,7 @@ class PeriodPublishers:
         # the controller waits for this period's wrench and joint state: /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
+        self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
         states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
         if self.mounts is not None:  # before the joint state a recorder draws the frame at
             msg = self.mount_state

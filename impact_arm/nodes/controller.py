@@ -4,8 +4,9 @@ parameters in controller_params.py.
 
 It knows the arm only as a real model-based controller would (kinematics and gravity terms
 from the scene) and talks only through topics: /joint_states and, if anyone publishes it,
-/contact_wrench in; /effort_controller/commands out, [τ_joint1, τ_joint2] in the order of
-``joints`` — what ros2_control's forward_command_controller named ``effort_controller`` takes.
+/contact_wrench in; /effort_controller/commands out, [τ_joint1, …, τ_jointN] (the scene's
+joints) in the order of ``joints``: what ros2_control's forward_command_controller named
+``effort_controller`` takes.
 
 trigger joint_states (default): one command per joint state whose stamp reaches the next tick
 of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer: a timer at
@@ -23,15 +24,21 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from .. import contract
-from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, joint_names, to_absolute
+from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, to_absolute
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
-from ..physics.scene import load_scene, resolve_scene_path
 from ..io.wire import MalformedMessage, PatchedMessage, joint_state_fields, wrench_stamped_fields
 from ._runner import realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
-from .params import NODE_OPTIONS, declare, refuse_unknown, validator
+from .params import (
+    NODE_OPTIONS,
+    declare,
+    refuse_unknown,
+    scene_joint_names,
+    startup_scene,
+    validator,
+)
 
 # the settings whose change starts a fresh integral
 INTEGRAL_SETTINGS = (
@@ -51,14 +58,13 @@ class Controller(Node):
     def __init__(self):
         super().__init__('controller', **NODE_OPTIONS)
         # the scene (given at start-up, hence already declared) sets the table's defaults
-        name = self.get_parameter('scene').value if self.has_parameter('scene') else ''
-        scene = load_scene(resolve_scene_path(str(name) or 'paper'))
+        _, scene = startup_scene(self)
         self.table = parameter_table(scene)
         p = self.p = declare(self, self.table)
         self.n = scene.n_links
         self.model = ArmModel(scene)
-        names = joint_names(self.n)
-        check(p, names)
+        names = self.joint_names = scene_joint_names(scene)
+        command_order = check(p, names)
         refuse_unknown(self, self.table)
         self.ctrl = CycleController(
             self.model,
@@ -78,6 +84,13 @@ class Controller(Node):
         self._warm_up(scene)
         self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
         self.sent = 0
+        # down halves ended by a detected impact (the cycles struck) and the stamp at which
+        # the latest down half began: `impact-arm run` ends a run on them (an arm that
+        # bounces reports several impacts per cycle; its strike is the first contact after
+        # the down half began)
+        self.strikes = 0
+        self.down_half_start = 0.0
+        self._mode = self.ctrl.mode
         self.pub = self.create_publisher(
             Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy(p.command_history)
         )
@@ -95,7 +108,7 @@ class Controller(Node):
         self.inputs = ControlInputs(
             self.ctrl,
             names,
-            [names.index(j) for j in p.joints],
+            command_order,
             p.rate,
             p.trigger,
             self._send,
@@ -148,7 +161,7 @@ class Controller(Node):
 
     def _set_parameters(self, values):
         p = self.p.replace(**values)
-        check(p, joint_names(self.n))
+        check(p, self.joint_names)
         c = self.ctrl
         if any(getattr(p, k) != getattr(self.p, k) for k in INTEGRAL_SETTINGS):
             c.integral = self._integrator(p)
@@ -195,6 +208,13 @@ class Controller(Node):
     def _send(self, values):
         self.pub.publish(self.wire_command.fill([float(v) for v in values]))
         self.sent += 1
+        mode, self._mode = self._mode, self.ctrl.mode
+        if mode != self._mode:
+            if self._mode == 'up':
+                self.strikes += 1
+                self._publish_diagnostics()  # now: a run ends on its count
+            elif self.inputs.latest is not None:
+                self.down_half_start = self.inputs.latest[0]
 
     def finish(self, executor) -> int:
         """Like a deactivated controller: leave the actuators with zero torque."""
@@ -221,6 +241,8 @@ class Controller(Node):
             message=f'{dropped} inputs dropped' if dropped else 'running',
             values=[
                 KeyValue(key='commands_sent', value=str(self.sent)),
+                KeyValue(key='strikes', value=str(self.strikes)),
+                KeyValue(key='down_half_start', value=repr(self.down_half_start)),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )

@@ -7,15 +7,8 @@ from __future__ import annotations
 import math
 
 from .. import contract
-from ..contract import (
-    ANTIWINDUP_STRATEGIES,
-    COMMANDS,
-    FEEDBACK_LAWS,
-    PID_SPACES,
-    joint_names,
-    to_joint_space,
-)
-from .params import Param, ParameterError
+from ..contract import ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES, to_joint_space
+from .params import Param, ParameterError, check_joints, scene_joint_names
 
 
 def parameter_table(scene):
@@ -37,6 +30,7 @@ def parameter_table(scene):
             'q (article eq. 9: PD on link angles + gravity compensation), pid or pd',
             'str',
             choices=FEEDBACK_LAWS,
+            shown_default="scene's",
         ),
         Param('rate', 1000.0, 'command rate [Hz]', low=0.1, high=100000.0, read_only=True),
         Param(
@@ -47,8 +41,18 @@ def parameter_table(scene):
             'str',
             choices=('joint_states', 'timer'),
             read_only=True,
+            doc=' (joint_states: sensor-synchronous, deterministic on simulated time)',
         ),
-        Param('p', list(c.kp), 'proportional gains per joint [N m/rad]', 'floats', low=0.0, size=n),
+        Param(
+            'p',
+            list(c.kp),
+            'proportional gains per joint [N m/rad]',
+            'floats',
+            low=0.0,
+            size=n,
+            shown_default="scene's",
+            doc=' (control_toolbox names: `p`, `i`, `d`)',
+        ),
         Param(
             'i',
             list(c.ki),
@@ -56,25 +60,44 @@ def parameter_table(scene):
             'floats',
             low=0.0,
             size=n,
+            shown_default="scene's",
         ),
-        Param('d', list(c.kd), 'derivative gains per joint [N m s/rad]', 'floats', low=0.0, size=n),
+        Param(
+            'd',
+            list(c.kd),
+            'derivative gains per joint [N m s/rad]',
+            'floats',
+            low=0.0,
+            size=n,
+            shown_default="scene's",
+        ),
         Param(
             'i_clamp_max',
             math.inf,
             'upper clamp of the integral term [N m] (legacy)',
             high=math.inf,
+            doc=' (with `antiwindup_strategy: legacy`)',
         ),
         Param(
             'i_clamp_min',
             -math.inf,
             'lower clamp of the integral term [N m] (legacy)',
             low=-math.inf,
+            doc=' (with `antiwindup_strategy: legacy`)',
         ),
         Param(
-            'u_clamp_max', math.inf, "upper limit of each joint's PID output [N m]", high=math.inf
+            'u_clamp_max',
+            math.inf,
+            "upper limit of each joint's PID output [N m]",
+            high=math.inf,
+            doc=' (laws pid, pd)',
         ),
         Param(
-            'u_clamp_min', -math.inf, "lower limit of each joint's PID output [N m]", low=-math.inf
+            'u_clamp_min',
+            -math.inf,
+            "lower limit of each joint's PID output [N m]",
+            low=-math.inf,
+            doc=' (laws pid, pd)',
         ),
         Param(
             'antiwindup_strategy',
@@ -84,6 +107,7 @@ def parameter_table(scene):
             'is at a u_clamp limit)',
             'str',
             choices=ANTIWINDUP_STRATEGIES,
+            doc='; none integrates regardless',
         ),
         Param(
             'space',
@@ -91,6 +115,7 @@ def parameter_table(scene):
             'angles the PID acts on: absolute link angles or relative joint angles',
             'str',
             choices=PID_SPACES,
+            shown_default="scene's",
         ),
         Param(
             'down_target',
@@ -100,6 +125,8 @@ def parameter_table(scene):
             low=-4 * math.pi,
             high=4 * math.pi,
             size=n,
+            shown_default="scene's",
+            doc=' (relative: joint1 = q1, joint_k = q_k − q_(k−1))',
         ),
         Param(
             'up_target',
@@ -109,6 +136,7 @@ def parameter_table(scene):
             low=-4 * math.pi,
             high=4 * math.pi,
             size=n,
+            shown_default="scene's",
         ),
         Param(
             'switch_height',
@@ -116,6 +144,7 @@ def parameter_table(scene):
             'tip height that ends the up phase [m]',
             low=-1e3,
             high=1e3,
+            shown_default="scene's",
         ),
         Param(
             'surface_height',
@@ -123,6 +152,7 @@ def parameter_table(scene):
             'height of the struck surface, for velocity-reversal detection [m]',
             low=-1e3,
             high=1e3,
+            shown_default='lowest surface',
         ),
         Param('force_threshold', 1.0, 'contact normal force that means impact [N]', low=0.0),
         Param(
@@ -134,11 +164,12 @@ def parameter_table(scene):
         ),
         Param(
             'joints',
-            joint_names(n),
-            'joint order of the command array',
+            scene_joint_names(scene),
+            "joint order of the command array (default: the scene's joints, base first)",
             'strs',
             size=n,
             read_only=True,
+            shown_default="the scene's: `[joint1, …, jointN]`",
         ),
         Param(
             'command_readers',
@@ -150,6 +181,7 @@ def parameter_table(scene):
             low=1,
             high=100,
             read_only=True,
+            doc='. `impact-arm run` and the launch file set 2 when they record',
         ),
         Param(
             'startup_hold',
@@ -191,10 +223,11 @@ def parameter_table(scene):
 
 
 def check(p, names):
-    """What no single parameter's range says: ParameterError naming the parameters."""
-    if sorted(p.joints) != names:
-        raise ParameterError(f'parameter joints = {p.joints}: must name each of {names} once')
+    """What no single parameter's range says: ParameterError naming the parameters.
+    Returns the command order (the index in ``names`` of each entry of ``joints``)."""
+    order = check_joints(p.joints, names)
     for name in ('i_clamp', 'u_clamp'):
         low, high = getattr(p, f'{name}_min'), getattr(p, f'{name}_max')
         if low > high:
             raise ParameterError(f'{name}_min = {low:g} > {name}_max = {high:g}')
+    return order

@@ -20,6 +20,7 @@ from rcl_interfaces.msg import (
 
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
+from ..contract import joint_names
 from ..physics.errors import ImpactArmError
 
 
@@ -39,6 +40,9 @@ class Param:
     size: int | None = None  # arrays: required length (None: any, >= 1)
     read_only: bool = False  # start-up only (changing it needs a restart)
     open_low: bool = False  # low bound excluded (e.g. rates > 0)
+    # for the generated tables of docs/*.md (param_docs.py), not for ``ros2 param describe``:
+    doc: str = ''  # what the documentation says beyond the description (markdown)
+    shown_default: str = ''  # the default in words, where the scene or the time sets it
 
     def allowed(self) -> str:
         if self.choices:
@@ -49,9 +53,14 @@ class Param:
             return f'{">" if self.open_low else ">="} {self.low:g}'
         if self.high is not None:
             return f'<= {self.high:g}'
-        return {'floats': 'a list of numbers', 'strs': 'a list of strings'}.get(
-            self.kind, f'a {self.kind}'
-        )
+        return {
+            'floats': 'a list of numbers',
+            'strs': 'a list of strings',
+            'str': 'a string',
+            'bool': 'true or false',
+            'int': 'an integer',
+            'float': 'a number',
+        }[self.kind]
 
     def descriptor(self) -> ParameterDescriptor:
         d = ParameterDescriptor(
@@ -125,6 +134,41 @@ class Param:
             fail('out of range')
         if self.high is not None and number > self.high:
             fail('out of range')
+
+
+def scene_joint_names(scene) -> list:
+    """The joint names of ``scene``'s arm, base first: every node names the joints by this
+    one function (the scene's number of links decides how many)."""
+    return joint_names(scene.n_links)
+
+
+def check_joints(given, names, parameter='joints') -> list:
+    """The one joint check of every node: ``given`` (a node's joint order parameter) must
+    name each of ``names`` (the scene's joints) exactly once. Returns, for each position of
+    ``given``, the index of that joint in ``names``; ParameterError naming the parameter."""
+    if sorted(given) != sorted(names):
+        raise ParameterError(
+            f"parameter {parameter} = {list(given)}: must name each of the scene's "
+            f'{len(names)} joints {list(names)} once (the order of the command array)'
+        )
+    return [list(names).index(j) for j in given]
+
+
+def startup_scene(node, default='paper'):
+    """(path, scene) of the node's ``scene`` parameter as given at start-up (declared from
+    the command line or parameter file by ``NODE_OPTIONS``), before the node's table is
+    declared: the scene sets defaults of the table (joint names, gains). Empty: ``default``
+    (None: no scene, returns (None, None))."""
+    from ..physics.scene import load_scene, resolve_scene_path
+
+    name = node.get_parameter('scene').value if node.has_parameter('scene') else ''
+    if name is not None and not isinstance(name, str):
+        raise ParameterError(f'parameter scene = {name!r}: not a string; allowed: a str')
+    name = name or default
+    if not name:
+        return None, None
+    path = resolve_scene_path(name)
+    return path, load_scene(path)
 
 
 # Node options of a node whose parameters ``declare`` and ``refuse_unknown`` handle: every

@@ -34,7 +34,6 @@ import time
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
-from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rosbags.serde import SerdeError
 
@@ -48,9 +47,18 @@ from ..io.mcap_ros2 import (
     ros_distro,
 )
 from ..io.msgdefs import typestore
-from ..io.scene_visuals import DEFAULT_TF_RATE, VisualsWriter
+from ..io.scene_visuals import VisualsWriter
 from ..io.wire import MalformedMessage, header_stamp_ns, joint_state_fields, wrench_stamped_fields
 from ._runner import reader_node, run, take_raw
+from .params import (
+    NODE_OPTIONS,
+    ParameterError,
+    declare,
+    refuse_unknown,
+    scene_joint_names,
+    validator,
+)
+from .recorder_params import PARAMS
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
@@ -71,56 +79,17 @@ def _string_reader():
     return read
 
 
-def _param(node, name, default, description):
-    return node.declare_parameter(name, default, ParameterDescriptor(description=description)).value
-
-
 class Recorder(Node):
     def __init__(self):
-        super().__init__('recorder')
-        stamp = time.strftime('%Y%m%d-%H%M%S')
-        self.output = _param(self, 'output', f'runs/{stamp}.mcap', 'MCAP file to write')
-        topics = _param(
-            self,
-            'topics',
-            list(TOPICS),
-            'topics to record; "name" or "name:pkg/msg/Type" (contract topics and '
-            'published topics need no type)',
-        )
-        scene = _param(
-            self, 'scene', '', 'scene file or installed scene name to store in the file (optional)'
-        )
-        self.param_nodes = _param(
-            self,
-            'param_nodes',
-            ['simulator', 'controller'],
-            'nodes whose parameters are stored at start and at shutdown',
-        )
-        interval = _param(
-            self,
-            'flush_interval',
-            0.5,
-            'seconds between flushes: at most this much is lost if killed',
-        )
-        tf_rate = _param(
-            self,
-            'tf_rate',
-            DEFAULT_TF_RATE,
-            'rate of the derived /tf and /impact_markers [Hz of sim time] (with a scene)',
-        )
-        log_time = _param(
-            self,
-            'log_time',
-            'stamps',
-            'log time of each message: "stamps" = the newest /clock or '
-            '/joint_states stamp received (simulated time, as ros2 bag record '
-            '--use-sim-time; 0 before the first), "reception" = wall clock',
-        )
-        if not interval > 0:
-            raise ValueError(f'flush_interval = {interval}: must be > 0 s')
-        if log_time not in ('stamps', 'reception'):
-            raise ValueError(f'log_time = {log_time!r}: must be "stamps" or "reception"')
-        self.by_stamps = log_time == 'stamps'
+        super().__init__('recorder', **NODE_OPTIONS)
+        p = self.p = declare(self, PARAMS)
+        refuse_unknown(self, PARAMS)
+        # every parameter is fixed at start-up: a change is refused, not silently ignored
+        self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
+        self.output = p.output or f'runs/{time.strftime("%Y%m%d-%H%M%S")}.mcap'
+        topics, scene, interval, tf_rate = p.topics, p.scene, p.flush_interval, p.tf_rate
+        self.param_nodes = [n for n in p.param_nodes if n]
+        self.by_stamps = p.log_time == 'stamps'
         self.now_ns = 0  # stamps: the newest /clock or /joint_states stamp
         scene_text = None
         if scene:
@@ -131,7 +100,9 @@ class Recorder(Node):
                 with open(scene, encoding='utf-8') as f:
                     scene_text = f.read()
             except OSError as e:
-                raise ValueError(f'scene = {scene!r}: cannot read ({e.strerror})') from None
+                raise ParameterError(
+                    f'parameter scene = {scene!r}: cannot read ({e.strerror})'
+                ) from None
         try:
             self.writer = Ros2McapWriter(self.output, flush_interval=interval)
         except RecordingError as e:
@@ -148,7 +119,10 @@ class Recorder(Node):
         )
         self.writer.add_metadata(
             'parameters/recorder',
-            {name: json.dumps(p.value) for name, p in self.get_parameters_by_prefix('').items()},
+            {
+                name: json.dumps(self.output if name == 'output' else value.value)
+                for name, value in self.get_parameters_by_prefix('').items()
+            },
         )
         if scene_text is not None:
             self.writer.add_attachment(os.path.basename(scene), scene_text, 'application/yaml')
@@ -165,8 +139,6 @@ class Recorder(Node):
         if scene_text is not None:
             from ..physics.scene import scene_from_text
 
-            if not tf_rate > 0:
-                raise ValueError(f'tf_rate = {tf_rate!r}: must be > 0 Hz')
             self.visuals = VisualsWriter(
                 self.writer,
                 scene_from_text(scene_text, scene),
@@ -182,7 +154,7 @@ class Recorder(Node):
             for topic in derived:
                 del self.wanted[topic]
             self._q = None  # absolute link angles of the latest joint state
-            self._joints = contract.joint_names(self.visuals.visuals.scene.n_links)
+            self._joints = scene_joint_names(self.visuals.visuals.scene)
             self._read_string = _string_reader()
         self.subs = {}
         # what has been written, for a lockstep simulator that waits for the recording

@@ -4,20 +4,8 @@
 ``impact-arm replay run.mcap --rate 2``. Each topic is published with its recorded type and the
 QoS its publishers offered (from the file), as the recorded serialized bytes (nothing is
 deserialized); timing follows the recorded log times scaled by ``rate``
-(``impact_arm.io.replay_plan`` computes the schedule). Parameters:
-
-==========================  ========  =====================================================
-``file``                    string    MCAP file to replay (required)
-``rate``                    float     speed factor, (0, 1000]; 1.0 = recorded speed
-``clock``                   float     publish /clock (recorded time) at this many Hz of
-                                      wall time, [0, 10000]; 0 = no /clock
-``loop``                    bool      start again after the last message
-``topics``                  string[]  replay only these topics ([] = all)
-``start_offset``            float     skip this many seconds of recorded time, >= 0
-``delay``                   float     wait this long before the first message, [0, 3600] s
-``wait_for_subscribers``    int       before starting, wait (at most 30 s) until every topic
-                                      has this many subscribers, [0, 1000]
-==========================  ========  =====================================================
+(``impact_arm.io.replay_plan`` computes the schedule). Parameters: replay_params.py (their
+table in docs/topics.md is generated from it).
 
 Publishing runs in its own thread paced by the monotonic clock, so the executor (parameter
 services) never delays a message; a late message is published at once, never skipped.
@@ -30,7 +18,6 @@ import os
 import threading
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -41,62 +28,29 @@ from ..io.mcap_ros2 import message_class
 from ..io.msgdefs import has_type_support
 from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
+from .params import NODE_OPTIONS, declare, refuse_unknown, validator
+from .replay_params import PARAMS, WAIT_SUBSCRIBERS_MAX
 
-WAIT_SUBSCRIBERS_MAX = 30.0
 PROGRESS_PERIOD = 5.0  # s of wall time between progress lines in the log
-
-PARAMETERS = {  # name: (default, description, check -> converted value or raise)
-    'file': ('', 'MCAP file to replay'),
-    'rate': (1.0, 'speed factor, (0, 1000]; 1.0 = recorded speed'),
-    'clock': (0.0, 'publish /clock at this many Hz of wall time, [0, 10000]; 0 = off'),
-    'loop': (False, 'start again after the last message'),
-    'topics': ([''], 'topics to replay ([] or [""] = all)'),
-    'start_offset': (0.0, 'seconds of recorded time to skip, >= 0'),
-    'delay': (0.0, 'seconds to wait before the first message, [0, 3600]'),
-    'wait_for_subscribers': (0, 'wait (<= 30 s) for this many subscribers per topic, [0, 1000]'),
-}
-
-
-def _number(name, value, low, high, kind=float):
-    try:
-        number = kind(value)
-    except (TypeError, ValueError):
-        raise ReplayError(f'{name} = {value!r}: must be a number in [{low}, {high}]') from None
-    if isinstance(value, bool) or not (math.isfinite(number) and low <= number <= high):
-        raise ReplayError(f'{name} = {value!r}: must be in [{low}, {high}]')
-    return number
 
 
 class Replay(Node):
     def __init__(self, **overrides):
         super().__init__(
-            'replay', parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()]
+            'replay',
+            parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
+            **NODE_OPTIONS,
         )
-        values = {
-            name: self.declare_parameter(
-                name, default, ParameterDescriptor(description=text, dynamic_typing=True)
-            ).value
-            for name, (default, text) in PARAMETERS.items()
-        }
-        if not values['file']:
+        p = declare(self, PARAMS)
+        refuse_unknown(self, PARAMS)
+        # every parameter is fixed at start-up: a change is refused, not silently ignored
+        self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
+        if not p.file:
             raise ReplayError('file = "": the MCAP file to replay is required (-p file:=run.mcap)')
-        clock = _number('clock', values['clock'], 0, 10000)
-        self.delay = _number('delay', values['delay'], 0, 3600)
-        self.wait_subs = _number(
-            'wait_for_subscribers', values['wait_for_subscribers'], 0, 1000, int
-        )
-        loop = values['loop']
-        if not isinstance(loop, bool):
-            raise ReplayError(f'loop = {loop!r}: must be true or false')
-        topics = values['topics'] or []
-        if isinstance(topics, str):
-            topics = [topics]
+        clock, self.delay, self.wait_subs, loop = p.clock, p.delay, p.wait_for_subscribers, p.loop
+        topics = [t for t in p.topics if t]
         self.plan = ReplayPlan.open(
-            values['file'],
-            rate=values['rate'],
-            start_offset=values['start_offset'],
-            topics=[t for t in topics if t],
-            loop=loop,
+            p.file, rate=p.rate, start_offset=p.start_offset, topics=topics, loop=loop
         )
         self.clock_period = 1.0 / clock if clock else math.inf
         self.publishers_ = {}
@@ -262,6 +216,8 @@ def cli(args) -> int:
         'wait_for_subscribers': int(args.wait_for_subscribers),
     }
     # the same checks as the node, before any DDS start-up: errors come as one line
+    for param in PARAMS:
+        param.check(overrides[param.name])
     ReplayPlan.open(
         overrides['file'],
         rate=overrides['rate'],
@@ -269,9 +225,6 @@ def cli(args) -> int:
         topics=[t for t in overrides['topics'] if t],
         loop=overrides['loop'],
     )
-    _number('clock', overrides['clock'], 0, 10000)
-    _number('delay', overrides['delay'], 0, 3600)
-    _number('wait_for_subscribers', overrides['wait_for_subscribers'], 0, 1000, int)
     return run(lambda: Replay(**overrides), ['impact-arm-replay'])
 
 

@@ -27,11 +27,10 @@ from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from .. import contract
-from ..contract import COMMANDS, DIAGNOSTICS, joint_names
+from ..contract import COMMANDS, DIAGNOSTICS
 from ..physics import jit
 from ..driver.arm import SimulatedArm
 from ..driver.realtime import WatchdogPolicy
-from ..physics.scene import load_scene, resolve_scene_path
 from ..driver.session import LockstepSession, Outputs, RealtimeSession
 from ..io.wire import float64_array_data, joint_state_command
 from . import sim_services
@@ -44,8 +43,15 @@ from ._runner import (
     run,
     take_raw,
 )
-from .params import NODE_OPTIONS, declare, refuse_unknown, validator
-from .simulator_params import PARAMS, SimulatorParams, check
+from .params import (
+    NODE_OPTIONS,
+    declare,
+    refuse_unknown,
+    scene_joint_names,
+    startup_scene,
+    validator,
+)
+from .simulator_params import check, parameter_table
 
 # s at most, at exit, for the readers to acknowledge the last samples: 2 s (under Fast DDS's
 # 3 s heartbeat) lost reports of a lagging recorder in one run of three under load
@@ -57,9 +63,10 @@ class Simulator(Node):
 
     def __init__(self):
         super().__init__('simulator', **NODE_OPTIONS)
-        p = self.p = declare(self, PARAMS, SimulatorParams)
-        scene_path = resolve_scene_path(p.scene or 'paper')
-        self.scene = load_scene(scene_path)
+        # the scene (given at start-up, hence already declared) sets the joints' defaults
+        scene_path, self.scene = startup_scene(self)
+        self.table = parameter_table(self.scene)
+        p = self.p = declare(self, self.table)
         # no contact trace: impact reports are built from the located events
         arm = self.arm = SimulatedArm(
             self.scene,
@@ -69,10 +76,10 @@ class Simulator(Node):
             trace=False,
             brake_torque=p.brake_torque,
         )
-        names = self.joint_names = joint_names(arm.n)
-        check(p, names)
-        refuse_unknown(self, PARAMS)
-        self.add_on_set_parameters_callback(validator(PARAMS, self._set_parameters))
+        names = self.joint_names = scene_joint_names(self.scene)
+        command_order = check(p, names)
+        refuse_unknown(self, self.table)
+        self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
         lockstep = p.mode == 'lockstep'
         # lockstep runs in the executor thread, unprioritized (read by _runner.run)
         self.middleware_priority = 0 if lockstep else p.thread_priority
@@ -88,7 +95,7 @@ class Simulator(Node):
             rate_factor=p.rate_factor,
             command_timeout=p.command_timeout,
             outputs=outputs,
-            command_order=[names.index(j) for j in p.joints],
+            command_order=command_order,
             policy=WatchdogPolicy(p.watchdog_policy),
             max_takes=contract.qos(COMMANDS).depth,
         )

@@ -1,19 +1,41 @@
-"""The simulator node's parameters, declared once: this table gives each its default,
-range, description (``ros2 param describe``) and the typed object the node reads."""
+"""The simulator node's parameters, declared once: ``parameter_table(scene)`` gives each its
+default (the joint names from the scene), range, description (``ros2 param describe``) and,
+through ``params.declare``, the typed object the node reads."""
 
 from .. import contract
-from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES, joint_names
+from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES
 from ..driver.arm import DEFAULT_BRAKE_TORQUE
 from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy
 from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
-from .params import Param, ParameterError, values_class
+from .params import Param, ParameterError, check_joints, scene_joint_names
 
-PARAMS = (
+
+def parameter_table(scene):
+    """The simulator's parameters; the joint names and their number come from ``scene``."""
+    return (
+        _PARAMS_BEFORE_JOINTS
+        + (
+            Param(
+                'joints',
+                scene_joint_names(scene),
+                "joint order of the command array (default: the scene's joints, base first)",
+                'strs',
+                size=scene.n_links,
+                read_only=True,
+                shown_default="the scene's: `[joint1, …, jointN]`",
+            ),
+        )
+        + _PARAMS_AFTER_JOINTS
+    )
+
+
+_PARAMS_BEFORE_JOINTS = (
     Param(
         'scene',
         '',
-        'scene YAML file or installed scene name (empty: paper, the article)',
+        'scene YAML file or installed scene name (empty: paper, the article); its sensors '
+        'section (docs/scene.md) sets how /joint_states and /contact_wrench report the state',
         'str',
         read_only=True,
     ),
@@ -51,6 +73,7 @@ PARAMS = (
         'before the watchdog acts (watchdog_policy; a few control periods)',
         low=1e-3,
         high=3600.0,
+        doc='; /diagnostics then WARNs. 20 periods at 1 kHz: a few periods of your controller',
     ),
     # brake by default: zero torque drops the arm onto the part, where it chatters (a 0.33 s
     # middleware stall gave ~300 impact events in one simulated second); a real drive's safe
@@ -64,6 +87,7 @@ PARAMS = (
         'str',
         choices=tuple(p.value for p in WatchdogPolicy),
         read_only=True,
+        doc=' (see "The watchdog" below)',
     ),
     Param(
         'brake_torque',
@@ -71,6 +95,7 @@ PARAMS = (
         "the brake's torque limit per joint [N m] (watchdog_policy brake)",
         low=1e-3,
         high=1e9,
+        doc='; /diagnostics reports it and the largest brake torque used',
     ),
     Param(
         'max_effort',
@@ -78,8 +103,10 @@ PARAMS = (
         'commanded torques are clipped to +-max_effort [N m]',
         low=1e-3,
         high=1e9,
+        doc=" (the article's Q law peaks near 2 kN m)",
     ),
-    Param('joints', joint_names(2), 'joint order of the command array', 'strs', read_only=True),
+)
+_PARAMS_AFTER_JOINTS = (
     Param(
         'preset',
         '',
@@ -98,6 +125,8 @@ PARAMS = (
         low=0,
         high=99,
         read_only=True,
+        doc='. Under load, middleware threads at normal scheduling held samples back '
+        'for 100–450 ms',
     ),
     Param(
         'diagnostics_period',
@@ -121,6 +150,7 @@ PARAMS = (
         'TF frame of /contact_wrench (x tangential, y normal)',
         'str',
         read_only=True,
+        doc=' (docs/topics.md, "Frames")',
     ),
     Param(
         'joint_commands_topic',
@@ -129,6 +159,7 @@ PARAMS = (
         '(effort by joint name), as topic_based_ros2_control sends them',
         'str',
         read_only=True,
+        doc=' (docs/ros2_control.md)',
     ),
     Param(
         'joint_states_topic',
@@ -136,6 +167,7 @@ PARAMS = (
         'joint states again, for topic_based_ros2_control (not /joint_states)',
         'str',
         read_only=True,
+        doc='; published while someone subscribes',
     ),
     Param(
         'tf_rate',
@@ -145,6 +177,8 @@ PARAMS = (
         high=1000.0,
         open_low=True,
         read_only=True,
+        doc=", from a timer outside the realtime loop; also at each impact's first contact, "
+        'maximum compression and separation (docs/topics.md, "Markers")',
     ),
     Param(
         'recorder_window',
@@ -156,6 +190,7 @@ PARAMS = (
         low=0,
         high=contract.WRITER_REPAIR_DEPTH // 2,
         read_only=True,
+        doc=f'. `impact-arm run` and the launch file set {contract.RECORDER_WINDOW} in lockstep',
     ),
     Param(
         'rod_radius',
@@ -173,16 +208,12 @@ PARAMS = (
         read_only=True,
     ),
 )
-SimulatorParams = values_class('SimulatorParams', PARAMS)
 
 
 def check(p, names):
-    """What no single parameter's range says: ParameterError naming the parameters."""
-    if sorted(p.joints) != sorted(names):
-        raise ParameterError(
-            f'parameter joints = {p.joints}: must name each of '
-            f'{names} once (the order of the command array)'
-        )
+    """What no single parameter's range says: ParameterError naming the parameters.
+    Returns the command order (the index in ``names`` of each entry of ``joints``)."""
+    order = check_joints(p.joints, names)
     if (
         p.joint_states_topic in (JOINT_STATES, JOINT_STATES.lstrip('/'))
         or p.joint_commands_topic == COMMANDS
@@ -197,3 +228,4 @@ def check(p, names):
             'parameter rate_factor = 0.0: realtime mode needs a pace '
             '> 0 (use mode lockstep to run as fast as possible)'
         )
+    return order

@@ -391,6 +391,15 @@ class PhaseIntegrator:
         c[layout.C_JT] = c[layout.C_JN] = 0.0
         return out
 
+    def take_peak(self) -> float:
+        """Peak normal contact force [N] since the last call, at the contact points the
+        integration computed (every step end in contact, including maximum compression: an
+        event, so a step end); the next span starts from the force acting now."""
+        c = self.state.c
+        out = float(c[layout.C_PERIOD_PEAK])
+        c[layout.C_PERIOD_PEAK] = c[layout.C_IMP_FN] if c[layout.C_PHASE] != layout.FREE else 0.0
+        return out
+
     def set_held_torque(self, tau: ArrayLike) -> None:
         """Hold the joint torques ``tau`` from now on (``control='held'``: a new command).
         The derivative cached at the current state is dropped, since it held the old torque."""

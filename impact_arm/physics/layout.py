@@ -8,10 +8,11 @@ names keep both sides reading the same slots.
 FREE, ELASTIC, ELASTOPLASTIC, RESTITUTION = 0, 1, 2, 3
 LAW_HELD, LAW_Q, LAW_PID, LAW_NONE = 0, 1, 2, 3
 # contact-state array C: phase, surface, cycle mode (0 down, 1 up), restitution
-# parameters, peak force, last impulse point, accumulated impulses
+# parameters, peak force of the impact, last impulse point, accumulated impulses, peak normal
+# force since the last output row or take_peak (the period's peak: /contact_force_peak)
 C_PHASE, C_SURF, C_MODE, C_DR, C_RR, C_DM, C_PM, C_PEAK = 0, 1, 2, 3, 4, 5, 6, 7
-C_IMP_T, C_IMP_FF, C_IMP_FN, C_JT, C_JN = 8, 9, 10, 11, 12
-C_SIZE = 13
+C_IMP_T, C_IMP_FF, C_IMP_FN, C_JT, C_JN, C_PERIOD_PEAK = 8, 9, 10, 11, 12, 13
+C_SIZE = 14
 # surface table columns; a mounted surface's plate: index of its displacement z in the state
 # (its rate follows; -1: rigidly mounted), mass, stiffness, damping coefficient
 S_H, S_LAW, S_MU, S_VD, S_E, S_R, S_SY, S_CJ, S_DC, S_PC, S_B = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
@@ -71,9 +72,9 @@ def shape_offsets(n: int, n_integral: int, n_mount: int = 0) -> dict:
     P_ARM_ON (some joint has armature)). Joint values are values, not shape: zero is off, and
     a scene that changes them never compiles a new kernel. R_*: an output row
     (``emit_output``): t, the state, the contact impulse since the previous row (tangential,
-    normal), the torque acting, actuators acting (1/0), the tip velocity (x, y). W_*: the
-    right-hand side's scratch (generalized forces, torques, PID error and rate, then N*N for
-    the mass matrix factor)."""
+    normal), the torque acting, actuators acting (1/0), the tip velocity (x, y), the peak
+    normal contact force since the previous row. W_*: the right-hand side's scratch
+    (generalized forces, torques, PID error and rate, then N*N for the mass matrix factor)."""
     size = 2 * n + n_integral + 2 * n_mount
     return {
         'SIZE': size,
@@ -106,7 +107,8 @@ def shape_offsets(n: int, n_integral: int, n_mount: int = 0) -> dict:
         'R_TAU': 3 + size,
         'R_ACT': 3 + size + n,
         'R_VTIP': 4 + size + n,
-        'R_SIZE': 6 + size + n,
+        'R_FPEAK': 6 + size + n,
+        'R_SIZE': 7 + size + n,
         'W_GEN': 0,
         'W_TAU': n,
         'W_ERR': 2 * n,

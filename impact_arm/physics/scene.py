@@ -17,6 +17,7 @@ import os
 import re
 import reprlib
 from dataclasses import dataclass, field
+from enum import Enum
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
@@ -109,6 +110,36 @@ class IntegratorSpec:
     contact_rtol: float | None = None
 
 
+class RateReading(str, Enum):
+    """How the driver obtains the joint rates it publishes."""
+
+    EXACT = 'exact'  # the drive's own velocity measurement (the state's rate, plus rate_noise)
+    DIFFERENCE = 'difference'  # (published position - previous one) x publish rate
+    FILTERED = 'filtered'  # that difference through a first-order low-pass at rate_cutoff
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """How the simulated driver reports the state (``driver/sensors.py``): the physics is
+    untouched. The defaults are ideal sensors: the exact state, at once."""
+
+    counts_per_revolution: int | None = None  # encoder resolution; None: not quantised
+    position_noise: float = 0.0  # [rad] standard deviation, before quantisation
+    rate_noise: float = 0.0  # [rad/s] on the exact rate only
+    effort_noise: float = 0.0  # [N m]
+    wrench_noise: float = 0.0  # [N]
+    rate: RateReading = RateReading.EXACT
+    rate_cutoff: float | None = None  # [Hz] of the filtered rate
+    state_latency: float = 0.0  # [s] age of the published joint states
+    effort_latency: float = 0.0  # [s] age of the reported efforts
+    wrench_latency: float = 0.0  # [s] age of the published wrench
+    seed: int = 0  # of the noise: a run's readings are reproducible
+
+    @property
+    def ideal(self) -> bool:
+        return self == SensorSpec()
+
+
 @dataclass(frozen=True)
 class Scene:
     name: str
@@ -127,6 +158,7 @@ class Scene:
     publish_rate: float  # Hz of sampled output (joint states)
     integrator: IntegratorSpec
     joints: tuple[JointSpec, ...] = ()  # one per link; () is the ideal joints
+    sensors: SensorSpec = field(default_factory=SensorSpec)
     source_text: str = field(default='', compare=False, repr=False)
     source_path: str = field(default='', compare=False, repr=False)
 
@@ -204,6 +236,20 @@ INTEGRATOR = {
     'method': _choice(INTEGRATOR_METHODS, 'dopri5'),
     'contact_rtol': _num(1e-14, 1e-1, unit='-', default=None),
 }
+MAX_SENSOR_LATENCY = 1.0  # s: a driver whose samples are older is broken, not slow
+SENSORS = {
+    'counts_per_revolution': ('int', (1, 2**40), '', None),
+    'position_noise': _num(0, 1, unit='rad', default=0.0),
+    'rate_noise': _num(0, 1e3, unit='rad/s', default=0.0),
+    'effort_noise': _num(0, 1e6, unit='N m', default=0.0),
+    'wrench_noise': _num(0, 1e9, unit='N', default=0.0),
+    'rate': _choice([r.value for r in RateReading], RateReading.EXACT.value),
+    'rate_cutoff': _num(1e-3, 1e6, unit='Hz', default=None),
+    'state_latency': _num(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
+    'effort_latency': _num(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
+    'wrench_latency': _num(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
+    'seed': ('int', (0, 2**32 - 1), '', 0),
+}
 SCHEMA = {
     'name': ('str', None, '', 'scene'),
     'description': ('str', None, '', ''),
@@ -229,6 +275,7 @@ SCHEMA = {
     't_max': _num(0, 1e7, low_open=True, unit='s', default=60.0),
     'publish_rate': _num(1, 1e6, unit='Hz', default=1000.0),
     'integrator': ('dict', INTEGRATOR, '', {'preset': 'balanced'}),
+    'sensors': ('dict', SENSORS, '', {}),
 }
 
 
@@ -481,6 +528,7 @@ def parse_scene(
         check.fail('joints', f'has {len(joints)} entries: must have one per link ({n}) or none')
     _check_physics(check, raw, surfaces, arm)
     integ = IntegratorSpec(**raw['integrator'])
+    sensors = _sensor_spec(check, raw['sensors'])
     return Scene(
         name=raw['name'],
         lengths=tuple(l['length'] for l in raw['links']),
@@ -498,9 +546,32 @@ def parse_scene(
         publish_rate=raw['publish_rate'],
         integrator=integ,
         joints=joints,
+        sensors=sensors,
         source_text=text,
         source_path=path,
     )
+
+
+def _sensor_spec(check: _Checker, raw: dict) -> SensorSpec:
+    """The checked ``sensors`` section; a key that the chosen rate reading would ignore is
+    refused rather than silently dropped."""
+    if not raw:  # the section left out: ideal sensors
+        return SensorSpec()
+    rate = RateReading(raw['rate'])
+    if raw['rate_noise'] and rate is not RateReading.EXACT:
+        check.fail(
+            'sensors.rate_noise',
+            f'= {raw["rate_noise"]:g} applies to rate: exact only; rate: {rate.value} '
+            f'derives the rates from the published positions and carries their noise',
+        )
+    if rate is RateReading.FILTERED and raw['rate_cutoff'] is None:
+        check.fail('sensors.rate_cutoff', 'is missing: rate: filtered needs a cut-off (Hz)')
+    if rate is not RateReading.FILTERED and raw['rate_cutoff'] is not None:
+        check.fail(
+            'sensors.rate_cutoff',
+            f'= {raw["rate_cutoff"]:g} applies to rate: filtered only (rate is {rate.value})',
+        )
+    return SensorSpec(**{**raw, 'rate': rate})
 
 
 MAX_LENGTH_RATIO = 1e3  # longest / shortest link

@@ -37,6 +37,7 @@ class Sample:
     tau: tuple
     wrench: tuple  # (F_tangential, F_normal) averaged over the period that ends at t
     mode: str
+    force_peak: float = 0.0  # the largest normal contact force in that period [N]
     plates: tuple = ()  # (z, ż) of each mounted surface's plate, in surface order [m, m/s]
 
 
@@ -296,6 +297,7 @@ def run(
                 last_publish = t_pub
                 tau = integ.torque()
                 tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
+                mode = ctrl.mode if ctrl else st.mode
                 publish(
                     Sample(
                         t_pub,
@@ -303,7 +305,8 @@ def run(
                         tuple(qd),
                         tau_now,
                         wrench,
-                        ctrl.mode if ctrl else st.mode,
+                        mode,
+                        integ.take_peak(),
                         model.plate_states(st.y),
                     ),
                     model.tip(q, qd)[2:],
@@ -343,7 +346,7 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
             wrench = (row[eq.R_JT] / dt, row[eq.R_JN] / dt)
             plates = model.plate_states(row[eq.R_Y : eq.R_Y + model.size]) if model.n_mount else ()
             publish(
-                Sample(row[eq.R_T], q, qd, tau, wrench, mode, plates),
+                Sample(row[eq.R_T], q, qd, tau, wrench, mode, row[eq.R_FPEAK], plates),
                 tuple(row[eq.R_VTIP : eq.R_VTIP + 2]),
             )
             last_t = row[eq.R_T]
@@ -359,11 +362,13 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
             tau if tau is not None else (0.0,) * n,
             integ.contact_force_now(),
             st.mode,
+            integ.contact_force_now()[1],
             model.plate_states(st.y),
         ),
         model.tip(q, qd)[2:],
     )
     integ.take_impulse()
+    integ.take_peak()
     last_index = math.floor(t_max / dt * (1 + 1e-12))
     t_final = last_index * dt
     integ.start_output(dt, 1, sink=publish_rows)

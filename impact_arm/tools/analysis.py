@@ -12,7 +12,9 @@ impact record each: the table is exactly the one ``simulate`` prints), ``/impact
 Outputs in DIR (default: ``runs/<FILE name without .mcap>_analysis``): ``report.md``,
 ``impacts.json`` (``{"impacts": [...]}``, the records as published), ``impact_table.txt``,
 ``poincare_qd1_zero.csv`` / ``poincare_qd2_zero.csv`` and the figures ``fig3_controllers.png``
-… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each). Figure 3 is the
+… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each; ``--format svg|pdf``,
+``--dpi``). The impact table and the limit cycle are printed before any figure is drawn;
+the animation is a step of its own (``impact-arm animate``, or ``--animation``). Figure 3 is the
 article's comparison of the control laws (``--laws``, default q, pd, pid): step responses of
 the file's scene with its surface taken away, simulated offline. Figures 8-11 come from
 ``/impact_trace`` (offline recordings) or, in a live recording, from the impact integrated
@@ -51,6 +53,7 @@ class Run:
     scene: object = None
     metadata: dict = field(default_factory=dict)
     law: str = ''
+    topics: tuple = ()  # the topics the file holds (with or without messages)
 
 
 def _quiet(text):
@@ -59,7 +62,7 @@ def _quiet(text):
 
 def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
-    from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info
+    from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info, unreadable_reason
     from ..io.msgdefs import typestore
 
     deserialize_cdr = typestore().deserialize_cdr
@@ -70,7 +73,7 @@ def load(path, progress=_quiet) -> Run:
         info = topics_info(path)
         metadata = read_metadata(path)
     except Exception as e:  # noqa: BLE001 - any reader failure: not an MCAP file we can use
-        raise AnalysisError(f'{path}: not a readable MCAP file ({e})') from None
+        raise AnalysisError(f'{path}: {unreadable_reason(path, e)}') from None
     if JOINT_STATES not in info:
         raise AnalysisError(f'{path}: no /joint_states recorded (topics: {sorted(info)})')
     total = sum(i.message_count for i in info.values()) or 1
@@ -122,6 +125,7 @@ def load(path, progress=_quiet) -> Run:
         scene,
         metadata,
         law,
+        tuple(sorted(info)),
     )
 
 
@@ -274,6 +278,71 @@ def reintegrated_trace(scene, record: dict):
     )
 
 
+@dataclass(frozen=True)
+class ElasticCurve:
+    """The elastic (Hertz) phase of one impact on a fine time grid: the integrator's output
+    between contact and the end of the phase (yield at 1.9 δc, or maximum compression for a
+    contact that stays elastic). The phase lasts ~1 µs, a step or two of the integrator: its
+    step ends alone draw it as a straight segment."""
+
+    t: np.ndarray  # [s]
+    delta: np.ndarray  # indentation [m]
+    force: np.ndarray  # normal force [N], Hertz at delta
+    end: str  # the event that ends the phase: 'yield' or 'max_compression'
+
+
+def elastic_curve(scene, record: dict, points: int = 80) -> ElasticCurve | None:
+    """Integrate impact ``record`` again from its reported contact state (as
+    ``reintegrated_trace``) with output on a grid of ``points`` times over its elastic phase
+    (the integrator's continuous extension; contact steps end on the grid). None when the
+    record cannot be integrated again (``trace_missing_reason``) or has no elastic phase."""
+    from ..physics.contact import hertz_force
+    from ..physics.integrator import PhaseIntegrator, options_from_spec
+    from ..physics.model import ArmModel
+
+    if scene is None or scene.n_links != 2 or scene.actuators_during_contact:
+        return None
+    durations = record.get('phase_durations') or []
+    if not durations or not durations[0] > 0 or 'q_contact_deg' not in record:
+        return None
+    model = ArmModel(scene)
+    n = model.n
+    q = np.radians(np.asarray(record['q_contact_deg'], float))
+    v = np.asarray(record['v_before'], float)
+    qd = np.linalg.solve(np.asarray(model.tip_jacobian(q), float).reshape(2, n), v)
+    back = 1e-7  # start a moment before contact, as reintegrated_trace does
+    state = model.initial_state()
+    state.t = float(record['t_contact']) - back
+    state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
+    integ = PhaseIntegrator(model, state, control='held', **options_from_spec(scene.integrator))
+    dt = float(durations[0]) / points
+    integ.start_output(dt, math.ceil(float(record['t_contact']) / dt))
+    t_end = state.t + 10 * max(float(record['duration']), 1e-6)
+    contact = end = None
+    while state.t < t_end and end is None:
+        for event in integ.advance(t_end, stop_at_event=True):
+            if event.kind == 'contact' and contact is None:
+                contact = event
+            elif contact is not None and event.kind in ('yield', 'max_compression'):
+                end = event
+                break
+    if contact is None or end is None:
+        return None
+    rows = integ.take_output()
+    surface = model.surfaces[contact.surface]
+    level = float(state.levels[contact.surface])
+
+    def indentation(y):
+        return level - float(np.sum(model.L * np.sin(y[:n])))
+
+    t = [contact.t] + [r[0] for r in rows if contact.t < r[0] < end.t] + [end.t]
+    ys = [contact.y] + [r[1 : 1 + model.size] for r in rows if contact.t < r[0] < end.t] + [end.y]
+    delta = np.array([max(indentation(y), 0.0) for y in ys])
+    c = surface.constants
+    force = np.array([hertz_force(d, c.E, c.R) for d in delta])
+    return ElasticCurve(np.asarray(t), delta, force, end.kind)
+
+
 def with_contact_point(columns, rows, record):
     """The trace with its first point at contact (δ = 0, no force, the velocities and
     energies before impact from the record): the kernel records points at step ends, so the
@@ -383,9 +452,35 @@ def add_arguments(parser):
         'recording',
     )
     parser.add_argument(
+        '--animation',
+        action='store_true',
+        help='also write animation.gif (slow, about a minute; impact-arm animate makes it alone)',
+    )
+    parser.add_argument(
         '--no-animation',
         action='store_true',
-        help='skip animation.gif (impact-arm animate makes it alone)',
+        help='no animation.gif: the default since --animation (accepted for older scripts)',
+    )
+    figure_options(parser)
+
+
+def figure_options(parser):
+    """--format and --dpi, shared with the commands that draw figures."""
+    from .figures import DPI, FORMATS
+
+    parser.add_argument(
+        '--format',
+        default='png',
+        choices=FORMATS,
+        help='file format of the figures (default png; svg and pdf are vector graphics)',
+    )
+    parser.add_argument(
+        '--dpi',
+        type=float,
+        default=DPI,
+        metavar='N',
+        help=f'resolution of png figures in dots per inch (default {DPI}, [50, 1200]); '
+        f'sets the size in pixels, not the layout',
     )
 
 
@@ -403,6 +498,8 @@ def cli(args) -> int:
     )
     if not 0 < args.compare_time <= 60:
         raise AnalysisError(f'--compare-time = {args.compare_time}: must be in (0, 60] s')
+    if not 50 <= args.dpi <= 1200:
+        raise AnalysisError(f'--dpi = {args.dpi:g}: must be in [50, 1200]')
     laws = [w.strip() for w in args.laws.split(',') if w.strip()]
     for law in laws:
         if law not in FEEDBACK_LAWS:
@@ -419,6 +516,16 @@ def cli(args) -> int:
             f'(the impacts reported in {args.file})'
         )
     others = [load(f, progress=say) for f in args.compare]
+    # the table first: it needs nothing but the file, the figures take seconds
+    table = impact_table(run.impacts)
+    lc = limit_cycle(run.impacts)
+    line.end()
+    if run.impacts:
+        print(f'impact table ({len(run.impacts)} impacts):')
+        print(table)
+    else:
+        print(f'no impacts in {args.file}: {no_impact_reason(run)}')
+    print(_limit_cycle_text(lc), flush=True)
     missing = []
     steps = []
     if laws and run.scene is None:
@@ -429,11 +536,7 @@ def cli(args) -> int:
         steps = [step_response(run.scene, law, args.compare_time, say) for law in laws]
     impact, constants = impact_points(run, args.impact, say)
     if impact is None:
-        missing.append(
-            f'Figures 8-11 not drawn: {args.file} has no /impact_trace, and '
-            f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
-            f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE'
-        )
+        missing.append(_no_impact_figures(run, args.file))
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
@@ -448,20 +551,10 @@ def cli(args) -> int:
         recordings=others,
         constants=constants,
         missing=missing,
+        style=figures.Style(args.format, args.dpi),
+        elastic=elastic_curve(run.scene, impact[2]) if impact is not None else None,
     )
-    if not args.no_animation and run.scene is not None:
-        from .animation import animate, contact_forces
-
-        gif = os.path.join(out, 'animation.gif')
-        say(f'animating to {gif}')
-        frames = animate(run, gif, contact_forces(args.file), progress=say)
-        line.end()
-        print(f'animation: {gif} ({frames} frames)')
     line.end()
-    print(f'impact table ({len(run.impacts)} impacts):')
-    print(written['table'])
-    lc = written['limit_cycle']
-    print(_limit_cycle_text(lc))
     if impact is not None and impact[3]:
         print(f'Figures 8-11: impact {args.impact} {impact[3]}')
     for line_ in missing:
@@ -469,9 +562,38 @@ def cli(args) -> int:
     print(
         f'wrote {os.path.join(out, "report.md")} ({len(written["figures"])} figures: '
         + ', '.join(name for name, _ in written['figures'])
-        + ')'
+        + ')',
+        flush=True,
     )
+    if args.animation and run.scene is not None:
+        from .animation import animate, contact_forces
+
+        gif = os.path.join(out, 'animation.gif')
+        say(f'animating to {gif}')
+        frames = animate(run, gif, contact_forces(args.file), progress=say)
+        line.end()
+        print(f'animation: {gif} ({frames} frames)')
+    elif args.animation:
+        print(f'animation not drawn: {args.file} stores no scene (link lengths)')
     return 0
+
+
+def no_impact_reason(run: Run) -> str:
+    """Why a recording has no impact record: no /impact_report topic at all (a recording
+    of joint states only), or the topic is there and the arm never struck."""
+    if IMPACT_REPORT in run.topics or IMPACT_TRACE in run.topics:
+        return f'the arm struck no surface ({IMPACT_REPORT} was recorded, with no message)'
+    return f'it has no {IMPACT_REPORT} topic'
+
+
+def _no_impact_figures(run: Run, path) -> str:
+    if not run.impacts and not run.traces and IMPACT_REPORT in run.topics:
+        return f'Figures 8-11 not drawn: {path} has no impact to show (the arm struck no surface)'
+    return (
+        f'Figures 8-11 not drawn: {path} has no /impact_trace, and '
+        f'{trace_missing_reason(run)}, so the impact cannot be integrated again. '
+        f'Record with the trace: impact-arm simulate --scene SCENE --mcap FILE'
+    )
 
 
 def impact_points(run: Run, k: int, progress=_quiet):
@@ -556,6 +678,8 @@ def write_outputs(
     recordings=(),
     constants=None,
     missing=(),
+    style=None,
+    elastic=None,
 ) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
@@ -582,6 +706,8 @@ def write_outputs(
         progress=progress,
         recordings=recordings,
         constants=constants,
+        style=style,
+        elastic=elastic,
     )
     _write(
         os.path.join(out, 'report.md'),
@@ -590,14 +716,26 @@ def write_outputs(
     return {'table': table, 'limit_cycle': lc, 'figures': made, 'sections': sections}
 
 
+def _origin(info: dict) -> str:
+    """Who recorded the file and how: 'offline run, simulate --mcap' for an offline file
+    (its node and mode are both 'offline'), else 'NODE, MODE'."""
+    node, mode = info.get('node', '?'), info.get('mode', 'live')
+    if node == 'offline':
+        return 'offline run, impact-arm simulate --mcap'
+    return f'{node}, {mode}' if mode != node else node
+
+
+def _figure_named(made, stem) -> str:
+    return next((name for name, _ in made if name.startswith(stem + '.')), stem + '.png')
+
+
 def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) -> str:
     info = run.metadata.get('impact_arm', {})
     nonfinite = int(np.count_nonzero(~np.isfinite(run.q)) + np.count_nonzero(~np.isfinite(run.qd)))
     lines = [
         f'# Analysis of {run.label}',
         '',
-        f'Recorded by impact_arm {info.get("version", "?")} ({info.get("node", "?")}'
-        f', {info.get("mode", "live")}); scene '
+        f'Recorded by impact_arm {info.get("version", "?")} ({_origin(info)}); scene '
         f'{run.scene.name if run.scene is not None else "not stored"}'
         f'{", law " + run.law if run.law else ""}; {len(run.t)} joint states over '
         f'{run.t[-1] - run.t[0]:.4f} s, {len(run.impacts)} impact reports, '
@@ -663,7 +801,7 @@ def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) ->
         lines += [f'**{line}**', '']
     if others:
         lines += [
-            'Recordings compared (fig3b_recordings.png): '
+            f'Recordings compared ({_figure_named(made, "fig3b_recordings")}): '
             + ', '.join([run.label] + [o.label for o in others])
             + '.',
             '',

@@ -1,11 +1,18 @@
 """``impact-arm animate FILE.mcap``: the arm, the surface and the contact force, frame by frame.
 
-For people without a 3D viewer. Frames are spaced 1/fps of simulated time (real time), and
-``slow`` times closer within ``window`` seconds of each impact, where the interesting part
-lasts milliseconds. Each frame shows the recorded joint state nearest its time; the contact
-force is the strongest /contact_wrench value since the previous frame, drawn from the tip with
-the same saturating length as the 3D markers (io/scene_visuals.py), so no contact is missed
-between frames. Writes a GIF (pillow, which matplotlib brings) or an MP4 (needs ffmpeg).
+For people without a 3D viewer. Frames are spaced 1/fps of simulated time (real time),
+``slow`` times closer within ``window`` seconds of each impact, and each impact itself (which
+lasts ~0.1 ms) gets ``contact_frames`` frames of its own: slow motion through the contact,
+with the force of the impact's trace (``/impact_trace``: offline recordings) at that instant.
+Each frame shows the recorded joint state nearest its time. The force arrow is drawn to scale
+(a scale bar says how many kN a length is): inside an impact the traced force, elsewhere the
+strongest /contact_wrench value since the previous frame (a period average), so no contact is
+missed between frames.
+
+The axes, the surface and the scale bar are drawn once by matplotlib; each frame draws the
+arm, the tip and the arrow onto a copy of that picture with Pillow (which matplotlib brings):
+seconds for a whole run, where redrawing every frame with matplotlib took minutes. Writes a GIF
+(Pillow) or an MP4 (needs ffmpeg).
 """
 
 from __future__ import annotations
@@ -21,6 +28,10 @@ from ..physics.errors import ImpactArmError
 DEFAULT_FPS = 20.0
 DEFAULT_SLOW = 10.0  # frames this much closer near impacts
 DEFAULT_WINDOW = 0.03  # s either side of an impact's contact time
+DEFAULT_CONTACT_FRAMES = 12  # frames through each impact (slow motion)
+PIXELS, DPI = 400, 80  # frame size: PIXELS square at DPI (5 inches)
+ARROW_SHARE = 0.45  # the strongest force is drawn this fraction of the reach long
+BLUE, RED, ORANGE, GREY = (31, 119, 180), (214, 39, 40), (255, 127, 14), (80, 80, 80)
 
 
 class AnimationError(ImpactArmError):
@@ -34,16 +45,21 @@ def frame_times(
     fps: float = DEFAULT_FPS,
     slow: float = DEFAULT_SLOW,
     window: float = DEFAULT_WINDOW,
+    contacts=(),
+    contact_frames: int = 0,
 ) -> np.ndarray:
     """Simulated times of the frames from ``t0`` to ``t1``: 1/fps apart, 1/(fps·slow) apart
-    within ``window`` of an impact time."""
+    within ``window`` of an impact time, and ``contact_frames`` evenly through each contact
+    ``(t_contact, duration)`` of ``contacts`` (from its start to its end)."""
     impacts = np.sort(np.asarray(list(impact_times), float))
     out, t, step = [], float(t0), 1.0 / fps
     while t <= t1 + 1e-12:
         out.append(t)
         near = impacts.size and np.min(np.abs(impacts - t)) <= window
         t += step / slow if near else step
-    return np.asarray(out)
+    for start, duration in contacts if contact_frames > 0 else ():
+        out.extend(start + duration * np.linspace(0.0, 1.0, contact_frames))
+    return np.unique(np.asarray(out, float))
 
 
 def contact_forces(path):
@@ -62,6 +78,54 @@ def contact_forces(path):
     return np.asarray(t)[order], np.asarray(f, float).reshape(-1, 2)[order]
 
 
+class _Contact:
+    """One impact's traced force (tangential F_f, normal F_n) and indentation over time."""
+
+    def __init__(self, index, columns, rows):
+        col = {name: rows[:, i] for i, name in enumerate(columns)}
+        self.index = index
+        self.t = col['t']
+        self.start, self.end = float(self.t[0]), float(self.t[-1])
+        self.force = np.stack([col['F_f'], col['F_n']], axis=1)
+        self.delta = col['delta']
+
+    def at(self, t):
+        """(tangential, normal) force [N] and indentation [m] at ``t``, linear between points;
+        zero before the first point (the contact itself, δ = 0)."""
+        if t < self.t[0]:
+            return np.zeros(2), 0.0
+        ft = [np.interp(t, self.t, self.force[:, k]) for k in (0, 1)]
+        return np.asarray(ft), float(np.interp(t, self.t, self.delta))
+
+
+def _contacts(run):
+    """The traced impacts of ``run`` (``_Contact``), starting at each one's contact time."""
+    out = []
+    for k, (columns, rows) in enumerate(run.traces):
+        if len(rows) < 2 or not {'t', 'F_n', 'F_f', 'delta'} <= set(columns):
+            continue
+        contact = _Contact(k + 1, columns, np.asarray(rows, float))
+        if k < len(run.impacts):  # the trace's first point is a step end, not the contact
+            contact.start = min(contact.start, float(run.impacts[k]['t_contact']))
+        out.append(contact)
+    return out
+
+
+def _nice_force(value: float) -> float:
+    """A round force [N] near ``value``/2 for the scale bar: 1, 2 or 5 times a power of ten."""
+    if not value > 0:
+        return 1000.0
+    exponent = math.floor(math.log10(value / 2))
+    for mantissa in (5, 2, 1):
+        if mantissa * 10**exponent <= value / 2:
+            return mantissa * 10**exponent
+    return 10**exponent
+
+
+def _kn(force: float) -> str:
+    return f'{force / 1e3:g} kN'
+
+
 def animate(
     run,
     out_path,
@@ -70,97 +134,212 @@ def animate(
     slow: float = DEFAULT_SLOW,
     window: float = DEFAULT_WINDOW,
     progress=None,
+    contact_frames: int = DEFAULT_CONTACT_FRAMES,
 ) -> int:
     """Write the animation of ``run`` (analysis.Run, with its scene) to ``out_path`` (.gif or
     .mp4); ``forces`` as ``contact_forces`` returns. Returns the number of frames."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    from matplotlib import animation
-
-    from ..io.scene_visuals import arrow_length
-
     if run.scene is None:
         raise AnimationError(f'{run.label}: the recording holds no scene (link lengths)')
-    if not (fps > 0 and slow >= 1 and window >= 0):
+    if not (fps > 0 and slow >= 1 and window >= 0 and contact_frames >= 0):
         raise AnimationError(
-            f'fps = {fps}, slow = {slow}, window = {window}: need fps > 0, slow >= 1, window >= 0'
+            f'fps = {fps}, slow = {slow}, window = {window}, contact_frames = '
+            f'{contact_frames}: need fps > 0, slow >= 1, window >= 0, contact_frames >= 0'
         )
     ext = os.path.splitext(out_path)[1].lower()
     if ext not in ('.gif', '.mp4'):
         raise AnimationError(f'--out {out_path}: must end in .gif or .mp4')
+    if ext == '.mp4':
+        from matplotlib import animation as mpl_animation
+
+        if not mpl_animation.FFMpegWriter.isAvailable():
+            raise AnimationError(
+                f'--out {out_path}: MP4 needs ffmpeg, which is not installed; write a .gif instead'
+            )
     scene, lengths = run.scene, np.asarray(run.scene.lengths, float)
     if len(lengths) != run.q.shape[1]:
         raise AnimationError(
             f'{run.label}: {run.q.shape[1]} joints recorded, the stored scene '
             f'has {len(lengths)} links'
         )
+    contacts = _contacts(run)
     times = frame_times(
-        run.t[0], run.t[-1], [i['t_contact'] for i in run.impacts], fps, slow, window
+        run.t[0],
+        run.t[-1],
+        [i['t_contact'] for i in run.impacts],
+        fps,
+        slow,
+        window,
+        [(c.start, c.end - c.start) for c in contacts],
+        contact_frames,
     )
     reach = float(lengths.sum())
-    fig, ax = plt.subplots(figsize=(5, 5), dpi=80)
+    strongest = max(
+        [float(np.max(np.hypot(*c.force.T))) for c in contacts]
+        + ([float(np.max(np.hypot(*forces[1].T)))] if forces is not None and len(forces[0]) else [])
+        + [0.0]
+    )
+    per_newton = ARROW_SHARE * reach / strongest if strongest > 0 else 0.0
+    background, to_pixels = _background(scene, reach, per_newton, _nice_force(strongest))
+    tip_radius = max(
+        abs(
+            to_pixels(np.array([[scene.tip_radius, 0.0]]))[0, 0] - to_pixels(np.zeros((1, 2)))[0, 0]
+        ),
+        3.0,
+    )
+    frames = []
+    previous = -math.inf
+    for k, t in enumerate(times):
+        frames.append(
+            _frame(
+                background,
+                to_pixels,
+                run,
+                lengths,
+                t,
+                previous,
+                forces,
+                contacts,
+                per_newton,
+                tip_radius,
+            )
+        )
+        previous = t
+        if progress and k % 100 == 0:
+            progress(f'  animation frame {k}/{len(times)}')
+    _write(frames, out_path, ext, fps)
+    return len(times)
+
+
+def _background(scene, reach, per_newton, bar_force):
+    """The picture every frame starts from (axes, surfaces, force scale bar) as a Pillow
+    image, and the map from data coordinates [m] to its pixels."""
+    import matplotlib
+
+    matplotlib.use('Agg', force=True)
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    fig, ax = plt.subplots(figsize=(PIXELS / DPI, PIXELS / DPI), dpi=DPI)
     ax.set_xlim(-1.1 * reach, 1.1 * reach)
     ax.set_ylim(-1.1 * reach, 1.1 * reach)
     ax.set_aspect('equal')
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
+    fig.subplots_adjust(left=0.16, right=0.96, bottom=0.12, top=0.88)
     for s in scene.surfaces:
         ax.axhline(s.height, color='0.5', lw=3)
-    (arm,) = ax.plot([], [], '-o', lw=3, color='tab:blue', ms=4)
-    tip = plt.Circle((0, 0), max(scene.tip_radius, 0.01 * reach), color='tab:red')
-    ax.add_patch(tip)
-    (arrow,) = ax.plot([], [], '-', lw=2, color='tab:orange')
-    title = ax.set_title('')
-    previous = [-math.inf]
+    if per_newton > 0:
+        length = bar_force * per_newton
+        x0, y0 = -1.0 * reach, -1.0 * reach
+        ax.plot([x0, x0 + length], [y0, y0], color='tab:orange', lw=2)
+        ax.text(x0, y0 + 0.04 * reach, f'force scale: {_kn(bar_force)}', fontsize=7)
+    fig.canvas.draw()
+    height = fig.canvas.get_width_height()[1]
+    transform = ax.transData.frozen()
+    image = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+    plt.close(fig)
 
-    def draw(k):
-        t = times[k]
-        i = min(np.searchsorted(run.t, t), len(run.t) - 1)
-        if i and abs(run.t[i - 1] - t) <= abs(run.t[i] - t):
-            i -= 1
-        q = run.q[i]
-        x = np.concatenate([[0.0], np.cumsum(lengths * np.cos(q))])
-        y = np.concatenate([[0.0], np.cumsum(lengths * np.sin(q))])
-        arm.set_data(x, y)
-        tip.center = (x[-1], y[-1])
-        arrow.set_data([], [])
-        if forces is not None:
-            ft, f = forces
-            sel = (ft > previous[0]) & (ft <= t)
-            if sel.any():
-                mags = np.hypot(f[sel, 0], f[sel, 1])
-                j = int(np.argmax(mags))
-                if mags[j] > 0:
-                    length = arrow_length(mags[j], reach)
-                    arrow.set_data(
-                        [x[-1], x[-1] + length * f[sel][j, 0] / mags[j]],
-                        [y[-1], y[-1] + length * f[sel][j, 1] / mags[j]],
-                    )
-        previous[0] = t
-        title.set_text(f't = {t:.3f} s')
-        if progress and k % 100 == 0:
-            progress(f'  animation frame {k}/{len(times)}')
-        return arm, tip, arrow, title
+    def to_pixels(xy):
+        display = transform.transform(np.asarray(xy, float))
+        return np.stack([display[:, 0], height - display[:, 1]], axis=1)
 
-    anim = animation.FuncAnimation(fig, draw, frames=len(times), blit=False)
-    if ext == '.gif':
-        writer = animation.PillowWriter(fps=fps)
-    else:
-        if not animation.FFMpegWriter.isAvailable():
-            plt.close(fig)
-            raise AnimationError(
-                f'--out {out_path}: MP4 needs ffmpeg, which is not installed; write a .gif instead'
-            )
-        writer = animation.FFMpegWriter(fps=fps)
+    return image, to_pixels
+
+
+def _frame(background, to_pixels, run, lengths, t, previous, forces, contacts, per_newton, radius):
+    from PIL import ImageDraw
+
+    i = min(int(np.searchsorted(run.t, t)), len(run.t) - 1)
+    if i and abs(run.t[i - 1] - t) <= abs(run.t[i] - t):
+        i -= 1
+    q = run.q[i]
+    x = np.concatenate([[0.0], np.cumsum(lengths * np.cos(q))])
+    y = np.concatenate([[0.0], np.cumsum(lengths * np.sin(q))])
+    image = background.copy()
+    draw = ImageDraw.Draw(image)
+    points = to_pixels(np.stack([x, y], axis=1))
+    draw.line([tuple(p) for p in points], fill=BLUE, width=4)
+    for px, py in points[:-1]:
+        draw.ellipse([px - 3, py - 3, px + 3, py + 3], fill=BLUE)
+    tx, ty = points[-1]
+    draw.ellipse([tx - radius, ty - radius, tx + radius, ty + radius], fill=RED)
+    force, title = None, f't = {t:.3f} s'
+    inside = next((c for c in contacts if c.start <= t <= c.end), None)
+    if inside is not None:
+        force, delta = inside.at(t)
+        newtons = round(float(np.hypot(*force)), -1)
+        title = (
+            f't = {t:.6f} s   impact {inside.index}, {1e6 * (t - inside.start):.1f} us '
+            f'after contact (slow motion)\nindentation {1e6 * delta:.0f} um,  '
+            f'force {_kn(newtons)}'
+        )
+    elif forces is not None:
+        ft, f = forces
+        sel = (ft > previous) & (ft <= t)
+        if sel.any():
+            mags = np.hypot(f[sel, 0], f[sel, 1])
+            force = f[sel][int(np.argmax(mags))]
+    if force is not None and per_newton > 0 and np.hypot(*force) > 0:
+        end = to_pixels(np.array([[x[-1] + per_newton * force[0], y[-1] + per_newton * force[1]]]))[
+            0
+        ]
+        _arrow(draw, (tx, ty), tuple(end))
+    draw.multiline_text((70, 8), title, fill=GREY, spacing=2)
+    return image
+
+
+def _arrow(draw, start, end):
+    """A line from ``start`` to ``end`` (pixels) with a head at ``end``."""
+    draw.line([start, end], fill=ORANGE, width=3)
+    dx, dy = end[0] - start[0], end[1] - start[1]
+    length = math.hypot(dx, dy)
+    if length < 1:
+        return
+    ux, uy = dx / length, dy / length
+    size = min(10.0, 0.5 * length)
+    left = (end[0] - size * ux + 0.5 * size * uy, end[1] - size * uy - 0.5 * size * ux)
+    right = (end[0] - size * ux - 0.5 * size * uy, end[1] - size * uy + 0.5 * size * ux)
+    draw.polygon([end, left, right], fill=ORANGE)
+
+
+def _write(frames, out_path, ext, fps):
     try:
-        anim.save(out_path, writer=writer)
+        if ext == '.gif':
+            first = frames[0].quantize(colors=64)
+            rest = [f.quantize(palette=first) for f in frames[1:]]
+            first.save(
+                out_path,
+                save_all=True,
+                append_images=rest,
+                duration=int(round(1000 / fps)),
+                loop=0,
+                optimize=False,
+            )
+        else:
+            _write_mp4(frames, out_path, fps)
     except OSError as e:
-        raise AnimationError(f'--out {out_path}: cannot write ({e.strerror})') from None
+        raise AnimationError(f'--out {out_path}: cannot write ({e.strerror or e})') from None
+
+
+def _write_mp4(frames, out_path, fps):
+    import matplotlib
+
+    matplotlib.use('Agg', force=True)
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+
+    fig = plt.figure(figsize=(PIXELS / DPI, PIXELS / DPI), dpi=DPI)
+    ax = fig.add_axes([0, 0, 1, 1])
+    ax.axis('off')
+    shown = ax.imshow(np.asarray(frames[0]))
+    writer = animation.FFMpegWriter(fps=fps)
+    try:
+        with writer.saving(fig, out_path, DPI):
+            for frame in frames:
+                shown.set_data(np.asarray(frame))
+                writer.grab_frame()
     finally:
         plt.close(fig)
-    return len(times)
 
 
 def add_arguments(parser):
@@ -188,6 +367,14 @@ def add_arguments(parser):
         metavar='S',
         help=f'seconds either side of an impact shown slowed (default {DEFAULT_WINDOW:g})',
     )
+    parser.add_argument(
+        '--contact-frames',
+        type=int,
+        default=DEFAULT_CONTACT_FRAMES,
+        metavar='N',
+        help=f'frames through each impact, from its /impact_trace (default '
+        f'{DEFAULT_CONTACT_FRAMES}; 0: none)',
+    )
 
 
 def cli(args) -> int:
@@ -207,7 +394,14 @@ def cli(args) -> int:
 
     run = load(args.file, progress=say)
     frames = animate(
-        run, out, contact_forces(args.file), args.fps, args.slow, args.window, progress=say
+        run,
+        out,
+        contact_forces(args.file),
+        args.fps,
+        args.slow,
+        args.window,
+        progress=say,
+        contact_frames=args.contact_frames,
     )
     line.end()
     print(f'wrote {out} ({frames} frames)')

@@ -105,15 +105,17 @@ def match(a_rows, b_rows) -> list:
 
 
 def compare(
-    a, b, *, scene='paper', joints=None, controller=False, states_topic=None, wrench_topic=None
+    a, b, *, scene=None, joints=None, controller=False, states_topic=None, wrench_topic=None
 ) -> dict:
     """Python API: {'a': rows, 'b': rows, 'pairs': [(i, j)], 'table': [...], 'what': text}."""
     from ..contract import JOINT_STATES
     from ..calibration.study import Study
     from ..io.recording import read_recording
 
+    from .fit import scene_of
+
     b_is_recording = _is_recording(b)
-    kin_scene = scene if b_is_recording else b
+    kin_scene = scene_of(a, scene)[0] if b_is_recording else b
     study = Study(kin_scene)
     n = study.scene().n_links
     rec_a = read_recording(a, joints, n, states_topic or JOINT_STATES, wrench_topic)
@@ -213,13 +215,24 @@ def write_plot(result, path, a_name, b_name):
     plt.close(fig)
 
 
+def default_out(a, b) -> str:
+    """runs/compare_<A>_vs_<B>: one directory per pair, so comparing A with another B
+    does not land on the first result."""
+
+    def name(path):
+        return os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
+
+    return os.path.join('runs', f'compare_{name(a)}_vs_{name(b)}')
+
+
 def add_arguments(parser):
     parser.add_argument('a', help='recording (rosbag2 folder or MCAP file)')
     parser.add_argument('b', help='second recording, or a scene (file or installed name)')
     parser.add_argument(
         '--scene',
-        default='paper',
-        help='scene for the kinematics when both are recordings (default paper)',
+        default=None,
+        help='scene for the kinematics when both are recordings (default: the scene A '
+        'stores, else paper)',
     )
     parser.add_argument(
         '--controller',
@@ -227,14 +240,34 @@ def add_arguments(parser):
         help='B a scene: simulate it with its own controller instead of '
         "replaying A's impacts with A's efforts",
     )
-    parser.add_argument('--joints', default=None, metavar='A,B,...')
-    parser.add_argument('--states-topic', default=None, metavar='T')
-    parser.add_argument('--wrench-topic', default=None, metavar='T')
+    parser.add_argument(
+        '--joints',
+        default=None,
+        metavar='A,B,...',
+        help='joint names in the joint states, base first (default joint1..jointN)',
+    )
+    parser.add_argument(
+        '--states-topic',
+        default=None,
+        metavar='T',
+        help='sensor_msgs/JointState topic of the recordings (default /joint_states)',
+    )
+    parser.add_argument(
+        '--wrench-topic',
+        default=None,
+        metavar='T',
+        help='geometry_msgs/WrenchStamped topic (default /contact_wrench if recorded)',
+    )
     parser.add_argument(
         '--out',
         default=None,
         metavar='DIR',
-        help='write table.json and compare.png here (default runs/compare_<A>/)',
+        help='write table.json and compare.png here (default runs/compare_<A>_vs_<B>/)',
+    )
+    parser.add_argument(
+        '--force',
+        action='store_true',
+        help='replace an earlier comparison in the output directory (refused without)',
     )
 
 
@@ -242,6 +275,13 @@ def cli(args) -> int:
     from .cli import write_json
 
     joints = [j.strip() for j in args.joints.split(',')] if args.joints else None
+    out = args.out or default_out(args.a, args.b)
+    earlier = [n for n in ('table.json', 'compare.png') if os.path.exists(os.path.join(out, n))]
+    if earlier and not args.force:  # refused before the work, not after
+        raise ImpactArmError(
+            f'--out {out}: holds an earlier comparison ({", ".join(earlier)}); pass --force '
+            f'to replace it, or another --out'
+        )
     result = compare(
         args.a,
         args.b,
@@ -253,8 +293,6 @@ def cli(args) -> int:
     )
     print(f'A: {args.a}\nB: {result["what"]}')
     print(format_table(result))
-    name = os.path.splitext(os.path.basename(os.path.normpath(args.a)))[0]
-    out = args.out or os.path.join('runs', f'compare_{name}')
     os.makedirs(out, exist_ok=True)
     write_json(os.path.join(out, 'table.json'), result)
     print(f'wrote {os.path.join(out, "table.json")}')

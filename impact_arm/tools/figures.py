@@ -1,7 +1,8 @@
-"""PNG figures like the article's Figures 3–11 (matplotlib, Agg backend, no display needed).
+"""Figures like the article's Figures 3–11 (matplotlib, Agg backend, no display needed).
 
-Every figure is ``FIGURE_SIZE`` pixels (width, height): a fixed size in inches at a fixed dpi,
-saved without tight cropping. ``draw_all`` returns [(file name, caption)] of what it drew; a
+Every figure is ``FIGURE_INCHES`` in size, saved without tight cropping, as PNG (``FIGURE_SIZE``
+pixels at the default ``DPI``; ``Style.dpi`` scales the pixels, not the layout), SVG or PDF
+(``Style.format``). ``draw_all`` returns [(file name, caption)] of what it drew; a
 figure whose data the recording lacks (no scene for Figures 3 and 7, neither ``/impact_trace``
 nor a re-integrable ``/impact_report`` for 8–11) is left out, and ``analyze`` says why.
 """
@@ -10,12 +11,30 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 DPI = 100
 FIGURE_INCHES = (9.0, 5.5)
 FIGURE_SIZE = (int(FIGURE_INCHES[0] * DPI), int(FIGURE_INCHES[1] * DPI))  # pixels
+FORMATS = ('png', 'svg', 'pdf')
+
+
+@dataclass(frozen=True)
+class Style:
+    """How the figures are written: file format (``FORMATS``) and the dpi of raster output."""
+
+    format: str = 'png'
+    dpi: float = DPI
+
+    def __post_init__(self):
+        if self.format not in FORMATS:
+            raise ValueError(f'figure format {self.format!r}: choose one of {", ".join(FORMATS)}')
+        if not 50 <= self.dpi <= 1200:
+            raise ValueError(f'figure dpi = {self.dpi:g}: must be in [50, 1200]')
+
+
 PHASE_NAMES = {1: 'elastic compression', 2: 'elasto-plastic compression', 3: 'restitution'}
 
 
@@ -28,10 +47,14 @@ def _plt():
     return plt
 
 
-def _save(fig, out, name):
+def _save(fig, out, name, style=Style()):
     path = os.path.join(out, name)
-    tmp = path + '.tmp.png'
-    fig.savefig(tmp, dpi=DPI)
+    tmp = path + '.tmp.' + style.format
+    # no creation date in vector files: the same run gives the same file
+    metadata = {'CreationDate': None} if style.format == 'pdf' else None
+    if style.format == 'svg':
+        metadata = {'Date': None}
+    fig.savefig(tmp, dpi=style.dpi, format=style.format, metadata=metadata)
     _plt().close(fig)
     os.replace(tmp, path)
     return path
@@ -164,33 +187,73 @@ def fig4_link_angles(run, out):
 
 
 def fig5_phase_portraits(run, out):
+    """Angles and rates in one unit system: degrees and degrees per second (as Figure 4)."""
     plt = _plt()
     fig = plt.figure(figsize=FIGURE_INCHES)
     for k in (0, 1):
         ax = fig.add_subplot(1, 2, k + 1, projection='3d')
-        ax.plot(_deg(run.q[:, 0]), _deg(run.q[:, 1]), run.qd[:, k], lw=0.6)
+        ax.plot(_deg(run.q[:, 0]), _deg(run.q[:, 1]), _deg(run.qd[:, k]), lw=0.6)
         ax.set_xlabel('q1 [deg]')
         ax.set_ylabel('q2 [deg]')
-        ax.set_zlabel(f'q̇{k + 1} [rad/s]')
+        ax.set_zlabel(f'q̇{k + 1} [deg/s]')
         ax.set_title(f'({"ab"[k]}) q1, q2, q̇{k + 1}', fontsize=9)
     fig.subplots_adjust(left=0.02, right=0.95, wspace=0.15)
     return fig
 
 
+DIRECTIONS = {-1.0: 'falling', 1.0: 'rising'}
+
+
 def fig6_poincare(run, sections, out):
+    """One panel per section (q̇1 = 0, q̇2 = 0) and direction of the crossing (falling,
+    rising): the crossings of one direction gather about one point of the limit cycle, and
+    the other direction's lie far away, so each cluster gets axes scaled to itself. Successive
+    crossings are joined (the way the motion settles), the last one starred."""
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=FIGURE_INCHES)
-    for k, ax in enumerate(axes):
+    fig, axes = plt.subplots(2, 2, figsize=FIGURE_INCHES)
+    norm = plt.Normalize(0, max([len(rows) - 1 for rows in sections.values()] + [1]))
+    mappable = None
+    for k in (0, 1):
         rows = sections[k]
-        if len(rows):
-            order = np.arange(len(rows))
-            sc = ax.scatter(_deg(rows[:, 1]), _deg(rows[:, 2]), c=order, cmap='viridis', s=18)
-            fig.colorbar(sc, ax=ax, label='crossing number')
-        ax.set_xlabel('q1 [deg]')
-        ax.set_ylabel('q2 [deg]')
-        ax.set_title(f'({"ab"[k]}) q1, q2 at q̇{k + 1} = 0 ({len(rows)} crossings)', fontsize=9)
-        ax.grid(alpha=0.3)
-    _layout(fig)
+        for j, (direction, name) in enumerate(DIRECTIONS.items()):
+            ax = axes[k, j]
+            order = np.nonzero(rows[:, 3] == direction)[0] if len(rows) else np.zeros(0, int)
+            if len(order):
+                x, y = _deg(rows[order, 1]), _deg(rows[order, 2])
+                ax.plot(x, y, '-', color='0.75', lw=0.6, zorder=0)
+                mappable = ax.scatter(x, y, c=order, cmap='viridis', norm=norm, s=16)
+                ax.plot(x[-1:], y[-1:], '*', color='tab:red', ms=10, mfc='none', mew=1.0)
+                ax.margins(0.15)
+                if len(order) >= 6:  # the settled half, about the last point
+                    half = len(order) // 2
+                    dx, dy = x[half:] - x[-1], y[half:] - y[-1]
+                    inset = ax.inset_axes([0.58, 0.5, 0.4, 0.38])
+                    inset.plot(dx, dy, '-', color='0.75', lw=0.6, zorder=0)
+                    inset.scatter(dx, dy, c=order[half:], cmap='viridis', norm=norm, s=10)
+                    inset.plot([0], [0], '*', color='tab:red', ms=8, mfc='none')
+                    inset.margins(0.25)
+                    inset.ticklabel_format(useOffset=False, style='plain')
+                    spread = max(np.ptp(dx), np.ptp(dy))
+                    _style_inset(inset, '', 'Δq1 from the star [deg]', 'Δq2 [deg]')
+                    inset.text(
+                        0.03,
+                        0.97,
+                        f'last {len(dx)}: within {spread:.2g}°',
+                        transform=inset.transAxes,
+                        fontsize=6,
+                        va='top',
+                    )
+            ax.set_title(
+                f'({"abcd"[2 * k + j]}) q̇{k + 1} = 0, {name}: {len(order)} crossings', fontsize=8
+            )
+            ax.set_xlabel('q1 [deg]', fontsize=8)
+            ax.set_ylabel('q2 [deg]', fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+    fig.subplots_adjust(left=0.08, right=0.86, bottom=0.1, top=0.93, wspace=0.3, hspace=0.55)
+    if mappable is not None:
+        bar = fig.colorbar(mappable, ax=list(axes.ravel()), fraction=0.03, pad=0.02)
+        bar.set_label('crossing number (star: the last)')
     return fig
 
 
@@ -214,17 +277,32 @@ def _trace(impact):
     return col, (col['t'] - impact[2]['t_contact']) * 1e6
 
 
-def _by_phase(ax, tus, y, phase, scale=1.0, x=None, legend=True, last_is_end=True):
+def _by_phase(ax, tus, y, phase, scale=1.0, x=None, legend=True, last_is_end=True, curves=None):
     """One colour per contact phase, every point drawn; each phase's line starts at the
     previous phase's last point (the switch, located exactly), so the curve has no gap, and
-    the switches are marked."""
+    the switches are marked. ``curves``: {phase: (x, y)} drawn as that phase's line instead of
+    the segments between its points (the elastic phase from the integrator's dense output:
+    its points are a step or two apart)."""
     x = tus if x is None else x
+    curves = curves or {}
     for p, name in PHASE_NAMES.items():
         idx = np.nonzero(phase == p)[0]
         if not len(idx):
             continue
         if idx[0] > 0:
             idx = np.concatenate([[idx[0] - 1], idx])
+        if p in curves:
+            cx, cy = curves[p]
+            ax.plot(cx, np.asarray(cy) * scale, '-', lw=1, color=PHASE_COLORS[p])
+            ax.plot(
+                x[idx],
+                y[idx] * scale,
+                '.',
+                ms=3,
+                color=PHASE_COLORS[p],
+                label=name + ' (line: dense output)' if legend else None,
+            )
+            continue
         ax.plot(
             x[idx],
             y[idx] * scale,
@@ -256,12 +334,26 @@ def _note(ax, impact):
         ax.figure.text(0.005, 0.004, impact[3], ha='left', va='bottom', fontsize=7, color='0.35')
 
 
-def fig8_indentation(impact, out):
+def _elastic(elastic, impact, x='t'):
+    """{1: (x, y)} of the elastic phase's dense curve (``analysis.ElasticCurve``): x in µs
+    since contact (or the indentation, ``x='delta'``, in µm); y in the trace's own unit
+    (the caller scales)."""
+    if elastic is None:
+        return None
+    xs = (elastic.t - impact[2]['t_contact']) * 1e6 if x == 't' else elastic.delta * 1e6
+    return xs, elastic
+
+
+def fig8_indentation(impact, out, elastic=None):
+    from ..physics.contact import YIELD_ONSET_FACTOR
+
     plt = _plt()
     col, tus = _trace(impact)
     k = impact[2].get('index', '?')
     fig, ax = plt.subplots(figsize=FIGURE_INCHES)
-    _by_phase(ax, tus, col['delta'], col['phase'], 1e6)
+    dense = _elastic(elastic, impact)
+    curves = {1: (dense[0], elastic.delta)} if dense else None
+    _by_phase(ax, tus, col['delta'], col['phase'], 1e6, curves=curves)
     ax.set_xlabel('t since contact [µs]')
     ax.set_ylabel('indentation δ [µm]')
     ax.set_title(
@@ -270,9 +362,9 @@ def fig8_indentation(impact, out):
     )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc='upper left')
-    elastic = np.nonzero(col['phase'] == 1)[0]
-    if len(elastic):  # zoom on the short elastic phase, as the article does
-        last = min(elastic[-1] + 3, len(tus) - 1)
+    in_elastic = np.nonzero(col['phase'] == 1)[0]
+    if len(in_elastic):  # zoom on the short elastic phase, as the article does
+        last = min(in_elastic[-1] + 3, len(tus) - 1)
         inset = ax.inset_axes([0.6, 0.1, 0.35, 0.4])
         _by_phase(
             inset,
@@ -282,17 +374,31 @@ def fig8_indentation(impact, out):
             1e6,
             legend=False,
             last_is_end=False,
+            curves=curves,
         )
-        t_yield, d_yield = tus[elastic[-1]], col['delta'][elastic[-1]] * 1e6
-        inset.axhline(d_yield, color='k', ls=':', lw=0.8)
-        inset.annotate(
-            f'yield onset δ = 1.9 δc = {d_yield:.2f} µm\nat {t_yield:.2f} µs',
-            (t_yield, d_yield),
-            xytext=(0.05, 0.7),
-            textcoords='axes fraction',
-            fontsize=6,
-            arrowprops=dict(arrowstyle='->', lw=0.6),
-        )
+        t_yield, d_yield = tus[in_elastic[-1]], col['delta'][in_elastic[-1]] * 1e6
+        if np.any(col['phase'] == 2):  # it yielded: Hertz hands over at 1.9 δc
+            d_c = d_yield / YIELD_ONSET_FACTOR
+            inset.axhline(d_yield, color='k', ls=':', lw=0.8)
+            inset.axhline(d_c, color='tab:red', ls='--', lw=0.8)
+            inset.annotate(
+                f'Hertz → Jackson–Green:\nδ = 1.9 δc = {d_yield:.2f} µm at {t_yield:.2f} µs',
+                (t_yield, d_yield),
+                xytext=(0.03, 0.8),
+                textcoords='axes fraction',
+                fontsize=6,
+                arrowprops=dict(arrowstyle='->', lw=0.6),
+            )
+            inset.text(
+                0.03 * t_yield,
+                d_c,
+                f'onset of yield: δc = {d_c:.2f} µm',
+                fontsize=6,
+                color='tab:red',
+                va='bottom',
+            )
+        inset.set_xlim(-0.02 * t_yield, 1.5 * t_yield)
+        inset.set_ylim(0, 1.6 * d_yield)
         _style_inset(inset, 'zoom: elastic compression (Hertz)', 't [µs]', 'δ [µm]')
     _note(ax, impact)
     _layout(fig)
@@ -320,12 +426,14 @@ def fig9_impact_velocity(impact, out):
     return fig
 
 
-def fig10_contact_force(impact, out):
+def fig10_contact_force(impact, out, elastic=None):
     plt = _plt()
     col, tus = _trace(impact)
     k = impact[2].get('index', '?')
     fig, ax = plt.subplots(figsize=FIGURE_INCHES)
-    _by_phase(ax, tus, col['F_n'], col['phase'], 1e-3)
+    dense = _elastic(elastic, impact)
+    curves = {1: (dense[0], elastic.force)} if dense else None
+    _by_phase(ax, tus, col['F_n'], col['phase'], 1e-3, curves=curves)
     if np.any(col['F_f'] != 0):
         ax.plot(tus, col['F_f'] * 1e-3, 'k--', lw=0.8, label='friction force F_f')
     ax.set_xlabel('t since contact [µs]')
@@ -333,12 +441,30 @@ def fig10_contact_force(impact, out):
     ax.set_title(f'Contact force during impact {k} (F_max = {impact[2]["F_max"] * 1e-3:.2f} kN)')
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc='upper left')
+    in_elastic = np.nonzero(col['phase'] == 1)[0]
+    if len(in_elastic) and np.any(col['phase'] == 2):  # zoom on the elastic phase (Hertz)
+        last = min(in_elastic[-1] + 3, len(tus) - 1)
+        inset = ax.inset_axes([0.42, 0.3, 0.28, 0.36])  # between F_f and the peak
+        _by_phase(
+            inset,
+            tus[: last + 1],
+            col['F_n'][: last + 1],
+            col['phase'][: last + 1],
+            1e-3,
+            legend=False,
+            last_is_end=False,
+            curves=curves,
+        )
+        t_yield, f_yield = tus[in_elastic[-1]], col['F_n'][in_elastic[-1]] * 1e-3
+        inset.set_xlim(-0.02 * t_yield, 1.5 * t_yield)
+        inset.set_ylim(0, 1.6 * f_yield)
+        _style_inset(inset, 'zoom: elastic compression (Hertz, F ∝ δ^1.5)', 't [µs]', 'F_n [kN]')
     _note(ax, impact)
     _layout(fig)
     return fig
 
 
-def fig_force_indentation(impact, constants, out):
+def fig_force_indentation(impact, constants, out, elastic=None):
     """Normal force against indentation: the points of the impact on the model's three laws
     (Hertz to 1.9 δc, Jackson–Green to δm, restitution from δm down to δr)."""
     from ..physics.contact import (
@@ -392,9 +518,18 @@ def fig_force_indentation(impact, constants, out):
                 ms=5,
                 label='1.9 δc (Hertz → Jackson–Green)' if a is ax else None,
             )
-    _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta)
+    curves = {1: (elastic.delta * 1e6, elastic.force)} if elastic is not None else None
+    _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta, curves=curves)
     _by_phase(
-        inset, delta, col['F_n'], col['phase'], 1e-3, x=delta, legend=False, last_is_end=False
+        inset,
+        delta,
+        col['F_n'],
+        col['phase'],
+        1e-3,
+        x=delta,
+        legend=False,
+        last_is_end=False,
+        curves=curves,
     )
     ax.set_xlabel('indentation δ [µm]')
     ax.set_ylabel('normal force F_n [kN]')
@@ -447,64 +582,83 @@ def fig11_kinetic_energy(impact, out):
 
 
 IMPACT_FIGURES = (
-    'fig8_indentation.png',
-    'fig9_impact_velocity.png',
-    'fig10_contact_force.png',
-    'fig10b_force_indentation.png',
-    'fig11_kinetic_energy.png',
+    'fig8_indentation',
+    'fig9_impact_velocity',
+    'fig10_contact_force',
+    'fig10b_force_indentation',
+    'fig11_kinetic_energy',
 )
 CAPTIONS = {
-    'fig3_controllers.png': 'Fig. 3: step responses of the Q controller, PD and PID without '
+    'fig3_controllers': 'Fig. 3: step responses of the Q controller, PD and PID without '
     'impact, (a) link 1, (b) link 2',
-    'fig3b_recordings.png': 'Link angles of the compared recordings',
-    'fig4_link_angles.png': 'Fig. 4: link angles q1(t), q2(t)',
-    'fig5_phase_portraits.png': 'Fig. 5: phase portraits (q1, q2, q̇1) and (q1, q2, q̇2)',
-    'fig6_poincare.png': 'Fig. 6: Poincaré maps, q1 and q2 at q̇1 = 0 and at q̇2 = 0',
-    'fig7_tip_velocity.png': 'Fig. 7: tip velocity vx(t), vy(t)',
-    'fig8_indentation.png': 'Fig. 8: indentation during the impact, elastic phase zoomed',
-    'fig9_impact_velocity.png': 'Fig. 9: tangential and normal tip velocity during the impact',
-    'fig10_contact_force.png': 'Fig. 10: contact force during the impact',
-    'fig10b_force_indentation.png': 'Force against indentation on the three contact laws '
+    'fig3b_recordings': 'Link angles of the compared recordings',
+    'fig4_link_angles': 'Fig. 4: link angles q1(t), q2(t)',
+    'fig5_phase_portraits': 'Fig. 5: phase portraits (q1, q2, q̇1) and (q1, q2, q̇2), '
+    'degrees and degrees per second',
+    'fig6_poincare': 'Fig. 6: Poincaré maps, q1 and q2 at q̇1 = 0 and at q̇2 = 0, one panel '
+    'per direction of the crossing (each scaled to its points)',
+    'fig7_tip_velocity': 'Fig. 7: tip velocity vx(t), vy(t)',
+    'fig8_indentation': 'Fig. 8: indentation during the impact, elastic phase zoomed',
+    'fig9_impact_velocity': 'Fig. 9: tangential and normal tip velocity during the impact',
+    'fig10_contact_force': 'Fig. 10: contact force during the impact',
+    'fig10b_force_indentation': 'Force against indentation on the three contact laws '
     '(not in the article)',
-    'fig11_kinetic_energy.png': 'Fig. 11: kinetic energies during the impact',
+    'fig11_kinetic_energy': 'Fig. 11: kinetic energies during the impact',
 }
 
 
 def draw_all(
-    run, steps, sections, v_tip, impact, out, progress=None, recordings=(), constants=None
+    run,
+    steps,
+    sections,
+    v_tip,
+    impact,
+    out,
+    progress=None,
+    recordings=(),
+    constants=None,
+    style=None,
+    elastic=None,
 ):
     """Draw every figure the data allows into ``out``; returns [(file name, caption)].
     ``steps``: the step-response runs of Figure 3 (none: no Figure 3); ``impact``: (columns,
     rows, record, note) of the impact for Figures 8–11, or None; ``recordings``: more
     recordings to compare with ``run``; ``constants``: the impacted surface's contact
-    constants (the model's curves in the force–indentation plot)."""
+    constants (the model's curves in the force–indentation plot); ``style``: format and dpi
+    (default: PNG at ``DPI``); ``elastic``: the impact's elastic phase on a fine grid
+    (``analysis.ElasticCurve``), drawn as the line of that phase in Figures 8 and 10."""
+    style = style or Style()
     jobs = []
     if steps:
-        jobs.append(('fig3_controllers.png', lambda: fig3_controllers(steps, out)))
+        jobs.append(('fig3_controllers', lambda: fig3_controllers(steps, out)))
     if recordings:
-        jobs.append(('fig3b_recordings.png', lambda: fig_recordings([run] + list(recordings), out)))
+        jobs.append(('fig3b_recordings', lambda: fig_recordings([run] + list(recordings), out)))
     jobs += [
-        ('fig4_link_angles.png', lambda: fig4_link_angles(run, out)),
-        ('fig5_phase_portraits.png', lambda: fig5_phase_portraits(run, out)),
-        ('fig6_poincare.png', lambda: fig6_poincare(run, sections, out)),
+        ('fig4_link_angles', lambda: fig4_link_angles(run, out)),
+        ('fig5_phase_portraits', lambda: fig5_phase_portraits(run, out)),
+        ('fig6_poincare', lambda: fig6_poincare(run, sections, out)),
     ]
     if v_tip is not None:
-        jobs.append(('fig7_tip_velocity.png', lambda: fig7_tip_velocity(run, v_tip, out)))
+        jobs.append(('fig7_tip_velocity', lambda: fig7_tip_velocity(run, v_tip, out)))
     if impact is not None:
         jobs += [
-            ('fig8_indentation.png', lambda: fig8_indentation(impact, out)),
-            ('fig9_impact_velocity.png', lambda: fig9_impact_velocity(impact, out)),
-            ('fig10_contact_force.png', lambda: fig10_contact_force(impact, out)),
-            ('fig10b_force_indentation.png', lambda: fig_force_indentation(impact, constants, out)),
-            ('fig11_kinetic_energy.png', lambda: fig11_kinetic_energy(impact, out)),
+            ('fig8_indentation', lambda: fig8_indentation(impact, out, elastic)),
+            ('fig9_impact_velocity', lambda: fig9_impact_velocity(impact, out)),
+            ('fig10_contact_force', lambda: fig10_contact_force(impact, out, elastic)),
+            (
+                'fig10b_force_indentation',
+                lambda: fig_force_indentation(impact, constants, out, elastic),
+            ),
+            ('fig11_kinetic_energy', lambda: fig11_kinetic_energy(impact, out)),
         ]
     made = []
-    for i, (name, draw) in enumerate(jobs):
+    for i, (stem, draw) in enumerate(jobs):
+        name = f'{stem}.{style.format}'
         if progress:
             progress(f'figure {i + 1}/{len(jobs)}: {name}')
-        _save(draw(), out, name)
-        caption = CAPTIONS[name]
-        if name in IMPACT_FIGURES:
+        _save(draw(), out, name, style)
+        caption = CAPTIONS[stem]
+        if stem in IMPACT_FIGURES:
             caption += f' (impact {impact[2].get("index", "?")}' + (
                 f'; {impact[3]})' if impact[3] else ')'
             )

@@ -33,6 +33,20 @@ def parse_param(text: str):
         ) from None
 
 
+def scene_of(recording, scene=None):
+    """The scene to read ``recording`` with: ``scene`` when given (path or installed name),
+    else the one the recording stores (the recorder and ``simulate --mcap`` store it), else
+    the article's. Returns (scene for ``Study``, its name for the user)."""
+    if scene:
+        return scene, str(scene)
+    from ..io.recording import recorded_scene
+
+    stored = recorded_scene(recording)
+    if stored is None:
+        return 'paper', 'paper (the recording stores no scene)'
+    return stored, f'{stored.name!r}, stored in the recording'
+
+
 def default_out(recording) -> str:
     name = os.path.basename(os.path.normpath(os.fspath(recording)))
     return os.path.join('runs', f'fit_{os.path.splitext(name)[0]}')
@@ -51,17 +65,29 @@ def fit_recording(
     options=None,
     progress=None,
     say=print,
+    corrections=None,
 ):
-    """Read ``recording``, fit ``params`` ({key: (lo, hi)}) of ``scene`` and write
-    ``out``/fitted.yaml, fit.json, report.md and the PNGs (``out`` None: the default
-    runs/fit_<name>/; False: write nothing). Returns the ``FitResult``."""
+    """Read ``recording``, diagnose it (``calibration/diagnose.py``: findings said and
+    reported; only the ``corrections`` asked for are applied), fit ``params`` ({key: (lo,
+    hi)}) of ``scene`` and write ``out``/fitted.yaml, fit.json, report.md and the PNGs
+    (``out`` None: the default runs/fit_<name>/; False: write nothing). Returns the
+    ``FitResult``."""
     from ..contract import JOINT_STATES
+    from ..calibration.diagnose import Corrections, correct, diagnose
     from ..calibration.fit import fit
     from ..calibration.study import Study
     from ..io.recording import read_recording
+    from ..physics.model import ArmModel
 
-    n = Study(scene).scene().n_links
-    rec = read_recording(recording, joints, n, states_topic or JOINT_STATES, wrench_topic)
+    scene, scene_name = scene_of(recording, scene)
+    base = Study(scene).scene()
+    rec = read_recording(
+        recording, joints, base.n_links, states_topic or JOINT_STATES, wrench_topic
+    )
+    diagnosis = diagnose(rec, ArmModel(base))
+    rec = correct(rec, corrections or Corrections(), diagnosis)
+    for line in diagnosis.lines():
+        say(line)
     result = fit(rec, scene, params, options, progress)
     if out is False:
         return result
@@ -73,14 +99,14 @@ def fit_recording(
     from .cli import write_json
 
     for path in filter(None, [os.path.join(out, 'fit.json'), json_path]):
-        write_json(path, result.to_json())
+        write_json(path, {**result.to_json(), 'diagnosis': diagnosis.to_json()})
         say(f'wrote {path}')
     say(f'wrote {fitted}')
     for path in write_figures(result, out):
         say(f'wrote {path}')
     report = os.path.join(out, 'report.md')
     with open(report, 'w', encoding='utf-8') as f:
-        f.write(report_text(result, recording, scene))
+        f.write(report_text(result, recording, scene_name, diagnosis))
     say(f'wrote {report}')
     return result
 
@@ -110,7 +136,7 @@ def _fmt(v):
     return f'{v:.5g}' if isinstance(v, float) and math.isfinite(v) else str(v)
 
 
-def report_text(result, recording, scene) -> str:
+def report_text(result, recording, scene, diagnosis=None) -> str:
     lines = [
         f'# Fit of {os.fspath(recording)}',
         '',
@@ -189,6 +215,8 @@ def report_text(result, recording, scene) -> str:
     ]
     if result.notes:
         lines += ['Notes:', ''] + [f'- {x}' for x in result.notes] + ['']
+    if diagnosis is not None:
+        lines += diagnosis.markdown()
     return '\n'.join(lines)
 
 
@@ -330,11 +358,14 @@ def write_figures(result, out) -> list:
 
 
 def add_arguments(parser):
+    from .recording_diagnosis import add_correction_arguments
+
     parser.add_argument('recording', help='rosbag2 folder (metadata.yaml + MCAP) or MCAP file')
     parser.add_argument(
         '--scene',
-        default='paper',
-        help='scene file or installed name: the fixed rest and the start',
+        default=None,
+        help='scene file or installed name: the fixed rest and the start (default: the '
+        'scene the recording stores, else paper)',
     )
     parser.add_argument(
         '--param',
@@ -368,6 +399,7 @@ def add_arguments(parser):
         action='store_true',
         help='ignore a recorded wrench: fit from the joint states alone',
     )
+    add_correction_arguments(parser)
     parser.add_argument('--json', default=None, metavar='OUT', help='also write the JSON here')
     parser.add_argument(
         '--out',
@@ -379,6 +411,7 @@ def add_arguments(parser):
 
 def cli(args) -> int:
     from ..calibration.fit import FitOptions
+    from .recording_diagnosis import corrections_from
     from .cli import writable_output
     from .progress import Progress
 
@@ -388,6 +421,7 @@ def cli(args) -> int:
     if args.json:
         args.json = writable_output(args.json, '--json')
     joints = [j.strip() for j in args.joints.split(',')] if args.joints else None
+    corrections = corrections_from(args)
     line = Progress(prefix='  ')
 
     def progress(text, done=None, total=None):
@@ -406,6 +440,7 @@ def cli(args) -> int:
             json_path=args.json,
             options=FitOptions(use_wrench=not args.no_wrench),
             progress=progress,
+            corrections=corrections,
         )
     finally:
         line.end()

@@ -13,6 +13,39 @@ import threading
 import time
 
 
+class _Screen:
+    """The terminal shared by the progress lines and the compile notice: while a notice is
+    open (from its first line to its last), progress output waits and follows it, so the two
+    never interleave (the notice's counter runs in a thread of its own)."""
+
+    def __init__(self):
+        self.lock = threading.RLock()
+        self.held = False
+        self.waiting: list = []  # (stream, text) of log lines held back
+        self.line = None  # (progress, stream, text) of the terminal line last drawn
+
+    def hold(self):
+        with self.lock:
+            self.held = True
+
+    def release(self):
+        """After the notice's last line: the held log lines, then the last terminal line."""
+        with self.lock:
+            self.held = False
+            for stream, text in self.waiting:
+                stream.write(text)
+                stream.flush()
+            self.waiting = []
+            if self.line is not None:
+                progress, stream, text = self.line
+                if progress.shown:
+                    stream.write(text)
+                    stream.flush()
+
+
+SCREEN = _Screen()
+
+
 class Progress:
     """``show(text, done=None, log=False)`` as work advances; ``end()`` once.
 
@@ -39,19 +72,35 @@ class Progress:
         return f'  {100 * fraction:3.0f} %  ETA {_duration(left)}'
 
     def show(self, text: str, done=None, log: bool = False) -> None:
-        if self.tty:
-            self.stream.write(f'\r\033[K{self.prefix}{text}{self.eta(done)}')
-            self.stream.flush()
-            self.shown = True
-        elif log:
-            print(f'{self.prefix}{text}', file=self.stream, flush=True)
+        with SCREEN.lock:
+            if self.tty:
+                line = f'\r\033[K{self.prefix}{text}{self.eta(done)}'
+                SCREEN.line = (self, self.stream, line)
+                self.shown = True
+                if not SCREEN.held:  # else drawn when the compile notice ends
+                    self.stream.write(line)
+                    self.stream.flush()
+            elif log:
+                line = f'{self.prefix}{text}\n'
+                if SCREEN.held:
+                    SCREEN.waiting.append((self.stream, line))
+                else:
+                    self.stream.write(line)
+                    self.stream.flush()
 
     def end(self) -> None:
         """Finish the terminal line (kept or erased); nothing to do off a terminal."""
-        if self.tty and self.shown:
-            self.stream.write('\n' if self.keep else '\r\033[K')
-            self.stream.flush()
-            self.shown = False
+        with SCREEN.lock:
+            if self.tty and self.shown:
+                self.shown = False
+                if SCREEN.held:  # the notice holds the line: keep it as a finished one
+                    if self.keep and SCREEN.line and SCREEN.line[0] is self:
+                        SCREEN.waiting.append((self.stream, SCREEN.line[2] + '\n'))
+                else:
+                    self.stream.write('\n' if self.keep else '\r\033[K')
+                    self.stream.flush()
+                if SCREEN.line and SCREEN.line[0] is self:
+                    SCREEN.line = None
 
 
 def _duration(seconds: float) -> str:
@@ -140,6 +189,7 @@ class CompileNotice:
                 f'{COMPILE_NOTICE}: compiled in {self._compiled:.0f} s, cached for next time',
                 final=True,
             )
+            SCREEN.release()
         self._first, self._idle_since, self._shown = None, None, False
 
     def _tick(self):
@@ -157,6 +207,7 @@ class CompileNotice:
                     continue
                 if not self._shown:
                     self._shown = True
+                    SCREEN.hold()
                     self._logged = elapsed
                     self._write(f'{COMPILE_NOTICE} ...' + (f' {elapsed:.0f} s' if self.tty else ''))
                 elif self.tty:
@@ -166,6 +217,10 @@ class CompileNotice:
                     self._write(f'  ... {elapsed:.0f} s')
 
     def _write(self, text, final=False):
+        with SCREEN.lock:
+            self._write_now(text, final)
+
+    def _write_now(self, text, final):
         if self.tty:
             self.stream.write(f'\r\033[K{self.prefix}{text}' + ('\n' if final else ''))
         else:

@@ -10,6 +10,7 @@ dies with this process even if it is killed (PR_SET_PDEATHSIG).
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
 import signal
@@ -21,6 +22,7 @@ import time
 from .. import contract
 from ..contract import (
     COMMANDS,
+    CONTACT_FORCE_PEAK,
     CONTACT_WRENCH,
     DIAGNOSTICS,
     FEEDBACK_LAWS,
@@ -35,7 +37,7 @@ NODES = ('recorder', 'simulator', 'controller')  # start order (the arm moves wi
 STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, recorder last
 # what the recorder must have matched before the first command (the commands themselves: the
 # controller waits for its two readers)
-SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, IMPACT_REPORT, DIAGNOSTICS)
+SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, IMPACT_REPORT, DIAGNOSTICS)
 
 
 def add_arguments(parser):
@@ -133,26 +135,32 @@ def cli(args) -> int:
             f'realtime: {d.get("overruns", "?")} overruns; worst period compute '
             f'{d.get("compute_worst_us", "?")} us of {d.get("period_us", "?")} us'
         )
+    failed = {n: c for n, c in codes.items() if c not in (0, None)}
+    # a run a node failed in is no complete run, whatever the file holds
+    why_failed = '; '.join(
+        ([] if outcome in ('completed', 'interrupted') else [outcome])
+        + [f'{node} exited with status {code}' for node, code in failed.items()]
+    )
     incomplete = False
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
 
         check = check_recording(output, args.rate)
-        print(f'wrote {output}: {check.summary(args.mode == "lockstep")}')
+        print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
     elif output:
         print(f'no recording: {output} was not written')
-    failed = {n: c for n, c in codes.items() if c not in (0, None)}
     if outcome == 'interrupted':
         print('interrupted: nodes stopped, recording closed', file=sys.stderr)
         return 130
+    if why_failed:
+        print(f'the run failed: {why_failed}', file=sys.stderr)
+        for node in failed:
+            print(f'{node} log: {run.logs[node]}', file=sys.stderr)
+        return 1
     if incomplete:
         print('the lockstep recording is incomplete', file=sys.stderr)
-        return 1
-    if failed or outcome not in ('completed',):
-        for node, code in failed.items():
-            print(f'{node} exited with status {code}; its log: {run.logs[node]}', file=sys.stderr)
         return 1
     return 0
 
@@ -228,11 +236,12 @@ def _die_with_parent():
     os.setpgrp()  # Ctrl-C reaches the runner only; it stops the nodes in order
 
 
-def simulator_diagnostics(msg):
+def simulator_diagnostics(msg, name=contract.SIMULATOR_STATUS):
     """The simulator's /diagnostics values in ``msg`` (a DiagnosticArray) with its ``level``
-    and ``message``, or None: the controller publishes its own status there too."""
+    and ``message``, or None: the controller publishes its own status there too (``name``
+    contract.CONTROLLER_STATUS reads that one)."""
     for status in msg.status:
-        if status.name == contract.SIMULATOR_STATUS:
+        if status.name == name:
             values = {kv.key: kv.value for kv in status.values}
             level = status.level
             values['level'] = level[0] if isinstance(level, (bytes, bytearray)) else int(level)
@@ -306,6 +315,8 @@ class Run:
         self.diagnostics = {}
         self.sim_time = 0.0
         self.rhs_evaluations = 0
+        self.strikes = 0  # cycles whose down half an impact ended (the controller's count)
+        self.down_half_start = {}  # strike count -> stamp at which that cycle's down half began
         self.wall = 0.0
         self.node = None
         self.interrupted = threading.Event()  # set by the CLI's SIGINT/SIGTERM handler
@@ -374,6 +385,8 @@ class Run:
                 continue
             if node == 'controller':
                 self._await_graph()
+            if any(proc.poll() is not None for proc in self.procs.values()):
+                break  # a node already failed: watch() reports it, start nothing more
             self.logs[node] = os.path.join(self.logdir, f'{node}.log')
             with open(self.logs[node], 'wb') as log:
                 self.procs[node] = subprocess.Popen(
@@ -421,6 +434,13 @@ class Run:
             self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
+        controller = simulator_diagnostics(msg, contract.CONTROLLER_STATUS)
+        if controller is not None and not self.stopping:
+            strikes = int(controller.get('strikes', 0))
+            self.strikes = max(self.strikes, strikes)
+            # the first message of a strike count comes at the strike, while its cycle's
+            # down half is still the latest
+            self.down_half_start.setdefault(strikes, float(controller.get('down_half_start', 0)))
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
@@ -447,7 +467,9 @@ class Run:
                 )
             self.wall = now - (first or start)
             self._progress(cycles)
-            if len(self.impacts) >= cycles:
+            # a cycle counts once the controller saw its impact: an arm that bounces reports
+            # several impacts per cycle (the article's reports one)
+            if self._struck(cycles):
                 if self.args.mode == 'realtime':
                     self._pause_simulator()
                 return 'completed'
@@ -458,6 +480,15 @@ class Run:
                 return f'simulator stopped: {self.diagnostics.get("message")}'
             if now - start > timeout:
                 return f'timeout after {timeout:g} s'
+
+    def _struck(self, cycles) -> bool:
+        """Whether the controller has struck in each of ``cycles`` cycles and the report of
+        the last strike's impact is here (the first contact after that cycle's down half
+        began; the report and the controller's count travel on different topics)."""
+        if self.strikes < cycles or len(self.impacts) < cycles:
+            return False
+        began = self.down_half_start.get(cycles, -math.inf)
+        return any(record['t_contact'] >= began for record in self.impacts)
 
     def _pause_simulator(self, timeout=2.0):
         """Realtime: freeze the arm where the run completed. Stopping the controller first
@@ -480,14 +511,15 @@ class Run:
         """One refreshed line on a terminal; otherwise a line per impact (logs stay short)."""
         count = len(self.impacts)
         line = (
-            f'cycle {min(count + 1, cycles)}/{cycles}  impacts {count}  t = {self.sim_time:7.3f} s'
+            f'cycle {min(self.strikes + 1, cycles)}/{cycles}  impacts {count}  '
+            f't = {self.sim_time:7.3f} s'
         )
         # /diagnostics come at 1 Hz: 'waiting' seen before the first command is stale once
         # impacts arrive, so only a state worth acting on is shown
         watchdog = self.diagnostics.get('watchdog')
         if watchdog == 'timeout' or (watchdog == 'waiting' and not count):
             line += f'  watchdog {watchdog}'
-        self.line.show(line, done=count, log=count != self._reported)
+        self.line.show(line, done=min(self.strikes, cycles), log=count != self._reported)
         self._reported = count
 
     def _wait(self, proc, timeout):

@@ -513,6 +513,23 @@ def execute(
     }
 
 
+def summary_line(stats: dict) -> str:
+    """The sweep's closing line. A resumed sweep with nothing left to run says so, and a rate
+    is given only when it was measured (results after the first chunk), never as nan."""
+    head = (
+        f'{stats["runs"]} runs: {stats["ran"]} run now, {stats["skipped"]} already done, '
+        f'{stats["failed"]} failed (error column)'
+    )
+    if not stats['ran']:
+        return f'{head}: nothing left to run (every run was in the table already)'
+    rate = stats['rate']
+    then = f'; then {rate:.0f} runs/s' if math.isfinite(rate) else ''
+    return (
+        f'{head} in {stats["wall"]:.1f} s wall (first results after {stats["startup"]:.1f} s: '
+        f'workers, imports, kernels{then})'
+    )
+
+
 # --- plots -------------------------------------------------------------------------------
 # units of the run and impact columns (docs/outputs.md); parameters take theirs from the schema
 COLUMN_UNITS = {
@@ -712,7 +729,12 @@ def add_arguments(parser):
     drawing.add_argument('--metric', default='cor_kinematic', help='column to plot')
     drawing.add_argument('--x', help='swept parameter on the x axis (its key path)')
     drawing.add_argument('--y', help='second swept parameter (colour shows the metric)')
-    drawing.add_argument('--table', choices=TABLES, default='runs')
+    drawing.add_argument(
+        '--table',
+        choices=TABLES,
+        default='runs',
+        help='plot: the table the metric comes from (default runs; impacts: one row per impact)',
+    )
     drawing.add_argument('--impact', type=int, help='impacts table: this impact number')
     drawing.add_argument('-o', '--output', metavar='PNG', help='where to write the plot')
 
@@ -737,12 +759,7 @@ def cli(args) -> int:
         'runs', os.path.splitext(os.path.basename(args.target))[0] + '.sweep'
     )
     stats = execute(spec, out, workers=args.workers, cluster=args.cluster, batch=args.batch)
-    print(
-        f'{stats["runs"]} runs: {stats["ran"]} run now, {stats["skipped"]} already done, '
-        f'{stats["failed"]} failed (error column) in {stats["wall"]:.1f} s wall (first '
-        f'results after {stats["startup"]:.1f} s: workers, imports, kernels; then '
-        f'{stats["rate"]:.0f} runs/s)'
-    )
+    print(summary_line(stats))
     print(f'wrote {out}/runs' + ('' if 'impacts' not in spec.outputs else f', {out}/impacts'))
     if args.csv:
         import pyarrow.csv as pcsv

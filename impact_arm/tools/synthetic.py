@@ -1,7 +1,12 @@
 """Recordings with known parameters, for the tests and ``bench fit``: the simulator runs a
 scene variant, its samples become what a driver would publish (relative joint angles, rates,
 efforts, period-averaged wrench) with sensor noise, lost samples and a clock offset, and can
-be written as a single MCAP file (our writer) or a rosbag2 folder (the rosbags library's)."""
+be written as a single MCAP file (our writer) or a rosbag2 folder (the rosbags library's).
+
+The scene's ``sensors`` section (encoder counts, noise, rate readings, latencies) is applied
+by the simulated driver's own sensor chain (``driver/sensors.py``), e.g. ``overrides=
+{'sensors.rate': 'difference', 'sensors.effort_latency': 0.002}``: a recording "like a real
+arm's". With that section the ``noise`` argument defaults to none (the section says it)."""
 
 from __future__ import annotations
 
@@ -9,6 +14,7 @@ import numpy as np
 
 from ..contract import CONTACT_WRENCH, JOINT_STATES, to_joint_space
 from ..calibration.identify import JointRecording
+from ..driver.sensors import sensed_series
 
 REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
 
@@ -27,9 +33,11 @@ def synthetic_recording(
     wrench=True,
     control_rate=None,
 ) -> JointRecording:
-    """Simulate ``scene`` with ``overrides`` and sample it as a driver would, adding Gaussian
-    ``noise`` (per signal, see REALISTIC_NOISE), dropping a fraction ``drop`` of the samples,
-    jittering the stamps by ``jitter`` seconds (uniform) and offsetting the clock."""
+    """Simulate ``scene`` with ``overrides`` and sample it as a driver would: through the
+    scene's ``sensors`` section, then adding Gaussian ``noise`` (per signal, see
+    REALISTIC_NOISE; none by default when the scene has a sensors section), dropping a
+    fraction ``drop`` of the samples, jittering the stamps by ``jitter`` seconds (uniform:
+    the values stay those of the regular periods) and offsetting the clock."""
     from ..physics.simulate import run
     from ..calibration.study import Study
 
@@ -47,7 +55,9 @@ def synthetic_recording(
     qd = np.array([to_joint_space(x.qd) for x in s])
     tau = np.array([x.tau for x in s], float)
     w = np.array([x.wrench for x in s], float)
-    noise = REALISTIC_NOISE if noise is None else noise
+    if not sc.sensors.ideal:
+        q, qd, tau, w = sensed_series(sc.sensors, publish_rate, q, qd, tau, w)
+    noise = _default_noise(sc, noise)
     q, qd, tau, w = (
         _noisy(x, noise.get(name, 0.0), rng)
         for x, name in ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench'))
@@ -69,6 +79,12 @@ def synthetic_recording(
         rec.wrench = w[w_keep]
     rec.truth = result.impacts
     return rec
+
+
+def _default_noise(scene, noise):
+    if noise is not None:
+        return noise
+    return REALISTIC_NOISE if scene.sensors.ideal else {}
 
 
 def _noisy(x, sigma, rng):
@@ -146,8 +162,9 @@ def driver_recording(
     scene='paper', overrides=None, *, rate=1000.0, cycles=6, noise=None, seed=0, t_max=None
 ) -> JointRecording:
     """What the simulator node publishes (``SimulatedArm``: each period's effort is the
-    command held over the period that ends at the stamp) under the scene's controller
-    sampled at ``rate`` — the reading of efforts of a ros2_control driver."""
+    command held over the period that ends at the stamp; the scene's ``sensors`` section
+    applied) under the scene's controller sampled at ``rate`` — the reading of efforts of a
+    ros2_control driver. The controller sees what is published, as over the topics."""
     from ..contract import to_absolute
     from ..physics.control import CycleController
     from ..driver.arm import SimulatedArm
@@ -172,7 +189,7 @@ def driver_recording(
         done += before == 'up' and ctrl.mode == 'down'
         tick = arm.step()
         rows.append((tick.t, tick.position, tick.velocity, tick.effort, tick.wrench))
-    noise = REALISTIC_NOISE if noise is None else noise
+    noise = _default_noise(sc, noise)
     t = np.array([r[0] for r in rows])
     q, qd, tau, w = (np.array([r[k] for r in rows], float) for k in range(1, 5))
     q, qd, tau, w = (

@@ -25,8 +25,9 @@ P_RTOL, P_ATOL, P_MAXSTEP = _offsets['P_RTOL'], _offsets['P_ATOL'], _offsets['P_
 P_CRTOL, P_CATOL, P_SIZE = _offsets['P_CRTOL'], _offsets['P_CATOL'], _offsets['P_SIZE']
 P_DAMP, P_FRIC, P_FVD, P_ARM = (_offsets[k] for k in ('P_DAMP', 'P_FRIC', 'P_FVD', 'P_ARM'))
 P_JFRIC_ON, P_ARM_ON = _offsets['P_JFRIC_ON'], _offsets['P_ARM_ON']
-R_T, R_Y, R_JT, R_JN, R_TAU, R_ACT, R_VTIP, R_SIZE = (
-    _offsets[k] for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_SIZE')
+R_T, R_Y, R_JT, R_JN, R_TAU, R_ACT, R_VTIP, R_FPEAK, R_SIZE = (
+    _offsets[k]
+    for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_FPEAK', 'R_SIZE')
 )
 W_GEN, W_TAU, W_ERR, W_RATE, W_MASS, SCRATCH = (
     _offsets[k] for k in ('W_GEN', 'W_TAU', 'W_ERR', 'W_RATE', 'W_MASS', 'SCRATCH')

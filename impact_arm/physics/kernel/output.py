@@ -62,7 +62,8 @@ def interpolate(t0, h, ts, y0, f0, y1, f1, K, quartic, out, at):
 def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, scratch):
     """Output rows for the grid times k dt in (t0, t0 + h] (k = O[O_NEXT], dt = O[O_DT];
     O[O_ROWS] rows used): t, the state, the contact impulse since the previous row (then reset), the torque
-    acting, whether the actuators act, and the tip velocity (layout R_*). False when ``out``
+    acting, whether the actuators act, the tip velocity and the peak normal contact force since
+    the previous row (layout R_*). False when ``out``
     is full."""
     size = y0.shape[0]
     dt = O[O_DT]
@@ -88,6 +89,10 @@ def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, sc
         row[R_JT], row[R_JN] = C[C_JT], C[C_JN]
         C[C_JT] = 0.0
         C[C_JN] = 0.0
+        # the peak since the previous row; the next interval starts from the force acting at
+        # this row (contact steps end on the rows, so the last contact point is this one)
+        row[R_FPEAK] = C[C_PERIOD_PEAK]
+        C[C_PERIOD_PEAK] = C[C_IMP_FN] if C[C_PHASE] != FREE else 0.0
         acting = control_torque(
             state, P, I, C, tau_held, row[R_TAU : R_TAU + N], scratch[:N], scratch[N : 2 * N]
         )

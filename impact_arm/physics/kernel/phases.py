@@ -22,6 +22,8 @@ def record_point(t, y, P, I, SURF, C, levels, trace, tcount, y_mid):
     delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
     if fn > C[C_PEAK]:
         C[C_PEAK] = fn
+    if fn > C[C_PERIOD_PEAK]:
+        C[C_PERIOD_PEAK] = fn
     dt = t - C[C_IMP_T]
     _, fn_mid, ff_mid, _, _ = contact_forces(y_mid, P, SURF, C, levels)
     C[C_JT] += (ff + 4.0 * ff_mid + C[C_IMP_FF]) * dt / 6.0

@@ -1,0 +1,303 @@
+"""The diagnosis of a recording before its fit (calibration/diagnose.py): each detector runs on
+recordings the synthetic tool makes with and without its effect (through the simulated
+driver's sensor chain), fires on the one and stays quiet on the other, and estimates the
+effect; each correction removes what it corrects; ``impact-arm fit`` says what it found."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from impact_arm.calibration.diagnose import (
+    Corrections,
+    FindingKind,
+    SampleTimes,
+    central_rates,
+    correct,
+    diagnose,
+    stamp_jitter,
+)
+from impact_arm.calibration.study import Study
+from impact_arm.physics.model import ArmModel
+from impact_arm.tools.synthetic import driver_recording, synthetic_recording
+
+PERIOD = 1e-3
+ENCODER = {'sensors.counts_per_revolution': 1 << 17}
+EFFORT_LATE = {'sensors.effort_latency': 0.002, 'sensors.effort_noise': 0.05}
+
+
+@pytest.fixture(scope='module')
+def model():
+    return ArmModel(Study('paper').scene())
+
+
+@pytest.fixture(scope='module')
+def plain():
+    """Realistic noise, 2 % of the samples lost: none of the effects."""
+    return synthetic_recording(cycles=4, drop=0.02, seed=5)
+
+
+def recording(overrides=None, **kw):
+    kw.setdefault('cycles', 4)
+    return synthetic_recording(overrides=overrides, seed=5, **kw)
+
+
+def kinds(rec, model):
+    return diagnose(rec, model).kinds()
+
+
+def test_a_recording_without_effects_gives_no_finding(plain, model):
+    diagnosis = diagnose(plain, model)
+    assert diagnosis.findings == []
+    assert FindingKind.EFFORT_DELAY in diagnosis.checked
+    assert FindingKind.WRENCH_LAG in diagnosis.checked
+    # unquantised positions: the resolution is unknown, and the report says so
+    assert FindingKind.POSITION_NOISE in diagnosis.skipped
+    assert 'nothing found' in diagnosis.lines()[0]
+
+
+@pytest.mark.parametrize('rate', ['difference', 'exact', 'filtered'])
+def test_rates_that_are_differences_of_the_positions_are_named(rate, model):
+    over = {**ENCODER, 'sensors.position_noise': 2e-5, 'sensors.rate': rate}
+    if rate == 'filtered':
+        over['sensors.rate_cutoff'] = 300.0
+    found = kinds(recording(over), model)
+    assert (FindingKind.DIFFERENCE_RATES in found) == (rate == 'difference'), found
+
+
+def test_central_difference_rates_are_named_too(plain, model):
+    rec = dataclasses.replace(plain, velocity=central_rates(plain.t, plain.position))
+    assert FindingKind.DIFFERENCE_RATES in kinds(rec, model)
+    assert FindingKind.DIFFERENCE_RATES not in kinds(plain, model)
+
+
+def test_jittered_stamps_are_named_with_their_rms(plain, model):
+    jitter = 1e-4  # uniform +-: rms jitter / sqrt(3)
+    diagnosis = diagnose(recording(jitter=jitter, drop=0.02), model)
+    assert FindingKind.STAMP_JITTER in diagnosis.kinds()
+    estimate = diagnosis.estimates[FindingKind.STAMP_JITTER]
+    assert estimate == pytest.approx(jitter / np.sqrt(3), rel=0.1)
+    assert 'regular period' in diagnosis.findings[0].seen
+    # lost samples are gaps of whole periods, not jitter; nor is a scatter of a few us (the
+    # fit's effort readings and free-flight fits do not feel it)
+    assert FindingKind.STAMP_JITTER not in kinds(plain, model)
+    assert FindingKind.STAMP_JITTER not in kinds(recording(jitter=5e-6), model)
+
+
+def test_irregular_sampling_with_true_stamps_is_no_jitter(model):
+    """Samples taken at irregular times and stamped truly (picked from a 4 kHz run, a quarter
+    period early or late at random): the positions advance with the stamps, nothing to
+    correct."""
+    fine = recording(publish_rate=4000.0, noise={})
+    rng = np.random.default_rng(1)
+    pick = np.arange(4, len(fine.t) - 4, 4) + rng.integers(-1, 2, (len(fine.t) - 8 + 3) // 4)
+    rec = dataclasses.replace(
+        fine,
+        t=fine.t[pick] - fine.t[pick[0]],
+        position=fine.position[pick],
+        velocity=fine.velocity[pick],
+        effort=fine.effort[pick],
+    )
+    jitter, follows = stamp_jitter(rec)
+    assert jitter > 1e-4 and follows is SampleTimes.STAMPS
+    assert FindingKind.STAMP_JITTER not in kinds(rec, model)
+
+
+@pytest.mark.parametrize('latency', [0.002, 0.005])
+def test_late_efforts_are_named_with_their_delay(latency, plain, model):
+    rec = recording({**EFFORT_LATE, 'sensors.effort_latency': latency})
+    diagnosis = diagnose(rec, model)
+    assert FindingKind.EFFORT_DELAY in diagnosis.kinds()
+    assert diagnosis.estimates[FindingKind.EFFORT_DELAY] == pytest.approx(latency, abs=0.3e-3)
+    assert abs(diagnose(plain, model).estimates[FindingKind.EFFORT_DELAY]) < 0.3e-3
+
+
+def test_efforts_unrelated_to_the_motion_give_no_delay(plain, model):
+    """Efforts that are noise: some delay balances the energy least, by chance, but no better
+    than the noise explains (F far below its threshold)."""
+    rng = np.random.default_rng(3)
+    rec = dataclasses.replace(plain, effort=rng.normal(0.0, 5.0, plain.effort.shape))
+    assert FindingKind.EFFORT_DELAY not in kinds(rec, model)
+
+
+def test_late_joint_states_show_as_early_efforts(model):
+    diagnosis = diagnose(recording({'sensors.state_latency': 0.003}), model)
+    assert diagnosis.estimates[FindingKind.EFFORT_DELAY] == pytest.approx(-0.003, abs=0.3e-3)
+    assert 'early' in next(f.seen for f in diagnosis.findings if f.kind.value == 'effort_delay')
+
+
+def test_a_drivers_held_efforts_are_no_delay_until_they_are_late(model):
+    """The simulator node reports the command held over the period that ends at the stamp:
+    half a period, which the fit's reading of the efforts absorbs."""
+    held = diagnose(driver_recording(cycles=4), model)
+    assert FindingKind.EFFORT_DELAY not in held.kinds()
+    late = diagnose(driver_recording(cycles=4, overrides={'sensors.effort_latency': 0.003}), model)
+    assert FindingKind.EFFORT_DELAY in late.kinds()
+    assert late.estimates[FindingKind.EFFORT_DELAY] == pytest.approx(0.0035, abs=0.3e-3)
+
+
+@pytest.mark.parametrize('noise, fires', [(1e-5, False), (1e-3, True)])
+def test_position_noise_far_above_the_encoder_resolution_is_named(noise, fires, model):
+    rec = recording({**ENCODER, 'sensors.position_noise': noise})
+    diagnosis = diagnose(rec, model)
+    assert FindingKind.POSITION_NOISE in diagnosis.checked
+    assert (FindingKind.POSITION_NOISE in diagnosis.kinds()) == fires
+    if fires:
+        finding = diagnosis.findings[0]
+        assert finding.estimate == pytest.approx(noise, rel=0.2)
+        assert f'{2 * np.pi / (1 << 17):.3g} rad' in finding.seen
+
+
+@pytest.mark.parametrize('latency', [0.002, -0.003])
+def test_a_wrench_that_lags_the_impacts_is_named(latency, plain, model):
+    rec = recording({'sensors.wrench_latency': max(latency, 0.0)})
+    if latency < 0:  # a wrench stamped early: its stamps moved, the values kept
+        rec.wrench_t = rec.wrench_t + latency
+    diagnosis = diagnose(rec, model)
+    assert FindingKind.WRENCH_LAG in diagnosis.kinds()
+    assert diagnosis.estimates[FindingKind.WRENCH_LAG] == pytest.approx(latency, abs=0.2e-3)
+    assert diagnose(plain, model).estimates[FindingKind.WRENCH_LAG] == 0.0
+
+
+def test_joint_samples_lost_after_the_contacts_are_no_wrench_lag(plain, model):
+    """The first two joint samples after each impact lost: the wrench still rises between the
+    last sample before and the first after, on time."""
+    from impact_arm.calibration.identify import find_impacts
+
+    lost = {k for a in find_impacts(plain) for k in (a + 1, a + 2)}
+    keep = np.array([k not in lost for k in range(len(plain.t))])
+    rec = dataclasses.replace(
+        plain,
+        t=plain.t[keep],
+        position=plain.position[keep],
+        velocity=plain.velocity[keep],
+        effort=plain.effort[keep],
+    )
+    diagnosis = diagnose(rec, model)
+    assert FindingKind.WRENCH_LAG in diagnosis.checked
+    assert diagnosis.estimates[FindingKind.WRENCH_LAG] == 0.0
+
+
+def test_without_a_wrench_or_a_scene_the_checks_say_why_not(model):
+    rec = recording(wrench=False)
+    diagnosis = diagnose(rec)
+    assert diagnosis.skipped[FindingKind.WRENCH_LAG] == 'no wrench recorded'
+    assert 'scene' in diagnosis.skipped[FindingKind.EFFORT_DELAY]
+
+
+# ------------------------------------------------------------------------- corrections
+def test_nothing_is_changed_unless_asked(model):
+    rec = recording(EFFORT_LATE)
+    diagnosis = diagnose(rec, model)
+    assert correct(rec, Corrections(), diagnosis) is rec
+    assert diagnosis.findings[0].corrected_by == '' and diagnosis.corrections == []
+
+
+def test_a_known_effort_latency_is_taken_out(model):
+    exact = recording({'sensors.effort_noise': 0.05})
+    late = recording(EFFORT_LATE)
+    diagnosis = diagnose(late, model)
+    fixed = correct(late, Corrections(effort_latency=0.002), diagnosis)
+    assert FindingKind.EFFORT_DELAY not in kinds(fixed, model)
+    # the efforts are back at their stamps: those of the recording without the latency
+    # (same noise draws: the latency moves the noisy readings)
+    np.testing.assert_allclose(fixed.effort, exact.effort[: len(fixed.effort)], atol=1e-9)
+    assert len(fixed.t) == len(late.t) - 2
+    assert diagnosis.findings[0].corrected_by == '--effort-latency'
+    assert any('--effort-latency' in note for note in fixed.notes)
+
+
+def test_a_known_wrench_latency_is_taken_out(model):
+    rec = recording({'sensors.wrench_latency': 0.002})
+    fixed = correct(rec, Corrections(wrench_latency=0.002))
+    assert FindingKind.WRENCH_LAG not in kinds(fixed, model)
+
+
+def test_regular_stamps_restore_the_sampling_grid(model):
+    regular = recording(drop=0.02)
+    jittered = recording(drop=0.02, jitter=1e-4)
+    fixed = correct(jittered, Corrections(regular_stamps=True))
+    assert FindingKind.STAMP_JITTER not in kinds(fixed, model)
+    # the same samples are lost in both (one seed): the least-squares grid is the true one
+    # to a fraction of the jitter (its slope and offset carry the jitter's mean over 1600
+    # samples: ~3e-6 s at the ends); the jittered stamps were up to 1e-4 s off
+    error = (fixed.t - fixed.t[0]) - (regular.t - regular.t[0])
+    assert np.max(np.abs(error)) < 2e-5 < np.max(np.abs(jittered.t - regular.t))
+    assert np.max(np.abs(np.diff(error))) < 1e-8  # the grid is regular
+
+
+def test_central_rates_are_the_derivative_at_the_stamps():
+    t = np.array([0.0, 0.001, 0.0021, 0.003, 0.0042])
+    q = np.stack([3 * t**2 - t, -2 * t**2], axis=1)
+    np.testing.assert_allclose(
+        central_rates(t, q), np.stack([6 * t - 1, -4 * t], axis=1), rtol=1e-12, atol=1e-12
+    )
+
+
+TRUTH = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 1e9}
+
+
+def test_difference_rates_are_read_as_the_mean_rates_of_their_periods(model):
+    """Against the exact rates of the same run sampled at 2 kHz: the corrected samples sit at
+    the middles of the 1 kHz periods, and their rates are the rates there."""
+    rec = recording({**TRUTH, 'sensors.rate': 'difference'}, noise={})
+    fine = recording(TRUTH, noise={}, publish_rate=2000.0)
+    fixed = correct(rec, Corrections(difference_rates=True))
+    at = np.round((fixed.t + fixed.t0_ns * 1e-9) * 2000).astype(int)
+    assert np.allclose(fine.t[at], fixed.t + fixed.t0_ns * 1e-9, atol=1e-9)
+    assert at.min() >= 0 and np.all(at % 2 == 1)  # the middles of the periods
+    err = np.abs(fixed.velocity - fine.velocity[at])
+    assert np.median(err) < 1e-4  # O(period^2) of the mean over the period
+    assert np.max(err) < 0.2  # the samples whose period held a contact are gone
+    # positions there from parabolas: fast changes right after a contact limit them
+    q_err = np.abs(fixed.position - fine.position[at])
+    assert np.median(q_err) < 1e-6 and np.max(q_err) < 3e-4
+    m = min(len(rec.t), len(fine.t[::2]))
+    raw_err = np.abs(rec.velocity[:m] - fine.velocity[::2][:m])
+    assert np.median(raw_err) > 100 * np.median(err)  # read at the stamps: half a period off
+    assert FindingKind.DIFFERENCE_RATES not in kinds(fixed, model)
+
+
+def test_a_fit_of_difference_rates_is_corrected_by_reading_them_as_mean_rates():
+    from impact_arm.calibration.fit import fit
+
+    over = {**TRUTH, **ENCODER, 'sensors.rate': 'difference', 'sensors.position_noise': 2e-5}
+    rec = synthetic_recording('paper', over, cycles=8, seed=3, noise={'wrench': 2.0})
+    bounds = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
+    as_is = fit(rec, 'paper', bounds)
+    fixed = fit(correct(rec, Corrections(difference_rates=True)), 'paper', bounds)
+
+    def sy_error(result):
+        return abs(result.parameters['materials.steel.S_y']['value'] / 1e9 - 1)
+
+    assert sy_error(as_is) > 0.08 and sy_error(fixed) < 0.04, (sy_error(as_is), sy_error(fixed))
+
+
+def test_bad_corrections_are_refused_in_one_line():
+    with pytest.raises(ValueError, match='--effort-latency = nan'):
+        Corrections(effort_latency=float('nan'))
+    with pytest.raises(ValueError, match='--wrench-latency = 5'):
+        Corrections(wrench_latency=5.0)
+
+
+# --------------------------------------------------------------------------------- CLI
+def test_fit_says_what_the_diagnosis_found_and_reports_it(tmp_path, capsys):
+    from impact_arm.tools.cli import main
+    from impact_arm.tools.synthetic import write_rosbag2
+
+    folder = tmp_path / 'late_bag'
+    write_rosbag2(recording(EFFORT_LATE, cycles=6), str(folder), extra_joint=False)
+    out = tmp_path / 'fit'
+    args = ['fit', str(folder), '--param', 'surfaces[0].mu=0.05:1', '--out', str(out)]
+    main([*args, '--effort-latency', '0.002'])
+    text = capsys.readouterr().out
+    assert 'recording diagnosis: the efforts are' in text and 'ms late' in text
+    data = json.loads((out / 'fit.json').read_text())
+    (finding,) = data['diagnosis']['findings']
+    assert finding['kind'] == 'effort_delay' and finding['corrected_by'] == '--effort-latency'
+    assert finding['estimate'] == pytest.approx(0.002, abs=0.3e-3)
+    assert '## The recording' in (out / 'report.md').read_text()
+    assert main([*args, '--effort-latency', 'inf']) == 2
+    err = capsys.readouterr().err
+    assert '--effort-latency = inf' in err and err.count('\n') == 1
