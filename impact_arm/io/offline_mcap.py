@@ -248,7 +248,8 @@ class OfflineRecorder:
                 effort=np.zeros(0),
             )
             self._write(SURFACE_MOUNTS, mounts, t_ns)
-        self.visuals.state(t_ns, sample.q, sample.wrench, plates=sample.plates)
+            self.visuals.plates(t_ns, plates)
+        self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record: dict, trace_rows: Sequence[Sequence[float]]) -> None:
         t_ns = sim_time_ns(record['t_contact'] + record['duration'])

@@ -180,15 +180,26 @@ class SceneVisuals:
         self._next_tf = math.floor(t * self.tf_rate * (1 + 1e-12) + 1e-9) + 1
         return True
 
-    def tf(self, q: Sequence[float], t_ns: int, plates: Sequence[float] = ()) -> Any:
-        """The joint transforms for absolute link angles ``q``, then each mounted surface's
-        frame at its rest height moved by its plate's z (``plates``: (z, ż) per mounted
-        surface, flat; () or missing: at rest)."""
+    def tf(self, q: Sequence[float], t_ns: int, plates: Sequence[float] | None = None) -> Any:
+        """The joint transforms for absolute link angles ``q``; with ``plates`` ((z, ż) per
+        mounted surface, flat, of the same instant) also each mounted surface's frame."""
         transforms = moving_transforms(self.scene.lengths, q)
-        for j, (frame, height) in enumerate(self.mounted):
-            z = float(plates[2 * j]) if len(plates) > 2 * j else 0.0
-            transforms.append(Transform(WORLD, frame, 0.0, 0.0, height + z, PLANE_FRAME_ROTATION))
+        if plates is not None:
+            transforms += self._surface_transforms(plates)
         return self._TF(transforms=[self._transform(t, t_ns) for t in transforms])
+
+    def surface_tf(self, t_ns: int, plates: Sequence[float]) -> Any:
+        """The mounted surfaces' frames alone, at their rest heights moved by their plates'
+        z (``plates``: (z, ż) per mounted surface, flat, at ``t_ns``)."""
+        return self._TF(
+            transforms=[self._transform(t, t_ns) for t in self._surface_transforms(plates)]
+        )
+
+    def _surface_transforms(self, plates):
+        return [
+            Transform(WORLD, frame, 0.0, 0.0, height + float(plates[2 * j]), PLANE_FRAME_ROTATION)
+            for j, (frame, height) in enumerate(self.mounted)
+        ]
 
     def add_impact(self, record: Mapping[str, Any] | str | bytes) -> None:
         """An impact report (the JSON record or its text): its contact point becomes a
@@ -319,7 +330,7 @@ class VisualsWriter:
         self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
         self._last: tuple | None = None  # (stamp, q, log time) of the latest state
         self._shown: int | None = None  # stamp of the latest /tf written
-        self.plates: Sequence[float] = ()  # the latest (z, ż) of the mounted surfaces
+        self._next_plates = 0  # index k of the next mounted-surface frames, at k / tf_rate
 
     def state(
         self,
@@ -327,16 +338,24 @@ class VisualsWriter:
         q: Sequence[float],
         wrench: Sequence[float] | None = None,
         log_time_ns: int | None = None,
-        plates: Sequence[float] | None = None,
     ) -> None:
-        """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``;
-        ``plates``: the mounted surfaces' (z, ż) at it, None: the latest given)."""
-        if plates is not None:
-            self.plates = plates
+        """One joint state (absolute angles ``q``; ``wrench`` is not drawn, see ``force``)."""
         log = t_ns if log_time_ns is None else log_time_ns
         self._last = (t_ns, q, log)
         if self.visuals.due(t_ns * 1e-9):
             self._frame(t_ns, q, log)
+
+    def plates(self, t_ns: int, plates: Sequence[float], log_time_ns: int | None = None) -> None:
+        """One sample of the mounted surfaces' plates ((z, ż) each, flat, /surface_mounts):
+        their frames on /tf, stamped with it, at ``tf_rate`` of its stamps (on their own: a
+        plate's sample and the joint state of its period may reach a recorder in either
+        order)."""
+        t = t_ns * 1e-9
+        if t * self.visuals.tf_rate < self._next_plates * (1 - 1e-12) - 1e-9:
+            return
+        self._next_plates = math.floor(t * self.visuals.tf_rate * (1 + 1e-12) + 1e-9) + 1
+        log = t_ns if log_time_ns is None else log_time_ns
+        self._write(TF, self.visuals.surface_tf(t_ns, plates), log)
 
     def finish(self) -> None:
         """The last state, if /tf has not shown it yet: the file ends on the final pose and
@@ -345,7 +364,7 @@ class VisualsWriter:
             self._frame(*self._last)
 
     def _frame(self, t_ns, q, log):
-        self._write(TF, self.visuals.tf(q, t_ns, self.plates), log)
+        self._write(TF, self.visuals.tf(q, t_ns), log)
         self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
         self._shown = t_ns
 
@@ -365,7 +384,7 @@ class VisualsWriter:
             self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None else log_time_ns)
 
     def _frame_at_event(self, t_ns, q, log):
-        self._write(TF, self.visuals.tf(q, t_ns, self.plates), log)
+        self._write(TF, self.visuals.tf(q, t_ns), log)
         self._write(IMPACT_MARKERS, self.visuals.markers(t_ns), log)
 
     def _write(self, topic, msg, log_time_ns):

@@ -77,7 +77,7 @@ class PeriodPublishers:
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
         states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
-        if self.mounts is not None:  # before the joint state a recorder draws the frame at
+        if self.mounts is not None:
             msg = self.mount_state
             msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
             msg.position, msg.velocity = list(tick.plates[0::2]), list(tick.plates[1::2])

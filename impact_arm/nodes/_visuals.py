@@ -60,11 +60,9 @@ class VisualsPublisher:
 
     def _publish(self):
         self._on_timer()
-        latest = self.latest
-        plates = latest.plates if latest is not None else ()
-        with self.lock:  # each impact's events first: their stamps are older
+        with self.lock:  # each impact's events first: their stamps are older (the arm only)
             events = [
-                (self.visuals.tf(q, t_ns, plates), self.visuals.markers(t_ns))
+                (self.visuals.tf(q, t_ns), self.visuals.markers(t_ns))
                 for t_ns, q in self.visuals.take_events()
             ]
         for tf, markers in events:
@@ -77,7 +75,8 @@ class VisualsPublisher:
         self._stamp = tick.t
         t_ns = round(tick.t * 1e9)
         if self.pub_tf is not None:
-            self.pub_tf.publish(self.visuals.tf(to_absolute(tick.position), t_ns, tick.plates))
+            plates = tick.plates if self.visuals.mounted else None
+            self.pub_tf.publish(self.visuals.tf(to_absolute(tick.position), t_ns, plates))
         with self.lock:
             markers = self.visuals.markers(t_ns)
         self.pub_markers.publish(markers)

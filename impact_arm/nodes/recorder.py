@@ -341,10 +341,10 @@ class Recorder(Node):
                 return  # not this scene's joints: nothing to draw
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
         elif topic == contract.SURFACE_MOUNTS:
-            # published before the period's joint state; should it arrive after it, the
-            # surface frame of that one state shows the plate a period late
-            _, _, _, position, velocity = joint_state_fields(data)
-            self.visuals.plates = [v for pair in zip(position, velocity) for v in pair]
+            # the mounted surfaces' frames, drawn from their own samples and stamps
+            sec, nanosec, _, position, velocity = joint_state_fields(data)
+            plates = [v for pair in zip(position, velocity) for v in pair]
+            self.visuals.plates(sec * 1_000_000_000 + nanosec, plates, received)
         elif topic == contract.IMPACT_REPORT:
             try:
                 self.visuals.impact(self._read_string(data).data)
