@@ -269,7 +269,7 @@ def test_a_fit_of_difference_rates_is_corrected_by_reading_them_as_mean_rates():
     fixed = fit(correct(rec, Corrections(difference_rates=True)), 'paper', bounds)
 
     def sy_error(result):
-        return abs(result.parameters['materials.steel.S_y']['value'] / 1e9 - 1)
+        return abs(result.parameters['materials.steel.S_y'].value / 1e9 - 1)
 
     assert sy_error(as_is) > 0.08 and sy_error(fixed) < 0.04, (sy_error(as_is), sy_error(fixed))
 

@@ -14,7 +14,14 @@ from impact_arm.driver.arm import CommandError, SimulatedArm
 from impact_arm.physics.model import ArmModel
 from impact_arm.driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy, WatchdogState
 from impact_arm.physics.scene import load_scene, resolve_scene_path
-from impact_arm.driver.session import Level, LockstepSession, Outputs, RealtimeSession
+from impact_arm.driver.session import (
+    JointCommand,
+    Level,
+    LockstepSession,
+    Outputs,
+    RealtimeSession,
+    Release,
+)
 
 P = 1.0 / RATE
 
@@ -190,9 +197,11 @@ def inputs(scene, sent, clock=None, **kwargs):
     )
 
 
-def state(c, t, q=(1.0, 0.5), qd=(0.0, 0.0)):
+def state(c, t, q=None, qd=(0.0, 0.0), effort=()):
+    """A joint state at t; by default one that moves (a driver's repetitions are equal)."""
     sec, nanosec = divmod(round(t * 1e9), 1_000_000_000)
-    c.joint_state(sec, nanosec, ['joint1', 'joint2'], list(q), list(qd))
+    q = (1.0 + math.sin(t), 0.5) if q is None else q
+    c.joint_state(sec, nanosec, ['joint1', 'joint2'], list(q), list(qd), list(effort))
 
 
 def test_a_state_waits_for_the_wrench_of_its_instant_and_the_force_is_latched(scene):
@@ -343,3 +352,147 @@ def test_typed_kinds_are_their_text_wherever_text_was_used():
     assert {'max_compression': 1}[kind] == 1 and json.dumps([kind]) == '["max_compression"]'
     assert EventKind('separation') is EventKind.SEPARATION
     assert WatchdogState.TIMEOUT == 'timeout' and f'{WatchdogPolicy.BRAKE}' == 'brake'
+
+
+@pytest.mark.parametrize('kind', [RealtimeSession, LockstepSession])
+def test_zero_joint_commands_leave_the_arm_braked_with_time_stopped(scene, kind):
+    """Topic hardware writes zeros from its activation on, before any controller runs: with
+    the default release rule they neither release the brakes nor start time, in either mode;
+    the first command with a torque does. Command arrays keep starting on the first one."""
+    clock, published = FakeClock(), []
+    s = session(kind, scene, clock, published, release=Release.NONZERO_JOINT_COMMAND)
+    s.publish_initial()
+    q0 = list(published[0].position)
+    for _ in range(50):
+        assert s.offer(JointCommand(lambda: [0.0, 0.0]))
+        if kind is RealtimeSession:
+            s.loop.realtime_period()
+    assert s.arm.periods == 0 and s.arm.t == 0.0 and not s.released()
+    assert all(tick.t == 0.0 and list(tick.position) == q0 for tick in published)
+    assert s.zero_before_release == 50 and s.loop.commands == 0
+    assert s.take_status().value('zero_commands_before_release') == '50'
+    assert s.offer(JointCommand(lambda: [0.0, 1.0]))  # a controller drives it
+    if kind is RealtimeSession:
+        s.loop.realtime_period()
+    assert s.arm.periods == 1 and s.released()
+    assert s.offer(JointCommand(lambda: [0.0, 0.0]))  # once released, zeros are commands
+    if kind is RealtimeSession:
+        s.loop.realtime_period()
+    assert s.arm.periods == 2 and s.arm.command == [0.0, 0.0]
+    # a command array starts at once under this rule, and any command under first_command
+    for release, read in (
+        (Release.NONZERO_JOINT_COMMAND, lambda: [0.0, 0.0]),
+        (Release.FIRST_COMMAND, JointCommand(lambda: [0.0, 0.0])),
+    ):
+        other = session(kind, scene, clock, [], release=release)
+        other.offer(read)
+        if kind is RealtimeSession:
+            other.loop.realtime_period()
+        assert other.arm.periods == 1
+    # nonzero_command holds arrays too
+    held = session(kind, scene, clock, [], release=Release.NONZERO_COMMAND)
+    held.offer(lambda: [0.0, 0.0])
+    if kind is RealtimeSession:
+        held.loop.realtime_period()
+    assert held.arm.periods == 0
+
+
+# ------------------------------------------------- a ros2_control driver's joint states
+WALL = 1_764_000_000.0  # a wall-clock stamp (s), as joint_state_broadcaster stamps
+
+
+def test_a_broadcasters_repetitions_are_not_periods_and_wall_stamps_tick(scene):
+    """joint_state_broadcaster republishes the hardware's latest state at each controller
+    manager update, with the update's wall-clock stamp: a new sample ticks once, its
+    repetitions (same values, newer stamps) do not, even off the simulated grid."""
+    sent = []
+    c = inputs(scene, sent, wrench_publishers=lambda: False)
+    ticked_on = []
+    for k in range(20):  # an update every 0.25 ms, a new sample every 5th (a slow driver)
+        q = (1.0 + 0.01 * (k // 5), 0.5)
+        state(c, WALL + k * 0.00025 + (0.00004 if k % 3 else 0.0), q=q)
+        if len(sent) > len(ticked_on):
+            ticked_on.append(q[0])
+    # each new sample ticked, once: a repetition that reached the next tick first would
+    # have ticked on stale values and made the new sample wait a whole period
+    assert ticked_on == [1.0, 1.01, 1.02, 1.03] and c.repeated == 16
+    # an arm that really stands still is not starved: the same values once the repetition
+    # window (1.5 periods) has passed tick again
+    state(c, WALL + 0.0060, q=(1.03, 0.5))
+    assert len(sent) == 5
+
+
+def test_a_wrench_on_another_clock_is_latched_never_waited_for(scene):
+    """The simulator's wrench (simulated stamps) beside a broadcaster's joint states (wall
+    clock): no state waits for it or is dropped as missing its wrench; its force still
+    switches the cycle at the next tick."""
+    sent = []
+    c = inputs(scene, sent, wrench_tolerance=0.01)
+    for k in range(10):
+        c.wrench(0, k * 1_000_000, (0.0, 0.0))
+        state(c, WALL + k * 0.001)
+    assert len(sent) == 10 and c.waiting is None and not any(c.dropped.values())
+    c.wrench(0, 10_000_000, (0.0, 500.0))  # an impact, on the other clock
+    state(c, WALL + 0.010)
+    assert c.ctrl.mode == 'up' and len(sent) == 11
+    # a wrench on the states' own clock within the tolerance is still waited for
+    same = inputs(scene, [], wrench_tolerance=0.01)
+    same.wrench(1, 0, (0.0, 0.0))
+    state(same, 1.001)
+    assert same.waiting is not None
+
+
+def test_the_latency_is_measured_from_the_efforts_the_driver_reports(scene):
+    """A driver reporting the torque acting now: with two commands still on their way the
+    controller counts two, and predicts over them (latency_periods -1)."""
+    sent = []
+    c = inputs(scene, sent, wrench_publishers=lambda: False, latency_periods=-1)
+    acting = [[0.0, 0.0]] * 3
+    for k in range(10):
+        state(c, k * 0.001, effort=acting[-3])
+        acting.append(sent[-1])
+    assert c.measured_latency == 2 and len(c.in_flight()) == 2
+    fixed = inputs(scene, [], wrench_publishers=lambda: False, latency_periods=1)
+    state(fixed, 0.0)
+    state(fixed, 0.001)
+    assert len(fixed.in_flight()) == 1
+
+
+def test_prediction_keeps_the_limit_cycle_under_command_latency(scene):
+    """The article's controller and arm in one process (lockstep session and the
+    controller's input handling, joined by queues), the driver delaying each command by one
+    period: acting on the sampled state the arm strikes twice per cycle; predicting over the
+    measured latency, it strikes as without latency."""
+    from impact_arm.tools.latency_study import closed_loop
+
+    base = closed_loop(scene, 0, 0, t_max=2.5)
+    late = closed_loop(scene, 1, 0, t_max=2.5)
+    predicted = closed_loop(scene, 1, -1, t_max=2.5)
+    two = closed_loop(scene, 2, -1, t_max=2.5)
+    assert base.second_strikes == 0 and base.impacts >= 5
+    assert late.second_strikes >= 3
+    for run in (predicted, two):
+        assert not run.failed and run.second_strikes == 0
+        assert run.impacts == base.impacts
+        assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
+
+
+def test_a_stale_echo_or_a_wild_prediction_does_not_steer_the_arm(scene):
+    """An effort matching a command sent long ago (a driver holding an old one) is no
+    latency; a prediction that leaves any arm's range (torques in flight no arm could take)
+    is not acted on: the sampled state is, and the fall-back is counted."""
+    sent = []
+    c = inputs(scene, sent, wrench_publishers=lambda: False, latency_periods=-1)
+    for k in range(20):
+        state(c, k * 0.001, effort=sent[-1] if sent else ())
+    assert c.measured_latency == 0 and len(sent) == 20
+    state(c, 0.020, effort=sent[-12])  # eleven commands back: a stale echo
+    assert c.measured_latency == 0
+    state(c, 0.021, effort=sent[-4])
+    assert c.measured_latency == 3
+    wild = inputs(scene, [], wrench_publishers=lambda: False, latency_periods=2)
+    state(wild, 0.0)
+    wild.sent.extend([[1e9, -1e9], [1e9, -1e9]])
+    state(wild, 0.001)
+    assert wild.dropped['unsafe_predictions'] == 1
+    assert all(math.isfinite(v) and abs(v) < 1e5 for v in wild.sent[-1])

@@ -148,7 +148,8 @@ def test_controller_that_loses_every_wrench_sample_still_cycles(probe, ros_env, 
                 lambda: len(reports) >= 5 or not sim.alive() or not ctl.alive(), timeout=120
             ), f'{len(reports)} impacts\n{ctl.stderr[-2000:]}'
             assert sim.alive() and ctl.alive(), sim.stderr + ctl.stderr
-            assert 'ticking on the next state without it' in ctl.stderr
+            # a wrench source that never delivered holds no state: nothing waits for it
+            assert 'ticking on the next state without it' not in ctl.stderr
     times = reports_of(reports)[:5]
     gaps = [b - a for a, b in zip(times, times[1:])]
     # one impact per cycle, at the article's period (a missed switch re-strikes at once)

@@ -2,8 +2,11 @@
 on their own topic, the robot description and markers (real node processes, random domain)."""
 
 import math
+import os
 import threading
 import time
+
+import pytest
 
 from ros_helpers import diagnostics_values, simulator, start_process, wait_for
 
@@ -115,3 +118,89 @@ def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_
     assert len(common) > PERIODS // 2
     assert all(hw_name[s] == by_name[s][0] for s in common)
     assert rejected(diags[-1]) == 2
+
+
+# The stand-in stack (ros2control_standin.py) at 100 updates per wall second, its pace: the
+# simulator in lockstep runs one period per command the hardware writes, as topic hardware
+# writes one each update. Four Python processes at 1 kHz of wall time do not keep their pace
+# on a loaded two-core CI machine; here each has 20 ms per period, so the latency stays what
+# the stack makes it: a command computed from the state broadcast at update u is latched at
+# update u+1 and written one update late, at u+2: it acts two periods after its state.
+STANDIN_UPDATES = 50.0  # per wall second (at 100, a loaded machine let one command in
+# a few hundred miss its update: a latency that varies by a period can strike twice)
+STANDIN_CYCLES = 5  # impacts (the article's cycle strikes every ~0.4 s)
+
+
+def test_the_controller_drives_the_arm_through_a_ros2_control_standin(probe, ros_env, tmp_path):
+    """Hardware and controller manager first (zero commands from activation on, each
+    update), then the simulator, then the controller remapped to the broadcaster's states
+    and the effort controller's commands: the arm stays braked with time stopped until the
+    controller's first command, then strikes once per cycle; commands act two periods late,
+    states are stamped on the wall clock, the wrench on the simulated clock."""
+    import json
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from ros_helpers import controller, from_simulator, helper_args
+    from std_msgs.msg import String
+
+    from impact_arm.physics.scene import load_scene, resolve_scene_path
+    from impact_arm.tools.latency_study import SECOND_STRIKE_S, closed_loop
+
+    reports = probe.listen(String, '/impact_report', transient=True)
+    diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
+    controller_diags = probe.listen(
+        DiagnosticArray,
+        '/diagnostics',
+        keep=lambda m: m.status and 'controller' in m.status[0].name,
+    )
+    standin = [
+        helper_args('--rate', STANDIN_UPDATES, '--late', 1, '--duration', 180)[0],
+        os.path.join(os.path.dirname(__file__), 'ros2control_standin.py'),
+        *helper_args('--rate', STANDIN_UPDATES, '--late', 1, '--duration', 180)[2:],
+    ]
+
+    def sim_values():
+        return diagnostics_values(diags[-1][1]) if diags else {}
+
+    with start_process(standin, ros_env, tmp_path, 'standin') as cm:
+        assert wait_for(lambda: '"update"' in cm.stdout or not cm.alive(), 60), cm.stderr
+        params = ('mode:=lockstep', 'rate_factor:=0.0', 'diagnostics_period:=0.25')
+        with start_process(simulator(*params), ros_env, tmp_path, 'sim_standin') as sim:
+            # the hardware's zeros reach the simulator, which keeps the arm braked at t = 0
+            assert wait_for(
+                lambda: (
+                    int(sim_values().get('zero_commands_before_release', 0)) > 100
+                    or not sim.alive()
+                ),
+                60,
+            ), sim.stderr
+            assert float(sim_values()['sim_time']) == 0.0 and sim_values()['commands'] == '0'
+            remaps = (
+                '-r',
+                '/joint_states:=/joint_state_broadcaster/joint_states',
+                '-r',
+                '/effort_controller/commands:=/arm_effort_controller/commands',
+            )
+            with start_process(
+                controller('startup_hold:=0.5', ros_args=remaps), ros_env, tmp_path, 'ctrl_standin'
+            ) as ctrl:
+                assert wait_for(
+                    lambda: len(reports) >= STANDIN_CYCLES + 1 or not sim.alive(), 240
+                ), f'{len(reports)} impacts\n{sim.stderr}\n{ctrl.stderr}'
+                values = sim_values()
+                assert wait_for(lambda: controller_diags, 5)
+                seen = diagnostics_values(controller_diags[-1][1])
+            assert sim.alive(), sim.stderr
+    impacts = [json.loads(m.data) for _, m in reports]
+    contacts = [r['t_contact'] for r in impacts]
+    gaps = [b - a for a, b in zip(contacts, contacts[1:])]
+    assert min(gaps) > SECOND_STRIKE_S, contacts  # one strike per cycle
+    # no dropped arm: the first strike is the controller's, when the offline loop strikes
+    offline = closed_loop(load_scene(resolve_scene_path('paper')), 0, 0, t_max=1.0)
+    assert contacts[0] == pytest.approx(offline.t_contact[0], abs=0.02), contacts
+    assert max(r['delta_m'] for r in impacts) < 1.5 * max(offline.delta_m)
+    assert int(values['zero_commands_before_release']) > 100
+    # the controller waited for no wrench of the other clock, dropped no state, and
+    # predicted over the commands it measured in flight
+    assert seen['missing_wrenches'] == '0' and seen['stamp_jumps'] == '0', seen
+    assert int(seen['latency_periods_max']) >= 1, seen

@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from impact_arm.contract import to_joint_space
+
 from impact_arm.physics.model import ArmModel
 from impact_arm.io.urdf import moving_transforms, robot_description, static_transforms
 from scenes import scene_from
@@ -99,7 +101,8 @@ def test_joint_values_are_relative_angles_and_put_the_tip_where_the_model_does(s
 def test_ros2_control_block_names_topic_hardware_with_effort_commands():
     import xml.etree.ElementTree as ET
 
-    root = ET.fromstring(robot_description(scene_from()))
+    scene = scene_from()
+    root = ET.fromstring(robot_description(scene))
     control = root.find('ros2_control')
     assert control.find('hardware/plugin').text == 'topic_based_ros2_control/TopicBasedSystem'
     params = {p.get('name'): p.text for p in control.findall('hardware/param')}
@@ -112,6 +115,14 @@ def test_ros2_control_block_names_topic_hardware_with_effort_commands():
             'velocity',
             'effort',
         ]
+    # before the hardware's first state the broadcaster publishes the scene's initial pose
+    initial = [
+        [float(s.find("param[@name='initial_value']").text) for s in j.findall('state_interface')]
+        for j in control.findall('joint')
+    ]
+    relative = to_joint_space(scene.q0)
+    assert [i[0] for i in initial] == pytest.approx(relative, abs=1e-12)
+    assert all(i[1:] == [0.0, 0.0] for i in initial) and relative[1] != 0.0
 
 
 def test_frame_functions_compose_to_the_tip():

@@ -12,7 +12,9 @@ from impact_arm.io.msgdefs import serialize_cdr
 from impact_arm.io import wire
 from impact_arm.io.wire import (
     PatchedMessage,
+    MalformedMessage,
     float64_array_data,
+    joint_state_effort,
     joint_state_fields,
     wrench_stamped_fields,
 )
@@ -128,6 +130,27 @@ def test_joint_state_layout_is_reused_only_for_the_same_layout():
     assert len(same_size) == len(no_velocity) == len(first)
     assert joint_state_fields(no_velocity)[3:] == ([1.0, 2.0], [])
     assert joint_state_fields(same_size)[2] == ['jb', 'ja']
+
+
+@pytest.mark.parametrize('frame', ['', 'abc', 'abcdefg'])
+@pytest.mark.parametrize('names', [['joint1'], ['joint1', 'joint2'], ['a', 'bb', 'ccc']])
+def test_joint_state_effort_reads_what_rclpy_serialized(names, frame, monkeypatch):
+    """Efforts (the driver's acting torques), read at the remembered layout's offsets once
+    joint_state_fields has seen a message of that layout, and by a full parse otherwise:
+    both what rclpy serialized, whatever the padding before them."""
+    n = len(names)
+    for effort in ([], [0.25 + k for k in range(n)]):
+        msg = JointState(name=names, position=[1.0] * n, velocity=[-2.0] * n, effort=effort)
+        msg.header.frame_id = frame
+        raw = serialize_message(msg)
+        wire._joint_state_layouts.clear()
+        assert joint_state_effort(raw) == effort  # full parse
+        joint_state_fields(raw)  # its layout remembered
+        with monkeypatch.context() as m:
+            m.setattr(wire, 'CdrReader', None)  # the fast path parses nothing
+            assert joint_state_effort(raw) == effort
+    with pytest.raises(MalformedMessage):
+        joint_state_effort(raw[:-3])
 
 
 def test_wrench_stamped_fields_read_rclpy_serialized_wrenches():

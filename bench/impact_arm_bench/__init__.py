@@ -70,6 +70,10 @@ SUBCOMMANDS = {
         'impact_arm_bench.oblique',
         'a sphere striking a flat obliquely vs measured rebounds (tangential CoR, spin)',
     ),
+    'latency': (
+        'impact_arm_bench.latency',
+        'limit cycle against command latency 0-3 periods, with and without prediction',
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',

@@ -93,9 +93,13 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
             # a 1 kHz reader in this process would load the machine and the simulator
             # beyond what a user's run (controller, recorder) does
             run.node.destroy_subscription(probe)
-        cpu0, wall0 = cpu_seconds(f'/proc/{sim.pid}/stat'), time.monotonic()
+        # CPU of each node over the run (user + system, all its threads)
+        cpu0 = {name: cpu_seconds(f'/proc/{p.pid}/stat') for name, p in run.procs.items()}
+        wall0 = time.monotonic()
         outcome = run.watch(timeout)
-        cpu1, wall1 = cpu_seconds(f'/proc/{sim.pid}/stat'), time.monotonic()
+        cpu1 = {name: cpu_seconds(f'/proc/{p.pid}/stat') for name, p in run.procs.items()}
+        wall1 = time.monotonic()
+        load = os.getloadavg()[0]
         final = run.diagnostics
         deadline = time.monotonic() + 2.5  # one more report, covering the last impact
         while run.diagnostics is final and time.monotonic() < deadline:
@@ -128,7 +132,9 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'lockstep_wait_mean_us': float(d.get('lockstep_wait_mean_us', 'nan')),
         'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
         'period_us': 1e6 / rate,
-        'simulator_cpu_percent': 100 * (cpu1 - cpu0) / (wall1 - wall0),
+        'simulator_cpu_percent': 100 * (cpu1['simulator'] - cpu0['simulator']) / (wall1 - wall0),
+        'cpu_percent': {name: 100 * (cpu1[name] - cpu0[name]) / (wall1 - wall0) for name in cpu0},
+        'load_average': load,
         'rss_peak_mb': memory,
         'first_joint_state_after_s': (first_state[0] - started) if first_state else None,
     }
@@ -231,8 +237,9 @@ def run(args) -> int:
             f'{r["jitter_max_us"]:.0f} us (at t = {r["jitter_max_at_s"]:.3f} s); worst compute '
             f'{r["worst_compute_us"]:.0f} us of a {r["period_us"]:.0f} us period '
             f'(at t = {r["worst_compute_at_s"]:.3f} s); '
-            f'simulator CPU {r["simulator_cpu_percent"]:.1f} % of one core '
-            f'({r["scheduling"]}); peak RSS '
+            'CPU of one core: '
+            + ', '.join(f'{k} {v:.1f} %' for k, v in r['cpu_percent'].items())
+            + f' ({r["scheduling"]}; load average {r["load_average"]:.1f}); peak RSS '
             + ', '.join(f'{k} {v:.0f} MB' for k, v in r['rss_peak_mb'].items())
             + f'; first /joint_states {r["first_joint_state_after_s"]:.2f} s after start'
         )

@@ -3,7 +3,7 @@
 From sampled joint states alone (any clock, missing and jittered samples): the sensor noise,
 the impacts (a step in the joint rates that the positions do not show), and around each
 impact a local polynomial fit of the free flight on either side, from which the state just
-before and just after the contact follow with their uncertainty. ``calibration/fit.py`` then asks a
+before and just after the contact follow with their uncertainty. ``calibration/fit/`` then asks a
 scene to reproduce the step. Everything here is plain numpy in joint space (relative angles,
 as drivers publish them).
 """
@@ -107,6 +107,11 @@ class LocalFit:
         d[1:] = p[1:] * tau ** (p[1:] - 1) / self.scale
         return v, d
 
+    def positions(self, t: np.ndarray) -> np.ndarray:
+        """q at each of the times ``t``: (len(t), n)."""
+        tau = (np.asarray(t, float) - self.t_ref) / self.scale
+        return (tau[:, None] ** np.arange(self.DEGREE + 1)) @ self.coef.T
+
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at ``t``: cov is (2n, 2n) over [q, q̇] (joints independent)."""
         v, d = self._rows(t)
@@ -141,6 +146,7 @@ class ImpactWindow:
     post_qd: np.ndarray  # their rates (m, n)
     impulse: np.ndarray | None = None  # (tangential, normal) [N s]
     impulse_var: np.ndarray | None = None
+    rate_sigma: np.ndarray | None = None  # the rates' noise per joint [rad/s]
     if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
         effort_ib: int = field(init=False)
         effort_off: list[bool] = field(init=False)
@@ -276,13 +282,15 @@ def estimate_noise(rec: JointRecording, impacts: Sequence[int], window: int = 15
 
 def _contact_time(pre: LocalFit, post: LocalFit, t_a, t_b, sigma_q):
     """Where the positions of both sides meet (rates step at the contact, positions do not)."""
+
+    def miss(t: np.ndarray) -> np.ndarray:
+        return np.sum(((pre.positions(t) - post.positions(t)) / sigma_q) ** 2, axis=1)
+
     grid = np.linspace(t_a, t_b, 201)
-    miss = [np.sum(((pre.state(t)[0] - post.state(t)[0]) / sigma_q) ** 2) for t in grid]
-    k = int(np.argmin(miss))
+    k = int(np.argmin(miss(grid)))
     lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
     fine = np.linspace(lo, hi, 41)
-    miss = [np.sum(((pre.state(t)[0] - post.state(t)[0]) / sigma_q) ** 2) for t in fine]
-    return float(fine[int(np.argmin(miss))])
+    return float(fine[int(np.argmin(miss(fine)))])
 
 
 def impact_windows(
@@ -386,6 +394,7 @@ def make_window(
         effort_t=rec.t[e_idx].copy(),
         post_t=rec.t[compare].copy(),
         post_qd=rec.velocity[compare].copy(),
+        rate_sigma=noise.velocity,
     )
     win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
     # samples during the contact whose torque is zero within the noise: actuators off

@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from typing import Callable, Sequence
 
 from ..contract import to_absolute
 from ..physics.control import CycleController
+from ..physics.prediction import StatePredictor
 
 STAMP_EPS = 1e-9  # stamps are integer nanoseconds: ticks compare to 1 ns
 # A state beyond these is not an arm's: a broken or hostile peer. Angles may wind a few turns;
@@ -29,6 +31,16 @@ MAX_FORCE = 1e12  # N, a contact wrench beyond any scene's
 # samples come at >= 1 Hz (a scene's slowest publish_rate): a longer gap forward, or any step
 # back, is a reset or a bad stamp, and the cycle re-arms at the new time
 MAX_STAMP_GAP = 1.0  # s
+# A state whose stamp is within this fraction of a control period (or of the state stream's
+# own spacing, when finer) before the next tick still ticks: a driver stamping with its own
+# wall clock (ros2_control's joint_state_broadcaster) jitters around the simulated grid
+TICK_TOLERANCE = 0.4
+# a sample equal to the previous one within this many periods is the driver's repetition
+REPEAT_WINDOW = 1.5
+# the most commands in flight a measurement counts (8 ms at 1 kHz)
+MAX_MEASURED_LATENCY = 8
+# commands kept to predict and to match the efforts a driver reports against
+SENT_HISTORY = 32
 DROPPED = (
     'malformed_joint_states',
     'malformed_wrenches',
@@ -37,6 +49,7 @@ DROPPED = (
     'missing_wrenches',
     'stamp_jumps',
     'unsafe_torques',
+    'unsafe_predictions',
 )
 
 
@@ -63,6 +76,8 @@ class ControlInputs:
         wrench_publishers: Callable[[], bool] = lambda: True,
         startup_hold: float = 0.0,
         clock: Callable[[], float] = time.monotonic,
+        latency_periods: int = 0,
+        wrench_tolerance: float = math.inf,
     ):
         self.ctrl = ctrl
         self.joint_names = list(joint_names)
@@ -72,9 +87,13 @@ class ControlInputs:
         self.send, self.log, self.ready = send, log, ready
         self.wrench_publishers = wrench_publishers
         self.clock = clock
-        self.hold_until = clock() + startup_hold
+        self.created = clock()
+        self.hold_until = self.created + startup_hold
+        # when the first command went, by this clock, after the inputs were created
+        self.first_command_after: float | None = None
         self.next_tick = 0.0
         self.latest: tuple[float, list[float], list[float]] | None = None  # absolute angles
+        self.latest_joint: tuple[list[float], list[float]] = ([], [])  # as received
         # a joint state waiting for its wrench
         self.waiting: tuple[float, list[float], list[float]] | None = None
         self.wrench_stamp = -math.inf
@@ -83,6 +102,23 @@ class ControlInputs:
         self.started = False
         self.dropped = dict.fromkeys(DROPPED, 0)
         self.jump_from: float | None = None  # stamp of a sample that jumped, until confirmed
+        # a state is waited for its wrench only when the newest wrench is at most this far
+        # behind it on the same clock: a wrench on another clock (or far late) is latched
+        # and used at the next tick, never a reason to hold or drop states
+        self.wrench_tolerance = wrench_tolerance
+        # the driver's repetitions of a sample (a broadcaster republishing the state each
+        # update): not new periods
+        self.repeated = 0
+        self.sample_gap = math.inf  # stamp spacing of the newest two distinct samples
+        # prediction over the commands in flight: ``latency_periods`` >= 0 fixed, -1 measured
+        # from the efforts the driver reports (``measured_latency``)
+        if latency_periods < -1:
+            raise ValueError(f'latency_periods = {latency_periods}: must be >= -1')
+        self.latency_periods = latency_periods
+        self.measured_latency = 0
+        self.latency_max = 0  # the largest measured
+        self.sent: deque[list[float]] = deque(maxlen=SENT_HISTORY)  # joint order, newest last
+        self.predictor = StatePredictor(ctrl.model, self.period) if latency_periods else None
 
     def drop(self, counter: str, why: str) -> None:
         self.dropped[counter] += 1
@@ -118,6 +154,7 @@ class ControlInputs:
         names: Sequence[str],
         position: Sequence[float],
         velocity: Sequence[float],
+        effort: Sequence[float] = (),
     ) -> None:
         t = sec + nanosec * 1e-9
         try:
@@ -126,6 +163,20 @@ class ControlInputs:
             vel = [velocity[k] for k in index]
         except (ValueError, IndexError):
             self.log(f'joint state without {self.joint_names} positions and velocities: ignored')
+            return
+        same = pos == self.latest_joint[0] and vel == self.latest_joint[1]
+        if (
+            same
+            and self.started  # (before, the held state's repetitions let the first tick retry)
+            and self.waiting is None
+            and self.latest is not None
+            and t < self.latest[0] + REPEAT_WINDOW * self._spacing()
+        ):
+            # the same sample again under a newer stamp (a broadcaster republishing each
+            # update) or the same stamp (a lockstep driver's repetition): no new period. A
+            # state still waiting for its wrench is answered by the repetition (below); an
+            # arm that really stands still ticks again once the window has passed.
+            self.repeated += 1
             return
         if not (all(abs(v) <= MAX_ANGLE for v in pos) and all(abs(v) <= MAX_RATE for v in vel)):
             # also false for NaN
@@ -159,8 +210,14 @@ class ControlInputs:
             # again from its down half
             self.ctrl.rearm(restart=t < self.latest[0])
         self.jump_from = None
+        if self.latest is not None and t > self.latest[0] and not same:
+            self.sample_gap = t - self.latest[0]
         self.latest = (t, to_absolute(pos), to_absolute(vel))
-        if self.trigger != 'joint_states' or t < self.next_tick - STAMP_EPS:
+        self.latest_joint = (pos, vel)
+        if effort and self.latency_periods == -1:
+            self._measure_latency(effort, index)
+        tolerance = TICK_TOLERANCE * min(self.period, self.sample_gap)
+        if self.trigger != 'joint_states' or t < self.next_tick - tolerance - STAMP_EPS:
             return
         # the wrench of the same instant is published just before the joint state: wait for
         # it when someone publishes wrenches. A wrench publisher that sends no valid wrench
@@ -176,11 +233,20 @@ class ControlInputs:
                 f'without waiting until a wrench arrives',
             )
             self.wrench_flowing = False
-        elif self.wrench_flowing and self.wrench_stamp < t - STAMP_EPS and self.wrench_publishers():
+        elif (
+            self.wrench_flowing
+            and t - self.wrench_tolerance <= self.wrench_stamp < t - STAMP_EPS
+            and self.wrench_publishers()
+        ):
             self.waiting = self.latest
             return
         self.waiting = None
         self._tick(*self.latest)
+
+    def _spacing(self) -> float:
+        """The stamp spacing of the driver's new samples: a control period, or the stream's
+        own when coarser (a simulator slower than real time behind a wall-clock broadcaster)."""
+        return self.period if math.isinf(self.sample_gap) else max(self.period, self.sample_gap)
 
     def timer(self) -> None:
         """Trigger timer: tick on the latest state."""
@@ -191,10 +257,28 @@ class ControlInputs:
     def _tick(self, t: float, q: list[float], qd: list[float]) -> None:
         if not self.started:
             # the driver repeats its held state, which brings us back here
-            if self.clock() < self.hold_until or not self.ready():
+            now = self.clock()
+            if now < self.hold_until or not self.ready():
                 return
             self.started = True
+            self.first_command_after = now - self.created
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
+        ahead = self.in_flight()
+        if ahead and self.predictor is not None:
+            # act on the state this command will meet: the driver applies it only after
+            # the commands still on their way
+            q_ahead, qd_ahead = self.predictor.ahead(q, qd, ahead)
+            if all(abs(v) <= MAX_ANGLE for v in q_ahead) and all(
+                abs(v) <= MAX_RATE for v in qd_ahead
+            ):  # (also false for NaN)
+                q, qd = q_ahead, qd_ahead
+                t += len(ahead) * self.period
+            else:  # the model's free motion left any arm's range: act on the sample itself
+                self.drop(
+                    'unsafe_predictions',
+                    f'state predicted {len(ahead)} periods ahead of {t:.6f} s out of '
+                    f'range: acting on the sampled state',
+                )
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
         self.normal_force = None  # the latch covers one tick
         if not all(math.isfinite(v) for v in tau):
@@ -205,4 +289,32 @@ class ControlInputs:
             )
             self.ctrl.rearm()
             return
+        self.sent.append(tau)
         self.send([tau[j] for j in self.order])
+
+    # ------------------------------------------------------------------------- latency
+    def in_flight(self) -> list[list[float]]:
+        """The sent commands that have not reached the actuators yet, oldest first."""
+        k = self.measured_latency if self.latency_periods == -1 else self.latency_periods
+        return list(self.sent)[len(self.sent) - k :] if k else []
+
+    def _measure_latency(self, effort: Sequence[float], index: list[int]) -> None:
+        """The driver reports the torques acting now: the commands sent after the one it
+        reports are in flight. Only an unambiguous match counts (a command equal to its
+        successor, as in a hold, could be either)."""
+        try:
+            acting = [float(effort[k]) for k in index]
+        except IndexError:
+            return
+        sent = self.sent
+        # a match further back is no latency but a driver holding an old command (its
+        # brake, a stall): not counted
+        for back in range(len(sent) - 1, max(len(sent) - 2 - MAX_MEASURED_LATENCY, -1), -1):
+            if sent[back] == acting:
+                if back + 1 < len(sent) and sent[back + 1] == acting:
+                    return
+                if back > 0 and sent[back - 1] == acting:
+                    return
+                self.measured_latency = len(sent) - 1 - back
+                self.latency_max = max(self.latency_max, self.measured_latency)
+                return

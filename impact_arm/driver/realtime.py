@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
@@ -236,8 +237,17 @@ class DriverLoop:
         max_takes: int = 100,
         take_budget: float = 0.5,
         policy: WatchdogPolicy | str = WatchdogPolicy.ZERO,
+        latency: int = 0,
     ):
         self.arm = arm
+        # periods a command spends on its way to the actuators (a driver stack's latency,
+        # simulated): each period's newest command reaches the watchdog ``latency`` periods
+        # after the period that took it. The first command (the release) acts at once.
+        if latency < 0:
+            raise ValueError(f'command latency = {latency} periods: must be >= 0')
+        self.latency = latency
+        self._in_flight: deque[list[float] | None] = deque()
+        self._newest: list[float] | None = None  # the newest command of this period
         self.wall_period = wall_period  # realtime: wall seconds per period
         self.watchdog = Watchdog(command_timeout, policy)
         self.stats = PeriodStats(wall_period)
@@ -287,7 +297,22 @@ class DriverLoop:
         if self.first_command_wall is None:
             self.first_command_wall = now
         self.commands += 1
+        if self.latency and self.watchdog.pending is not None:
+            self._newest = torques  # on its way: ``_deliver`` hands it on
+            return
         self.watchdog.command(torques, self._run_time(now))
+        self._in_flight = deque([None] * self.latency)
+
+    def _deliver(self, now):
+        """At a period's start: the command taken ``latency`` periods ago reaches the
+        watchdog (which holds the one before it meanwhile)."""
+        if not self.latency or self.watchdog.pending is None:
+            return
+        self._in_flight.append(self._newest)
+        self._newest = None
+        arriving = self._in_flight.popleft()
+        if arriving is not None:
+            self.watchdog.command(arriving, self._run_time(now))
 
     def _take_commands(self, now):
         """Take the queued commands, then check them newest first until one is valid: a
@@ -377,6 +402,7 @@ class DriverLoop:
             ) = 0
             self.first_command_wall = None
             self._steps = 0
+            self._in_flight, self._newest = deque(), None
             # a new schedule from now on: the next period is due one period later
             self.start_wall, self._k, self._frozen = now, -1, 0.0
             self._paused_at = now if self.paused else None
@@ -401,6 +427,7 @@ class DriverLoop:
             self.sleep(deadline - now)
         woke = self.clock()
         self._take_commands(woke)
+        self._deliver(woke)
         self._apply_controls(woke)
         held = self.watchdog.pending is None and self.arm.periods == 0
         if held or (self.paused and not self._steps):
@@ -448,6 +475,7 @@ class DriverLoop:
     def lockstep_period(self, arrived: float, rate_factor: float) -> Tick:
         """The period a command that arrived at ``arrived`` starts (lockstep); paced so that
         simulated time never runs ahead of ``rate_factor`` x wall time (0: unpaced)."""
+        self._deliver(arrived)
         if self.e_stop:
             self.arm.release()
             self.watchdog.reapply()

@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ..physics import jit
+from ..physics.kinds import TextEnum
 from .arm import CommandError, SimulatedArm, Tick
 from ..physics.errors import SimulationError
 from .realtime import PERIOD_PARTS, DriverLoop, WatchdogPolicy, WatchdogState
@@ -36,6 +37,37 @@ class Level(IntEnum):
     OK = 0
     WARN = 1
     ERROR = 2
+
+
+class Release(TextEnum):
+    """Which command releases the brakes and starts simulated time (at start-up and after a
+    reset). first_command: any valid one. nonzero_command: one with a non-zero torque; all-zero
+    commands before it are counted and ignored, as a drive ignores a disabled controller's.
+    nonzero_joint_command: so for JointState commands (topic hardware such as ros2_control's
+    TopicBasedSystem writes zeros from its activation on, long before a controller runs), the
+    first one for command arrays (the project's controller sends the model's holding torque
+    first)."""
+
+    FIRST_COMMAND = 'first_command'
+    NONZERO_COMMAND = 'nonzero_command'
+    NONZERO_JOINT_COMMAND = 'nonzero_joint_command'
+
+    def needs_torque(self, joint_command: bool) -> bool:
+        """Whether an all-zero command of this kind leaves the brakes on."""
+        return self is Release.NONZERO_COMMAND or (
+            self is Release.NONZERO_JOINT_COMMAND and joint_command
+        )
+
+
+@dataclass(frozen=True)
+class JointCommand:
+    """A command read from the topic hardware's JointState topic: ``offer`` takes it like any
+    ``read`` callable; its kind matters to the ``Release`` rule."""
+
+    read: Callable[[], list[float]]
+
+    def __call__(self) -> list[float]:
+        return self.read()
 
 
 @dataclass(frozen=True)
@@ -81,10 +113,14 @@ class Session:
         policy: WatchdogPolicy = WatchdogPolicy.ZERO,
         take_command: Callable[[], Any] | None = None,
         max_takes: int = 100,
+        release: Release = Release.FIRST_COMMAND,
+        command_latency: int = 0,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
     ):
         self.arm = arm
+        self.release = Release(release)
+        self.zero_before_release = 0  # all-zero commands that left the brakes on
         self.out = outputs or Outputs()
         self.publish_rate, self.rate_factor = publish_rate, rate_factor
         self.command_order = command_order
@@ -101,6 +137,7 @@ class Session:
             sleep=sleep,
             max_takes=max_takes,
             policy=policy,
+            latency=command_latency,
         )
         self.rejected = self.clipped = 0
         self.failed = ''  # why the simulation stopped ('' while it runs)
@@ -125,14 +162,32 @@ class Session:
             torques[joint] = values[k]
         return torques
 
+    def released(self) -> bool:
+        """Whether a command has released the brakes (since the start or the last reset)."""
+        return self.loop.watchdog.pending is not None or self.arm.periods > 0
+
     def offer(self, read: Callable[[], list[float]], now: float | None = None) -> bool:
         """One command: ``read()`` gives its joint torques, or raises CommandError or
-        ValueError when it is malformed. True when applied, False when refused (counted,
-        logged at most once a second)."""
+        ValueError when it is malformed. True when taken (applied, or an all-zero command
+        the ``release`` rule ignores before the brakes are released), False when refused
+        (counted, logged at most once a second)."""
         try:
             torques = read()
         except (CommandError, ValueError) as exc:
             return self._reject(exc, now)
+        if (
+            not any(torques)
+            and self.release.needs_torque(isinstance(read, JointCommand))
+            and not self.released()
+        ):
+            if not self.zero_before_release:
+                self.out.log(
+                    'info',
+                    'zero command: brakes stay on until a command with a torque '
+                    f'(release_on {self.release})',
+                )
+            self.zero_before_release += 1
+            return True
         now = self.clock() if now is None else now
         self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
         self.loop.command(torques, now)
@@ -306,6 +361,8 @@ class Session:
             'commands': str(loop.commands),
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
+            # all-zero commands that did not release the brakes (release_on)
+            'zero_commands_before_release': str(self.zero_before_release),
             'publish_failures': str(self.out.failures()),
             **self._extra_values(),
             'sim_time': f'{self.arm.t:.6f}',

@@ -42,6 +42,7 @@ from ..contract import (
     joint_names,
     plane_rotation,
     surface_frame,
+    to_joint_space,
 )
 from ..physics.errors import ImpactArmError
 
@@ -237,12 +238,12 @@ def robot_description(
         _sub(joint, 'child', link=t.child)
         roll = 2 * math.atan2(t.rotation[0], t.rotation[3])  # only rotations about x here
         _sub(joint, 'origin', xyz=f'{_num(t.x)} {_num(t.y)} {_num(t.z)}', rpy=f'{_num(roll)} 0 0')
-    _ros2_control(robot, joints, joint_commands_topic, joint_states_topic)
+    _ros2_control(robot, joints, joint_commands_topic, joint_states_topic, to_joint_space(scene.q0))
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding='unicode') + '\n'
 
 
-def _ros2_control(robot, joints, commands_topic, states_topic):
+def _ros2_control(robot, joints, commands_topic, states_topic, initial_positions):
     control = _sub(robot, 'ros2_control', name='impact_arm', type='system')
     hardware = _sub(control, 'hardware')
     _sub(hardware, 'plugin').text = 'topic_based_ros2_control/TopicBasedSystem'
@@ -255,8 +256,14 @@ def _ros2_control(robot, joints, commands_topic, states_topic):
         ('trigger_joint_command_threshold', '-1'),
     ):
         _sub(hardware, 'param', name=key).text = value
-    for joint_name in joints:
+    for joint_name, position in zip(joints, initial_positions):
         joint = _sub(control, 'joint', name=joint_name)
         _sub(joint, 'command_interface', name='effort')
         for state in ('position', 'velocity', 'effort'):
-            _sub(joint, 'state_interface', name=state)
+            interface = _sub(joint, 'state_interface', name=state)
+            # what the broadcaster publishes before the hardware's first state: the scene's
+            # initial pose (the simulator's, braked until a command with a torque), so a
+            # controller started before the simulator computes the torque that holds the
+            # arm there, not one for an arm at zero angles
+            initial = position if state == 'position' else 0.0
+            _sub(interface, 'param', name='initial_value').text = _num(initial)

@@ -291,6 +291,35 @@ def joint_state_fields(raw: bytes) -> tuple[int, int, list[str], list[float], li
     return sec, nanosec, names, position, velocity
 
 
+_COUNT = struct.Struct('<I')
+
+
+@_reader
+def joint_state_effort(raw: bytes) -> list[float]:
+    """The ``effort`` of a serialized ``sensor_msgs/JointState`` (in the order of its names):
+    the torques a driver says act now, read only by a controller that measures its command
+    latency from them."""
+    layout = _joint_state_layouts.get(len(raw))
+    if layout is not None and raw[:2] == b'\x00\x01' and layout.matches(raw):
+        # effort is the message's last field: its count right after the velocities, its
+        # doubles after the count, aligned to 8 bytes from the CDR origin (byte 4)
+        v_at, v_struct = layout.velocity
+        count_at = v_at + v_struct.size
+        (n,) = _COUNT.unpack_from(raw, count_at)
+        at = count_at + 4
+        at += (8 - (at - 4) % 8) % 8
+        if not n and count_at + 4 == len(raw):
+            return []
+        if at + 8 * n == len(raw):
+            return list(struct.unpack_from(f'<{n}d', raw, at))
+    r = CdrReader(raw)
+    _header(r)
+    _strings(r)
+    _doubles_at(r)
+    _doubles_at(r)
+    return _doubles_at(r)[0]
+
+
 def _doubles_at(r: CdrReader):
     """A float64 sequence and the offset of its first element."""
     r.align(4)

@@ -28,7 +28,13 @@ from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, to_a
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
-from ..io.wire import MalformedMessage, PatchedMessage, joint_state_fields, wrench_stamped_fields
+from ..io.wire import (
+    MalformedMessage,
+    PatchedMessage,
+    joint_state_effort,
+    joint_state_fields,
+    wrench_stamped_fields,
+)
 from ._runner import realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
 from .params import (
@@ -116,6 +122,8 @@ class Controller(Node):
             ready=self._readers_matched,
             startup_hold=p.startup_hold,
             wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0,
+            latency_periods=p.latency_periods,
+            wrench_tolerance=p.wrench_tolerance,
         )
         if p.startup_hold > 0:
             self.get_logger().info(
@@ -191,10 +199,12 @@ class Controller(Node):
     def _on_joint_state(self, raw):
         try:
             fields = joint_state_fields(raw)
+            # the acting torques, only to measure the latency from them
+            effort = joint_state_effort(raw) if self.p.latency_periods == -1 else ()
         except MalformedMessage as exc:
             self.inputs.drop('malformed_joint_states', f'joint state dropped: {exc}')
             return
-        self.inputs.joint_state(*fields)
+        self.inputs.joint_state(*fields, effort)
 
     # ------------------------------------------------------------------------ output
     def _readers_matched(self):
@@ -215,6 +225,11 @@ class Controller(Node):
                 self._publish_diagnostics()  # now: a run ends on its count
             elif self.inputs.latest is not None:
                 self.down_half_start = self.inputs.latest[0]
+        if self.sent == 1 and self.inputs.first_command_after is not None:
+            self.get_logger().info(
+                f'first command sent {self.inputs.first_command_after:.3f} s after start '
+                f'(startup_hold {self.p.startup_hold:g} s)'
+            )
 
     def finish(self, executor) -> int:
         """Like a deactivated controller: leave the actuators with zero torque."""
@@ -243,6 +258,11 @@ class Controller(Node):
                 KeyValue(key='commands_sent', value=str(self.sent)),
                 KeyValue(key='strikes', value=str(self.strikes)),
                 KeyValue(key='down_half_start', value=repr(self.down_half_start)),
+                # the driver's repetitions of a sample, not taken as new periods
+                KeyValue(key='repeated_states', value=str(self.inputs.repeated)),
+                # commands in flight the latest command was predicted over
+                KeyValue(key='latency_periods', value=str(len(self.inputs.in_flight()))),
+                KeyValue(key='latency_periods_max', value=str(self.inputs.latency_max)),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )

@@ -8,6 +8,7 @@ import math
 
 from .. import contract
 from ..contract import ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES, to_joint_space
+from ..driver.control_inputs import SENT_HISTORY
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
 
@@ -161,6 +162,30 @@ def parameter_table(scene):
             'tip velocity reversal within this height above the surface means impact [m]',
             low=0.0,
             high=10.0,
+        ),
+        Param(
+            'latency_periods',
+            -1,
+            'control periods a command takes to reach the actuators (a driver stack adds '
+            'one or two): the controller acts on the state predicted from the model and the '
+            'commands still in flight; -1: measured from the efforts the driver reports '
+            '(0 until one matches a command sent; set it for a driver that reports measured '
+            'torques); 0: no prediction',
+            'int',
+            low=-1,
+            high=SENT_HISTORY - 1,
+            read_only=True,
+        ),
+        Param(
+            'wrench_tolerance',
+            0.01,
+            's: a joint state waits for the contact wrench of its instant only while the '
+            'newest wrench is at most this far behind it on the same clock; a wrench on '
+            'another clock, late or absent is used as it comes (the largest force since the '
+            'last command), never a reason to hold or drop states',
+            low=0.0,
+            high=10.0,
+            read_only=True,
         ),
         Param(
             'joints',

@@ -31,7 +31,7 @@ from ..contract import COMMANDS, DIAGNOSTICS
 from ..physics import jit
 from ..driver.arm import SimulatedArm
 from ..driver.realtime import WatchdogPolicy
-from ..driver.session import LockstepSession, Outputs, RealtimeSession
+from ..driver.session import JointCommand, LockstepSession, Outputs, RealtimeSession
 from ..io.wire import float64_array_data, joint_state_command
 from . import sim_services
 from ._period_io import PeriodPublishers
@@ -98,6 +98,8 @@ class Simulator(Node):
             command_order=command_order,
             policy=WatchdogPolicy(p.watchdog_policy),
             max_takes=contract.qos(COMMANDS).depth,
+            release=p.release_on,
+            command_latency=p.command_latency_periods,
         )
         subscribe = self.create_subscription
         self.reader_node = None
@@ -203,7 +205,9 @@ class Simulator(Node):
         return lambda: self.session.ordered(float64_array_data(raw))
 
     def _named_command(self, raw):
-        return lambda: self.arm.check_command(joint_state_command(raw, self.joint_names))
+        return JointCommand(
+            lambda: self.arm.check_command(joint_state_command(raw, self.joint_names))
+        )
 
     def _take_command(self):
         """The oldest queued command, arrays first (one controller uses one topic; in a

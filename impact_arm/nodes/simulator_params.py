@@ -6,6 +6,7 @@ from .. import contract
 from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES
 from ..driver.arm import DEFAULT_BRAKE_TORQUE
 from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy
+from ..driver.session import Release
 from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from .params import Param, ParameterError, check_joints, scene_joint_names
@@ -96,6 +97,31 @@ _PARAMS_BEFORE_JOINTS = (
         low=1e-3,
         high=1e9,
         doc='; /diagnostics reports it and the largest brake torque used',
+    ),
+    # the arm stays braked with time stopped until a controller drives it: ros2_control's
+    # TopicBasedSystem sends zero commands from its activation on, seconds before any
+    # controller runs, and taking those as the start dropped the arm onto the part
+    Param(
+        'release_on',
+        Release.NONZERO_JOINT_COMMAND.value,
+        'which command releases the brakes and starts time (at start-up, after a reset): '
+        'first_command (any), nonzero_command (one with a non-zero torque; all-zero ones '
+        'before it are ignored) or nonzero_joint_command (non-zero for JointState commands on '
+        'joint_commands_topic, any for command arrays)',
+        'str',
+        choices=tuple(r.value for r in Release),
+        read_only=True,
+    ),
+    Param(
+        'command_latency_periods',
+        0,
+        "periods a command takes to reach the actuators: a driver stack's latency, "
+        "simulated (each period's newest command acts this many periods later; the first "
+        'command, which releases the brakes, at once)',
+        'int',
+        low=0,
+        high=1000,
+        read_only=True,
     ),
     Param(
         'max_effort',

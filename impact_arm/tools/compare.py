@@ -31,18 +31,16 @@ def _is_recording(path) -> bool:
 def recorded_impacts(rec, study, timing=None) -> tuple:
     """Rows of the impacts of a recording; the scene gives the kinematics and the free flight
     that carries the first sample after an impact back to its separation (for the CoR)."""
-    from ..calibration.fit import FitOptions, ImpactSet, predict_impact, prepare, recorded_cor
+    from ..calibration.fit import predict_impact, read_impacts, recorded_cor
     from ..calibration.identify import joint_to_absolute_matrix, tip_normal_speed
     from ..physics.model import ArmModel
 
     model = ArmModel(study.scene())
-    _, noise, windows, notes = prepare(rec, FitOptions(), model)
-    problem = ImpactSet(study, [], windows, True)
-    problem.select([], noise.velocity)
+    impacts = read_impacts(rec, study)
     T = joint_to_absolute_matrix(rec.n)
     rows, preds = [], []
-    for w in problem.windows:
-        p = predict_impact(model, w, problem.timing)
+    for w in impacts.windows:
+        p = predict_impact(model, w, impacts.timing)
         q, qd_pre, _ = w.pre.state(w.t_c)
         v_in = tip_normal_speed(model, T @ q, T @ qd_pre)
         imp = w.impulse if w.impulse is not None else [math.nan, math.nan]
@@ -50,14 +48,14 @@ def recorded_impacts(rec, study, timing=None) -> tuple:
             {
                 't': w.t_c,
                 'impact_speed': -v_in,
-                'cor': recorded_cor(model, w, p, problem.timing, v_in),
+                'cor': recorded_cor(model, w, p, impacts.timing, v_in),
                 'impulse_n': float(imp[1]),
                 'impulse_t': float(imp[0]),
                 'qd_after': w.post_qd[0].tolist(),
             }
         )
         preds.append((w, p))
-    return rows, preds, problem, notes
+    return rows, preds, impacts
 
 
 def replayed_impacts(preds, model) -> list:
@@ -119,7 +117,7 @@ def compare(
     study = Study(kin_scene)
     n = study.scene().n_links
     rec_a = read_recording(a, joints, n, states_topic or JOINT_STATES, wrench_topic)
-    a_rows, preds, _problem, _ = recorded_impacts(rec_a, study)
+    a_rows, preds, _ = recorded_impacts(rec_a, study)
     a_origin = a_rows[0]['t'] if a_rows else 0.0
     if b_is_recording:
         rec_b = read_recording(b, joints, n, states_topic or JOINT_STATES, wrench_topic)

@@ -3,7 +3,7 @@
     impact-arm fit runs/arm.mcap --scene config/paper.yaml \\
         --param surfaces[0].mu=0.05:1 --param materials.steel.S_y=2e8:5e9
 
-The method lives in calibration/fit.py (docs/fit.md); this module reads the recording, runs the fit
+The method lives in calibration/fit/ (docs/fit.md); this module reads the recording, runs the fit
 with a progress line and writes the JSON, the fitted scene, report.md and the figures.
 Python API: ``fit_recording(...)`` returns the ``FitResult`` and writes the same files.
 """
@@ -20,16 +20,20 @@ from ..physics.errors import ImpactArmError
 
 
 def parse_param(text: str):
-    """'KEY=LO:HI' -> (key, (lo, hi)); one-line error naming the argument."""
-    key, eq, rng = text.partition('=')
+    """'KEY=LO:HI' -> (key, (lo, hi)), 'KEY=LO:HI@START' -> (key, (lo, hi, start)); a
+    one-line error naming the argument."""
+    key, eq, rest = text.partition('=')
+    rng, at, start = rest.partition('@')
     lo, colon, hi = rng.partition(':')
     try:
-        if not (key and eq and colon):
+        if not (key and eq and colon) or (at and not start):
             raise ValueError
-        return key.strip(), (float(lo), float(hi))
+        bounds = (float(lo), float(hi)) + ((float(start),) if at else ())
+        return key.strip(), bounds
     except ValueError:
         raise ImpactArmError(
-            f'--param {text!r}: expected KEY=LO:HI, e.g. surfaces[0].mu=0.05:1'
+            f'--param {text!r}: expected KEY=LO:HI or KEY=LO:HI@START, e.g. '
+            f'surfaces[0].mu=0.05:1 or surfaces[0].mu=0.05:1@0.5'
         ) from None
 
 
@@ -144,6 +148,8 @@ def report_text(result, recording, scene, diagnosis=None) -> str:
         '',
         f'**Verdict: {result.verdict}**',
         '',
+        *[f'- {w}' for w in result.warnings],
+        *([''] if result.warnings else []),
         (
             f'{result.impacts_used} impacts used; '
             f'{"joint rates and wrench impulse" if result.used_wrench else "joint rates only"}; '
@@ -157,13 +163,42 @@ def report_text(result, recording, scene, diagnosis=None) -> str:
         '|---|---:|---:|---|---|',
     ]
     for key, p in result.parameters.items():
-        ident = 'yes' if p['identifiable'] else f'no ({p.get("why", "correlated")})'
+        ident = 'yes' if p.identifiable else f'no ({p.why or "correlated"})'
+        d = p.digits()
         lines.append(
-            f'| `{key}` | {_fmt(p["start"])} | {_fmt(p["value"])} | '
-            f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}] | {ident}'
-            + (' (at a bound)' if p['at_bound'] else '')
+            f'| `{key}` | {_fmt(p.start)} | {p.value:.{d}g} | '
+            f'[{p.ci95[0]:.{d}g}, {p.ci95[1]:.{d}g}] | {ident}'
+            + (' (at a bound)' if p.at_bound else '')
             + ' |'
         )
+    if result.output_tests:
+        lines += [
+            '',
+            '| output | recorded below fitted | sign test p | mean [σ] | trend with speed [s.e.] |',
+            '|---|---:|---:|---:|---:|',
+        ]
+        for t in result.output_tests:
+            trend = f'{t.trend_t:+.2f}' if math.isfinite(t.trend_t) else 'one speed'
+            lines.append(
+                f'| {t.output} | {t.below} of {t.count} | {t.sign_p:.2g} | {t.mean:+.2f} '
+                f'| {trend} |'
+            )
+    if result.dependences:
+        lines += [
+            '',
+            'What the fitted values depend on (first order, per 1 % of each fixed parameter; '
+            'tolerance: how well that parameter must be known for its error to stay within '
+            "one standard deviation of the fitted value's):",
+            '',
+            '| fitted | fixed | change per 1 % (or per the amount given) | tolerance |',
+            '|---|---|---:|---:|',
+        ]
+        for d in result.dependences:
+            change = f'{d.change:+.3g} %' if d.relative else f'{d.change:+.3g}'
+            per = '' if d.unit == '%' else f' per {d.step:g} {d.unit}'
+            lines.append(
+                f'| `{d.fitted}` | `{d.fixed}` | {change}{per} | {d.tolerance:.2g} {d.unit} |'
+            )
     if result.cannot_tell_apart:
         lines += [
             '',
@@ -226,22 +261,21 @@ def _ms_from(origin, t):
 
 def write_figures(result, out) -> list:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    # the object API with the Agg canvas, not pyplot: no backend machinery to import in the
+    # fresh process a fit runs in
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     from ..calibration.fit import predict_impact
 
-    problem = result.problem
-    model = problem.model([result.scene_overrides[p.key] for p in problem.specs])
+    model = result.model
     rec = result.recording
     wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     made = []
     rows = 2 if rec.wrench is not None else 1
-    fig, axes = plt.subplots(
-        rows, max(len(wins), 1), figsize=(4.2 * max(len(wins), 1), 3.4 * rows), squeeze=False
-    )
+    fig = Figure(figsize=(4.2 * max(len(wins), 1), 3.4 * rows))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, max(len(wins), 1), squeeze=False)
     colors = ['tab:blue', 'tab:orange', 'tab:green', 'tab:red']
     for c, w in enumerate(wins):
         dt = w.t_b - w.t_a
@@ -251,7 +285,7 @@ def write_figures(result, out) -> list:
             if rec.wrench is not None
             else []
         )
-        pred = predict_impact(model, w, problem.timing, dense=extra)
+        pred = predict_impact(model, w, result.timing, dense=extra)
         ax = axes[0][c]
         lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
         sel = (rec.t >= lo) & (rec.t <= hi)
@@ -319,14 +353,17 @@ def write_figures(result, out) -> list:
             if c == 0:
                 ax.legend(fontsize=7)
     fig.suptitle('Recorded and fitted around the impacts', fontsize=10)
-    fig.tight_layout()
+    # fixed margins: tight_layout lays every label out again, the costliest step of the fit's
+    # outputs in a fresh process
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.9, wspace=0.3, hspace=0.35)
     path = os.path.join(out, 'impacts.png')
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     made.append(path)
 
     good = [r for r in result.per_impact if not r.get('error')]
-    fig, ax = plt.subplots(figsize=(5.5, 4))
+    fig = Figure(figsize=(5.5, 4))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
     ax.plot(
         [r['impact_speed'] for r in good], [r['cor_recorded'] for r in good], 'o', label='recorded'
     )
@@ -349,10 +386,9 @@ def write_figures(result, out) -> list:
     ax.set_ylabel('kinematic coefficient of restitution [-]')
     ax.set_title('CoR against impact speed', fontsize=10)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.14, right=0.97, bottom=0.13, top=0.92)
     path = os.path.join(out, 'cor.png')
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     made.append(path)
     return made
 
@@ -371,9 +407,10 @@ def add_arguments(parser):
         '--param',
         action='append',
         default=[],
-        metavar='KEY=LO:HI',
+        metavar='KEY=LO:HI[@START]',
         help='a scene key path to fit within bounds (repeat), e.g. '
-        'surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9',
+        "surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9; '@START' starts the search "
+        "there instead of at the scene's value, e.g. surfaces[0].mu=0.05:1@0.5",
     )
     parser.add_argument(
         '--joints',
@@ -398,6 +435,15 @@ def add_arguments(parser):
         '--no-wrench',
         action='store_true',
         help='ignore a recorded wrench: fit from the joint states alone',
+    )
+    parser.add_argument(
+        '--leave-out',
+        action='append',
+        type=float,
+        default=[],
+        metavar='T',
+        help='leave the impact at time T [s from the first sample] out of the fit (repeat); '
+        'an outlier impact is named and refitted without in any case',
     )
     add_correction_arguments(parser)
     parser.add_argument('--json', default=None, metavar='OUT', help='also write the JSON here')
@@ -438,7 +484,7 @@ def cli(args) -> int:
             wrench_topic=args.wrench_topic,
             out=args.out,
             json_path=args.json,
-            options=FitOptions(use_wrench=not args.no_wrench),
+            options=FitOptions(use_wrench=not args.no_wrench, leave_out=tuple(args.leave_out)),
             progress=progress,
             corrections=corrections,
         )
@@ -446,9 +492,11 @@ def cli(args) -> int:
         line.end()
     for key, p in result.parameters.items():
         print(
-            f'{key} = {p["value"]:.6g}  95 % [{p["ci95"][0]:.6g}, {p["ci95"][1]:.6g}]'
-            + ('' if p['identifiable'] else '  NOT identified by these data')
+            f'{key} = {p.interval_text()}'
+            + ('' if p.identifiable else '  NOT identified by these data')
         )
+    for warning in result.warnings:
+        print(f'warning: {warning}')
     if result.cannot_tell_apart:
         print('cannot tell apart: ' + '; '.join(' ~ '.join(p) for p in result.cannot_tell_apart))
     print(

@@ -1,0 +1,120 @@
+"""How the recorded efforts acted between samples: the readings of a driver's reported
+efforts, and the choice among them by how well each predicts the free flight."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import itertools
+import math
+
+import numpy as np
+
+from ...physics.errors import SimulationError
+from ...physics.integrator import PhaseIntegrator
+from ...physics.model import ArmModel
+from ..identify import ImpactWindow, joint_to_absolute_matrix
+
+
+EFFORT_TIMINGS = ('linear', 'previous', 'next')
+SUBSTEPS = 8  # torque pieces per sample period (linear timing)
+
+
+class TorqueSchedule:
+    """The joint torque between samples from the recorded efforts, by how a driver reports
+    them: 'linear' (the effort at a stamp is the torque at that instant; continuous between),
+    'previous' (it is the command held over the period that ends at the stamp, as our
+    simulator reports it), 'next' (held from the stamp to the next one). Before the contact
+    only efforts recorded before it are used, after it only those after it (a controller that
+    reacts to the impact changes its torque there)."""
+
+    def __init__(self, win: ImpactWindow, timing: str):
+        self.t, self.tau, self.timing = win.effort_t, win.effort.copy(), timing
+        self.ib = ib = getattr(win, 'effort_ib', 2)
+        # A sample taken during the contact with the actuators off shows no torque, not the
+        # command: read as 'previous', that command acted before the contact began (the one
+        # after it is reported at b), so the command of the last free sample stands in.
+        off = getattr(win, 'effort_off', [])
+        for k in range(2, ib):
+            if off[k]:
+                self.tau[k] = self.tau[1] if timing == 'previous' else self.tau[ib]
+
+    def __call__(self, t0: float, t1: float, side: str) -> np.ndarray:
+        t, tau, mid, last = self.t, self.tau, 0.5 * (t0 + t1), len(self.t) - 1
+        if self.timing == 'previous':
+            return tau[min(max(int(np.searchsorted(t, mid, side='left')), 2), last)]
+        if self.timing == 'next':
+            return tau[min(max(int(np.searchsorted(t, mid, side='right')) - 1, 1), last)]
+        if side == 'pre':
+            i, j = 0, 1
+        elif mid < t[self.ib]:
+            i, j = self.ib, self.ib + 1
+        else:
+            i = min(max(int(np.searchsorted(t, mid, side='right')) - 1, self.ib), last - 1)
+            j = i + 1
+        if t[j] == t[i]:
+            return tau[j]
+        return tau[i] + (tau[j] - tau[i]) * (mid - t[i]) / (t[j] - t[i])
+
+    def boundaries(self, t_from: float, t_to: float) -> list[float]:
+        """Times where the held torque is renewed: every sample, and SUBSTEPS per period for
+        'linear'."""
+        grid: list | np.ndarray = [x for x in self.t if t_from < x < t_to]
+        if self.timing == 'linear':
+            edges = np.concatenate([[t_from], grid, [t_to]])
+            grid = np.concatenate(
+                [np.linspace(lo, hi, SUBSTEPS + 1)[1:-1] for lo, hi in itertools.pairwise(edges)]
+                + [grid]
+            )
+        return sorted({float(x) for x in grid} | {float(t_to)})
+
+
+def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
+    """Squared error of one-period predictions between the compared post-impact samples,
+    from the recorded state, under ``timing``: how well that reading of the efforts explains
+    the free motion where the torque changes fastest."""
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    torque = TorqueSchedule(win, timing)
+    q_post = [win.post.state(t)[0] for t in win.post_t]
+    err = 0.0
+    for k in range(len(win.post_t) - 1):
+        state = model.initial_state()
+        state.t = win.post_t[k]
+        state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ win.post_qd[k]
+        held = timing != 'controller'
+        state.mode = 'up'  # after an impact the scene's controller lifts the arm
+        integ = PhaseIntegrator(
+            model, state, control='held' if held else 'continuous', preset='balanced'
+        )
+        try:
+            for edge in torque.boundaries(win.post_t[k], win.post_t[k + 1]):
+                if held:
+                    integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+                integ.advance(edge)
+        except SimulationError:
+            return math.inf
+        if integ.state.phase != 0:
+            return math.inf
+        err += float(
+            np.sum((np.linalg.solve(T, integ.state.y[n : 2 * n]) - win.post_qd[k + 1]) ** 2)
+        )
+    return err
+
+
+def effort_timing(model: ArmModel, windows: Sequence[ImpactWindow]) -> tuple[str, dict[str, float]]:
+    """The reading of the efforts that best predicts the free motion after the impacts, and
+    the error of each: the three readings of the recorded efforts, and the scene's own
+    controller when it is a continuous state feedback (a stiff controller changes its torque
+    within a sample period faster than any interpolation of the samples follows)."""
+    timings = list(EFFORT_TIMINGS)
+    ctrl = model.scene.controller
+    if ctrl.rate == 0 and ctrl.law in ('q', 'pd') and model.n_integral == 0:
+        timings.append('controller')
+    each = {t: [free_flight_error(model, w, t) for w in windows] for t in timings}
+    # an impact after which one reading's flight meets the surface again (inf) says nothing
+    # of the readings: compared over the impacts every reading flies through (all of them
+    # when there is none such)
+    common = [k for k in range(len(windows)) if all(math.isfinite(each[t][k]) for t in timings)]
+    errors = {t: sum(each[t][k] for k in (common or range(len(windows)))) for t in timings}
+    return min(errors, key=errors.get), errors  # type: ignore[arg-type]  # every key is present

@@ -1,0 +1,137 @@
+"""The fitted parameters: scene key paths with bounds, checked against the scene, and the
+unit-cube / log coordinates the search and the covariance use."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ...physics.errors import ImpactArmError, SceneError
+from ..study import Study, parse_key_path
+from ...physics.scene import SCHEMA
+
+
+class FitError(ImpactArmError):
+    """Bad fit input (parameter keys, bounds, options): one line naming what is wrong."""
+
+
+@dataclass
+class Parameter:
+    key: str
+    lo: float
+    hi: float
+    start: float
+    log: bool  # fitted in log space (positive bounds)
+
+    def to_unit(self, value: float) -> float:
+        if self.log:
+            return (math.log(value) - math.log(self.lo)) / (math.log(self.hi) - math.log(self.lo))
+        return (value - self.lo) / (self.hi - self.lo)
+
+    def from_unit(self, u: float) -> float:
+        if self.log:
+            return math.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
+        return self.lo + u * (self.hi - self.lo)
+
+    def to_native(self, value: float) -> float:
+        """The coordinate the covariance is stated in: log(value) or value."""
+        return math.log(value) if self.log else value
+
+
+def parameter_specs(study: Study, bounds: dict) -> list:
+    """Check each key against the scene and its bounds ({key: (lo, hi)} or (lo, hi, start)):
+    the key holds a number in the scene, or is one the scene may leave out (its value is then
+    the schema's default, e.g. no joint damping) and the scene accepts it there;
+    the bounds are finite, lo < hi, and contain the start (by default the scene's value)."""
+    if not bounds:
+        raise FitError('no parameter to fit: give at least one --param KEY=LO:HI')
+    specs: list[Parameter] = []
+    for key, given in bounds.items():
+        if len(given) not in (2, 3):
+            raise FitError(f'--param {key}: expected (lo, hi) or (lo, hi, start), got {given!r}')
+        lo, hi = float(given[0]), float(given[1])
+        stated = _scene_value(study, key)
+        if stated is None:  # a key the scene leaves out: the schema's default, if it has one
+            stated = schema_default(key)
+            if stated is None:
+                raise FitError(_missing(study, key))
+            try:
+                study.scene({key: stated})
+            except SceneError as exc:
+                raise FitError(f'--param {key}: the scene refuses it: {exc}') from None
+        start = float(given[2]) if len(given) == 3 else stated
+        text = f'{lo:g}:{hi:g}' + (f'@{start:g}' if len(given) == 3 else '')
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise FitError(f'--param {key}={text}: bounds must be finite with LO < HI')
+        if not lo <= start <= hi:
+            what = 'the start' if len(given) == 3 else f"the scene's value {start:g}, the start"
+            raise FitError(
+                f'--param {key}={text}: the bounds exclude {what}; widen them, or give a start '
+                f'inside them (KEY=LO:HI@START)'
+            )
+        specs.append(Parameter(key, lo, hi, start, log=lo > 0))
+    return specs
+
+
+def _scene_value(study: Study, key: str) -> float | None:
+    """The number the scene states at ``key``, None if it states nothing there."""
+    try:
+        parts = parse_key_path(key)
+    except SceneError as exc:
+        raise FitError(f'--param {key}: {exc}') from None
+    node = study.data
+    for part in parts:
+        ok = (
+            (isinstance(node, dict) and part in node)
+            if isinstance(part, str)
+            else (isinstance(node, list) and part < len(node))
+        )
+        if not ok:
+            return None
+        node = node[part]
+    if isinstance(node, bool) or not isinstance(node, (int, float)):
+        raise FitError(f"--param {key}: the scene's value {node!r} is not a number")
+    return float(node)
+
+
+def _missing(study: Study, key: str) -> str:
+    """The refusal of a key the scene does not state and that has no 'absent' value."""
+    parts = parse_key_path(key)
+    node = study.data
+    for depth, part in enumerate(parts):
+        ok = (
+            (isinstance(node, dict) and part in node)
+            if isinstance(part, str)
+            else (isinstance(node, list) and part < len(node))
+        )
+        if not ok:
+            where = (
+                ''.join(f'[{p}]' if isinstance(p, int) else f'.{p}' for p in parts[:depth]).lstrip(
+                    '.'
+                )
+                or 'the scene'
+            )
+            return (
+                f'--param {key}: the scene {study.origin} has no {part!r} in {where} (fit keys '
+                f'the scene states, e.g. surfaces[0].mu, materials.steel.S_y)'
+            )
+        node = node[part]
+    return f'--param {key}: not in the scene {study.origin}'
+
+
+def schema_default(key: str) -> float | None:
+    """The number the scene schema gives a key the scene leaves out (None: required, not a
+    number, or not in the schema), read from the schema along the key's path."""
+    node: tuple = ('dict', SCHEMA, '', None)  # a schema leaf: (kind, constraint, unit, default)
+    for part in parse_key_path(key):
+        kind, inner = node[0], node[1]
+        if (kind == 'list' and isinstance(part, int)) or (kind == 'map' and isinstance(part, str)):
+            node = ('dict', inner, '', None)  # a list item or a named entry: its schema
+        elif kind == 'dict' and isinstance(part, str) and part in inner:
+            node = inner[part]
+        else:
+            return None
+    default = node[3]
+    if node[0] == 'num' and isinstance(default, (int, float)) and not isinstance(default, bool):
+        return float(default)
+    return None

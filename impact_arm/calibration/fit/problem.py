@@ -1,0 +1,269 @@
+"""The problem: the recorded impacts, how a scene variant predicts them, and the whitened
+residuals whose sum of squares is a chi-square when the scene is right."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...physics.model import ArmModel
+from ...physics.errors import SceneError
+from ..identify import (
+    IdentifyError,
+    ImpactWindow,
+    JointRecording,
+    Noise,
+    estimate_noise,
+    find_impacts,
+    impact_windows,
+    joint_to_absolute_matrix,
+    tip_normal_speed,
+)
+from ..study import Study
+from .efforts import effort_timing
+from .parameters import FitError
+from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
+
+# The whitened residual of an impact the model cannot replay at some values (no contact, a
+# contact outside the law's validity): well above any misfit near the start, so that the
+# search never prefers losing impacts to fitting them (30x that for values the scene refuses)
+PENALTY = 30.0
+
+
+@dataclass
+class FitOptions:
+    window: int = 15  # samples per side for the free-flight fits
+    use_wrench: bool = True  # when the recording has one
+    starts: int = 3  # local searches from the best points of the global stage
+    global_points: int = 0  # 0: 6 + 4 per parameter
+    z_min: float = 30.0  # impact detection threshold (robust z of the rate step)
+    max_nfev: int = 25  # per local search and parameter
+    post_samples: int = 3  # samples after each impact compared with the model
+    leave_out: tuple[float, ...] = ()  # contact times [s] of impacts not to fit
+    check_outliers: bool = True  # refit without an outlier impact and report both
+
+
+class ImpactSet:
+    """The recorded impacts and how a scene variant predicts them, as whitened residuals."""
+
+    best: np.ndarray  # the fitted values, set by fit
+
+    def __init__(self, study: Study, specs: list, windows: list, use_wrench: bool):
+        self.study, self.specs, self.windows = study, specs, windows
+        self.use_wrench = use_wrench and any(w.impulse is not None for w in windows)
+        self.evaluations = 0
+        self.timing = 'linear'
+        self.penalty = PENALTY
+
+    def model(
+        self, values: Sequence[float] | np.ndarray, fixed: dict[str, float] | None = None
+    ) -> ArmModel:
+        """The scene with the fitted keys at ``values`` and ``fixed`` keys moved too."""
+        overrides = {p.key: float(v) for p, v in zip(self.specs, values)} | (fixed or {})
+        try:
+            return ArmModel(self.study.scene(overrides))
+        except SceneError as exc:
+            raise FitError(f'the scene refuses {overrides}: {exc}') from None
+
+    def wrench_at(self, win: ImpactWindow) -> bool:
+        """Whether the wrench impulse of this impact is compared (recorded in full there)."""
+        return self.use_wrench and win.impulse is not None
+
+    def outputs(self, pred: Prediction, win: ImpactWindow) -> np.ndarray:
+        qd = pred.qd.ravel()
+        return np.concatenate([qd, pred.impulse]) if self.wrench_at(win) else qd
+
+    def recorded(self, win: ImpactWindow) -> np.ndarray:
+        qd = win.post_qd.ravel()
+        return np.concatenate([qd, win.impulse]) if self.wrench_at(win) else qd
+
+    def predict(
+        self, values: Sequence[float] | np.ndarray, fixed: dict[str, float] | None = None
+    ) -> list[Prediction]:
+        self.evaluations += 1
+        try:
+            model = self.model(values, fixed)
+        except FitError as exc:  # a combination the scene's schema refuses: a penalty
+            n = self.windows[0].post_qd.shape[1] if self.windows else 1
+            return [failed(n, FailureKind.SCENE_REFUSED, str(exc)) for _ in self.windows]
+        return [predict_impact(model, w, self.timing) for w in self.windows]
+
+    def select(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> list[str]:
+        """At the starting ``values``: choose the reading of the efforts, move samples taken
+        in a contact out of each impact's comparison, keep the impacts the scene replays and
+        give them robust diagonal weights (``calibrate`` refines them at the optimum)."""
+        model = self.model(values)
+        self.timing, self.timing_errors = effort_timing(model, self.windows)
+        kept, self.whiten, notes = [], [], []
+        for w in self.windows:
+            w, base = self._widen(model, w, predict_impact(model, w, self.timing))
+            if base.error:
+                notes.append(
+                    f'impact at t = {w.t_c:.4f} s left out: {base.error} with the starting scene'
+                )
+                continue
+            ib = getattr(w, 'effort_ib', 2)
+            if self.timing == 'next' and any(w.effort_off[k] for k in range(2, ib)):
+                notes.append(
+                    f'impact at t = {w.t_c:.4f} s left out: a sample taken during '
+                    f'the contact shows no torque, so the command held after the '
+                    f'contact is not recorded'
+                )
+                continue
+            # robust weights for the global stage (no linearisation, which a bounce that
+            # comes and goes with the parameters would spoil): each recorded rate's noise
+            # plus the pre-impact rates' uncertainty, the impulse's noise
+            cov_pre = w.pre.state(w.t_a)[2]
+            var = np.tile(sigma_qd**2 + np.diag(cov_pre)[model.n :], len(w.post_t))
+            if self.wrench_at(w):
+                var = np.concatenate([var, w.impulse_var])
+            kept.append(w)
+            self.whiten.append(np.diag(1.0 / np.sqrt(var)))
+            w.sigma = np.sqrt(var)
+        self.windows = kept
+        return notes
+
+    def _widen(self, model, w, base):
+        """A contact under way at the last sample before the impact, or still at the first
+        after it (a long contact can span several samples): that sample leaves the free
+        flight, as long as the model says so."""
+        for _ in range(6):
+            side = {FailureKind.SURFACE_ABOVE_TIP: 'pre', FailureKind.CONTACT_OUTLASTS: 'post'}.get(
+                base.failure, ''
+            )
+            wider = w.widened(side) if side and getattr(w, 'widened', None) else None
+            if wider is None:
+                break
+            wider.index = w.index
+            w, base = wider, predict_impact(model, wider, self.timing)
+        return w, base
+
+    def calibrate(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> None:
+        """The full whitening of each impact's residual at ``values`` (the optimum so far):
+        the recorded rates' noise (``sigma_qd`` per joint), the wrench noise, and the
+        pre-impact fit's covariance carried through the impact (sensitivities by finite
+        differences). An impact the model cannot replay at ``values`` keeps its weights."""
+        try:
+            model = self.model(values)
+        except FitError:
+            return
+        n = model.n
+        for i, w in enumerate(self.windows):
+            base = predict_impact(model, w, self.timing)
+            w, base = self._widen(model, w, base)
+            if base.error:
+                continue
+            self.windows[i] = w
+            q, qd, cov_pre = w.pre.state(w.t_a)
+            x0 = np.concatenate([q, qd])
+            y0 = self.outputs(base, w)
+            m = len(w.post_t)
+            S = np.zeros((len(y0), 2 * n))
+            steps = np.sqrt(np.diag(cov_pre)) + 1e-9
+            for k in range(2 * n):
+                x = x0.copy()
+                x[k] += steps[k]
+                p = predict_impact(model, w, self.timing, (x[:n], x[n:]))
+                if not p.error:
+                    S[:, k] = (self.outputs(p, w) - y0) / steps[k]
+            C = S @ cov_pre @ S.T
+            C[: m * n, : m * n] += np.diag(np.tile(sigma_qd**2, m))
+            if self.wrench_at(w):
+                C[m * n :, m * n :] += np.diag(w.impulse_var)
+            # noise-free data (a simulation) leave C singular: a relative floor keeps it usable
+            C += np.eye(len(C)) * max(1e-12 * np.trace(C) / len(C), 1e-30)
+            self.whiten[i] = np.linalg.inv(np.linalg.cholesky(C))
+            w.sigma = np.sqrt(np.diag(C))
+
+    def residuals(
+        self, values: Sequence[float] | np.ndarray, predictions: list[Prediction] | None = None
+    ) -> np.ndarray:
+        preds = predictions if predictions is not None else self.predict(values)
+        out = []
+        for w, L, p in zip(self.windows, self.whiten, preds):
+            if p.error:
+                refused = p.failure is FailureKind.SCENE_REFUSED
+                out.append(np.full(L.shape[0], self.penalty * (30 if refused else 1)))
+            else:
+                out.append(L @ (self.outputs(p, w) - self.recorded(w)))
+        return np.concatenate(out) if out else np.zeros(0)
+
+
+def contact_test(
+    model: ArmModel, tolerance: float = 0.05
+) -> Callable[[np.ndarray, np.ndarray, np.ndarray], bool]:
+    """``is_contact`` for ``find_impacts``: the tip is within ``tolerance`` x the arm's reach
+    of a surface's height, moving down before the step and less so after it."""
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    heights = [s.height for s in model.surfaces]
+    reach = float(np.sum(model.L))
+
+    def is_contact(q: np.ndarray, qd_before: np.ndarray, qd_after: np.ndarray) -> bool:
+        y = tip_y(model, T @ q)
+        v0 = tip_normal_speed(model, T @ q, T @ qd_before)
+        v1 = tip_normal_speed(model, T @ q, T @ qd_after)
+        return any(abs(y - h) < tolerance * reach for h in heights) and v0 < 0 and v1 > v0
+
+    return is_contact
+
+
+def prepare(
+    recording: JointRecording, options: FitOptions, model: ArmModel | None = None
+) -> tuple[list, Noise, list[ImpactWindow], list[str]]:
+    """Impacts, noise and impact windows of a recording (refused if it has no impact);
+    ``model`` (the scene's kinematics) tells contacts from other steps of the rates."""
+    impacts = find_impacts(
+        recording, options.z_min, contact_test(model) if model is not None else None
+    )
+    if not impacts:
+        steps = len(find_impacts(recording, options.z_min)) if model is not None else 0
+        why = (
+            f'{steps} step(s) of the joint rates, none with the tip near a surface of the '
+            f"scene (check --joints order, the scene's links and surface heights)"
+            if steps
+            else 'no step in the joint rates stands out of the noise'
+        )
+        raise IdentifyError(f'no impact in the recording {recording.source}: {why}')
+    noise = estimate_noise(recording, impacts, options.window)
+    windows, notes = impact_windows(
+        recording, noise, impacts, options.window, post_samples=options.post_samples
+    )
+    normal = [w.impulse[1] for w in windows if w.impulse is not None]
+    if normal and np.median(normal) < 0:
+        # a wrench published as the force on the surface, not on the arm: same law
+        for w in windows:
+            if w.impulse is not None:
+                w.impulse = -w.impulse
+        notes.append(
+            'the recorded wrench points into the surface: its sign is reversed '
+            '(the simulator publishes the force on the arm)'
+        )
+    if not windows:
+        raise IdentifyError(f'{len(impacts)} impact(s) found but none usable: ' + '; '.join(notes))
+    return impacts, noise, windows, notes
+
+
+@dataclass
+class RecordedImpacts:
+    """The impacts of a recording as a scene reads them: the windows its model replays, how
+    the efforts are read between samples, the sensor noise and what was noted on the way."""
+
+    windows: list[ImpactWindow]
+    timing: str
+    noise: Noise
+    notes: list[str]
+
+
+def read_impacts(
+    recording: JointRecording, study: Study, options: FitOptions | None = None
+) -> RecordedImpacts:
+    """The impacts of ``recording`` that the scene of ``study`` replays at its own values."""
+    options = options or FitOptions()
+    _, noise, windows, notes = prepare(recording, options, ArmModel(study.scene()))
+    problem = ImpactSet(study, [], windows, options.use_wrench)
+    notes += problem.select([], noise.velocity)
+    return RecordedImpacts(problem.windows, problem.timing, noise, notes)

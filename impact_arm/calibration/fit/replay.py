@@ -1,0 +1,253 @@
+"""One recorded impact replayed on the model: from the recorded state before the contact,
+under the recorded efforts, through every contact phase, to the compared samples after it.
+A replay that cannot be made says why by a ``FailureKind``."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...physics.errors import SimulationError
+from ...physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
+from ...physics.model import ArmModel
+from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
+from .efforts import TorqueSchedule
+
+FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
+# A sample this many rate standard deviations short of the model's separation is in the contact
+INSIDE_SIGMAS = 3.0
+
+
+def window_options(model: ArmModel) -> dict:
+    """Integrator options of the replays: the scene's own (the fitted scene will run with
+    them, and a second contact on the edge of happening is found or missed as the scene's
+    runs find or miss it), tightened to 'balanced' when looser than FIT_RTOL."""
+    opts = getattr(model, '_fit_options', None)
+    if opts is None:
+        spec = model.scene.integrator
+        opts = options_from_spec(spec)
+        rtol = opts['rtol'] if opts['rtol'] is not None else PRESETS[opts['preset']][0]
+        if max(rtol, opts['contact_rtol'] or rtol) > FIT_RTOL:
+            opts = options_from_spec(spec, preset='balanced')
+        model._fit_options = opts  # type: ignore[attr-defined]  # cached per model instance
+    return opts
+
+
+class FailureKind(enum.Enum):
+    """Why an impact could not be replayed at some parameter values."""
+
+    SURFACE_ABOVE_TIP = 'surface above the tip'  # the start sample is already in contact
+    NO_CONTACT = 'no contact'  # the model misses the surface across the recorded impact
+    CONTACT_OUTLASTS = 'contact outlasts'  # still in contact at the first compared sample
+    SIMULATION = 'simulation'  # the integrator stopped (SimulationError)
+    SCENE_REFUSED = 'scene refused'  # the parameter values make a scene the schema refuses
+
+
+@dataclass
+class Prediction:
+    qd: np.ndarray  # joint rates at the compared post-impact samples (m, n) [rad/s]
+    impulse: np.ndarray  # contact impulse (tangential, normal) [N s]
+    v_in: float  # tip normal speed at first contact [m/s]
+    v_out: float  # ... at last separation
+    contacts: int
+    qd_sep: np.ndarray | None = None  # joint rates at the last separation
+    error: str = ''  # why the replay failed, in words ('' when it did not)
+    failure: FailureKind | None = None  # ... and as a kind, for the code that acts on it
+    if TYPE_CHECKING:  # set after construction by predict_impact (not dataclass fields)
+        path: np.ndarray = field(init=False)
+        t_sep: float = field(init=False)
+        y_sep: np.ndarray = field(init=False)
+
+
+def predict_impact(
+    model: ArmModel,
+    win: ImpactWindow,
+    timing: str = 'linear',
+    pre_state: tuple[np.ndarray, np.ndarray] | None = None,
+    dense: Sequence[float] | None = None,
+) -> Prediction:
+    """Simulate one impact from the recorded state at the last sample before it (the
+    pre-impact fit, or ``pre_state`` = (q, q̇) in joint space) under the recorded efforts,
+    through every contact, to the compared samples after it. ``dense`` (a list of extra
+    times) makes ``Prediction.path`` rows (t, q̇ joint space..., cumulative impulse t, n)
+    at every boundary, for plots."""
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    heights = [s.height for s in model.surfaces]
+    t0 = win.t_a
+    q, qd, _ = win.pre.state(t0)
+    if pre_state is not None:
+        q, qd = pre_state
+    if heights and tip_y(model, T @ q) <= max(heights):
+        return failed(
+            n,
+            FailureKind.SURFACE_ABOVE_TIP,
+            "the scene's surface is above the arm's tip before the recorded contact",
+        )
+    state = model.initial_state()
+    state.t = t0
+    state.y[:n], state.y[n : 2 * n] = T @ q, T @ qd
+    held = timing != 'controller'
+    state.mode = 'down'  # the scene's controller, if used, is approaching the surface
+    integ = PhaseIntegrator(
+        model, state, control='held' if held else 'continuous', **window_options(model)
+    )
+    torque = TorqueSchedule(win, timing)
+    first: Any = None  # the first and last contact events, once found
+    last: Any = None
+    contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
+    targets = list(win.post_t)
+    edges = torque.boundaries(t0, targets[-1])
+    if dense is not None:
+        edges = sorted(set(edges) | {float(x) for x in dense if t0 < x < targets[-1]})
+    try:
+        for edge in edges:
+            while integ.state.t < edge:
+                if held:  # (ignored by the kernel while actuators are off in contact)
+                    integ.set_held_torque(
+                        torque(integ.state.t, edge, 'pre' if side == 'pre' else 'post')
+                    )
+                for event in integ.advance(edge, stop_at_event=('contact', 'separation')):
+                    if event.kind == 'contact':
+                        contacts += 1
+                        first = first or event
+                        side = 'contact'
+                    elif event.kind == 'separation':
+                        last, side = event, 'post'
+            if dense is not None:
+                impulse += integ.take_impulse()
+                path.append(
+                    [integ.state.t, *np.linalg.solve(T, integ.state.y[n : 2 * n]), *impulse]
+                )
+            if targets and abs(edge - targets[0]) < 1e-12:
+                if side == 'contact':
+                    # a contact ending just after the sample in the model, just before it in
+                    # the recording (the start state is uncertain by microseconds): let it
+                    # end within a tenth of a period and compare there, unless what is left
+                    # of it changes the rates beyond their noise (the sample was then taken
+                    # in the contact, and is no free flight)
+                    first_contact = last is None
+                    at_sample = np.linalg.solve(T, integ.state.y[n : 2 * n])
+                    for event in integ.advance(
+                        edge + 0.1 * (win.t_b - win.t_a), stop_at_event=('separation',)
+                    ):
+                        if event.kind == 'separation':
+                            last, side = event, 'post'
+                    if first_contact and side == 'post' and win.rate_sigma is not None:
+                        rest = np.linalg.solve(T, last.y[n : 2 * n]) - at_sample
+                        sigmas = float(np.max(np.abs(rest) / win.rate_sigma))
+                        if sigmas > INSIDE_SIGMAS:
+                            return failed(
+                                n,
+                                FailureKind.CONTACT_OUTLASTS,
+                                f'the first sample after the impact is taken in the contact '
+                                f'(the rest of it changes the rates by {sigmas:.3g} σ)',
+                            )
+                if side == 'pre' or last is None:
+                    if side == 'pre':
+                        return failed(
+                            n,
+                            FailureKind.NO_CONTACT,
+                            'no contact predicted across the recorded impact',
+                        )
+                    return failed(
+                        n,
+                        FailureKind.CONTACT_OUTLASTS,
+                        'the contact outlasts the first sample after it',
+                    )
+                # else in a further contact begun since: the rates there are continuous in
+                # the parameters (it has only just begun when it appears), compare them
+                rates.append(np.linalg.solve(T, integ.state.y[n : 2 * n]))
+                targets.pop(0)
+    except SimulationError as exc:
+        return failed(n, FailureKind.SIMULATION, str(exc))
+    impulse += integ.take_impulse()
+    pred = Prediction(
+        np.array(rates),
+        impulse,
+        tip_normal_speed(model, first.y[:n], first.y[n : 2 * n]),
+        tip_normal_speed(model, last.y[:n], last.y[n : 2 * n]),
+        contacts,
+        np.linalg.solve(T, last.y[n : 2 * n]),
+    )
+    pred.path = np.array(path)
+    pred.t_sep, pred.y_sep = last.t, last.y[: 2 * n].copy()
+    return pred
+
+
+def free_flight(
+    model: ArmModel, win: ImpactWindow, timing: str, t0: float, y0: np.ndarray, t1: float
+) -> np.ndarray | None:
+    """Joint rates at ``t1`` after free flight from absolute state ``y0`` at ``t0`` under
+    the torque ``timing`` uses after the impact (None if a contact intervenes)."""
+    n = model.n
+    state = model.initial_state()
+    state.t, state.y[: 2 * n] = t0, y0
+    held = timing != 'controller'
+    state.mode = 'up'
+    integ = PhaseIntegrator(
+        model, state, control='held' if held else 'continuous', **window_options(model)
+    )
+    torque = TorqueSchedule(win, timing)
+    try:
+        for edge in torque.boundaries(t0, t1):
+            if held:
+                integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+            integ.advance(edge)
+    except SimulationError:
+        return None
+    if integ.state.phase != 0:
+        return None
+    return np.linalg.solve(joint_to_absolute_matrix(n), integ.state.y[n : 2 * n])
+
+
+def recorded_separation_rates(
+    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: str
+) -> np.ndarray | None:
+    """The joint rates at the predicted separation that carry the model's free flight onto
+    the recorded first sample after the impact (Newton step through the flight's
+    sensitivity): the recorded side of the post-impact state, for its CoR."""
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    t1 = win.post_t[0]
+    base = free_flight(model, win, timing, pred.t_sep, pred.y_sep, t1)
+    if base is None:
+        return None
+    A = np.zeros((n, n))
+    for k in range(n):
+        y = pred.y_sep.copy()
+        y[n : 2 * n] += T[:, k] * 1e-4  # one joint rate up by 1e-4 rad/s
+        moved = free_flight(model, win, timing, pred.t_sep, y, t1)
+        if moved is None:
+            return None
+        A[:, k] = (moved - base) / 1e-4
+    qd_sep = np.linalg.solve(T, pred.y_sep[n : 2 * n])
+    return qd_sep + np.linalg.solve(A, win.post_qd[0] - base)
+
+
+def recorded_cor(
+    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: str, v_in: float
+) -> float:
+    n = model.n
+    qd = recorded_separation_rates(model, win, pred, timing)
+    if qd is None or not v_in:
+        return math.nan
+    T = joint_to_absolute_matrix(n)
+    return -tip_normal_speed(model, pred.y_sep[:n], T @ qd) / v_in
+
+
+def tip_y(model: ArmModel, q_abs: np.ndarray) -> float:
+    return float(model.tip(q_abs, np.zeros_like(q_abs))[1])
+
+
+def failed(n: int, kind: FailureKind, why: str) -> Prediction:
+    """The prediction of a replay that could not be made, with its reason."""
+    return Prediction(
+        np.full((1, n), np.nan), np.full(2, np.nan), math.nan, math.nan, 0, None, why, kind
+    )

@@ -1,0 +1,150 @@
+"""The controller and the simulated driver in one process, joined by queues instead of DDS:
+the lockstep loop of the two nodes (the same ``LockstepSession`` and ``ControlInputs`` they
+run), with a command latency in the driver, to show what a driver stack's latency does to the
+article's limit cycle and what the controller's prediction (``latency_periods``) restores.
+
+Deterministic: no wall clock, no middleware. ``bench/latency.py`` prints the table of
+docs/benchmarks.md from it.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import random
+from collections import deque
+from dataclasses import dataclass
+
+from ..contract import joint_names, to_absolute, to_joint_space
+from ..driver.arm import SimulatedArm
+from ..driver.control_inputs import ControlInputs
+from ..driver.session import LockstepSession, Outputs
+from ..physics.control import CycleController
+from ..physics.model import ArmModel
+from ..physics.scene import Scene
+
+# an impact this soon after the previous one is a second strike of the same down-swing (the
+# article's cycle strikes every ~0.4 s; a second strike follows within a few ms)
+SECOND_STRIKE_S = 0.05
+
+
+@dataclass(frozen=True)
+class LoopResult:
+    """What one closed-loop run did: its impacts' contact times [s], largest penetrations
+    [m] and normal tip speeds before contact [m/s]; ``failed`` says why it stopped early."""
+
+    latency: int
+    predicted: int
+    t_max: float
+    t_contact: tuple[float, ...]
+    delta_m: tuple[float, ...]
+    v_before: tuple[float, ...]
+    failed: str = ''
+
+    @property
+    def impacts(self) -> int:
+        return len(self.t_contact)
+
+    @property
+    def second_strikes(self) -> int:
+        gaps = [b - a for a, b in zip(self.t_contact, self.t_contact[1:])]
+        return sum(g < SECOND_STRIKE_S for g in gaps)
+
+    def cycle_periods(self, skip: int = 5) -> list[float]:
+        """Times between strikes of successive cycles, after the first ``skip`` impacts."""
+        t = [x for i, x in enumerate(self.t_contact) if i >= skip]
+        return [b - a for a, b in zip(t, t[1:]) if b - a >= SECOND_STRIKE_S]
+
+
+def closed_loop(
+    scene: Scene,
+    latency: int,
+    predicted: int,
+    t_max: float = 10.0,
+    rate: float = 1000.0,
+    jitter: float = 0.0,
+    seed: int = 0,
+) -> LoopResult:
+    """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
+    simulated seconds, the driver delaying each command by ``latency`` periods and the
+    controller predicting ``predicted`` periods ahead (0: no prediction; -1: measured).
+
+    ``jitter`` > 0: each command takes one period more with this probability (an
+    unsynchronised controller manager), so that some periods hold the previous command and
+    some commands are superseded before they act (the driver applies a period's newest)."""
+    arm = SimulatedArm(scene, rate, trace=False)
+    model = ArmModel(scene)
+    ctrl = CycleController.for_scene(model, scene.controller)
+    # the node's targets pass through joint space (parameters), as here
+    ctrl.targets = {k: to_absolute(to_joint_space(v)) for k, v in ctrl.targets.items()}
+    ticks: deque = deque()
+    commands: deque = deque()
+    contacts: list[tuple[float, float, float]] = []
+
+    def report(tick):
+        for record, _ in tick.impacts:
+            contacts.append((record['t_contact'], record['delta_m'], record['v_before'][1]))
+
+    session = LockstepSession(
+        arm,
+        publish_rate=rate,
+        rate_factor=0.0,
+        command_timeout=math.inf,
+        command_order=list(range(arm.n)),
+        outputs=Outputs(publish=ticks.append, report=report),
+        command_latency=0 if jitter else latency,
+        clock=lambda: 0.0,
+        sleep=lambda s: None,
+    )
+    names = joint_names(arm.n)
+    inputs = ControlInputs(
+        ctrl,
+        names,
+        list(range(arm.n)),
+        rate,
+        'joint_states',
+        commands.append,
+        latency_periods=predicted,
+        clock=lambda: 0.0,
+    )
+    rng = random.Random(seed)
+    line: list[tuple[int, int, list[float]]] = []  # (period it acts from, order, torques)
+    sent = 0
+    acting: list[float] = []
+    session.publish_initial()
+    while not session.failed and arm.t < t_max - 0.5 / rate:
+        while ticks:
+            tick = ticks.popleft()
+            sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
+            inputs.wrench(sec, nsec, (tick.wrench[0], tick.wrench[1], 0.0))
+            inputs.joint_state(sec, nsec, names, tick.position, tick.velocity, tick.effort)
+        if not commands:
+            return _result(latency, predicted, t_max, contacts, 'the controller sent nothing')
+        if not jitter:
+            while commands:
+                session.offer(functools.partial(list, commands.popleft()))
+            continue
+        # the delay line: each command acts from the period it arrives in, the newest wins
+        while commands:
+            sent += 1
+            delay = latency + (rng.random() < jitter) if sent > 1 else 0  # the release: at once
+            line.append((arm.periods + delay, sent, commands.popleft()))
+        arrived = [c for c in line if c[0] <= arm.periods]
+        if arrived:
+            newest = max(arrived, key=lambda c: c[1])
+            line[:] = [c for c in line if c[1] > newest[1]]
+            acting = newest[2]
+        session.offer(functools.partial(list, acting))
+    return _result(latency, predicted, t_max, contacts, session.failed)
+
+
+def _result(latency, predicted, t_max, contacts, failed):
+    return LoopResult(
+        latency,
+        predicted,
+        t_max,
+        tuple(c[0] for c in contacts),
+        tuple(c[1] for c in contacts),
+        tuple(c[2] for c in contacts),
+        failed,
+    )
