@@ -368,8 +368,8 @@ def test_a_recording_of_an_arm_with_joint_friction_fits_once_the_scene_has_it():
     scene = apply_overrides(Study('paper').data, {k: 0.5 for k in truth})
     result = fit(rec, scene, {**contact, **{k: (0.0, 3.0) for k in truth}})
     assert result.fits, result.verdict
-    assert result.parameters['surfaces[0].mu']['value'] == pytest.approx(0.2, rel=0.02)
-    assert result.parameters['materials.steel.S_y']['value'] == pytest.approx(1.12e9, rel=0.03)
+    assert result.parameters['surfaces[0].mu'].value == pytest.approx(0.2, rel=0.02)
+    assert result.parameters['materials.steel.S_y'].value == pytest.approx(1.12e9, rel=0.03)
     for key in truth:
-        lo, hi = result.parameters[key]['ci95']
+        lo, hi = result.parameters[key].ci95
         assert lo < 1.0 < hi

@@ -305,10 +305,10 @@ def test_a_recording_of_a_plate_on_a_stiff_mount_is_fitted_with_the_mount_in_the
     rec = synthetic_recording('paper', mount, cycles=6, drop=0.02, clock_offset=1.7e9, seed=7)
     bounds = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
     rigid = fit(rec, 'paper', bounds).parameters['materials.steel.S_y']
-    lo, hi = rigid['ci95']
+    lo, hi = rigid.ci95
     assert not lo < 1.12e9 < hi  # confidently wrong
     result = fit(rec, apply_overrides(Study('paper').data, mount), bounds)
     assert result.fits, result.verdict
     for key, value in (('surfaces[0].mu', 0.2), ('materials.steel.S_y', 1.12e9)):
-        lo, hi = result.parameters[key]['ci95']
+        lo, hi = result.parameters[key].ci95
         assert lo < value < hi, (key, lo, hi)
