@@ -132,6 +132,21 @@ def _resize_links(data, n, rng):
             data['joints'] = [joints[min(k, len(joints) - 1)] for k in range(n)]
 
 
+def _general_links(data, rng):
+    """Links that are not uniform rods: centres of mass off mid-length and off the axis,
+    inertias from a point-like to a far-spread mass (then open to the mutations below)."""
+    links = data.get('links')
+    if not isinstance(links, list):
+        return
+    for link in links:
+        length, mass = (link.get(k) if isinstance(link, dict) else None for k in ('length', 'mass'))
+        if not all(isinstance(v, float) and math.isfinite(v) for v in (length, mass)):
+            continue
+        link['com_x'] = length * rng.uniform(-0.3, 1.2)
+        link['com_y'] = length * rng.uniform(-0.3, 0.3)
+        link['inertia'] = mass * length * length * rng.choice((1e-7, 1e-3, 0.05, 0.3, 2.0))
+
+
 def _sensors_section(rng: random.Random) -> dict:
     """A ``sensors`` section of extreme but mostly valid values (the mutations below may then
     break it): 1-count encoders, 1 rad noise, a filter far above or below the rate, 1 s of
@@ -170,6 +185,8 @@ def mutate(base: dict, rng: random.Random) -> str:
             surfaces[0]['mount'] = random_mount(rng)
     if rng.random() < 0.3:
         _resize_links(data, rng.randint(3, 8), rng)
+    if rng.random() < 0.3:
+        _general_links(data, rng)
     if rng.random() < 0.2:  # a driver's sensors, at the edges of their ranges
         data['sensors'] = _sensors_section(rng)
     if rng.random() < 0.15 and isinstance(data.get('surfaces'), list) and data['surfaces']:

@@ -104,3 +104,17 @@ def test_kernel_dump_refuses_an_unknown_scene_in_one_line(tmp_path, argv, messag
         env=dict(os.environ, PYTHONPATH=ROOT),
     )
     assert out.returncode == 2 and message in out.stderr and 'Traceback' not in out.stderr
+
+
+def test_general_links_write_the_same_names():
+    """General links (centres of mass, inertias, contact point): the same functions, the
+    closed-form q̈ up to ``GENERAL_SYMBOLIC_ACCEL`` links."""
+    with open(injected.__file__, encoding='utf-8') as f:
+        declared = defined(f.read())
+    for n in (2, 3, 5):
+        names = defined(
+            equations._module_header(n, True, True, True, 0, general=True)
+            + equations._derivation(n, True, general=True)
+        )
+        with_accel = n <= equations.GENERAL_SYMBOLIC_ACCEL
+        assert names == (declared if with_accel else declared - {'accel'}), n

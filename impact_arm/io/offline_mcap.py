@@ -88,6 +88,7 @@ from ..contract import (
     to_joint_space,
 )
 from ..driver.sensors import Sensors
+from ..physics.scene import self_contained_text
 from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter, mounted_surfaces
 
@@ -180,7 +181,7 @@ class OfflineRecorder:
                 'topics': json.dumps(list(self.topics)),
             },
         )
-        text = scene.source_text or ''
+        text = self_contained_text(scene) or ''  # an arm's URDF inlined
         scene_file = (
             os.path.basename(scene.source_path) if scene.source_path else f'{scene.name}.yaml'
         )

@@ -79,12 +79,16 @@ IMPACT_POINT_RGBA = (0.0, 0.85, 1.0, 1.0)
 IMPACT_EVENTS = ('contact', 'max_compression', 'separation')
 
 
-def tip_position(lengths: Sequence[float], q: Sequence[float]) -> tuple[float, float]:
-    """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``."""
-    return (
-        math.fsum(L * math.cos(a) for L, a in zip(lengths, q)),
-        math.fsum(L * math.sin(a) for L, a in zip(lengths, q)),
-    )
+def tip_position(
+    lengths: Sequence[float], q: Sequence[float], tip_point: Sequence[float] | None = None
+) -> tuple[float, float]:
+    """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``;
+    ``tip_point``: B on the last link (along, across; default: its end)."""
+    along, across = (lengths[-1], 0.0) if tip_point is None else tip_point
+    x = [L * math.cos(a) for L, a in zip(lengths[:-1], q)]
+    y = [L * math.sin(a) for L, a in zip(lengths[:-1], q)]
+    c, s = math.cos(q[len(lengths) - 1]), math.sin(q[len(lengths) - 1])
+    return math.fsum(x + [along * c - across * s]), math.fsum(y + [along * s + across * c])
 
 
 def arrow_length(force: float, reach: float) -> float:
@@ -212,7 +216,9 @@ class SceneVisuals:
             force = float(record['F_max'])  # type: ignore[call-overload,index]
             _, t_contact, q_contact = events[0]
             # the model's contact begins when the tip centre B reaches the surface plane
-            x, _, z = plane_to_world(*tip_position(self.scene.lengths, q_contact))
+            x, _, z = plane_to_world(
+                *tip_position(self.scene.lengths, q_contact, self.scene.contact_point)
+            )
             n = self.scene.n_links
             numbers = [force, x, z] + [a for _, _, q in events for a in q]
         except (

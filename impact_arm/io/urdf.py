@@ -11,13 +11,22 @@ Frames follow REP 103 (z up, gravity along -z); the model's plane is the world's
   encoder angles of the wire and link k's x axis points along the model's absolute angle q_k.
   Every joint axis is ``0 -1 0`` (the model's z): a positive angle lifts the rod towards +z,
   as it lifts it towards the model's +y;
-* ``tip`` — fixed to linkN at x = L_N: the centre B of the tip sphere (radius R1);
+* ``tip`` — fixed to linkN at the contact point (x = L_N for rods): the centre B of the tip
+  sphere (radius R1);
 * ``surface1`` … — fixed to world, one per scene surface, at z = height (the surface plane),
   with the model's axes (``contract.PLANE_FRAME_ROTATION``): x tangential, y the outward
   normal (world +z). /contact_wrench is given in ``surface1``.
 
 The joints are URDF ``continuous`` joints (revolute without position limits): the model has
-none, and effort clipping is the simulator's ``max_effort`` parameter.
+none, and effort clipping is the simulator's ``max_effort`` parameter. A scene whose arm came
+from a URDF with limits or ``<dynamics>`` (``Scene.joints``) gets them written back
+(``revolute`` with its ``<limit>``), though the model does not act on them.
+
+Each link's ``<inertial>`` is the model's: the centre of mass at (along, 0, across) of the link
+frame (a rod's: mid-length), ``iyy`` the inertia about it about the joint axis (``izz`` the
+same, as for a body slender along x). ``tip`` sits at the scene's contact point on the last
+link (a rod's end unless the scene says otherwise); a scene reading this file back with
+``arm: {urdf: ..., contact: {link: tip}}`` is the same arm (physics/urdf_arm.py).
 
 Rods are drawn as cylinders of ``rod_radius`` (a visual setting: the model's rods are lines;
 default ``ROD_RADIUS_PER_LENGTH`` of the shortest link). The tip sphere's collision radius is
@@ -45,6 +54,8 @@ from ..contract import (
     to_joint_space,
 )
 from ..physics.errors import ImpactArmError
+
+from ..physics.scene import JointSpec
 
 if TYPE_CHECKING:
     from ..physics.scene import Scene
@@ -132,13 +143,14 @@ def moving_transforms(lengths: Sequence[float], q: Sequence[float]) -> list[Tran
 
 def static_transforms(scene: Scene) -> list[Transform]:
     """The fixed transforms: the tip on the last link, each surface on the world."""
+    along, across = scene.contact_point
     out = [
         Transform(
             link_names(scene.n_links)[-1],
             TIP,
-            float(scene.lengths[-1]),
+            float(along),
             0.0,
-            0.0,
+            float(across),  # the model's across (e⊥) is the link frame's +z
             (0.0, 0.0, 0.0, 1.0),
         )
     ]
@@ -193,13 +205,16 @@ def robot_description(
     _sub(robot, 'link', name=WORLD)
     links = link_names(scene.n_links)
     joints = joint_names(scene.n_links)
-    for k, (link_name, L, m) in enumerate(zip(links, scene.lengths, scene.masses)):
+    for k, (link_name, L, m, (cx, cy), i_c) in enumerate(
+        zip(links, scene.lengths, scene.masses, scene.link_com, scene.link_inertias)
+    ):
         link = _sub(robot, 'link', name=link_name)
         inertial = _sub(link, 'inertial')
-        _sub(inertial, 'origin', xyz=f'{_num(L / 2)} 0 0', rpy='0 0 0')
+        # the model's along / across the link are the link frame's x / z
+        _sub(inertial, 'origin', xyz=f'{_num(cx)} 0 {_num(cy) if cy else 0}', rpy='0 0 0')
         _sub(inertial, 'mass', value=_num(m))
-        # a uniform slender rod along x, about its centre: the model's inertia
-        i_c = m * L * L / 12
+        # about the centre, about y (the joint axis) the model's inertia; about z the same,
+        # as for a slender body along x (the model does not read it)
         _sub(inertial, 'inertia', ixx='0', ixy='0', ixz='0', iyy=_num(i_c), iyz='0', izz=_num(i_c))
         # URDF cylinders lie along z: turn by +90° about y to lay the rod along x
         _visual_and_collision(
@@ -210,12 +225,31 @@ def robot_description(
             radius=_num(rod_radius),
             length=_num(L),
         )
-        joint = _sub(robot, 'joint', name=joints[k], type='continuous')
+        spec = scene.joints[k] if scene.joints else JointSpec(joints[k])
+        limited = spec.lower is not None and spec.upper is not None
+        joint = _sub(robot, 'joint', name=joints[k], type='revolute' if limited else 'continuous')
         _sub(joint, 'parent', link=WORLD if k == 0 else links[k - 1])
         _sub(joint, 'child', link=link_name)
         x = 0.0 if k == 0 else scene.lengths[k - 1]
         _sub(joint, 'origin', xyz=f'{_num(x)} 0 0', rpy='0 0 0')
         _sub(joint, 'axis', xyz=axis)
+        limit = {
+            key: _num(value)
+            for key, value in (
+                ('lower', spec.lower if limited else None),
+                ('upper', spec.upper if limited else None),
+                ('effort', spec.effort),
+                ('velocity', spec.velocity),
+            )
+            if value is not None
+        }
+        if limit:
+            if limited:  # URDF requires both on a revolute joint's limit
+                limit.setdefault('effort', '0')
+                limit.setdefault('velocity', '0')
+            _sub(joint, 'limit', **limit)
+        if spec.damping or spec.friction:
+            _sub(joint, 'dynamics', damping=_num(spec.damping), friction=_num(spec.friction))
     tip = _sub(robot, 'link', name=TIP)
     _visual_and_collision(
         tip, {'xyz': '0 0 0', 'rpy': '0 0 0'}, 'sphere', 'tip', radius=_num(scene.tip_radius)

@@ -103,6 +103,10 @@ class Recorder(Node):
                 raise ParameterError(
                     f'parameter scene = {scene!r}: cannot read ({e.strerror})'
                 ) from None
+            from ..physics.scene import scene_from_text, self_contained_text
+
+            # an arm from a URDF file: the file's text goes into the recording's scene
+            scene_text = self_contained_text(scene_from_text(scene_text, scene, path=scene))
         try:
             self.writer = Ros2McapWriter(self.output, flush_interval=interval)
         except RecordingError as e:

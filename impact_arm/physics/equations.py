@@ -1,12 +1,14 @@
-"""Equations of motion of a planar chain of uniform rods, derived with sympy and compiled once.
+"""Equations of motion of a planar chain of links, derived with sympy and compiled once.
 
 Generalized coordinates are the *absolute* link angles q_i (from +x). Lagrange's equations
 d/dt(dT/dq̇) - dT/dq = Q give  M(q) q̈ = Q - b(q, q̇)  with b the velocity-product terms.
 Gravity enters through its generalized forces Q_g = Σ G_j · ∂r_Cj/∂q_i (docs/model.md), never
 through a hand-typed formula.
 
-The derivation keeps lengths, masses and g as symbols, so one derivation serves every scene
-with the same number of links and the same features; sympy is slow to import and to
+The derivation keeps lengths, masses and g as symbols (for general links also the centres of
+mass, inertias and contact point: ``GEOMETRY``), so one derivation serves every scene with the
+same number of links and the same features; a scene of uniform rods gets the rods' equations,
+exactly as before general links existed; sympy is slow to import and to
 differentiate, so the generated Python source is cached on disk (``cache_dir()``) keyed by a
 hash of what it was generated from. A warm start imports no sympy at all.
 
@@ -61,13 +63,26 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
 """
 
 
-def _derive_source(n: int, gravity: bool) -> str:
-    """Generate Python source for the chain's numeric functions (runs sympy)."""
+def _derive_source(n: int, gravity: bool, general: bool = False) -> str:
+    """Generate Python source for the chain's numeric functions (runs sympy).
+
+    ``general``: links with any centre of mass (along and across the link), any inertia
+    about it and the contact point anywhere on the last link, read from the geometry block
+    (``GEOMETRY``); otherwise uniform rods struck at the last link's end, whose block holds
+    the lengths alone."""
     import sympy as sp
 
     q = sp.symbols(f'q0:{n}')
     qd = sp.symbols(f'qd0:{n}')
     L = sp.symbols(f'L0:{n}', positive=True)
+    if general:
+        com_x = sp.symbols(f'cx0:{n}', real=True)  # centre of mass along link i
+        com_y = sp.symbols(f'cy0:{n}', real=True)  # ... and across it (towards e_i⊥)
+        inertias = sp.symbols(f'Jc0:{n}', positive=True)  # about the centre of mass
+        tip_x, tip_y = sp.symbols('tx ty', real=True)  # contact point on the last link
+        geometry = tuple(L) + com_x + com_y + inertias + (tip_x, tip_y)
+    else:
+        geometry = tuple(L)
     m = sp.symbols(f'm0:{n}', positive=True)
     g = sp.Symbol('g')
     Qx = sp.symbols(f'Qx0:{n}')  # non-gravity generalized forces (joint torques, contact)
@@ -75,19 +90,27 @@ def _derive_source(n: int, gravity: bool) -> str:
     def e(i: int) -> Any:
         return sp.Matrix([sp.cos(q[i]), sp.sin(q[i])])
 
+    def across(i: int) -> Any:  # e_i turned by +90°
+        return sp.Matrix([-sp.sin(q[i]), sp.cos(q[i])])
+
     def dt(expr: Any) -> Any:  # total time derivative along the motion
         return sum(sp.diff(expr, q[i]) * qd[i] for i in range(n))
 
     joints = [sp.zeros(2, 1)]
     for i in range(n):
         joints.append(joints[-1] + L[i] * e(i))
-    centres = [joints[i] + L[i] / 2 * e(i) for i in range(n)]
-    tip = joints[-1]
+    if general:
+        centres = [joints[i] + com_x[i] * e(i) + com_y[i] * across(i) for i in range(n)]
+        tip = joints[n - 1] + tip_x * e(n - 1) + tip_y * across(n - 1)
+    else:
+        centres = [joints[i] + L[i] / 2 * e(i) for i in range(n)]
+        tip = joints[-1]
 
     link_T = []
     for i in range(n):
         v = centres[i].applyfunc(dt)
-        inertia = m[i] * L[i] ** 2 / 12  # uniform rod about its centre
+        # about the centre: given, or a uniform rod's
+        inertia = inertias[i] if general else m[i] * L[i] ** 2 / 12
         link_T.append(
             sp.Rational(1, 2) * inertia * qd[i] ** 2 + sp.Rational(1, 2) * m[i] * (v.T * v)[0]
         )
@@ -101,7 +124,7 @@ def _derive_source(n: int, gravity: bool) -> str:
     b = [dt(p[i]) - sp.diff(T, q[i]) for i in range(n)]  # d/dt(dT/dq̇) without the q̈ part
     rhs = sp.Matrix([Qx[i] + (qg[i] if gravity else 0) - b[i] for i in range(n)])
     M = M.applyfunc(sp.simplify)
-    if n <= 3:
+    if n <= (GENERAL_SYMBOLIC_ACCEL if general else 3):
         qdd = list(M.LUsolve(rhs))
         solve_numerically = False
     else:  # symbolic inverses grow too fast; solve M x = rhs numerically at run time
@@ -125,7 +148,7 @@ def _derive_source(n: int, gravity: bool) -> str:
         lines.append(f'    return ({body},)')
         return '\n'.join(lines)
 
-    params = [(L, 'L'), (m, 'm')]
+    params = [(geometry, 'L'), (m, 'm')]
     state = [(q, 'q'), (qd, 'qd')]
     funcs = []
     if not solve_numerically:
@@ -142,17 +165,19 @@ def _derive_source(n: int, gravity: bool) -> str:
         )
     )
     funcs.append(
-        function('tip', ['q', 'qd', 'L'], [tip[0], tip[1], tip_v[0], tip_v[1]], state + [(L, 'L')])
+        function(
+            'tip', ['q', 'qd', 'L'], [tip[0], tip[1], tip_v[0], tip_v[1]], state + [(geometry, 'L')]
+        )
     )
     funcs.append(
         function(
             'tip_acceleration',
             ['q', 'qd', 'qdd', 'L'],
             [tip_a[0], tip_a[1]],
-            state + [(qdd_s, 'qdd'), (L, 'L')],
+            state + [(qdd_s, 'qdd'), (geometry, 'L')],
         )
     )
-    funcs.append(function('tip_jacobian', ['q', 'L'], jac[0] + jac[1], [(q, 'q'), (L, 'L')]))
+    funcs.append(function('tip_jacobian', ['q', 'L'], jac[0] + jac[1], [(q, 'q'), (geometry, 'L')]))
     funcs.append(function('gravity_forces', ['q', 'L', 'm', 'g'], qg, [(q, 'q')] + params))
     funcs.append(function('link_energies', ['q', 'qd', 'L', 'm'], link_T, state + params))
     funcs.append(function('potential', ['q', 'L', 'm', 'g'], [V], [(q, 'q')] + params))
@@ -326,14 +351,219 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     return '\n\n\n'.join(funcs) + '\n'
 
 
-def _module_header(n, gravity, contact, friction, n_integral, n_mount=0):
+# General links: the closed-form q̈ of the symbolic derivation up to this many links (its
+# expressions grow faster with the centre-of-mass offsets than with rods'); beyond, and in
+# every long chain, M q̈ = rhs is solved numerically.
+GENERAL_SYMBOLIC_ACCEL = 2
+
+# The geometry block of general links (``layout.geometry_size``), in the order the
+# generated functions read it: lengths L_i (joint i to joint i+1), centre of mass of each
+# link along (cx_i) and across (cy_i) it from its joint, inertia about the centre of mass
+# (Jc_i), then the contact point on the last link along (tx) and across (ty) it.
+GEOMETRY = ('L', 'cx', 'cy', 'Jc', 'tip')
+
+
+def _general_chain_source(n: int, gravity: bool) -> str:
+    """``_chain_source`` for general links (``GEOMETRY``): any centre of mass, inertia and
+    contact point on the last link.
+
+    Link k's centre is c_k = Σ_(i<k) L_i e_i + cx_k e_k + cy_k e_k⊥ (e⊥: e turned by +90°), so
+    ∂c_k/∂q_i = L_i e_i⊥ for i < k and cx_k e_k⊥ − cy_k e_k for i = k. With S_k the mass of
+    links k, k+1, ... the kinetic energy ½ Σ M_ij q̇_i q̇_j has
+    M_ii = Jc_i + m_i (cx_i² + cy_i²) + L_i² S_(i+1) and, for i < j,
+    M_ij = A_ij cos(q_i − q_j) + B_ij sin(q_i − q_j), A_ij = L_i (L_j S_(j+1) + m_j cx_j),
+    B_ij = L_i m_j cy_j. Each M_ij depends on q_i − q_j alone, so Lagrange's velocity terms
+    are b_i = Σ_(j>i) σ_ij q̇_j² − Σ_(j<i) σ_ji q̇_j² with σ_ij = A_ij sin(q_i − q_j) −
+    B_ij cos(q_i − q_j); gravity's generalized force is
+    Q_g,i = −g (L_i cos q_i S_(i+1) + m_i (cx_i cos q_i − cy_i sin q_i)). A rod (cx = L/2,
+    cy = 0, Jc = m L²/12) gives ``_chain_source``'s coefficients. Checked against the
+    symbolic derivation for 2-4 links and against Pinocchio (test_equations.py,
+    test_urdf_arm.py)."""
+    r = range(n)
+    last = n - 1
+
+    def cx(i: int) -> str:
+        return f'L[{n + i}]'
+
+    def cy(i: int) -> str:
+        return f'L[{2 * n + i}]'
+
+    def jc(i: int) -> str:
+        return f'L[{3 * n + i}]'
+
+    tx, ty = f'L[{4 * n}]', f'L[{4 * n + 1}]'
+
+    def head(name: str, args: Sequence[str]) -> list[str]:
+        return ['@jit_leaf', f'def {name}({", ".join(args)}):']
+
+    def trig(lines: list[str]) -> None:
+        for i in r:
+            lines.append(f'    c{i} = cos(q[{i}])')
+            lines.append(f'    s{i} = sin(q[{i}])')
+
+    def tail_masses(lines: list[str]) -> None:
+        lines.append(f'    S{n} = 0.0')
+        for k in reversed(r):
+            lines.append(f'    S{k} = S{k + 1} + m[{k}]')
+
+    def gravity_force(i: int) -> str:
+        return f'-g * (L[{i}] * c{i} * S{i + 1} + m[{i}] * ({cx(i)} * c{i} - {cy(i)} * s{i}))'
+
+    def rotated_tip(lines: list[str]) -> None:
+        # the contact point relative to the last joint, in the plane's axes
+        lines.append(f'    px = {tx} * c{last} - {ty} * s{last}')
+        lines.append(f'    py = {tx} * s{last} + {ty} * c{last}')
+
+    funcs = []
+    lines = head('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'])
+    trig(lines)
+    tail_masses(lines)
+    for i in r:
+        lines.append(
+            f'    M{i}_{i} = {jc(i)} + m[{i}] * ({cx(i)} * {cx(i)} + {cy(i)} * {cy(i)})'
+            f' + L[{i}] * L[{i}] * S{i + 1}'
+        )
+        for j in range(i + 1, n):
+            lines.append(f'    A{i}_{j} = L[{i}] * (L[{j}] * S{j + 1} + m[{j}] * {cx(j)})')
+            lines.append(f'    B{i}_{j} = L[{i}] * m[{j}] * {cy(j)}')
+            lines.append(f'    cd{i}_{j} = c{i} * c{j} + s{i} * s{j}')  # cos(q_i - q_j)
+            lines.append(f'    sd{i}_{j} = s{i} * c{j} - c{i} * s{j}')  # sin(q_i - q_j)
+            lines.append(f'    M{i}_{j} = A{i}_{j} * cd{i}_{j} + B{i}_{j} * sd{i}_{j}')
+            lines.append(f'    g{i}_{j} = A{i}_{j} * sd{i}_{j} - B{i}_{j} * cd{i}_{j}')
+    for i in r:
+        terms = [f'g{i}_{j} * qd[{j}] * qd[{j}]' for j in range(i + 1, n)]
+        terms += [f'-g{j}_{i} * qd[{j}] * qd[{j}]' for j in range(i)]
+        b = ' + '.join(terms).replace('+ -', '- ') or '0.0'
+        grav = f' + ({gravity_force(i)})' if gravity else ''
+        lines.append(f'    r{i} = Qx[{i}]{grav} - ({b})')
+    entries = [f'M{min(i, j)}_{max(i, j)}' for i in r for j in r] + [f'r{i}' for i in r]
+    lines.append(f'    return ({", ".join(entries)},)')
+    funcs.append('\n'.join(lines))
+    gravity_term = (
+        f' - g * (L[j] * cos(q[j]) * tail + m[j] * (L[{n} + j] * cos(q[j])'
+        f' - L[{2 * n} + j] * sin(q[j])))'
+        if gravity
+        else ''
+    )
+    funcs.append(f"""@jit_leaf
+def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
+    n = q.shape[0]
+    tail = 0.0                  # mass of the links beyond link j
+    for j in range(n - 1, -1, -1):
+        cx = L[n + j]
+        cy = L[2 * n + j]
+        out[j] = Qx[j]{gravity_term}
+        S[j * n + j] = L[3 * n + j] + m[j] * (cx * cx + cy * cy) + L[j] * L[j] * tail
+        for i in range(j):      # A_ij above the diagonal, B_ij below, until the second pass
+            S[i * n + j] = L[i] * (L[j] * tail + m[j] * cx)
+            S[j * n + i] = L[i] * m[j] * cy
+        tail += m[j]
+    for j in range(n):
+        for i in range(j):
+            a = S[i * n + j]
+            b = S[j * n + i]
+            d = q[i] - q[j]
+            cd = cos(d)
+            sd = sin(d)
+            sigma = a * sd - b * cd
+            out[i] -= sigma * qd[j] * qd[j]
+            out[j] += sigma * qd[i] * qd[i]
+            S[i * n + j] = a * cd + b * sd
+            S[j * n + i] = S[i * n + j]""")
+
+    def joint_sum(term: str) -> str:
+        return ' + '.join([term.format(i=i) for i in range(last)] or ['0.0'])
+
+    lines = head('tip', ['q', 'qd', 'L'])
+    trig(lines)
+    rotated_tip(lines)
+    lines.append(
+        '    return ('
+        + f'{joint_sum("L[{i}] * c{i}")} + px, '
+        + f'{joint_sum("L[{i}] * s{i}")} + py, '
+        + f'{joint_sum("-L[{i}] * s{i} * qd[{i}]")} - py * qd[{last}], '
+        + f'{joint_sum("L[{i}] * c{i} * qd[{i}]")} + px * qd[{last}],)'
+    )
+    funcs.append('\n'.join(lines))
+
+    lines = head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
+    trig(lines)
+    rotated_tip(lines)
+    w = f'qd[{last}] * qd[{last}]'
+    lines.append(
+        '    return ('
+        + joint_sum('L[{i}] * (-s{i} * qdd[{i}] - c{i} * qd[{i}] * qd[{i}])')
+        + f' - py * qdd[{last}] - px * {w}, '
+        + joint_sum('L[{i}] * (c{i} * qdd[{i}] - s{i} * qd[{i}] * qd[{i}])')
+        + f' + px * qdd[{last}] - py * {w},)'
+    )
+    funcs.append('\n'.join(lines))
+
+    lines = head('tip_jacobian', ['q', 'L'])
+    trig(lines)
+    rotated_tip(lines)
+    lines.append(
+        '    return ('
+        + ', '.join(
+            [f'-L[{i}] * s{i}' for i in range(last)]
+            + ['-py']
+            + [f'L[{i}] * c{i}' for i in range(last)]
+            + ['px']
+        )
+        + ',)'
+    )
+    funcs.append('\n'.join(lines))
+
+    lines = head('gravity_forces', ['q', 'L', 'm', 'g'])
+    trig(lines)
+    tail_masses(lines)
+    lines.append('    return (' + ', '.join(gravity_force(i) for i in r) + ',)')
+    funcs.append('\n'.join(lines))
+
+    def centre(lines: list[str], k: int) -> None:
+        # link k's centre relative to its joint, in the plane's axes
+        lines.append(f'    ux = {cx(k)} * c{k} - {cy(k)} * s{k}')
+        lines.append(f'    uy = {cx(k)} * s{k} + {cy(k)} * c{k}')
+
+    lines = head('link_energies', ['q', 'qd', 'L', 'm'])
+    trig(lines)
+    lines.append('    jx = 0.0')  # velocity of link k's joint
+    lines.append('    jy = 0.0')
+    for k in r:
+        centre(lines, k)
+        lines.append(f'    vx = jx - uy * qd[{k}]')
+        lines.append(f'    vy = jy + ux * qd[{k}]')
+        lines.append(
+            f'    T{k} = 0.5 * m[{k}] * (vx * vx + vy * vy) + 0.5 * {jc(k)} * qd[{k}] * qd[{k}]'
+        )
+        lines.append(f'    jx = jx - L[{k}] * s{k} * qd[{k}]')
+        lines.append(f'    jy = jy + L[{k}] * c{k} * qd[{k}]')
+    lines.append('    return (' + ', '.join(f'T{k}' for k in r) + ',)')
+    funcs.append('\n'.join(lines))
+
+    lines = head('potential', ['q', 'L', 'm', 'g'])
+    trig(lines)
+    lines.append('    y = 0.0')
+    lines.append('    V = 0.0')
+    for k in r:
+        centre(lines, k)
+        lines.append(f'    V += m[{k}] * g * (y + uy)')
+        lines.append(f'    y += L[{k}] * s{k}')
+    lines.append('    return (V,)')
+    funcs.append('\n'.join(lines))
+    funcs.append('HAS_ACCEL = False')
+    return '\n\n\n'.join(funcs) + '\n'
+
+
+def _module_header(n, gravity, contact, friction, n_integral, general=False, n_mount=0):
     """Constants the kernel template reads as compile-time constants."""
     from .layout import shape_offsets
 
-    offsets = shape_offsets(n, n_integral, n_mount)
+    offsets = shape_offsets(n, n_integral, general, n_mount)
+    links = ', general links' if general else ''
     lines = [
         f'# generated by impact_arm.physics.equations v{GENERATOR_VERSION}: n={n}, gravity={gravity},'
-        f' contact={contact}, friction={friction}, integral states={n_integral}'
+        f' contact={contact}, friction={friction}, integral states={n_integral}{links}'
         + (f', mounted surfaces={n_mount}.' if n_mount else '.'),
         '# Do not edit: delete the file to regenerate it.',
         f'# compiled with {jit_options()}',
@@ -361,12 +591,13 @@ def _module_header(n, gravity, contact, friction, n_integral, n_mount=0):
     return '\n'.join(lines) + '\n\n\n'
 
 
-def _derivation(n, gravity):
+def _derivation(n, gravity, general=False):
     """The sympy part (slow), cached on its own: it does not depend on the scene's features.
     Beyond ``SYMBOLIC_LINKS`` the chain's closed form, which needs no cache."""
     if n > SYMBOLIC_LINKS:
-        return _chain_source(n, gravity)
-    key = hashlib.sha256(f'{GENERATOR_VERSION}-{n}-{gravity}'.encode()).hexdigest()[:16]
+        return _general_chain_source(n, gravity) if general else _chain_source(n, gravity)
+    shape = f'{GENERATOR_VERSION}-{n}-{gravity}' + ('-general' if general else '')
+    key = hashlib.sha256(shape.encode()).hexdigest()[:16]
     path = os.path.join(cache_dir(), f'derivation_{n}_{key}.py.txt')
     if os.path.exists(path):
         with open(path, encoding='utf-8') as f:
@@ -377,7 +608,7 @@ def _derivation(n, gravity):
 
     compile_started()  # sympy: part of the one-time cost the tools announce
     try:
-        text = _derive_source(n, gravity)
+        text = _derive_source(n, gravity, general)
     finally:
         compile_ended()
     _write_atomically(path, text)
@@ -408,26 +639,28 @@ def load_equations(
     contact: bool = True,
     friction: bool = True,
     n_integral: int = 0,
+    general: bool = False,
     n_mount: int = 0,
 ) -> types.ModuleType:
     """The compiled module for one scene shape: generated equations + the integrator kernel.
+    ``general``: links other than uniform rods struck at the end (``GEOMETRY``).
 
     Derives (sympy) and writes it on first use; later processes import the cached file, and
     numba's own cache (next to it) spares them the compilation too. Within a process a shape
     is looked up once (reading and hashing the sources costs 0.17 ms, a study's run ~2 ms)."""
-    key = (n, gravity, contact, friction, n_integral, n_mount, cache_dir())
+    key = (n, gravity, contact, friction, n_integral, general, n_mount, cache_dir())
     if key not in _LOADED:
-        _LOADED[key] = _load_equations(n, gravity, contact, friction, n_integral, n_mount)
+        _LOADED[key] = _load_equations(n, gravity, contact, friction, n_integral, general, n_mount)
     return _LOADED[key]
 
 
-def _load_equations(n, gravity, contact, friction, n_integral, n_mount=0):
+def _load_equations(n, gravity, contact, friction, n_integral, general, n_mount=0):
     from .kernel import template_source
 
     template = template_source()
     source = (
-        _module_header(n, gravity, contact, friction, n_integral, n_mount)
-        + _derivation(n, gravity)
+        _module_header(n, gravity, contact, friction, n_integral, general, n_mount)
+        + _derivation(n, gravity, general)
         + '\n\n'
         + template
     )

@@ -59,47 +59,57 @@ ST_RHS, ST_STEPS, ST_REJECTED = 0, 1, 2
 TR_T, TR_PHASE, TR_DELTA, TR_FN, TR_FF, TR_VX, TR_VY, TR_ENERGY = 0, 1, 2, 3, 4, 5, 6, 7
 
 
-def shape_offsets(n: int, n_integral: int, n_mount: int = 0) -> dict:
-    """Offsets that depend on the scene shape (n links, n_integral PID integral states,
-    n_mount mounted surfaces: the state is q, q̇, the integrals, then each plate's z, ż from
-    Y_MOUNT on).
-    The generator writes them into each kernel module as compile-time constants; Python code
-    reads them from that module (``model.eq``) or from here.
+def geometry_size(n: int, general: bool) -> int:
+    """Entries of the link-geometry block P_L: the n lengths for uniform rods; for general
+    links also each link's centre of mass (along, across) and inertia about it, then the
+    contact point on the last link (along, across): ``equations.GEOMETRY``."""
+    return 4 * n + 2 if general else n
 
-    P_*: the flat parameter array (lengths, masses, g, gains, targets, switch height,
-    tolerances, maximum step, then the joints' damping, Coulomb friction, its smoothing rate
-    and armature, and two switches: P_JFRIC_ON (some joint has damping or friction) and
-    P_ARM_ON (some joint has armature)). Joint values are values, not shape: zero is off, and
-    a scene that changes them never compiles a new kernel. R_*: an output row
-    (``emit_output``): t, the state, the contact impulse since the previous row (tangential,
-    normal), the torque acting, actuators acting (1/0), the tip velocity (x, y), the peak
-    normal contact force since the previous row. W_*: the right-hand side's scratch
+
+def shape_offsets(n: int, n_integral: int, general: bool = False, n_mount: int = 0) -> dict:
+    """Offsets that depend on the scene shape (n links, n_integral PID integral states,
+    general links or uniform rods, n_mount mounted surfaces: the state is q, q̇, the
+    integrals, then each plate's z, ż from Y_MOUNT on). The generator writes them into each
+    kernel module as compile-time constants; Python code reads them from that module
+    (``model.eq``) or from here.
+
+    P_*: the flat parameter array (link geometry (NL values), masses, g, gains, targets,
+    switch height, tolerances, maximum step, then the joints' damping, Coulomb friction, its
+    smoothing rate and armature, and two switches: P_JFRIC_ON (some joint has damping or
+    friction) and P_ARM_ON (some joint has armature)). Joint values are values, not shape:
+    zero is off, and a scene that changes them never compiles a new kernel. R_*: an output
+    row (``emit_output``): t, the state, the contact impulse since the previous row
+    (tangential, normal), the torque acting, actuators acting (1/0), the tip velocity (x, y),
+    the peak normal contact force since the previous row. W_*: the right-hand side's scratch
     (generalized forces, torques, PID error and rate, then N*N for the mass matrix factor)."""
     size = 2 * n + n_integral + 2 * n_mount
+    nl = geometry_size(n, general)
+    p = nl - n  # the parameters after the geometry block move by its extra entries
     return {
         'SIZE': size,
         'Y_MOUNT': 2 * n + n_integral,
+        'NL': nl,
         'P_L': 0,
-        'P_M': n,
-        'P_G': 2 * n,
-        'P_KP': 2 * n + 1,
-        'P_KD': 3 * n + 1,
-        'P_KI': 4 * n + 1,
-        'P_TDOWN': 5 * n + 1,
-        'P_TUP': 6 * n + 1,
-        'P_SWITCH': 7 * n + 1,
-        'P_RTOL': 7 * n + 2,
-        'P_ATOL': 7 * n + 3,
-        'P_MAXSTEP': 7 * n + 4,
-        'P_CRTOL': 7 * n + 5,
-        'P_CATOL': 7 * n + 6,
-        'P_DAMP': 7 * n + 7,
-        'P_FRIC': 8 * n + 7,
-        'P_FVD': 9 * n + 7,
-        'P_ARM': 10 * n + 7,
-        'P_JFRIC_ON': 11 * n + 7,
-        'P_ARM_ON': 11 * n + 8,
-        'P_SIZE': 11 * n + 9,
+        'P_M': p + n,
+        'P_G': p + 2 * n,
+        'P_KP': p + 2 * n + 1,
+        'P_KD': p + 3 * n + 1,
+        'P_KI': p + 4 * n + 1,
+        'P_TDOWN': p + 5 * n + 1,
+        'P_TUP': p + 6 * n + 1,
+        'P_SWITCH': p + 7 * n + 1,
+        'P_RTOL': p + 7 * n + 2,
+        'P_ATOL': p + 7 * n + 3,
+        'P_MAXSTEP': p + 7 * n + 4,
+        'P_CRTOL': p + 7 * n + 5,
+        'P_CATOL': p + 7 * n + 6,
+        'P_DAMP': p + 7 * n + 7,
+        'P_FRIC': p + 8 * n + 7,
+        'P_FVD': p + 9 * n + 7,
+        'P_ARM': p + 10 * n + 7,
+        'P_JFRIC_ON': p + 11 * n + 7,
+        'P_ARM_ON': p + 11 * n + 8,
+        'P_SIZE': p + 11 * n + 9,
         'R_T': 0,
         'R_Y': 1,
         'R_JT': 1 + size,

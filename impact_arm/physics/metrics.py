@@ -39,8 +39,8 @@ class ImpactBuilder:
         model = self.model
         n = model.n
         q, qd = y[:n], y[n : 2 * n]
-        _, _, vx, vy = self._tip(q, qd, model.L)
-        parts = [float(T) for T in self._energies(q, qd, model.L, model.m)]
+        _, _, vx, vy = self._tip(q, qd, model.geometry)
+        parts = [float(T) for T in self._energies(q, qd, model.geometry, model.m)]
         if self._rotors:  # a joint's rotor turns with its link (numpy: only when there is one)
             parts = [T + float(J) for T, J in zip(parts, model.rotor_energies(qd))]
         return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]

@@ -53,6 +53,21 @@ class ArmModel:
         self.n = scene.n_links
         self.L = np.array(scene.lengths, dtype=float)
         self.m = np.array(scene.masses, dtype=float)
+        # the generated functions' link geometry (equations.GEOMETRY): the lengths for rods
+        self.general = scene.general_links
+        self.geometry = (
+            np.concatenate(
+                [
+                    self.L,
+                    [c[0] for c in scene.link_com],
+                    [c[1] for c in scene.link_com],
+                    scene.link_inertias,
+                    scene.contact_point,
+                ]
+            )
+            if self.general
+            else self.L
+        )
         self.g = scene.gravity
         joints = scene.joint_specs
         self.damping = np.array([j.damping for j in joints], dtype=float)
@@ -91,6 +106,7 @@ class ArmModel:
             contact=bool(self.surfaces),
             friction=any(s.mu > 0 for s in self.surfaces),
             n_integral=self.n_integral,
+            general=self.general,
             n_mount=self.n_mount,
         )
         self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
@@ -131,19 +147,19 @@ class ArmModel:
     # --- kinematics and energies (thin wrappers over the generated functions) ---
     def tip(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """(x_B, y_B, ẋ_B, ẏ_B) of the tip centre B."""
-        return self.eq.tip(np.asarray(q, float), np.asarray(qd, float), self.L)
+        return self.eq.tip(np.asarray(q, float), np.asarray(qd, float), self.geometry)
 
     def tip_jacobian(self, q: ArrayLike) -> np.ndarray:
         """(∂x_B/∂q, ∂y_B/∂q) flattened: first n entries x, next n entries y."""
-        return self.eq.tip_jacobian(np.asarray(q, float), self.L)
+        return self.eq.tip_jacobian(np.asarray(q, float), self.geometry)
 
     def gravity_forces(self, q: ArrayLike) -> np.ndarray:
-        return self.eq.gravity_forces(np.asarray(q, float), self.L, self.m, self.g)
+        return self.eq.gravity_forces(np.asarray(q, float), self.geometry, self.m, self.g)
 
     def link_energies(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """Kinetic energy of each link, its joint's rotor (armature) included."""
         qd = np.asarray(qd, float)
-        links = np.asarray(self.eq.link_energies(np.asarray(q, float), qd, self.L, self.m))
+        links = np.asarray(self.eq.link_energies(np.asarray(q, float), qd, self.geometry, self.m))
         return links + self.rotor_energies(qd) if self.armature.any() else links
 
     def joint_rates(self, qd: ArrayLike) -> np.ndarray:
@@ -161,16 +177,25 @@ class ArmModel:
         return -(self.damping * omega + self.friction * np.tanh(omega / self.friction_v_d))
 
     def potential_energy(self, q: ArrayLike) -> float:
-        return self.eq.potential(np.asarray(q, float), self.L, self.m, self.g)[0]
+        return self.eq.potential(np.asarray(q, float), self.geometry, self.m, self.g)[0]
 
     def mass_matrix(self, q: ArrayLike) -> np.ndarray:
         n = self.n
         values = self.eq.mass_and_rhs(
-            np.asarray(q, float), np.zeros(n), np.zeros(n), self.L, self.m, self.g
+            np.asarray(q, float), np.zeros(n), np.zeros(n), self.geometry, self.m, self.g
         )
         M = np.array(values[: n * n]).reshape(n, n)
         T = np.eye(n) - np.eye(n, k=-1)  # ω = T q̇
         return M + T.T @ np.diag(self.armature) @ T
+
+    def free_forces(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
+        """Q_g − b(q, q̇): gravity's generalized forces less the velocity terms, the
+        right-hand side of M q̈ = Q_x + Q_g − b without other forces."""
+        n = self.n
+        values = self.eq.mass_and_rhs(
+            np.asarray(q, float), np.asarray(qd, float), np.zeros(n), self.geometry, self.m, self.g
+        )
+        return np.array(values[n * n :])
 
     def parameters(
         self,
@@ -184,7 +209,7 @@ class ArmModel:
         Contact phases use ``contact_rtol`` / ``contact_atol`` (default: rtol / atol)."""
         eq, n, c = self.eq, self.n, self.scene.controller
         P = np.zeros(eq.P_SIZE)
-        P[eq.P_L : eq.P_L + n] = self.L
+        P[eq.P_L : eq.P_L + eq.NL] = self.geometry
         P[eq.P_M : eq.P_M + n] = self.m
         P[eq.P_G] = self.g
         P[eq.P_KP : eq.P_KP + n] = c.kp

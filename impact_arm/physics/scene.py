@@ -77,17 +77,6 @@ class Surface:
 
 
 @dataclass(frozen=True)
-class JointSpec:
-    """What a real joint adds to the ideal one (all zero: the article's frictionless joint).
-    Each acts on the joint's relative rate ω_i = q̇_i - q̇_(i-1) (docs/model.md)."""
-
-    damping: float = 0.0  # viscous [N m s/rad]
-    friction: float = 0.0  # Coulomb [N m], smoothed as friction tanh(ω / friction_v_d)
-    friction_v_d: float = 0.01  # smoothing rate [rad/s]
-    armature: float = 0.0  # rotor inertia reflected to the joint [kg m^2]
-
-
-@dataclass(frozen=True)
 class ControllerSpec:
     law: str  # q | pid | pd | none
     space: str  # absolute | joint (angles the PID/PD acts on)
@@ -141,6 +130,26 @@ class SensorSpec:
 
 
 @dataclass(frozen=True)
+class JointSpec:
+    """A joint of the arm: its name and limits as its URDF describes them (limits are not
+    enforced: the article's arm has none), and what a real joint adds to the ideal one (all
+    zero: the article's frictionless joint), each acting on the joint's relative rate
+    ω_i = q̇_i - q̇_(i-1) (docs/model.md). ``damping`` / ``friction`` are the URDF's
+    ``<dynamics>`` values unless the scene's ``joints`` states them."""
+
+    name: str
+    lower: float | None = None  # rad, relative joint angle; None: continuous (no limits)
+    upper: float | None = None
+    effort: float | None = None  # N m, the URDF's <limit effort>
+    velocity: float | None = None  # rad/s, the URDF's <limit velocity>
+    damping: float = 0.0  # N m s/rad, viscous (URDF <dynamics damping>)
+    friction: float = 0.0  # N m, Coulomb (URDF <dynamics friction>), smoothed as
+    # friction tanh(ω / friction_v_d)
+    friction_v_d: float = 0.01  # rad/s, the Coulomb law's smoothing rate
+    armature: float = 0.0  # kg m^2, rotor inertia reflected to the joint
+
+
+@dataclass(frozen=True)
 class Scene:
     name: str
     lengths: tuple[float, ...]
@@ -157,7 +166,16 @@ class Scene:
     t_max: float  # hard stop of a run [s]
     publish_rate: float  # Hz of sampled output (joint states)
     integrator: IntegratorSpec
-    joints: tuple[JointSpec, ...] = ()  # one per link; () is the ideal joints
+    # General links (docs/scene.md): per link its centre of mass (along, across the link from
+    # its joint) [m] and inertia about it [kg m²], the contact point on the last link (along,
+    # across) [m]; empty or None: uniform rods struck at the last link's end
+    com: tuple[tuple[float, float], ...] = ()
+    inertias: tuple[float, ...] = ()
+    tip_point: tuple[float, float] | None = None
+    joints: tuple[JointSpec, ...] = ()  # empty: joint1..N, continuous, no dynamics
+    link_names: tuple[str, ...] = ()  # the URDF's names of the moving links
+    urdf_path: str = ''  # the file the arm came from ('' : the scene's links or arm.description)
+    urdf_text: str = field(default='', compare=False, repr=False)  # the URDF the arm came from
     sensors: SensorSpec = field(default_factory=SensorSpec)
     source_text: str = field(default='', compare=False, repr=False)
     source_path: str = field(default='', compare=False, repr=False)
@@ -168,8 +186,43 @@ class Scene:
 
     @property
     def joint_specs(self) -> tuple[JointSpec, ...]:
-        """One ``JointSpec`` per joint (ideal ones when the scene gives no ``joints``)."""
-        return self.joints or tuple(JointSpec() for _ in self.lengths)
+        """One ``JointSpec`` per joint (ideal ones, joint1..N, when the scene has none)."""
+        return self.joints or tuple(JointSpec(f'joint{i + 1}') for i in range(len(self.lengths)))
+
+    @property
+    def link_com(self) -> tuple[tuple[float, float], ...]:
+        """Each link's centre of mass (along, across) from its joint [m]."""
+        return self.com or rod_centres(self.lengths)
+
+    @property
+    def link_inertias(self) -> tuple[float, ...]:
+        """Each link's inertia about its centre of mass, about the joint axis [kg m²]."""
+        return self.inertias or rod_inertias(self.lengths, self.masses)
+
+    @property
+    def contact_point(self) -> tuple[float, float]:
+        """The tip sphere's centre B on the last link (along, across) from its joint [m]."""
+        return self.tip_point or (self.lengths[-1], 0.0)
+
+    @property
+    def general_links(self) -> bool:
+        """False when every link is a uniform rod (centre mid-length, inertia m L²/12) and
+        the tip at the last link's end: the article's equations, generated as before."""
+        return (
+            self.link_com != rod_centres(self.lengths)
+            or self.link_inertias != rod_inertias(self.lengths, self.masses)
+            or self.contact_point != (self.lengths[-1], 0.0)
+        )
+
+
+def rod_centres(lengths: Sequence[float]) -> tuple[tuple[float, float], ...]:
+    """Centres of mass of uniform rods: mid-length, on the axis."""
+    return tuple((length / 2, 0.0) for length in lengths)
+
+
+def rod_inertias(lengths: Sequence[float], masses: Sequence[float]) -> tuple[float, ...]:
+    """Inertias of uniform slender rods about their centres: m L² / 12."""
+    return tuple(m * length * length / 12 for length, m in zip(lengths, masses))
 
 
 # --- schema -----------------------------------------------------------------------------
@@ -193,12 +246,42 @@ MATERIAL = {
 # Absolute bounds below are physical: the model's tolerances are absolute in metres and
 # radians, the contact laws are fitted on lab-scale metal contact, and the numbers must stay far
 # from float64's range; docs/scene.md ("Physical ranges") gives each reason.
-LINK = {'length': _num(1e-3, 1e3, unit='m'), 'mass': _num(1e-6, 1e6, unit='kg')}
-JOINT = {
-    'damping': _num(0, 1e6, unit='N m s/rad', default=0.0),
-    'friction': _num(0, 1e6, unit='N m', default=0.0),
-    'friction_v_d': _num(1e-6, 10, unit='rad/s', default=0.01),
-    'armature': _num(0, 1e6, unit='kg m^2', default=0.0),
+LINK = {
+    'length': _num(1e-3, 1e3, unit='m'),
+    'mass': _num(1e-6, 1e6, unit='kg'),
+    # general links; absent: a uniform rod's (centre at length / 2, inertia m L^2 / 12)
+    'com_x': _num(-1e3, 1e3, unit='m', default=None),
+    'com_y': _num(-1e3, 1e3, unit='m', default=0.0),
+    'inertia': _num(1e-12, 1e12, unit='kg m^2', default=None),
+}
+TIP_RADIUS_RANGE = (1e-6, 1, False, False)  # m
+# values of a URDF arm's link that a scene (a fit, a sweep) sets instead of the file's
+ARM_LINK = {
+    'mass': ('num', LINK['mass'][1], 'kg', None),
+    'com_x': ('num', LINK['com_x'][1], 'm', None),
+    'com_y': ('num', LINK['com_y'][1], 'm', None),
+    'inertia': ('num', LINK['inertia'][1], 'kg m^2', None),
+}
+ARM: dict[str, Any] = {
+    'urdf': ('str', None, '', None),  # a file, or
+    'description': ('str', None, '', None),  # its text (recordings store the scene so)
+    'links': ('list', ARM_LINK, '', None),  # one per moving link: values instead of the file's
+    'contact': (
+        'dict',
+        {
+            'link': ('str', None, '', None),
+            'point': ('vec', _num(-1e3, 1e3), 'm', None),
+            'radius': ('num', TIP_RADIUS_RANGE, 'm', None),
+        },
+        '',
+        {},
+    ),
+}
+JOINT = {  # absent: the URDF's value for damping and friction, else the ideal joint's
+    'damping': _num(0, 1e6, unit='N m s/rad', default=None),
+    'friction': _num(0, 1e6, unit='N m', default=None),
+    'friction_v_d': _num(1e-6, 10, unit='rad/s', default=None),
+    'armature': _num(0, 1e6, unit='kg m^2', default=None),
 }
 SURFACE = {
     'height': _num(-1e3, 1e3, unit='m'),
@@ -254,9 +337,10 @@ SCHEMA = {
     'name': ('str', None, '', 'scene'),
     'description': ('str', None, '', ''),
     'gravity': _num(0, 1000, unit='m/s^2', default=9.81),
-    'links': ('list', LINK, '', REQUIRED),
+    'links': ('list', LINK, '', None),  # this or arm
+    'arm': ('dict', ARM, '', None),
     'joints': ('list', JOINT, '', ()),
-    'tip_radius': _num(1e-6, 1, unit='m'),
+    'tip_radius': ('num', TIP_RADIUS_RANGE, 'm', None),  # with links
     'materials': ('map', MATERIAL, '', REQUIRED),
     'arm_material': ('str', None, '', 'arm'),
     'surfaces': ('list', SURFACE, '', ()),
@@ -449,9 +533,8 @@ def parse_scene(
     checks across keys always run; a variant is refused exactly as without it."""
     check = _Checker(origin, checked)
     raw = check.leaf('', data, ('dict', SCHEMA, '', REQUIRED))
-    n = len(raw['links'])
-    if n < 2:
-        check.fail('links', f'has {n} entries: an arm needs at least 2 links')
+    links = _arm_links(check, raw, path)
+    n = len(links.lengths)
 
     def vector(path: str, values: Sequence | None, default: Any = None) -> tuple:
         if values is None:
@@ -502,7 +585,7 @@ def parse_scene(
 
     q0 = tuple(map(math.radians, vector('initial.q_deg', raw['initial']['q_deg'])))
     qd0 = vector('initial.qd', raw['initial']['qd'], 0.0)
-    reach = sum(l['length'] for l in raw['links'])
+    reach = sum(links.lengths[:-1]) + math.hypot(*links.tip_point)
     for i, s in enumerate(surfaces):
         if s.law != 'none' and abs(s.height) >= reach:
             check.fail(
@@ -523,18 +606,17 @@ def parse_scene(
                 f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
                 f'E and S_y',
             )
-    joints = tuple(JointSpec(**j) for j in raw['joints'])
-    if joints and len(joints) != n:
-        check.fail('joints', f'has {len(joints)} entries: must have one per link ({n}) or none')
-    _check_physics(check, raw, surfaces, arm)
+    joints = _joint_values(check, links, raw['joints'])
+    _check_physics(check, raw, links, surfaces, arm)
+    _check_joints(check, links, joints)
     integ = IntegratorSpec(**raw['integrator'])
     sensors = _sensor_spec(check, raw['sensors'])
     return Scene(
         name=raw['name'],
-        lengths=tuple(l['length'] for l in raw['links']),
-        masses=tuple(l['mass'] for l in raw['links']),
+        lengths=links.lengths,
+        masses=links.masses,
         gravity=raw['gravity'],
-        tip_radius=raw['tip_radius'],
+        tip_radius=links.tip_radius,
         arm_material=arm,
         surfaces=surfaces,
         actuators_during_contact=raw['actuators_during_contact'],
@@ -545,11 +627,196 @@ def parse_scene(
         t_max=raw['t_max'],
         publish_rate=raw['publish_rate'],
         integrator=integ,
+        com=links.com,
+        inertias=links.inertias,
+        tip_point=links.tip_point,
         joints=joints,
+        link_names=links.link_names,
+        urdf_path=links.urdf_path,
+        urdf_text=links.urdf_text,
         sensors=sensors,
         source_text=text,
         source_path=path,
     )
+
+
+@dataclass(frozen=True)
+class _ArmLinks:
+    """The arm's links from the scene's ``links`` or its ``arm.urdf``."""
+
+    lengths: tuple[float, ...]
+    masses: tuple[float, ...]
+    com: tuple[tuple[float, float], ...]
+    inertias: tuple[float, ...]
+    tip_point: tuple[float, float]
+    tip_radius: float
+    joints: tuple[JointSpec, ...]
+    link_names: tuple[str, ...]
+    urdf_path: str
+    key: str  # the scene key the links come from, for refusals
+    urdf_text: str = ''
+
+
+def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
+    from ..contract import joint_names
+
+    if raw['arm'] is not None:
+        for key, instead in (
+            ('links', 'the links'),
+            ('tip_radius', "the contact sphere's radius (arm.contact.radius)"),
+        ):
+            if raw[key] is not None:
+                check.fail(key, f'is given with arm.urdf, which gives {instead}: give one of them')
+        contact = raw['arm'].get('contact') or {}
+        point = contact.get('point')
+        if point is not None and len(point) != 3:
+            check.fail(
+                'arm.contact.point',
+                f"has {len(point)} entries: must be x y z (m) in the contact link's frame",
+            )
+        given = [key for key in ('urdf', 'description') if raw['arm'][key] is not None]
+        if len(given) != 1:
+            check.fail(
+                'arm',
+                'gives both urdf and description: give one of them'
+                if given
+                else 'needs urdf (a URDF file) or description (its text)',
+            )
+        urdf, urdf_text = _urdf_arm(
+            check.origin,
+            raw['arm']['urdf'],
+            raw['arm']['description'],
+            scene_path,
+            contact.get('link'),
+            point,
+            contact.get('radius'),
+        )
+        urdf = _with_link_values(check, urdf, raw['arm']['links'])
+        for k, name in enumerate(urdf.link_names):
+            where = f"arm.{given[0]} link '{name}'"
+            length = 'contact point distance' if k == len(urdf.link_names) - 1 else 'length'
+            for what, value, spec in (
+                (length, urdf.lengths[k], LINK['length']),
+                ('mass', urdf.masses[k], LINK['mass']),
+                ('centre of mass x', urdf.com[k][0], LINK['com_x']),
+                ('centre of mass z', urdf.com[k][1], LINK['com_y']),
+                ('inertia', urdf.inertias[k], LINK['inertia']),
+            ):
+                check.number(f'{where} {what}', value, spec[1], spec[2])
+        check.number('arm.contact.radius', urdf.tip_radius, TIP_RADIUS_RANGE, 'm')
+        return _ArmLinks(
+            urdf.lengths,
+            urdf.masses,
+            urdf.com,
+            urdf.inertias,
+            urdf.tip_point,
+            urdf.tip_radius,
+            urdf.joints,
+            urdf.link_names,
+            raw['arm']['urdf'] or '',
+            f'arm.{given[0]}',
+            urdf_text,
+        )
+    for key in ('links', 'tip_radius'):
+        if raw[key] is None:
+            check.fail(key, 'is missing (required unless arm.urdf gives the arm)')
+    entries = raw['links']
+    n = len(entries)
+    if n < 2:
+        check.fail('links', f'has {n} entries: an arm needs at least 2 links')
+    lengths = tuple(entry['length'] for entry in entries)
+    masses = tuple(entry['mass'] for entry in entries)
+    rod_c, rod_i = rod_centres(lengths), rod_inertias(lengths, masses)
+    return _ArmLinks(
+        lengths,
+        masses,
+        tuple(
+            (rod_c[k][0] if entry['com_x'] is None else entry['com_x'], entry['com_y'])
+            for k, entry in enumerate(entries)
+        ),
+        tuple(
+            rod_i[k] if entry['inertia'] is None else entry['inertia']
+            for k, entry in enumerate(entries)
+        ),
+        (lengths[-1], 0.0),
+        raw['tip_radius'],
+        tuple(JointSpec(name) for name in joint_names(n)),
+        (),
+        '',
+        'links',
+    )
+
+
+def _with_link_values(check: _Checker, urdf: Any, values: Sequence[dict] | None) -> Any:
+    """The URDF's arm with the values ``arm.links`` states instead of the file's."""
+    from dataclasses import replace
+
+    if values is None:
+        return urdf
+    n = len(urdf.link_names)
+    if len(values) != n:
+        check.fail(
+            'arm.links',
+            f'has {len(values)} entries: must have one per moving link of the URDF ({n}: '
+            f'{", ".join(urdf.link_names)})',
+        )
+    masses, com, inertias = list(urdf.masses), list(urdf.com), list(urdf.inertias)
+    for k, entry in enumerate(values):
+        if entry['mass'] is not None:
+            masses[k] = entry['mass']
+        com[k] = (
+            com[k][0] if entry['com_x'] is None else entry['com_x'],
+            com[k][1] if entry['com_y'] is None else entry['com_y'],
+        )
+        if entry['inertia'] is not None:
+            inertias[k] = entry['inertia']
+    return replace(urdf, masses=tuple(masses), com=tuple(com), inertias=tuple(inertias))
+
+
+_URDF_CACHE: dict[tuple, Any] = {}  # a study loads one scene many times: read its URDF once
+
+
+def _urdf_arm(origin, path, description, scene_path, link, point, radius):
+    """(the parsed arm, the URDF text) of ``arm.urdf`` (a file) or ``arm.description``."""
+    from .urdf_arm import parse_urdf_arm, read_urdf_file, resolve_urdf_path
+
+    if path is None:
+        key: tuple = (hash(description), description, link, point, radius)
+    else:
+        full = resolve_urdf_path(path, scene_path)
+        try:
+            info = os.stat(full)
+            stamp: tuple = (info.st_mtime_ns, info.st_size)
+        except OSError:
+            stamp = ()
+        key = (os.path.abspath(full), stamp, link, point, radius)
+    if key not in _URDF_CACHE:
+        if path is None:
+            text, where = description, f"scene '{origin}': arm.description"
+        else:
+            text = read_urdf_file(full, f"scene '{origin}': arm.urdf")
+            where = f"scene '{origin}': arm.urdf '{path}'"
+        if len(_URDF_CACHE) > 64:
+            _URDF_CACHE.clear()
+        _URDF_CACHE[key] = (parse_urdf_arm(text, where, link, point, radius), text)
+    return _URDF_CACHE[key]
+
+
+def self_contained_text(scene: Scene) -> str:
+    """The scene's YAML text as a recording stores it: unchanged, but for an arm read from
+    a URDF file, whose text it carries as ``arm.description`` instead of the file's path, so
+    that the recording's scene loads wherever the file is not."""
+    if not scene.urdf_path or not scene.source_text:
+        return scene.source_text
+    data = scene_data(scene.source_text, scene.source_path or scene.name)
+    arm = dict(data['arm'])
+    del arm['urdf']
+    arm['description'] = scene.urdf_text
+    data['arm'] = arm
+    header = (
+        f'# {scene.name}: the arm of {scene.urdf_path} inlined as arm.description (docs/scene.md)\n'
+    )
+    return header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
 
 
 def _sensor_spec(check: _Checker, raw: dict) -> SensorSpec:
@@ -578,15 +845,94 @@ MAX_LENGTH_RATIO = 1e3  # longest / shortest link
 MAX_MASS_RATIO = 1e4  # heaviest / lightest link
 MIN_CONTACT_TIME = 1e-6  # s, Hertz contact duration at 1 m/s
 MAX_LOOP_RATE = 1e5  # 1/s, the control loop's fastest eigenvalue (kd/I, sqrt(kp/I))
+# a link's inertia about its joint, at least, in m L^2 (a rod has 1/3): below it the link
+# turns almost freely about its joint and the mass matrix is near singular
+MIN_JOINT_INERTIA = 1e-6
+MAX_COM_DISTANCE = 10.0  # a link's centre of mass from its joint, at most, in link lengths
 
 
-def _check_physics(check, raw, surfaces, arm):
+def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
+    """Each link's inertia about its joint, refused when too small; a rod's m L² / 3."""
+    out = []
+    for k, (length, mass, (cx, cy), inertia) in enumerate(
+        zip(links.lengths, links.masses, links.com, links.inertias)
+    ):
+        rod = (cx, cy) == (length / 2, 0.0) and inertia == mass * length * length / 12
+        where = (
+            f'links[{k}]' if links.key == 'links' else f"{links.key} link '{links.link_names[k]}'"
+        )
+        if math.hypot(cx, cy) > MAX_COM_DISTANCE * length:
+            check.fail(
+                f'{where}.com_x' if links.key == 'links' else f'{where} centre of mass',
+                f'= ({cx:g}, {cy:g}) m is out of range: must lie within '
+                f'{MAX_COM_DISTANCE:g} link lengths ({MAX_COM_DISTANCE * length:g} m) of the '
+                f"link's joint (a link's mass lies on or near the link)",
+            )
+        about_joint = mass * length**2 / 3 if rod else inertia + mass * (cx * cx + cy * cy)
+        if about_joint < MIN_JOINT_INERTIA * mass * length**2:
+            check.fail(
+                f'{where}.inertia' if links.key == 'links' else f'{where} inertia',
+                f'= {inertia:g} with the centre of mass at ({cx:g}, {cy:g}) m: the inertia '
+                f'about the joint, {about_joint:.3g} kg m^2, is out of range: must be >= '
+                f'{MIN_JOINT_INERTIA:g} m L^2 = {MIN_JOINT_INERTIA * mass * length**2:.3g} '
+                f'(the link would turn almost freely: mass matrix near singular)',
+            )
+        out.append(about_joint)
+    return out
+
+
+def _joint_values(check: _Checker, links: _ArmLinks, entries: Sequence[dict]) -> tuple:
+    """The arm's joints (names and limits from ``links``) with the values the scene's
+    ``joints`` states: one entry per link, or none."""
+    from dataclasses import replace
+
+    if not entries:
+        return links.joints
+    n = len(links.lengths)
+    if len(entries) != n:
+        check.fail('joints', f'has {len(entries)} entries: must have one per link ({n}) or none')
+    return tuple(
+        replace(joint, **{k: v for k, v in entry.items() if v is not None})
+        for joint, entry in zip(links.joints, entries)
+    )
+
+
+def _check_joints(check: _Checker, links: _ArmLinks, joints: Sequence[JointSpec]) -> None:
+    """Joint friction and armature within what the numerics can follow."""
+    for k, joint in enumerate(joints):
+        cx, cy = links.com[k]
+        own = links.inertias[k]  # the link about its centre of mass
+        inertia = own + links.masses[k] * (cx * cx + cy * cy) + joint.armature
+        # near ω = 0 smoothed Coulomb friction is a damper of slope friction / friction_v_d
+        for key, value, rate in (
+            ('damping', joint.damping, joint.damping / inertia),
+            ('friction', joint.friction, joint.friction / joint.friction_v_d / inertia),
+        ):
+            if rate > MAX_LOOP_RATE:
+                check.fail(
+                    f'joints[{k}].{key}',
+                    f'= {value:g} is out of range: gives a decay rate of {rate:.3g} 1/s '
+                    f'on link {k + 1} (inertia {inertia:.3g} kg m^2'
+                    + (f', friction_v_d {joint.friction_v_d:g} rad/s' if key == 'friction' else '')
+                    + f'); must be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: '
+                    f'beyond the run budget)',
+                )
+        if joint.armature > MAX_MASS_RATIO * own:
+            check.fail(
+                f'joints[{k}].armature',
+                f'= {joint.armature:g} is out of range: must be <= {MAX_MASS_RATIO:g} times '
+                f"link {k + 1}'s own inertia ({MAX_MASS_RATIO * own:.3g} kg m^2: the mass "
+                f'matrix becomes too ill-conditioned to solve)',
+            )
+
+
+def _check_physics(check, raw, links, surfaces, arm):
     """Ranges that involve several keys: each bounds what the model or the numerics can do."""
-    lengths = [l['length'] for l in raw['links']]
-    masses = [l['mass'] for l in raw['links']]
+    lengths, masses = links.lengths, links.masses
+    joint_inertias = _joint_inertias(check, links)
     if max(lengths) / min(lengths) > MAX_LENGTH_RATIO:
         check.fail(
-            'links',
+            links.key,
             f'= lengths {min(lengths):g} .. {max(lengths):g} m: ratio '
             f'{max(lengths) / min(lengths):.3g} is out of range: must be <= '
             f'{MAX_LENGTH_RATIO:g} (the absolute tolerances, in m and rad, cannot suit '
@@ -594,15 +940,15 @@ def _check_physics(check, raw, surfaces, arm):
         )
     if max(masses) / min(masses) > MAX_MASS_RATIO:
         check.fail(
-            'links',
+            links.key,
             f'= masses {min(masses):g} .. {max(masses):g} kg: ratio '
             f'{max(masses) / min(masses):.3g} is out of range: must be <= '
             f'{MAX_MASS_RATIO:g} (the mass matrix becomes too ill-conditioned to solve)',
         )
-    if raw['tip_radius'] > min(lengths):
+    if links.tip_radius > min(lengths):
         check.fail(
-            'tip_radius',
-            f'= {raw["tip_radius"]:g} is out of range: must be <= the '
+            'tip_radius' if links.key == 'links' else 'arm.contact.radius',
+            f'= {links.tip_radius:g} is out of range: must be <= the '
             f'shortest link ({min(lengths):g} m): the tip is a sphere on a slender rod',
         )
     # Hertz contact duration of the lightest link's mass striking at 1 m/s:
@@ -611,7 +957,7 @@ def _check_physics(check, raw, surfaces, arm):
         if sfc.law == 'none':
             continue
         e_red = reduced_modulus(arm, sfc.material)
-        t_c = 2.87 * (min(masses) ** 2 / (raw['tip_radius'] * e_red**2)) ** 0.2
+        t_c = 2.87 * (min(masses) ** 2 / (links.tip_radius * e_red**2)) ** 0.2
         if t_c < MIN_CONTACT_TIME:
             check.fail(
                 f'surfaces[{i}].material',
@@ -645,8 +991,7 @@ def _check_physics(check, raw, surfaces, arm):
                 f'would fall under the resolution of t',
             )
     c = raw['controller']
-    for k, (length, mass) in enumerate(zip(lengths, masses)):
-        inertia = mass * length**2 / 3  # a rod about its joint
+    for k, inertia in enumerate(joint_inertias):
         for key, rate in (
             ('kd', c['kd'][k] / inertia if k < len(c['kd']) else 0.0),
             ('kp', math.sqrt(c['kp'][k] / inertia) if k < len(c['kp']) else 0.0),
@@ -658,34 +1003,6 @@ def _check_physics(check, raw, surfaces, arm):
                     f'{rate:.3g} 1/s on link {k + 1} (inertia {inertia:.3g} kg m^2); must '
                     f'be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: beyond the run budget)',
                 )
-    for k, joint in enumerate(raw['joints'][: len(lengths)]):
-        inertia = masses[k] * lengths[k] ** 2 / 3 + joint['armature']
-        # near ω = 0 smoothed Coulomb friction is a damper of slope friction / friction_v_d
-        for key, rate in (
-            ('damping', joint['damping'] / inertia),
-            ('friction', joint['friction'] / joint['friction_v_d'] / inertia),
-        ):
-            if rate > MAX_LOOP_RATE:
-                check.fail(
-                    f'joints[{k}].{key}',
-                    f'= {joint[key]:g} is out of range: gives a decay rate of {rate:.3g} 1/s '
-                    f'on link {k + 1} (inertia {inertia:.3g} kg m^2'
-                    + (
-                        f', friction_v_d {joint["friction_v_d"]:g} rad/s'
-                        if key == 'friction'
-                        else ''
-                    )
-                    + f'); must be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: '
-                    f'beyond the run budget)',
-                )
-        rod = masses[k] * lengths[k] ** 2 / 12  # link k about its centre
-        if joint['armature'] > MAX_MASS_RATIO * rod:
-            check.fail(
-                f'joints[{k}].armature',
-                f'= {joint["armature"]:g} is out of range: must be <= {MAX_MASS_RATIO:g} times '
-                f"link {k + 1}'s own inertia ({MAX_MASS_RATIO * rod:.3g} kg m^2: the mass "
-                f'matrix becomes too ill-conditioned to solve)',
-            )
     if 0 < c['rate'] < 1:
         check.fail(
             'controller.rate',
@@ -886,7 +1203,7 @@ def resolve_scene_path(name: str | os.PathLike) -> str:
 
 def installed_scenes() -> list[str]:
     """Names of the scene files in the installed config directories (the node parameter
-    files there are not scenes: a scene has a top-level ``links:``)."""
+    files there are not scenes: a scene has a top-level ``links:`` or ``arm:``)."""
     names = set()
     for directory in config_dirs():
         for entry in os.listdir(directory):
@@ -894,7 +1211,7 @@ def installed_scenes() -> list[str]:
                 continue
             try:
                 with open(os.path.join(directory, entry), encoding='utf-8') as f:
-                    if any(line.startswith('links:') for line in f):
+                    if any(line.startswith(('links:', 'arm:')) for line in f):
                         names.add(entry[: -len('.yaml')])
             except (OSError, UnicodeDecodeError):
                 continue

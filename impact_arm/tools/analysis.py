@@ -143,7 +143,13 @@ def _scene(metadata):
     from ..physics.scene import scene_from_text
 
     try:
-        return scene_from_text(text, origin='scene stored in the recording')
+        # a file the scene names (an older recording's arm.urdf) is found beside the scene
+        # file the recording was made from
+        return scene_from_text(
+            text,
+            origin='scene stored in the recording',
+            path=metadata.get('scene', {}).get('path') or '',
+        )
     except ImpactArmError:
         return None
 
@@ -333,6 +339,8 @@ def elastic_curve(scene, record: dict, points: int = 80) -> ElasticCurve | None:
     level = float(state.levels[contact.surface])
 
     def indentation(y):
+        if model.general:  # the tip B anywhere on the last link
+            return level - float(model.tip(y[:n], np.zeros(n))[1])
         return level - float(np.sum(model.L * np.sin(y[:n])))
 
     t = [contact.t] + [r[0] for r in rows if contact.t < r[0] < end.t] + [end.t]
@@ -408,6 +416,14 @@ def tip_velocity(run: Run) -> np.ndarray | None:
     if run.scene is None or len(run.scene.lengths) != run.q.shape[1]:
         return None
     L = np.asarray(run.scene.lengths, float)
+    if run.scene.general_links:  # the tip B off the last link's end: its point's velocity
+        along, across = run.scene.contact_point
+        q, w = run.q[:, -1], run.qd[:, -1]
+        vx = -(L[:-1] * np.sin(run.q[:, :-1]) * run.qd[:, :-1]).sum(axis=1)
+        vy = (L[:-1] * np.cos(run.q[:, :-1]) * run.qd[:, :-1]).sum(axis=1)
+        vx -= (along * np.sin(q) + across * np.cos(q)) * w
+        vy += (along * np.cos(q) - across * np.sin(q)) * w
+        return np.stack([vx, vy], axis=1)
     vx = -(L * np.sin(run.q) * run.qd).sum(axis=1)
     vy = (L * np.cos(run.q) * run.qd).sum(axis=1)
     return np.stack([vx, vy], axis=1)
@@ -630,7 +646,7 @@ def _struck_surface(scene, record):
     if not model.surfaces:
         return None
     q = np.radians(np.asarray(record['q_contact_deg'], float))
-    y_tip = float(np.sum(model.L * np.sin(q)))
+    y_tip = float(model.tip(q, np.zeros_like(q))[1])
     return min(model.surfaces, key=lambda s: abs(s.height - y_tip)).constants
 
 

@@ -255,6 +255,10 @@ def _frame(background, to_pixels, run, lengths, t, previous, forces, contacts, p
     q = run.q[i]
     x = np.concatenate([[0.0], np.cumsum(lengths * np.cos(q))])
     y = np.concatenate([[0.0], np.cumsum(lengths * np.sin(q))])
+    if run.scene.general_links:  # the tip B: the contact point on the last link
+        along, across = run.scene.contact_point
+        c, s = math.cos(q[-1]), math.sin(q[-1])
+        x[-1], y[-1] = x[-2] + along * c - across * s, y[-2] + along * s + across * c
     image = background.copy()
     draw = ImageDraw.Draw(image)
     points = to_pixels(np.stack([x, y], axis=1))

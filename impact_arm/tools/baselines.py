@@ -67,7 +67,7 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
         event.direction = 1.0
         return event
 
-    L = model.L
+    L = model.geometry
     heights = [s.height for s in model.surfaces]
 
     def make_rise(s):

@@ -4,11 +4,12 @@ unit-cube / log coordinates the search and the covariance use."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ...physics.errors import ImpactArmError, SceneError
-from ..study import Study, parse_key_path
-from ...physics.scene import SCHEMA
+from ..study import Study, apply_overrides, parse_key_path
+from ...physics.scene import SCHEMA, Scene
 
 
 class FitError(ImpactArmError):
@@ -38,6 +39,54 @@ class Parameter:
         return math.log(value) if self.log else value
 
 
+# link keys with a default that follows from the others (docs/scene.md): a fit may start
+# from it without the scene stating it (a rod's centre and inertia; a URDF arm's values)
+_LINK_DEFAULTS: dict[str, Callable[[Scene, int], float]] = {
+    'com_x': lambda scene, k: scene.link_com[k][0],
+    'com_y': lambda scene, k: scene.link_com[k][1],
+    'inertia': lambda scene, k: scene.link_inertias[k],
+    'mass': lambda scene, k: scene.masses[k],  # a URDF arm's: the file's
+}
+
+
+def _link_default_key(parts: Sequence) -> bool:
+    """``links[i].KEY`` left to a rod's default, or ``arm.links[i].KEY`` to the URDF's."""
+    head = ('links',) if parts[0] == 'links' else ('arm', 'links')
+    return (
+        tuple(parts[: len(head)]) == head
+        and len(parts) == len(head) + 2
+        and isinstance(parts[-2], int)
+        and parts[-1] in _LINK_DEFAULTS
+        and (head == ('arm', 'links') or parts[-1] != 'mass')
+    )
+
+
+def _link_default(study: Study, key: str, parts: Sequence) -> float | None:
+    """The value a link key the scene leaves out stands at, None if ``key`` is no such key."""
+    if not _link_default_key(parts):
+        return None
+    try:
+        scene = study.scene()
+    except SceneError as exc:
+        raise FitError(f'--param {key}: {exc}') from None
+    if parts[-2] >= scene.n_links:
+        return None
+    return float(_LINK_DEFAULTS[parts[-1]](scene, parts[-2]))
+
+
+def _state_arm_links(study: Study, parts: Sequence) -> None:
+    """A fit of ``arm.links[i].KEY`` of a scene that states no ``arm.links``: the study's
+    data gets one empty entry per link (the URDF's values stand), for the fit to set."""
+    arm = study.data.get('arm') if isinstance(study.data, dict) else None
+    if tuple(parts[:2]) != ('arm', 'links') or not isinstance(arm, dict) or 'links' in arm:
+        return
+    try:
+        n = study.scene().n_links
+    except SceneError as exc:
+        raise FitError(f'--param arm.links: {exc}') from None
+    study.data = apply_overrides(study.data, {'arm.links': [{} for _ in range(n)]})
+
+
 def parameter_specs(study: Study, bounds: dict) -> list:
     """Check each key against the scene and its bounds ({key: (lo, hi)} or (lo, hi, start)):
     the key holds a number in the scene, or is one the scene may leave out (its value is then
@@ -50,7 +99,14 @@ def parameter_specs(study: Study, bounds: dict) -> list:
         if len(given) not in (2, 3):
             raise FitError(f'--param {key}: expected (lo, hi) or (lo, hi, start), got {given!r}')
         lo, hi = float(given[0]), float(given[1])
+        try:
+            parts = parse_key_path(key)
+        except SceneError as exc:
+            raise FitError(f'--param {key}: {exc}') from None
+        _state_arm_links(study, parts)
         stated = _scene_value(study, key)
+        if stated is None:  # a link key left to its default (a rod's, the URDF's)
+            stated = _link_default(study, key, parts)
         if stated is None:  # a key the scene leaves out: the schema's default, if it has one
             stated = schema_default(key)
             if stated is None:

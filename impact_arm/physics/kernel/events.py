@@ -19,7 +19,7 @@ def event_values(y, P, I, SURF, C, levels, g):
     ns = SURF.shape[0]
     for k in range(g.shape[0]):
         g[k] = -1.0
-    tip_state = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])
+    tip_state = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])
     y_tip = tip_state[1]
     phase = int(C[C_PHASE])
     if phase == FREE:
@@ -47,7 +47,7 @@ def event_values(y, P, I, SURF, C, levels, g):
 def event_rate(y, f, k, P, SURF, C):
     """Time derivative of event function k at state y with derivative f (for Newton)."""
     ns = SURF.shape[0]
-    L = P[P_L : P_L + N]
+    L = P[P_L : P_L + NL]
     vy = tip(y[:N], y[N : 2 * N], L)[3]
     if HAS_MOUNT:
         # the surface's plate moves: δ̇ = ż - ẏ_B, and at maximum compression z̈ counts

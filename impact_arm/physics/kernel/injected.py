@@ -15,8 +15,9 @@ HAS_ACCEL = True  # accel() exists (closed-form q̈, N <= 3); else mass_and_rhs(
 NM = 1  # surfaces on a compliant mount (each adds its plate's z, ż to the state)
 HAS_MOUNT = True  # NM > 0
 
-_offsets = shape_offsets(N, NI, NM)
+_offsets = shape_offsets(N, NI, n_mount=NM)
 SIZE, Y_MOUNT = _offsets['SIZE'], _offsets['Y_MOUNT']
+NL = _offsets['NL']  # entries of the link-geometry block (N for rods: the lengths)
 P_L, P_M, P_G, P_KP, P_KD, P_KI = (
     _offsets[k] for k in ('P_L', 'P_M', 'P_G', 'P_KP', 'P_KD', 'P_KI')
 )
@@ -35,7 +36,8 @@ W_GEN, W_TAU, W_ERR, W_RATE, W_MASS, SCRATCH = (
 TR_SIZE = _offsets['TR_SIZE']
 
 
-# the sympy-generated functions (equations._derive_source); L, m: link lengths and masses
+# the sympy-generated functions (equations._derive_source); L: the link geometry (NL values:
+# the lengths, for general links also centres of mass, inertias, contact point), m: masses
 def accel(q, qd, Qx, L, m, g) -> tuple:
     """q̈ (N values) for generalized forces Qx besides gravity."""
     return (math.nan,) * N

@@ -382,7 +382,7 @@ def stepping_loop(
                 cap = contact_step_cap(y, P, SURF, C, levels, scratch)
             else:
                 # the dent is forgotten once the tip has risen above the surface again
-                y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])[1]
+                y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
                 for s in range(ns):
                     # on a mounted surface, above its rest height in the plate's frame
                     plate = plate_displacement(y, SURF, s) if HAS_MOUNT else 0.0

@@ -97,7 +97,7 @@ def emit_output(t0, h, y0, f0, y1, f1, K, quartic, P, I, C, tau_held, O, out, sc
             state, P, I, C, tau_held, row[R_TAU : R_TAU + N], scratch[:N], scratch[N : 2 * N]
         )
         row[R_ACT] = 1.0 if acting else 0.0
-        v = tip(state[:N], state[N : 2 * N], P[P_L : P_L + N])
+        v = tip(state[:N], state[N : 2 * N], P[P_L : P_L + NL])
         row[R_VTIP], row[R_VTIP + 1] = v[2], v[3]
         O[O_NEXT] += 1.0
         O[O_ROWS] += 1.0

@@ -33,7 +33,7 @@ def record_point(t, y, P, I, SURF, C, levels, trace, tcount, y_mid):
         row = trace[tcount[0]]
         row[TR_T], row[TR_PHASE], row[TR_DELTA] = t, C[C_PHASE], delta
         row[TR_FN], row[TR_FF], row[TR_VX], row[TR_VY] = fn, ff, vx, vy
-        energies = link_energies(y[:N], y[N : 2 * N], P[P_L : P_L + N], P[P_M : P_M + N])
+        energies = link_energies(y[:N], y[N : 2 * N], P[P_L : P_L + NL], P[P_M : P_M + N])
         previous = 0.0
         for i in range(N):
             # a joint's rotor (armature) turns with its link: its energy is booked there
@@ -92,7 +92,7 @@ def apply_event(slot, t, y, P, I, SURF, C, levels, info):
             # located separation leaves y_B on the new level to rounding, and a +1e-20 there
             # made the next contact undetectable (the tip of a controller pressing down
             # tunnelled through the floor). Keep the level strictly below the tip.
-            y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + N])[1]
+            y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
             if HAS_MOUNT:
                 # the dent is in the plate: its level is kept in the plate's frame
                 z = plate_displacement(y, SURF, s)

@@ -20,7 +20,7 @@ def solve_mass_matrix(q, qd, generalized, P, out, S):
     out, Cholesky M = G G^T in place in S (row-major, lower triangle), then two triangular
     solves in place in out. S is N*N scratch (no allocation here). Compiled once and called:
     the closed-form path of a short arm needs it only when a joint has armature."""
-    mass_and_rhs_into(q, qd, generalized, P[P_L : P_L + N], P[P_M : P_M + N], P[P_G], S, out)
+    mass_and_rhs_into(q, qd, generalized, P[P_L : P_L + NL], P[P_M : P_M + N], P[P_G], S, out)
     if P[P_ARM_ON] != 0.0:
         # a rotor J_k turns at the joint's relative rate ω_k = q̇_k - q̇_(k-1): its energy
         # ½ J_k ω_k² adds J_k (e_k - e_(k-1)) (e_k - e_(k-1))^T to M, and nothing to the
@@ -56,9 +56,11 @@ def solve_mass_matrix(q, qd, generalized, P, out, S):
 @jit_leaf
 def accelerations(q, qd, generalized, P, out, S):
     """q̈ into ``out``; S is N*N scratch for the general case (no allocation here)."""
+    L = P[P_L : P_L + NL]
+    m = P[P_M : P_M + N]
     if HAS_ACCEL:
         if P[P_ARM_ON] == 0.0:
-            values = accel(q, qd, generalized, P[P_L : P_L + N], P[P_M : P_M + N], P[P_G])
+            values = accel(q, qd, generalized, L, m, P[P_G])
             for i in range(N):
                 out[i] = values[i]
         else:  # the closed form has no armature in it
@@ -120,7 +122,7 @@ def surface_rate(y, SURF, s):
 @jit_leaf
 def contact_forces(y, P, SURF, C, levels):
     """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
-    L = P[P_L : P_L + N]
+    L = P[P_L : P_L + NL]
     tip_state = tip(y[:N], y[N : 2 * N], L)
     s = int(C[C_SURF])
     phase = int(C[C_PHASE])
@@ -166,7 +168,7 @@ def contact_frequency(y, P, SURF, C, levels, work):
     if not fn > 0.0 or not delta > base:
         return 0.0
     q = y[:N]
-    jac = tip_jacobian(q, P[P_L : P_L + N])
+    jac = tip_jacobian(q, P[P_L : P_L + NL])
     zero, gen, a1, a0 = work[:N], work[N : 2 * N], work[2 * N : 3 * N], work[3 * N : 4 * N]
     for i in range(N):
         zero[i] = 0.0
@@ -208,7 +210,7 @@ def control_torque(y, P, I, C, tau_held, tau, error, rate):
             target,
             P[P_KP : P_KP + N],
             P[P_KD : P_KD + N],
-            gravity_forces(q, P[P_L : P_L + N], P[P_M : P_M + N], P[P_G]),
+            gravity_forces(q, P[P_L : P_L + NL], P[P_M : P_M + N], P[P_G]),
             tau,
         )
         return True
@@ -246,7 +248,7 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE:
             delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
-            jac = tip_jacobian(q, P[P_L : P_L + N])
+            jac = tip_jacobian(q, P[P_L : P_L + NL])
             for i in range(N):
                 generalized[i] += jac[i] * ff + jac[N + i] * fn
     acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
