@@ -373,3 +373,23 @@ def test_a_recording_of_an_arm_with_joint_friction_fits_once_the_scene_has_it():
     for key in truth:
         lo, hi = result.parameters[key].ci95
         assert lo < 1.0 < hi
+
+
+def test_a_urdf_arms_dynamics_act_and_the_scene_may_override_them():
+    """examples/three_link.urdf's <dynamics damping friction> become the model's joint
+    damping and friction; the scene's ``joints`` sets a value on top (a key left out keeps
+    the file's) and adds what a URDF has no words for (armature). A URDF arm's scene states
+    its joints list (empty entries) for that: its length is the URDF's."""
+    import os
+
+    from impact_arm.calibration.study import Study
+
+    path = os.path.join(os.path.dirname(__file__), '..', 'examples', 'three_link.yaml')
+    study = Study(path, {'joints': [{}, {}, {}]})
+    model = ArmModel(study.scene())
+    assert model.damping.tolist() == [0.05, 0.05, 0.02]
+    assert model.friction.tolist() == [0.2, 0.15, 0.1]
+    override = ArmModel(study.scene({'joints[0].damping': 0.5, 'joints[2].armature': 0.01}))
+    assert override.damping[0] == 0.5 and override.damping[1] == model.damping[1]
+    assert override.friction.tolist() == model.friction.tolist()
+    assert override.armature.tolist() == [0.0, 0.0, 0.01]
