@@ -67,6 +67,10 @@ RECORDER_STATUS = 'impact_arm: recorder'
 LOSSES_METADATA = 'recording/losses'
 CLOCK = '/clock'
 COMMANDS = '/effort_controller/commands'
+# the plates of mounted surfaces (scene surfaces[i].mount), published and recorded only for a
+# scene that has one: sensor_msgs/JointState, one entry per mounted surface named by its frame
+# (surface1, ...), position z [m] from rest (up), velocity ż [m/s]
+SURFACE_MOUNTS = '/surface_mounts'
 IMPACT_TRACE = '/impact_trace'  # written by offline runs only: the contact phase, densely
 ROBOT_DESCRIPTION = '/robot_description'  # the visual topics (io/scene_visuals.py)
 TF_STATIC = '/tf_static'
@@ -221,6 +225,7 @@ TOPICS = {  # topic -> (type, QoS) of every topic the nodes exchange; see the do
     COMMANDS: (COMMAND_TYPE, RELIABLE_100),
 }
 TRACE_QOS = LATCHED_100
+SURFACE_MOUNTS_QOS = RELIABLE_100
 # History of the lockstep writers of the per-period streams (joint states, wrench, commands).
 # A reliable keep-last writer can resend only what its history still holds: a recorder
 # descheduled for 0.5 s under load (a lockstep run makes ~2 400 periods a second) lost ~1 000

@@ -63,6 +63,48 @@ def key_paths(node, path=()):
         yield path
 
 
+# what a real arm's joints add (scene ``joints``): ordinary values and the extremes the scene
+# must either run to a finite end or refuse (Coulomb smoothing at 1e-4 rad/s, a rotor 100x
+# the link's own inertia, friction far above any torque)
+JOINT_VALUES = {
+    'damping': (0.0, 0.01, 1.0, 50.0, 1e4),
+    'friction': (0.0, 0.1, 1.0, 100.0, 1e5),
+    'friction_v_d': (1e-6, 1e-4, 0.01, 1.0),
+    'armature': (0.0, 1e-3, 0.1, 100 / 12, 1e3),
+}
+
+
+# a struck plate's mount (scene ``surfaces[i].mount``): from a free plate (stiffness 0) to one
+# far stiffer than the contact (1e11 N/m under 10 kg), light and heavy plates, over-damped
+MOUNT_VALUES = {
+    'mass': (0.01, 1.0, 10.0, 1e3, 1e-6),
+    'stiffness': (0.0, 1e5, 1e8, 1e11, 1e13),
+    'damping_ratio': (0.0, 0.05, 1.0, 10.0),
+}
+
+
+def random_mount(rng):
+    """A ``mount`` mapping; its last, extreme values drawn rarely."""
+    return {
+        k: values[-1] if rng.random() < 0.1 else rng.choice(values[:-1])
+        for k, values in MOUNT_VALUES.items()
+        if k != 'damping_ratio' or rng.random() < 0.7
+    }
+
+
+def random_joints(n, rng):
+    """A ``joints`` list for n links, each key present or left to its default; the last,
+    extreme value of each key is drawn rarely, so that most such scenes run."""
+    return [
+        {
+            k: values[-1] if rng.random() < 0.1 else rng.choice(values[:-1])
+            for k, values in JOINT_VALUES.items()
+            if rng.random() < 0.6
+        }
+        for _ in range(n)
+    ]
+
+
 def _resize_links(data, n, rng):
     """n links, every per-link vector resized to match (or, sometimes, left wrong)."""
     links = data.get('links')
@@ -85,6 +127,9 @@ def _resize_links(data, n, rng):
             vector = data.get(section, {}).get(key) if isinstance(data.get(section), dict) else None
             if isinstance(vector, list) and vector:
                 data[section][key] = [vector[min(k, len(vector) - 1)] for k in range(n)]
+        joints = data.get('joints')
+        if isinstance(joints, list) and joints:
+            data['joints'] = [joints[min(k, len(joints) - 1)] for k in range(n)]
 
 
 def _general_links(data, rng):
@@ -132,6 +177,12 @@ def mutate(base: dict, rng: random.Random) -> str:
     import yaml
 
     data = copy.deepcopy(base)
+    if rng.random() < 0.3 and isinstance(data.get('links'), list):
+        data['joints'] = random_joints(len(data['links']), rng)
+    surfaces = data.get('surfaces')
+    if rng.random() < 0.2 and isinstance(surfaces, list) and surfaces:
+        if isinstance(surfaces[0], dict):
+            surfaces[0]['mount'] = random_mount(rng)
     if rng.random() < 0.3:
         _resize_links(data, rng.randint(3, 8), rng)
     if rng.random() < 0.3:

@@ -553,6 +553,8 @@ def test_a_general_arm_conserves_energy_in_the_kernel(tmp_path):
     data, path = example_data()
     data.update(surfaces=[], cycles=0, t_max=3.0, publish_rate=100.0)
     data['controller']['law'] = 'none'
+    # the URDF's <dynamics> act as joint friction: off here, so that T + V is conserved
+    data['joints'] = [{'damping': 0.0, 'friction': 0.0} for _ in range(3)]
     scene = parse_scene(data, origin='free', path=path)
     result = run(scene, preset='reference')
     model = ArmModel(scene)

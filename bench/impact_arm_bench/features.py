@@ -5,7 +5,9 @@ generated kernel has no contact test; no controller: the double pendulum swings 
 article's start pose), a frictionless Hertz floor (contact test and elastic Hertz
 phases, no friction term, no yield) and the article's scene (three-phase elasto-plastic
 contact with tanh friction). Optional: the same free motion without gravity, and a three-link
-arm (``--three-links``; its first use derives and compiles a new scene shape, ~1-2 min).
+arm (``--three-links``; its first use derives and compiles a new scene shape, ~1-2 min), and
+(``--real-arm``) the article with joint damping and Coulomb friction, with joint armature and
+with its floor on a compliant mount, each with its cost relative to the article's scene.
 
 Reported per scene, best of ``--repeats``: wall time, simulated time, wall microseconds per
 simulated second, right-hand-side evaluations per simulated second and per wall second, and
@@ -62,12 +64,39 @@ def _three_links(data):
     return data
 
 
+def _joint_friction(data):
+    # a geared arm's joints: viscous and Coulomb friction (values of the kernel, no new shape)
+    data['joints'] = [
+        {'damping': 0.5, 'friction': 1.0, 'friction_v_d': 0.01},
+        {'damping': 0.3, 'friction': 0.5, 'friction_v_d': 0.01},
+    ]
+    return data
+
+
+def _armature(data):
+    # rotor inertias: the closed-form accelerations give way to a Cholesky solve
+    data['joints'] = [{'armature': 0.05}, {'armature': 0.02}]
+    return data
+
+
+def _mounted_floor(data):
+    # the floor as a 10 kg plate on 1e8 N/m, lightly damped: two more states (a new shape)
+    data['surfaces'][0]['mount'] = {'mass': 10.0, 'stiffness': 1e8, 'damping_ratio': 0.05}
+    return data
+
+
 SCENES = {
     'free motion (no surface)': _free,
     'frictionless Hertz floor': _hertz,
     "article's scene (elasto-plastic + friction)": lambda d: d,
 }
 EXTRA = {'free motion, no gravity': _no_gravity}
+REAL_ARM = {  # --real-arm: what a real arm's joints and a compliant floor add to the article
+    'article + joint damping and Coulomb friction': _joint_friction,
+    'article + joint armature': _armature,
+    'article + floor on a mount (10 kg, 1e8 N/m)': _mounted_floor,
+}
+ARTICLE = "article's scene (elasto-plastic + friction)"
 
 
 def add_arguments(parser):
@@ -82,6 +111,12 @@ def add_arguments(parser):
         '--three-links',
         action='store_true',
         help='add a three-link arm (compiles a new scene shape on first use)',
+    )
+    parser.add_argument(
+        '--real-arm',
+        action='store_true',
+        help='add the article with joint friction, with armature, with a mounted floor (the '
+        'mounted floor compiles a new scene shape on first use)',
     )
     parser.add_argument('--json', metavar='FILE', help='write the measured rows as JSON')
 
@@ -121,6 +156,8 @@ def run(args) -> int:
     scenes = dict(SCENES, **EXTRA)
     if args.three_links:
         scenes['three links, article floor'] = _three_links
+    if args.real_arm:
+        scenes.update(REAL_ARM)
     rows = [measure(name, make, args.preset, args.repeats) for name, make in scenes.items()]
     common.progress_done()
     print(
@@ -164,6 +201,16 @@ def run(args) -> int:
         '\nwall ns / rhs eval: whole run (stepping, events, Python wrapper) per right-hand-side '
         'evaluation, i.e. the per-evaluation price of the features compiled in.'
     )
+    if args.real_arm:
+        article = next(r for r in rows if r['scene'] == ARTICLE)
+        print("\nAgainst the article's scene, same run (ratios of wall per simulated second):")
+        for r in rows:
+            if r['scene'] in REAL_ARM:
+                print(
+                    f'  {r["scene"]}: x{r["us_per_sim_s"] / article["us_per_sim_s"]:.2f} '
+                    f'(rhs / sim s x{r["rhs_per_sim_s"] / article["rhs_per_sim_s"]:.2f}, '
+                    f'ns / rhs x{r["ns_per_rhs"] / article["ns_per_rhs"]:.2f})'
+                )
     if args.json:
         common.write_json(
             args.json, {'benchmark': 'features', 'machine': common.machine(), 'rows': rows}

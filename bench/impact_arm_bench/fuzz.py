@@ -3,9 +3,9 @@
 N scene files are mutated from config/paper.yaml with a seeded generator (deleted keys, wrong
 types, huge / tiny / denormal / NaN / inf numbers, integers beyond float64, extra and duplicate
 keys, YAML tags, aliases and 1.1-only spellings, 3-8 links, unreachable surfaces, extreme
-``sensors`` sections) and each is loaded and run offline as ``impact-arm simulate`` would, its
-sensors section read over a second of states as the simulated driver would. Every one must
-end in one of
+``sensors`` sections, joint friction and armature, mounted surfaces) and each is loaded and run
+offline as ``impact-arm simulate`` would, its sensors section read over a second of states as
+the simulated driver would. Every one must end in one of
 
 * accepted-finite: the run finished and every number it reports is finite;
 * refused: the scene was refused in one line (SceneError);
@@ -114,7 +114,7 @@ def worker():
             scene.controller.law,
             scene.controller.rate > 0,
             scene.integrator.method,
-            tuple((s.law, s.mu > 0) for s in scene.surfaces),
+            tuple((s.law, s.mu > 0, s.mount is not None) for s in scene.surfaces),
         )
         if shape not in shapes:
             shapes.add(shape)

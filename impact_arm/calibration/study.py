@@ -79,10 +79,15 @@ def _plain(value):
     return value
 
 
+# top-level lists of the scene with one entry per link, each entry all defaults when absent
+PER_LINK_LISTS = ('joints',)
+
+
 def apply_overrides(data: dict, overrides: dict) -> dict:
     """A copy of scene ``data`` with each key path set to its value (containers along a path
-    are copied, the rest shared). A path through a missing mapping creates it; the schema
-    then refuses keys it does not know."""
+    are copied, the rest shared). A path through a missing mapping creates it, and one through
+    a missing per-link list (``joints[1].damping``) creates it with an empty entry per link;
+    the schema then refuses keys it does not know."""
     out = dict(data)
     for path, value in overrides.items():
         parts = _key_path(path)
@@ -106,6 +111,10 @@ def apply_overrides(data: dict, overrides: dict) -> dict:
                 node[key] = _plain(value)
                 break
             child = node.get(key) if isinstance(node, dict) else node[key]
+            if child is None and key in PER_LINK_LISTS and isinstance(parts[depth + 1], int):
+                # 'joints[1].damping' on a scene with ideal joints: one default entry per link
+                links = out.get('links')
+                child = [{} for _ in links] if isinstance(links, list) else []
             child = {} if child is None else child
             child = (
                 list(child)

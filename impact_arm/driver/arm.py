@@ -48,6 +48,7 @@ class Tick:
     wrench: tuple  # (tangential, normal) contact force averaged over the period [N]
     impacts: list = field(default_factory=list)  # [(record, trace rows)] completed this period
     force_peak: float = 0.0  # the largest normal contact force in the period [N]
+    plates: tuple = ()  # (z, ż) of each mounted surface's plate (ArmModel.plate_states)
 
 
 class SimulatedArm:
@@ -220,13 +221,20 @@ class SimulatedArm:
         q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
         tau = self.integrator.torque()
         effort = list(tau) if tau is not None else [0.0] * n
+        plates = self.model.plate_states(st.y)
         if self.sensors.ideal:
             return Tick(
-                st.t, to_joint_space(q), to_joint_space(qd), effort, tuple(wrench), list(impacts)
+                st.t,
+                to_joint_space(q),
+                to_joint_space(qd),
+                effort,
+                tuple(wrench),
+                list(impacts),
+                plates=plates,
             )
         key = (self.periods, st.y.tobytes())
         if self._reading is None or self._reading[:2] != key:
             reading = self.sensors.read(to_joint_space(q), to_joint_space(qd), effort, wrench)
             self._reading = (*key, reading)
         r = self._reading[2]
-        return Tick(st.t, r.position, r.velocity, r.effort, r.wrench, list(impacts))
+        return Tick(st.t, r.position, r.velocity, r.effort, r.wrench, list(impacts), plates=plates)

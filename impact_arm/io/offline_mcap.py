@@ -76,7 +76,10 @@ from ..contract import (
     CONTACT_WRENCH,
     IMPACT_REPORT,
     IMPACT_TRACE,
+    JOINT_STATE_TYPE,
     JOINT_STATES,
+    SURFACE_MOUNTS,
+    SURFACE_MOUNTS_QOS,
     TOPICS,
     TRACE_QOS,
     TRACE_TYPE,
@@ -87,7 +90,7 @@ from ..contract import (
 from ..driver.sensors import Sensors
 from ..physics.scene import self_contained_text
 from .msgdefs import typestore
-from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter
+from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter, mounted_surfaces
 
 if TYPE_CHECKING:
     from ..physics.simulate import RunResult, Sample
@@ -139,13 +142,25 @@ class OfflineRecorder:
         self._types = self._store.types
         self._names = joint_names(self.n)
         self._columns = trace_columns(self.n)
-        self.counts = {topic: 0 for topic in OFFLINE_TOPICS}
+        self._mount_frames = [frame for frame, _ in mounted_surfaces(scene)]
+        self.topics = dict(OFFLINE_TOPICS)
+        if self._mount_frames:  # the plates of mounted surfaces
+            self.topics[SURFACE_MOUNTS] = JOINT_STATE_TYPE
+        self.counts = {topic: 0 for topic in self.topics}
         self.writer = Ros2McapWriter(
             self.path, flush_interval=flush_interval, compression=compression
         )
-        for topic, type_name in OFFLINE_TOPICS.items():
+        for topic, type_name in self.topics.items():
             # the contract's QoS for the contract topics; traces like the reports
-            self.writer.add_topic(topic, type_name, TRACE_QOS if topic == IMPACT_TRACE else None)
+            self.writer.add_topic(
+                topic,
+                type_name,
+                TRACE_QOS
+                if topic == IMPACT_TRACE
+                else SURFACE_MOUNTS_QOS
+                if topic == SURFACE_MOUNTS
+                else None,
+            )
         rate = scene.controller.rate if control_rate is None else float(control_rate)
         version = package_version() or __version__
         self.writer.add_metadata(
@@ -163,7 +178,7 @@ class OfflineRecorder:
                 'time': 'simulated (log time = header stamp = sim time)',
                 'trace_columns': ','.join(self._columns),
                 'tf_rate_hz': repr(float(tf_rate)),
-                'topics': json.dumps(list(OFFLINE_TOPICS)),
+                'topics': json.dumps(list(self.topics)),
             },
         )
         text = self_contained_text(scene) or ''  # an arm's URDF inlined
@@ -224,6 +239,17 @@ class OfflineRecorder:
             ),
         )
         self._write(CONTACT_FORCE_PEAK, peak, t_ns)
+        if self._mount_frames:
+            plates = sample.plates
+            mounts = T['sensor_msgs/msg/JointState'](
+                header=self._header(t_ns, ''),
+                name=self._mount_frames,
+                position=np.array(plates[0::2], dtype=np.float64),
+                velocity=np.array(plates[1::2], dtype=np.float64),
+                effort=np.zeros(0),
+            )
+            self._write(SURFACE_MOUNTS, mounts, t_ns)
+            self.visuals.plates(t_ns, plates)
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
     def on_impact(self, record: dict, trace_rows: Sequence[Sequence[float]]) -> None:
@@ -266,7 +292,7 @@ class OfflineRecorder:
     def _write(self, topic: str, msg, t_ns: int):
         # rosbags' CDR (a dataclass per type): faster here than building rclpy messages for
         # msgdefs.serialize_cdr, and the same bytes
-        self.writer.write(topic, self._store.serialize_cdr(msg, OFFLINE_TOPICS[topic]), t_ns, t_ns)
+        self.writer.write(topic, self._store.serialize_cdr(msg, self.topics[topic]), t_ns, t_ns)
         self.counts[topic] += 1
 
     def close(self, result: RunResult | None = None) -> None:

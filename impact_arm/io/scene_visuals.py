@@ -36,7 +36,7 @@ viewer that jumps to any time shows them right from one message.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import json
 import math
@@ -47,6 +47,7 @@ from ..contract import (
     TF,
     TF_STATIC,
     TF_TYPE,
+    PLANE_FRAME_ROTATION,
     VISUAL_TOPICS,
     plane_to_world,
 )
@@ -54,12 +55,16 @@ from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (
     SURFACE_THICKNESS_PER_REACH,
     WORLD,
+    Transform,
     moving_transforms,
     robot_description,
     rod_radius_of,
     static_transforms,
     surface_frames,
 )
+
+if TYPE_CHECKING:
+    from ..physics.scene import Scene
 
 DEFAULT_TF_RATE = 100.0  # Hz: smooth to the eye, a tenth of the joint-state rate
 ARROW_HALF_FORCE = 1000.0  # N at which the arrow is half the reach long
@@ -108,6 +113,17 @@ def event_states(record: Mapping[str, Any]) -> list[tuple[str, int, list[float]]
     return [(kind, int(t), [math.radians(a) for a in q]) for kind, t, q in out]
 
 
+def mounted_surfaces(scene: Scene) -> list[tuple[str, float]]:
+    """(frame, rest height [m]) of each surface on a compliant mount, in the order of the
+    plates' states (``ArmModel.plate_states``, /surface_mounts): their frames move on /tf."""
+    frames = surface_frames(scene)
+    return [
+        (frames[i], float(s.height))
+        for i, s in enumerate(scene.surfaces)
+        if s.mount is not None and s.law != 'none'
+    ]
+
+
 def _stamp(header, t_ns: int):
     header.stamp.sec, header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
 
@@ -132,6 +148,7 @@ class SceneVisuals:
         self._TransformStamped, self._String, self._Point = TransformStamped, String, Point
         self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
+        self.mounted = mounted_surfaces(scene)
         self._next_tf = 0  # index k of the next /tf time k / tf_rate
         self.impacts: list[tuple] = []  # (contact stamp [ns], contact point (x, z), F_max [N])
         self._events: list[tuple] = []  # event frames not yet taken: (stamp [ns], q)
@@ -149,8 +166,14 @@ class SceneVisuals:
         return self._String(data=robot_description(self.scene, rod_radius=self.rod_radius))
 
     def tf_static(self, t_ns: int = 0) -> Any:
+        """The fixed transforms; a mounted surface's frame moves, so it is on /tf instead."""
+        moving = {frame for frame, _ in self.mounted}
         return self._TF(
-            transforms=[self._transform(t, t_ns) for t in static_transforms(self.scene)]
+            transforms=[
+                self._transform(t, t_ns)
+                for t in static_transforms(self.scene)
+                if t.child not in moving
+            ]
         )
 
     # ------------------------------------------------------------------ per state
@@ -161,11 +184,26 @@ class SceneVisuals:
         self._next_tf = math.floor(t * self.tf_rate * (1 + 1e-12) + 1e-9) + 1
         return True
 
-    def tf(self, q: Sequence[float], t_ns: int) -> Any:
-        """The joint transforms for absolute link angles ``q``."""
+    def tf(self, q: Sequence[float], t_ns: int, plates: Sequence[float] | None = None) -> Any:
+        """The joint transforms for absolute link angles ``q``; with ``plates`` ((z, ż) per
+        mounted surface, flat, of the same instant) also each mounted surface's frame."""
+        transforms = moving_transforms(self.scene.lengths, q)
+        if plates is not None:
+            transforms += self._surface_transforms(plates)
+        return self._TF(transforms=[self._transform(t, t_ns) for t in transforms])
+
+    def surface_tf(self, t_ns: int, plates: Sequence[float]) -> Any:
+        """The mounted surfaces' frames alone, at their rest heights moved by their plates'
+        z (``plates``: (z, ż) per mounted surface, flat, at ``t_ns``)."""
         return self._TF(
-            transforms=[self._transform(t, t_ns) for t in moving_transforms(self.scene.lengths, q)]
+            transforms=[self._transform(t, t_ns) for t in self._surface_transforms(plates)]
         )
+
+    def _surface_transforms(self, plates):
+        return [
+            Transform(WORLD, frame, 0.0, 0.0, height + float(plates[2 * j]), PLANE_FRAME_ROTATION)
+            for j, (frame, height) in enumerate(self.mounted)
+        ]
 
     def add_impact(self, record: Mapping[str, Any] | str | bytes) -> None:
         """An impact report (the JSON record or its text): its contact point becomes a
@@ -298,6 +336,7 @@ class VisualsWriter:
         self._write(TF_STATIC, self.visuals.tf_static(0), log_time_ns)
         self._last: tuple | None = None  # (stamp, q, log time) of the latest state
         self._shown: int | None = None  # stamp of the latest /tf written
+        self._next_plates = 0  # index k of the next mounted-surface frames, at k / tf_rate
 
     def state(
         self,
@@ -311,6 +350,18 @@ class VisualsWriter:
         self._last = (t_ns, q, log)
         if self.visuals.due(t_ns * 1e-9):
             self._frame(t_ns, q, log)
+
+    def plates(self, t_ns: int, plates: Sequence[float], log_time_ns: int | None = None) -> None:
+        """One sample of the mounted surfaces' plates ((z, ż) each, flat, /surface_mounts):
+        their frames on /tf, stamped with it, at ``tf_rate`` of its stamps (on their own: a
+        plate's sample and the joint state of its period may reach a recorder in either
+        order)."""
+        t = t_ns * 1e-9
+        if t * self.visuals.tf_rate < self._next_plates * (1 - 1e-12) - 1e-9:
+            return
+        self._next_plates = math.floor(t * self.visuals.tf_rate * (1 + 1e-12) + 1e-9) + 1
+        log = t_ns if log_time_ns is None else log_time_ns
+        self._write(TF, self.visuals.surface_tf(t_ns, plates), log)
 
     def finish(self) -> None:
         """The last state, if /tf has not shown it yet: the file ends on the final pose and

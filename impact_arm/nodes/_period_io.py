@@ -14,6 +14,7 @@ from std_msgs.msg import String
 
 from .. import contract
 from ..contract import CLOCK, CONTACT_FORCE_PEAK, CONTACT_WRENCH, IMPACT_REPORT, JOINT_STATES
+from ..io.scene_visuals import mounted_surfaces
 from ..io.wire import PatchedMessage
 from ._visuals import VisualsPublisher
 
@@ -49,6 +50,14 @@ class PeriodPublishers:
         peak.header.frame_id = p.frame_id
         self.wire_peak = PatchedMessage(peak, ('wrench.force.y',))
         self.wire_clock = PatchedMessage(Clock(), (), stamp='clock')
+        # a scene with mounted surfaces: their plates' z, ż each period (contract.SURFACE_MOUNTS)
+        self.mounts = None
+        frames = [frame for frame, _ in mounted_surfaces(scene)]
+        if frames:
+            self.mounts = make(
+                JointState, contract.SURFACE_MOUNTS, contract.SURFACE_MOUNTS_QOS.to_rclpy(depth)
+            )
+            self.mount_state = JointState(name=frames)
         self.visuals = VisualsPublisher(
             node,
             scene,
@@ -68,6 +77,11 @@ class PeriodPublishers:
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
         states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
+        if self.mounts is not None:
+            msg = self.mount_state
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
+            msg.position, msg.velocity = list(tick.plates[0::2]), list(tick.plates[1::2])
+            self._send(self.mounts, msg)
         self._send(self.joints, states)
         if self.hw_states_wanted:
             self._send(self.hw_states, states)

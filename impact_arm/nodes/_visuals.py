@@ -64,7 +64,7 @@ class VisualsPublisher:
         # of a core of the simulator's executor thread (asking costs ~3 us)
         tf = self.pub_tf if self.pub_tf and self.pub_tf.get_subscription_count() else None
         markers = self.pub_markers if self.pub_markers.get_subscription_count() else None
-        with self.lock:  # each impact's events first: their stamps are older
+        with self.lock:  # each impact's events first: their stamps are older (the arm only)
             events = [
                 (tf and self.visuals.tf(q, t_ns), markers and self.visuals.markers(t_ns))
                 for t_ns, q in self.visuals.take_events()
@@ -80,7 +80,8 @@ class VisualsPublisher:
         self._stamp = tick.t
         t_ns = round(tick.t * 1e9)
         if tf is not None:
-            tf.publish(self.visuals.tf(to_absolute(tick.position), t_ns))
+            plates = tick.plates if self.visuals.mounted else None
+            tf.publish(self.visuals.tf(to_absolute(tick.position), t_ns, plates))
         if markers is not None:
             with self.lock:
                 markers_msg = self.visuals.markers(t_ns)

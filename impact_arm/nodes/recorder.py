@@ -149,6 +149,9 @@ class Recorder(Node):
                 tf_rate,
                 log_time_ns=0 if self.by_stamps else time.time_ns(),
             )
+            if self.visuals.visuals.mounted and contract.SURFACE_MOUNTS not in self.wanted:
+                # the scene's plates move its surfaces: their topic is recorded and drawn
+                self.wanted[contract.SURFACE_MOUNTS] = contract.JOINT_STATE_TYPE
             derived = sorted(set(self.wanted) & set(contract.VISUAL_TOPICS))
             if derived:
                 self.get_logger().info(f'not subscribing to {derived}: derived from the scene')
@@ -341,6 +344,11 @@ class Recorder(Node):
             except KeyError:
                 return  # not this scene's joints: nothing to draw
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
+        elif topic == contract.SURFACE_MOUNTS:
+            # the mounted surfaces' frames, drawn from their own samples and stamps
+            sec, nanosec, _, position, velocity = joint_state_fields(data)
+            plates = [v for pair in zip(position, velocity) for v in pair]
+            self.visuals.plates(sec * 1_000_000_000 + nanosec, plates, received)
         elif topic == contract.IMPACT_REPORT:
             try:
                 self.visuals.impact(self._read_string(data).data)

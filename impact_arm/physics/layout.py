@@ -13,9 +13,11 @@ LAW_HELD, LAW_Q, LAW_PID, LAW_NONE = 0, 1, 2, 3
 C_PHASE, C_SURF, C_MODE, C_DR, C_RR, C_DM, C_PM, C_PEAK = 0, 1, 2, 3, 4, 5, 6, 7
 C_IMP_T, C_IMP_FF, C_IMP_FN, C_JT, C_JN, C_PERIOD_PEAK = 8, 9, 10, 11, 12, 13
 C_SIZE = 14
-# surface table columns
+# surface table columns; a mounted surface's plate: index of its displacement z in the state
+# (its rate follows; -1: rigidly mounted), mass, stiffness, damping coefficient
 S_H, S_LAW, S_MU, S_VD, S_E, S_R, S_SY, S_CJ, S_DC, S_PC, S_B = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
-S_SIZE = 11
+S_MOUNT, S_MM, S_MK, S_MC = 11, 12, 13, 14
+S_SIZE = 15
 # integer options I
 I_LAW, I_SPACE, I_ACT, I_TRACE, I_METHOD = 0, 1, 2, 3, 4
 I_SIZE = 5
@@ -64,23 +66,28 @@ def geometry_size(n: int, general: bool) -> int:
     return 4 * n + 2 if general else n
 
 
-def shape_offsets(n: int, n_integral: int, general: bool = False) -> dict:
+def shape_offsets(n: int, n_integral: int, general: bool = False, n_mount: int = 0) -> dict:
     """Offsets that depend on the scene shape (n links, n_integral PID integral states,
-    general links or uniform rods). The generator writes them into each kernel module as
-    compile-time constants; Python code reads them from that module (``model.eq``) or from
-    here.
+    general links or uniform rods, n_mount mounted surfaces: the state is q, q̇, the
+    integrals, then each plate's z, ż from Y_MOUNT on). The generator writes them into each
+    kernel module as compile-time constants; Python code reads them from that module
+    (``model.eq``) or from here.
 
     P_*: the flat parameter array (link geometry (NL values), masses, g, gains, targets,
-    switch height, tolerances, maximum step). R_*: an output row (``emit_output``): t, the
-    state, the contact impulse since the previous row (tangential, normal), the torque
-    acting, actuators acting (1/0), the tip velocity (x, y), the peak normal contact force
-    since the previous row. W_*: the right-hand side's scratch (generalized forces, torques,
-    PID error and rate, then N*N for the mass matrix factor)."""
-    size = 2 * n + n_integral
+    switch height, tolerances, maximum step, then the joints' damping, Coulomb friction, its
+    smoothing rate and armature, and two switches: P_JFRIC_ON (some joint has damping or
+    friction) and P_ARM_ON (some joint has armature)). Joint values are values, not shape:
+    zero is off, and a scene that changes them never compiles a new kernel. R_*: an output
+    row (``emit_output``): t, the state, the contact impulse since the previous row
+    (tangential, normal), the torque acting, actuators acting (1/0), the tip velocity (x, y),
+    the peak normal contact force since the previous row. W_*: the right-hand side's scratch
+    (generalized forces, torques, PID error and rate, then N*N for the mass matrix factor)."""
+    size = 2 * n + n_integral + 2 * n_mount
     nl = geometry_size(n, general)
     p = nl - n  # the parameters after the geometry block move by its extra entries
     return {
         'SIZE': size,
+        'Y_MOUNT': 2 * n + n_integral,
         'NL': nl,
         'P_L': 0,
         'P_M': p + n,
@@ -96,7 +103,13 @@ def shape_offsets(n: int, n_integral: int, general: bool = False) -> dict:
         'P_MAXSTEP': p + 7 * n + 4,
         'P_CRTOL': p + 7 * n + 5,
         'P_CATOL': p + 7 * n + 6,
-        'P_SIZE': p + 7 * n + 7,
+        'P_DAMP': p + 7 * n + 7,
+        'P_FRIC': p + 8 * n + 7,
+        'P_FVD': p + 9 * n + 7,
+        'P_ARM': p + 10 * n + 7,
+        'P_JFRIC_ON': p + 11 * n + 7,
+        'P_ARM_ON': p + 11 * n + 8,
+        'P_SIZE': p + 11 * n + 9,
         'R_T': 0,
         'R_Y': 1,
         'R_JT': 1 + size,

@@ -32,6 +32,7 @@ class ImpactBuilder:
         eq = model.eq
         self._tip = getattr(eq.tip, 'py_func', eq.tip)
         self._energies = getattr(eq.link_energies, 'py_func', eq.link_energies)
+        self._rotors = bool(model.armature.any())
 
     def _tip_and_energy(self, y):
         y = np.asarray(y, dtype=float)
@@ -40,6 +41,8 @@ class ImpactBuilder:
         q, qd = y[:n], y[n : 2 * n]
         _, _, vx, vy = self._tip(q, qd, model.geometry)
         parts = [float(T) for T in self._energies(q, qd, model.geometry, model.m)]
+        if self._rotors:  # a joint's rotor turns with its link (numpy: only when there is one)
+            parts = [T + float(J) for T, J in zip(parts, model.rotor_energies(qd))]
         return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]
 
     def feed(self, event: Event) -> dict | None:

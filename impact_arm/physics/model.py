@@ -8,7 +8,7 @@ does (time, coordinates, velocities, integral states, contact phase, the current
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import math
@@ -20,7 +20,7 @@ import numpy as np
 from . import layout
 from .contact import ContactConstants, contact_constants
 from .equations import load_equations
-from .scene import Scene
+from .scene import Mount, Scene
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -41,6 +41,8 @@ class SurfaceModel:
     mu: float
     v_d: float
     constants: ContactConstants
+    mount: Mount | None = None  # None: rigid
+    mount_state: int = -1  # index of the plate's z in the state (ż follows), -1: rigid
 
 
 class ArmModel:
@@ -67,6 +69,21 @@ class ArmModel:
             else self.L
         )
         self.g = scene.gravity
+        joints = scene.joint_specs
+        self.damping = np.array([j.damping for j in joints], dtype=float)
+        self.friction = np.array([j.friction for j in joints], dtype=float)
+        self.friction_v_d = np.array([j.friction_v_d for j in joints], dtype=float)
+        self.armature = np.array([j.armature for j in joints], dtype=float)
+        ctrl = scene.controller
+        # integral states exist only if a PID is evaluated continuously in the right-hand side
+        self.n_integral = self.n if (ctrl.law == 'pid' and ctrl.rate == 0) else 0
+        struck = [s for s in scene.surfaces if s.law != 'none']
+        # each mounted surface's plate adds z, ż to the state, after the integrals
+        mount_states, k = [], 2 * self.n + self.n_integral
+        for surface in struck:
+            mount_states.append(k if surface.mount is not None else -1)
+            k += 2 if surface.mount is not None else 0
+        self.n_mount = len([surface for surface in struck if surface.mount is not None])
         self.surfaces = tuple(
             SurfaceModel(
                 i,
@@ -75,13 +92,12 @@ class ArmModel:
                 s.mu,
                 s.v_d,
                 contact_constants(scene.arm_material, s.material, scene.tip_radius),
+                s.mount,
+                mount_states[i],
             )
-            for i, s in enumerate(s for s in scene.surfaces if s.law != 'none')
+            for i, s in enumerate(struck)
         )
-        ctrl = scene.controller
-        # integral states exist only if a PID is evaluated continuously in the right-hand side
-        self.n_integral = self.n if (ctrl.law == 'pid' and ctrl.rate == 0) else 0
-        self.size = 2 * self.n + self.n_integral
+        self.size = 2 * self.n + self.n_integral + 2 * self.n_mount
         # Model only what the scene needs: the generated module has no gravity terms for g = 0,
         # and its kernel no contact code without surfaces, no friction term when every μ = 0.
         self.eq = load_equations(
@@ -91,6 +107,7 @@ class ArmModel:
             friction=any(s.mu > 0 for s in self.surfaces),
             n_integral=self.n_integral,
             general=self.general,
+            n_mount=self.n_mount,
         )
         self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
         for s in self.surfaces:
@@ -107,9 +124,25 @@ class ArmModel:
                 c.delta_c,
                 c.P_c,
                 c.B,
+                s.mount_state,
+                s.mount.mass if s.mount else 0.0,
+                s.mount.stiffness if s.mount else 0.0,
+                s.mount.damping if s.mount else 0.0,
             )
         if not self.surfaces:
             self.surface_table = self.surface_table[:0]
+
+    @property
+    def mounted(self) -> tuple[SurfaceModel, ...]:
+        """The surfaces on a compliant mount, in surface order."""
+        return tuple(s for s in self.surfaces if s.mount is not None)
+
+    def plate_states(self, y: Sequence[float] | np.ndarray) -> tuple[float, ...]:
+        """(z, ż) of each mounted surface's plate from a state ``y``, flat, in surface
+        order; () for a rigid scene."""
+        if not self.n_mount:
+            return ()
+        return tuple(float(y[s.mount_state + k]) for s in self.mounted for k in (0, 1))
 
     # --- kinematics and energies (thin wrappers over the generated functions) ---
     def tip(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
@@ -124,9 +157,24 @@ class ArmModel:
         return self.eq.gravity_forces(np.asarray(q, float), self.geometry, self.m, self.g)
 
     def link_energies(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
-        return self.eq.link_energies(
-            np.asarray(q, float), np.asarray(qd, float), self.geometry, self.m
-        )
+        """Kinetic energy of each link, its joint's rotor (armature) included."""
+        qd = np.asarray(qd, float)
+        links = np.asarray(self.eq.link_energies(np.asarray(q, float), qd, self.geometry, self.m))
+        return links + self.rotor_energies(qd) if self.armature.any() else links
+
+    def joint_rates(self, qd: ArrayLike) -> np.ndarray:
+        """ω_i = q̇_i - q̇_(i-1): each joint's relative rate (q̇_0 = 0)."""
+        qd = np.asarray(qd, float)
+        return np.diff(qd, prepend=0.0)
+
+    def rotor_energies(self, qd: ArrayLike) -> np.ndarray:
+        """½ J_i ω_i²: the kinetic energy of each joint's rotor."""
+        return 0.5 * self.armature * self.joint_rates(qd) ** 2
+
+    def joint_friction_torques(self, qd: ArrayLike) -> np.ndarray:
+        """τ_i = -(d_i ω_i + f_i tanh(ω_i / v_i)): what each joint's bearing applies."""
+        omega = self.joint_rates(qd)
+        return -(self.damping * omega + self.friction * np.tanh(omega / self.friction_v_d))
 
     def potential_energy(self, q: ArrayLike) -> float:
         return self.eq.potential(np.asarray(q, float), self.geometry, self.m, self.g)[0]
@@ -136,7 +184,9 @@ class ArmModel:
         values = self.eq.mass_and_rhs(
             np.asarray(q, float), np.zeros(n), np.zeros(n), self.geometry, self.m, self.g
         )
-        return np.array(values[: n * n]).reshape(n, n)
+        M = np.array(values[: n * n]).reshape(n, n)
+        T = np.eye(n) - np.eye(n, k=-1)  # ω = T q̇
+        return M + T.T @ np.diag(self.armature) @ T
 
     def free_forces(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """Q_g − b(q, q̇): gravity's generalized forces less the velocity terms, the
@@ -171,6 +221,12 @@ class ArmModel:
         P[eq.P_RTOL], P[eq.P_ATOL], P[eq.P_MAXSTEP] = rtol, atol, max_step
         P[eq.P_CRTOL] = rtol if contact_rtol is None else contact_rtol
         P[eq.P_CATOL] = atol if contact_atol is None else contact_atol
+        P[eq.P_DAMP : eq.P_DAMP + n] = self.damping
+        P[eq.P_FRIC : eq.P_FRIC + n] = self.friction
+        P[eq.P_FVD : eq.P_FVD + n] = self.friction_v_d
+        P[eq.P_ARM : eq.P_ARM + n] = self.armature
+        P[eq.P_JFRIC_ON] = 1.0 if self.damping.any() or self.friction.any() else 0.0
+        P[eq.P_ARM_ON] = 1.0 if self.armature.any() else 0.0
         return P
 
     def initial_state(self) -> 'ArmState':
@@ -182,7 +238,8 @@ class ArmModel:
 
 
 class ArmState:
-    """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID)]; the
+    """What changes during a run. ``y`` = [q (n), q̇ (n), ∫e (n if continuous PID), then z, ż
+    of each mounted surface's plate (``SurfaceModel.mount_state``)]; the
     contact phase machine lives in the flat array ``c`` the kernel reads (layout.C_*)."""
 
     def __init__(self, t: float, y: ArrayLike, levels: ArrayLike, n: int):

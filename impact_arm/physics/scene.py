@@ -52,12 +52,28 @@ def reduced_modulus(a: Material, b: Material) -> float:
 
 
 @dataclass(frozen=True)
+class Mount:
+    """A surface's compliant mount: the surface is a plate of ``mass`` on a spring-damper
+    along its normal, at rest at its height at t = 0 (docs/model.md)."""
+
+    mass: float  # [kg]
+    stiffness: float  # [N/m]
+    damping_ratio: float = 0.0  # c = 2 damping_ratio sqrt(stiffness mass)
+
+    @property
+    def damping(self) -> float:
+        """The damping coefficient c [N s/m]."""
+        return 2.0 * self.damping_ratio * math.sqrt(self.stiffness * self.mass)
+
+
+@dataclass(frozen=True)
 class Surface:
     height: float  # y of the horizontal surface [m]; the tip strikes it from above
     law: str  # elastoplastic | hertz | none
     mu: float  # Coulomb friction coefficient (0 = no friction term)
     v_d: float  # tanh smoothing velocity [m/s]
     material: Material
+    mount: Mount | None = None  # None: rigidly mounted
 
 
 @dataclass(frozen=True)
@@ -115,9 +131,11 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class JointSpec:
-    """A joint of the arm as its URDF describes it. The model reads none of it yet: limits
-    are not enforced (the article's arm has none), and ``damping`` / ``friction`` are the
-    URDF's ``<dynamics>`` values, kept under the names of the joint-friction keys."""
+    """A joint of the arm: its name and limits as its URDF describes them (limits are not
+    enforced: the article's arm has none), and what a real joint adds to the ideal one (all
+    zero: the article's frictionless joint), each acting on the joint's relative rate
+    ω_i = q̇_i - q̇_(i-1) (docs/model.md). ``damping`` / ``friction`` are the URDF's
+    ``<dynamics>`` values unless the scene's ``joints`` states them."""
 
     name: str
     lower: float | None = None  # rad, relative joint angle; None: continuous (no limits)
@@ -125,7 +143,10 @@ class JointSpec:
     effort: float | None = None  # N m, the URDF's <limit effort>
     velocity: float | None = None  # rad/s, the URDF's <limit velocity>
     damping: float = 0.0  # N m s/rad, viscous (URDF <dynamics damping>)
-    friction: float = 0.0  # N m, Coulomb (URDF <dynamics friction>)
+    friction: float = 0.0  # N m, Coulomb (URDF <dynamics friction>), smoothed as
+    # friction tanh(ω / friction_v_d)
+    friction_v_d: float = 0.01  # rad/s, the Coulomb law's smoothing rate
+    armature: float = 0.0  # kg m^2, rotor inertia reflected to the joint
 
 
 @dataclass(frozen=True)
@@ -162,6 +183,11 @@ class Scene:
     @property
     def n_links(self) -> int:
         return len(self.lengths)
+
+    @property
+    def joint_specs(self) -> tuple[JointSpec, ...]:
+        """One ``JointSpec`` per joint (ideal ones, joint1..N, when the scene has none)."""
+        return self.joints or tuple(JointSpec(f'joint{i + 1}') for i in range(len(self.lengths)))
 
     @property
     def link_com(self) -> tuple[tuple[float, float], ...]:
@@ -251,12 +277,28 @@ ARM: dict[str, Any] = {
         {},
     ),
 }
+JOINT = {  # absent: the URDF's value for damping and friction, else the ideal joint's
+    'damping': _num(0, 1e6, unit='N m s/rad', default=None),
+    'friction': _num(0, 1e6, unit='N m', default=None),
+    'friction_v_d': _num(1e-6, 10, unit='rad/s', default=None),
+    'armature': _num(0, 1e6, unit='kg m^2', default=None),
+}
 SURFACE = {
     'height': _num(-1e3, 1e3, unit='m'),
     'law': _choice(CONTACT_LAWS, 'elastoplastic'),
     'mu': _num(0, 10, unit='-', default=0.0),
     'v_d': _num(1e-6, 10, unit='m/s', default=0.02),
     'material': ('str', None, '', 'surface'),
+    'mount': (
+        'dict',
+        {
+            'mass': _num(1e-6, 1e6, unit='kg'),
+            'stiffness': _num(0, 1e13, unit='N/m'),
+            'damping_ratio': _num(0, 10, unit='-', default=0.0),
+        },
+        '',
+        None,
+    ),
 }
 CONTROLLER = {
     'law': _choice(CONTROL_LAWS, 'q'),
@@ -297,6 +339,7 @@ SCHEMA = {
     'gravity': _num(0, 1000, unit='m/s^2', default=9.81),
     'links': ('list', LINK, '', None),  # this or arm
     'arm': ('dict', ARM, '', None),
+    'joints': ('list', JOINT, '', ()),
     'tip_radius': ('num', TIP_RADIUS_RANGE, 'm', None),  # with links
     'materials': ('map', MATERIAL, '', REQUIRED),
     'arm_material': ('str', None, '', 'arm'),
@@ -515,6 +558,7 @@ def parse_scene(
             mu=s['mu'],
             v_d=s['v_d'],
             material=material(f'surfaces[{i}].material', s['material']),
+            mount=Mount(**s['mount']) if s['mount'] is not None else None,
         )
         for i, s in enumerate(raw['surfaces'])
     )
@@ -562,7 +606,9 @@ def parse_scene(
                 f'elasto-plastic (Jackson-Green) law; use law hertz, or a consistent '
                 f'E and S_y',
             )
+    joints = _joint_values(check, links, raw['joints'])
     _check_physics(check, raw, links, surfaces, arm)
+    _check_joints(check, links, joints)
     integ = IntegratorSpec(**raw['integrator'])
     sensors = _sensor_spec(check, raw['sensors'])
     return Scene(
@@ -584,7 +630,7 @@ def parse_scene(
         com=links.com,
         inertias=links.inertias,
         tip_point=links.tip_point,
-        joints=links.joints,
+        joints=joints,
         link_names=links.link_names,
         urdf_path=links.urdf_path,
         urdf_text=links.urdf_text,
@@ -835,6 +881,51 @@ def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
     return out
 
 
+def _joint_values(check: _Checker, links: _ArmLinks, entries: Sequence[dict]) -> tuple:
+    """The arm's joints (names and limits from ``links``) with the values the scene's
+    ``joints`` states: one entry per link, or none."""
+    from dataclasses import replace
+
+    if not entries:
+        return links.joints
+    n = len(links.lengths)
+    if len(entries) != n:
+        check.fail('joints', f'has {len(entries)} entries: must have one per link ({n}) or none')
+    return tuple(
+        replace(joint, **{k: v for k, v in entry.items() if v is not None})
+        for joint, entry in zip(links.joints, entries)
+    )
+
+
+def _check_joints(check: _Checker, links: _ArmLinks, joints: Sequence[JointSpec]) -> None:
+    """Joint friction and armature within what the numerics can follow."""
+    for k, joint in enumerate(joints):
+        cx, cy = links.com[k]
+        own = links.inertias[k]  # the link about its centre of mass
+        inertia = own + links.masses[k] * (cx * cx + cy * cy) + joint.armature
+        # near ω = 0 smoothed Coulomb friction is a damper of slope friction / friction_v_d
+        for key, value, rate in (
+            ('damping', joint.damping, joint.damping / inertia),
+            ('friction', joint.friction, joint.friction / joint.friction_v_d / inertia),
+        ):
+            if rate > MAX_LOOP_RATE:
+                check.fail(
+                    f'joints[{k}].{key}',
+                    f'= {value:g} is out of range: gives a decay rate of {rate:.3g} 1/s '
+                    f'on link {k + 1} (inertia {inertia:.3g} kg m^2'
+                    + (f', friction_v_d {joint.friction_v_d:g} rad/s' if key == 'friction' else '')
+                    + f'); must be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: '
+                    f'beyond the run budget)',
+                )
+        if joint.armature > MAX_MASS_RATIO * own:
+            check.fail(
+                f'joints[{k}].armature',
+                f'= {joint.armature:g} is out of range: must be <= {MAX_MASS_RATIO:g} times '
+                f"link {k + 1}'s own inertia ({MAX_MASS_RATIO * own:.3g} kg m^2: the mass "
+                f'matrix becomes too ill-conditioned to solve)',
+            )
+
+
 def _check_physics(check, raw, links, surfaces, arm):
     """Ranges that involve several keys: each bounds what the model or the numerics can do."""
     lengths, masses = links.lengths, links.masses
@@ -875,6 +966,29 @@ def _check_physics(check, raw, links, surfaces, arm):
                 f'{MIN_CONTACT_TIME:g} s (stiffness E* = {e_red:.3g} Pa against link '
                 f'masses down to {min(masses):g} kg: steps would fall under the '
                 f'resolution of t)',
+            )
+    for i, sfc in enumerate(surfaces):
+        if sfc.mount is None or sfc.law == 'none':
+            continue
+        mount = sfc.mount
+        omega = math.sqrt(mount.stiffness / mount.mass)
+        for key, rate in (('stiffness', omega), ('damping_ratio', 2 * mount.damping_ratio * omega)):
+            if rate > MAX_LOOP_RATE:
+                check.fail(
+                    f'surfaces[{i}].mount.{key}',
+                    f'= {getattr(mount, key):g} is out of range: gives the plate a rate of '
+                    f'{rate:.3g} 1/s (mass {mount.mass:g} kg, stiffness {mount.stiffness:g} '
+                    f'N/m); must be <= {MAX_LOOP_RATE:g} 1/s (explicit steps of ~10 us: beyond '
+                    f'the run budget)',
+                )
+        e_red = reduced_modulus(arm, sfc.material)
+        t_c = 2.87 * (mount.mass**2 / (raw['tip_radius'] * e_red**2)) ** 0.2
+        if t_c < MIN_CONTACT_TIME:
+            check.fail(
+                f'surfaces[{i}].mount.mass',
+                f'= {mount.mass:g} is out of range: the tip would bounce off the plate in '
+                f'~{t_c:.2g} s (Hertz at 1 m/s); must be >= {MIN_CONTACT_TIME:g} s: steps '
+                f'would fall under the resolution of t',
             )
     c = raw['controller']
     for k, inertia in enumerate(joint_inertias):

@@ -38,6 +38,7 @@ class Sample:
     wrench: tuple  # (F_tangential, F_normal) averaged over the period that ends at t
     mode: str
     force_peak: float = 0.0  # the largest normal contact force in that period [N]
+    plates: tuple = ()  # (z, ż) of each mounted surface's plate, in surface order [m, m/s]
 
 
 MAX_KEPT_SAMPLES = 2e7  # publish_rate * t_max of a run that keeps its samples in memory
@@ -298,7 +299,16 @@ def run(
                 tau_now = tuple(tau) if tau is not None else tuple([0.0] * n)
                 mode = ctrl.mode if ctrl else st.mode
                 publish(
-                    Sample(t_pub, tuple(q), tuple(qd), tau_now, wrench, mode, integ.take_peak()),
+                    Sample(
+                        t_pub,
+                        tuple(q),
+                        tuple(qd),
+                        tau_now,
+                        wrench,
+                        mode,
+                        integ.take_peak(),
+                        model.plate_states(st.y),
+                    ),
                     model.tip(q, qd)[2:],
                 )
                 k_pub += 1
@@ -334,8 +344,9 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
             q, qd = tuple(row[eq.R_Y : eq.R_Y + n]), tuple(row[eq.R_Y + n : eq.R_Y + 2 * n])
             tau = tuple(row[eq.R_TAU : eq.R_TAU + n]) if row[eq.R_ACT] else (0.0,) * n
             wrench = (row[eq.R_JT] / dt, row[eq.R_JN] / dt)
+            plates = model.plate_states(row[eq.R_Y : eq.R_Y + model.size]) if model.n_mount else ()
             publish(
-                Sample(row[eq.R_T], q, qd, tau, wrench, mode, row[eq.R_FPEAK]),
+                Sample(row[eq.R_T], q, qd, tau, wrench, mode, row[eq.R_FPEAK], plates),
                 tuple(row[eq.R_VTIP : eq.R_VTIP + 2]),
             )
             last_t = row[eq.R_T]
@@ -352,6 +363,7 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
             integ.contact_force_now(),
             st.mode,
             integ.contact_force_now()[1],
+            model.plate_states(st.y),
         ),
         model.tip(q, qd)[2:],
     )

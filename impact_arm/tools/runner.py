@@ -28,6 +28,7 @@ from ..contract import (
     FEEDBACK_LAWS,
     IMPACT_REPORT,
     JOINT_STATES,
+    SURFACE_MOUNTS,
 )
 from ..physics.errors import ImpactArmError
 from .progress import Progress
@@ -270,11 +271,19 @@ class RecorderProgress:
         self.written_until = msg.sec * 1_000_000_000 + msg.nanosec
 
 
-def recorder_subscribed(node) -> set:
-    """The simulator topics the recorder's reader subscribes to, as ``node`` sees the graph."""
+def simulator_topics(scene) -> tuple:
+    """What the recorder must have matched for ``scene``: ``SIMULATOR_TOPICS``, and the
+    plates of its mounted surfaces if it has any."""
+    mounted = any(s.mount is not None and s.law != 'none' for s in scene.surfaces)
+    return SIMULATOR_TOPICS + ((SURFACE_MOUNTS,) if mounted else ())
+
+
+def recorder_subscribed(node, topics=SIMULATOR_TOPICS) -> set:
+    """The simulator ``topics`` the recorder's reader subscribes to, as ``node`` sees the
+    graph."""
     return {
         topic
-        for topic in SIMULATOR_TOPICS
+        for topic in topics
         if any(
             info.node_name == RECORDER_READER
             for info in node.get_subscriptions_info_by_topic(topic)
@@ -282,11 +291,11 @@ def recorder_subscribed(node) -> set:
     }
 
 
-def ready_for_commands(node, recorder=None) -> bool:
+def ready_for_commands(node, recorder=None, topics=SIMULATOR_TOPICS) -> bool:
     """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
     its command reader (and the recorder's) are known and, with a recorder (``recorder``: a
-    RecorderProgress), the recorder's reader subscribes to every simulator topic and the
-    recorder has said it wrote joint states (the simulator publishes its held initial state
+    RecorderProgress), the recorder's reader subscribes to every simulator topic (``topics``)
+    and the recorder has said it wrote joint states (the simulator publishes its held initial state
     until the first command). The arm starts moving with the first command and nothing must go
     unrecorded: a subscription in the graph is not a matched reader (it may match seconds
     later); a written sample is proof."""
@@ -298,7 +307,7 @@ def ready_for_commands(node, recorder=None) -> bool:
         return False
     if recorder is None:
         return True
-    return recorder.written_until is not None and recorder_subscribed(node) == set(SIMULATOR_TOPICS)
+    return recorder.written_until is not None and recorder_subscribed(node, topics) == set(topics)
 
 
 class Run:
@@ -410,7 +419,7 @@ class Run:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self._spin_once(0.05)
-            if ready_for_commands(self.node, recorder):
+            if ready_for_commands(self.node, recorder, simulator_topics(self.scene)):
                 return
             for name, proc in self.procs.items():
                 if proc.poll() is not None:

@@ -7,6 +7,7 @@ from ..contact import YIELD_ONSET_FACTOR as YIELD_ONSET  # the header's name for
 from ..jit import jit
 from ..layout import *
 from .injected import *
+from .rhs import surface_level, surface_rate
 from .steps import EPS, trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
@@ -24,28 +25,43 @@ def event_values(y, P, I, SURF, C, levels, g):
     if phase == FREE:
         if HAS_CONTACT:
             for s in range(ns):
-                g[s] = levels[s] - y_tip
+                g[s] = surface_level(y, SURF, levels, s) - y_tip
         if (I[I_LAW] == LAW_Q or I[I_LAW] == LAW_PID) and C[C_MODE] > 0.5:
             g[ns + EV_SWITCH] = y_tip - P[P_SWITCH]
         return
     s = int(C[C_SURF])
-    delta = levels[s] - y_tip
+    delta = surface_level(y, SURF, levels, s) - y_tip
+    # δ̇ = ż - ẏ_B (ż: the plate's rate, 0 on a rigid mount) turns from + to -
+    closing = tip_state[3] - surface_rate(y, SURF, s) if HAS_MOUNT else tip_state[3]
     if phase == ELASTIC:
         if SURF[s, S_LAW] == 0:
             g[ns + EV_YIELD] = delta - YIELD_ONSET * SURF[s, S_DC]
-        g[ns + EV_MAX] = tip_state[3]  # δ̇ = -ẏ_B turns from + to -
+        g[ns + EV_MAX] = closing
     elif phase == ELASTOPLASTIC:
-        g[ns + EV_MAX] = tip_state[3]
+        g[ns + EV_MAX] = closing
     else:
         g[ns + EV_SEP] = C[C_DR] - delta  # δ falls through δr
 
 
 @jit
-def event_rate(y, f, k, P, SURF):
+def event_rate(y, f, k, P, SURF, C):
     """Time derivative of event function k at state y with derivative f (for Newton)."""
     ns = SURF.shape[0]
     L = P[P_L : P_L + NL]
     vy = tip(y[:N], y[N : 2 * N], L)[3]
+    if HAS_MOUNT:
+        # the surface's plate moves: δ̇ = ż - ẏ_B, and at maximum compression z̈ counts
+        s = k if k < ns else int(C[C_SURF])
+        plate = int(SURF[s, S_MOUNT]) if s >= 0 else -1
+        zd = y[plate + 1] if plate >= 0 else 0.0
+        if k < ns or k == ns + EV_YIELD:
+            return zd - vy
+        if k == ns + EV_MAX:
+            zdd = f[plate + 1] if plate >= 0 else 0.0
+            return tip_acceleration(y[:N], y[N : 2 * N], f[N : 2 * N], L)[1] - zdd
+        if k == ns + EV_SEP:
+            return vy - zd
+        return vy  # switch height
     if k < ns or k == ns + EV_YIELD:
         return -vy  # δ grows as the tip moves down
     if k == ns + EV_MAX:
@@ -111,7 +127,7 @@ def locate(
             side = 1
         if fc == 0.0 or b - a <= tol:
             break
-        rate = event_rate(y_out, f_tmp, k, P, SURF)
+        rate = event_rate(y_out, f_tmp, k, P, SURF, C)
         newton = c - fc / rate if rate != 0.0 else -1.0
         if abs(newton - c) <= tol:
             # converged: step just past the root so the event has really happened

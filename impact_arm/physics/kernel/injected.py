@@ -12,9 +12,11 @@ NI = 0  # PID integral states (N for a continuous pid law, else 0)
 HAS_CONTACT = True  # the scene has surfaces
 HAS_FRICTION = True  # some surface has friction
 HAS_ACCEL = True  # accel() exists (closed-form q̈, N <= 3); else mass_and_rhs()
+NM = 1  # surfaces on a compliant mount (each adds its plate's z, ż to the state)
+HAS_MOUNT = True  # NM > 0
 
-_offsets = shape_offsets(N, NI)
-SIZE = _offsets['SIZE']
+_offsets = shape_offsets(N, NI, n_mount=NM)
+SIZE, Y_MOUNT = _offsets['SIZE'], _offsets['Y_MOUNT']
 NL = _offsets['NL']  # entries of the link-geometry block (N for rods: the lengths)
 P_L, P_M, P_G, P_KP, P_KD, P_KI = (
     _offsets[k] for k in ('P_L', 'P_M', 'P_G', 'P_KP', 'P_KD', 'P_KI')
@@ -22,6 +24,8 @@ P_L, P_M, P_G, P_KP, P_KD, P_KI = (
 P_TDOWN, P_TUP, P_SWITCH = _offsets['P_TDOWN'], _offsets['P_TUP'], _offsets['P_SWITCH']
 P_RTOL, P_ATOL, P_MAXSTEP = _offsets['P_RTOL'], _offsets['P_ATOL'], _offsets['P_MAXSTEP']
 P_CRTOL, P_CATOL, P_SIZE = _offsets['P_CRTOL'], _offsets['P_CATOL'], _offsets['P_SIZE']
+P_DAMP, P_FRIC, P_FVD, P_ARM = (_offsets[k] for k in ('P_DAMP', 'P_FRIC', 'P_FVD', 'P_ARM'))
+P_JFRIC_ON, P_ARM_ON = _offsets['P_JFRIC_ON'], _offsets['P_ARM_ON']
 R_T, R_Y, R_JT, R_JN, R_TAU, R_ACT, R_VTIP, R_FPEAK, R_SIZE = (
     _offsets[k]
     for k in ('R_T', 'R_Y', 'R_JT', 'R_JN', 'R_TAU', 'R_ACT', 'R_VTIP', 'R_FPEAK', 'R_SIZE')

@@ -13,7 +13,7 @@ from .events import event_values, locate
 from .injected import *
 from .output import emit_output, interpolate
 from .phases import apply_event, record_point
-from .rhs import contact_frequency, rhs
+from .rhs import contact_frequency, plate_displacement, rhs, surface_level
 from .steps import EPS, error_norm, initial_step, phase_tolerances, rosenbrock_now, trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
@@ -384,9 +384,11 @@ def stepping_loop(
                 # the dent is forgotten once the tip has risen above the surface again
                 y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
                 for s in range(ns):
-                    if levels[s] != SURF[s, S_H] and y_tip > SURF[s, S_H]:
+                    # on a mounted surface, above its rest height in the plate's frame
+                    plate = plate_displacement(y, SURF, s) if HAS_MOUNT else 0.0
+                    if levels[s] != SURF[s, S_H] and y_tip - plate > SURF[s, S_H]:
                         levels[s] = SURF[s, S_H]
-                        g0[s] = levels[s] - y_tip
+                        g0[s] = surface_level(y, SURF, levels, s) - y_tip
         # output after the step's impulse is booked, before any early return
         if output and not emit_output(
             t_prev, t - t_prev, y_prev, y_root, y, f, K, quartic, P, I, C, tau_held, O, out, scratch

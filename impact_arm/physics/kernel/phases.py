@@ -9,7 +9,7 @@ from ..contact import residual, restitution_radius
 from ..jit import jit
 from ..layout import *
 from .injected import *
-from .rhs import contact_forces
+from .rhs import contact_forces, plate_displacement
 # --- template: equations.py copies what follows into the generated module ---
 
 
@@ -34,8 +34,12 @@ def record_point(t, y, P, I, SURF, C, levels, trace, tcount, y_mid):
         row[TR_T], row[TR_PHASE], row[TR_DELTA] = t, C[C_PHASE], delta
         row[TR_FN], row[TR_FF], row[TR_VX], row[TR_VY] = fn, ff, vx, vy
         energies = link_energies(y[:N], y[N : 2 * N], P[P_L : P_L + NL], P[P_M : P_M + N])
+        previous = 0.0
         for i in range(N):
-            row[TR_ENERGY + i] = energies[i]
+            # a joint's rotor (armature) turns with its link: its energy is booked there
+            omega = y[N + i] - previous
+            previous = y[N + i]
+            row[TR_ENERGY + i] = energies[i] + 0.5 * P[P_ARM + i] * omega * omega
         tcount[0] += 1
     return delta
 
@@ -45,7 +49,7 @@ def set_mode(mode, y, C):
     """Cycle half of the continuous controller (0 down, 1 up); integral states restart with
     the new target."""
     C[C_MODE] = mode
-    for i in range(2 * N, y.shape[0]):
+    for i in range(2 * N, 2 * N + NI):
         y[i] = 0.0
 
 
@@ -89,7 +93,14 @@ def apply_event(slot, t, y, P, I, SURF, C, levels, info):
             # made the next contact undetectable (the tip of a controller pressing down
             # tunnelled through the floor). Keep the level strictly below the tip.
             y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
-            levels[s] = min(levels[s] - C[C_DR], y_tip - 4.0 * np.spacing(abs(y_tip)))
+            if HAS_MOUNT:
+                # the dent is in the plate: its level is kept in the plate's frame
+                z = plate_displacement(y, SURF, s)
+                y_rel = y_tip - z
+                scale = max(abs(y_tip), abs(z))
+                levels[s] = min(levels[s] - C[C_DR], y_rel - 4.0 * np.spacing(scale))
+            else:
+                levels[s] = min(levels[s] - C[C_DR], y_tip - 4.0 * np.spacing(abs(y_tip)))
             info[0], info[1], info[2] = C[C_PEAK], C[C_DM], C[C_DR]
             C[C_PHASE], C[C_SURF] = FREE, -1.0
     return True

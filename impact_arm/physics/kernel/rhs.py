@@ -13,39 +13,110 @@ from .injected import *
 # --- template: equations.py copies what follows into the generated module ---
 
 
+@jit
+def solve_mass_matrix(q, qd, generalized, P, out, S):
+    """q̈ into ``out`` from the mass matrix, with the joints' armature added (zero is off):
+    M q̈ = b with M symmetric positive definite (it is a kinetic energy): M into S and b into
+    out, Cholesky M = G G^T in place in S (row-major, lower triangle), then two triangular
+    solves in place in out. S is N*N scratch (no allocation here). Compiled once and called:
+    the closed-form path of a short arm needs it only when a joint has armature."""
+    mass_and_rhs_into(q, qd, generalized, P[P_L : P_L + NL], P[P_M : P_M + N], P[P_G], S, out)
+    if P[P_ARM_ON] != 0.0:
+        # a rotor J_k turns at the joint's relative rate ω_k = q̇_k - q̇_(k-1): its energy
+        # ½ J_k ω_k² adds J_k (e_k - e_(k-1)) (e_k - e_(k-1))^T to M, and nothing to the
+        # velocity terms (ω is linear in q̇ with constant coefficients)
+        for k in range(N):
+            J = P[P_ARM + k]
+            S[k * N + k] += J
+            if k > 0:
+                S[(k - 1) * N + k - 1] += J
+                S[k * N + k - 1] -= J
+                S[(k - 1) * N + k] -= J
+    for i in range(N):
+        for j in range(i + 1):
+            s = S[i * N + j]
+            for k in range(j):
+                s -= S[i * N + k] * S[j * N + k]
+            if i == j:
+                S[i * N + i] = math.sqrt(s)
+            else:
+                S[i * N + j] = s / S[j * N + j]
+    for i in range(N):
+        s = out[i]
+        for k in range(i):
+            s -= S[i * N + k] * out[k]
+        out[i] = s / S[i * N + i]
+    for i in range(N - 1, -1, -1):
+        s = out[i]
+        for k in range(i + 1, N):
+            s -= S[k * N + i] * out[k]
+        out[i] = s / S[i * N + i]
+
+
 @jit_leaf
 def accelerations(q, qd, generalized, P, out, S):
     """q̈ into ``out``; S is N*N scratch for the general case (no allocation here)."""
     L = P[P_L : P_L + NL]
     m = P[P_M : P_M + N]
     if HAS_ACCEL:
-        values = accel(q, qd, generalized, L, m, P[P_G])
-        for i in range(N):
-            out[i] = values[i]
+        if P[P_ARM_ON] == 0.0:
+            values = accel(q, qd, generalized, L, m, P[P_G])
+            for i in range(N):
+                out[i] = values[i]
+        else:  # the closed form has no armature in it
+            solve_mass_matrix(q, qd, generalized, P, out, S)
     else:
-        # M q̈ = b with M symmetric positive definite (it is a kinetic energy): M into S and
-        # b into out, Cholesky M = G G^T in place in S (row-major, lower triangle), then two
-        # triangular solves in place in out
-        mass_and_rhs_into(q, qd, generalized, L, m, P[P_G], S, out)
-        for i in range(N):
-            for j in range(i + 1):
-                s = S[i * N + j]
-                for k in range(j):
-                    s -= S[i * N + k] * S[j * N + k]
-                if i == j:
-                    S[i * N + i] = math.sqrt(s)
-                else:
-                    S[i * N + j] = s / S[j * N + j]
-        for i in range(N):
-            s = out[i]
-            for k in range(i):
-                s -= S[i * N + k] * out[k]
-            out[i] = s / S[i * N + i]
-        for i in range(N - 1, -1, -1):
-            s = out[i]
-            for k in range(i + 1, N):
-                s -= S[k * N + i] * out[k]
-            out[i] = s / S[i * N + i]
+        solve_mass_matrix(q, qd, generalized, P, out, S)
+
+
+@jit_leaf
+def add_joint_friction(qd, P, generalized):
+    """The joints' viscous damping and smoothed Coulomb friction into the generalized forces.
+    Each acts on its joint's relative rate ω_i = q̇_i - q̇_(i-1) as a torque
+    τ_i = -(d_i ω_i + f_i tanh(ω_i / v_i)) of link i-1 on link i, mapped like a motor's
+    (Q_i += τ_i, Q_(i-1) -= τ_i). It is not part of the control torque: a driver reports
+    what its motors apply, not what its bearings take."""
+    previous = 0.0
+    for i in range(N):
+        omega = qd[i] - previous
+        previous = qd[i]
+        tau = -P[P_DAMP + i] * omega
+        if P[P_FRIC + i] != 0.0:
+            tau -= P[P_FRIC + i] * math.tanh(omega / P[P_FVD + i])
+        generalized[i] += tau
+        if i > 0:
+            generalized[i - 1] -= tau
+
+
+@jit_leaf
+def plate_displacement(y, SURF, s):
+    """z of surface s's plate from its rest height (0 when rigidly mounted)."""
+    if HAS_MOUNT:
+        k = int(SURF[s, S_MOUNT])
+        if k >= 0:
+            return y[k]
+    return 0.0
+
+
+@jit_leaf
+def surface_level(y, SURF, levels, s):
+    """Height of surface s where the tip meets it now: its level (lowered by a dent), moved
+    with its plate's displacement z when it is mounted."""
+    if HAS_MOUNT:
+        k = int(SURF[s, S_MOUNT])
+        if k >= 0:
+            return levels[s] + y[k]
+    return levels[s]
+
+
+@jit_leaf
+def surface_rate(y, SURF, s):
+    """ż of surface s's plate (0 when rigidly mounted)."""
+    if HAS_MOUNT:
+        k = int(SURF[s, S_MOUNT])
+        if k >= 0:
+            return y[k + 1]
+    return 0.0
 
 
 @jit_leaf
@@ -55,7 +126,7 @@ def contact_forces(y, P, SURF, C, levels):
     tip_state = tip(y[:N], y[N : 2 * N], L)
     s = int(C[C_SURF])
     phase = int(C[C_PHASE])
-    delta = levels[s] - tip_state[1]
+    delta = surface_level(y, SURF, levels, s) - tip_state[1]
     if phase == ELASTIC:
         fn = hertz_force(delta, SURF[s, S_E], SURF[s, S_R])
     elif phase == ELASTOPLASTIC:
@@ -109,6 +180,10 @@ def contact_frequency(y, P, SURF, C, levels, work):
     inverse_mass = 0.0
     for i in range(N):
         inverse_mass += jac[N + i] * (a1[i] - a0[i])
+    if HAS_MOUNT:
+        s = int(C[C_SURF])
+        if SURF[s, S_MOUNT] >= 0:
+            inverse_mass += 1.0 / SURF[s, S_MM]  # the plate recoils too: two masses in series
     return math.sqrt(max(0.0, 1.5 * fn / (delta - base) * inverse_mass))
 
 
@@ -169,6 +244,7 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     rate = W[W_RATE : W_RATE + N]
     for i in range(N):
         generalized[i] = 0.0
+    fn = 0.0
     if HAS_CONTACT:
         if int(C[C_PHASE]) != FREE:
             delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
@@ -178,6 +254,8 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
     if acting:
         add_joint_torques(tau, generalized)
+    if P[P_JFRIC_ON] != 0.0:
+        add_joint_friction(qd, P, generalized)
     for i in range(N):
         out[i] = qd[i]
     accelerations(q, qd, generalized, P, out[N : 2 * N], W[W_MASS:])
@@ -186,3 +264,14 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
         # control_torque left the PID error in ``error``
         for i in range(NI):
             out[2 * N + i] = error[i] if acting else 0.0
+    if HAS_MOUNT:
+        # each plate on its spring-damper about rest; the one struck carries the contact force
+        struck = int(C[C_SURF]) if int(C[C_PHASE]) != FREE else -1
+        for s in range(SURF.shape[0]):
+            k = int(SURF[s, S_MOUNT])
+            if k >= 0:
+                force = -SURF[s, S_MK] * y[k] - SURF[s, S_MC] * y[k + 1]
+                if s == struck:
+                    force -= fn
+                out[k] = y[k + 1]
+                out[k + 1] = force / SURF[s, S_MM]
