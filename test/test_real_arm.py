@@ -2,7 +2,14 @@
 with joint damping and Coulomb friction, striking a plate on a compliant mount, seen through an
 encoder. Each part has its own tests; these check that they work together."""
 
+import json
+import math
 import os
+import re
+import shutil
+
+import numpy as np
+import pytest
 
 REAL_ARM = os.path.join(os.path.dirname(__file__), '..', 'examples', 'real_arm.yaml')
 
@@ -16,3 +23,59 @@ def test_a_urdf_arm_takes_a_mounted_plate_and_joint_friction():
     assert scene.general_links and scene.tip_radius == 0.005
     assert scene.surfaces[0].mount is not None and scene.surfaces[0].mount.mass == 10.0
     assert [j.friction for j in scene.joints] == [0.2, 0.3, 0.1]
+
+
+@pytest.mark.slow
+def test_a_real_arm_runs_over_dds_is_recorded_analysed_and_fitted(
+    ros_env, tmp_path, capsys, monkeypatch
+):
+    """The issue's end: the URDF arm with joint friction and a mounted plate through
+    ``impact-arm run`` (simulator, controller and recorder over DDS, lockstep, 3 cycles), the
+    recording read back complete, ``impact-arm analyze`` with its defaults, and ``impact-arm
+    fit`` freeing a contact parameter and a joint's friction, started away from the truth:
+    ``fits``, each interval covering the scene's value."""
+    from test_any_arm import impact_arm_run, read_back
+
+    from impact_arm.tools.cli import main
+
+    examples = os.path.dirname(REAL_ARM)
+    shutil.copy(os.path.join(examples, 'three_link.urdf'), tmp_path)
+    shutil.copy(REAL_ARM, tmp_path / 'arm.yaml')
+    code, out = impact_arm_run(
+        ['--scene', 'arm.yaml', '--mode', 'lockstep', '--name', 'arm', '--out', 'runs'],
+        ros_env,
+        tmp_path,
+    )
+    assert code == 0 and ': complete' in out, out
+    recording = tmp_path / 'runs' / 'arm.mcap'
+    by_topic = read_back(recording)
+    states = by_topic['/joint_states']
+    stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in states])
+    # lockstep: the initial state is repeated until the controller answers, then every period
+    # once, none lost
+    periods = np.unique(stamps)
+    assert np.allclose(np.diff(periods), 1e-3, atol=1e-9) and np.all(np.diff(stamps) >= 0)
+    assert len(periods) == int(re.search(r'wrote \S+: (\d+) periods', out).group(1))
+    assert all(len(s.position) == 3 for s in states)
+    counts = np.array([s.position for s in states]) * 131072 / (2 * math.pi)
+    assert np.allclose(counts, np.round(counts), rtol=0, atol=1e-6)  # the encoder's readings
+    assert len(by_topic['/impact_report']) == 3
+    plate = np.array([m.position[0] for m in by_topic['/surface_mounts']])
+    assert plate[0] == 0.0 and plate.min() < -1e-7  # the plate gives way under the strikes
+
+    monkeypatch.chdir(tmp_path)
+    assert main(['analyze', str(recording), '--out', 'analysis']) == 0
+    figures = sorted(p.name for p in (tmp_path / 'analysis').glob('fig*.png'))
+    assert 'fig3_controllers.png' in figures and 'fig4_link_angles.png' in figures
+
+    truth = {'surfaces[0].mu': 0.2, 'joints[1].friction': 0.3}
+    argv = ['fit', str(recording), '--scene', 'arm.yaml', '--out', 'fit']
+    argv += ['--param', 'surfaces[0].mu=0.05:1@0.4', '--param', 'joints[1].friction=0:1@0.5']
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert capsys.readouterr().out.rstrip().endswith(': fits')
+    result = json.load(open(tmp_path / 'fit' / 'fit.json'))
+    assert result['verdict'] == 'fits'
+    for key, value in truth.items():
+        low, high = result['parameters'][key]['ci95']
+        assert low <= value <= high, (key, low, high)
