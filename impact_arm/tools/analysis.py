@@ -516,7 +516,8 @@ def cli(args) -> int:
         raise AnalysisError(f'--compare-time = {args.compare_time}: must be in (0, 60] s')
     if not 50 <= args.dpi <= 1200:
         raise AnalysisError(f'--dpi = {args.dpi:g}: must be in [50, 1200]')
-    laws = [w.strip() for w in (args.laws or ','.join(STEP_LAWS)).split(',') if w.strip()]
+    given = ','.join(STEP_LAWS) if args.laws is None else args.laws
+    laws = [w.strip() for w in given.split(',') if w.strip()]
     for law in laws:
         if law not in FEEDBACK_LAWS:
             raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
