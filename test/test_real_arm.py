@@ -79,3 +79,25 @@ def test_a_real_arm_runs_over_dds_is_recorded_analysed_and_fitted(
     for key, value in truth.items():
         low, high = result['parameters'][key]['ci95']
         assert low <= value <= high, (key, low, high)
+
+
+def test_the_figures_of_a_three_link_recording_show_every_link(tmp_path):
+    """Figures 3 and 4 (and the compared recordings) draw one panel per link: a three-link
+    arm's third link was left out of them."""
+    from impact_arm.tools.analysis import Run
+    from impact_arm.tools.figures import fig3_controllers, fig4_link_angles, fig_recordings
+
+    t = np.linspace(0.0, 1.0, 50)
+    q = np.stack([np.cos(t), np.sin(t), -t], axis=1)
+    run = Run('three links', t, q, np.gradient(q, t, axis=0), law='q')
+    run.target = np.array([-1.0, -1.2, -1.0])
+    for fig in (fig4_link_angles(run, tmp_path), fig_recordings([run, run], tmp_path)):
+        axes = [ax for ax in fig.axes if ax.get_ylabel()]
+        assert [ax.get_ylabel() for ax in axes] == ['q1 [deg]', 'q2 [deg]', 'q3 [deg]']
+        assert np.allclose(axes[2].lines[0].get_ydata(), np.degrees(q[:, 2]))
+    fig = fig3_controllers([run], tmp_path)
+    titles = [ax.get_title() for ax in fig.axes if ax.get_title().startswith('(')]
+    assert titles == [
+        f'({p}) response of link {k + 1} (target {t:g}°)'
+        for k, (p, t) in enumerate(zip('abc', np.degrees(run.target)))
+    ]
