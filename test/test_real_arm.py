@@ -59,7 +59,11 @@ def test_a_real_arm_runs_over_dds_is_recorded_analysed_and_fitted(
     assert all(len(s.position) == 3 for s in states)
     counts = np.array([s.position for s in states]) * 131072 / (2 * math.pi)
     assert np.allclose(counts, np.round(counts), rtol=0, atol=1e-6)  # the encoder's readings
-    assert len(by_topic['/impact_report']) == 3
+    reports = [json.loads(m.data) for m in by_topic['/impact_report']]
+    assert len(reports) == 3
+    for report in reports:  # the impact table gives every link's contact angle
+        angles = ','.join(f'{a:>7.2f}' for a in report['q_contact_deg'])
+        assert f'{report["t_contact"]:>9.5f} {angles} ' in out, out
     plate = np.array([m.position[0] for m in by_topic['/surface_mounts']])
     assert plate[0] == 0.0 and plate.min() < -1e-7  # the plate gives way under the strikes
 
