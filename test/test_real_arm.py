@@ -60,7 +60,9 @@ def test_a_real_arm_runs_over_dds_is_recorded_analysed_and_fitted(
     counts = np.array([s.position for s in states]) * 131072 / (2 * math.pi)
     assert np.allclose(counts, np.round(counts), rtol=0, atol=1e-6)  # the encoder's readings
     reports = [json.loads(m.data) for m in by_topic['/impact_report']]
-    assert len(reports) == 3
+    # at least the scene's 3 cycles: in lockstep the run stops the controller once it has seen
+    # them, and on a loaded machine the arm may strike again before it does
+    assert len(reports) >= 3 and [r['index'] for r in reports] == list(range(1, len(reports) + 1))
     for report in reports:  # the impact table gives every link's contact angle
         angles = ','.join(f'{a:>7.2f}' for a in report['q_contact_deg'])
         assert f'{report["t_contact"]:>9.5f} {angles} ' in out, out
