@@ -301,3 +301,19 @@ def test_fit_says_what_the_diagnosis_found_and_reports_it(tmp_path, capsys):
     assert main([*args, '--effort-latency', 'inf']) == 2
     err = capsys.readouterr().err
     assert '--effort-latency = inf' in err and err.count('\n') == 1
+
+
+def test_the_encoder_grid_is_found_when_no_step_is_a_single_count():
+    """A fast joint on a fine encoder moves two counts or more every period: the grid is
+    still the count, not the smallest step (which made the noise check 'not checked')."""
+    from impact_arm.calibration.diagnose import encoder_resolution
+    from impact_arm.calibration.identify import JointRecording
+
+    count = 2 * np.pi / (1 << 17)
+    steps = np.array([[2, 1], [3, 1], [5, 2], [2, 7]] * 10)  # joint 1: never a single count
+    position = np.cumsum(steps, axis=0) * count
+    t = np.arange(len(position)) * 1e-3
+    rec = JointRecording(t, position, np.zeros_like(position), np.zeros_like(position))
+    assert encoder_resolution(rec) == pytest.approx([count, count], rel=1e-9)
+    off_grid = position + np.random.default_rng(1).normal(0.0, 1e-3 * count, position.shape)
+    assert encoder_resolution(dataclasses.replace(rec, position=off_grid)) is None

@@ -361,22 +361,36 @@ def check_effort_delay(
     )
 
 
+# the smallest step of a joint may be several counts: a joint that never turns slower than
+# a few counts per period (a fine encoder on a fast arm) never shows a single count
+MAX_COUNTS_IN_SMALLEST_STEP = 1000
+
+
 def encoder_resolution(rec: JointRecording) -> np.ndarray | None:
-    """Per joint, the smallest step of the positions when every step is a whole number of it
-    (an encoder's counts); None when the positions are not on such a grid."""
+    """Per joint, the largest step of which every step of the positions is a whole number
+    (an encoder's count), looked for among whole fractions of the smallest step; None when
+    the positions are not on such a grid."""
     steps = np.diff(rec.position, axis=0)
     out = []
     for j in range(rec.n):
         d = np.abs(steps[:, j])
         d = d[d > 0]
-        if len(d) < 10:
+        if len(d) < 10 or float(np.min(d)) > 0.1:
             return None
-        s = float(np.min(d))
-        counts = d / s
-        if np.max(np.abs(counts - np.round(counts))) > 1e-4 or s > 0.1:
+        count = _grid_step(d)
+        if count is None:
             return None
-        out.append(s)
+        out.append(count)
     return np.array(out)
+
+
+def _grid_step(d: np.ndarray) -> float | None:
+    smallest = float(np.min(d))
+    for k in range(1, MAX_COUNTS_IN_SMALLEST_STEP + 1):
+        counts = d * (k / smallest)
+        if np.max(np.abs(counts - np.round(counts))) <= 1e-4:
+            return smallest / k
+    return None
 
 
 def check_position_noise(

@@ -982,7 +982,7 @@ def _check_physics(check, raw, links, surfaces, arm):
                     f'the run budget)',
                 )
         e_red = reduced_modulus(arm, sfc.material)
-        t_c = 2.87 * (mount.mass**2 / (raw['tip_radius'] * e_red**2)) ** 0.2
+        t_c = 2.87 * (mount.mass**2 / (links.tip_radius * e_red**2)) ** 0.2
         if t_c < MIN_CONTACT_TIME:
             check.fail(
                 f'surfaces[{i}].mount.mass',

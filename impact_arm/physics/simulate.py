@@ -390,15 +390,18 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
 
 def format_table(result: RunResult) -> str:
     """The impact table people read in a terminal."""
+    # every link's contact angle (the article's two in its columns)
+    n = len(result.impacts[0]['q_contact_deg']) if result.impacts else 2
+    angles = ','.join(f'q{k + 1}' for k in range(n)) + ' [deg]'
     lines = [
-        f'{"#":>3} {"t [s]":>9} {"q1,q2 [deg]":>15} {"dur [us]":>9} {"dm [um]":>8} '
+        f'{"#":>3} {"t [s]":>9} {angles:>{8 * n - 1}} {"dur [us]":>9} {"dm [um]":>8} '
         f'{"dr [um]":>8} {"Fmax [kN]":>9} {"vx,vy before":>14} {"vx,vy after":>14} '
         f'{"e":>6} {"T before->after [J]":>19} {"e_energy":>17}'
     ]
     for i in result.impacts:
         lines.append(
             f'{i["index"]:>3} {i["t_contact"]:>9.5f} '
-            f'{i["q_contact_deg"][0]:>7.2f},{i["q_contact_deg"][1]:>7.2f} '
+            f'{",".join(f"{a:>7.2f}" for a in i["q_contact_deg"])} '
             f'{i["duration"] * 1e6:>9.2f} {i["delta_m"] * 1e6:>8.2f} {i["delta_r"] * 1e6:>8.2f} '
             f'{i["F_max"] / 1e3:>9.3f} '
             f'{i["v_before"][0]:>6.3f},{i["v_before"][1]:>7.3f} '

@@ -37,6 +37,8 @@ class Style:
 
 PHASE_NAMES = {1: 'elastic compression', 2: 'elasto-plastic compression', 3: 'restitution'}
 
+PANEL = 'abcdefghijklmnopqrstuvwxyz'  # the panels' letters
+
 
 def _plt():
     import matplotlib
@@ -76,7 +78,8 @@ def fig3_controllers(runs, out):
     from .analysis import step_metrics
 
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=FIGURE_INCHES)
+    fig, axes = plt.subplots(1, runs[0].q.shape[1], figsize=FIGURE_INCHES)
+    notes_size = 7 if len(axes) <= 2 else 5  # each law's numbers fit under a narrower panel
     styles = {'q': ('tab:blue', '-'), 'pd': ('tab:orange', '--'), 'pid': ('tab:green', '-.')}
     for k, ax in enumerate(axes):
         target = math.degrees(runs[0].target[k])
@@ -118,10 +121,17 @@ def fig3_controllers(runs, out):
         inset.grid(alpha=0.3)
         ax.set_xlabel('t [s]')
         ax.set_ylabel(f'q{k + 1} [deg]')
-        ax.set_title(f'({"ab"[k]}) response of link {k + 1} (target {target:g}°)', fontsize=9)
+        ax.set_title(f'({PANEL[k]}) response of link {k + 1} (target {target:g}°)', fontsize=9)
         ax.grid(alpha=0.3)
         for i, (text, color) in enumerate(lines):
-            ax.text(0.0, -0.19 - 0.065 * i, text, transform=ax.transAxes, fontsize=7, color=color)
+            ax.text(
+                0.0,
+                -0.19 - 0.065 * i,
+                text,
+                transform=ax.transAxes,
+                fontsize=notes_size,
+                color=color,
+            )
     fig.legend(
         loc='upper center',
         ncol=len(runs) + 1,
@@ -133,7 +143,7 @@ def fig3_controllers(runs, out):
         0.5,
         0.915,
         'Step responses without impact (surface removed): from '
-        f'({math.degrees(runs[0].q[0, 0]):.0f}°, {math.degrees(runs[0].q[0, 1]):.0f}°) to '
+        f'({", ".join(f"{a:.0f}°" for a in _deg(runs[0].q[0]))}) to '
         'the down target',
         ha='center',
         fontsize=9,
@@ -145,7 +155,7 @@ def fig3_controllers(runs, out):
 def fig_recordings(runs, out):
     """Link angles of several recordings (``analyze --compare``), over the time all cover."""
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=FIGURE_INCHES)
+    fig, axes = plt.subplots(1, min(r.q.shape[1] for r in runs), figsize=FIGURE_INCHES)
     t_end = min(r.t[-1] - r.t[0] for r in runs) if len(runs) > 1 else math.inf
     for run in runs:
         label = run.label + (f' (law {run.law})' if run.law and 'law' not in run.label else '')
@@ -156,17 +166,18 @@ def fig_recordings(runs, out):
     for k, ax in enumerate(axes):
         ax.set_xlabel("t since the recording's start [s]")
         ax.set_ylabel(f'q{k + 1} [deg]')
-        ax.set_title(f'({"ab"[k]}) link {k + 1}', fontsize=9)
+        ax.set_title(f'({PANEL[k]}) link {k + 1}', fontsize=9)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     _layout(fig)
     return fig
 
 
-def _two_time_series(t, series, ylabels, titles):
-    """Two panels over t, one above the other: (a) and (b)."""
+def _time_series(t, series, ylabels, titles):
+    """One panel per series over t, one above the other: (a), (b), ..."""
     plt = _plt()
-    fig, axes = plt.subplots(2, 1, figsize=FIGURE_INCHES, sharex=True)
+    fig, axes = plt.subplots(len(series), 1, figsize=FIGURE_INCHES, sharex=True, squeeze=False)
+    axes = axes[:, 0]
     for ax, y, ylabel, title in zip(axes, series, ylabels, titles):
         ax.plot(t, y, lw=0.8)
         ax.set_ylabel(ylabel)
@@ -178,11 +189,13 @@ def _two_time_series(t, series, ylabels, titles):
 
 
 def fig4_link_angles(run, out):
-    return _two_time_series(
+    """Every link's angle: the article's two panels, one more per further link."""
+    links = range(run.q.shape[1])
+    return _time_series(
         run.t,
-        [_deg(run.q[:, k]) for k in (0, 1)],
-        [f'q{k + 1} [deg]' for k in (0, 1)],
-        [f'({"ab"[k]}) angle q{k + 1}(t)' for k in (0, 1)],
+        [_deg(run.q[:, k]) for k in links],
+        [f'q{k + 1} [deg]' for k in links],
+        [f'({PANEL[k]}) angle q{k + 1}(t)' for k in links],
     )
 
 
@@ -258,7 +271,7 @@ def fig6_poincare(run, sections, out):
 
 
 def fig7_tip_velocity(run, v_tip, out):
-    return _two_time_series(
+    return _time_series(
         run.t,
         [v_tip[:, k] for k in (0, 1)],
         [f'v{"xy"[k]} [m/s]' for k in (0, 1)],
