@@ -34,9 +34,7 @@ def defined(source):
 
 
 def generated(n, n_integral=0):
-    return defined(
-        equations._module_header(n, True, True, True, n_integral) + equations._derivation(n, True)
-    )
+    return defined(equations._module_header(n, n_integral) + equations._derivation(n))
 
 
 def test_the_stub_declares_exactly_what_the_generator_writes():
@@ -113,8 +111,7 @@ def test_general_links_write_the_same_names():
         declared = defined(f.read())
     for n in (2, 3, 5):
         names = defined(
-            equations._module_header(n, True, True, True, 0, general=True)
-            + equations._derivation(n, True, general=True)
+            equations._module_header(n, 0, general=True) + equations._derivation(n, general=True)
         )
         with_accel = n <= equations.GENERAL_SYMBOLIC_ACCEL
         assert names == (declared if with_accel else declared - {'accel'}), n

@@ -9,8 +9,6 @@ from ..layout import shape_offsets
 
 N = 2  # links
 NI = 0  # PID integral states (N for a continuous pid law, else 0)
-HAS_CONTACT = True  # the scene has surfaces
-HAS_FRICTION = True  # some surface has friction
 HAS_ACCEL = True  # accel() exists (closed-form q̈, N <= 3); else mass_and_rhs()
 NM = 1  # surfaces on a compliant mount (each adds its plate's z, ż to the state)
 HAS_MOUNT = True  # NM > 0

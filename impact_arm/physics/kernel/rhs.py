@@ -142,9 +142,8 @@ def contact_forces(y, P, SURF, C, levels):
     else:
         fn = restitution_force(delta, C[C_DR], SURF[s, S_E], C[C_RR])
     ff = 0.0
-    if HAS_FRICTION:
-        if SURF[s, S_MU] > 0:
-            ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])
+    if SURF[s, S_MU] > 0:
+        ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])
     return delta, fn, ff, tip_state[2], tip_state[3]
 
 
@@ -190,9 +189,8 @@ def contact_frequency(y, P, SURF, C, levels, work):
 @jit_leaf
 def control_torque(y, P, I, C, tau_held, tau, error, rate):
     """Joint torques acting now into ``tau``; False when the actuators are off."""
-    if HAS_CONTACT:
-        if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
-            return False
+    if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
+        return False
     law = I[I_LAW]
     if law == LAW_NONE:
         return False
@@ -245,12 +243,11 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     for i in range(N):
         generalized[i] = 0.0
     fn = 0.0
-    if HAS_CONTACT:
-        if int(C[C_PHASE]) != FREE:
-            delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
-            jac = tip_jacobian(q, P[P_L : P_L + NL])
-            for i in range(N):
-                generalized[i] += jac[i] * ff + jac[N + i] * fn
+    if int(C[C_PHASE]) != FREE:
+        delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
+        jac = tip_jacobian(q, P[P_L : P_L + NL])
+        for i in range(N):
+            generalized[i] += jac[i] * ff + jac[N + i] * fn
     acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
     if acting:
         add_joint_torques(tau, generalized)
