@@ -36,6 +36,7 @@ UNCONTROLLED = {('controller', 'law'): 'none'}
             ),
         ),
         ('PD', lambda: scene_from({('controller', 'law'): 'pd'}, surfaces=[])),
+        ('continuous PID (integral states)', lambda: scene_from({('controller', 'law'): 'pid'})),
     ],
 )
 def test_parameter_values_share_the_kernel_of_their_arm_shape(name, scene):

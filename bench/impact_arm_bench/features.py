@@ -140,7 +140,7 @@ def measure(name, make, preset, repeats):
         'preset': preset,
         'contact': bool(model.surfaces),
         'friction': any(s.mu > 0 for s in model.surfaces),
-        'integral_states': model.eq.NI,
+        'integral_states': model.n_integral,
         'kernel': model.eq.__name__,
         'gravity': scene.gravity != 0,
         'impacts': len(r['impacts']),

@@ -101,9 +101,7 @@ class ArmModel:
         # The compiled module depends on the arm's shape alone: gravity, contact and friction
         # are values (g, the surface table's rows, μ), so g = 0, no surface or μ = 0 run on
         # the same kernel as the article's scene.
-        self.eq = load_equations(
-            self.n, n_integral=self.n_integral, general=self.general, n_mount=self.n_mount
-        )
+        self.eq = load_equations(self.n, general=self.general, n_mount=self.n_mount)
         self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
         for s in self.surfaces:
             c = s.constants

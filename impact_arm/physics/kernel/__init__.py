@@ -1,7 +1,7 @@
 """The stepped phase integrator kernel, as template text split by concern.
 
 ``equations.load_equations`` builds one module per scene shape: a header of compile-time
-constants (``N``, ``NI``, ``HAS_MOUNT``, the layout's offsets), the
+constants (``N``, ``NM``, ``HAS_MOUNT``, the layout's offsets), the
 sympy-generated equations (``tip``, ``tip_jacobian``, ``gravity_forces``, ``link_energies``,
 ``accel`` or ``mass_and_rhs``), then the parts below, in ``PARTS`` order, each from its
 ``MARKER`` line on. What stands above a part's marker (imports from ``layout``, from the

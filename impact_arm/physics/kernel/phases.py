@@ -9,7 +9,7 @@ from ..contact import residual, restitution_radius
 from ..jit import jit
 from ..layout import *
 from .injected import *
-from .rhs import contact_forces, plate_displacement
+from .rhs import contact_forces, integral_states, plate_displacement
 # --- template: equations.py copies what follows into the generated module ---
 
 
@@ -49,7 +49,7 @@ def set_mode(mode, y, C):
     """Cycle half of the continuous controller (0 down, 1 up); integral states restart with
     the new target."""
     C[C_MODE] = mode
-    for i in range(2 * N, 2 * N + NI):
+    for i in range(2 * N, 2 * N + integral_states(y)):
         y[i] = 0.0
 
 

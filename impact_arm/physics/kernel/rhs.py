@@ -13,6 +13,14 @@ from .injected import *
 # --- template: equations.py copies what follows into the generated module ---
 
 
+@jit_leaf
+def integral_states(y):
+    """PID integral states in the state y: N for a continuous PID, else 0. The model sizes
+    the state (``ArmModel.size``), so this is a value read from its length, not a kernel
+    shape; the mounted plates' z, ż come after them."""
+    return y.shape[0] - 2 * N - 2 * NM
+
+
 @jit
 def solve_mass_matrix(q, qd, generalized, P, out, S):
     """q̈ into ``out`` from the mass matrix, with the joints' armature added (zero is off):
@@ -213,11 +221,11 @@ def control_torque(y, P, I, C, tau_held, tau, error, rate):
         )
         return True
     pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
-    if NI > 0:
+    if integral_states(y) > 0:
         pid_law(
             error,
             rate,
-            y[2 * N : 2 * N + NI],
+            y[2 * N : 3 * N],
             P[P_KP : P_KP + N],
             P[P_KD : P_KD + N],
             P[P_KI : P_KI + N],
@@ -256,10 +264,11 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     for i in range(N):
         out[i] = qd[i]
     accelerations(q, qd, generalized, P, out[N : 2 * N], W[W_MASS:])
-    if NI > 0:
+    ni = integral_states(y)
+    if ni > 0:
         # the integral runs only while the controller acts (it is off during contact);
         # control_torque left the PID error in ``error``
-        for i in range(NI):
+        for i in range(ni):
             out[2 * N + i] = error[i] if acting else 0.0
     if HAS_MOUNT:
         # each plate on its spring-damper about rest; the one struck carries the contact force
