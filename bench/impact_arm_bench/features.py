@@ -202,7 +202,9 @@ def run(args) -> int:
     )
     print(
         '\nwall ns / rhs eval: whole run (stepping, events, Python wrapper) per right-hand-side '
-        'evaluation, i.e. the per-evaluation price of the features compiled in.'
+        'evaluation, i.e. the per-evaluation price of the features the scene uses.\n'
+        'kernel: the compiled module (its hash); gravity, surfaces and friction are values, '
+        'so the scenes of one arm share it.'
     )
     if args.real_arm:
         article = next(r for r in rows if r['scene'] == ARTICLE)
