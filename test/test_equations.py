@@ -49,14 +49,13 @@ def arguments(rng, n):
 
 
 @pytest.mark.parametrize('n', [2, 3, 4])
-@pytest.mark.parametrize('gravity', [True, False])
-def test_closed_form_matches_the_symbolic_derivation(n, gravity):
+def test_closed_form_matches_the_symbolic_derivation(n):
     symbolic = functions(
-        equations._derive_source(n, gravity) + equations.MASS_INTO_WRAPPER
+        equations._derive_source(n) + equations.MASS_INTO_WRAPPER
         if n > equations.SYMBOLIC_LINKS
-        else equations._derivation(n, gravity)
+        else equations._derivation(n)
     )
-    chain = functions(equations._chain_source(n, gravity))
+    chain = functions(equations._chain_source(n))
     rng = np.random.default_rng(n)
     for _ in range(20):
         args = arguments(rng, n)
@@ -83,7 +82,7 @@ def kinetic_energy(f, q, qd, L, m):
 
 def test_long_chain_kinetic_energy_is_the_mass_matrix_form():
     n = 9
-    f = functions(equations._chain_source(n, True))
+    f = functions(equations._chain_source(n))
     rng = np.random.default_rng(1)
     for _ in range(10):
         q, qd = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
@@ -97,7 +96,7 @@ def test_long_chain_conserves_energy_in_free_swing():
     """No torque, no contact: T + V stays constant to the integration error (RK4, fixed
     step), which fails if the velocity terms or gravity's forces disagree with T and V."""
     n, dt = 7, 2e-4
-    f = functions(equations._chain_source(n, True))
+    f = functions(equations._chain_source(n))
     L, m = np.linspace(0.3, 0.6, n), np.linspace(1.0, 0.4, n)
 
     def rate(y):  # through the kernel's form of the equations
@@ -147,7 +146,7 @@ def test_long_chain_matches_pinocchio(n):
     closed form in absolute angles q = T θ (T: lower triangle of ones), i.e.
     M_θ = Tᵀ M_q T and RNEA = Tᵀ (b - Q_g)."""
     pin = pytest.importorskip('pinocchio')
-    f = functions(equations._chain_source(n, True))
+    f = functions(equations._chain_source(n))
     rng = np.random.default_rng(n)
     g = 9.81
     T = np.tril(np.ones((n, n)))
@@ -181,10 +180,9 @@ def general_geometry(rng, n):
 
 
 @pytest.mark.parametrize('n', [2, 3])
-@pytest.mark.parametrize('gravity', [True, False])
-def test_general_links_closed_form_matches_the_symbolic_derivation(n, gravity):
-    symbolic = functions(equations._derivation(n, gravity, general=True))
-    chain = functions(equations._general_chain_source(n, gravity))
+def test_general_links_closed_form_matches_the_symbolic_derivation(n):
+    symbolic = functions(equations._derivation(n, general=True))
+    chain = functions(equations._general_chain_source(n))
     assert ('accel' in symbolic) == (n <= equations.GENERAL_SYMBOLIC_ACCEL)
     rng = np.random.default_rng(10 + n)
     for _ in range(20):
@@ -213,8 +211,8 @@ def test_general_links_closed_form_matches_the_symbolic_derivation(n, gravity):
 
 @pytest.mark.parametrize('n', [2, 3, 7])
 def test_general_links_with_rod_geometry_are_the_rod_equations(n):
-    rods = functions(equations._chain_source(n, True))
-    general = functions(equations._general_chain_source(n, True))
+    rods = functions(equations._chain_source(n))
+    general = functions(equations._general_chain_source(n))
     rng = np.random.default_rng(n)
     for _ in range(5):
         args = arguments(rng, n)
@@ -232,7 +230,7 @@ def test_general_long_chain_conserves_energy_in_free_swing():
     """As for rods: offsets across the links bring the B_ij sin terms into M and the
     velocity terms; an error in any of them breaks T + V conservation."""
     n, dt = 6, 2e-4
-    f = functions(equations._general_chain_source(n, True))
+    f = functions(equations._general_chain_source(n))
     G = general_geometry(np.random.default_rng(5), n)
     m = np.linspace(1.0, 0.4, n)
 

@@ -33,17 +33,15 @@ def defined(source):
     return {n for n in names if not n.startswith('_')} - imported
 
 
-def generated(n, n_integral=0):
-    return defined(
-        equations._module_header(n, True, True, True, n_integral) + equations._derivation(n, True)
-    )
+def generated(n):
+    return defined(equations._module_header(n) + equations._derivation(n))
 
 
 def test_the_stub_declares_exactly_what_the_generator_writes():
     with open(injected.__file__, encoding='utf-8') as f:
         declared = defined(f.read())
     # N <= 3 links: closed-form accelerations too (accel); more: the mass matrix only
-    closed_form, numeric = generated(2), generated(4, n_integral=4)
+    closed_form, numeric = generated(2), generated(4)
     assert 'accel' in closed_form and 'accel' not in numeric
     assert closed_form == declared, (
         f'written but not declared in kernel/injected.py: {sorted(closed_form - declared)}; '
@@ -113,8 +111,7 @@ def test_general_links_write_the_same_names():
         declared = defined(f.read())
     for n in (2, 3, 5):
         names = defined(
-            equations._module_header(n, True, True, True, 0, general=True)
-            + equations._derivation(n, True, general=True)
+            equations._module_header(n, general=True) + equations._derivation(n, general=True)
         )
         with_accel = n <= equations.GENERAL_SYMBOLIC_ACCEL
         assert names == (declared if with_accel else declared - {'accel'}), n

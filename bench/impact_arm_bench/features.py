@@ -1,9 +1,8 @@
 """``impact-arm bench features``: what each feature of a scene costs per simulated second.
 
-Scenes (all the article's arm and controller unless said): free motion (no surface, so the
-generated kernel has no contact test; no controller: the double pendulum swings from the
-article's start pose), a frictionless Hertz floor (contact test and elastic Hertz
-phases, no friction term, no yield) and the article's scene (three-phase elasto-plastic
+Scenes (all the article's arm and controller unless said): free motion (no surface; no
+controller: the double pendulum swings from the article's start pose), a frictionless Hertz
+floor (elastic Hertz phases, μ = 0, no yield) and the article's scene (three-phase elasto-plastic
 contact with tanh friction). Optional: the same free motion without gravity, and a three-link
 arm (``--three-links``; its first use derives and compiles a new scene shape, ~1-2 min), and
 (``--real-arm``) the article with joint damping and Coulomb friction, with joint armature and
@@ -11,7 +10,8 @@ with its floor on a compliant mount, each with its cost relative to the article'
 
 Reported per scene, best of ``--repeats``: wall time, simulated time, wall microseconds per
 simulated second, right-hand-side evaluations per simulated second and per wall second, and
-the compiled module's shape (contact / friction / integral states).
+whether the scene has contact and friction, and the compiled module it ran on: gravity,
+surfaces and μ are values, so every two-link rod arm shares the article's kernel.
 """
 
 from __future__ import annotations
@@ -133,14 +133,15 @@ def measure(name, make, preset, repeats):
     common.time_ours(scene, rtol, atol, repeats=1)  # load the compiled module
     common.progress(f'{name}: timing')
     r = common.time_ours(scene, rtol, atol, repeats=repeats)
-    eq = ArmModel(scene).eq
+    model = ArmModel(scene)
     return {
         'scene': name,
         'links': scene.n_links,
         'preset': preset,
-        'contact': eq.HAS_CONTACT,
-        'friction': eq.HAS_FRICTION,
-        'integral_states': eq.NI,
+        'contact': bool(model.surfaces),
+        'friction': any(s.mu > 0 for s in model.surfaces),
+        'integral_states': model.n_integral,
+        'kernel': model.eq.__name__,
         'gravity': scene.gravity != 0,
         'impacts': len(r['impacts']),
         't_simulated': r['t_end'],
@@ -171,6 +172,7 @@ def run(args) -> int:
             r['links'],
             'yes' if r['contact'] else 'no',
             'yes' if r['friction'] else 'no',
+            r['kernel'].rsplit('_', 1)[-1],
             r['impacts'],
             f'{r["t_simulated"]:.3f}',
             f'{r["wall"] * 1e3:.2f}',
@@ -185,8 +187,9 @@ def run(args) -> int:
             [
                 'scene',
                 'links',
-                'contact code',
-                'friction term',
+                'contact',
+                'friction',
+                'kernel',
                 'impacts',
                 'sim [s]',
                 'wall [ms]',
@@ -199,7 +202,9 @@ def run(args) -> int:
     )
     print(
         '\nwall ns / rhs eval: whole run (stepping, events, Python wrapper) per right-hand-side '
-        'evaluation, i.e. the per-evaluation price of the features compiled in.'
+        'evaluation, i.e. the per-evaluation price of the features the scene uses.\n'
+        'kernel: the compiled module (its hash); gravity, surfaces and friction are values, '
+        'so the scenes of one arm share it.'
     )
     if args.real_arm:
         article = next(r for r in rows if r['scene'] == ARTICLE)

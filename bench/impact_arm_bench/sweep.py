@@ -32,7 +32,7 @@ SETTING = {
     'integrator.atol': 1e-4,
     'integrator.contact_rtol': 3e-4,
 }
-# μ > 0 keeps the friction term, so every run has the base scene's kernel shape
+# μ, like every value here, is a kernel value: every run has the base scene's kernel
 RANGES = {
     'surfaces[0].mu': [0.05, 0.5],
     'materials.steel.E': [1.5e11, 2.5e11],

@@ -7,15 +7,15 @@ through a hand-typed formula.
 
 The derivation keeps lengths, masses and g as symbols (for general links also the centres of
 mass, inertias and contact point: ``GEOMETRY``), so one derivation serves every scene with the
-same number of links and the same features; a scene of uniform rods gets the rods' equations,
+same number of links (gravity, contact and friction are values: g, the surface table's rows
+and μ); a scene of uniform rods gets the rods' equations,
 exactly as before general links existed; sympy is slow to import and to
 differentiate, so the generated Python source is cached on disk (``cache_dir()``) keyed by a
 hash of what it was generated from. A warm start imports no sympy at all.
 
 Why the kernel is generated text rather than an ordinary module: each scene shape gets its
-own module whose header makes N, NI, HAS_CONTACT, HAS_FRICTION and the layout's offsets
-module-level constants, which numba compiles as constants (loops of known length, contact
-and friction code absent from a scene without them); and numba caches compiled functions per
+own module whose header makes N, NM and the layout's offsets module-level constants, which
+numba compiles as constants (loops of known length); and numba caches compiled functions per
 source file, so one file per shape gives each shape its own cache entry, which a shared
 module with runtime flags could not. The kernel's source is ``kernel/`` (split by concern;
 ``kernel/injected.py`` declares what this generator injects).
@@ -63,7 +63,7 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
 """
 
 
-def _derive_source(n: int, gravity: bool, general: bool = False) -> str:
+def _derive_source(n: int, general: bool = False) -> str:
     """Generate Python source for the chain's numeric functions (runs sympy).
 
     ``general``: links with any centre of mass (along and across the link), any inertia
@@ -122,7 +122,7 @@ def _derive_source(n: int, gravity: bool, general: bool = False) -> str:
     M = sp.Matrix(n, n, lambda i, j: sp.diff(T, qd[i], qd[j]))
     p = [sp.diff(T, qd[i]) for i in range(n)]
     b = [dt(p[i]) - sp.diff(T, q[i]) for i in range(n)]  # d/dt(dT/dq̇) without the q̈ part
-    rhs = sp.Matrix([Qx[i] + (qg[i] if gravity else 0) - b[i] for i in range(n)])
+    rhs = sp.Matrix([Qx[i] + qg[i] - b[i] for i in range(n)])
     M = M.applyfunc(sp.simplify)
     if n <= (GENERAL_SYMBOLIC_ACCEL if general else 3):
         qdd = list(M.LUsolve(rhs))
@@ -192,7 +192,7 @@ def _derive_source(n: int, gravity: bool, general: bool = False) -> str:
 SYMBOLIC_LINKS = 3
 
 
-def _chain_source(n: int, gravity: bool) -> str:
+def _chain_source(n: int) -> str:
     """The same functions as ``_derive_source`` for a planar chain of uniform rods, written
     from the chain's closed form instead of a symbolic expansion.
 
@@ -246,7 +246,7 @@ def _chain_source(n: int, gravity: bool) -> str:
             sign = '' if i < j else '-'
             terms.append(f'{sign}C{lo}_{hi} * sn{lo}_{hi} * qd[{j}] * qd[{j}]')
         b = ' + '.join(terms).replace('+ -', '- ') or '0.0'
-        grav = f' - g * L[{i}] * c{i} * (0.5 * m[{i}] + S{i + 1})' if gravity else ''
+        grav = f' - g * L[{i}] * c{i} * (0.5 * m[{i}] + S{i + 1})'
         lines.append(f'    r{i} = Qx[{i}]{grav} - ({b})')
     entries = []
     for i in r:
@@ -257,7 +257,7 @@ def _chain_source(n: int, gravity: bool) -> str:
     funcs.append('\n'.join(lines))
     # the kernel's form: loops, not straight-line code (n² named values cost numba seconds
     # to type and lower: 6 s at 12 links)
-    gravity_term = ' - g * L[j] * cos(q[j]) * (0.5 * m[j] + tail)' if gravity else ''
+    gravity_term = ' - g * L[j] * cos(q[j]) * (0.5 * m[j] + tail)'
     funcs.append(f"""@jit_leaf
 def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     n = q.shape[0]
@@ -363,7 +363,7 @@ GENERAL_SYMBOLIC_ACCEL = 2
 GEOMETRY = ('L', 'cx', 'cy', 'Jc', 'tip')
 
 
-def _general_chain_source(n: int, gravity: bool) -> str:
+def _general_chain_source(n: int) -> str:
     """``_chain_source`` for general links (``GEOMETRY``): any centre of mass, inertia and
     contact point on the last link.
 
@@ -434,7 +434,7 @@ def _general_chain_source(n: int, gravity: bool) -> str:
         terms = [f'g{i}_{j} * qd[{j}] * qd[{j}]' for j in range(i + 1, n)]
         terms += [f'-g{j}_{i} * qd[{j}] * qd[{j}]' for j in range(i)]
         b = ' + '.join(terms).replace('+ -', '- ') or '0.0'
-        grav = f' + ({gravity_force(i)})' if gravity else ''
+        grav = f' + ({gravity_force(i)})'
         lines.append(f'    r{i} = Qx[{i}]{grav} - ({b})')
     entries = [f'M{min(i, j)}_{max(i, j)}' for i in r for j in r] + [f'r{i}' for i in r]
     lines.append(f'    return ({", ".join(entries)},)')
@@ -442,8 +442,6 @@ def _general_chain_source(n: int, gravity: bool) -> str:
     gravity_term = (
         f' - g * (L[j] * cos(q[j]) * tail + m[j] * (L[{n} + j] * cos(q[j])'
         f' - L[{2 * n} + j] * sin(q[j])))'
-        if gravity
-        else ''
     )
     funcs.append(f"""@jit_leaf
 def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
@@ -555,15 +553,14 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     return '\n\n\n'.join(funcs) + '\n'
 
 
-def _module_header(n, gravity, contact, friction, n_integral, general=False, n_mount=0):
+def _module_header(n, general=False, n_mount=0):
     """Constants the kernel template reads as compile-time constants."""
     from .layout import shape_offsets
 
-    offsets = shape_offsets(n, n_integral, general, n_mount)
+    offsets = shape_offsets(n, general, n_mount)
     links = ', general links' if general else ''
     lines = [
-        f'# generated by impact_arm.physics.equations v{GENERATOR_VERSION}: n={n}, gravity={gravity},'
-        f' contact={contact}, friction={friction}, integral states={n_integral}{links}'
+        f'# generated by impact_arm.physics.equations v{GENERATOR_VERSION}: n={n}{links}'
         + (f', mounted surfaces={n_mount}.' if n_mount else '.'),
         '# Do not edit: delete the file to regenerate it.',
         f'# compiled with {jit_options()}',
@@ -582,21 +579,19 @@ def _module_header(n, gravity, contact, friction, n_integral, general=False, n_m
         '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
         'from impact_arm.physics.control import add_joint_torques, pid_error, pid_law, q_law',
         f'N = {n}',
-        f'NI = {n_integral}',
-        f'HAS_CONTACT = {contact}',
-        f'HAS_FRICTION = {friction}',
     ]
     lines += [f'NM = {n_mount}', f'HAS_MOUNT = {n_mount > 0}']
     lines += [f'{k} = {v}' for k, v in offsets.items()]
     return '\n'.join(lines) + '\n\n\n'
 
 
-def _derivation(n, gravity, general=False):
+def _derivation(n, general=False):
     """The sympy part (slow), cached on its own: it does not depend on the scene's features.
-    Beyond ``SYMBOLIC_LINKS`` the chain's closed form, which needs no cache."""
+    Beyond ``SYMBOLIC_LINKS`` the chain's closed form, which needs no cache. Gravity is
+    always in it: g is a value (P_G), and g = 0 multiplies its terms away."""
     if n > SYMBOLIC_LINKS:
-        return _general_chain_source(n, gravity) if general else _chain_source(n, gravity)
-    shape = f'{GENERATOR_VERSION}-{n}-{gravity}' + ('-general' if general else '')
+        return _general_chain_source(n) if general else _chain_source(n)
+    shape = f'{GENERATOR_VERSION}-{n}-True' + ('-general' if general else '')
     key = hashlib.sha256(shape.encode()).hexdigest()[:16]
     path = os.path.join(cache_dir(), f'derivation_{n}_{key}.py.txt')
     if os.path.exists(path):
@@ -608,7 +603,7 @@ def _derivation(n, gravity, general=False):
 
     compile_started()  # sympy: part of the one-time cost the tools announce
     try:
-        text = _derive_source(n, gravity, general)
+        text = _derive_source(n, general)
     finally:
         compile_ended()
     _write_atomically(path, text)
@@ -633,37 +628,24 @@ _LOADED: dict[
 ] = {}  # (shape, cache directory) -> module: a study builds a model per run
 
 
-def load_equations(
-    n: int,
-    gravity: bool = True,
-    contact: bool = True,
-    friction: bool = True,
-    n_integral: int = 0,
-    general: bool = False,
-    n_mount: int = 0,
-) -> types.ModuleType:
+def load_equations(n: int, general: bool = False, n_mount: int = 0) -> types.ModuleType:
     """The compiled module for one scene shape: generated equations + the integrator kernel.
     ``general``: links other than uniform rods struck at the end (``GEOMETRY``).
 
     Derives (sympy) and writes it on first use; later processes import the cached file, and
     numba's own cache (next to it) spares them the compilation too. Within a process a shape
     is looked up once (reading and hashing the sources costs 0.17 ms, a study's run ~2 ms)."""
-    key = (n, gravity, contact, friction, n_integral, general, n_mount, cache_dir())
+    key = (n, general, n_mount, cache_dir())
     if key not in _LOADED:
-        _LOADED[key] = _load_equations(n, gravity, contact, friction, n_integral, general, n_mount)
+        _LOADED[key] = _load_equations(n, general, n_mount)
     return _LOADED[key]
 
 
-def _load_equations(n, gravity, contact, friction, n_integral, general, n_mount=0):
+def _load_equations(n, general, n_mount=0):
     from .kernel import template_source
 
     template = template_source()
-    source = (
-        _module_header(n, gravity, contact, friction, n_integral, general, n_mount)
-        + _derivation(n, gravity, general)
-        + '\n\n'
-        + template
-    )
+    source = _module_header(n, general, n_mount) + _derivation(n, general) + '\n\n' + template
     key = hashlib.sha256(f'{source}{sys.version_info[:2]}'.encode()).hexdigest()[:16]
     name = f'impact_arm_kernel_{n}_{key}'
     if name in sys.modules:

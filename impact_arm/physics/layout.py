@@ -66,28 +66,34 @@ def geometry_size(n: int, general: bool) -> int:
     return 4 * n + 2 if general else n
 
 
-def shape_offsets(n: int, n_integral: int, general: bool = False, n_mount: int = 0) -> dict:
-    """Offsets that depend on the scene shape (n links, n_integral PID integral states,
-    general links or uniform rods, n_mount mounted surfaces: the state is q, q̇, the
-    integrals, then each plate's z, ż from Y_MOUNT on). The generator writes them into each
-    kernel module as compile-time constants; Python code reads them from that module
-    (``model.eq``) or from here.
+def shape_offsets(n: int, general: bool = False, n_mount: int = 0) -> dict:
+    """Offsets that depend on the scene shape (n links, general links or uniform rods,
+    n_mount mounted surfaces). The generator writes them into each kernel module as
+    compile-time constants; Python code reads them from that module (``model.eq``) or from
+    here.
+
+    The state is q, q̇, the PID integral states (n of them for a continuous PID, else none),
+    then each mounted plate's z, ż (``SurfaceModel.mount_state``). Whether the integrals are
+    there is a value, not shape: the kernel reads it from the state's length
+    (``integral_states``), so a continuous PID runs on its arm's kernel, and a state without
+    them is stepped and error-normed exactly as before. SIZE is the longest state of the
+    shape (integrals included): an output row reserves that many columns.
 
     P_*: the flat parameter array (link geometry (NL values), masses, g, gains, targets,
     switch height, tolerances, maximum step, then the joints' damping, Coulomb friction, its
     smoothing rate and armature, and two switches: P_JFRIC_ON (some joint has damping or
     friction) and P_ARM_ON (some joint has armature)). Joint values are values, not shape:
     zero is off, and a scene that changes them never compiles a new kernel. R_*: an output
-    row (``emit_output``): t, the state, the contact impulse since the previous row
-    (tangential, normal), the torque acting, actuators acting (1/0), the tip velocity (x, y),
-    the peak normal contact force since the previous row. W_*: the right-hand side's scratch
+    row (``emit_output``): t, the state (SIZE columns, those past the state's length 0), the
+    contact impulse since the previous row (tangential, normal), the torque acting, actuators
+    acting (1/0), the tip velocity (x, y), the peak normal contact force since the previous
+    row. W_*: the right-hand side's scratch
     (generalized forces, torques, PID error and rate, then N*N for the mass matrix factor)."""
-    size = 2 * n + n_integral + 2 * n_mount
+    size = 3 * n + 2 * n_mount
     nl = geometry_size(n, general)
     p = nl - n  # the parameters after the geometry block move by its extra entries
     return {
         'SIZE': size,
-        'Y_MOUNT': 2 * n + n_integral,
         'NL': nl,
         'P_L': 0,
         'P_M': p + n,

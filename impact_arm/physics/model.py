@@ -98,17 +98,10 @@ class ArmModel:
             for i, s in enumerate(struck)
         )
         self.size = 2 * self.n + self.n_integral + 2 * self.n_mount
-        # Model only what the scene needs: the generated module has no gravity terms for g = 0,
-        # and its kernel no contact code without surfaces, no friction term when every μ = 0.
-        self.eq = load_equations(
-            self.n,
-            gravity=self.g != 0.0,
-            contact=bool(self.surfaces),
-            friction=any(s.mu > 0 for s in self.surfaces),
-            n_integral=self.n_integral,
-            general=self.general,
-            n_mount=self.n_mount,
-        )
+        # The compiled module depends on the arm's shape alone: gravity, contact and friction
+        # are values (g, the surface table's rows, μ), so g = 0, no surface or μ = 0 run on
+        # the same kernel as the article's scene.
+        self.eq = load_equations(self.n, general=self.general, n_mount=self.n_mount)
         self.surface_table = np.zeros((max(1, len(self.surfaces)), layout.S_SIZE))
         for s in self.surfaces:
             c = s.constants

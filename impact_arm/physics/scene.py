@@ -70,7 +70,7 @@ class Mount:
 class Surface:
     height: float  # y of the horizontal surface [m]; the tip strikes it from above
     law: str  # elastoplastic | hertz | none
-    mu: float  # Coulomb friction coefficient (0 = no friction term)
+    mu: float  # Coulomb friction coefficient (0 = no friction force)
     v_d: float  # tanh smoothing velocity [m/s]
     material: Material
     mount: Mount | None = None  # None: rigidly mounted

@@ -1,15 +1,15 @@
 """The stepped phase integrator kernel, as template text split by concern.
 
 ``equations.load_equations`` builds one module per scene shape: a header of compile-time
-constants (``N``, ``NI``, ``HAS_CONTACT``, ``HAS_FRICTION``, the layout's offsets), the
+constants (``N``, ``NM``, ``HAS_MOUNT``, the layout's offsets), the
 sympy-generated equations (``tip``, ``tip_jacobian``, ``gravity_forces``, ``link_energies``,
 ``accel`` or ``mass_and_rhs``), then the parts below, in ``PARTS`` order, each from its
 ``MARKER`` line on. What stands above a part's marker (imports from ``layout``, from the
 ``injected`` stub and from sibling parts) is there so linters and editors can follow the
 template; the generator drops it. The parts are written in the numba-compatible subset of
 Python: compiled with numba when it is available, interpreted otherwise. Module-level
-constants are compile-time constants for numba, so a scene without contact or friction has
-no contact code in its hot loop at all.
+constants are compile-time constants for numba; what a parameter value can switch off
+(gravity, surfaces, friction) is a value, so every scene of one arm shape shares a kernel.
 
 The kernel: Dormand-Prince 5(4) with error control (or, in free flight when I_METHOD asks
 for it, a linearly implicit Rosenbrock 4(3) step: the controller makes the free flight

@@ -23,9 +23,8 @@ def event_values(y, P, I, SURF, C, levels, g):
     y_tip = tip_state[1]
     phase = int(C[C_PHASE])
     if phase == FREE:
-        if HAS_CONTACT:
-            for s in range(ns):
-                g[s] = surface_level(y, SURF, levels, s) - y_tip
+        for s in range(ns):
+            g[s] = surface_level(y, SURF, levels, s) - y_tip
         if (I[I_LAW] == LAW_Q or I[I_LAW] == LAW_PID) and C[C_MODE] > 0.5:
             g[ns + EV_SWITCH] = y_tip - P[P_SWITCH]
         return

@@ -8,15 +8,12 @@ import math
 from ..layout import shape_offsets
 
 N = 2  # links
-NI = 0  # PID integral states (N for a continuous pid law, else 0)
-HAS_CONTACT = True  # the scene has surfaces
-HAS_FRICTION = True  # some surface has friction
 HAS_ACCEL = True  # accel() exists (closed-form q̈, N <= 3); else mass_and_rhs()
 NM = 1  # surfaces on a compliant mount (each adds its plate's z, ż to the state)
 HAS_MOUNT = True  # NM > 0
 
-_offsets = shape_offsets(N, NI, n_mount=NM)
-SIZE, Y_MOUNT = _offsets['SIZE'], _offsets['Y_MOUNT']
+_offsets = shape_offsets(N, n_mount=NM)
+SIZE = _offsets['SIZE']  # the longest state (PID integral states included)
 NL = _offsets['NL']  # entries of the link-geometry block (N for rods: the lengths)
 P_L, P_M, P_G, P_KP, P_KD, P_KI = (
     _offsets[k] for k in ('P_L', 'P_M', 'P_G', 'P_KP', 'P_KD', 'P_KI')

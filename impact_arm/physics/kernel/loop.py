@@ -190,7 +190,7 @@ def stepping_loop(
     """``advance`` with its scratch arrays."""
     output = O[O_DT] > 0.0
     # the phase, hence the step method, stays the same through one call (a switch returns)
-    in_contact = HAS_CONTACT and int(C[C_PHASE]) != FREE
+    in_contact = int(C[C_PHASE]) != FREE
     quartic = not rosenbrock_now(I, C)  # Dormand-Prince steps carry a quartic extension
     ns = SURF.shape[0]
     rtol, atol = phase_tolerances(P, C)
@@ -362,33 +362,22 @@ def stepping_loop(
             break
         copy_into(g0, g1)
         delta = 0.0
-        if HAS_CONTACT:
-            if in_contact:
-                # the midpoint state for Simpson's impulse, from the step's extension
-                interpolate(
-                    t_prev,
-                    t - t_prev,
-                    0.5 * (t_prev + t),
-                    y_prev,
-                    y_root,
-                    y,
-                    f,
-                    K,
-                    quartic,
-                    work,
-                    0,
-                )
-                delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
-                cap = contact_step_cap(y, P, SURF, C, levels, scratch)
-            else:
-                # the dent is forgotten once the tip has risen above the surface again
-                y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
-                for s in range(ns):
-                    # on a mounted surface, above its rest height in the plate's frame
-                    plate = plate_displacement(y, SURF, s) if HAS_MOUNT else 0.0
-                    if levels[s] != SURF[s, S_H] and y_tip - plate > SURF[s, S_H]:
-                        levels[s] = SURF[s, S_H]
-                        g0[s] = surface_level(y, SURF, levels, s) - y_tip
+        if in_contact:
+            # the midpoint state for Simpson's impulse, from the step's extension
+            interpolate(
+                t_prev, t - t_prev, 0.5 * (t_prev + t), y_prev, y_root, y, f, K, quartic, work, 0
+            )
+            delta = record_point(t, y, P, I, SURF, C, levels, trace, tcount, work)
+            cap = contact_step_cap(y, P, SURF, C, levels, scratch)
+        else:
+            # the dent is forgotten once the tip has risen above the surface again
+            y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
+            for s in range(ns):
+                # on a mounted surface, above its rest height in the plate's frame
+                plate = plate_displacement(y, SURF, s) if HAS_MOUNT else 0.0
+                if levels[s] != SURF[s, S_H] and y_tip - plate > SURF[s, S_H]:
+                    levels[s] = SURF[s, S_H]
+                    g0[s] = surface_level(y, SURF, levels, s) - y_tip
         # output after the step's impulse is booked, before any early return
         if output and not emit_output(
             t_prev, t - t_prev, y_prev, y_root, y, f, K, quartic, P, I, C, tau_held, O, out, scratch

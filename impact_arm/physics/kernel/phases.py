@@ -9,7 +9,7 @@ from ..contact import residual, restitution_radius
 from ..jit import jit
 from ..layout import *
 from .injected import *
-from .rhs import contact_forces, plate_displacement
+from .rhs import contact_forces, integral_states, plate_displacement
 # --- template: equations.py copies what follows into the generated module ---
 
 
@@ -49,7 +49,7 @@ def set_mode(mode, y, C):
     """Cycle half of the continuous controller (0 down, 1 up); integral states restart with
     the new target."""
     C[C_MODE] = mode
-    for i in range(2 * N, 2 * N + NI):
+    for i in range(2 * N, 2 * N + integral_states(y)):
         y[i] = 0.0
 
 
@@ -72,35 +72,34 @@ def apply_event(slot, t, y, P, I, SURF, C, levels, info):
     if kind == EV_SWITCH:
         set_mode(0.0, y, C)
         return True
-    if HAS_CONTACT:
-        s = int(C[C_SURF])
-        if kind == EV_YIELD:
-            C[C_PHASE] = ELASTOPLASTIC
-        elif kind == EV_MAX:
-            delta, fn, _, _, _ = contact_forces(y, P, SURF, C, levels)
-            dr = residual(delta, SURF[s, S_DC]) if SURF[s, S_LAW] == 0 else 0.0
-            C[C_DM], C[C_PM], C[C_DR] = delta, fn, dr
-            if not 0.0 <= dr < delta:
-                return False
-            C[C_RR] = restitution_radius(delta, dr, fn, SURF[s, S_E])
-            C[C_PEAK] = max(C[C_PEAK], fn)
-            C[C_PHASE] = RESTITUTION
-            info[0], info[1], info[2], info[3] = delta, fn, dr, C[C_RR]
-        elif kind == EV_SEP:
-            # keep the dent: a re-strike before the tip leaves it meets the dent's floor.
-            # The contact event fires when level - y_B rises through zero from below; the
-            # located separation leaves y_B on the new level to rounding, and a +1e-20 there
-            # made the next contact undetectable (the tip of a controller pressing down
-            # tunnelled through the floor). Keep the level strictly below the tip.
-            y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
-            if HAS_MOUNT:
-                # the dent is in the plate: its level is kept in the plate's frame
-                z = plate_displacement(y, SURF, s)
-                y_rel = y_tip - z
-                scale = max(abs(y_tip), abs(z))
-                levels[s] = min(levels[s] - C[C_DR], y_rel - 4.0 * np.spacing(scale))
-            else:
-                levels[s] = min(levels[s] - C[C_DR], y_tip - 4.0 * np.spacing(abs(y_tip)))
-            info[0], info[1], info[2] = C[C_PEAK], C[C_DM], C[C_DR]
-            C[C_PHASE], C[C_SURF] = FREE, -1.0
+    s = int(C[C_SURF])
+    if kind == EV_YIELD:
+        C[C_PHASE] = ELASTOPLASTIC
+    elif kind == EV_MAX:
+        delta, fn, _, _, _ = contact_forces(y, P, SURF, C, levels)
+        dr = residual(delta, SURF[s, S_DC]) if SURF[s, S_LAW] == 0 else 0.0
+        C[C_DM], C[C_PM], C[C_DR] = delta, fn, dr
+        if not 0.0 <= dr < delta:
+            return False
+        C[C_RR] = restitution_radius(delta, dr, fn, SURF[s, S_E])
+        C[C_PEAK] = max(C[C_PEAK], fn)
+        C[C_PHASE] = RESTITUTION
+        info[0], info[1], info[2], info[3] = delta, fn, dr, C[C_RR]
+    elif kind == EV_SEP:
+        # keep the dent: a re-strike before the tip leaves it meets the dent's floor.
+        # The contact event fires when level - y_B rises through zero from below; the
+        # located separation leaves y_B on the new level to rounding, and a +1e-20 there
+        # made the next contact undetectable (the tip of a controller pressing down
+        # tunnelled through the floor). Keep the level strictly below the tip.
+        y_tip = tip(y[:N], y[N : 2 * N], P[P_L : P_L + NL])[1]
+        if HAS_MOUNT:
+            # the dent is in the plate: its level is kept in the plate's frame
+            z = plate_displacement(y, SURF, s)
+            y_rel = y_tip - z
+            scale = max(abs(y_tip), abs(z))
+            levels[s] = min(levels[s] - C[C_DR], y_rel - 4.0 * np.spacing(scale))
+        else:
+            levels[s] = min(levels[s] - C[C_DR], y_tip - 4.0 * np.spacing(abs(y_tip)))
+        info[0], info[1], info[2] = C[C_PEAK], C[C_DM], C[C_DR]
+        C[C_PHASE], C[C_SURF] = FREE, -1.0
     return True

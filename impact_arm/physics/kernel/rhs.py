@@ -13,6 +13,14 @@ from .injected import *
 # --- template: equations.py copies what follows into the generated module ---
 
 
+@jit_leaf
+def integral_states(y):
+    """PID integral states in the state y: N for a continuous PID, else 0. The model sizes
+    the state (``ArmModel.size``), so this is a value read from its length, not a kernel
+    shape; the mounted plates' z, ż come after them."""
+    return y.shape[0] - 2 * N - 2 * NM
+
+
 @jit
 def solve_mass_matrix(q, qd, generalized, P, out, S):
     """q̈ into ``out`` from the mass matrix, with the joints' armature added (zero is off):
@@ -142,9 +150,8 @@ def contact_forces(y, P, SURF, C, levels):
     else:
         fn = restitution_force(delta, C[C_DR], SURF[s, S_E], C[C_RR])
     ff = 0.0
-    if HAS_FRICTION:
-        if SURF[s, S_MU] > 0:
-            ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])
+    if SURF[s, S_MU] > 0:
+        ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])
     return delta, fn, ff, tip_state[2], tip_state[3]
 
 
@@ -190,9 +197,8 @@ def contact_frequency(y, P, SURF, C, levels, work):
 @jit_leaf
 def control_torque(y, P, I, C, tau_held, tau, error, rate):
     """Joint torques acting now into ``tau``; False when the actuators are off."""
-    if HAS_CONTACT:
-        if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
-            return False
+    if int(C[C_PHASE]) != FREE and I[I_ACT] == 0:
+        return False
     law = I[I_LAW]
     if law == LAW_NONE:
         return False
@@ -215,11 +221,11 @@ def control_torque(y, P, I, C, tau_held, tau, error, rate):
         )
         return True
     pid_error(q, qd, target, I[I_SPACE] == 1, error, rate)
-    if NI > 0:
+    if integral_states(y) > 0:
         pid_law(
             error,
             rate,
-            y[2 * N : 2 * N + NI],
+            y[2 * N : 3 * N],
             P[P_KP : P_KP + N],
             P[P_KD : P_KD + N],
             P[P_KI : P_KI + N],
@@ -245,12 +251,11 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     for i in range(N):
         generalized[i] = 0.0
     fn = 0.0
-    if HAS_CONTACT:
-        if int(C[C_PHASE]) != FREE:
-            delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
-            jac = tip_jacobian(q, P[P_L : P_L + NL])
-            for i in range(N):
-                generalized[i] += jac[i] * ff + jac[N + i] * fn
+    if int(C[C_PHASE]) != FREE:
+        delta, fn, ff, vx, vy = contact_forces(y, P, SURF, C, levels)
+        jac = tip_jacobian(q, P[P_L : P_L + NL])
+        for i in range(N):
+            generalized[i] += jac[i] * ff + jac[N + i] * fn
     acting = control_torque(y, P, I, C, tau_held, tau, error, rate)
     if acting:
         add_joint_torques(tau, generalized)
@@ -259,10 +264,11 @@ def rhs(t, y, out, P, I, SURF, C, levels, tau_held, stats, W):
     for i in range(N):
         out[i] = qd[i]
     accelerations(q, qd, generalized, P, out[N : 2 * N], W[W_MASS:])
-    if NI > 0:
+    ni = integral_states(y)
+    if ni > 0:
         # the integral runs only while the controller acts (it is off during contact);
         # control_torque left the PID error in ``error``
-        for i in range(NI):
+        for i in range(ni):
             out[2 * N + i] = error[i] if acting else 0.0
     if HAS_MOUNT:
         # each plate on its spring-damper about rest; the one struck carries the contact force

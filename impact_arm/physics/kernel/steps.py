@@ -208,9 +208,8 @@ def error_norm(err, y0, y1, rtol, atol):
 @jit_leaf
 def phase_tolerances(P, C):
     """(rtol, atol) of the current phase: contact phases have their own (see PhaseIntegrator)."""
-    if HAS_CONTACT:
-        if int(C[C_PHASE]) != FREE:
-            return P[P_CRTOL], P[P_CATOL]
+    if int(C[C_PHASE]) != FREE:
+        return P[P_CRTOL], P[P_CATOL]
     return P[P_RTOL], P[P_ATOL]
 
 
