@@ -48,7 +48,6 @@ from ..contract import (
     PLANE_AXIS_IN_WORLD,
     PLANE_FRAME_ROTATION,
     WORLD_FRAME,
-    joint_names,
     plane_rotation,
     surface_frame,
     to_joint_space,
@@ -204,7 +203,7 @@ def robot_description(
         _sub(_sub(robot, 'material', name=colour), 'color', rgba=rgba)
     _sub(robot, 'link', name=WORLD)
     links = link_names(scene.n_links)
-    joints = joint_names(scene.n_links)
+    joints = list(scene.joint_names)
     for k, (link_name, L, m, (cx, cy), i_c) in enumerate(
         zip(links, scene.lengths, scene.masses, scene.link_com, scene.link_inertias)
     ):
