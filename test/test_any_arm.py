@@ -217,6 +217,12 @@ def test_a_urdf_arm_runs_under_its_own_joint_names_and_its_recording_reads_back(
     robot = ET.fromstring(description.data)
     moving = [j.get('name') for j in robot.findall('joint') if j.get('type') != 'fixed']
     assert moving == urdf_joints
+    # whose links, the URDF's, are the frames /tf moves
+    links = [
+        j.find('child').get('link') for j in robot.findall('joint') if j.get('type') != 'fixed'
+    ]
+    assert links == ['upper_arm', 'forearm', 'hand']
+    assert all([t.child_frame_id for t in m.transforms][:3] == links for m in by_topic['/tf'])
 
     # read back as fit and compare read it: the joints of the scene the recording stores
     stored = recorded_scene(recording)
