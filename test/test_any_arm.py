@@ -167,3 +167,74 @@ def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
     assert not run._struck(2)
     run.impacts.append(report(0.619))
     assert run._struck(2)
+
+
+def write_urdf_arm_scene(directory, cycles=1) -> Path:
+    """The example three-link URDF arm (examples/three_link.yaml and .urdf) copied into
+    ``directory``, ``cycles`` down/up cycles; returns the scene's path."""
+    import yaml
+
+    examples = Path(__file__).resolve().parents[1] / 'examples'
+    data = yaml.safe_load((examples / 'three_link.yaml').read_text(encoding='utf-8'))
+    (directory / data['arm']['urdf']).write_text(
+        (examples / data['arm']['urdf']).read_text(encoding='utf-8'), encoding='utf-8'
+    )
+    data['cycles'], data['t_max'] = cycles, 10.0
+    path = directory / 'three_link.yaml'
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding='utf-8')
+    return path
+
+
+@pytest.mark.slow
+def test_a_urdf_arm_runs_under_its_own_joint_names_and_its_recording_reads_back(ros_env, tmp_path):
+    import xml.etree.ElementTree as ET
+
+    from impact_arm.io.recording import read_recording, recorded_scene
+    from impact_arm.tools.fit import fit_recording
+
+    urdf_joints = ['shoulder', 'elbow', 'wrist']  # examples/three_link.urdf's joints
+    cycles = 2  # the first impact has free samples after it, to fit
+    scene_path = write_urdf_arm_scene(tmp_path, cycles)
+    code, out = impact_arm_run(
+        ['--scene', str(scene_path), '--mode', 'lockstep', '--name', 'arm', '--out', 'runs'],
+        ros_env,
+        tmp_path,
+    )
+    assert code == 0, out
+    assert ': complete' in out and 'failed' not in out, out
+    recording = tmp_path / 'runs' / 'arm.mcap'
+    by_topic = read_back(recording)
+
+    # the simulator publishes, and the controller drives, the URDF's joints by their names
+    states = by_topic['/joint_states']
+    assert states and all(list(m.name) == urdf_joints for m in states)
+    commands = by_topic['/effort_controller/commands']
+    assert commands and all(len(c.data) == len(urdf_joints) for c in commands)
+    reports = [json.loads(m.data) for m in by_topic['/impact_report']]
+    assert len(reports) >= cycles
+    # the robot description names them so too (its revolute joints; the rest are fixed)
+    (description,) = by_topic['/robot_description']
+    robot = ET.fromstring(description.data)
+    moving = [j.get('name') for j in robot.findall('joint') if j.get('type') != 'fixed']
+    assert moving == urdf_joints
+    # whose links, the URDF's, are the frames /tf moves
+    links = [
+        j.find('child').get('link') for j in robot.findall('joint') if j.get('type') != 'fixed'
+    ]
+    assert links == ['upper_arm', 'forearm', 'hand']
+    assert all([t.child_frame_id for t in m.transforms][:3] == links for m in by_topic['/tf'])
+
+    # read back as fit and compare read it: the joints of the scene the recording stores
+    stored = recorded_scene(recording)
+    assert list(stored.joint_names) == urdf_joints
+    rec = read_recording(recording, scene_joints=stored.joint_names)
+    assert list(rec.joints) == urdf_joints
+    assert rec.position.shape[1] == len(urdf_joints) and len(rec.position) > len(states) / 2
+    assert np.all(np.isfinite(rec.position))
+    # and fitted (scene=None: the stored scene): the yield strength the arm was simulated with
+    # comes back from the recorded joint rates, started 40 % off
+    result = fit_recording(
+        recording, None, {'materials.steel.S_y': (0.5e9, 2e9, 0.7e9)}, out=False, say=lambda s: None
+    )
+    assert result.impacts_used >= 1
+    assert result.parameters['materials.steel.S_y'].value == pytest.approx(1.12e9, rel=1e-3)

@@ -3,6 +3,7 @@
 and refused, naming the joint and why, when it is not a planar chain the model can be."""
 
 import copy
+import xml.etree.ElementTree as ET
 import json
 import math
 import os
@@ -774,3 +775,19 @@ def test_impact_arm_run_of_a_urdf_arm_completes_and_puts_its_tip_on_the_surface(
         config = np.array([math.cos(theta[0]), math.sin(theta[0]), theta[1], theta[2]])
         pin.framesForwardKinematics(model, data, config)
         assert at_contact == pytest.approx(data.oMf[model.getFrameId('tool')].translation, abs=1e-9)
+
+
+def test_the_description_names_a_urdf_arms_links_and_joints_as_its_urdf_does(tmp_path):
+    from impact_arm.io.urdf import VisualSettingError, robot_description
+
+    text, _, _ = random_urdf(np.random.default_rng(1), 3)
+    scene = load(tmp_path, text, 3)
+    assert scene.joint_names == ('j0', 'j1', 'j2')
+    robot = ET.fromstring(robot_description(scene))
+    moving = [j for j in robot.findall('joint') if j.get('type') != 'fixed']
+    assert [j.get('name') for j in moving] == ['j0', 'j1', 'j2']
+    assert [j.find('child').get('link') for j in moving] == ['l0', 'l1', 'l2']
+    # a link named as a frame the description adds would make two links of one name
+    clash = load(tmp_path, text.replace('"l1"', '"tip"'), 3)
+    with pytest.raises(VisualSettingError, match="arm.urdf link 'tip'"):
+        robot_description(clash)

@@ -84,7 +84,6 @@ from ..contract import (
     TRACE_QOS,
     TRACE_TYPE,
     WRENCH_FRAME,
-    joint_names,
     to_joint_space,
 )
 from ..driver.sensors import Sensors
@@ -140,7 +139,7 @@ class OfflineRecorder:
         self.n = scene.n_links
         self._store = typestore()
         self._types = self._store.types
-        self._names = joint_names(self.n)
+        self._names = list(scene.joint_names)
         self._columns = trace_columns(self.n)
         self._mount_frames = [frame for frame, _ in mounted_surfaces(scene)]
         self.topics = dict(OFFLINE_TOPICS)

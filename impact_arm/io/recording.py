@@ -106,8 +106,10 @@ def read_recording(
     states_topic: str = JOINT_STATES,
     wrench_topic: str | None = None,
     progress: Callable[..., Any] | None = None,
+    scene_joints: Sequence[str] | None = None,
 ) -> JointRecording:
-    """The joint states of ``joints`` (default joint1..jointN) and, if recorded, the wrench.
+    """The joint states of ``joints`` (default ``scene_joints``, the recorded arm's scene's
+    ``Scene.joint_names``; without it joint1..jointN) and, if recorded, the wrench.
 
     ``wrench_topic`` None reads ``/contact_wrench`` when the recording has it; a topic named
     explicitly must be there. Samples whose values are not finite are dropped and counted in
@@ -115,7 +117,7 @@ def read_recording(
     files = mcap_files(path)
     topics = _topics(files)
     given = bool(joints)
-    joints = list(joints) if joints else joint_names(n_joints)
+    joints = list(joints or scene_joints or joint_names(n_joints))
     if states_topic not in topics:
         raise RecordingInputError(
             f'--states-topic {states_topic}: not in the recording '

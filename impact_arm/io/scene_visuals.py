@@ -59,6 +59,7 @@ from .urdf import (
     moving_transforms,
     robot_description,
     rod_radius_of,
+    scene_link_names,
     static_transforms,
     surface_frames,
 )
@@ -149,6 +150,7 @@ class SceneVisuals:
         self._Marker = Marker
         self.reach = math.fsum(scene.lengths)
         self.mounted = mounted_surfaces(scene)
+        self.links = scene_link_names(scene)  # the frames /tf moves, as the description names them
         self._next_tf = 0  # index k of the next /tf time k / tf_rate
         self.impacts: list[tuple] = []  # (contact stamp [ns], contact point (x, z), F_max [N])
         self._events: list[tuple] = []  # event frames not yet taken: (stamp [ns], q)
@@ -187,7 +189,7 @@ class SceneVisuals:
     def tf(self, q: Sequence[float], t_ns: int, plates: Sequence[float] | None = None) -> Any:
         """The joint transforms for absolute link angles ``q``; with ``plates`` ((z, ż) per
         mounted surface, flat, of the same instant) also each mounted surface's frame."""
-        transforms = moving_transforms(self.scene.lengths, q)
+        transforms = moving_transforms(self.scene.lengths, q, self.links)
         if plates is not None:
             transforms += self._surface_transforms(plates)
         return self._TF(transforms=[self._transform(t, t_ns) for t in transforms])

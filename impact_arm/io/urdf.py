@@ -48,7 +48,6 @@ from ..contract import (
     PLANE_AXIS_IN_WORLD,
     PLANE_FRAME_ROTATION,
     WORLD_FRAME,
-    joint_names,
     plane_rotation,
     surface_frame,
     to_joint_space,
@@ -75,6 +74,22 @@ SURFACE_THICKNESS_PER_REACH = 0.02
 
 def link_names(n_links: int) -> list:
     return [f'link{i + 1}' for i in range(n_links)]
+
+
+def scene_link_names(scene: Scene) -> list[str]:
+    """The frames of ``scene``'s moving links, base first: a URDF arm's own link names (as
+    its joints keep theirs, ``Scene.joint_names``), else link1..N. Refused in one line when a
+    URDF link takes the name of a frame the description adds (world, tip, the surfaces)."""
+    if not scene.link_names:
+        return link_names(scene.n_links)
+    reserved = {WORLD, TIP, *surface_frames(scene)}
+    taken = [name for name in scene.link_names if name in reserved]
+    if taken:
+        raise VisualSettingError(
+            f"arm.urdf link '{taken[0]}': the name of a frame the description adds "
+            f'({", ".join(sorted(reserved))}): rename the link'
+        )
+    return list(scene.link_names)
 
 
 def surface_frames(scene: Scene) -> list[str]:
@@ -123,9 +138,12 @@ class Transform(NamedTuple):
         return self.rotation
 
 
-def moving_transforms(lengths: Sequence[float], q: Sequence[float]) -> list[Transform]:
-    """The joint transforms for absolute link angles ``q`` (one per link, chain order)."""
-    links = link_names(len(lengths))
+def moving_transforms(
+    lengths: Sequence[float], q: Sequence[float], links: Sequence[str] | None = None
+) -> list[Transform]:
+    """The joint transforms for absolute link angles ``q`` (one per link, chain order), into
+    the frames ``links`` (default link1..N; a scene's: ``scene_link_names``)."""
+    links = list(links) if links else link_names(len(lengths))
     out = [Transform(WORLD, links[0], 0.0, 0.0, 0.0, plane_rotation(float(q[0])))]
     for k in range(1, len(lengths)):
         out.append(
@@ -146,7 +164,7 @@ def static_transforms(scene: Scene) -> list[Transform]:
     along, across = scene.contact_point
     out = [
         Transform(
-            link_names(scene.n_links)[-1],
+            scene_link_names(scene)[-1],
             TIP,
             float(along),
             0.0,
@@ -203,8 +221,8 @@ def robot_description(
     ):
         _sub(_sub(robot, 'material', name=colour), 'color', rgba=rgba)
     _sub(robot, 'link', name=WORLD)
-    links = link_names(scene.n_links)
-    joints = joint_names(scene.n_links)
+    links = scene_link_names(scene)
+    joints = list(scene.joint_names)
     for k, (link_name, L, m, (cx, cy), i_c) in enumerate(
         zip(links, scene.lengths, scene.masses, scene.link_com, scene.link_inertias)
     ):

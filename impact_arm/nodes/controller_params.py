@@ -194,7 +194,7 @@ def parameter_table(scene):
             'strs',
             size=n,
             read_only=True,
-            shown_default="the scene's: `[joint1, …, jointN]`",
+            shown_default="the scene's: its URDF's joint names, else `[joint1, …, jointN]`",
         ),
         Param(
             'command_readers',

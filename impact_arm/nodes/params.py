@@ -20,7 +20,6 @@ from rcl_interfaces.msg import (
 
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
-from ..contract import joint_names
 from ..physics.errors import ImpactArmError
 
 
@@ -137,9 +136,9 @@ class Param:
 
 
 def scene_joint_names(scene) -> list:
-    """The joint names of ``scene``'s arm, base first: every node names the joints by this
-    one function (the scene's number of links decides how many)."""
-    return joint_names(scene.n_links)
+    """The joint names of ``scene``'s arm, base first (``Scene.joint_names``: a URDF arm's
+    own, else joint1..N): every node names the joints by this one function."""
+    return list(scene.joint_names)
 
 
 def check_joints(given, names, parameter='joints') -> list:

@@ -24,7 +24,7 @@ def parameter_table(scene):
                 'strs',
                 size=scene.n_links,
                 read_only=True,
-                shown_default="the scene's: `[joint1, …, jointN]`",
+                shown_default="the scene's: its URDF's joint names, else `[joint1, …, jointN]`",
             ),
         )
         + _PARAMS_AFTER_JOINTS

@@ -190,6 +190,13 @@ class Scene:
         return self.joints or tuple(JointSpec(f'joint{i + 1}') for i in range(len(self.lengths)))
 
     @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The arm's joint names, base first: a URDF arm's own (its ``<joint name>``), joint1..N
+        for the scene's ``links``. Every node, topic, description and recording names the
+        joints by this."""
+        return tuple(spec.name for spec in self.joint_specs)
+
+    @property
     def link_com(self) -> tuple[tuple[float, float], ...]:
         """Each link's centre of mass (along, across) from its joint [m]."""
         return self.com or rod_centres(self.lengths)

@@ -115,12 +115,17 @@ def compare(
     b_is_recording = _is_recording(b)
     kin_scene = scene_of(a, scene)[0] if b_is_recording else b
     study = Study(kin_scene)
-    n = study.scene().n_links
-    rec_a = read_recording(a, joints, n, states_topic or JOINT_STATES, wrench_topic)
+    kin = study.scene()
+    n, names = kin.n_links, kin.joint_names
+    rec_a = read_recording(
+        a, joints, n, states_topic or JOINT_STATES, wrench_topic, scene_joints=names
+    )
     a_rows, preds, _ = recorded_impacts(rec_a, study)
     a_origin = a_rows[0]['t'] if a_rows else 0.0
     if b_is_recording:
-        rec_b = read_recording(b, joints, n, states_topic or JOINT_STATES, wrench_topic)
+        rec_b = read_recording(
+            b, joints, n, states_topic or JOINT_STATES, wrench_topic, scene_joints=names
+        )
         b_rows = recorded_impacts(rec_b, study)[0]
         what = f'recording {b}'
     elif controller:

@@ -86,7 +86,12 @@ def fit_recording(
     scene, scene_name = scene_of(recording, scene)
     base = Study(scene).scene()
     rec = read_recording(
-        recording, joints, base.n_links, states_topic or JOINT_STATES, wrench_topic
+        recording,
+        joints,
+        base.n_links,
+        states_topic or JOINT_STATES,
+        wrench_topic,
+        scene_joints=base.joint_names,
     )
     diagnosis = diagnose(rec, ArmModel(base))
     rec = correct(rec, corrections or Corrections(), diagnosis)

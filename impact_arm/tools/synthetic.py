@@ -70,7 +70,7 @@ def synthetic_recording(
         position=q[keep],
         velocity=qd[keep],
         effort=tau[keep],
-        joints=[f'joint{i + 1}' for i in range(q.shape[1])],
+        joints=list(sc.joint_names),
         source=f'synthetic {scene}',
         t0_ns=round(stamps[keep][0] * 1e9),
     )
@@ -203,7 +203,7 @@ def driver_recording(
         effort=tau,
         wrench_t=t - t[0],
         wrench=w,
-        joints=[f'joint{i + 1}' for i in range(q.shape[1])],
+        joints=list(sc.joint_names),
         source=f'driver {scene}',
         t0_ns=round(t[0] * 1e9),
     )
