@@ -45,7 +45,7 @@ def test_grid_output_is_as_accurate_as_stepping_to_each_grid_time(method, rtol):
     options = dict(rtol=rtol, atol=rtol * 1e-2, method=method)
     states, torques, impulses, stepped_stats = stepped(model, times, **options)
     rows, stats = with_output(model, times[-1], DT, **options)
-    n, size = model.n, model.size
+    n, size, eq = model.n, model.size, model.eq
     assert np.array_equal(rows[:, 0], times)  # exactly the grid, nothing skipped
     scale = np.abs(reference[:, : 2 * n]).max(axis=0) + 1e-3
 
@@ -54,15 +54,15 @@ def test_grid_output_is_as_accurate_as_stepping_to_each_grid_time(method, rtol):
 
     # (after the impacts the trajectories of both part from the reference alike: the
     # rebound amplifies the impact's error, so the bound is relative to the stepped run's)
-    assert error(rows[:, 1 : 1 + size]) <= 3 * error(states) + 1e-9, (
-        error(rows[:, 1 : 1 + size]),
+    assert error(rows[:, eq.R_Y : eq.R_Y + size]) <= 3 * error(states) + 1e-9, (
+        error(rows[:, eq.R_Y : eq.R_Y + size]),
         error(states),
     )
     assert stats.steps < 0.7 * stepped_stats.steps, (stats.steps, stepped_stats.steps)
     # torque and impulse of each row: what the stepped integration saw over that period
-    tau = rows[:, 3 + size : 3 + size + n]
+    tau = rows[:, eq.R_TAU : eq.R_TAU + n]
     assert np.max(np.abs(tau - torques)) < 10 * rtol * np.abs(torques).max()
-    impulse = rows[:, 1 + size : 3 + size]
+    impulse = rows[:, eq.R_JT : eq.R_JN + 1]
     assert np.max(np.abs(impulse - impulses)) < 10 * rtol * np.abs(impulses).max()
     assert np.abs(impulses[:, 1]).max() > 1.0  # the window really holds impacts
 
@@ -83,8 +83,7 @@ def test_output_rows_split_an_impact_impulse_without_losing_any(law, preset, rel
         for event in integ.advance(0.002, stop_at_event=True):
             states[event.kind] = event.y
     rows = integ.take_output()
-    size = model.size
-    normal = rows[:, 2 + size]
+    normal = rows[:, model.eq.R_JN]
     dp = generalized_momentum(states['separation']) - generalized_momentum(states['contact'])
     assert (normal > 0).sum() >= 5  # spread over several rows
     assert normal.sum() + integ.take_impulse()[1] == pytest.approx(dp[0], rel=rel)
