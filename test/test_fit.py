@@ -683,3 +683,33 @@ def test_fit_and_compare_read_a_three_link_arm_with_the_scene_it_stores(
 def test_a_recording_of_more_joints_than_the_scene_has_is_refused(three_link_recording):
     with pytest.raises(RecordingInputError, match=r'names joint3 besides .*--scene'):
         read_recording(three_link_recording, n_joints=2)
+
+
+def test_the_fitted_force_drawn_beside_a_three_link_arms_wrench_is_its_own(three_link_recording):
+    """The impacts figure's fitted forces, period-averaged at the wrench's stamps, lie on the
+    recorded wrench of a noise-free recording of the same scene (they were read from the
+    wrong columns of the prediction for any arm but two links)."""
+    from impact_arm.calibration.fit import predict_impact
+    from impact_arm.tools.fit import fit_recording, fitted_period_forces
+
+    result = fit_recording(
+        three_link_recording, None, {'materials.steel.S_y': (2e8, 5e9)}, out=False, say=str
+    )
+    rec = result.recording
+    period = float(np.median(np.diff(rec.wrench_t)))
+    checked = 0
+    for win, pred in zip(result.windows, result.predictions):
+        if pred.error:
+            continue
+        inside = (rec.wrench_t > win.t_a) & (rec.wrench_t <= win.post_t[-1])
+        ts = rec.wrench_t[inside]
+        # as the figure asks: the path at each stamp and one period before it
+        at = np.concatenate([np.linspace(win.t_a, win.post_t[-1], 80), ts, ts - period])
+        dense = predict_impact(result.model, win, result.timing, dense=sorted(at))
+        tangential, normal = fitted_period_forces(dense.path, ts, period, rec.n)
+        peak = rec.wrench[inside, 1].max()
+        assert peak > 100.0  # an impact's period, not free flight
+        assert np.allclose(normal, rec.wrench[inside, 1], atol=0.02 * peak)
+        assert np.allclose(tangential, rec.wrench[inside, 0], atol=0.02 * peak)
+        checked += 1
+    assert checked >= 2

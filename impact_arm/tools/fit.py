@@ -264,6 +264,20 @@ def _ms_from(origin, t):
     return (np.asarray(t) - origin) * 1e3
 
 
+def fitted_period_forces(path, ts, period, n) -> tuple:
+    """The fitted contact force averaged over each period ending at ``ts`` (a wrench's
+    stamps), (tangential, normal), from a prediction's ``path`` rows: t, the ``n`` joint rates,
+    then the cumulative impulse (tangential, normal): the impulse gained over the period over
+    its length, as a driver's period-averaged wrench reports it."""
+    out = []
+    for col in (1 + n, 2 + n):
+        gained = np.interp(ts, path[:, 0], path[:, col]) - np.interp(
+            ts - period, path[:, 0], path[:, col]
+        )
+        out.append(gained / period)
+    return tuple(out)
+
+
 def write_figures(result, out) -> list:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
     # the object API with the Agg canvas, not pyplot: no backend machinery to import in the
@@ -285,11 +299,13 @@ def write_figures(result, out) -> list:
     for c, w in enumerate(wins):
         dt = w.t_b - w.t_a
         dense = np.linspace(w.t_a, w.post_t[-1], 80)
-        extra = list(dense) + (
-            list(rec.wrench_t[(rec.wrench_t > w.t_a) & (rec.wrench_t <= w.post_t[-1])])
-            if rec.wrench is not None
-            else []
-        )
+        extra = list(dense)
+        if rec.wrench is not None:
+            # the path at each wrench stamp and one period before: the fitted period
+            # averages are then differences of exact cumulative impulses
+            stamps = rec.wrench_t[(rec.wrench_t > w.t_a) & (rec.wrench_t <= w.post_t[-1])]
+            period = float(np.median(np.diff(rec.wrench_t)))
+            extra += list(stamps) + list(stamps[stamps - period > w.t_a] - period)
         pred = predict_impact(model, w, result.timing, dense=extra)
         ax = axes[0][c]
         lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
@@ -341,18 +357,11 @@ def write_figures(result, out) -> list:
                 dtw = float(np.median(np.diff(rec.wrench_t)))
                 ts = rec.wrench_t[wsel]
                 ts = ts[(ts > w.t_a) & (ts <= w.post_t[-1])]
-                for col, mark, name in ((4, 'x', 'normal'), (3, '+', 'tangential')):
-                    cum = np.interp(ts, pred.path[:, 0], pred.path[:, col]) - np.interp(
-                        ts - dtw, pred.path[:, 0], pred.path[:, col]
-                    )
-                    ax.plot(
-                        t_ms(ts),
-                        cum / dtw,
-                        mark,
-                        ms=9,
-                        color='tab:red' if col == 4 else 'tab:purple',
-                        label=f'{name} fitted',
-                    )
+                forces = fitted_period_forces(pred.path, ts, dtw, rec.n)
+                for (name, mark, color), values in zip(
+                    (('tangential', '+', 'tab:purple'), ('normal', 'x', 'tab:red')), forces
+                ):
+                    ax.plot(t_ms(ts), values, mark, ms=9, color=color, label=f'{name} fitted')
             ax.set_xlabel('time from contact [ms]')
             ax.set_ylabel('period-averaged force [N]')
             if c == 0:
