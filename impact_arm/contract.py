@@ -260,6 +260,11 @@ VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher
 
 def qos(topic: str, default: TopicQos = TopicQos()) -> TopicQos:
     """The QoS the contract gives ``topic`` (remapped names fall back to ``default``)."""
+    if topic == SURFACE_MOUNTS:
+        # not in TOPICS (only a scene with mounted surfaces publishes it), but a reader that
+        # subscribes before its publisher exists (the recorder) must still ask for reliable
+        # delivery: a best-effort reader got no repair and lost plate samples under load
+        return SURFACE_MOUNTS_QOS
     return TOPICS.get(topic, (None, default))[1]
 
 

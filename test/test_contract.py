@@ -151,3 +151,13 @@ def test_progress_lines_wait_for_the_compile_notice_to_end():
     assert lines[1] == f'{COMPILE_NOTICE} ...'
     assert lines[2].startswith(f'{COMPILE_NOTICE}: compiled in ')
     assert lines[3:] == ['analyze: figure 1/2', 'analyze: figure 2/2']
+
+
+def test_the_plate_topic_has_its_contract_qos_before_any_publisher_exists():
+    """The recorder subscribes to /surface_mounts before the simulator publishes it: the
+    contract, not the (absent) publishers' offer, gives its QoS, reliable and deep enough for
+    the lockstep writers' repairs."""
+    from impact_arm import contract
+
+    mounts = contract.qos(contract.SURFACE_MOUNTS, contract.TopicQos(reliability='best_effort'))
+    assert mounts == contract.SURFACE_MOUNTS_QOS and mounts.reliability == 'reliable'
