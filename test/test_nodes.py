@@ -546,7 +546,10 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path):
             for _, _, m in make_reader(f).iter_messages(topics=[contract.JOINT_STATES])
         ]
     lost = int(losses[f'lost:{contract.JOINT_STATES}'])
-    assert lost > 1000, losses  # ~3 000 periods of 1 ms
+    # ~3 000 periods of 1 ms went by; how many of them the transport still buffered for the
+    # frozen process varies (a fresh-clone CI run lost 75): that some were lost is the premise,
+    # the exact count is checked by the identity below
+    assert lost > 0, losses
     assert len(records) + lost + int(losses[f'before_first:{contract.JOINT_STATES}']) == int(
         sent[contract.JOINT_STATES]
     ), (len(records), losses, sent)
