@@ -90,6 +90,24 @@ def test_local_fit_differentiates_a_cubic_exactly():
     assert cov[1, 1] > 0
 
 
+def test_local_fit_of_difference_rates_rests_on_the_positions():
+    """Rates that are backward differences hold the positions' information, half a period
+    late: read as the derivative they would pull the cubic off; with their period given the
+    fit goes through the positions and its rate at the sample is the cubic's derivative."""
+    t = np.linspace(0.0, 0.014, 15)
+    c = np.array([0.3, -2.0, 40.0, 90000.0])
+
+    def q_of(x):
+        return c[0] + c[1] * x + c[2] * x**2 + c[3] * x**3
+
+    q = q_of(t)[:, None]
+    mean = ((q_of(t) - q_of(t - 1e-3)) / 1e-3)[:, None]
+    fitted = LocalFit(t, q, mean, t[-1], np.array([1e-5]), np.array([1e-2]), rate_period=1e-3)
+    exact = c[1] + 2 * c[2] * t[-1] + 3 * c[3] * t[-1] ** 2
+    assert fitted.state(t[-1])[1][0] == pytest.approx(exact, abs=1e-8)
+    assert fitted.mean_rates(t[-1:], 1e-3)[0, 0] == pytest.approx(mean[-1, 0], abs=1e-8)
+
+
 def test_a_rate_step_is_an_impact_a_rate_kink_is_not():
     t = np.arange(0, 0.2, 1e-3)
     v = np.where(t < 0.1005, -2.0, 1.0) + np.where(t > 0.0505, 3000 * (t - 0.0505), 0.0)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+import enum
 import math
 from dataclasses import dataclass, field
 
@@ -28,6 +29,15 @@ class IdentifyError(ImpactArmError):
     """A recording that does not allow an identification (no impact, too few samples)."""
 
 
+class RateMeaning(str, enum.Enum):
+    """What a recorded joint rate is."""
+
+    INSTANT = 'instant'  # the rate at the stamp (a drive's own velocity)
+    # (q(t) - q(t - period)) / period: a backward difference of the positions, the mean rate
+    # over the period before the stamp (a driver that differentiates its encoder)
+    PERIOD_MEAN = 'period_mean'
+
+
 @dataclass
 class JointRecording:
     t: np.ndarray  # [s] from the first sample (stamps of any clock)
@@ -40,6 +50,7 @@ class JointRecording:
     source: str = ''
     t0_ns: int = 0  # stamp of the first sample
     notes: list = field(default_factory=list)
+    rates: RateMeaning = RateMeaning.INSTANT
     if TYPE_CHECKING:  # set by find_impacts (not a dataclass field)
         step_z: np.ndarray = field(init=False)
 
@@ -50,6 +61,11 @@ class JointRecording:
     @property
     def period(self) -> float:
         return float(np.median(np.diff(self.t)))
+
+    @property
+    def rate_period(self) -> float | None:
+        """The period each recorded rate is the mean over, None for rates at the stamps."""
+        return self.period if self.rates is RateMeaning.PERIOD_MEAN else None
 
 
 @dataclass
@@ -72,11 +88,13 @@ class Noise:
 
 class LocalFit:
     """A cubic per joint through positions and rates together (rates are the positions'
-    derivative), weighted by their noise; ``state(t)`` gives q, q̇ and their covariance."""
+    derivative), weighted by their noise; ``state(t)`` gives q, q̇ and their covariance.
+    With ``rate_period`` (rates that are backward differences of the positions) the rates
+    hold nothing the positions do not: the cubic goes through the positions alone."""
 
     DEGREE = 3
 
-    def __init__(self, t, q, qd, t_ref, sigma_q, sigma_qd):
+    def __init__(self, t, q, qd, t_ref, sigma_q, sigma_qd, rate_period: float | None = None):
         self.t_ref, self.scale = t_ref, max(float(np.ptp(t)), 1e-6)
         tau = (np.asarray(t) - t_ref) / self.scale
         powers = np.arange(self.DEGREE + 1)
@@ -87,10 +105,14 @@ class LocalFit:
         self.coef = np.zeros((n, self.DEGREE + 1))
         self.cov = np.zeros((n, self.DEGREE + 1, self.DEGREE + 1))
         self.chi2 = 0.0
-        dof = 2 * len(tau) - (self.DEGREE + 1)
+        with_rates = rate_period is None
+        dof = (2 if with_rates else 1) * len(tau) - (self.DEGREE + 1)
         for j in range(n):
-            A = np.vstack([V / sigma_q[j], D / sigma_qd[j]])
-            b = np.concatenate([q[:, j] / sigma_q[j], qd[:, j] / sigma_qd[j]])
+            if with_rates:
+                A = np.vstack([V / sigma_q[j], D / sigma_qd[j]])
+                b = np.concatenate([q[:, j] / sigma_q[j], qd[:, j] / sigma_qd[j]])
+            else:
+                A, b = V / sigma_q[j], q[:, j] / sigma_q[j]
             coef, *_ = np.linalg.lstsq(A, b, rcond=None)
             chi2 = float(np.sum((A @ coef - b) ** 2))
             # a window the cubic cannot follow (unmodelled jerk) widens its own uncertainty
@@ -111,6 +133,11 @@ class LocalFit:
         """q at each of the times ``t``: (len(t), n)."""
         tau = (np.asarray(t, float) - self.t_ref) / self.scale
         return (tau[:, None] ** np.arange(self.DEGREE + 1)) @ self.coef.T
+
+    def mean_rates(self, t: np.ndarray, period: float) -> np.ndarray:
+        """(q(t) - q(t - period)) / period at each of the times ``t``: (len(t), n)."""
+        t = np.asarray(t, float)
+        return (self.positions(t) - self.positions(t - period)) / period
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at ``t``: cov is (2n, 2n) over [q, q̇] (joints independent)."""
@@ -144,6 +171,9 @@ class ImpactWindow:
     effort_t: np.ndarray  # their times
     post_t: np.ndarray  # first m samples after the impact
     post_qd: np.ndarray  # their rates (m, n)
+    # rates that are means over the period before their stamps (``RateMeaning.PERIOD_MEAN``):
+    # that period [s]; None: rates at the stamps
+    rate_period: float | None = None
     impulse: np.ndarray | None = None  # (tangential, normal) [N s]
     impulse_var: np.ndarray | None = None
     rate_sigma: np.ndarray | None = None  # the rates' noise per joint [rad/s]
@@ -373,6 +403,7 @@ def make_window(
             rec.t[ref],
             noise.position,
             noise.velocity,
+            rec.rate_period,
         )
         for idx, ref in ((pre_idx, a), (post_idx, b))
     ]
@@ -394,6 +425,7 @@ def make_window(
         effort_t=rec.t[e_idx].copy(),
         post_t=rec.t[compare].copy(),
         post_qd=rec.velocity[compare].copy(),
+        rate_period=rec.rate_period,
         rate_sigma=noise.velocity,
     )
     win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
@@ -441,6 +473,7 @@ def _contact_under_way(rec, noise, pre_idx, b, limit=6.0) -> bool:
     step across the impact: noise-free data leave only the cubic's own error): a contact
     already under way."""
     head, last = pre_idx[:-1], pre_idx[-1]
+    period = rec.rate_period
     fit = LocalFit(
         rec.t[head],
         rec.position[head],
@@ -448,10 +481,13 @@ def _contact_under_way(rec, noise, pre_idx, b, limit=6.0) -> bool:
         rec.t[head[-1]],
         noise.position,
         noise.velocity,
+        period,
     )
     _, qd, cov = fit.state(rec.t[last])
     n = rec.n
     sd = np.sqrt(np.diag(cov)[n:] + noise.velocity**2)
+    if period is not None:  # the recorded rate is the mean over the period before the stamp
+        qd = fit.mean_rates(np.array([rec.t[last]]), period)[0]
     floor = 1e-3 * float(np.max(np.abs(rec.velocity[b] - rec.velocity[last])))
     return bool(np.any(np.abs(rec.velocity[last] - qd) > np.maximum(limit * sd, floor)))
 

@@ -77,11 +77,14 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
     T = joint_to_absolute_matrix(n)
     torque = TorqueSchedule(win, timing)
     q_post = [win.post.state(t)[0] for t in win.post_t]
+    period = win.rate_period
     err = 0.0
     for k in range(len(win.post_t) - 1):
         state = model.initial_state()
         state.t = win.post_t[k]
-        state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ win.post_qd[k]
+        # rates that are period means: the rate at the sample from the fit of its positions
+        qd = win.post_qd[k] if period is None else win.post.state(win.post_t[k])[1]
+        state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ qd
         held = timing != 'controller'
         state.mode = 'up'  # after an impact the scene's controller lifts the arm
         integ = PhaseIntegrator(
@@ -96,9 +99,14 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
             return math.inf
         if integ.state.phase != 0:
             return math.inf
-        err += float(
-            np.sum((np.linalg.solve(T, integ.state.y[n : 2 * n]) - win.post_qd[k + 1]) ** 2)
-        )
+        if period is None:
+            predicted = np.linalg.solve(T, integ.state.y[n : 2 * n])
+        else:  # the mean rate over the period before the next sample
+            dt = win.post_t[k + 1] - win.post_t[k]
+            if abs(dt - period) > 0.25 * period:
+                continue  # a sample lost between: its rate is not over this period
+            predicted = (np.linalg.solve(T, integ.state.y[:n]) - q_post[k]) / dt
+        err += float(np.sum((predicted - win.post_qd[k + 1]) ** 2))
     return err
 
 

@@ -104,8 +104,17 @@ def predict_impact(
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
     targets = list(win.post_t)
     edges = torque.boundaries(t0, targets[-1])
+    extra: set[float] = set()
     if dense is not None:
-        edges = sorted(set(edges) | {float(x) for x in dense if t0 < x < targets[-1]})
+        extra |= {float(x) for x in dense if t0 < x < targets[-1]}
+    # rates recorded as means over the period before their stamps: the replay's positions
+    # one period before each compared sample give the same mean (like compared with like)
+    period = win.rate_period
+    positions: dict[float, np.ndarray] = {}
+    if period is not None:
+        extra |= {float(x) - period for x in targets if float(x) - period > t0}
+    if extra:
+        edges = sorted(set(edges) | extra)
     try:
         for edge in edges:
             while integ.state.t < edge:
@@ -120,6 +129,8 @@ def predict_impact(
                         side = 'contact'
                     elif event.kind == 'separation':
                         last, side = event, 'post'
+            if period is not None:
+                positions[edge] = np.linalg.solve(T, integ.state.y[:n])
             if dense is not None:
                 impulse += integ.take_impulse()
                 path.append(
@@ -163,7 +174,16 @@ def predict_impact(
                     )
                 # else in a further contact begun since: the rates there are continuous in
                 # the parameters (it has only just begun when it appears), compare them
-                rates.append(np.linalg.solve(T, integ.state.y[n : 2 * n]))
+                if period is None:
+                    rates.append(np.linalg.solve(T, integ.state.y[n : 2 * n]))
+                else:
+                    rates.append(
+                        (
+                            np.linalg.solve(T, integ.state.y[:n])
+                            - _position_at(positions, edge - period, q, qd, t0)
+                        )
+                        / period
+                    )
                 targets.pop(0)
     except SimulationError as exc:
         return failed(n, FailureKind.SIMULATION, str(exc))
@@ -179,6 +199,17 @@ def predict_impact(
     pred.path = np.array(path)
     pred.t_sep, pred.y_sep = last.t, last.y[: 2 * n].copy()
     return pred
+
+
+def _position_at(
+    positions: dict[float, np.ndarray], t: float, q0: np.ndarray, qd0: np.ndarray, t0: float
+) -> np.ndarray:
+    """The replay's joint positions at ``t``: recorded at an edge, or (at or before the
+    replay's start ``t0``, where stamps a rounding apart put it) from the start state."""
+    if t > t0 + 1e-12:
+        key = min(positions, key=lambda x: abs(x - t))
+        return positions[key]
+    return q0 + qd0 * (t - t0)
 
 
 def free_flight(
@@ -228,7 +259,9 @@ def recorded_separation_rates(
             return None
         A[:, k] = (moved - base) / 1e-4
     qd_sep = np.linalg.solve(T, pred.y_sep[n : 2 * n])
-    return qd_sep + np.linalg.solve(A, win.post_qd[0] - base)
+    # rates that are period means: the rate at the sample from the fit of its positions
+    target = win.post_qd[0] if win.rate_period is None else win.post.state(t1)[1]
+    return qd_sep + np.linalg.solve(A, target - base)
 
 
 def recorded_cor(
