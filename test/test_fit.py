@@ -731,3 +731,58 @@ def test_the_fitted_force_drawn_beside_a_three_link_arms_wrench_is_its_own(three
         assert np.allclose(tangential, rec.wrench[inside, 0], atol=0.02 * peak)
         checked += 1
     assert checked >= 2
+
+
+# ------------------------------------------------------------------ sensor latencies fitted
+def late_driver_recording(overrides):
+    """The simulated driver's loop (1 kHz sampled controller, each effort the command held
+    over the period that ends at its stamp) through a scene whose sensors are late."""
+    from impact_arm.tools.synthetic import driver_recording
+
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    over = {**truth, 'controller.rate': 1000.0, **overrides}
+    return truth, driver_recording('paper', over, cycles=6, seed=3, noise=noise)
+
+
+def sampled_scene():
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    return apply_overrides(Study('paper').data, {'controller.rate': 1000.0})
+
+
+def test_an_effort_latency_is_fitted_with_its_interval():
+    """Efforts 2 ms late (the driver's sensors.effort_latency): fixed at 0 the fit does not
+    fit and says that no reading of the efforts explains the free flight; freed (started at
+    0), the latency and the reading are chosen together, and every interval covers the truth."""
+    truth, rec = late_driver_recording({'sensors.effort_latency': 0.002})
+    fixed = fit(rec, sampled_scene(), BOUNDS)
+    assert fixed.verdict.startswith('does not fit: '), fixed.verdict
+    assert 'no reading of the recorded efforts predicts the free flight' in fixed.verdict
+    assert 'sensors.effort_latency' in fixed.verdict
+    freed = fit(rec, sampled_scene(), BOUNDS | {'sensors.effort_latency': (0.0, 0.005)})
+    assert freed.fits, freed.verdict
+    assert freed.timing == 'previous'
+    for key, value in (truth | {'sensors.effort_latency': 0.002}).items():
+        p = freed.parameters[key]
+        assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)
+
+
+def test_a_wrench_latency_is_fitted_with_its_interval():
+    """The wrench published 2 ms late (sensors.wrench_latency): fixed at 0 the impulse is
+    summed over the wrong periods, the fit does not fit and says the force comes after them;
+    freed, each impact's wrench is taken over every period the latency's bounds allow, the
+    centroid of its normal force is compared with the replay's moved back by the latency,
+    and every interval covers the truth."""
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    rec = recording({**truth, 'sensors.wrench_latency': 0.002}, 3, cycles=8, noise=noise)
+    fixed = fit(rec, 'paper', BOUNDS)
+    assert fixed.verdict.startswith('does not fit: '), fixed.verdict
+    assert 'the wrench published late? free sensors.wrench_latency' in fixed.verdict
+    freed = fit(rec, 'paper', BOUNDS | {'sensors.wrench_latency': (0.0, 0.005)})
+    assert freed.fits, freed.verdict
+    assert freed.used_wrench
+    for key, value in (truth | {'sensors.wrench_latency': 0.002}).items():
+        p = freed.parameters[key]
+        assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)

@@ -17,7 +17,7 @@ from ...physics.errors import SimulationError
 from ...physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
-from .efforts import TorqueSchedule
+from .efforts import TorqueSchedule, effort_shift, wrench_shift
 
 FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
 # A sample this many rate standard deviations short of the model's separation is in the contact
@@ -59,6 +59,7 @@ class Prediction:
     qd_sep: np.ndarray | None = None  # joint rates at the last separation
     error: str = ''  # why the replay failed, in words ('' when it did not)
     failure: FailureKind | None = None  # ... and as a kind, for the code that acts on it
+    wrench_timing: float = math.nan  # centroid of the normal force in the wrench's periods
     if TYPE_CHECKING:  # set after construction by predict_impact (not dataclass fields)
         path: np.ndarray = field(init=False)
         t_sep: float = field(init=False)
@@ -98,7 +99,7 @@ def predict_impact(
     integ = PhaseIntegrator(
         model, state, control='held' if held else 'continuous', **window_options(model)
     )
-    torque = TorqueSchedule(win, timing)
+    torque = TorqueSchedule(win, timing, effort_shift(model))
     first: Any = None  # the first and last contact events, once found
     last: Any = None
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
@@ -113,6 +114,14 @@ def predict_impact(
     positions: dict[float, np.ndarray] = {}
     if period is not None:
         extra |= {float(x) - period for x in targets if float(x) - period > t0}
+    # a wrench that may be late: the cumulative impulse where each period of it begins and
+    # ends, moved back by the scene's delay of the wrench
+    lag_ends: np.ndarray | None = None
+    cumulative: dict[float, float] = {}
+    if win.wrench_stamps is not None:
+        ends = win.wrench_stamps - wrench_shift(model)
+        lag_ends = np.concatenate([ends - win.wrench_period, ends])
+        extra |= {float(x) for x in lag_ends if t0 < x < targets[-1]}
     if extra:
         edges = sorted(set(edges) | extra)
     try:
@@ -131,8 +140,9 @@ def predict_impact(
                         last, side = event, 'post'
             if period is not None:
                 positions[edge] = np.linalg.solve(T, integ.state.y[:n])
-            if dense is not None:
+            if dense is not None or lag_ends is not None:
                 impulse += integ.take_impulse()
+                cumulative[edge] = float(impulse[1])
                 path.append(
                     [integ.state.t, *np.linalg.solve(T, integ.state.y[n : 2 * n]), *impulse]
                 )
@@ -198,7 +208,32 @@ def predict_impact(
     )
     pred.path = np.array(path)
     pred.t_sep, pred.y_sep = last.t, last.y[: 2 * n].copy()
+    if lag_ends is not None:
+        pred.wrench_timing = _wrench_timing(win, lag_ends, cumulative, t0, float(impulse[1]))
     return pred
+
+
+def _wrench_timing(
+    win: ImpactWindow, lag_ends: np.ndarray, cumulative: dict[float, float], t0: float, total: float
+) -> float:
+    """The centroid of the normal force the replay puts into the recorded wrench's periods
+    (each the impulse between its moved-back start and end), as the recorded one: sum s F /
+    sum F over the periods' stamps, in s after ``t0``."""
+
+    def at(t: float) -> float:
+        if t <= t0:
+            return 0.0
+        if t >= max(cumulative, default=t0):
+            return total
+        return cumulative[min(cumulative, key=lambda x: abs(x - t))]
+
+    stamps = win.wrench_stamps
+    assert stamps is not None
+    m = len(stamps)
+    gained = np.array([at(float(lag_ends[m + k])) - at(float(lag_ends[k])) for k in range(m)])
+    if not gained.sum() > 0:
+        return float(np.mean(stamps)) - t0
+    return float(stamps @ gained) / float(gained.sum()) - t0
 
 
 def _position_at(
@@ -225,7 +260,7 @@ def free_flight(
     integ = PhaseIntegrator(
         model, state, control='held' if held else 'continuous', **window_options(model)
     )
-    torque = TorqueSchedule(win, timing)
+    torque = TorqueSchedule(win, timing, effort_shift(model))
     try:
         for edge in torque.boundaries(t0, t1):
             if held:

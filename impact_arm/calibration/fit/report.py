@@ -263,7 +263,7 @@ def estimate(
     for p in specs:  # the most demanding fixed parameters of each fitted one
         warnings += [d.sentence() for d in deps if d.fitted == p.key and d.demanding][:3]
     joints = list(recording.joints) or [f'joint{j + 1}' for j in range(recording.n)]
-    verdict = judge(per_impact, joints, chi2, dof, _where(per_impact, params))
+    verdict = judge(per_impact, joints, chi2, dof, _where(per_impact, params, problem))
     return FitResult(
         params,
         verdict.text,
@@ -294,14 +294,48 @@ def estimate(
     )
 
 
-def _where(per_impact: list[dict], params: dict[str, ParameterEstimate]) -> list[str]:
-    """Where a misfit lies, for the verdict's reason: rates or impulse, bounds."""
+# the best reading of the efforts missing the free flight by this many times what the rates'
+# noise leaves: no reading explains it (a right reading stays within tens; efforts two
+# periods late miss it by ~1e6)
+TIMING_MISFIT = 1e3
+
+
+def _where(
+    per_impact: list[dict], params: dict[str, ParameterEstimate], problem: ImpactSet | None = None
+) -> list[str]:
+    """Where a misfit lies, for the verdict's reason: rates or impulse, bounds, efforts no
+    reading explains."""
     parts = []
     with_wrench = [x for x in per_impact if 'residual_impulse' in x]
     if with_wrench:
-        rate = np.mean([np.sum(np.square(x['whitened'][:-2])) for x in with_wrench])
-        imp = np.mean([np.sum(np.square(x['whitened'][-2:])) for x in with_wrench])
+        rate = np.mean(
+            [np.sum(np.square(x['whitened'][: -len(x['residual_impulse'])])) for x in with_wrench]
+        )
+        imp = np.mean(
+            [np.sum(np.square(x['whitened'][-len(x['residual_impulse']) :])) for x in with_wrench]
+        )
         parts.append('mostly in the ' + ('wrench impulse' if imp > rate else 'joint rates'))
+    late = [w for w in problem.windows if problem.wrench_at(w)] if problem is not None else []
+    after = sum(w.wrench_after for w in late)
+    if late and 2 * after > len(late) and 'sensors.wrench_latency' not in params:
+        parts.append(
+            f'at {after} of {len(late)} impacts most of the recorded normal force comes after '
+            f'the periods that can hold the contact: the wrench published late? free '
+            f'sensors.wrench_latency too, or give --wrench-latency'
+        )
+    misfit = problem.timing_misfit if problem is not None else None
+    if (
+        problem is not None
+        and misfit is not None
+        and misfit > TIMING_MISFIT
+        and 'sensors.effort_latency' not in params
+    ):
+        parts.append(
+            f'no reading of the recorded efforts predicts the free flight after the impacts '
+            f"(the best, '{problem.timing}', misses it by {misfit:.3g} times what the rates' "
+            f'noise leaves): efforts reported late or early? free sensors.effort_latency too, '
+            f'or give --effort-latency'
+        )
     bounded = [k for k, v in params.items() if v.at_bound]
     if bounded:
         parts.append(f'{", ".join(bounded)} at a bound')
