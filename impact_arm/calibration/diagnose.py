@@ -665,6 +665,8 @@ def rates_as_period_means(rec: JointRecording) -> JointRecording:
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
+    if out.plates_t is not None:
+        out.plates_t = out.plates_t - shift
     out.t0_ns = rec.t0_ns + round(shift * 1e9)
     return out
 
@@ -679,10 +681,14 @@ def _regular_stamps(rec: JointRecording) -> JointRecording:
     if rec.wrench_t is not None:
         kw = np.round((rec.wrench_t - a) / b)
         out.wrench_t = a + b * kw
+    if rec.plates_t is not None:
+        out.plates_t = a + b * np.round((rec.plates_t - a) / b)
     shift = out.t[0]
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
+    if out.plates_t is not None:
+        out.plates_t = out.plates_t - shift
     out.t0_ns = rec.t0_ns + round(shift * 1e9)
     return out
 
@@ -704,5 +710,7 @@ def _earlier_efforts(rec: JointRecording, latency: float) -> JointRecording:
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
+    if out.plates_t is not None:
+        out.plates_t = out.plates_t - shift
     out.t0_ns = rec.t0_ns + round(shift * 1e9)
     return out

@@ -51,6 +51,10 @@ class JointRecording:
     t0_ns: int = 0  # stamp of the first sample
     notes: list = field(default_factory=list)
     rates: RateMeaning = RateMeaning.INSTANT
+    # the mounted surfaces' plates, when recorded (/surface_mounts): stamps [s] (same origin
+    # as t) and (z, ż) of each plate, flat, in surface order [m, m/s]
+    plates_t: np.ndarray | None = None
+    plates: np.ndarray | None = None
     if TYPE_CHECKING:  # set by find_impacts (not a dataclass field)
         step_z: np.ndarray = field(init=False)
 
@@ -184,6 +188,7 @@ class ImpactWindow:
     wrench_timing: float | None = None
     wrench_timing_var: float = 0.0
     wrench_after: bool = False  # most of the normal force after the periods summed
+    plate: np.ndarray | None = None  # the plates' recorded (z, ż) at t_a, flat; None: not recorded
     if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
         effort_ib: int = field(init=False)
         effort_off: list[bool] = field(init=False)
@@ -453,6 +458,7 @@ def make_window(
         bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12)) for k in range(len(e_idx))
     ]
     _add_impulse(rec, noise, win, wrench_lag)
+    win.plate = _plate_at(rec, rec.t[a])
 
     def widened(side: str) -> ImpactWindow | None:
         a2, b2 = (a - 1, b) if side == 'pre' else (a, b + 1)
@@ -552,6 +558,18 @@ def _add_impulse(rec, noise, win, wrench_lag=(0.0, 0.0)):
     win.wrench_timing_var = float(noise.wrench[1] ** 2 * np.sum((wt[sel] - centroid) ** 2)) / (
         total**2
     )
+
+
+def _plate_at(rec: JointRecording, t: float) -> np.ndarray | None:
+    """The plates' recorded state at the joint sample stamped ``t`` (a plate sample of the
+    same period: the simulator publishes both with the period's stamp), None when there is
+    none such."""
+    if rec.plates is None or rec.plates_t is None or not len(rec.plates_t):
+        return None
+    k = int(np.argmin(np.abs(rec.plates_t - t)))
+    if abs(rec.plates_t[k] - t) > 1e-3 * rec.period:
+        return None
+    return rec.plates[k].copy()
 
 
 def joint_to_absolute_matrix(n: int) -> np.ndarray:

@@ -94,6 +94,10 @@ def predict_impact(
     state = model.initial_state()
     state.t = t0
     state.y[:n], state.y[n : 2 * n] = T @ q, T @ qd
+    if win.plate is not None and len(win.plate) == 2 * model.n_mount:
+        # a plate still ringing from the impacts before: from its recorded state
+        for i, surface in enumerate(model.mounted):
+            state.y[surface.mount_state : surface.mount_state + 2] = win.plate[2 * i : 2 * i + 2]
     held = timing != 'controller'
     state.mode = 'down'  # the scene's controller, if used, is approaching the surface
     integ = PhaseIntegrator(

@@ -259,6 +259,7 @@ def estimate(
     noise_rms = float(np.sqrt(np.mean(np.square(sd_rate)))) if sd_rate else math.nan
     deps = dependences(problem, specs, values, J, sigma)
     warnings = [x for x in (one_impact(per_impact),) if x]
+    warnings += ringing_plates(problem.model(values), problem.windows)
     warnings += [y for y in (out_of_range(p.key, v) for p, v in zip(specs, values)) if y]
     for p in specs:  # the most demanding fixed parameters of each fitted one
         warnings += [d.sentence() for d in deps if d.fitted == p.key and d.demanding][:3]
@@ -292,6 +293,35 @@ def estimate(
         dependences=deps,
         warnings=warnings,
     )
+
+
+# a plate left with more than this share of its ringing at the next impact is not at rest
+RINGING = 0.01
+
+
+def ringing_plates(model: ArmModel, windows: list) -> list[str]:
+    """A warning per mounted surface whose plate still rings at the next impact (its decay
+    exp(-zeta omega dt) over the shortest time between two impacts above ``RINGING``) when
+    the recording has no plate states: the replay then starts it at rest."""
+    if not model.n_mount or len(windows) < 2 or any(w.plate is not None for w in windows):
+        return []
+    gap = float(np.min(np.diff(sorted(w.t_c for w in windows))))
+    out = []
+    for surface in model.mounted:
+        mount = surface.mount
+        assert mount is not None  # model.mounted holds the mounted ones
+        omega = math.sqrt(mount.stiffness / mount.mass)
+        left = math.exp(-mount.damping_ratio * omega * gap)
+        if left > RINGING:
+            out.append(
+                f'the plate of surfaces[{surface.index}] ({mount.mass:g} kg on '
+                f'{mount.stiffness:g} N/m, '
+                f'damping ratio {mount.damping_ratio:g}) still rings at the next impact '
+                f'({left:.2g} of its motion left after {gap:.3g} s): each impact is replayed '
+                f'with the plate at rest, as the recording has no plate states (record '
+                f'/surface_mounts, as the simulator does)'
+            )
+    return out
 
 
 # the best reading of the efforts missing the free flight by this many times what the rates'
