@@ -828,3 +828,18 @@ def test_the_plates_states_are_read_from_a_recording(tmp_path):
     assert back.plates is not None and back.plates.shape == rec.plates.shape == (len(rec.t), 2)
     np.testing.assert_allclose(back.plates, rec.plates, rtol=0, atol=0)
     np.testing.assert_allclose(back.plates_t, back.t, atol=1e-9)
+
+
+def test_a_state_latency_is_fitted_against_the_wrench():
+    """Joint states published 2 ms late (sensors.state_latency; efforts read as the scene's
+    controller, so only the wrench shows it, 2 ms early against the states): freed, it is
+    fitted from the wrench's timing and every interval covers the truth."""
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    rec = recording({**truth, 'sensors.state_latency': 0.002}, 3, cycles=8, noise=noise)
+    assert not fit(rec, 'paper', BOUNDS).fits
+    freed = fit(rec, 'paper', BOUNDS | {'sensors.state_latency': (0.0, 0.005)})
+    assert freed.fits, freed.verdict
+    for key, value in (truth | {'sensors.state_latency': 0.002}).items():
+        p = freed.parameters[key]
+        assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)
