@@ -108,15 +108,15 @@ def free_flight_error(
     n = model.n
     T = joint_to_absolute_matrix(n)
     torque = TorqueSchedule(win, timing, effort_shift(model) if shift is None else shift)
-    q_post = [win.post.state(t)[0] for t in win.post_t]
     period = win.rate_period
+    if period is not None:
+        return _mean_rate_change_error(model, win, torque, timing, period)
+    q_post = [win.post.state(t)[0] for t in win.post_t]
     err = 0.0
     for k in range(len(win.post_t) - 1):
         state = model.initial_state()
         state.t = win.post_t[k]
-        # rates that are period means: the rate at the sample from the fit of its positions
-        qd = win.post_qd[k] if period is None else win.post.state(win.post_t[k])[1]
-        state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ qd
+        state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ win.post_qd[k]
         held = timing != 'controller'
         state.mode = 'up'  # after an impact the scene's controller lifts the arm
         integ = PhaseIntegrator(
@@ -131,15 +131,58 @@ def free_flight_error(
             return math.inf
         if integ.state.phase != 0:
             return math.inf
-        if period is None:
-            predicted = np.linalg.solve(T, integ.state.y[n : 2 * n])
-        else:  # the mean rate over the period before the next sample
-            dt = win.post_t[k + 1] - win.post_t[k]
-            if abs(dt - period) > 0.25 * period:
-                continue  # a sample lost between: its rate is not over this period
-            predicted = (np.linalg.solve(T, integ.state.y[:n]) - q_post[k]) / dt
-        err += float(np.sum((predicted - win.post_qd[k + 1]) ** 2))
+        err += float(
+            np.sum((np.linalg.solve(T, integ.state.y[n : 2 * n]) - win.post_qd[k + 1]) ** 2)
+        )
     return err
+
+
+def _mean_rate_change_error(
+    model: ArmModel, win: ImpactWindow, torque: TorqueSchedule, timing: str, period: float
+) -> float:
+    """``free_flight_error`` for rates that are period means: from the first compared sample
+    after the impact, with the rate there that reproduces the recorded mean over the first
+    period (the rate at a sample is not recorded; two Newton steps), the mean rate over the
+    next period against the recorded one. 0 when fewer than three samples a period apart."""
+    t = win.post_t
+    if len(t) < 3 or np.any(np.abs(np.diff(t[:3]) - period) > 0.25 * period):
+        return 0.0
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    q0, qd0, _ = win.post.state(t[0])
+    held = timing != 'controller'
+
+    def flight(qd: np.ndarray, until: int) -> list[np.ndarray] | None:
+        state = model.initial_state()
+        state.t = t[0]
+        state.y[:n], state.y[n : 2 * n] = T @ q0, T @ qd
+        state.mode = 'up'  # after an impact the scene's controller lifts the arm
+        integ = PhaseIntegrator(
+            model, state, control='held' if held else 'continuous', preset='balanced'
+        )
+        q = []
+        try:
+            for k in range(1, until + 1):
+                for edge in torque.boundaries(t[k - 1], t[k]):
+                    if held:
+                        integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+                    integ.advance(edge)
+                q.append(np.linalg.solve(T, integ.state.y[:n]))
+        except SimulationError:
+            return None
+        return q if integ.state.phase == 0 else None
+
+    qd = qd0.copy()
+    for _ in range(2):  # the mean over the first period is ~ the start's rate: J ~ identity
+        first = flight(qd, 1)
+        if first is None:
+            return math.inf
+        qd = qd + (win.post_qd[1] - (first[0] - q0) / (t[1] - t[0]))
+    both = flight(qd, 2)
+    if both is None:
+        return math.inf
+    predicted = (both[1] - both[0]) / (t[2] - t[1])
+    return float(np.sum((predicted - win.post_qd[2]) ** 2))
 
 
 def effort_timing(
