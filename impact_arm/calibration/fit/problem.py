@@ -140,17 +140,30 @@ class ImpactSet:
             # together, the latency's start where they predict the free flight best
             i, spec = fitted[0], self.specs[fitted[0]]
             period = float(np.median(np.concatenate([np.diff(w.effort_t) for w in self.windows])))
-            self.timing, latency, self.timing_errors = effort_timing_and_latency(
+            reading, latency, errors = effort_timing_and_latency(
                 model, self.windows, model.scene.sensors.state_latency, (spec.lo, spec.hi), period
             )
-            notes.append(
-                f'{spec.key} started at {latency:.6g} s (not {spec.start:g}), with the '
-                f"reading '{self.timing}' of the efforts: together they best predict the free "
-                f'flight after the impacts'
-            )
-            spec.start = latency
-            self.start_values[i] = latency
-            model = self.model(self.start_values)
+            own, own_errors = effort_timing(model, self.windows)
+            if own == 'controller' and own_errors[own] < errors[reading]:
+                # a stiff continuous controller the replay recomputes beats every reading of
+                # the recorded efforts at every latency: their latency does not enter it
+                self.timing, self.timing_errors = own, own_errors
+                notes.append(
+                    f"{spec.key} does not enter the replay: the scene's own controller "
+                    f'predicts the free flight after the impacts better than any reading of '
+                    f'the recorded efforts at any latency within the bounds, and reads none '
+                    f'of them'
+                )
+            else:
+                self.timing, self.timing_errors = reading, errors
+                notes.append(
+                    f'{spec.key} started at {latency:.6g} s (not {spec.start:g}), with the '
+                    f"reading '{reading}' of the efforts: together they best predict the "
+                    f'free flight after the impacts'
+                )
+                spec.start = latency
+                self.start_values[i] = latency
+                model = self.model(self.start_values)
         else:
             self.timing, self.timing_errors = effort_timing(model, self.windows)
         # the best reading's error over what the rates' noise alone leaves (two noisy rates
