@@ -146,7 +146,7 @@ def cli(args) -> int:
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
 
-        check = check_recording(output, args.rate)
+        check = check_recording(output, args.rate, simulator_topics(scene))
         print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
