@@ -101,6 +101,7 @@ class Controller(Node):
         self.cycles_completed = 0
         self.finished = False
         self._mode = self.ctrl.mode
+        self._switches = self.ctrl.switches  # a re-arm sets the down half without a switch
         self.pub = self.create_publisher(
             Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy(p.command_history)
         )
@@ -223,7 +224,8 @@ class Controller(Node):
         if self.finished:
             return  # the cycles are done: the driver holds the last command
         mode, self._mode = self._mode, self.ctrl.mode
-        if mode == 'up' and self._mode == 'down':
+        switched, self._switches = self.ctrl.switches != self._switches, self.ctrl.switches
+        if mode == 'up' and self._mode == 'down' and switched:
             self.cycles_completed += 1
             if self.p.cycles and self.cycles_completed >= self.p.cycles:
                 # before the next down half's first command: not one period of it is run
