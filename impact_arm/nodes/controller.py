@@ -270,15 +270,12 @@ class Controller(Node):
 
     def _publish_diagnostics(self):
         dropped = sum(self.inputs.dropped.values())
+        message = 'cycles completed' if self.finished else 'running'
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK,
             name=contract.CONTROLLER_STATUS,
             hardware_id='impact_arm_controller',
-            message=f'{dropped} inputs dropped'
-            if dropped
-            else 'cycles completed'
-            if self.finished
-            else 'running',
+            message=f'{dropped} inputs dropped' if dropped else message,
             values=[
                 KeyValue(key='commands_sent', value=str(self.sent)),
                 KeyValue(key='strikes', value=str(self.strikes)),
