@@ -578,6 +578,7 @@ def _module_header(n, general=False, n_mount=0):
         '                                friction_force, residual, restitution_radius,',
         '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
         'from impact_arm.physics.control import add_joint_torques, pid_error, pid_law, q_law',
+        'from impact_arm.physics.roots import event_tolerance, false_position, illinois_update',
         f'N = {n}',
     ]
     lines += [f'NM = {n_mount}', f'HAS_MOUNT = {n_mount > 0}']
