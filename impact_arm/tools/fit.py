@@ -98,6 +98,14 @@ def fit_recording(
     for line in diagnosis.lines():
         say(line)
     result = fit(rec, scene, params, options, progress)
+    if corrections is not None and corrections.effort_latency and result.timing == 'controller':
+        # the option was applied, but this reading replays no recorded effort
+        result.warnings.append(
+            f'--effort-latency {corrections.effort_latency:g} moved the efforts, but the fit '
+            "read them as the scene's own controller (the reading that best predicts the free "
+            'flight after the impacts), which replays none of them: the latency acts only on '
+            'which samples count as taken in a contact'
+        )
     if out is False:
         return result
     out = out or default_out(recording)
