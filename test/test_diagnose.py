@@ -424,3 +424,45 @@ def test_a_driver_loops_difference_rates_fit_with_the_advice():
     for key, value in TRUTH.items():
         lo, hi = result.parameters[key].ci95
         assert lo < value < hi, (key, lo, value, hi)
+
+
+def test_a_latency_option_on_a_scene_that_states_it_is_refused(tmp_path, capsys):
+    """The fit replays the scene's sensor latencies, so --effort-latency (or
+    --wrench-latency) on top of a scene that states the same delay, or of a fit that frees
+    it, would shift the efforts (the wrench) twice: refused in one line naming both and what
+    to do. A scene whose latencies cancel (effort as late as the states) takes the option."""
+    import yaml
+
+    from impact_arm.calibration.study import apply_overrides
+    from impact_arm.tools.cli import main
+    from impact_arm.tools.synthetic import write_rosbag2
+
+    folder = tmp_path / 'bag'
+    write_rosbag2(recording(EFFORT_LATE, cycles=2), str(folder), extra_joint=False)
+
+    def scene_file(name, overrides):
+        path = tmp_path / f'{name}.yaml'
+        path.write_text(yaml.safe_dump(apply_overrides(Study('paper').data, overrides)))
+        return str(path)
+
+    late = scene_file('late', {'sensors.effort_latency': 0.002, 'sensors.wrench_latency': 0.001})
+    fit = ['fit', str(folder), '--out', str(tmp_path / 'fit')]
+    mu = ['--param', 'surfaces[0].mu=0.05:1']
+    for option, key in (('--effort-latency', 'effort'), ('--wrench-latency', 'wrench')):
+        assert main([*fit, '--scene', late, *mu, option, '0.002']) == 2
+        err = capsys.readouterr().err
+        assert err.count('\n') == 1, err
+        assert f"{option} 0.002 and the scene's sensors.{key}_latency" in err
+        assert f'drop {option}' in err
+    freed = ['--param', 'sensors.effort_latency=0:0.005']
+    assert main([*fit, *mu, *freed, '--effort-latency', '0.002']) == 2
+    err = capsys.readouterr().err
+    assert '--effort-latency 0.002 and the fitted sensors.effort_latency' in err, err
+    assert err.count('\n') == 1
+    state = ['--param', 'sensors.state_latency=0:0.005']
+    assert main([*fit, *mu, *state, '--wrench-latency', '0.001']) == 2
+    assert 'the fitted sensors.state_latency' in capsys.readouterr().err
+    # the same delay of the efforts and the states: nothing shifted, the option is taken
+    level = scene_file('level', {'sensors.effort_latency': 0.002, 'sensors.state_latency': 0.002})
+    assert main([*fit, '--scene', level, *mu, '--effort-latency', '0.002']) in (0, 1)
+    assert 'wrote' in capsys.readouterr().out

@@ -26,6 +26,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from enum import Enum
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -41,6 +42,7 @@ from .identify import (
 
 if TYPE_CHECKING:
     from ..physics.model import ArmModel
+    from ..physics.scene import SensorSpec
 
 # A delay or a lag is reported from this many sample periods on: within one period the fit's
 # own reading of the efforts (the effort at the stamp, or held over the period before or
@@ -163,6 +165,38 @@ class Corrections:
     @property
     def requested(self) -> bool:
         return self != Corrections()
+
+    def shift_conflict(self, sensors: SensorSpec, fitted: Iterable[str]) -> str | None:
+        """Why these corrections cannot go with a scene that states or a fit that frees the
+        same delay, in one line (None when they can): the fit replays the scene's sensor
+        latencies (the efforts read ``effort_latency - state_latency`` later, the wrench
+        ``wrench_latency - state_latency``), so an option on top would shift them twice."""
+        fitted = set(fitted)
+        for option, key, shift in (
+            ('effort_latency', 'sensors.effort_latency', sensors.effort_latency),
+            ('wrench_latency', 'sensors.wrench_latency', sensors.wrench_latency),
+        ):
+            value = getattr(self, option)
+            if not value:
+                continue
+            flag = '--' + option.replace('_', '-')
+            freed = sorted(fitted & {key, 'sensors.state_latency'})
+            if freed:
+                return (
+                    f'{flag} {value:g} and the fitted {" and ".join(freed)} would both delay '
+                    f'the same signal: drop {flag} (the fit finds the delay) or fix the key '
+                    f'in the scene and drop its --param'
+                )
+            stated = shift - sensors.state_latency
+            if stated:
+                return (
+                    f"{flag} {value:g} and the scene's {key} = {shift:g} (less "
+                    f'sensors.state_latency = {sensors.state_latency:g}) would both delay the '
+                    f"same signal, the fit replaying the scene's latencies too: drop {flag} "
+                    f"(the scene's value is used) or set {key} to sensors.state_latency in the "
+                    f'scene'
+                )
+        return None
 
 
 # ------------------------------------------------------------------------------ checks

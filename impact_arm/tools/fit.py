@@ -85,6 +85,9 @@ def fit_recording(
 
     scene, scene_name = scene_of(recording, scene)
     base = Study(scene).scene()
+    conflict = (corrections or Corrections()).shift_conflict(base.sensors, params)
+    if conflict:  # refused before the recording is read: the efforts would be shifted twice
+        raise ImpactArmError(conflict)
     rec = read_recording(
         recording,
         joints,
