@@ -33,6 +33,31 @@ def wrench_shift(model: ArmModel) -> float:
     return float(sensors.wrench_latency - sensors.state_latency)
 
 
+def contact_period_command(model: ArmModel, win: ImpactWindow) -> np.ndarray | None:
+    """The command held over the period in which the contact begins, when the recording
+    cannot hold it (the sample ending that period is taken in the contact with the actuators
+    off, so it shows no torque): the scene's own sampled controller at the last sample
+    before the impact, from that sample as recorded (the positions and rates the driver's
+    controller saw, difference rates included), approaching the surface. None when the
+    scene's controller is not a memoryless sampled law (``q``, ``pd`` at a rate) at the
+    recording's period, or the sample is not kept: the command of the period before stands
+    in. A controller acting on noisy rates makes each command differ from the one before by
+    its gain times that noise; standing in for it, the previous command moves the replayed
+    impact by as much, in step with the rate noise of the sample the replay starts from,
+    which biased the fitted law (docs/fit.md, step 4)."""
+    ctrl = model.scene.controller
+    sample = getattr(win, 'sample_a', None)
+    if sample is None or ctrl.rate <= 0 or ctrl.law not in ('q', 'pd'):
+        return None
+    if abs(1.0 / ctrl.rate - (win.t_b - win.t_a) / max(win.b - win.a, 1)) > 1e-3 / ctrl.rate:
+        return None  # a controller at another rate than the samples': not its command
+    from ...physics.control import CycleController
+
+    T = joint_to_absolute_matrix(model.n)
+    q, qd = sample
+    return np.array(CycleController.for_scene(model, ctrl).torque(T @ q, T @ qd))
+
+
 class TorqueSchedule:
     """The joint torque between samples from the recorded efforts, by how a driver reports
     them: 'linear' (the effort at a stamp is the torque at that instant; continuous between),
@@ -46,7 +71,13 @@ class TorqueSchedule:
     read ``latency`` later in the recording, linear between its samples (a continuous delay;
     a driver that delays by whole periods is the case of a whole number of periods)."""
 
-    def __init__(self, win: ImpactWindow, timing: str, latency: float = 0.0):
+    def __init__(
+        self,
+        win: ImpactWindow,
+        timing: str,
+        latency: float = 0.0,
+        contact_command: np.ndarray | None = None,
+    ):
         self.t, self.tau, self.timing = win.effort_t, win.effort.copy(), timing
         self.ib = ib = getattr(win, 'effort_ib', 2)
         off = getattr(win, 'effort_off', [])
@@ -64,9 +95,16 @@ class TorqueSchedule:
         # A sample taken during the contact with the actuators off shows no torque, not the
         # command: read as 'previous', that command acted before the contact began (the one
         # after it is reported at b), so the command of the last free sample stands in.
+        # ``contact_command`` (``contact_period_command``): the command of the period in
+        # which the contact begins, recomputed, in place of the one before it.
         for k in range(2, ib):
             if off[k]:
-                self.tau[k] = self.tau[1] if timing == 'previous' else self.tau[ib]
+                if timing != 'previous':
+                    self.tau[k] = self.tau[ib]
+                elif k == 2 and contact_command is not None:
+                    self.tau[k] = contact_command
+                else:
+                    self.tau[k] = self.tau[1]
 
     def __call__(self, t0: float, t1: float, side: str) -> np.ndarray:
         t, tau, mid, last = self.t, self.tau, 0.5 * (t0 + t1), len(self.t) - 1

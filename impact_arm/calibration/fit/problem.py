@@ -25,6 +25,7 @@ from ..identify import (
 from ..study import Study
 from .efforts import effort_timing, effort_timing_and_latency, wrench_shift
 from .parameters import FitError
+from .prestate import shot_start
 from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
 
 # The whitened residual of an impact the model cannot replay at some values (no contact, a
@@ -175,6 +176,7 @@ class ImpactSet:
             else None
         )
         for w in self.windows:
+            self._shoot(model, w)
             w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
                 notes.append(
@@ -192,7 +194,7 @@ class ImpactSet:
             # robust weights for the global stage (no linearisation, which a bounce that
             # comes and goes with the parameters would spoil): each recorded rate's noise
             # plus the pre-impact rates' uncertainty, the impulse's noise
-            cov_pre = w.pre.state(w.t_a)[2]
+            cov_pre = w.start_state()[2]
             var = np.tile(sigma_qd**2 + np.diag(cov_pre)[model.n :], len(w.post_t))
             if self.wrench_at(w):
                 var = np.concatenate([var, self.wrench_var(w)])
@@ -214,8 +216,16 @@ class ImpactSet:
             if wider is None:
                 break
             wider.index = w.index
+            self._shoot(model, wider)
             w, base = wider, predict_impact(model, wider, self.timing)
         return w, base
+
+    def _shoot(self, model: ArmModel, w: ImpactWindow) -> None:
+        """Rates that are period means: the replay starts from the state the model's flight
+        under the recorded efforts gives at the last sample before the impact (fitted to the
+        positions before it), not from the cubic's (``prestate.py`` says why)."""
+        if w.rate_period is not None:
+            w.start = shot_start(model, w, self.timing)
 
     def calibrate(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> None:
         """The full whitening of each impact's residual at ``values`` (the optimum so far):
@@ -228,12 +238,13 @@ class ImpactSet:
             return
         n = model.n
         for i, w in enumerate(self.windows):
+            self._shoot(model, w)  # the flight before the impact, with the model of ``values``
             base = predict_impact(model, w, self.timing)
             w, base = self._widen(model, w, base)
             if base.error:
                 continue
             self.windows[i] = w
-            q, qd, cov_pre = w.pre.state(w.t_a)
+            q, qd, cov_pre = w.start_state()
             x0 = np.concatenate([q, qd])
             y0 = self.outputs(base, w)
             m = len(w.post_t)
