@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from dataclasses import dataclass, replace
+import copy
 
 import numpy as np
 
@@ -176,7 +177,7 @@ class ImpactSet:
             else None
         )
         for w in self.windows:
-            self._shoot(model, w)
+            w = self._shoot(model, w)
             w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
                 notes.append(
@@ -216,16 +217,20 @@ class ImpactSet:
             if wider is None:
                 break
             wider.index = w.index
-            self._shoot(model, wider)
+            wider = self._shoot(model, wider)
             w, base = wider, predict_impact(model, wider, self.timing)
         return w, base
 
-    def _shoot(self, model: ArmModel, w: ImpactWindow) -> None:
-        """Rates that are period means: the replay starts from the state the model's flight
-        under the recorded efforts gives at the last sample before the impact (fitted to the
-        positions before it), not from the cubic's (``prestate.py`` says why)."""
-        if w.rate_period is not None:
-            w.start = shot_start(model, w, self.timing)
+    def _shoot(self, model: ArmModel, w: ImpactWindow) -> ImpactWindow:
+        """Rates that are period means: the window whose replay starts from the state the
+        model's flight under the recorded efforts gives at the last sample before the impact
+        (fitted to the positions before it), not from the cubic's (``prestate.py`` says why).
+        A new window when the start is set: one replayed before keeps its start."""
+        if w.rate_period is None:
+            return w
+        shot = copy.copy(w)
+        shot.start = shot_start(model, w, self.timing)
+        return shot
 
     def calibrate(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> None:
         """The full whitening of each impact's residual at ``values`` (the optimum so far):
@@ -238,7 +243,7 @@ class ImpactSet:
             return
         n = model.n
         for i, w in enumerate(self.windows):
-            self._shoot(model, w)  # the flight before the impact, with the model of ``values``
+            w = self._shoot(model, w)  # the flight before the impact, with ``values``' model
             base = predict_impact(model, w, self.timing)
             w, base = self._widen(model, w, base)
             if base.error:
