@@ -7,6 +7,8 @@ import json
 import math
 import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -159,6 +161,90 @@ def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, c
     scene = load_scene(data['scene'])
     assert scene.surfaces[0].mu == pytest.approx(data['parameters']['surfaces[0].mu']['value'])
     assert not run(scene, samples=False).error
+
+
+FIT_MODULES = (
+    'impact_arm.tools.fit',
+    'impact_arm.calibration.fit',
+    'impact_arm.calibration.diagnose',
+    'impact_arm.io.recording',
+)
+# what the fit's path has no use for (ROS, the symbolic derivation, pyplot, the statistics
+# package) or needs only later (the optimiser, the figures' library)
+NOT_AT_IMPORT = ('rclpy', 'sympy', 'matplotlib', 'scipy.optimize', 'scipy.stats')
+NOT_IN_A_FIT = ('rclpy', 'scipy.stats', 'matplotlib')
+
+
+def _modules_of(code):
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=300)
+    assert out.returncode in (0, 1), out.stderr[-2000:]
+    return set(out.stdout.split())
+
+
+def test_importing_the_fit_loads_no_ros_symbolic_plotting_or_optimising_library():
+    loaded = _modules_of(f'import sys\nimport {", ".join(FIT_MODULES)}\nprint(*sys.modules)')
+    assert loaded >= set(FIT_MODULES)
+    assert not loaded & set(NOT_AT_IMPORT)
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='figures aside need fork')
+def test_a_fit_command_draws_its_figures_aside_and_loads_no_ros(bag, tmp_path):
+    """The command's own process never imports matplotlib (a forked process draws the
+    figures), nor rclpy or scipy.stats; the figures are written all the same."""
+    folder, _ = bag
+    args = [
+        'fit',
+        folder,
+        '--param',
+        'surfaces[0].mu=0.05:1',
+        '--param',
+        'materials.steel.S_y=2e8:5e9',
+        '--out',
+        str(tmp_path),
+    ]
+    loaded = _modules_of(
+        'import sys\nfrom impact_arm.tools.cli import main\n'
+        f'code = main({args!r})\nprint(*sys.modules)\nsys.exit(code)'
+    )
+    assert 'scipy.optimize' in loaded  # the fit ran in this process
+    assert not loaded & set(NOT_IN_A_FIT)
+    for name in ('impacts.png', 'cor.png'):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+
+
+def test_figures_drawn_aside_are_those_drawn_here_even_when_that_process_dies(
+    bag, tmp_path, monkeypatch
+):
+    from impact_arm.tools import figure_process
+    from impact_arm.tools.fit import draw_figures, figure_data, fit_recording
+
+    folder, _ = bag
+    started = []
+    start = figure_process.FigureProcess.start.__func__
+
+    def recorded_start(cls):
+        started.append(start(cls))
+        return started[-1]
+
+    monkeypatch.setattr(figure_process.FigureProcess, 'start', classmethod(recorded_start))
+    aside = fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'aside'), say=print)
+    (tmp_path / 'here').mkdir()
+    draw_figures(figure_data(aside), str(tmp_path / 'here'))
+    submit = figure_process.FigureProcess.submit
+
+    def die_first(self, data, out):
+        self._process.kill()
+        self._process.join()
+        submit(self, data, out)
+
+    monkeypatch.setattr(figure_process.FigureProcess, 'submit', die_first)
+    fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'died'), say=print)
+    if sys.platform.startswith('linux'):
+        assert len(started) == 2 and all(started)  # both drawn aside, or meant to be
+    for name in ('impacts.png', 'cor.png'):
+        here = (tmp_path / 'here' / name).read_bytes()
+        assert (tmp_path / 'aside' / name).read_bytes() == here, name
+        assert (tmp_path / 'died' / name).read_bytes() == here, name
 
 
 def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):
