@@ -369,6 +369,15 @@ def write_figures(result, out) -> list:
 
 def draw_figures(data: FigureData, out) -> list:
     """Draw ``data`` into impacts.png and cor.png in ``out``; their paths."""
+    from matplotlib import rc_context
+
+    # titles at the axes' top, not placed above the axes' decorations there (they have none:
+    # the same pixels) by laying every tick label out once more
+    with rc_context({'axes.titley': 1.0}):
+        return _draw(data, out)
+
+
+def _draw(data: FigureData, out) -> list:
     # the object API with the Agg canvas, not pyplot: no backend machinery to import in the
     # fresh process a fit runs in
     from matplotlib.backends.backend_agg import FigureCanvasAgg
