@@ -187,9 +187,9 @@ def test_importing_the_fit_loads_no_ros_symbolic_plotting_or_optimising_library(
     assert not loaded & set(NOT_AT_IMPORT)
 
 
-@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='figures aside need fork')
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='the side process needs fork')
 def test_a_fit_command_draws_its_figures_aside_and_loads_no_ros(bag, tmp_path):
-    """The command's own process never imports matplotlib (a forked process draws the
+    """The command's own process never imports matplotlib (its side process draws the
     figures), nor rclpy or scipy.stats; the figures are written all the same."""
     folder, _ = bag
     args = [
@@ -212,39 +212,72 @@ def test_a_fit_command_draws_its_figures_aside_and_loads_no_ros(bag, tmp_path):
         assert (tmp_path / name).stat().st_size > 10_000, name
 
 
-def test_figures_drawn_aside_are_those_drawn_here_even_when_that_process_dies(
-    bag, tmp_path, monkeypatch
+@pytest.fixture
+def side_processes(monkeypatch):
+    """The side processes fit_recording starts (None where it could not)."""
+    from impact_arm.tools import side_process
+
+    started = []
+    start = side_process.SideProcess.start.__func__
+
+    def recorded_start(cls, first):
+        started.append(start(cls, first))
+        return started[-1]
+
+    monkeypatch.setattr(side_process.SideProcess, 'start', classmethod(recorded_start))
+    return started
+
+
+def _killed_before(method, monkeypatch):
+    """SideProcess.``method`` with the process killed first."""
+    from impact_arm.tools import side_process
+
+    original = getattr(side_process.SideProcess, method)
+
+    def killed_first(self, *args):
+        self._process.kill()
+        self._process.join()
+        return original(self, *args)
+
+    monkeypatch.setattr(side_process.SideProcess, method, killed_first)
+
+
+def test_what_the_side_process_reads_and_draws_is_what_this_one_would(
+    bag, tmp_path, monkeypatch, side_processes
 ):
-    from impact_arm.tools import figure_process
+    """The recording, its diagnosis and the figures are the same whether the side process
+    reads and draws them, or this one does when the side process is gone."""
     from impact_arm.tools.fit import draw_figures, figure_data, fit_recording
 
     folder, _ = bag
-    started = []
-    start = figure_process.FigureProcess.start.__func__
-
-    def recorded_start(cls):
-        started.append(start(cls))
-        return started[-1]
-
-    monkeypatch.setattr(figure_process.FigureProcess, 'start', classmethod(recorded_start))
     aside = fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'aside'), say=print)
+    here = fit_recording(folder, 'paper', BOUNDS, out=False)
     (tmp_path / 'here').mkdir()
-    draw_figures(figure_data(aside), str(tmp_path / 'here'))
-    submit = figure_process.FigureProcess.submit
-
-    def die_first(self, data, out):
-        self._process.kill()
-        self._process.join()
-        submit(self, data, out)
-
-    monkeypatch.setattr(figure_process.FigureProcess, 'submit', die_first)
-    fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'died'), say=print)
+    draw_figures(figure_data(here), str(tmp_path / 'here'))
+    _killed_before('figures', monkeypatch)
+    fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'died_drawing'), say=print)
+    _killed_before('first_result', monkeypatch)
+    fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'died_reading'), say=print)
     if sys.platform.startswith('linux'):
-        assert len(started) == 2 and all(started)  # both drawn aside, or meant to be
-    for name in ('impacts.png', 'cor.png'):
-        here = (tmp_path / 'here' / name).read_bytes()
-        assert (tmp_path / 'aside' / name).read_bytes() == here, name
-        assert (tmp_path / 'died' / name).read_bytes() == here, name
+        assert len(side_processes) == 3 and all(side_processes)
+    for field in ('t', 'position', 'velocity', 'effort', 'wrench_t', 'wrench'):
+        assert np.array_equal(getattr(aside.recording, field), getattr(here.recording, field))
+    for out in ('aside', 'died_drawing', 'died_reading'):
+        data = json.loads((tmp_path / out / 'fit.json').read_text())
+        assert data['parameters'] == json.loads(json.dumps(here.to_json()))['parameters']
+        for name in ('impacts.png', 'cor.png'):
+            assert (tmp_path / out / name).read_bytes() == (tmp_path / 'here' / name).read_bytes()
+
+
+def test_a_recording_refused_by_the_side_process_is_refused_here(bag, tmp_path, side_processes):
+    from impact_arm.tools.fit import fit_recording
+
+    with pytest.raises(RecordingInputError) as exc:
+        fit_recording(bag[0], 'paper', BOUNDS, states_topic='/arm/joint_states', out=str(tmp_path))
+    assert '--states-topic /arm/joint_states: not in' in str(exc.value)
+    if sys.platform.startswith('linux'):
+        assert len(side_processes) == 1 and side_processes[0]
+        assert not side_processes[0]._process.is_alive()
 
 
 def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):

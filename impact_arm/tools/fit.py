@@ -83,13 +83,12 @@ def fit_recording(
     from ..calibration.study import Study
     from ..io.recording import read_recording
     from ..physics.model import ArmModel
-    from .figure_process import FigureProcess
+    from .side_process import SideProcess
 
-    # the figures' process, forked now: it imports matplotlib while this one fits
-    figures = FigureProcess.start() if out is not False else None
-    try:
-        scene, scene_name = scene_of(recording, scene)
-        base = Study(scene).scene()
+    scene, scene_name = scene_of(recording, scene)
+    base = Study(scene).scene()
+
+    def read_and_diagnose():
         rec = read_recording(
             recording,
             joints,
@@ -98,7 +97,16 @@ def fit_recording(
             wrench_topic,
             scene_joints=base.joint_names,
         )
-        diagnosis = diagnose(rec, ArmModel(base))
+        return rec, diagnose(rec, ArmModel(base))
+
+    # a second process reads the recording while this one imports the optimiser, then
+    # imports matplotlib while this one fits, and draws the figures
+    side = SideProcess.start(read_and_diagnose) if out is not False else None
+    try:
+        if side is not None:
+            import scipy.optimize  # noqa: F401  # the fit's, imported while the side reads
+
+        rec, diagnosis = read_and_diagnose() if side is None else side.first_result()
         rec = correct(rec, corrections or Corrections(), diagnosis)
         for line in diagnosis.lines():
             say(line)
@@ -108,8 +116,8 @@ def fit_recording(
         out = out or default_out(recording)
         os.makedirs(out, exist_ok=True)
         data = figure_data(result)
-        if figures is not None:
-            figures.submit(data, out)  # drawn there while the rest is written here
+        if side is not None:
+            side.submit(data, out)  # drawn there while the rest is written here
         fitted = os.path.join(out, 'fitted.yaml')
         write_fitted_scene(scene, result.scene_overrides, fitted, recording)
         result.scene_path = os.path.abspath(fitted)
@@ -119,7 +127,7 @@ def fit_recording(
             write_json(path, {**result.to_json(), 'diagnosis': diagnosis.to_json()})
             say(f'wrote {path}')
         say(f'wrote {fitted}')
-        for path in figures.result() if figures is not None else draw_figures(data, out):
+        for path in side.figures() if side is not None else draw_figures(data, out):
             say(f'wrote {path}')
         report = os.path.join(out, 'report.md')
         with open(report, 'w', encoding='utf-8') as f:
@@ -127,8 +135,8 @@ def fit_recording(
         say(f'wrote {report}')
         return result
     finally:
-        if figures is not None:
-            figures.close()
+        if side is not None:
+            side.close()
 
 
 def write_fitted_scene(scene, values: dict, path, recording=''):
