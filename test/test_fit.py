@@ -245,8 +245,8 @@ def _killed_before(method, monkeypatch):
 def test_what_the_side_process_reads_and_draws_is_what_this_one_would(
     bag, tmp_path, monkeypatch, side_processes
 ):
-    """The recording, its diagnosis and the figures are the same whether the side process
-    reads and draws them, or this one does when the side process is gone."""
+    """The recording and the figures are the same whether the side process reads and draws
+    them, or this one does when the side process is gone."""
     from impact_arm.tools.fit import draw_figures, figure_data, fit_recording
 
     folder, _ = bag

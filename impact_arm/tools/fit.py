@@ -88,8 +88,8 @@ def fit_recording(
     scene, scene_name = scene_of(recording, scene)
     base = Study(scene).scene()
 
-    def read_and_diagnose():
-        rec = read_recording(
+    def read():
+        return read_recording(
             recording,
             joints,
             base.n_links,
@@ -97,16 +97,17 @@ def fit_recording(
             wrench_topic,
             scene_joints=base.joint_names,
         )
-        return rec, diagnose(rec, ArmModel(base))
 
     # a second process reads the recording while this one imports the optimiser, then
-    # imports matplotlib while this one fits, and draws the figures
-    side = SideProcess.start(read_and_diagnose) if out is not False else None
+    # imports matplotlib while this one fits, and draws the figures (the diagnosis stays
+    # here: on a first run the model it needs compiles, which one notice tells)
+    side = SideProcess.start(read) if out is not False else None
     try:
         if side is not None:
             import scipy.optimize  # noqa: F401  # the fit's, imported while the side reads
 
-        rec, diagnosis = read_and_diagnose() if side is None else side.first_result()
+        rec = read() if side is None else side.first_result()
+        diagnosis = diagnose(rec, ArmModel(base))
         rec = correct(rec, corrections or Corrections(), diagnosis)
         for line in diagnosis.lines():
             say(line)

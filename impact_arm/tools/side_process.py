@@ -2,10 +2,11 @@
 
 A fresh ``impact-arm fit`` spends a third of a second importing the optimiser (scipy) and
 another third importing the figures' library (matplotlib), each before the step that needs it.
-A process forked at the start takes what needs neither off the critical path: it reads and
-diagnoses the recording while this one imports the optimiser, sends both back, imports
-matplotlib while this one fits, and then only draws what it is sent (``FigureData``: plain
-arrays, no model). When the process cannot be forked (no ``fork`` on the platform, or threads
+A process forked at the start takes what needs neither off the critical path: it reads the
+recording while this one imports the optimiser, sends it back, imports matplotlib while this
+one fits, and then only draws what it is sent (``FigureData``: plain arrays, no model). It
+runs nothing of the compiled model: a first run's compilation stays in one process, with one
+notice. When the process cannot be forked (no ``fork`` on the platform, or threads
 running in this process, which a fork could leave holding a lock) or fails, the same work is
 done here: the results and files are the same either way, and a refusal of the recording
 (``ImpactArmError``) is raised here as it was raised there.
