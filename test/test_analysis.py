@@ -3,6 +3,7 @@ the limit cycle, Poincaré sections, every figure (opened and measured) and the 
 
 import json
 import math
+import os
 import struct
 import subprocess
 import sys
@@ -12,6 +13,8 @@ import pytest
 
 from impact_arm.tools.analysis import limit_cycle, poincare
 from impact_arm.tools.figures import FIGURE_SIZE
+
+HERE = os.path.dirname(os.path.abspath(__file__))
 
 FIGURES = [
     'fig3_controllers.png',
@@ -429,3 +432,76 @@ def test_an_empty_or_truncated_file_is_named_with_what_is_wrong(article, tmp_pat
             lines = bad.stderr.strip().splitlines()
             assert bad.returncode == 2 and len(lines) == 1, bad.stderr
             assert path.name in lines[0] and fault in lines[0], lines[0]
+
+
+@pytest.fixture(scope='module')
+def three_link(tmp_path_factory):
+    """A live-like recording of the three-link arm (config/three_link.yaml): its offline
+    recording without /impact_trace, as the simulator node records none."""
+    d = tmp_path_factory.mktemp('three_link')
+    scene = os.path.join(os.path.dirname(HERE), 'config', 'three_link.yaml')
+    sim = cli('simulate', '--scene', scene, '--mcap', d / 'offline.mcap', cwd=d)
+    assert sim.returncode == 0, sim.stderr
+    return d, without_trace(d / 'offline.mcap', d / 'live.mcap')
+
+
+def test_a_three_link_live_recording_gets_every_links_figures(three_link):
+    """Figures 5, 6 and 8-11 of a live three-link recording: Figure 5 one portrait per link
+    (the article's (q1, q2, q̇1), (q1, q2, q̇2), then (q2, q3, q̇3)), Figure 6 one row of
+    sections per link, the impact integrated again from its report (the rates at contact
+    from its tip velocity and link energies) with all three links' energies, and its points
+    those of the offline trace of the same impact."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    from impact_arm.tools import analysis, figures
+
+    d, live = three_link
+    ana = cli('analyze', live, '--out', d / 'out', '--laws', '', '--no-animation', cwd=d)
+    assert ana.returncode == 0, ana.stderr
+    assert 'impact 1 re-integrated from /impact_report' in ana.stdout
+    for name in FIGURES[2:4] + FIGURES[5:]:
+        assert png_size(d / 'out' / name) == FIGURE_SIZE, name
+    rows = np.loadtxt(d / 'out' / 'poincare_qd3_zero.csv', delimiter=',', skiprows=1)
+    assert rows.shape[1] == 5 and len(rows) >= 5  # t, q1, q2, q3, direction
+
+    run = analysis.load(live)
+    deg = np.degrees
+    portraits = [ax for ax in figures.fig5_phase_portraits(run, d).axes]
+    assert len(portraits) == 3
+    for k, (ax, (a, b)) in enumerate(zip(portraits, [(0, 1), (0, 1), (1, 2)])):
+        (line,) = ax.get_lines()
+        x, y, z = line.get_data_3d()
+        assert np.array_equal(x, deg(run.q[:, a])) and np.array_equal(y, deg(run.q[:, b]))
+        assert np.array_equal(z, deg(run.qd[:, k])), k
+    sections = {k: analysis.poincare(run.t, run.q, run.qd, k) for k in range(3)}
+    maps = figures.fig6_poincare(run, sections, d)
+    for k in range(3):
+        rows = sections[k]
+        assert rows.shape[1] == 5 and np.all(np.abs(np.interp(rows[:, 0], run.t, run.qd[:, k])) < 1)
+        a, b = figures.angle_pair(k)
+        for j, direction in enumerate((-1.0, 1.0)):
+            ax = maps.axes[2 * k + j]
+            assert ax.get_xlabel() == f'q{a + 1} [deg]' and ax.get_title().startswith(
+                f'({"abcdef"[2 * k + j]}) q̇{k + 1} = 0'
+            )
+            points = ax.collections[0].get_offsets()
+            mine = rows[rows[:, -1] == direction]
+            assert np.allclose(points, deg(mine[:, [1 + a, 1 + b]]))
+
+    (columns, points, record, note), _ = analysis.impact_points(run, 1)
+    (_, trace_rows, _, trace_note), _ = analysis.impact_points(analysis.load(d / 'offline.mcap'), 1)
+    assert note and not trace_note
+    assert [c for c in columns if c.startswith('T')] == ['T1', 'T2', 'T3']
+    assert points.shape == trace_rows.shape
+    assert points == pytest.approx(trace_rows, rel=1e-4, abs=1e-6)
+    energies = figures.fig11_kinetic_energy((columns, points, record, note), d)
+    assert [ax.get_title().split(':')[0] for ax in energies.axes] == [
+        '(a) link 1',
+        '(b) link 2',
+        '(c) link 3',
+        '(d) total',
+    ]
+    for i, ax in enumerate(energies.axes[:3]):
+        drawn = np.concatenate([line.get_ydata() for line in ax.get_lines()])
+        assert set(drawn) <= set(points[:, columns.index(f'T{i + 1}')])

@@ -94,3 +94,42 @@ def test_the_report_names_an_offline_recording_once():
     )
     assert _origin({'node': 'recorder', 'mode': 'lockstep'}) == 'recorder, lockstep'
     assert _origin({'node': 'recorder'}) == 'recorder, live'
+
+
+def _option_helps(command):
+    parser = build_parser(command)
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return {
+        action.option_strings[0]: (action.help, action.metavar, action.default)
+        for action in sub.choices[command]._actions
+        if action.option_strings
+    }
+
+
+def test_fit_and_compare_read_a_recording_through_the_same_options():
+    """`fit` and `compare` declare --joints, --states-topic and --wrench-topic through one
+    function: the same metavar and default, the help texts each command has always shown."""
+    fit, compare = _option_helps('fit'), _option_helps('compare')
+    joints = 'joint names in the joint states, base first (default joint1..jointN)'
+    assert fit['--joints'] == compare['--joints'] == (joints, 'A,B,...', None)
+    assert fit['--states-topic'] == (
+        'sensor_msgs/JointState topic (default /joint_states)',
+        'T',
+        None,
+    )
+    assert compare['--states-topic'] == (
+        'sensor_msgs/JointState topic of the recordings (default /joint_states)',
+        'T',
+        None,
+    )
+    assert fit['--wrench-topic'] == (
+        'geometry_msgs/WrenchStamped topic (default /contact_wrench if recorded; without it '
+        'the fit uses the joint states alone)',
+        'T',
+        None,
+    )
+    assert compare['--wrench-topic'] == (
+        'geometry_msgs/WrenchStamped topic (default /contact_wrench if recorded)',
+        'T',
+        None,
+    )

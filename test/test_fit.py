@@ -92,6 +92,24 @@ def test_local_fit_differentiates_a_cubic_exactly():
     assert cov[1, 1] > 0
 
 
+def test_local_fit_of_difference_rates_rests_on_the_positions():
+    """Rates that are backward differences hold the positions' information, half a period
+    late: read as the derivative they would pull the cubic off; with their period given the
+    fit goes through the positions and its rate at the sample is the cubic's derivative."""
+    t = np.linspace(0.0, 0.014, 15)
+    c = np.array([0.3, -2.0, 40.0, 90000.0])
+
+    def q_of(x):
+        return c[0] + c[1] * x + c[2] * x**2 + c[3] * x**3
+
+    q = q_of(t)[:, None]
+    mean = ((q_of(t) - q_of(t - 1e-3)) / 1e-3)[:, None]
+    fitted = LocalFit(t, q, mean, t[-1], np.array([1e-5]), np.array([1e-2]), rate_period=1e-3)
+    exact = c[1] + 2 * c[2] * t[-1] + 3 * c[3] * t[-1] ** 2
+    assert fitted.state(t[-1])[1][0] == pytest.approx(exact, abs=1e-8)
+    assert fitted.mean_rates(t[-1:], 1e-3)[0, 0] == pytest.approx(mean[-1, 0], abs=1e-8)
+
+
 def test_a_rate_step_is_an_impact_a_rate_kink_is_not():
     t = np.arange(0, 0.2, 1e-3)
     v = np.where(t < 0.1005, -2.0, 1.0) + np.where(t > 0.0505, 3000 * (t - 0.0505), 0.0)
@@ -832,3 +850,134 @@ def test_the_fitted_force_drawn_beside_a_three_link_arms_wrench_is_its_own(three
         assert np.allclose(tangential, rec.wrench[inside, 0], atol=0.02 * peak)
         checked += 1
     assert checked >= 2
+
+
+# ------------------------------------------------------------------ sensor latencies fitted
+def late_driver_recording(overrides):
+    """The simulated driver's loop (1 kHz sampled controller, each effort the command held
+    over the period that ends at its stamp) through a scene whose sensors are late."""
+    from impact_arm.tools.synthetic import driver_recording
+
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    over = {**truth, 'controller.rate': 1000.0, **overrides}
+    return truth, driver_recording('paper', over, cycles=6, seed=3, noise=noise)
+
+
+def sampled_scene():
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    return apply_overrides(Study('paper').data, {'controller.rate': 1000.0})
+
+
+def test_an_effort_latency_is_fitted_with_its_interval():
+    """Efforts 2 ms late (the driver's sensors.effort_latency): fixed at 0 the fit does not
+    fit and says that no reading of the efforts explains the free flight; freed (started at
+    0), the latency and the reading are chosen together, and every interval covers the truth."""
+    truth, rec = late_driver_recording({'sensors.effort_latency': 0.002})
+    fixed = fit(rec, sampled_scene(), BOUNDS)
+    assert fixed.verdict.startswith('does not fit: '), fixed.verdict
+    assert 'no reading of the recorded efforts predicts the free flight' in fixed.verdict
+    assert 'sensors.effort_latency' in fixed.verdict
+    freed = fit(rec, sampled_scene(), BOUNDS | {'sensors.effort_latency': (0.0, 0.005)})
+    assert freed.fits, freed.verdict
+    assert freed.timing == 'previous'
+    for key, value in (truth | {'sensors.effort_latency': 0.002}).items():
+        p = freed.parameters[key]
+        assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)
+
+
+def test_a_wrench_latency_is_fitted_with_its_interval():
+    """The wrench published 2 ms late (sensors.wrench_latency): fixed at 0 the impulse is
+    summed over the wrong periods, the fit does not fit and says the force comes after them;
+    freed, each impact's wrench is taken over every period the latency's bounds allow, the
+    centroid of its normal force is compared with the replay's moved back by the latency,
+    and every interval covers the truth."""
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    rec = recording({**truth, 'sensors.wrench_latency': 0.002}, 3, cycles=8, noise=noise)
+    fixed = fit(rec, 'paper', BOUNDS)
+    assert fixed.verdict.startswith('does not fit: '), fixed.verdict
+    assert 'the wrench published late? free sensors.wrench_latency' in fixed.verdict
+    freed = fit(rec, 'paper', BOUNDS | {'sensors.wrench_latency': (0.0, 0.005)})
+    assert freed.fits, freed.verdict
+    assert freed.used_wrench
+    for key, value in (truth | {'sensors.wrench_latency': 0.002}).items():
+        p = freed.parameters[key]
+        assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)
+
+
+# ------------------------------------------------------------------ a plate still ringing
+def test_a_plate_still_ringing_is_replayed_from_its_recorded_state():
+    """A plate on a lightly damped mount (damping ratio 5e-4: half its ringing left at the
+    next impact): the recording's plate states (/surface_mounts) start each replay, and the
+    fit with the right scene fits and covers the truth. Without them the replay starts the
+    plate at rest; the report says the plate still rings, and the scene does not fit."""
+    from impact_arm.calibration.study import Study, apply_overrides
+
+    mount = {'surfaces[0].mount': {'mass': 10.0, 'stiffness': 1e8, 'damping_ratio': 5e-4}}
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    scene = apply_overrides(Study('paper').data, mount)
+    rec = synthetic_recording('paper', truth | mount, cycles=8, seed=3, drop=0.02)
+    assert rec.plates is not None and np.max(np.abs(rec.plates[:, 1])) > 1e-3
+    result = fit(rec, scene, BOUNDS)
+    assert result.fits, result.verdict
+    for key, value in truth.items():
+        lo, hi = result.parameters[key].ci95
+        assert lo < value < hi, (key, lo, value, hi)
+    assert not any('still rings' in w for w in result.warnings)
+    at_rest = fit(
+        synthetic_recording('paper', truth | mount, cycles=8, seed=3, drop=0.02, plates=False),
+        scene,
+        BOUNDS,
+    )
+    assert any(
+        'surfaces[0]' in w and 'still rings at the next impact' in w for w in at_rest.warnings
+    )
+    assert not at_rest.fits
+
+
+def test_the_plates_states_are_read_from_a_recording(tmp_path):
+    """/surface_mounts, as the simulator and the synthetic tool write it (z and ż of each
+    plate), comes back from a rosbag2 folder as the recording's plate states, on its clock."""
+    mount = {'surfaces[0].mount': {'mass': 10.0, 'stiffness': 1e8, 'damping_ratio': 5e-4}}
+    rec = synthetic_recording('paper', mount, cycles=2, seed=3, clock_offset=WALL_CLOCK)
+    write_rosbag2(rec, str(tmp_path / 'bag'))
+    back = read_recording(str(tmp_path / 'bag'), joints=rec.joints)
+    assert back.plates is not None and back.plates.shape == rec.plates.shape == (len(rec.t), 2)
+    np.testing.assert_allclose(back.plates, rec.plates, rtol=0, atol=0)
+    np.testing.assert_allclose(back.plates_t, back.t, atol=1e-9)
+
+
+def test_a_state_latency_is_fitted_against_the_wrench():
+    """Joint states published 2 ms late (sensors.state_latency; efforts read as the scene's
+    controller, so only the wrench shows it, 2 ms early against the states): freed, it is
+    fitted from the wrench's timing and every interval covers the truth."""
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    rec = recording({**truth, 'sensors.state_latency': 0.002}, 3, cycles=8, noise=noise)
+    assert not fit(rec, 'paper', BOUNDS).fits
+    freed = fit(rec, 'paper', BOUNDS | {'sensors.state_latency': (0.0, 0.005)})
+    assert freed.fits, freed.verdict
+    for key, value in (truth | {'sensors.state_latency': 0.002}).items():
+        p = freed.parameters[key]
+        assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)
+
+
+def test_an_effort_latency_the_scenes_own_controller_replays_is_said_not_to_enter():
+    """The article's scene (a stiff continuous controller): its own controller, which the
+    replay recomputes, predicts the free flight better than any reading of the recorded
+    efforts at any latency, so a freed effort latency does not enter the replay: the fit
+    still fits (it did not when a reading of the efforts was forced), the latency comes out
+    not identified, and a note says why."""
+    truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
+    noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
+    rec = recording({**truth, 'sensors.effort_latency': 0.002}, 3, noise=noise)
+    result = fit(rec, 'paper', BOUNDS | {'sensors.effort_latency': (0.0, 0.005)})
+    assert result.timing == 'controller'
+    assert result.fits, result.verdict
+    assert not result.parameters['sensors.effort_latency'].identifiable
+    assert any('sensors.effort_latency does not enter the replay' in x for x in result.notes)
+    for key, value in truth.items():
+        lo, hi = result.parameters[key].ci95
+        assert lo < value < hi, (key, lo, value, hi)

@@ -239,6 +239,29 @@ def test_body_scene_refusals_name_the_key_in_one_line(change, words):
     assert words in str(err.value) and '\n' not in str(err.value)
 
 
+@pytest.mark.parametrize(
+    'corner, message',
+    [
+        (
+            [0.1, 2000],
+            'body.corners[0][1] = 2000 is out of range: must be >= -1000 and <= 1000 (m)',
+        ),
+        ([0.1, 'x'], "body.corners[0][1] = 'x' is not a number; must be >= -1000 and <= 1000 (m)"),
+        (
+            [float('inf'), 0],
+            'body.corners[0][0] = inf is not finite; must be >= -1000 and <= 1000 (m)',
+        ),
+    ],
+)
+def test_a_corner_coordinate_is_refused_by_the_scene_checker_number_check(corner, message):
+    """A body scene's points go through the arm scene's number check: the same words."""
+    data = square()
+    data['body']['corners'] = [corner]
+    with pytest.raises(SceneError) as err:
+        parse_body_scene(data, 'test')
+    assert str(err.value) == f"scene 'test': {message}"
+
+
 LEAVES = st.one_of(
     st.none(),
     st.booleans(),

@@ -115,3 +115,41 @@ def test_general_links_write_the_same_names():
         )
         with_accel = n <= equations.GENERAL_SYMBOLIC_ACCEL
         assert names == (declared if with_accel else declared - {'accel'}), n
+
+
+@pytest.mark.parametrize('n', [2, 12])
+def test_every_project_module_the_kernel_imports_is_in_its_cache_key(n):
+    """numba's cache of a kernel looks at the kernel's own file only; the project functions it
+    inlines must therefore name the file, or an edited contact law would load the old one."""
+    header = equations._module_header(n)
+    imported = {
+        node.module
+        for node in ast.walk(ast.parse(header))
+        if isinstance(node, ast.ImportFrom) and node.module.startswith('impact_arm')
+    }
+    imported |= {
+        a.name
+        for node in ast.walk(ast.parse(header))
+        if isinstance(node, ast.Import)
+        for a in node.names
+        if a.name.startswith('impact_arm')
+    }
+    hashed = {f'impact_arm.physics.{m}' for m in equations._IMPORTED_MODULE.findall(header)}
+    assert imported and imported == hashed
+
+
+def test_editing_an_inlined_module_renames_the_kernel(tmp_path):
+    physics = os.path.join(ROOT, 'impact_arm', 'physics')
+    for name in os.listdir(physics):
+        if name.endswith('.py'):
+            with open(os.path.join(physics, name), 'rb') as src:
+                (tmp_path / name).write_bytes(src.read())
+    source = equations._module_header(2) + 'x = 1\n'
+    before = equations.kernel_key(source, str(tmp_path))
+    assert before == equations.kernel_key(source, physics)
+    for module in ('contact', 'control', 'roots', 'layout', 'jit'):
+        path = tmp_path / f'{module}.py'
+        original = path.read_bytes()
+        path.write_bytes(original + b'\n# edited\n')
+        assert equations.kernel_key(source, str(tmp_path)) != before, module
+        path.write_bytes(original)

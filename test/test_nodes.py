@@ -92,6 +92,101 @@ def test_lockstep_article_matches_offline_and_repeats_bit_identically(
     assert [by_stamp[s[0]] for s in compared] == compared
 
 
+def test_lockstep_controller_stops_at_its_cycles_however_late_the_run_is_stopped(
+    probe, ros_env, tmp_path
+):
+    """With ``cycles`` the controller stops commanding where the offline run of those cycles
+    ends, so a lockstep recording holds exactly them although the nodes are stopped 3 s
+    later (a runner on a loaded machine sees the count late): nothing after the last cycle
+    but the one period of the zero command sent on exit, and every period on every
+    per-period topic. Read back with rosbags."""
+    import dataclasses
+    from pathlib import Path
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rosbags.highlevel import AnyReader
+
+    from impact_arm.nodes.recorder import FLOWING_LINE
+
+    cycles = 2
+    paper = resolve_scene_path('paper')
+    offline = run(dataclasses.replace(load_scene(paper), cycles=cycles), control_rate=1000.0)
+    status = probe.listen(
+        DiagnosticArray,
+        '/diagnostics',
+        keep=lambda m: bool(m.status) and m.status[0].name == contract.CONTROLLER_STATUS,
+    )
+    out = tmp_path / 'cycles.mcap'
+    per_period = (contract.JOINT_STATES, contract.CONTACT_WRENCH, contract.CONTACT_FORCE_PEAK)
+    with (
+        start_process(
+            node_args('impact_arm.nodes.recorder', f'output:={out}', f'scene:={paper}'),
+            ros_env,
+            tmp_path,
+            'recorder',
+        ) as rec,
+        start_process(
+            simulator(
+                'mode:=lockstep', 'rate_factor:=0.0', f'recorder_window:={contract.RECORDER_WINDOW}'
+            ),
+            ros_env,
+            tmp_path,
+            'sim',
+        ) as sim,
+    ):
+        # the recorder writes the held initial state on every per-period topic: from the
+        # first command on, nothing goes unrecorded
+        assert wait_for(
+            lambda: all(f'{FLOWING_LINE} {t}' in rec.stderr for t in per_period), timeout=90
+        ), rec.stderr + sim.stderr
+        with start_process(
+            controller(
+                'command_readers:=2',
+                f'command_history:={contract.WRITER_REPAIR_DEPTH}',
+                'startup_hold:=0.0',
+                f'cycles:={cycles}',
+            ),
+            ros_env,
+            tmp_path,
+            'ctl',
+        ) as ctl:
+
+            def completed():
+                return max(
+                    (int(diagnostics_values(m).get('cycles_completed', 0)) for _, m in status),
+                    default=0,
+                )
+
+            assert wait_for(lambda: completed() >= cycles or not ctl.alive(), timeout=150)
+            assert completed() == cycles, ctl.stderr + sim.stderr
+            time.sleep(3.0)  # the nodes run on: a third cycle would have begun and struck
+            ctl.stop()
+            said = ctl.stderr
+            assert ctl.popen.returncode == 0, ctl.stderr
+        sim.stop()
+        rec.stop()
+        assert rec.popen.returncode == 0, rec.stderr
+    probe.forget(status)
+
+    stamps, reports = {t: set() for t in per_period}, []
+    with AnyReader([Path(out)]) as reader:
+        for c, _, raw in reader.messages():
+            if c.topic in stamps:
+                msg = reader.deserialize(raw, c.msgtype)
+                stamps[c.topic].add(round(stamp(msg) * 1000))
+            elif c.topic == contract.IMPACT_REPORT:
+                reports.append(json.loads(reader.deserialize(raw, c.msgtype).data)['index'])
+    assert reports == list(range(1, cycles + 1))
+    last = max(stamps[contract.JOINT_STATES])
+    # the offline run of two cycles ends at the switch that ends the second up half; the
+    # lockstep run there too (its sampled control may switch a period or two apart), plus the
+    # period of the zero command. A third strike would come 0.3 s later.
+    assert last == pytest.approx(offline.t_end * 1000, abs=20), (last, offline.t_end)
+    for topic, seen in stamps.items():
+        assert seen == set(range(last + 1)), topic
+    assert f'{cycles} cycles completed: no further commands' in said
+
+
 def stamp_of(entry):
     return stamp(entry[1])
 

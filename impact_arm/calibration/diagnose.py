@@ -5,6 +5,7 @@ do about it.
 * ``DIFFERENCE_RATES``: the published rates are exact finite differences of the published
   positions (backward or central): the mean rate over a period, not the rate at the stamp,
   smeared across an impact;
+* ``FILTERED_RATES``: the rates are those differences through a first-order low-pass;
 * ``STAMP_JITTER``: the stamps scatter about a regular grid while the values follow the grid
   (stamps taken on arrival, not at sampling);
 * ``EFFORT_DELAY``: the reported efforts are late (or early) against the joint states, from
@@ -32,6 +33,7 @@ import numpy as np
 from .identify import (
     IdentifyError,
     JointRecording,
+    RateMeaning,
     estimate_noise,
     find_impacts,
     joint_to_absolute_matrix,
@@ -62,6 +64,7 @@ DELAY_F_MIN = 100.0
 
 class FindingKind(str, Enum):
     DIFFERENCE_RATES = 'difference_rates'
+    FILTERED_RATES = 'filtered_rates'
     STAMP_JITTER = 'stamp_jitter'
     EFFORT_DELAY = 'effort_delay'
     POSITION_NOISE = 'position_noise'
@@ -213,6 +216,42 @@ def check_difference_rates(rec: JointRecording) -> Finding | None:
                 + '; contact parameters fitted from these rates as measured ones are biased',
             )
     return None
+
+
+def check_filtered_rates(rec: JointRecording) -> Finding | None:
+    """Rates that are the backward differences d[k] = (q[k] - q[k-1]) / period through a
+    discrete first-order low-pass, v[k] = v[k-1] + alpha (d[k] - v[k-1]), with one alpha
+    (0 < alpha < 1) at nearly every sample where the arm moves."""
+    k, period = _consecutive(rec)
+    k = k[k >= 1]
+    q, v = rec.position, rec.velocity
+    x = (q[k] - q[k - 1]) / period - v[k - 1]
+    y = v[k] - v[k - 1]
+    moving = np.any(x != 0, axis=1)
+    x, y = x[moving], y[moving]
+    if len(x) < 20 or not np.any(x):
+        return None
+    alpha = float(np.sum(x * y) / np.sum(x * x))
+    if not 0.0 < alpha < 1.0 - 1e-9:
+        return None
+    scale = np.abs(v[k][moving]) + np.abs(x) + 1e-12
+    share = float(
+        np.mean(np.all(np.abs(y - alpha * x) <= 1e3 * DIFFERENCE_TOLERANCE * scale, axis=1))
+    )
+    if share < DIFFERENCE_SHARE:
+        return None
+    cutoff = -math.log(1.0 - alpha) / (2.0 * math.pi * period)
+    return Finding(
+        FindingKind.FILTERED_RATES,
+        cutoff,
+        'Hz',
+        f'the joint rates are backward differences of the positions through a first-order '
+        f'low-pass (cut-off {cutoff:.4g} Hz, alpha {alpha:.4g}) at {share:.0%} of the moving '
+        f'samples: late and smoothed across every impact, not a measured rate',
+        "record the drive's own velocity if it has one, or fit with --difference-rates (the "
+        'rates recomputed from the positions and read as mean rates over their periods); '
+        'contact parameters fitted from these rates as measured ones are biased',
+    )
 
 
 class SampleTimes(str, Enum):
@@ -491,6 +530,8 @@ def diagnose(rec: JointRecording, model: ArmModel | None = None) -> Diagnosis:
 
     found = check_difference_rates(rec)
     ran(FindingKind.DIFFERENCE_RATES, found, found.estimate if found else None)
+    found = None if found else check_filtered_rates(rec)
+    ran(FindingKind.FILTERED_RATES, found, found.estimate if found else None)
     ran(FindingKind.STAMP_JITTER, *check_stamp_jitter(rec))
     try:
         impacts = _impacts(rec, model)
@@ -537,15 +578,16 @@ def correct(
             ('--regular-stamps', FindingKind.STAMP_JITTER, 'stamps put on the regular grid')
         )
     if corrections.difference_rates:
-        out = difference_rates_at_midpoints(out)
+        out = rates_as_period_means(out)
         done.append(
             (
                 '--difference-rates',
                 FindingKind.DIFFERENCE_RATES,
-                'rates read as the mean rates over the periods before their stamps (samples '
-                "moved to the periods' middles, those holding a contact dropped)",
+                'rates read as the mean rates over the periods before their stamps and '
+                "compared with the replay's mean rates over the same periods",
             )
         )
+        done.append(('--difference-rates', FindingKind.FILTERED_RATES, ''))
     if corrections.effort_latency:
         out = _earlier_efforts(out, corrections.effort_latency)
         done.append(
@@ -565,9 +607,11 @@ def correct(
             )
         )
     for option, kind, what in done:
-        out.notes.append(f'corrected before the fit ({option}): {what}')
+        if what:
+            out.notes.append(f'corrected before the fit ({option}): {what}')
         if diagnosis is not None:
-            diagnosis.corrections.append(f'{option}: {what}')
+            if what:
+                diagnosis.corrections.append(f'{option}: {what}')
             diagnosis.findings = [
                 dataclasses.replace(f, corrected_by=option) if f.kind == kind else f
                 for f in diagnosis.findings
@@ -592,38 +636,37 @@ def _parabola_at(t: np.ndarray, q: np.ndarray, nodes: np.ndarray, at: np.ndarray
     return np.einsum('ij,ijk->ik', w, q[nodes])
 
 
-def difference_rates_at_midpoints(rec: JointRecording) -> JointRecording:
-    """A recording whose rates are backward differences, (q[k] - q[k-1]) / period, read for
-    what they are: the mean rate over the period before each stamp, which is the rate at the
-    period's middle to O(period^2). Each sample moves to t[k] - period / 2, with its position
-    there (the parabola through three neighbours on the same side of any impact) and its
-    effort there (linear). At each impact the two samples whose period may hold the contact
-    (the rate step of differences spreads over two gaps: the step the rates show and the
-    sample after it) are dropped: their rates mix both sides. The wrench keeps its stamps."""
-    t, q = rec.t, rec.position
-    N, period = len(t), rec.period
-    try:
-        impacts = find_impacts(rec)
-    except IdentifyError:
-        impacts = []
-    dropped = {k for f in impacts for k in (f, f + 1)} | {0}
-    keep = np.array([k for k in range(N) if k not in dropped])
-    mid = t[keep] - 0.5 * period
-    # nodes k-1, k, k+1, unless k+1 is dropped (across an impact) or beyond the end
-    centre = np.array([k - 1 if k + 1 >= N or k + 1 in dropped else k for k in keep])
-    centre = np.clip(centre, 1, N - 2)
-    nodes = np.stack([centre - 1, centre, centre + 1], axis=1)
+def rates_as_period_means(rec: JointRecording) -> JointRecording:
+    """A recording whose rates are backward differences of its positions, (q[k] - q[k-1]) /
+    period, or those differences through a filter, read for what they are: the mean rate over
+    the period before each stamp (``RateMeaning.PERIOD_MEAN``), which the fit compares with
+    the replay's own mean over that period. Rates that are not already the differences are
+    replaced by them where the sample before is recorded; a sample whose predecessor is lost
+    (and the first) is then dropped: its difference is unknown."""
+    k, period = _consecutive(rec)
+    q, v = rec.position, rec.velocity
+    diff = (q[k] - q[k - 1]) / period
+    scale = np.maximum(np.abs(v[k]), 1e-12)
+    already = float(np.mean(np.all(np.abs(diff - v[k]) <= DIFFERENCE_TOLERANCE * scale, axis=1)))
+    out = dataclasses.replace(rec, notes=list(rec.notes), rates=RateMeaning.PERIOD_MEAN)
+    if len(k) and already >= DIFFERENCE_SHARE:
+        return out  # a lost sample's successor keeps its rate: a difference all the same
+    velocity = v.copy()
+    velocity[k] = diff
     out = dataclasses.replace(
-        rec,
-        t=mid,
-        position=_parabola_at(t, q, nodes, mid),
-        velocity=rec.velocity[keep],
-        effort=np.array([np.interp(mid, t, rec.effort[:, j]) for j in range(rec.n)]).T,
+        out, t=rec.t[k], position=q[k], velocity=velocity[k], effort=rec.effort[k]
+    )
+    dropped = len(rec.t) - len(k)
+    out.notes.append(
+        f'rates recomputed as the differences of the positions; {dropped} sample(s) whose '
+        f'predecessor is not recorded dropped'
     )
     shift = float(out.t[0])
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
+    if out.plates_t is not None:
+        out.plates_t = out.plates_t - shift
     out.t0_ns = rec.t0_ns + round(shift * 1e9)
     return out
 
@@ -638,10 +681,14 @@ def _regular_stamps(rec: JointRecording) -> JointRecording:
     if rec.wrench_t is not None:
         kw = np.round((rec.wrench_t - a) / b)
         out.wrench_t = a + b * kw
+    if rec.plates_t is not None:
+        out.plates_t = a + b * np.round((rec.plates_t - a) / b)
     shift = out.t[0]
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
+    if out.plates_t is not None:
+        out.plates_t = out.plates_t - shift
     out.t0_ns = rec.t0_ns + round(shift * 1e9)
     return out
 
@@ -663,5 +710,7 @@ def _earlier_efforts(rec: JointRecording, latency: float) -> JointRecording:
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
+    if out.plates_t is not None:
+        out.plates_t = out.plates_t - shift
     out.t0_ns = rec.t0_ns + round(shift * 1e9)
     return out

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+import enum
 import math
 from dataclasses import dataclass, field
 
@@ -28,6 +29,15 @@ class IdentifyError(ImpactArmError):
     """A recording that does not allow an identification (no impact, too few samples)."""
 
 
+class RateMeaning(str, enum.Enum):
+    """What a recorded joint rate is."""
+
+    INSTANT = 'instant'  # the rate at the stamp (a drive's own velocity)
+    # (q(t) - q(t - period)) / period: a backward difference of the positions, the mean rate
+    # over the period before the stamp (a driver that differentiates its encoder)
+    PERIOD_MEAN = 'period_mean'
+
+
 @dataclass
 class JointRecording:
     t: np.ndarray  # [s] from the first sample (stamps of any clock)
@@ -40,6 +50,11 @@ class JointRecording:
     source: str = ''
     t0_ns: int = 0  # stamp of the first sample
     notes: list = field(default_factory=list)
+    rates: RateMeaning = RateMeaning.INSTANT
+    # the mounted surfaces' plates, when recorded (/surface_mounts): stamps [s] (same origin
+    # as t) and (z, ż) of each plate, flat, in surface order [m, m/s]
+    plates_t: np.ndarray | None = None
+    plates: np.ndarray | None = None
     if TYPE_CHECKING:  # set by find_impacts (not a dataclass field)
         step_z: np.ndarray = field(init=False)
 
@@ -50,6 +65,11 @@ class JointRecording:
     @property
     def period(self) -> float:
         return float(np.median(np.diff(self.t)))
+
+    @property
+    def rate_period(self) -> float | None:
+        """The period each recorded rate is the mean over, None for rates at the stamps."""
+        return self.period if self.rates is RateMeaning.PERIOD_MEAN else None
 
 
 @dataclass
@@ -72,11 +92,13 @@ class Noise:
 
 class LocalFit:
     """A cubic per joint through positions and rates together (rates are the positions'
-    derivative), weighted by their noise; ``state(t)`` gives q, q̇ and their covariance."""
+    derivative), weighted by their noise; ``state(t)`` gives q, q̇ and their covariance.
+    With ``rate_period`` (rates that are backward differences of the positions) the rates
+    hold nothing the positions do not: the cubic goes through the positions alone."""
 
     DEGREE = 3
 
-    def __init__(self, t, q, qd, t_ref, sigma_q, sigma_qd):
+    def __init__(self, t, q, qd, t_ref, sigma_q, sigma_qd, rate_period: float | None = None):
         self.t_ref, self.scale = t_ref, max(float(np.ptp(t)), 1e-6)
         tau = (np.asarray(t) - t_ref) / self.scale
         powers = np.arange(self.DEGREE + 1)
@@ -88,10 +110,14 @@ class LocalFit:
         self.cov = np.zeros((n, self.DEGREE + 1, self.DEGREE + 1))
         self.chi2 = 0.0
         self._states: dict = {}  # t -> (q, q̇, cov): see state()
-        dof = 2 * len(tau) - (self.DEGREE + 1)
+        with_rates = rate_period is None
+        dof = (2 if with_rates else 1) * len(tau) - (self.DEGREE + 1)
         for j in range(n):
-            A = np.vstack([V / sigma_q[j], D / sigma_qd[j]])
-            b = np.concatenate([q[:, j] / sigma_q[j], qd[:, j] / sigma_qd[j]])
+            if with_rates:
+                A = np.vstack([V / sigma_q[j], D / sigma_qd[j]])
+                b = np.concatenate([q[:, j] / sigma_q[j], qd[:, j] / sigma_qd[j]])
+            else:
+                A, b = V / sigma_q[j], q[:, j] / sigma_q[j]
             coef, *_ = np.linalg.lstsq(A, b, rcond=None)
             chi2 = float(np.sum((A @ coef - b) ** 2))
             # a window the cubic cannot follow (unmodelled jerk) widens its own uncertainty
@@ -112,6 +138,11 @@ class LocalFit:
         """q at each of the times ``t``: (len(t), n)."""
         tau = (np.asarray(t, float) - self.t_ref) / self.scale
         return (tau[:, None] ** np.arange(self.DEGREE + 1)) @ self.coef.T
+
+    def mean_rates(self, t: np.ndarray, period: float) -> np.ndarray:
+        """(q(t) - q(t - period)) / period at each of the times ``t``: (len(t), n)."""
+        t = np.asarray(t, float)
+        return (self.positions(t) - self.positions(t - period)) / period
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at ``t``: cov is (2n, 2n) over [q, q̇] (joints independent)."""
@@ -153,12 +184,24 @@ class ImpactWindow:
     effort_t: np.ndarray  # their times
     post_t: np.ndarray  # first m samples after the impact
     post_qd: np.ndarray  # their rates (m, n)
+    # rates that are means over the period before their stamps (``RateMeaning.PERIOD_MEAN``):
+    # that period [s]; None: rates at the stamps
+    rate_period: float | None = None
     impulse: np.ndarray | None = None  # (tangential, normal) [N s]
     impulse_var: np.ndarray | None = None
     rate_sigma: np.ndarray | None = None  # the rates' noise per joint [rad/s]
+    # a wrench that may be late (``_add_impulse``): its stamps and period, and the centroid
+    # of its normal force [s after t_a] with its variance; None: the impulse alone
+    wrench_stamps: np.ndarray | None = None
+    wrench_period: float = 0.0
+    wrench_timing: float | None = None
+    wrench_timing_var: float = 0.0
+    wrench_after: bool = False  # most of the normal force after the periods summed
+    plate: np.ndarray | None = None  # the plates' recorded (z, ż) at t_a, flat; None: not recorded
     if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
         effort_ib: int = field(init=False)
         effort_off: list[bool] = field(init=False)
+        effort_source: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
         widened: Callable[[str], ImpactWindow | None] = field(init=False)
 
     def jump(self) -> np.ndarray:
@@ -310,9 +353,13 @@ def impact_windows(
     min_samples: int = 5,
     max_gap: float = 5.0,
     post_samples: int = 3,
+    wrench_lag: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[list[ImpactWindow], list[str]]:
     """An ``ImpactWindow`` per usable impact and a note per impact left out (too few free
-    samples between impacts, a gap of more than ``max_gap`` periods across the contact)."""
+    samples between impacts, a gap of more than ``max_gap`` periods across the contact).
+    ``wrench_lag``: the range [s] of the wrench's delay behind the joint states (a latency
+    fitted or stated): each impact's wrench is taken over every period that can then hold
+    the contact, with its timing (``_add_impulse``)."""
     out: list[ImpactWindow]
     notes: list[str]
     out, notes = [], []
@@ -321,7 +368,7 @@ def impact_windows(
         lo = impacts[i - 1] + 1 if i else 0
         hi = impacts[i + 1] if i + 1 < len(impacts) else N - 1
         win, why = make_window(
-            rec, noise, a, a + 1, lo, hi, window, min_samples, max_gap, post_samples
+            rec, noise, a, a + 1, lo, hi, window, min_samples, max_gap, post_samples, wrench_lag
         )
         if win is None:
             notes.append(f'impact at t = {rec.t[a]:.4f} s left out: {why}')
@@ -342,6 +389,7 @@ def make_window(
     min_samples: int = 5,
     max_gap: float = 5.0,
     post_samples: int = 3,
+    wrench_lag: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[ImpactWindow | None, str]:
     """(ImpactWindow, '') for an impact between samples a and b (free samples from lo to
     hi), or (None, why not). ``window.widened(side)`` rebuilds it with one more sample
@@ -373,7 +421,9 @@ def make_window(
         )
     if len(pre_idx) > min_samples and _contact_under_way(rec, noise, pre_idx, b):
         # the contact began before sample a: it is no free-flight sample
-        return make_window(rec, noise, a - 1, b, lo, hi, window, min_samples, max_gap, post_samples)
+        return make_window(
+            rec, noise, a - 1, b, lo, hi, window, min_samples, max_gap, post_samples, wrench_lag
+        )
     fits = [
         LocalFit(
             rec.t[idx],
@@ -382,12 +432,15 @@ def make_window(
             rec.t[ref],
             noise.position,
             noise.velocity,
+            rec.rate_period,
         )
         for idx, ref in ((pre_idx, a), (post_idx, b))
     ]
     # ignored [call-arg], [misc]: mypy cannot count the items of the list ``fits`` (pre, post)
     t_c = _contact_time(*fits, rec.t[a], rec.t[b], noise.position)  # type: ignore[call-arg]
-    compare = post_idx[: _before_next_contact(rec, noise, post_idx[:post_samples])]
+    # a wrench published late shows this impact's force after b: not a further contact
+    own_wrench = rec.t[b] + max(wrench_lag[1], 0.0) + 1.25 * dt if any(wrench_lag) else None
+    compare = post_idx[: _before_next_contact(rec, noise, post_idx[:post_samples], own_wrench)]
     # efforts from the sample before a to the one after the last compared sample, including
     # any taken during the contact (between a and b)
     e_idx = np.concatenate([[max(a - 1, 0)], np.arange(a, min(compare[-1] + 2, N))])
@@ -403,28 +456,33 @@ def make_window(
         effort_t=rec.t[e_idx].copy(),
         post_t=rec.t[compare].copy(),
         post_qd=rec.velocity[compare].copy(),
+        rate_period=rec.rate_period,
         rate_sigma=noise.velocity,
     )
     win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
+    # the whole series, for a replay that reads the efforts later by a latency it fits
+    win.effort_source = (rec.t, rec.effort, 6 * noise.effort + 1e-12)
     # samples during the contact whose torque is zero within the noise: actuators off
     win.effort_off = [
         bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12)) for k in range(len(e_idx))
     ]
-    _add_impulse(rec, noise, win)
+    _add_impulse(rec, noise, win, wrench_lag)
+    win.plate = _plate_at(rec, rec.t[a])
 
     def widened(side: str) -> ImpactWindow | None:
         a2, b2 = (a - 1, b) if side == 'pre' else (a, b + 1)
-        return make_window(rec, noise, a2, b2, lo, hi, window, min_samples, max_gap, post_samples)[
-            0
-        ]
+        return make_window(
+            rec, noise, a2, b2, lo, hi, window, min_samples, max_gap, post_samples, wrench_lag
+        )[0]
 
     win.widened = widened
     return win, ''
 
 
-def _before_next_contact(rec, noise, idx, z_min=30.0) -> int:
+def _before_next_contact(rec, noise, idx, own_wrench=None, z_min=30.0) -> int:
     """How many of the post-impact samples ``idx`` come before a further contact (a bounce:
-    a rate step, or wrench in the period that ends at the sample); at least one."""
+    a rate step, or wrench in the period that ends at the sample, unless stamped up to
+    ``own_wrench``, the impact's own wrench published late); at least one."""
     z = getattr(rec, 'step_z', None)
     dt = rec.period
     for count, j in enumerate(idx[1:], start=1):
@@ -439,6 +497,8 @@ def _before_next_contact(rec, noise, idx, z_min=30.0) -> int:
             return count
         if rec.wrench is not None and noise.wrench is not None:
             near = (rec.wrench_t > rec.t[j - 1] + 0.5 * dt) & (rec.wrench_t <= rec.t[j] + 0.5 * dt)
+            if own_wrench is not None:
+                near &= rec.wrench_t > own_wrench
             if np.any(np.abs(rec.wrench[near]) > 8 * noise.wrench):
                 return count
     return len(idx)
@@ -450,6 +510,7 @@ def _contact_under_way(rec, noise, pre_idx, b, limit=6.0) -> bool:
     step across the impact: noise-free data leave only the cubic's own error): a contact
     already under way."""
     head, last = pre_idx[:-1], pre_idx[-1]
+    period = rec.rate_period
     fit = LocalFit(
         rec.t[head],
         rec.position[head],
@@ -457,23 +518,31 @@ def _contact_under_way(rec, noise, pre_idx, b, limit=6.0) -> bool:
         rec.t[head[-1]],
         noise.position,
         noise.velocity,
+        period,
     )
     _, qd, cov = fit.state(rec.t[last])
     n = rec.n
     sd = np.sqrt(np.diag(cov)[n:] + noise.velocity**2)
+    if period is not None:  # the recorded rate is the mean over the period before the stamp
+        qd = fit.mean_rates(np.array([rec.t[last]]), period)[0]
     floor = 1e-3 * float(np.max(np.abs(rec.velocity[b] - rec.velocity[last])))
     return bool(np.any(np.abs(rec.velocity[last] - qd) > np.maximum(limit * sd, floor)))
 
 
-def _add_impulse(rec, noise, win):
+def _add_impulse(rec, noise, win, wrench_lag=(0.0, 0.0)):
     """The wrench impulse over the periods that can hold the contact, if every one of them
-    was recorded (a lost wrench sample would lose part of the impulse)."""
+    was recorded (a lost wrench sample would lose part of the impulse). With a wrench that
+    may be late (``wrench_lag`` = its delay's range [s], not (0, 0)) the periods cover every
+    delay in that range, and the impulse's timing is kept too: the stamps and the normal
+    force of each period, and their centroid (sum s F / sum F, from the last sample before
+    the impact), which a replay that knows the delay gives alike."""
     if rec.wrench is None or noise.wrench is None:
         return
     wt = rec.wrench_t
     dtw = float(np.median(np.diff(wt)))
+    lo, hi = wrench_lag
     # every period that can overlap the contact, which lies between the joint samples a, b
-    sel = np.flatnonzero((wt > win.t_a - 0.25 * dtw) & (wt <= win.t_b + 1.25 * dtw))
+    sel = np.flatnonzero((wt > win.t_a + lo - 0.25 * dtw) & (wt <= win.t_b + hi + 1.25 * dtw))
     if len(sel) < 2:
         return
     around = np.arange(max(sel[0] - 1, 0), min(sel[-1] + 2, len(wt)))
@@ -481,6 +550,35 @@ def _add_impulse(rec, noise, win):
         return
     win.impulse = rec.wrench[sel].sum(axis=0) * dtw
     win.impulse_var = len(sel) * (noise.wrench * dtw) ** 2
+    if not any(wrench_lag):
+        # most of the normal force after these periods: a wrench published late
+        after = rec.wrench[sel[-1] + 1 : sel[-1] + 1 + 2 * len(sel), 1].sum() * dtw
+        win.wrench_after = bool(
+            abs(after) > abs(win.impulse[1]) and abs(after) > 8 * noise.wrench[1] * dtw
+        )
+        return
+    force = rec.wrench[sel, 1]
+    total = float(force.sum())
+    if total <= 0:
+        return
+    centroid = float(wt[sel] @ force) / total
+    win.wrench_stamps, win.wrench_period = wt[sel].copy(), dtw
+    win.wrench_timing = centroid - win.t_a
+    win.wrench_timing_var = float(noise.wrench[1] ** 2 * np.sum((wt[sel] - centroid) ** 2)) / (
+        total**2
+    )
+
+
+def _plate_at(rec: JointRecording, t: float) -> np.ndarray | None:
+    """The plates' recorded state at the joint sample stamped ``t`` (a plate sample of the
+    same period: the simulator publishes both with the period's stamp), None when there is
+    none such."""
+    if rec.plates is None or rec.plates_t is None or not len(rec.plates_t):
+        return None
+    k = int(np.argmin(np.abs(rec.plates_t - t)))
+    if abs(rec.plates_t[k] - t) > 1e-3 * rec.period:
+        return None
+    return rec.plates[k].copy()
 
 
 def joint_to_absolute_matrix(n: int) -> np.ndarray:

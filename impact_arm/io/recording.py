@@ -20,7 +20,7 @@ from operator import attrgetter
 
 import numpy as np
 
-from ..contract import CONTACT_WRENCH, JOINT_STATES, joint_names
+from ..contract import CONTACT_WRENCH, JOINT_STATES, SURFACE_MOUNTS, joint_names
 from ..physics.errors import ImpactArmError
 from ..calibration.identify import JointRecording
 from .wire import CdrReader, _doubles_at, _header, _strings
@@ -135,9 +135,13 @@ def read_recording(
         wrench_topic = None
     from .mcap_ros2 import iter_raw
 
-    wanted = [states_topic] + ([wrench_topic] if wrench_topic else [])
+    # the mounted surfaces' plates, when recorded (the simulator's recordings have them):
+    # the fit starts each impact's replay from their state
+    plates_topic = SURFACE_MOUNTS if SURFACE_MOUNTS in topics else None
+    wanted = [states_topic] + [x for x in (wrench_topic, plates_topic) if x]
     notes: list[str]
     states, wrenches, seen_names, notes = [], [], set(), []
+    plates: list = []
     for f in files:
         # read in the file's order and sorted by log time here (stable: ties stay in the
         # file's order, as the reader's own log-time merge keeps them): the reader's merge
@@ -159,6 +163,11 @@ def read_recording(
                             *(_pick(v, cols, len(names)) for v in (pos, vel, eff)),
                         )
                     )
+                elif m.topic == plates_topic:
+                    stamp, _, z, zd, _ = _joint_state(m.data)
+                    if len(z) == len(zd):
+                        flat = [x for pair in zip(z, zd) for x in pair]
+                        plates.append((stamp, m.log_time_ns, flat))
                 else:
                     stamp, force = _wrench(m.data)
                     wrenches.append((stamp, m.log_time_ns, force[0], force[1]))
@@ -182,7 +191,16 @@ def read_recording(
             f"{states_topic} names {', '.join(more)} besides the scene's {len(joints)} "
             f"joints: give the recorded arm's scene (--scene) or its joints (--joints)"
         )
-    return _assemble(states, wrenches, joints, os.fspath(path), notes)
+    rec = _assemble(states, wrenches, joints, os.fspath(path), notes)
+    widths = {len(p[2]) for p in plates}
+    if plates and len(widths) == 1 and widths != {0}:
+        stamps = _stamps([p[0] for p in plates], [p[1] for p in plates])
+        values = np.array([p[2] for p in plates], float)
+        order = np.argsort(stamps, kind='stable')
+        good = np.isfinite(values[order]).all(axis=1)
+        rec.plates_t = ((stamps[order] - rec.t0_ns) * 1e-9)[good]
+        rec.plates = values[order][good]
+    return rec
 
 
 def recorded_scene(path: str | os.PathLike) -> Any:

@@ -1,4 +1,5 @@
-"""Is a recording complete? Every period from stamp 0, a command for each, every impact report.
+"""Is a recording complete? Every period from stamp 0 on every per-period topic, a command for
+each, every impact report.
 
 ``impact-arm run`` checks its file with this once the recorder has closed it. In lockstep
 nothing forces a loss (the simulator waits for the recorder), so a gap is a defect and the run
@@ -12,10 +13,23 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from ..contract import COMMANDS, IMPACT_REPORT, JOINT_STATES, LOSSES_METADATA
-from .mcap_ros2 import iter_raw, read_metadata
+from ..contract import (
+    COMMANDS,
+    CONTACT_FORCE_PEAK,
+    CONTACT_WRENCH,
+    IMPACT_REPORT,
+    JOINT_STATES,
+    LOSSES_METADATA,
+    SURFACE_MOUNTS,
+)
+from .mcap_ros2 import iter_raw, read_metadata, topics_info
 from .msgdefs import typestore
 from .wire import MalformedMessage, header_stamp_ns
+
+
+# what the simulator publishes once per period, stamped with the period's time (the plates of
+# mounted surfaces only for a scene that has them); /clock is best effort, not among them
+PERIOD_TOPICS = (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, SURFACE_MOUNTS)
 
 
 @dataclass
@@ -26,6 +40,9 @@ class RecordingCheck:
     impact_reports: int
     missing_reports: list = field(default_factory=list)  # impact indices absent
     lost: dict = field(default_factory=dict)  # topic -> samples the recorder never got
+    # the other per-period topics: topic -> period numbers absent between 0 and the last
+    # period of any of them (a topic expected but not in the file misses every period)
+    missing_on: dict = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -36,6 +53,11 @@ class RecordingCheck:
         if self.missing_periods:
             first = self.missing_periods[0]
             problems.append(f'{len(self.missing_periods)} periods missing (first: period {first})')
+        for topic, missing in sorted(self.missing_on.items()):
+            if missing:
+                problems.append(
+                    f'{len(missing)} periods missing on {topic} (first: period {missing[0]})'
+                )
         if self.commands < self.periods - 1:
             problems.append(f'{self.periods - 1 - self.commands} commands missing')
         if self.missing_reports:
@@ -64,18 +86,24 @@ class RecordingCheck:
         return text + (f'; lost on the way (counted by the recorder): {lost}' if lost else '')
 
 
-def check_recording(path: str | os.PathLike, rate: float) -> RecordingCheck:
+def check_recording(
+    path: str | os.PathLike, rate: float, expected: tuple[str, ...] = ()
+) -> RecordingCheck:
     """Count what ``path`` holds against a run at ``rate`` Hz that started at stamp 0.
-    Period k has stamp k / rate; each period after the first was started by one command.
-    (A run with a reset repeats stamps: they count once.)"""
+    Period k has stamp k / rate on every per-period topic the file has (``PERIOD_TOPICS``)
+    and on those ``expected`` (the run's own, e.g. /surface_mounts for a scene with a mount:
+    absent from the file, it misses every period); each period after the first was started
+    by one command. (A run with a reset repeats stamps: they count once.)"""
+    recorded = topics_info(path)
+    periodic = [t for t in PERIOD_TOPICS if t == JOINT_STATES or t in recorded or t in expected]
     read_string = None
-    stamps: set[int]
+    stamps: dict[str, set[int]] = {topic: set() for topic in periodic}
     indices: list[int | None]  # None: a report that cannot be read
-    stamps, commands, indices = set(), 0, []
-    for m in iter_raw(path, [JOINT_STATES, COMMANDS, IMPACT_REPORT], log_time_order=False):
-        if m.topic == JOINT_STATES:
+    commands, indices = 0, []
+    for m in iter_raw(path, [*periodic, COMMANDS, IMPACT_REPORT], log_time_order=False):
+        if m.topic in stamps:
             try:
-                stamps.add(round(header_stamp_ns(m.data) * rate * 1e-9))
+                stamps[m.topic].add(round(header_stamp_ns(m.data) * rate * 1e-9))
             except MalformedMessage:
                 pass
         elif m.topic == COMMANDS:
@@ -87,10 +115,20 @@ def check_recording(path: str | os.PathLike, rate: float) -> RecordingCheck:
                 indices.append(int(json.loads(read_string(m.data, m.type_name).data)['index']))
             except (ValueError, KeyError, TypeError):
                 indices.append(None)
-    last = max(stamps, default=-1)
-    missing = sorted(set(range(last + 1)) - stamps)
+    last = max((max(seen, default=-1) for seen in stamps.values()), default=-1)
+    grid = set(range(last + 1))
+    missing = sorted(grid - stamps[JOINT_STATES])
+    missing_on = {t: sorted(grid - seen) for t, seen in stamps.items() if t != JOINT_STATES}
     known = {i for i in indices if i is not None}
     missing_reports = sorted(set(range(1, max(known, default=0) + 1)) - known)
     losses = read_metadata(path).get(LOSSES_METADATA, {})
     lost = {key.partition(':')[2]: int(n) for key, n in losses.items() if key.startswith('lost:')}
-    return RecordingCheck(len(stamps), missing, commands, len(indices), missing_reports, lost)
+    return RecordingCheck(
+        len(stamps[JOINT_STATES]),
+        missing,
+        commands,
+        len(indices),
+        missing_reports,
+        lost,
+        missing_on,
+    )

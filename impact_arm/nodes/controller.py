@@ -96,7 +96,12 @@ class Controller(Node):
         # the down half began)
         self.strikes = 0
         self.down_half_start = 0.0
+        # cycles whose up half ended (the arm back through switch_height, the offline run's
+        # count); at ``cycles`` of them no further command is sent
+        self.cycles_completed = 0
+        self.finished = False
         self._mode = self.ctrl.mode
+        self._switches = self.ctrl.switches  # a re-arm sets the down half without a switch
         self.pub = self.create_publisher(
             Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy(p.command_history)
         )
@@ -216,15 +221,31 @@ class Controller(Node):
         )
 
     def _send(self, values):
-        self.pub.publish(self.wire_command.fill([float(v) for v in values]))
-        self.sent += 1
+        if self.finished:
+            return  # the cycles are done: the driver holds the last command
         mode, self._mode = self._mode, self.ctrl.mode
+        switched, self._switches = self.ctrl.switches != self._switches, self.ctrl.switches
+        if mode == 'up' and self._mode == 'down' and switched:
+            self.cycles_completed += 1
+            if self.p.cycles and self.cycles_completed >= self.p.cycles:
+                # before the next down half's first command: not one period of it is run
+                self.finished = True
+                self.get_logger().info(
+                    f'{self.cycles_completed} cycles completed: no further commands (cycles)'
+                )
+                self._publish_diagnostics()  # now: a run ends on it
+                return
+        self._publish(values)
         if mode != self._mode:
             if self._mode == 'up':
                 self.strikes += 1
                 self._publish_diagnostics()  # now: a run ends on its count
             elif self.inputs.latest is not None:
                 self.down_half_start = self.inputs.latest[0]
+
+    def _publish(self, values):
+        self.pub.publish(self.wire_command.fill([float(v) for v in values]))
+        self.sent += 1
         if self.sent == 1 and self.inputs.first_command_after is not None:
             self.get_logger().info(
                 f'first command sent {self.inputs.first_command_after:.3f} s after start '
@@ -236,7 +257,7 @@ class Controller(Node):
         from rclpy.duration import Duration
 
         try:
-            self._send([0.0] * self.n)
+            self._publish([0.0] * self.n)  # also after the cycles: the actuators let go
             self.pub.wait_for_all_acked(Duration(seconds=0.5))
         except Exception:  # noqa: BLE001 - best effort once the middleware is shutting down
             self.get_logger().warning('could not send the zero command on exit')
@@ -249,14 +270,16 @@ class Controller(Node):
 
     def _publish_diagnostics(self):
         dropped = sum(self.inputs.dropped.values())
+        message = 'cycles completed' if self.finished else 'running'
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK,
             name=contract.CONTROLLER_STATUS,
             hardware_id='impact_arm_controller',
-            message=f'{dropped} inputs dropped' if dropped else 'running',
+            message=f'{dropped} inputs dropped' if dropped else message,
             values=[
                 KeyValue(key='commands_sent', value=str(self.sent)),
                 KeyValue(key='strikes', value=str(self.strikes)),
+                KeyValue(key='cycles_completed', value=str(self.cycles_completed)),
                 KeyValue(key='down_half_start', value=repr(self.down_half_start)),
                 # the driver's repetitions of a sample, not taken as new periods
                 KeyValue(key='repeated_states', value=str(self.inputs.repeated)),

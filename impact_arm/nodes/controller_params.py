@@ -233,6 +233,20 @@ def parameter_table(scene):
             read_only=True,
         ),
         Param(
+            'cycles',
+            0,
+            'down/up cycles after which the controller sends no further command (0: it '
+            'never stops); a cycle ends as the arm rises through switch_height after its '
+            "strike, where an offline run of the scene ends (counted from the node's start; a "
+            're-armed cycle is no cycle). In lockstep the simulator waits for the next command, '
+            'so simulated time stops there however long the nodes run on',
+            'int',
+            low=0,
+            high=1_000_000,
+            read_only=True,
+            doc=". `impact-arm run` sets the scene's `cycles` in lockstep",
+        ),
+        Param(
             'thread_priority',
             49,
             'SCHED_FIFO priority of the control thread and of the '

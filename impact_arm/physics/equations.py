@@ -29,6 +29,7 @@ from typing import Any
 import hashlib
 import importlib.util
 import os
+import re
 import sys
 import tempfile
 import types
@@ -578,6 +579,7 @@ def _module_header(n, general=False, n_mount=0):
         '                                friction_force, residual, restitution_radius,',
         '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
         'from impact_arm.physics.control import add_joint_torques, pid_error, pid_law, q_law',
+        'from impact_arm.physics.roots import event_tolerance, false_position, illinois_update',
         f'N = {n}',
     ]
     lines += [f'NM = {n_mount}', f'HAS_MOUNT = {n_mount > 0}']
@@ -641,13 +643,29 @@ def load_equations(n: int, general: bool = False, n_mount: int = 0) -> types.Mod
     return _LOADED[key]
 
 
+_IMPORTED_MODULE = re.compile(r'^from impact_arm\.physics\.(\w+) import', re.MULTILINE)
+
+
+def kernel_key(source: str, package_dir: str | None = None) -> str:
+    """The cache name's hash of a kernel module: its own text, the Python version and the text
+    of every project module its header imports. numba inlines those modules' functions (the
+    contact laws, the control laws, the event bracket) into the compiled kernel and its cache
+    looks only at the kernel's own file: without them an edited contact law would run the old
+    compiled one. ``package_dir``: where those modules are read (default: this package)."""
+    digest = hashlib.sha256(f'{source}{sys.version_info[:2]}'.encode())
+    here = package_dir or os.path.dirname(os.path.abspath(__file__))
+    for module in sorted(set(_IMPORTED_MODULE.findall(source))):
+        with open(os.path.join(here, module + '.py'), 'rb') as f:
+            digest.update(f.read())
+    return digest.hexdigest()[:16]
+
+
 def _load_equations(n, general, n_mount=0):
     from .kernel import template_source
 
     template = template_source()
     source = _module_header(n, general, n_mount) + _derivation(n, general) + '\n\n' + template
-    key = hashlib.sha256(f'{source}{sys.version_info[:2]}'.encode()).hexdigest()[:16]
-    name = f'impact_arm_kernel_{n}_{key}'
+    name = f'impact_arm_kernel_{n}_{kernel_key(source)}'
     if name in sys.modules:
         return sys.modules[name]
     path = os.path.join(cache_dir(), name + '.py')

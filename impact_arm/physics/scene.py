@@ -233,33 +233,45 @@ def rod_inertias(lengths: Sequence[float], masses: Sequence[float]) -> tuple[flo
 
 
 # --- schema -----------------------------------------------------------------------------
-# A leaf is (kind, constraint, unit, default); default REQUIRED means the key must be present.
+# A spec is (kind, constraint, unit, default); default REQUIRED means the key must be present.
+# Kinds: 'num' (constraint: low, high, low_open, high_open), 'choice' (the allowed values),
+# 'str', 'bool', 'int' (low, high), 'vec' (a non-empty list; constraint: its numbers' spec),
+# 'dict' (a schema), 'list' (a list of entries of a schema), 'map' (names to such entries).
 REQUIRED = object()
 
 
-def _num(low=None, high=None, low_open=False, high_open=False, unit='', default=REQUIRED):
+def number_spec(
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = '',
+    default: Any = REQUIRED,
+) -> tuple:
+    """The spec of a finite number in [low, high] (either end open or absent)."""
     return ('num', (low, high, low_open, high_open), unit, default)
 
 
-def _choice(options, default=REQUIRED):
+def choice_spec(options: Sequence[str], default: Any = REQUIRED) -> tuple:
+    """The spec of one of ``options``."""
     return ('choice', tuple(options), '', default)
 
 
 MATERIAL = {
-    'E': _num(1e5, 1e13, unit='Pa'),
-    'nu': _num(0, 0.5, high_open=True),
-    'S_y': _num(1e3, 1e12, unit='Pa'),
+    'E': number_spec(1e5, 1e13, unit='Pa'),
+    'nu': number_spec(0, 0.5, high_open=True),
+    'S_y': number_spec(1e3, 1e12, unit='Pa'),
 }
 # Absolute bounds below are physical: the model's tolerances are absolute in metres and
 # radians, the contact laws are fitted on lab-scale metal contact, and the numbers must stay far
 # from float64's range; docs/scene.md ("Physical ranges") gives each reason.
 LINK = {
-    'length': _num(1e-3, 1e3, unit='m'),
-    'mass': _num(1e-6, 1e6, unit='kg'),
+    'length': number_spec(1e-3, 1e3, unit='m'),
+    'mass': number_spec(1e-6, 1e6, unit='kg'),
     # general links; absent: a uniform rod's (centre at length / 2, inertia m L^2 / 12)
-    'com_x': _num(-1e3, 1e3, unit='m', default=None),
-    'com_y': _num(-1e3, 1e3, unit='m', default=0.0),
-    'inertia': _num(1e-12, 1e12, unit='kg m^2', default=None),
+    'com_x': number_spec(-1e3, 1e3, unit='m', default=None),
+    'com_y': number_spec(-1e3, 1e3, unit='m', default=0.0),
+    'inertia': number_spec(1e-12, 1e12, unit='kg m^2', default=None),
 }
 TIP_RADIUS_RANGE = (1e-6, 1, False, False)  # m
 # values of a URDF arm's link that a scene (a fit, a sweep) sets instead of the file's
@@ -277,7 +289,7 @@ ARM: dict[str, Any] = {
         'dict',
         {
             'link': ('str', None, '', None),
-            'point': ('vec', _num(-1e3, 1e3), 'm', None),
+            'point': ('vec', number_spec(-1e3, 1e3), 'm', None),
             'radius': ('num', TIP_RADIUS_RANGE, 'm', None),
         },
         '',
@@ -285,65 +297,65 @@ ARM: dict[str, Any] = {
     ),
 }
 JOINT = {  # absent: the URDF's value for damping and friction, else the ideal joint's
-    'damping': _num(0, 1e6, unit='N m s/rad', default=None),
-    'friction': _num(0, 1e6, unit='N m', default=None),
-    'friction_v_d': _num(1e-6, 10, unit='rad/s', default=None),
-    'armature': _num(0, 1e6, unit='kg m^2', default=None),
+    'damping': number_spec(0, 1e6, unit='N m s/rad', default=None),
+    'friction': number_spec(0, 1e6, unit='N m', default=None),
+    'friction_v_d': number_spec(1e-6, 10, unit='rad/s', default=None),
+    'armature': number_spec(0, 1e6, unit='kg m^2', default=None),
 }
 SURFACE = {
-    'height': _num(-1e3, 1e3, unit='m'),
-    'law': _choice(CONTACT_LAWS, 'elastoplastic'),
-    'mu': _num(0, 10, unit='-', default=0.0),
-    'v_d': _num(1e-6, 10, unit='m/s', default=0.02),
+    'height': number_spec(-1e3, 1e3, unit='m'),
+    'law': choice_spec(CONTACT_LAWS, 'elastoplastic'),
+    'mu': number_spec(0, 10, unit='-', default=0.0),
+    'v_d': number_spec(1e-6, 10, unit='m/s', default=0.02),
     'material': ('str', None, '', 'surface'),
     'mount': (
         'dict',
         {
-            'mass': _num(1e-6, 1e6, unit='kg'),
-            'stiffness': _num(0, 1e13, unit='N/m'),
-            'damping_ratio': _num(0, 10, unit='-', default=0.0),
+            'mass': number_spec(1e-6, 1e6, unit='kg'),
+            'stiffness': number_spec(0, 1e13, unit='N/m'),
+            'damping_ratio': number_spec(0, 10, unit='-', default=0.0),
         },
         '',
         None,
     ),
 }
 CONTROLLER = {
-    'law': _choice(CONTROL_LAWS, 'q'),
-    'space': _choice(PID_SPACES, 'absolute'),
-    'kp': ('vec', _num(0, 1e9), 'N m/rad', REQUIRED),
-    'kd': ('vec', _num(0, 1e9), 'N m s/rad', REQUIRED),
-    'ki': ('vec', _num(0, 1e9), 'N m/(rad s)', None),
-    'down_target_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
-    'up_target_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
-    'switch_height': _num(-1e3, 1e3, unit='m', default=1.0),
-    'rate': _num(0, 1e6, unit='Hz', default=0.0),
+    'law': choice_spec(CONTROL_LAWS, 'q'),
+    'space': choice_spec(PID_SPACES, 'absolute'),
+    'kp': ('vec', number_spec(0, 1e9), 'N m/rad', REQUIRED),
+    'kd': ('vec', number_spec(0, 1e9), 'N m s/rad', REQUIRED),
+    'ki': ('vec', number_spec(0, 1e9), 'N m/(rad s)', None),
+    'down_target_deg': ('vec', number_spec(-360, 360), 'deg', REQUIRED),
+    'up_target_deg': ('vec', number_spec(-360, 360), 'deg', REQUIRED),
+    'switch_height': number_spec(-1e3, 1e3, unit='m', default=1.0),
+    'rate': number_spec(0, 1e6, unit='Hz', default=0.0),
 }
 INTEGRATOR = {
-    'preset': _choice(INTEGRATOR_PRESETS, 'balanced'),
-    'rtol': _num(1e-14, 1e-1, unit='-', default=None),
-    'atol': _num(1e-16, 1e-1, unit='-', default=None),
-    'max_step': _num(1e-5, 10, unit='s', default=None),
-    'method': _choice(INTEGRATOR_METHODS, 'dopri5'),
-    'contact_rtol': _num(1e-14, 1e-1, unit='-', default=None),
+    'preset': choice_spec(INTEGRATOR_PRESETS, 'balanced'),
+    'rtol': number_spec(1e-14, 1e-1, unit='-', default=None),
+    'atol': number_spec(1e-16, 1e-1, unit='-', default=None),
+    'max_step': number_spec(1e-5, 10, unit='s', default=None),
+    'method': choice_spec(INTEGRATOR_METHODS, 'dopri5'),
+    'contact_rtol': number_spec(1e-14, 1e-1, unit='-', default=None),
 }
 MAX_SENSOR_LATENCY = 1.0  # s: a driver whose samples are older is broken, not slow
 SENSORS = {
     'counts_per_revolution': ('int', (1, 2**40), '', None),
-    'position_noise': _num(0, 1, unit='rad', default=0.0),
-    'rate_noise': _num(0, 1e3, unit='rad/s', default=0.0),
-    'effort_noise': _num(0, 1e6, unit='N m', default=0.0),
-    'wrench_noise': _num(0, 1e9, unit='N', default=0.0),
-    'rate': _choice([r.value for r in RateReading], RateReading.EXACT.value),
-    'rate_cutoff': _num(1e-3, 1e6, unit='Hz', default=None),
-    'state_latency': _num(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
-    'effort_latency': _num(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
-    'wrench_latency': _num(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
+    'position_noise': number_spec(0, 1, unit='rad', default=0.0),
+    'rate_noise': number_spec(0, 1e3, unit='rad/s', default=0.0),
+    'effort_noise': number_spec(0, 1e6, unit='N m', default=0.0),
+    'wrench_noise': number_spec(0, 1e9, unit='N', default=0.0),
+    'rate': choice_spec([r.value for r in RateReading], RateReading.EXACT.value),
+    'rate_cutoff': number_spec(1e-3, 1e6, unit='Hz', default=None),
+    'state_latency': number_spec(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
+    'effort_latency': number_spec(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
+    'wrench_latency': number_spec(0, MAX_SENSOR_LATENCY, unit='s', default=0.0),
     'seed': ('int', (0, 2**32 - 1), '', 0),
 }
 SCHEMA = {
     'name': ('str', None, '', 'scene'),
     'description': ('str', None, '', ''),
-    'gravity': _num(0, 1000, unit='m/s^2', default=9.81),
+    'gravity': number_spec(0, 1000, unit='m/s^2', default=9.81),
     'links': ('list', LINK, '', None),  # this or arm
     'arm': ('dict', ARM, '', None),
     'joints': ('list', JOINT, '', ()),
@@ -356,15 +368,15 @@ SCHEMA = {
     'initial': (
         'dict',
         {
-            'q_deg': ('vec', _num(-360, 360), 'deg', REQUIRED),
-            'qd': ('vec', _num(-1e4, 1e4), 'rad/s', None),
+            'q_deg': ('vec', number_spec(-360, 360), 'deg', REQUIRED),
+            'qd': ('vec', number_spec(-1e4, 1e4), 'rad/s', None),
         },
         '',
         REQUIRED,
     ),
     'cycles': ('int', (0, 1_000_000), '', 15),
-    't_max': _num(0, 1e7, low_open=True, unit='s', default=60.0),
-    'publish_rate': _num(1, 1e6, unit='Hz', default=1000.0),
+    't_max': number_spec(0, 1e7, low_open=True, unit='s', default=60.0),
+    'publish_rate': number_spec(1, 1e6, unit='Hz', default=1000.0),
     'integrator': ('dict', INTEGRATOR, '', {'preset': 'balanced'}),
     'sensors': ('dict', SENSORS, '', {}),
 }
@@ -381,8 +393,18 @@ def _describe_range(constraint, unit):
     return ('must be ' + ' and '.join(parts) + unit) if parts else f'any finite number{unit}'
 
 
-class _Checker:
-    """Checks scene data against the schema.
+class SceneChecker:
+    """Checks scene data against a schema of specs (``number_spec``, ``choice_spec``, the
+    kinds above), refusing the first bad value with a ``SceneError`` of one line: "scene
+    'ORIGIN': KEY.PATH = VALUE ..." and the allowed range. Every scene file uses it: the
+    arm's (``parse_scene``) and the free body's (``physics/bodies/scene.py``), so their
+    refusals read the same.
+
+    ``leaf(path, value, spec)`` checks one value of any kind and returns it checked (numbers
+    as floats, containers as tuples and dicts with their defaults filled in); ``number``
+    checks one number against a range, for a value a schema cannot describe; ``fail``
+    refuses in the same form, for checks across keys. A scene with container kinds of its
+    own subclasses it and overrides ``container``, handing the other kinds to this one.
 
     With ``checked`` (a dict kept between calls) each container that passes is remembered
     by its key path with its checked value: the very same object met there again is not
@@ -391,7 +413,7 @@ class _Checker:
     schema), and only what passed is remembered, so the first failure and its message are
     those of a full walk. The objects must not change in place between the calls."""
 
-    def __init__(self, origin, checked=None):
+    def __init__(self, origin: str, checked: dict | None = None) -> None:
         self.origin = origin
         self.checked = checked
 
@@ -399,6 +421,8 @@ class _Checker:
         raise SceneError(f"scene '{self.origin}': {path} {message}")
 
     def number(self, path: str, value: Any, constraint: tuple, unit: str) -> float:
+        """``value`` as a float if it is a finite number within ``constraint`` (low, high,
+        low_open, high_open; ``number_spec``'s), else refused naming ``path`` and the range."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(
                 path, f'= {_show.repr(value)} is not a number; {_describe_range(constraint, unit)}'
@@ -538,7 +562,7 @@ def parse_scene(
     and are never changed in place (a study's runs, ``study.apply_overrides``), a dict
     kept between the calls: a shared part already checked is not checked again. The
     checks across keys always run; a variant is refused exactly as without it."""
-    check = _Checker(origin, checked)
+    check = SceneChecker(origin, checked)
     raw = check.leaf('', data, ('dict', SCHEMA, '', REQUIRED))
     links = _arm_links(check, raw, path)
     n = len(links.lengths)
@@ -664,7 +688,7 @@ class _ArmLinks:
     urdf_text: str = ''
 
 
-def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
+def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
     from ..contract import joint_names
 
     if raw['arm'] is not None:
@@ -754,7 +778,7 @@ def _arm_links(check: _Checker, raw: dict, scene_path: str) -> _ArmLinks:
     )
 
 
-def _with_link_values(check: _Checker, urdf: Any, values: Sequence[dict] | None) -> Any:
+def _with_link_values(check: SceneChecker, urdf: Any, values: Sequence[dict] | None) -> Any:
     """The URDF's arm with the values ``arm.links`` states instead of the file's."""
     from dataclasses import replace
 
@@ -826,7 +850,7 @@ def self_contained_text(scene: Scene) -> str:
     return header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
 
 
-def _sensor_spec(check: _Checker, raw: dict) -> SensorSpec:
+def _sensor_spec(check: SceneChecker, raw: dict) -> SensorSpec:
     """The checked ``sensors`` section; a key that the chosen rate reading would ignore is
     refused rather than silently dropped."""
     if not raw:  # the section left out: ideal sensors
@@ -858,7 +882,7 @@ MIN_JOINT_INERTIA = 1e-6
 MAX_COM_DISTANCE = 10.0  # a link's centre of mass from its joint, at most, in link lengths
 
 
-def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
+def _joint_inertias(check: SceneChecker, links: _ArmLinks) -> list[float]:
     """Each link's inertia about its joint, refused when too small; a rod's m L² / 3."""
     out = []
     for k, (length, mass, (cx, cy), inertia) in enumerate(
@@ -888,7 +912,7 @@ def _joint_inertias(check: _Checker, links: _ArmLinks) -> list[float]:
     return out
 
 
-def _joint_values(check: _Checker, links: _ArmLinks, entries: Sequence[dict]) -> tuple:
+def _joint_values(check: SceneChecker, links: _ArmLinks, entries: Sequence[dict]) -> tuple:
     """The arm's joints (names and limits from ``links``) with the values the scene's
     ``joints`` states: one entry per link, or none."""
     from dataclasses import replace
@@ -904,7 +928,7 @@ def _joint_values(check: _Checker, links: _ArmLinks, entries: Sequence[dict]) ->
     )
 
 
-def _check_joints(check: _Checker, links: _ArmLinks, joints: Sequence[JointSpec]) -> None:
+def _check_joints(check: SceneChecker, links: _ArmLinks, joints: Sequence[JointSpec]) -> None:
     """Joint friction and armature within what the numerics can follow."""
     for k, joint in enumerate(joints):
         cx, cy = links.com[k]

@@ -11,15 +11,18 @@ impact record each: the table is exactly the one ``simulate`` prints), ``/impact
 
 Outputs in DIR (default: ``runs/<FILE name without .mcap>_analysis``): ``report.md``,
 ``impacts.json`` (``{"impacts": [...]}``, the records as published), ``impact_table.txt``,
-``poincare_qd1_zero.csv`` / ``poincare_qd2_zero.csv`` and the figures ``fig3_controllers.png``
-… ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels each; ``--format svg|pdf``,
-``--dpi``). The impact table and the limit cycle are printed before any figure is drawn;
-the animation is a step of its own (``impact-arm animate``, or ``--animation``). Figure 3 is the
-article's comparison of the control laws (``--laws``, default q, pd, pid): step responses of
-the file's scene with its surface taken away, simulated offline. Figures 8-11 come from
-``/impact_trace`` (offline recordings) or, in a live recording, from the impact integrated
-again from its ``/impact_report`` contact state (exact when the actuators are off during
-contact, as in the article); when neither is possible the command says why.
+``poincare_qd1_zero.csv`` … ``poincare_qdN_zero.csv`` (one per link) and the figures
+``fig3_controllers.png`` … ``fig11_kinetic_energy.png`` (``figures.FIGURE_SIZE`` pixels
+each; ``--format svg|pdf``, ``--dpi``). The impact table and the limit cycle are printed
+before any figure is drawn; the animation is a step of its own (``impact-arm animate``, or
+``--animation``). Figure 3 is the article's comparison of the control laws (``--laws``,
+default q, pd, pid): step responses of the file's scene with its surface taken away,
+simulated offline. Figures 8-11 come from ``/impact_trace`` (offline recordings) or, in a
+live recording, from the impact integrated again from its ``/impact_report`` contact state
+(exact when the actuators are off during contact, as in the article; beyond two links the
+joint rates at contact are those that give the reported tip velocity and link energies);
+when neither is possible the command says why. Figures 4-6 and 11 draw every link of the
+arm.
 """
 
 from __future__ import annotations
@@ -233,22 +236,63 @@ def trace_missing_reason(run: Run) -> str:
         return 'the recording has no /impact_report'
     if run.scene is None:
         return 'the recording stores no scene'
-    if run.scene.n_links != 2:
+    if run.scene.n_links > 2 and not all('T_before' in record for record in run.impacts):
         return (
-            f'the contact velocity gives the joint rates of 2 links only '
-            f'(this arm has {run.scene.n_links})'
+            f'its reports lack the link energies that give the joint rates of '
+            f'{run.scene.n_links} links at contact'
         )
     if run.scene.actuators_during_contact:
         return 'its scene keeps the actuators on during contact (their torque is not reported)'
     return ''
 
 
-def reintegrated_trace(scene, record: dict):
+def contact_state(model, record: dict, guess=None) -> tuple[np.ndarray, np.ndarray]:
+    """(q, q̇) at an impact's contact from its /impact_report: the angles it gives, and the
+    joint rates from the tip velocity v (q̇ = J(q)⁻¹ v) for two links. A longer chain has
+    more rates than v has components: they are the rates that give v and every link's
+    kinetic energy at contact (``T_before``), solved by least squares from ``guess`` (the
+    recording's last joint rates before the contact: of the discrete solutions, the one the
+    motion was on). Refused (AnalysisError) when no rates give both."""
+    n = model.n
+    q = np.radians(np.asarray(record['q_contact_deg'], float))
+    v = np.asarray(record['v_before'], float)
+    jacobian = np.asarray(model.tip_jacobian(q), float).reshape(2, n)
+    if n == 2:
+        return q, np.linalg.solve(jacobian, v)
+    from scipy.optimize import least_squares
+
+    energies = np.asarray(record['T_before'][:n], float)
+    v_scale = max(float(np.hypot(*v)), 1e-9)
+    t_scale = max(float(np.sum(energies)), 1e-12)
+
+    def residuals(qd):
+        return np.concatenate(
+            [(jacobian @ qd - v) / v_scale, (model.link_energies(q, qd) - energies) / t_scale]
+        )
+
+    start = np.zeros(n) if guess is None else np.asarray(guess, float)
+    fit = least_squares(residuals, start, method='lm', xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if not np.max(np.abs(fit.fun)) < 1e-8:
+        raise AnalysisError(
+            f'impact {record.get("index")}: no joint rates give its reported tip velocity '
+            f'and link energies at contact (worst relative misfit {np.max(np.abs(fit.fun)):.1e})'
+        )
+    return q, fit.x
+
+
+def rates_before(run: Run, t: float):
+    """The joint rates of ``run``'s last joint state at or before time ``t`` (None if none)."""
+    i = int(np.searchsorted(run.t, t, side='right')) - 1
+    return run.qd[i] if i >= 0 and np.all(np.isfinite(run.qd[i])) else None
+
+
+def reintegrated_trace(scene, record: dict, guess=None):
     """The points of one impact, integrated again from the state its /impact_report gives at
-    contact: angles, and joint rates from the tip velocity (q̇ = J(q)⁻¹ v). With the
-    actuators off during contact (the article's eq. 7) nothing else acts, so the impact is
-    the recorded one to the integrator's tolerance. Returns (columns, rows) as /impact_trace
-    carries them and the re-integrated record (to compare with the reported one)."""
+    contact (``contact_state``; ``guess``: the joint rates just before it, for more than two
+    links). With the actuators off during contact (the article's eq. 7) nothing else acts,
+    so the impact is the recorded one to the integrator's tolerance. Returns (columns, rows)
+    as /impact_trace carries them and the re-integrated record (to compare with the
+    reported one)."""
     from ..physics.periods import feed_events
     from ..physics.integrator import PhaseIntegrator, options_from_spec
     from ..physics.metrics import ImpactBuilder
@@ -257,9 +301,7 @@ def reintegrated_trace(scene, record: dict):
 
     model = ArmModel(scene)
     n = model.n
-    q = np.radians(np.asarray(record['q_contact_deg'], float))
-    v = np.asarray(record['v_before'], float)
-    qd = np.linalg.solve(np.asarray(model.tip_jacobian(q), float).reshape(2, n), v)
+    q, qd = contact_state(model, record, guess)
     # start a moment before contact (0.1 µs: ~0.6 µm above the surface) so that the contact
     # event is located as in the run, not taken as already crossed
     back = 1e-7
@@ -297,25 +339,29 @@ class ElasticCurve:
     end: str  # the event that ends the phase: 'yield' or 'max_compression'
 
 
-def elastic_curve(scene, record: dict, points: int = 80) -> ElasticCurve | None:
+def elastic_curve(scene, record: dict, points: int = 80, guess=None) -> ElasticCurve | None:
     """Integrate impact ``record`` again from its reported contact state (as
-    ``reintegrated_trace``) with output on a grid of ``points`` times over its elastic phase
-    (the integrator's continuous extension; contact steps end on the grid). None when the
-    record cannot be integrated again (``trace_missing_reason``) or has no elastic phase."""
+    ``reintegrated_trace``, ``guess`` as there) with output on a grid of ``points`` times
+    over its elastic phase (the integrator's continuous extension; contact steps end on the
+    grid). None when the record cannot be integrated again (``trace_missing_reason``) or has
+    no elastic phase."""
     from ..physics.contact import hertz_force
     from ..physics.integrator import PhaseIntegrator, options_from_spec
     from ..physics.model import ArmModel
 
-    if scene is None or scene.n_links != 2 or scene.actuators_during_contact:
+    if scene is None or scene.actuators_during_contact:
         return None
     durations = record.get('phase_durations') or []
     if not durations or not durations[0] > 0 or 'q_contact_deg' not in record:
         return None
+    if scene.n_links > 2 and 'T_before' not in record:
+        return None
     model = ArmModel(scene)
     n = model.n
-    q = np.radians(np.asarray(record['q_contact_deg'], float))
-    v = np.asarray(record['v_before'], float)
-    qd = np.linalg.solve(np.asarray(model.tip_jacobian(q), float).reshape(2, n), v)
+    try:
+        q, qd = contact_state(model, record, guess)
+    except AnalysisError:
+        return None
     back = 1e-7  # start a moment before contact, as reintegrated_trace does
     state = model.initial_state()
     state.t = float(record['t_contact']) - back
@@ -369,8 +415,9 @@ def with_contact_point(columns, rows, record):
 
 # ------------------------------------------------------------------------- analysis
 def poincare(t, q, qd, k: int) -> np.ndarray:
-    """Rows (t, q1, q2, direction) where q̇_k crosses zero (linear interpolation between
-    samples; direction +1 rising, -1 falling). Samples with a non-finite rate are skipped."""
+    """Rows (t, q1, ..., qn, direction) where q̇_k crosses zero (linear interpolation
+    between samples; direction +1 rising, -1 falling): every link's angle, the article's
+    (t, q1, q2, direction) for two links. Samples with a non-finite rate are skipped."""
     v = qd[:, k]
     a, b = v[:-1], v[1:]
     ok = np.isfinite(a) & np.isfinite(b)
@@ -381,11 +428,11 @@ def poincare(t, q, qd, k: int) -> np.ndarray:
         rows.append(
             [
                 t[i] + s * (t[i + 1] - t[i]),
-                *(q[i] + s * (q[i + 1] - q[i]))[:2],
+                *(q[i] + s * (q[i + 1] - q[i])),
                 1.0 if b[i] > a[i] else -1.0,
             ]
         )
-    return np.array(rows).reshape(-1, 4)
+    return np.array(rows).reshape(-1, q.shape[1] + 2)
 
 
 def limit_cycle(impacts) -> dict:
@@ -573,7 +620,11 @@ def cli(args) -> int:
         constants=constants,
         missing=missing,
         style=figures.Style(args.format, args.dpi),
-        elastic=elastic_curve(run.scene, impact[2]) if impact is not None else None,
+        elastic=elastic_curve(
+            run.scene, impact[2], guess=rates_before(run, float(impact[2]['t_contact']))
+        )
+        if impact is not None
+        else None,
     )
     line.end()
     if impact is not None and impact[3]:
@@ -634,7 +685,8 @@ def impact_points(run: Run, k: int, progress=_quiet):
     if record is None or trace_missing_reason(run):
         return None, constants
     progress(f'integrating impact {k} again from its /impact_report (no /impact_trace)')
-    (columns, rows), made = reintegrated_trace(run.scene, record)
+    guess = rates_before(run, float(record['t_contact']))
+    (columns, rows), made = reintegrated_trace(run.scene, record, guess)
     worst = max(abs(made[key] / record[key] - 1) for key in ('delta_m', 'F_max', 'duration'))
     note = (
         f're-integrated from /impact_report (no /impact_trace in the file); δm, F_max '
@@ -708,11 +760,12 @@ def write_outputs(
     _write(os.path.join(out, 'impacts.json'), json.dumps({'impacts': run.impacts}, indent=1))
     _write(os.path.join(out, 'impact_table.txt'), table + '\n')
     sections = {}
-    for k in (0, 1):
+    links = range(run.q.shape[1])
+    for k in links:  # q̇k = 0 for every link, with every link's angle
         rows = poincare(run.t, run.q, run.qd, k)
         sections[k] = rows
-        lines = ['t_s,q1_deg,q2_deg,direction'] + [
-            f'{r[0]:.9g},{math.degrees(r[1]):.9g},{math.degrees(r[2]):.9g},{int(r[3])}'
+        lines = ['t_s,' + ''.join(f'q{j + 1}_deg,' for j in links) + 'direction'] + [
+            f'{r[0]:.9g},' + ''.join(f'{math.degrees(v):.9g},' for v in r[1:-1]) + f'{int(r[-1])}'
             for r in rows
         ]
         _write(os.path.join(out, f'poincare_qd{k + 1}_zero.csv'), '\n'.join(lines) + '\n')
@@ -790,8 +843,10 @@ def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) ->
         lines.append(
             f'- q̇{k + 1} = 0: {len(rows)} crossings (`poincare_qd{k + 1}_zero.csv`)'
             + (
-                f'; last: q1 = {math.degrees(rows[-1][1]):.3f}°, '
-                f'q2 = {math.degrees(rows[-1][2]):.3f}°'
+                '; last: '
+                + ', '.join(
+                    f'q{j + 1} = {math.degrees(v):.3f}°' for j, v in enumerate(rows[-1][1:-1])
+                )
                 if len(rows)
                 else ''
             )

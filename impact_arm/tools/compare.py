@@ -229,6 +229,8 @@ def default_out(a, b) -> str:
 
 
 def add_arguments(parser):
+    from .recording_options import add_recording_arguments
+
     parser.add_argument('a', help='recording (rosbag2 folder or MCAP file)')
     parser.add_argument('b', help='second recording, or a scene (file or installed name)')
     parser.add_argument(
@@ -243,24 +245,7 @@ def add_arguments(parser):
         help='B a scene: simulate it with its own controller instead of '
         "replaying A's impacts with A's efforts",
     )
-    parser.add_argument(
-        '--joints',
-        default=None,
-        metavar='A,B,...',
-        help='joint names in the joint states, base first (default joint1..jointN)',
-    )
-    parser.add_argument(
-        '--states-topic',
-        default=None,
-        metavar='T',
-        help='sensor_msgs/JointState topic of the recordings (default /joint_states)',
-    )
-    parser.add_argument(
-        '--wrench-topic',
-        default=None,
-        metavar='T',
-        help='geometry_msgs/WrenchStamped topic (default /contact_wrench if recorded)',
-    )
+    add_recording_arguments(parser, states_of=' of the recordings')
     parser.add_argument(
         '--out',
         default=None,

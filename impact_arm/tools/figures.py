@@ -199,18 +199,36 @@ def fig4_link_angles(run, out):
     )
 
 
+def angle_pair(k: int) -> tuple[int, int]:
+    """The two link angles link ``k``'s rate is drawn against (0-based): the article's q1, q2
+    for links 1 and 2, the link's own angle and its inner neighbour's beyond them."""
+    return (0, 1) if k < 2 else (k - 1, k)
+
+
 def fig5_phase_portraits(run, out):
-    """Angles and rates in one unit system: degrees and degrees per second (as Figure 4)."""
+    """One 3-D phase portrait per link: its rate against two link angles (``angle_pair``),
+    the article's (q1, q2, q̇1) and (q1, q2, q̇2) for two links. Angles and rates in one unit
+    system: degrees and degrees per second (as Figure 4)."""
     plt = _plt()
     fig = plt.figure(figsize=FIGURE_INCHES)
-    for k in (0, 1):
-        ax = fig.add_subplot(1, 2, k + 1, projection='3d')
-        ax.plot(_deg(run.q[:, 0]), _deg(run.q[:, 1]), _deg(run.qd[:, k]), lw=0.6)
-        ax.set_xlabel('q1 [deg]')
-        ax.set_ylabel('q2 [deg]')
-        ax.set_zlabel(f'q̇{k + 1} [deg/s]')
-        ax.set_title(f'({"ab"[k]}) q1, q2, q̇{k + 1}', fontsize=9)
-    fig.subplots_adjust(left=0.02, right=0.95, wspace=0.15)
+    n = run.q.shape[1]
+    small = {} if n <= 2 else {'fontsize': 8}  # three panels or more share the width
+    for k in range(n):
+        a, b = angle_pair(k)
+        ax = fig.add_subplot(1, n, k + 1, projection='3d')
+        ax.plot(_deg(run.q[:, a]), _deg(run.q[:, b]), _deg(run.qd[:, k]), lw=0.6)
+        ax.set_xlabel(f'q{a + 1} [deg]', **small)
+        ax.set_ylabel(f'q{b + 1} [deg]', **small)
+        ax.set_zlabel(f'q̇{k + 1} [deg/s]', **small)
+        ax.set_title(f'({PANEL[k]}) q{a + 1}, q{b + 1}, q̇{k + 1}', fontsize=9)
+        if n > 2:
+            from matplotlib.ticker import MaxNLocator
+
+            ax.tick_params(labelsize=7)
+            for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+                axis.set_major_locator(MaxNLocator(4))
+            ax.set_box_aspect(None, zoom=0.8)  # room for the rate's axis label
+    fig.subplots_adjust(left=0.02, right=0.95 if n <= 2 else 0.97, wspace=0.15)
     return fig
 
 
@@ -218,21 +236,26 @@ DIRECTIONS = {-1.0: 'falling', 1.0: 'rising'}
 
 
 def fig6_poincare(run, sections, out):
-    """One panel per section (q̇1 = 0, q̇2 = 0) and direction of the crossing (falling,
-    rising): the crossings of one direction gather about one point of the limit cycle, and
-    the other direction's lie far away, so each cluster gets axes scaled to itself. Successive
-    crossings are joined (the way the motion settles), the last one starred."""
+    """One panel per section (q̇k = 0 for every link k, one row each) and direction of the
+    crossing (falling, rising), drawn in the two link angles of Figure 5's portrait of that
+    link (``angle_pair``: q1, q2 for the article's two links): the crossings of one
+    direction gather about one point of the limit cycle, and the other direction's lie far
+    away, so each cluster gets axes scaled to itself. Successive crossings are joined (the
+    way the motion settles), the last one starred. ``sections``: {k: rows of
+    ``analysis.poincare``}."""
     plt = _plt()
-    fig, axes = plt.subplots(2, 2, figsize=FIGURE_INCHES)
+    n = len(sections)
+    fig, axes = plt.subplots(n, 2, figsize=FIGURE_INCHES, squeeze=False)
     norm = plt.Normalize(0, max([len(rows) - 1 for rows in sections.values()] + [1]))
     mappable = None
-    for k in (0, 1):
+    for k in range(n):
         rows = sections[k]
+        a, b = angle_pair(k)
         for j, (direction, name) in enumerate(DIRECTIONS.items()):
             ax = axes[k, j]
-            order = np.nonzero(rows[:, 3] == direction)[0] if len(rows) else np.zeros(0, int)
+            order = np.nonzero(rows[:, -1] == direction)[0] if len(rows) else np.zeros(0, int)
             if len(order):
-                x, y = _deg(rows[order, 1]), _deg(rows[order, 2])
+                x, y = _deg(rows[order, 1 + a]), _deg(rows[order, 1 + b])
                 ax.plot(x, y, '-', color='0.75', lw=0.6, zorder=0)
                 mappable = ax.scatter(x, y, c=order, cmap='viridis', norm=norm, s=16)
                 ax.plot(x[-1:], y[-1:], '*', color='tab:red', ms=10, mfc='none', mew=1.0)
@@ -247,7 +270,7 @@ def fig6_poincare(run, sections, out):
                     inset.margins(0.25)
                     inset.ticklabel_format(useOffset=False, style='plain')
                     spread = max(np.ptp(dx), np.ptp(dy))
-                    _style_inset(inset, '', 'Δq1 from the star [deg]', 'Δq2 [deg]')
+                    _style_inset(inset, '', f'Δq{a + 1} from the star [deg]', f'Δq{b + 1} [deg]')
                     inset.text(
                         0.03,
                         0.97,
@@ -257,13 +280,16 @@ def fig6_poincare(run, sections, out):
                         va='top',
                     )
             ax.set_title(
-                f'({"abcd"[2 * k + j]}) q̇{k + 1} = 0, {name}: {len(order)} crossings', fontsize=8
+                f'({PANEL[2 * k + j]}) q̇{k + 1} = 0, {name}: {len(order)} crossings', fontsize=8
             )
-            ax.set_xlabel('q1 [deg]', fontsize=8)
-            ax.set_ylabel('q2 [deg]', fontsize=8)
+            ax.set_xlabel(f'q{a + 1} [deg]', fontsize=8)
+            ax.set_ylabel(f'q{b + 1} [deg]', fontsize=8)
             ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
-    fig.subplots_adjust(left=0.08, right=0.86, bottom=0.1, top=0.93, wspace=0.3, hspace=0.55)
+    # the article's two rows keep their spacing; more rows share the height
+    fig.subplots_adjust(
+        left=0.08, right=0.86, bottom=0.1, top=0.93, wspace=0.3, hspace=0.55 if n <= 2 else 0.8
+    )
     if mappable is not None:
         bar = fig.colorbar(mappable, ax=list(axes.ravel()), fraction=0.03, pad=0.02)
         bar.set_label('crossing number (star: the last)')
@@ -606,10 +632,11 @@ CAPTIONS = {
     'impact, (a) link 1, (b) link 2',
     'fig3b_recordings': 'Link angles of the compared recordings',
     'fig4_link_angles': 'Fig. 4: link angles q1(t), q2(t)',
-    'fig5_phase_portraits': 'Fig. 5: phase portraits (q1, q2, q̇1) and (q1, q2, q̇2), '
-    'degrees and degrees per second',
-    'fig6_poincare': 'Fig. 6: Poincaré maps, q1 and q2 at q̇1 = 0 and at q̇2 = 0, one panel '
-    'per direction of the crossing (each scaled to its points)',
+    'fig5_phase_portraits': 'Fig. 5: phase portraits, one per link: (q1, q2, q̇1), '
+    '(q1, q2, q̇2), and (qk-1, qk, q̇k) for a further link k; degrees and degrees per second',
+    'fig6_poincare': 'Fig. 6: Poincaré maps at q̇k = 0, one row per link k, in the angles of '
+    "that link's phase portrait, one panel per direction of the crossing (each scaled to its "
+    'points)',
     'fig7_tip_velocity': 'Fig. 7: tip velocity vx(t), vy(t)',
     'fig8_indentation': 'Fig. 8: indentation during the impact, elastic phase zoomed',
     'fig9_impact_velocity': 'Fig. 9: tangential and normal tip velocity during the impact',

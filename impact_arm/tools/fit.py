@@ -112,6 +112,14 @@ def fit_recording(
         for line in diagnosis.lines():
             say(line)
         result = fit(rec, scene, params, options, progress)
+        if corrections is not None and corrections.effort_latency and result.timing == 'controller':
+            # the option was applied, but this reading replays no recorded effort
+            result.warnings.append(
+                f'--effort-latency {corrections.effort_latency:g} moved the efforts, but the fit '
+                "read them as the scene's own controller (the reading that best predicts the free "
+                'flight after the impacts), which replays none of them: the latency acts only on '
+                'which samples count as taken in a contact'
+            )
         if out is False:
             return result
         out = out or default_out(recording)
@@ -451,6 +459,7 @@ def _draw(data: FigureData, out) -> list:
 
 def add_arguments(parser):
     from .recording_diagnosis import add_correction_arguments
+    from .recording_options import add_recording_arguments
 
     parser.add_argument('recording', help='rosbag2 folder (metadata.yaml + MCAP) or MCAP file')
     parser.add_argument(
@@ -468,24 +477,8 @@ def add_arguments(parser):
         "surfaces[0].mu=0.05:1, materials.steel.S_y=2e8:5e9; '@START' starts the search "
         "there instead of at the scene's value, e.g. surfaces[0].mu=0.05:1@0.5",
     )
-    parser.add_argument(
-        '--joints',
-        default=None,
-        metavar='A,B,...',
-        help='joint names in the joint states, base first (default joint1..jointN)',
-    )
-    parser.add_argument(
-        '--states-topic',
-        default=None,
-        metavar='T',
-        help='sensor_msgs/JointState topic (default /joint_states)',
-    )
-    parser.add_argument(
-        '--wrench-topic',
-        default=None,
-        metavar='T',
-        help='geometry_msgs/WrenchStamped topic (default /contact_wrench if '
-        'recorded; without it the fit uses the joint states alone)',
+    add_recording_arguments(
+        parser, without_wrench='; without it the fit uses the joint states alone'
     )
     parser.add_argument(
         '--no-wrench',

@@ -146,7 +146,7 @@ def cli(args) -> int:
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
 
-        check = check_recording(output, args.rate)
+        check = check_recording(output, args.rate, simulator_topics(scene))
         print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
@@ -326,6 +326,7 @@ class Run:
         self.rhs_evaluations = 0
         self.strikes = 0  # cycles whose down half an impact ended (the controller's count)
         self.down_half_start = {}  # strike count -> stamp at which that cycle's down half began
+        self.cycles_completed = 0  # the controller's count of cycles whose up half ended
         self.wall = 0.0
         self.node = None
         self.interrupted = threading.Event()  # set by the CLI's SIGINT/SIGTERM handler
@@ -361,6 +362,9 @@ class Run:
                 else []
             )
             + (['startup_hold:=0.0'] if a.mode == 'lockstep' else [])
+            # lockstep: the controller stops at the count itself, so time stops there
+            # however late this process sees it (a loaded machine)
+            + ([f'cycles:={self.scene.cycles}'] if a.mode == 'lockstep' else [])
             + list(getattr(a, 'controller_params', None) or []),
             'recorder': [f'output:={self.output}', f'scene:={self.scene_path}'],
         }[node]
@@ -447,6 +451,9 @@ class Run:
         if controller is not None and not self.stopping:
             strikes = int(controller.get('strikes', 0))
             self.strikes = max(self.strikes, strikes)
+            self.cycles_completed = max(
+                self.cycles_completed, int(controller.get('cycles_completed', 0))
+            )
             # the first message of a strike count comes at the strike, while its cycle's
             # down half is still the latest
             self.down_half_start.setdefault(strikes, float(controller.get('down_half_start', 0)))
@@ -493,9 +500,14 @@ class Run:
     def _struck(self, cycles) -> bool:
         """Whether the controller has struck in each of ``cycles`` cycles and the report of
         the last strike's impact is here (the first contact after that cycle's down half
-        began; the report and the controller's count travel on different topics)."""
+        began; the report and the controller's count travel on different topics). In
+        lockstep also whether the controller has stopped at the scene's count (its
+        ``cycles``): the recording ends there."""
         if self.strikes < cycles or len(self.impacts) < cycles:
             return False
+        if self.args.mode == 'lockstep' and self.scene.cycles:
+            if self.cycles_completed < self.scene.cycles:
+                return False
         began = self.down_half_start.get(cycles, -math.inf)
         return any(record['t_contact'] >= began for record in self.impacts)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contract import CONTACT_WRENCH, JOINT_STATES, to_joint_space
+from ..contract import CONTACT_WRENCH, JOINT_STATES, SURFACE_MOUNTS, to_joint_space
 from ..calibration.identify import JointRecording
 from ..driver.sensors import sensed_series
 
@@ -32,12 +32,15 @@ def synthetic_recording(
     seed=0,
     wrench=True,
     control_rate=None,
+    plates=True,
 ) -> JointRecording:
     """Simulate ``scene`` with ``overrides`` and sample it as a driver would: through the
     scene's ``sensors`` section, then adding Gaussian ``noise`` (per signal, see
     REALISTIC_NOISE; none by default when the scene has a sensors section), dropping a
     fraction ``drop`` of the samples, jittering the stamps by ``jitter`` seconds (uniform:
-    the values stay those of the regular periods) and offsetting the clock."""
+    the values stay those of the regular periods) and offsetting the clock. A scene with
+    mounted surfaces also gives their plates' states (as /surface_mounts), unless ``plates``
+    is False (a real arm's recording rarely has them)."""
     from ..physics.simulate import run
     from ..calibration.study import Study
 
@@ -77,6 +80,10 @@ def synthetic_recording(
     if wrench:
         rec.wrench_t = stamps[w_keep] - stamps[keep][0]
         rec.wrench = w[w_keep]
+    if plates and s and s[0].plates:
+        # the mounted surfaces' plates, as the simulator publishes them (/surface_mounts)
+        rec.plates_t = rec.t.copy()
+        rec.plates = np.array([x.plates for x in s], float)[keep]
     rec.truth = result.impacts
     return rec
 
@@ -100,6 +107,9 @@ def _messages(rec: JointRecording):
     if rec.wrench is not None:
         for k in range(len(rec.wrench_t)):
             out.append((rec.t0_ns + round(rec.wrench_t[k] * 1e9), 'w', k))
+    if rec.plates is not None and rec.plates_t is not None:
+        for k in range(len(rec.plates_t)):
+            out.append((rec.t0_ns + round(rec.plates_t[k] * 1e9), 'p', k))
     out.sort(key=lambda x: x[0])
     return out
 
@@ -135,6 +145,11 @@ def write_rosbag2(
             if rec.wrench is not None
             else None
         )
+        cp = (
+            writer.add_connection(SURFACE_MOUNTS, JS.__msgtype__, typestore=store)
+            if rec.plates is not None
+            else None
+        )
         for ns, kind, k in _messages(rec):
             stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
             if kind == 'js':
@@ -147,6 +162,16 @@ def write_rosbag2(
                     effort=np.array(pad + rec.effort[k].tolist()),
                 )
                 writer.write(cjs, ns, store.serialize_cdr(msg, JS.__msgtype__))
+            elif kind == 'p':
+                plate = rec.plates[k]
+                msg = JS(
+                    header=H(stamp=stamp, frame_id=''),
+                    name=[f'surface{i + 1}' for i in range(len(plate) // 2)],
+                    position=np.array(plate[0::2], float),
+                    velocity=np.array(plate[1::2], float),
+                    effort=np.zeros(0),
+                )
+                writer.write(cp, ns, store.serialize_cdr(msg, JS.__msgtype__))
             else:
                 fx, fy = rec.wrench[k]
                 msg = WS(

@@ -20,21 +20,50 @@ EFFORT_TIMINGS = ('linear', 'previous', 'next')
 SUBSTEPS = 8  # torque pieces per sample period (linear timing)
 
 
+def effort_shift(model: ArmModel) -> float:
+    """How much later than the joint states the scene's sensors report the efforts [s]: the
+    effort latency less the states' own (only the difference shows in a recording)."""
+    sensors = model.scene.sensors
+    return float(sensors.effort_latency - sensors.state_latency)
+
+
+def wrench_shift(model: ArmModel) -> float:
+    """How much later than the joint states the scene's sensors publish the wrench [s]."""
+    sensors = model.scene.sensors
+    return float(sensors.wrench_latency - sensors.state_latency)
+
+
 class TorqueSchedule:
     """The joint torque between samples from the recorded efforts, by how a driver reports
     them: 'linear' (the effort at a stamp is the torque at that instant; continuous between),
     'previous' (it is the command held over the period that ends at the stamp, as our
     simulator reports it), 'next' (held from the stamp to the next one). Before the contact
     only efforts recorded before it are used, after it only those after it (a controller that
-    reacts to the impact changes its torque there)."""
+    reacts to the impact changes its torque there).
 
-    def __init__(self, win: ImpactWindow, timing: str):
+    ``latency`` [s]: the efforts are reported that much later than the joint states (the
+    scene's ``sensors.effort_latency`` less ``state_latency``): the effort at each stamp is
+    read ``latency`` later in the recording, linear between its samples (a continuous delay;
+    a driver that delays by whole periods is the case of a whole number of periods)."""
+
+    def __init__(self, win: ImpactWindow, timing: str, latency: float = 0.0):
         self.t, self.tau, self.timing = win.effort_t, win.effort.copy(), timing
         self.ib = ib = getattr(win, 'effort_ib', 2)
+        off = getattr(win, 'effort_off', [])
+        source = getattr(win, 'effort_source', None)
+        if latency and source is not None:
+            t_all, effort_all, floor = source
+            self.tau = np.stack(
+                [
+                    np.interp(self.t + latency, t_all, effort_all[:, j])
+                    for j in range(self.tau.shape[1])
+                ],
+                axis=1,
+            )
+            off = [bool(np.all(np.abs(row) < floor)) for row in self.tau]
         # A sample taken during the contact with the actuators off shows no torque, not the
         # command: read as 'previous', that command acted before the contact began (the one
         # after it is reported at b), so the command of the last free sample stands in.
-        off = getattr(win, 'effort_off', [])
         for k in range(2, ib):
             if off[k]:
                 self.tau[k] = self.tau[1] if timing == 'previous' else self.tau[ib]
@@ -69,13 +98,19 @@ class TorqueSchedule:
         return sorted({float(x) for x in grid} | {float(t_to)})
 
 
-def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
+def free_flight_error(
+    model: ArmModel, win: ImpactWindow, timing: str, shift: float | None = None
+) -> float:
     """Squared error of one-period predictions between the compared post-impact samples,
     from the recorded state, under ``timing``: how well that reading of the efforts explains
-    the free motion where the torque changes fastest."""
+    the free motion where the torque changes fastest. ``shift``: the efforts' delay behind
+    the joint states (default: the scene's sensors')."""
     n = model.n
     T = joint_to_absolute_matrix(n)
-    torque = TorqueSchedule(win, timing)
+    torque = TorqueSchedule(win, timing, effort_shift(model) if shift is None else shift)
+    period = win.rate_period
+    if period is not None:
+        return _mean_rate_change_error(model, win, torque, timing, period)
     q_post = [win.post.state(t)[0] for t in win.post_t]
     err = 0.0
     for k in range(len(win.post_t) - 1):
@@ -102,19 +137,103 @@ def free_flight_error(model: ArmModel, win: ImpactWindow, timing: str) -> float:
     return err
 
 
-def effort_timing(model: ArmModel, windows: Sequence[ImpactWindow]) -> tuple[str, dict[str, float]]:
+def _mean_rate_change_error(
+    model: ArmModel, win: ImpactWindow, torque: TorqueSchedule, timing: str, period: float
+) -> float:
+    """``free_flight_error`` for rates that are period means: from the first compared sample
+    after the impact, with the rate there that reproduces the recorded mean over the first
+    period (the rate at a sample is not recorded; two Newton steps), the mean rate over the
+    next period against the recorded one. 0 when fewer than three samples a period apart."""
+    t = win.post_t
+    if len(t) < 3 or np.any(np.abs(np.diff(t[:3]) - period) > 0.25 * period):
+        return 0.0
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    q0, qd0, _ = win.post.state(t[0])
+    held = timing != 'controller'
+
+    def flight(qd: np.ndarray, until: int) -> list[np.ndarray] | None:
+        state = model.initial_state()
+        state.t = t[0]
+        state.y[:n], state.y[n : 2 * n] = T @ q0, T @ qd
+        state.mode = 'up'  # after an impact the scene's controller lifts the arm
+        integ = PhaseIntegrator(
+            model, state, control='held' if held else 'continuous', preset='balanced'
+        )
+        q = []
+        try:
+            for k in range(1, until + 1):
+                for edge in torque.boundaries(t[k - 1], t[k]):
+                    if held:
+                        integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+                    integ.advance(edge)
+                q.append(np.linalg.solve(T, integ.state.y[:n]))
+        except SimulationError:
+            return None
+        return q if integ.state.phase == 0 else None
+
+    qd = qd0.copy()
+    for _ in range(2):  # the mean over the first period is ~ the start's rate: J ~ identity
+        first = flight(qd, 1)
+        if first is None:
+            return math.inf
+        qd = qd + (win.post_qd[1] - (first[0] - q0) / (t[1] - t[0]))
+    both = flight(qd, 2)
+    if both is None:
+        return math.inf
+    predicted = (both[1] - both[0]) / (t[2] - t[1])
+    return float(np.sum((predicted - win.post_qd[2]) ** 2))
+
+
+def effort_timing(
+    model: ArmModel,
+    windows: Sequence[ImpactWindow],
+    shift: float | None = None,
+    readings: Sequence[str] | None = None,
+) -> tuple[str, dict[str, float]]:
     """The reading of the efforts that best predicts the free motion after the impacts, and
     the error of each: the three readings of the recorded efforts, and the scene's own
     controller when it is a continuous state feedback (a stiff controller changes its torque
     within a sample period faster than any interpolation of the samples follows)."""
-    timings = list(EFFORT_TIMINGS)
+    timings = list(readings or EFFORT_TIMINGS)
     ctrl = model.scene.controller
-    if ctrl.rate == 0 and ctrl.law in ('q', 'pd') and model.n_integral == 0:
+    if readings is None and ctrl.rate == 0 and ctrl.law in ('q', 'pd') and model.n_integral == 0:
         timings.append('controller')
-    each = {t: [free_flight_error(model, w, t) for w in windows] for t in timings}
+    each = {t: [free_flight_error(model, w, t, shift) for w in windows] for t in timings}
     # an impact after which one reading's flight meets the surface again (inf) says nothing
     # of the readings: compared over the impacts every reading flies through (all of them
     # when there is none such)
     common = [k for k in range(len(windows)) if all(math.isfinite(each[t][k]) for t in timings)]
     errors = {t: sum(each[t][k] for k in (common or range(len(windows)))) for t in timings}
     return min(errors, key=errors.get), errors  # type: ignore[arg-type]  # every key is present
+
+
+# readings in the order a tie is resolved: 'previous' at a latency is 'next' one period
+# later, and 'previous' is the convention of the simulated driver (and of many real ones)
+TIE_ORDER = ('previous', 'next', 'linear')
+
+
+def effort_timing_and_latency(
+    model: ArmModel,
+    windows: Sequence[ImpactWindow],
+    state_latency: float,
+    bounds: tuple[float, float],
+    period: float,
+) -> tuple[str, float, dict[str, float]]:
+    """For a fitted effort latency: the reading of the recorded efforts and the latency within
+    ``bounds`` [s] that together best predict the free motion after the impacts (a grid of
+    half periods; the scene's own controller is no candidate, it reads no effort). A reading
+    and a latency are one timing of the torque: 'previous' at L is 'next' at L + one period,
+    so exact ties go to the earlier reading of ``TIE_ORDER``. Returns (reading, latency,
+    the error of each reading at its best latency)."""
+    lo, hi = bounds
+    grid = np.unique(np.concatenate([np.arange(lo, hi + 1e-12, 0.5 * period), [lo, hi]]))
+    best: dict[str, tuple[float, float]] = {}
+    for latency in grid:
+        _, errors = effort_timing(model, windows, float(latency) - state_latency, EFFORT_TIMINGS)
+        for reading, err in errors.items():
+            if reading not in best or err < best[reading][0] * (1 - 1e-9):
+                best[reading] = (err, float(latency))
+    least = min(err for err, _ in best.values())
+    reading = next(r for r in TIE_ORDER if best[r][0] <= least * (1 + 1e-3) + 1e-300)
+    return reading, best[reading][1], {r: e for r, (e, _) in best.items()}

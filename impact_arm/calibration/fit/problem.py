@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import operator
 
 import numpy as np
@@ -24,7 +24,7 @@ from ..identify import (
     tip_normal_speed,
 )
 from ..study import Study
-from .efforts import effort_timing
+from .efforts import effort_timing, effort_timing_and_latency, wrench_shift
 from .parameters import FitError
 from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
 
@@ -32,6 +32,22 @@ from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
 # contact outside the law's validity): well above any misfit near the start, so that the
 # search never prefers losing impacts to fitting them (30x that for values the scene refuses)
 PENALTY = 30.0
+EFFORT_LATENCY = 'sensors.effort_latency'  # a fitted key the reading of the efforts depends on
+
+
+def wrench_lag_range(study: Study, specs: Sequence) -> tuple[float, float]:
+    """The range [s] of the wrench's delay behind the joint states: the scene's sensors'
+    wrench latency less their state latency, each over its bounds when fitted."""
+    sensors = study.scene().sensors
+    ranges = {
+        'sensors.wrench_latency': (sensors.wrench_latency, sensors.wrench_latency),
+        'sensors.state_latency': (sensors.state_latency, sensors.state_latency),
+    }
+    for p in specs:
+        if p.key in ranges:
+            ranges[p.key] = (min(p.lo, p.start), max(p.hi, p.start))
+    wrench, state = ranges['sensors.wrench_latency'], ranges['sensors.state_latency']
+    return (wrench[0] - state[1], wrench[1] - state[0])
 
 
 @dataclass
@@ -45,6 +61,9 @@ class FitOptions:
     post_samples: int = 3  # samples after each impact compared with the model
     leave_out: tuple[float, ...] = ()  # contact times [s] of impacts not to fit
     check_outliers: bool = True  # refit without an outlier impact and report both
+    # range [s] of the wrench's delay behind the joint states the impacts' wrench must cover
+    # (set by the fit from a fitted or stated sensors.wrench_latency / state_latency)
+    wrench_lag: tuple[float, float] = (0.0, 0.0)
 
 
 class ImpactSet:
@@ -58,6 +77,7 @@ class ImpactSet:
         self.evaluations = 0  # replays of every impact (a point asked for again is not)
         self._replayed: dict = {}  # (values, moved keys, reading) -> (windows, predictions)
         self.timing = 'linear'
+        self.timing_misfit: float | None = None  # set by select
         self.penalty = PENALTY
 
     def model(
@@ -76,11 +96,27 @@ class ImpactSet:
 
     def outputs(self, pred: Prediction, win: ImpactWindow) -> np.ndarray:
         qd = pred.qd.ravel()
-        return np.concatenate([qd, pred.impulse]) if self.wrench_at(win) else qd
+        if not self.wrench_at(win):
+            return qd
+        if win.wrench_timing is None:
+            return np.concatenate([qd, pred.impulse])
+        return np.concatenate([qd, pred.impulse, [pred.wrench_timing]])
 
     def recorded(self, win: ImpactWindow) -> np.ndarray:
         qd = win.post_qd.ravel()
-        return np.concatenate([qd, win.impulse]) if self.wrench_at(win) else qd
+        if not self.wrench_at(win):
+            return qd
+        assert win.impulse is not None
+        if win.wrench_timing is None:
+            return np.concatenate([qd, win.impulse])
+        return np.concatenate([qd, win.impulse, [win.wrench_timing]])
+
+    @staticmethod
+    def wrench_var(win: ImpactWindow) -> np.ndarray:
+        """The noise variances of the wrench outputs: impulse, and its timing when kept."""
+        assert win.impulse_var is not None
+        var = np.broadcast_to(win.impulse_var, (2,))
+        return var if win.wrench_timing is None else np.append(var, win.wrench_timing_var)
 
     def predict(
         self, values: Sequence[float] | np.ndarray, fixed: dict[str, float] | None = None
@@ -113,8 +149,48 @@ class ImpactSet:
         in a contact out of each impact's comparison, keep the impacts the scene replays and
         give them robust diagonal weights (``calibrate`` refines them at the optimum)."""
         model = self.model(values)
-        self.timing, self.timing_errors = effort_timing(model, self.windows)
         kept, self.whiten, notes = [], [], []
+        self.start_values = np.array(values, float)
+        fitted = [i for i, p in enumerate(self.specs) if p.key == EFFORT_LATENCY]
+        if fitted and self.windows:
+            # the latency and the reading of the efforts are one timing of the torque: chosen
+            # together, the latency's start where they predict the free flight best
+            i, spec = fitted[0], self.specs[fitted[0]]
+            period = float(np.median(np.concatenate([np.diff(w.effort_t) for w in self.windows])))
+            reading, latency, errors = effort_timing_and_latency(
+                model, self.windows, model.scene.sensors.state_latency, (spec.lo, spec.hi), period
+            )
+            own, own_errors = effort_timing(model, self.windows)
+            if own == 'controller' and own_errors[own] < errors[reading]:
+                # a stiff continuous controller the replay recomputes beats every reading of
+                # the recorded efforts at every latency: their latency does not enter it
+                self.timing, self.timing_errors = own, own_errors
+                notes.append(
+                    f"{spec.key} does not enter the replay: the scene's own controller "
+                    f'predicts the free flight after the impacts better than any reading of '
+                    f'the recorded efforts at any latency within the bounds, and reads none '
+                    f'of them'
+                )
+            else:
+                self.timing, self.timing_errors = reading, errors
+                notes.append(
+                    f'{spec.key} started at {latency:.6g} s (not {spec.start:g}), with the '
+                    f"reading '{reading}' of the efforts: together they best predict the "
+                    f'free flight after the impacts'
+                )
+                spec.start = latency
+                self.start_values[i] = latency
+                model = self.model(self.start_values)
+        else:
+            self.timing, self.timing_errors = effort_timing(model, self.windows)
+        # the best reading's error over what the rates' noise alone leaves (two noisy rates
+        # per one-period prediction): far above 1 when no reading explains the free flight
+        expected = sum(len(w.post_t) - 1 for w in self.windows) * 2 * float(np.sum(sigma_qd**2))
+        self.timing_misfit = (
+            self.timing_errors[self.timing] / expected
+            if self.timing != 'controller' and expected > 0
+            else None
+        )
         for w in self.windows:
             w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
@@ -136,7 +212,7 @@ class ImpactSet:
             cov_pre = w.pre.state(w.t_a)[2]
             var = np.tile(sigma_qd**2 + np.diag(cov_pre)[model.n :], len(w.post_t))
             if self.wrench_at(w):
-                var = np.concatenate([var, w.impulse_var])
+                var = np.concatenate([var, self.wrench_var(w)])
             kept.append(w)
             self.whiten.append(np.diag(1.0 / np.sqrt(var)))
             w.sigma = np.sqrt(var)
@@ -189,7 +265,7 @@ class ImpactSet:
             C = S @ cov_pre @ S.T
             C[: m * n, : m * n] += np.diag(np.tile(sigma_qd**2, m))
             if self.wrench_at(w):
-                C[m * n :, m * n :] += np.diag(w.impulse_var)
+                C[m * n :, m * n :] += np.diag(self.wrench_var(w))
             # noise-free data (a simulation) leave C singular: a relative floor keeps it usable
             C += np.eye(len(C)) * max(1e-12 * np.trace(C) / len(C), 1e-30)
             self.whiten[i] = np.linalg.inv(np.linalg.cholesky(C))
@@ -247,7 +323,12 @@ def prepare(
         raise IdentifyError(f'no impact in the recording {recording.source}: {why}')
     noise = estimate_noise(recording, impacts, options.window)
     windows, notes = impact_windows(
-        recording, noise, impacts, options.window, post_samples=options.post_samples
+        recording,
+        noise,
+        impacts,
+        options.window,
+        post_samples=options.post_samples,
+        wrench_lag=options.wrench_lag,
     )
     normal = [w.impulse[1] for w in windows if w.impulse is not None]
     if normal and np.median(normal) < 0:
@@ -279,8 +360,11 @@ def read_impacts(
     recording: JointRecording, study: Study, options: FitOptions | None = None
 ) -> RecordedImpacts:
     """The impacts of ``recording`` that the scene of ``study`` replays at its own values."""
+    model = ArmModel(study.scene())
     options = options or FitOptions()
-    _, noise, windows, notes = prepare(recording, options, ArmModel(study.scene()))
+    if options.wrench_lag == (0.0, 0.0):
+        options = replace(options, wrench_lag=(wrench_shift(model),) * 2)
+    _, noise, windows, notes = prepare(recording, options, model)
     problem = ImpactSet(study, [], windows, options.use_wrench)
     notes += problem.select([], noise.velocity)
     return RecordedImpacts(problem.windows, problem.timing, noise, notes)

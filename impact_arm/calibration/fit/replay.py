@@ -17,7 +17,7 @@ from ...physics.errors import SimulationError
 from ...physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
-from .efforts import TorqueSchedule
+from .efforts import TorqueSchedule, effort_shift, wrench_shift
 
 FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
 # A sample this many rate standard deviations short of the model's separation is in the contact
@@ -59,6 +59,7 @@ class Prediction:
     qd_sep: np.ndarray | None = None  # joint rates at the last separation
     error: str = ''  # why the replay failed, in words ('' when it did not)
     failure: FailureKind | None = None  # ... and as a kind, for the code that acts on it
+    wrench_timing: float = math.nan  # centroid of the normal force in the wrench's periods
     if TYPE_CHECKING:  # set after construction by predict_impact (not dataclass fields)
         path: np.ndarray = field(init=False)
         t_sep: float = field(init=False)
@@ -93,19 +94,40 @@ def predict_impact(
     state = model.initial_state()
     state.t = t0
     state.y[:n], state.y[n : 2 * n] = T @ q, T @ qd
+    if win.plate is not None and len(win.plate) == 2 * model.n_mount:
+        # a plate still ringing from the impacts before: from its recorded state
+        for i, surface in enumerate(model.mounted):
+            state.y[surface.mount_state : surface.mount_state + 2] = win.plate[2 * i : 2 * i + 2]
     held = timing != 'controller'
     state.mode = 'down'  # the scene's controller, if used, is approaching the surface
     integ = PhaseIntegrator(
         model, state, control='held' if held else 'continuous', **window_options(model)
     )
-    torque = TorqueSchedule(win, timing)
+    torque = TorqueSchedule(win, timing, effort_shift(model))
     first: Any = None  # the first and last contact events, once found
     last: Any = None
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
     targets = list(win.post_t)
     edges = torque.boundaries(t0, targets[-1])
+    extra: set[float] = set()
     if dense is not None:
-        edges = sorted(set(edges) | {float(x) for x in dense if t0 < x < targets[-1]})
+        extra |= {float(x) for x in dense if t0 < x < targets[-1]}
+    # rates recorded as means over the period before their stamps: the replay's positions
+    # one period before each compared sample give the same mean (like compared with like)
+    period = win.rate_period
+    positions: dict[float, np.ndarray] = {}
+    if period is not None:
+        extra |= {float(x) - period for x in targets if float(x) - period > t0}
+    # a wrench that may be late: the cumulative impulse where each period of it begins and
+    # ends, moved back by the scene's delay of the wrench
+    lag_ends: np.ndarray | None = None
+    cumulative: dict[float, float] = {}
+    if win.wrench_stamps is not None:
+        ends = win.wrench_stamps - wrench_shift(model)
+        lag_ends = np.concatenate([ends - win.wrench_period, ends])
+        extra |= {float(x) for x in lag_ends if t0 < x < targets[-1]}
+    if extra:
+        edges = sorted(set(edges) | extra)
     try:
         for edge in edges:
             while integ.state.t < edge:
@@ -120,8 +142,11 @@ def predict_impact(
                         side = 'contact'
                     elif event.kind == 'separation':
                         last, side = event, 'post'
-            if dense is not None:
+            if period is not None:
+                positions[edge] = np.linalg.solve(T, integ.state.y[:n])
+            if dense is not None or lag_ends is not None:
                 impulse += integ.take_impulse()
+                cumulative[edge] = float(impulse[1])
                 path.append(
                     [integ.state.t, *np.linalg.solve(T, integ.state.y[n : 2 * n]), *impulse]
                 )
@@ -163,7 +188,16 @@ def predict_impact(
                     )
                 # else in a further contact begun since: the rates there are continuous in
                 # the parameters (it has only just begun when it appears), compare them
-                rates.append(np.linalg.solve(T, integ.state.y[n : 2 * n]))
+                if period is None:
+                    rates.append(np.linalg.solve(T, integ.state.y[n : 2 * n]))
+                else:
+                    rates.append(
+                        (
+                            np.linalg.solve(T, integ.state.y[:n])
+                            - _position_at(positions, edge - period, q, qd, t0)
+                        )
+                        / period
+                    )
                 targets.pop(0)
     except SimulationError as exc:
         return failed(n, FailureKind.SIMULATION, str(exc))
@@ -178,7 +212,43 @@ def predict_impact(
     )
     pred.path = np.array(path)
     pred.t_sep, pred.y_sep = last.t, last.y[: 2 * n].copy()
+    if lag_ends is not None:
+        pred.wrench_timing = _wrench_timing(win, lag_ends, cumulative, t0, float(impulse[1]))
     return pred
+
+
+def _wrench_timing(
+    win: ImpactWindow, lag_ends: np.ndarray, cumulative: dict[float, float], t0: float, total: float
+) -> float:
+    """The centroid of the normal force the replay puts into the recorded wrench's periods
+    (each the impulse between its moved-back start and end), as the recorded one: sum s F /
+    sum F over the periods' stamps, in s after ``t0``."""
+
+    def at(t: float) -> float:
+        if t <= t0:
+            return 0.0
+        if t >= max(cumulative, default=t0):
+            return total
+        return cumulative[min(cumulative, key=lambda x: abs(x - t))]
+
+    stamps = win.wrench_stamps
+    assert stamps is not None
+    m = len(stamps)
+    gained = np.array([at(float(lag_ends[m + k])) - at(float(lag_ends[k])) for k in range(m)])
+    if not gained.sum() > 0:
+        return float(np.mean(stamps)) - t0
+    return float(stamps @ gained) / float(gained.sum()) - t0
+
+
+def _position_at(
+    positions: dict[float, np.ndarray], t: float, q0: np.ndarray, qd0: np.ndarray, t0: float
+) -> np.ndarray:
+    """The replay's joint positions at ``t``: recorded at an edge, or (at or before the
+    replay's start ``t0``, where stamps a rounding apart put it) from the start state."""
+    if t > t0 + 1e-12:
+        key = min(positions, key=lambda x: abs(x - t))
+        return positions[key]
+    return q0 + qd0 * (t - t0)
 
 
 def free_flight(
@@ -194,7 +264,7 @@ def free_flight(
     integ = PhaseIntegrator(
         model, state, control='held' if held else 'continuous', **window_options(model)
     )
-    torque = TorqueSchedule(win, timing)
+    torque = TorqueSchedule(win, timing, effort_shift(model))
     try:
         for edge in torque.boundaries(t0, t1):
             if held:
@@ -228,7 +298,9 @@ def recorded_separation_rates(
             return None
         A[:, k] = (moved - base) / 1e-4
     qd_sep = np.linalg.solve(T, pred.y_sep[n : 2 * n])
-    return qd_sep + np.linalg.solve(A, win.post_qd[0] - base)
+    # rates that are period means: the rate at the sample from the fit of its positions
+    target = win.post_qd[0] if win.rate_period is None else win.post.state(t1)[1]
+    return qd_sep + np.linalg.solve(A, target - base)
 
 
 def recorded_cor(

@@ -259,11 +259,12 @@ def estimate(
     noise_rms = float(np.sqrt(np.mean(np.square(sd_rate)))) if sd_rate else math.nan
     deps = dependences(problem, specs, values, J, sigma)
     warnings = [x for x in (one_impact(per_impact),) if x]
+    warnings += ringing_plates(problem.model(values), problem.windows)
     warnings += [y for y in (out_of_range(p.key, v) for p, v in zip(specs, values)) if y]
     for p in specs:  # the most demanding fixed parameters of each fitted one
         warnings += [d.sentence() for d in deps if d.fitted == p.key and d.demanding][:3]
     joints = list(recording.joints) or [f'joint{j + 1}' for j in range(recording.n)]
-    verdict = judge(per_impact, joints, chi2, dof, _where(per_impact, params))
+    verdict = judge(per_impact, joints, chi2, dof, _where(per_impact, params, problem))
     return FitResult(
         params,
         verdict.text,
@@ -294,14 +295,77 @@ def estimate(
     )
 
 
-def _where(per_impact: list[dict], params: dict[str, ParameterEstimate]) -> list[str]:
-    """Where a misfit lies, for the verdict's reason: rates or impulse, bounds."""
+# a plate left with more than this share of its ringing at the next impact is not at rest
+RINGING = 0.01
+
+
+def ringing_plates(model: ArmModel, windows: list) -> list[str]:
+    """A warning per mounted surface whose plate still rings at the next impact (its decay
+    exp(-zeta omega dt) over the shortest time between two impacts above ``RINGING``) when
+    the recording has no plate states: the replay then starts it at rest."""
+    if not model.n_mount or len(windows) < 2 or any(w.plate is not None for w in windows):
+        return []
+    gap = float(np.min(np.diff(sorted(w.t_c for w in windows))))
+    out = []
+    for surface in model.mounted:
+        mount = surface.mount
+        assert mount is not None  # model.mounted holds the mounted ones
+        omega = math.sqrt(mount.stiffness / mount.mass)
+        left = math.exp(-mount.damping_ratio * omega * gap)
+        if left > RINGING:
+            out.append(
+                f'the plate of surfaces[{surface.index}] ({mount.mass:g} kg on '
+                f'{mount.stiffness:g} N/m, '
+                f'damping ratio {mount.damping_ratio:g}) still rings at the next impact '
+                f'({left:.2g} of its motion left after {gap:.3g} s): each impact is replayed '
+                f'with the plate at rest, as the recording has no plate states (record '
+                f'/surface_mounts, as the simulator does)'
+            )
+    return out
+
+
+# the best reading of the efforts missing the free flight by this many times what the rates'
+# noise leaves: no reading explains it (a right reading stays within tens; efforts two
+# periods late miss it by ~1e6)
+TIMING_MISFIT = 1e3
+
+
+def _where(
+    per_impact: list[dict], params: dict[str, ParameterEstimate], problem: ImpactSet | None = None
+) -> list[str]:
+    """Where a misfit lies, for the verdict's reason: rates or impulse, bounds, efforts no
+    reading explains."""
     parts = []
     with_wrench = [x for x in per_impact if 'residual_impulse' in x]
     if with_wrench:
-        rate = np.mean([np.sum(np.square(x['whitened'][:-2])) for x in with_wrench])
-        imp = np.mean([np.sum(np.square(x['whitened'][-2:])) for x in with_wrench])
+        rate = np.mean(
+            [np.sum(np.square(x['whitened'][: -len(x['residual_impulse'])])) for x in with_wrench]
+        )
+        imp = np.mean(
+            [np.sum(np.square(x['whitened'][-len(x['residual_impulse']) :])) for x in with_wrench]
+        )
         parts.append('mostly in the ' + ('wrench impulse' if imp > rate else 'joint rates'))
+    late = [w for w in problem.windows if problem.wrench_at(w)] if problem is not None else []
+    after = sum(w.wrench_after for w in late)
+    if late and 2 * after > len(late) and 'sensors.wrench_latency' not in params:
+        parts.append(
+            f'at {after} of {len(late)} impacts most of the recorded normal force comes after '
+            f'the periods that can hold the contact: the wrench published late? free '
+            f'sensors.wrench_latency too, or give --wrench-latency'
+        )
+    misfit = problem.timing_misfit if problem is not None else None
+    if (
+        problem is not None
+        and misfit is not None
+        and misfit > TIMING_MISFIT
+        and 'sensors.effort_latency' not in params
+    ):
+        parts.append(
+            f'no reading of the recorded efforts predicts the free flight after the impacts '
+            f"(the best, '{problem.timing}', misses it by {misfit:.3g} times what the rates' "
+            f'noise leaves): efforts reported late or early? free sensors.effort_latency too, '
+            f'or give --effort-latency'
+        )
     bounded = [k for k, v in params.items() if v.at_bound]
     if bounded:
         parts.append(f'{", ".join(bounded)} at a bound')

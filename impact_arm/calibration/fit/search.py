@@ -28,7 +28,7 @@ from ..study import Study
 from ...physics.model import ArmModel
 from ...physics.scene import Scene
 from .parameters import FitError, parameter_specs
-from .problem import PENALTY, FitOptions, ImpactSet, prepare
+from .problem import PENALTY, FitOptions, ImpactSet, prepare, wrench_lag_range
 from .outliers import find_outliers
 from .report import FitResult, estimate
 from .verdict import DOES_NOT_FIT, MISMATCH
@@ -109,6 +109,8 @@ def _fit_once(
             f'the recording has {recording.n} joints, the scene {study.origin} '
             f'{study.scene().n_links} links'
         )
+    if options.wrench_lag == (0.0, 0.0):
+        options = replace(options, wrench_lag=wrench_lag_range(study, specs))
     _, noise, windows, notes = prepare(recording, options, ArmModel(study.scene()))
     notes = list(recording.notes) + notes
     if options.leave_out:
@@ -136,6 +138,7 @@ def _fit_once(
     start = np.array([p.start for p in specs])
     say(f'{len(windows)} impacts; reading of the efforts', 0, None)
     start_notes = problem.select(start, noise.velocity)
+    start = problem.start_values  # a fitted effort latency starts with its reading's best
     notes += start_notes
     if not problem.windows:
         raise IdentifyError(

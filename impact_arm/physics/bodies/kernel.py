@@ -35,6 +35,7 @@ from ..contact import (
     restitution_radius,
 )
 from ..jit import jit, jit_leaf
+from ..roots import event_tolerance, false_position, illinois_update
 
 # pair phases
 FREE, ELASTIC, ELASTOPLASTIC, RESTITUTION = 0, 1, 2, 3
@@ -249,22 +250,11 @@ def locate(
     a, b, fa, fb = 0.0, h, ga, gb
     side = 0
     for _ in range(200):
-        c = (a * fb - b * fa) / (fb - fa)
-        if not (a < c < b):
-            c = 0.5 * (a + b)
+        c = false_position(a, b, fa, fb)
         trial_step(y, f0, c, P, corners, PT, CS, K, y1, f1, err, stats)
         event_values(y1, corners, PT, CS, g)
         fc = g[slot]
-        if fc >= 0.0:
-            b, fb = c, fc
-            if side == -1:
-                fa *= 0.5
-            side = -1
-        else:
-            a, fa = c, fc
-            if side == 1:
-                fb *= 0.5
-            side = 1
+        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
         if fc == 0.0 or b - a <= tol:
             break
     return b
@@ -402,7 +392,7 @@ def advance(
         event_values(y1, corners, PT, CS, g1)
         s_min = h
         crossed = -1
-        tol = max(h * 1e-12, 2.0 * EPS * abs(t), 1e-18)
+        tol = event_tolerance(h, t)
         for slot in range(2 * npairs):
             if g0[slot] < 0.0 <= g1[slot]:
                 s = locate(

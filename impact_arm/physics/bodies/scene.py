@@ -19,9 +19,9 @@ from ..scene import (
     MAX_YIELD_STRAIN,
     REQUIRED,
     Material,
-    _Checker,
-    _choice,
-    _num,
+    SceneChecker,
+    choice_spec,
+    number_spec,
     read_scene_file,
     reduced_modulus,
     scene_data,
@@ -87,51 +87,52 @@ class BodyScene:
     integrator: BodyIntegratorSpec
 
 
-_POINT = ('vec', _num(-1e3, 1e3), 'm', REQUIRED)
+_COORDINATE = number_spec(-1e3, 1e3, unit='m')  # of a point [x, z]
 BODY = {
-    'mass': _num(1e-6, 1e6, unit='kg'),
-    'inertia': _num(1e-12, 1e9, unit='kg m^2'),
+    'mass': number_spec(1e-6, 1e6, unit='kg'),
+    'inertia': number_spec(1e-12, 1e9, unit='kg m^2'),
     'corners': ('list_of_points', None, 'm', REQUIRED),
-    'corner_radius': _num(1e-6, 1, unit='m'),
+    'corner_radius': number_spec(1e-6, 1, unit='m'),
     'material': ('str', None, '', 'body'),
 }
 INITIAL = {
-    'x': _num(-1e3, 1e3, unit='m', default=0.0),
-    'z': _num(-1e3, 1e3, unit='m'),
-    'theta_deg': _num(-3600, 3600, unit='deg', default=0.0),
-    'vx': _num(-1e3, 1e3, unit='m/s', default=0.0),
-    'vz': _num(-1e3, 1e3, unit='m/s', default=0.0),
-    'omega': _num(-1e4, 1e4, unit='rad/s', default=0.0),
+    'x': number_spec(-1e3, 1e3, unit='m', default=0.0),
+    'z': number_spec(-1e3, 1e3, unit='m'),
+    'theta_deg': number_spec(-3600, 3600, unit='deg', default=0.0),
+    'vx': number_spec(-1e3, 1e3, unit='m/s', default=0.0),
+    'vz': number_spec(-1e3, 1e3, unit='m/s', default=0.0),
+    'omega': number_spec(-1e4, 1e4, unit='rad/s', default=0.0),
 }
 LINE_SURFACE = {
-    'point': ('vec', _num(-1e3, 1e3), 'm', (0.0, 0.0)),
-    'normal': ('vec', _num(-1e3, 1e3), '-', (0.0, 1.0)),
-    'law': _choice(BODY_CONTACT_LAWS, 'elastoplastic'),
-    'mu': _num(0, 10, unit='-', default=0.0),
-    'v_d': _num(1e-6, 10, unit='m/s', default=0.02),
-    'cor': _num(0, 1, low_open=True, unit='-', default=None),
+    'point': ('vec', number_spec(-1e3, 1e3), 'm', (0.0, 0.0)),
+    'normal': ('vec', number_spec(-1e3, 1e3), '-', (0.0, 1.0)),
+    'law': choice_spec(BODY_CONTACT_LAWS, 'elastoplastic'),
+    'mu': number_spec(0, 10, unit='-', default=0.0),
+    'v_d': number_spec(1e-6, 10, unit='m/s', default=0.02),
+    'cor': number_spec(0, 1, low_open=True, unit='-', default=None),
     'material': ('str', None, '', 'surface'),
 }
 BODY_INTEGRATOR = {
-    'rtol': _num(1e-13, 1e-3, unit='-', default=1e-9),
-    'atol': _num(1e-16, 1e-6, unit='-', default=1e-13),
-    'max_step': _num(1e-6, 1, unit='s', default=1e-3),
+    'rtol': number_spec(1e-13, 1e-3, unit='-', default=1e-9),
+    'atol': number_spec(1e-16, 1e-6, unit='-', default=1e-13),
+    'max_step': number_spec(1e-6, 1, unit='s', default=1e-3),
 }
 BODY_SCHEMA = {
     'name': ('str', None, '', 'body'),
     'description': ('str', None, '', ''),
-    'gravity': _num(0, 1000, unit='m/s^2', default=9.81),
+    'gravity': number_spec(0, 1000, unit='m/s^2', default=9.81),
     'materials': ('map', MATERIAL, '', REQUIRED),
     'body': ('dict', BODY, '', REQUIRED),
     'initial': ('dict', INITIAL, '', REQUIRED),
     'surfaces': ('list', LINE_SURFACE, '', REQUIRED),
-    't_max': _num(0, 1e4, low_open=True, unit='s', default=1.0),
+    't_max': number_spec(0, 1e4, low_open=True, unit='s', default=1.0),
     'integrator': ('dict', BODY_INTEGRATOR, '', {}),
 }
 
 
-class _BodyChecker(_Checker):
-    """The arm scene's checker plus one container: a list of 2-D points."""
+class _BodyChecker(SceneChecker):
+    """The arm scene's checker plus one container kind, a list of 2-D points, and the
+    check of one point."""
 
     def container(
         self,
@@ -153,7 +154,7 @@ class _BodyChecker(_Checker):
     def point(self, path: str, value: Any) -> tuple[float, float]:
         if not isinstance(value, (list, tuple)) or len(value) != 2:
             self.fail(path, f'= {value!r:.60} must be a point [x, z] (m)')
-        x, z = (self.number(f'{path}[{i}]', v, _POINT[1][1], 'm') for i, v in enumerate(value))
+        x, z = (self.leaf(f'{path}[{i}]', v, _COORDINATE) for i, v in enumerate(value))
         return (x, z)
 
 
@@ -232,7 +233,7 @@ def parse_body_scene(data: Any, origin: str = '<scene>') -> BodyScene:
     )
 
 
-def _check_pairing(check: _Checker, path: str, body: BodySpec, s: LineSurface) -> None:
+def _check_pairing(check: SceneChecker, path: str, body: BodySpec, s: LineSurface) -> None:
     if s.law == 'none':
         return
     E = reduced_modulus(body.material, s.material)

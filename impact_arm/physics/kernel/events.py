@@ -1,14 +1,16 @@
 # Kernel part: event functions of the current phase and the location of their zero crossings
-# (Newton on real steps inside an Illinois bracket).
+# (Newton on real steps inside an Illinois bracket; the bracket is physics/roots.py's, shared
+# with the free body's kernel).
 # Template text (see kernel/__init__.py): the imports above the marker are for
 # linters and editors only: the generated module's header provides those names.
 # flake8: noqa: F401,F403,F405
 from ..contact import YIELD_ONSET_FACTOR as YIELD_ONSET  # the header's name for it
 from ..jit import jit
 from ..layout import *
+from ..roots import event_tolerance, false_position, illinois_update
 from .injected import *
 from .rhs import surface_level, surface_rate
-from .steps import EPS, trial_step
+from .steps import trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
 
@@ -101,29 +103,19 @@ def locate(
     a, b = 0.0, h
     fa, fb = ga, gb
     side = 0
-    # below a few ulps of t the switch time cannot be told apart (t + s rounds) and the event
-    # function sits at its rounding floor: iterating further only bisected noise (5-8 extra
-    # real steps at each yield and separation of the article's impacts)
-    tol = max(h * 1e-12, 2.0 * EPS * abs(t), 1e-18)
-    c = (a * fb - b * fa) / (fb - fa)
+    # a tighter tolerance took 5-8 extra real steps at each yield and separation of the
+    # article's impacts, bisecting rounding noise
+    tol = event_tolerance(h, t)
+    c = false_position(a, b, fa, fb)
     for _ in range(100):
-        if not (a < c < b):
+        if not (a < c < b):  # a converged Newton step nudged onto an end of the bracket
             c = 0.5 * (a + b)
         trial_step(
             t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
         )
         event_values(y_out, P, I, SURF, C, levels, g)
         fc = g[k]
-        if fc >= 0.0:
-            b, fb = c, fc
-            if side == -1:
-                fa *= 0.5
-            side = -1
-        else:
-            a, fa = c, fc
-            if side == 1:
-                fb *= 0.5
-            side = 1
+        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
         if fc == 0.0 or b - a <= tol:
             break
         rate = event_rate(y_out, f_tmp, k, P, SURF, C)
@@ -137,7 +129,7 @@ def locate(
         if a < newton < b:
             c = newton
         else:
-            c = (a * fb - b * fa) / (fb - fa)
+            c = false_position(a, b, fa, fb)
     if b != c:
         trial_step(
             t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
