@@ -304,11 +304,11 @@ def run(args) -> int:
         Study('paper').scene(sensors)
     report = {}
     if not args.skip_fresh:
-        say('fresh process (15 impacts; 2 parameters, then 8):')
         if args.repeats < 1:
             from impact_arm.physics.errors import ImpactArmError
 
             raise ImpactArmError(f'--repeats {args.repeats}: must be at least 1')
+        say('fresh process (15 impacts; 2 parameters, then 8):')
         report['fresh'] = fresh_process(say, repeats=args.repeats)
         report['fresh_8'] = fresh_process(say, EIGHT, repeats=args.repeats)
     if args.fresh_only:
