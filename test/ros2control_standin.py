@@ -11,12 +11,29 @@ wire, one update loop at its own rate on the wall clock:
 * write: the hardware publishes the command interfaces as a JointState on
   /robot_joint_commands, stamped with the wall clock, ``--late`` updates late.
 
+``--wait-for-peers S``: once the controller has sent its first command, an update does not
+start before the hardware's new state and the controller's answer to the previous update's
+state have arrived (or S seconds have passed): a controller_manager that never outruns its
+hardware and its controller, as one at realtime priority on an idle machine, so that the
+latency is what the stack makes it and not the machine's scheduling (0: the wall-clock
+schedule alone).
+
+``--unsynchronised P``: an update loop whose phase drifts against the hardware's period
+(a controller_manager not synchronised with its hardware): with probability P (``--seed``)
+the effort controller takes a new command only at the update after the one it would have
+(never two updates in a row), the newest then, so that the latency a controller sees varies
+by a period from command to command, some commands never reach the hardware and some are
+written twice; counted in the JSON lines as "postponed". Decided per update, it stays on the
+updates' grid whatever the machine's scheduling.
+
 Prints JSON lines every 100 updates: {"event": "update", "n": updates, "zeros": zero
-commands written, "stale": updates whose effort controller had no newer command}.
+commands written, "stale": updates whose effort controller had no newer command,
+"postponed": new commands taken an update later}.
 """
 
 import argparse
 import json
+import random
 import time
 from collections import deque
 
@@ -33,6 +50,9 @@ def main():
     parser.add_argument('--rate', type=float, default=1000.0, help='updates per wall second')
     parser.add_argument('--late', type=int, default=1, help='updates a command is written late')
     parser.add_argument('--duration', type=float, default=60.0)
+    parser.add_argument('--unsynchronised', type=float, default=0.0, help='chance 0..1')
+    parser.add_argument('--wait-for-peers', type=float, default=0.0, help='s, at most')
+    parser.add_argument('--seed', type=int, default=0)
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node('standin_controller_manager')
@@ -40,13 +60,16 @@ def main():
     broadcast = node.create_publisher(JointState, '/joint_state_broadcaster/joint_states', qos)
     hardware_out = node.create_publisher(JointState, '/robot_joint_commands', qos)
     newest = {'state': None, 'command': None}
+    received = {'states': 0, 'commands': 0}
 
     def on_state(msg):
         newest['state'] = msg
+        received['states'] += 1
 
     def on_command(msg):
         if len(msg.data) == len(JOINTS):
             newest['command'] = list(msg.data)
+            received['commands'] += 1
 
     node.create_subscription(JointState, '/robot_joint_states', on_state, qos)
     node.create_subscription(Float64MultiArray, '/arm_effort_controller/commands', on_command, qos)
@@ -55,10 +78,23 @@ def main():
     written = deque([list(command_interfaces)] * args.late)
     period = 1.0 / args.rate
     start = time.monotonic()
-    k = zeros = slot = stale = 0
+    k = zeros = slot = stale = postponed = 0
+    rng = random.Random(args.seed)
+    missed = False  # the previous update missed a new command (never two in a row)
+    states_read = commands_before = 0  # counts at the previous update's read / broadcast
+    answer_due = False  # the previous update broadcast a state the controller answers
+    previous_position = None
+
+    def peers_ready():
+        if not args.wait_for_peers or not received['commands']:
+            return True  # (before the controller runs, the stack runs on its own)
+        answered = not answer_due or received['commands'] > commands_before
+        return received['states'] > states_read and answered
+
     while time.monotonic() - start < args.duration:
         # read
         msg = newest['state']
+        states_read = received['states']
         if msg is not None:
             index = [list(msg.name).index(j) for j in JOINTS]
             state_interfaces = tuple(
@@ -71,10 +107,20 @@ def main():
             out = JointState(name=list(JOINTS))
             out.header.stamp = stamp
             out.position, out.velocity, out.effort = state_interfaces
+            # a controller answers a new state, not a repetition
+            answer_due = list(out.position) != previous_position
+            previous_position = list(out.position)
+            commands_before = received['commands']
             broadcast.publish(out)
         if newest['command'] is not None:
-            stale += newest['command'] is command_interfaces
-            command_interfaces = newest['command']
+            fresh = newest['command'] is not command_interfaces
+            if fresh and not missed and rng.random() < args.unsynchronised:
+                postponed += 1  # the update's phase missed it: taken at the next one
+                missed = True
+            else:
+                missed = False
+                stale += not fresh
+                command_interfaces = newest['command']
         # write, late by --late updates
         written.append(list(command_interfaces))
         value = written.popleft()
@@ -85,16 +131,26 @@ def main():
         k += 1
         if k % 100 == 0:
             print(
-                json.dumps({'event': 'update', 'n': k, 'zeros': zeros, 'stale': stale}), flush=True
+                json.dumps(
+                    {
+                        'event': 'update',
+                        'n': k,
+                        'zeros': zeros,
+                        'stale': stale,
+                        'postponed': postponed,
+                    }
+                ),
+                flush=True,
             )
         # the next update at the next deadline of the schedule (missed ones are skipped, as
         # the controller manager does); the subscriptions are served meanwhile, at least once
         slot = max(slot + 1, int((time.monotonic() - start) / period))
         deadline = start + slot * period
         while True:
-            rclpy.spin_once(node, timeout_sec=max(0.0, deadline - time.monotonic()))
-            if time.monotonic() >= deadline:
+            now = time.monotonic()
+            if now >= deadline and (peers_ready() or now >= deadline + args.wait_for_peers):
                 break
+            rclpy.spin_once(node, timeout_sec=max(0.0, deadline - now) if now < deadline else 0.01)
     node.destroy_node()
     rclpy.try_shutdown()
 

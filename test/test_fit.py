@@ -7,6 +7,8 @@ import json
 import math
 import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -177,6 +179,123 @@ def test_cli_fits_a_rosbag2_folder_and_writes_a_scene_that_runs(bag, tmp_path, c
     scene = load_scene(data['scene'])
     assert scene.surfaces[0].mu == pytest.approx(data['parameters']['surfaces[0].mu']['value'])
     assert not run(scene, samples=False).error
+
+
+FIT_MODULES = (
+    'impact_arm.tools.fit',
+    'impact_arm.calibration.fit',
+    'impact_arm.calibration.diagnose',
+    'impact_arm.io.recording',
+)
+# what the fit's path has no use for (ROS, the symbolic derivation, pyplot, the statistics
+# package) or needs only later (the optimiser, the figures' library)
+NOT_AT_IMPORT = ('rclpy', 'sympy', 'matplotlib', 'scipy.optimize', 'scipy.stats')
+NOT_IN_A_FIT = ('rclpy', 'scipy.stats', 'matplotlib')
+
+
+def _modules_of(code):
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=300)
+    assert out.returncode in (0, 1), out.stderr[-2000:]
+    return set(out.stdout.split())
+
+
+def test_importing_the_fit_loads_no_ros_symbolic_plotting_or_optimising_library():
+    loaded = _modules_of(f'import sys\nimport {", ".join(FIT_MODULES)}\nprint(*sys.modules)')
+    assert loaded >= set(FIT_MODULES)
+    assert not loaded & set(NOT_AT_IMPORT)
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='the side process needs fork')
+def test_a_fit_command_draws_its_figures_aside_and_loads_no_ros(bag, tmp_path):
+    """The command's own process never imports matplotlib (its side process draws the
+    figures), nor rclpy or scipy.stats; the figures are written all the same."""
+    folder, _ = bag
+    args = [
+        'fit',
+        folder,
+        '--param',
+        'surfaces[0].mu=0.05:1',
+        '--param',
+        'materials.steel.S_y=2e8:5e9',
+        '--out',
+        str(tmp_path),
+    ]
+    loaded = _modules_of(
+        'import sys\nfrom impact_arm.tools.cli import main\n'
+        f'code = main({args!r})\nprint(*sys.modules)\nsys.exit(code)'
+    )
+    assert 'scipy.optimize' in loaded  # the fit ran in this process
+    assert not loaded & set(NOT_IN_A_FIT)
+    for name in ('impacts.png', 'cor.png'):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+
+
+@pytest.fixture
+def side_processes(monkeypatch):
+    """The side processes fit_recording starts (None where it could not)."""
+    from impact_arm.tools import side_process
+
+    started = []
+    start = side_process.SideProcess.start.__func__
+
+    def recorded_start(cls, first):
+        started.append(start(cls, first))
+        return started[-1]
+
+    monkeypatch.setattr(side_process.SideProcess, 'start', classmethod(recorded_start))
+    return started
+
+
+def _killed_before(method, monkeypatch):
+    """SideProcess.``method`` with the process killed first."""
+    from impact_arm.tools import side_process
+
+    original = getattr(side_process.SideProcess, method)
+
+    def killed_first(self, *args):
+        self._process.kill()
+        self._process.join()
+        return original(self, *args)
+
+    monkeypatch.setattr(side_process.SideProcess, method, killed_first)
+
+
+def test_what_the_side_process_reads_and_draws_is_what_this_one_would(
+    bag, tmp_path, monkeypatch, side_processes
+):
+    """The recording and the figures are the same whether the side process reads and draws
+    them, or this one does when the side process is gone."""
+    from impact_arm.tools.fit import draw_figures, figure_data, fit_recording
+
+    folder, _ = bag
+    aside = fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'aside'), say=print)
+    here = fit_recording(folder, 'paper', BOUNDS, out=False)
+    (tmp_path / 'here').mkdir()
+    draw_figures(figure_data(here), str(tmp_path / 'here'))
+    _killed_before('figures', monkeypatch)
+    fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'died_drawing'), say=print)
+    _killed_before('first_result', monkeypatch)
+    fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'died_reading'), say=print)
+    if sys.platform.startswith('linux'):
+        assert len(side_processes) == 3 and all(side_processes)
+    for field in ('t', 'position', 'velocity', 'effort', 'wrench_t', 'wrench'):
+        assert np.array_equal(getattr(aside.recording, field), getattr(here.recording, field))
+    for out in ('aside', 'died_drawing', 'died_reading'):
+        data = json.loads((tmp_path / out / 'fit.json').read_text())
+        assert data['parameters'] == json.loads(json.dumps(here.to_json()))['parameters']
+        for name in ('impacts.png', 'cor.png'):
+            assert (tmp_path / out / name).read_bytes() == (tmp_path / 'here' / name).read_bytes()
+
+
+def test_a_recording_refused_by_the_side_process_is_refused_here(bag, tmp_path, side_processes):
+    from impact_arm.tools.fit import fit_recording
+
+    with pytest.raises(RecordingInputError) as exc:
+        fit_recording(bag[0], 'paper', BOUNDS, states_topic='/arm/joint_states', out=str(tmp_path))
+    assert '--states-topic /arm/joint_states: not in' in str(exc.value)
+    if sys.platform.startswith('linux'):
+        assert len(side_processes) == 1 and side_processes[0]
+        assert not side_processes[0]._process.is_alive()
 
 
 def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):

@@ -477,6 +477,43 @@ def test_prediction_keeps_the_limit_cycle_under_command_latency(scene):
         assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
 
 
+def test_a_latency_that_varies_by_a_period_is_told_from_a_pipeline_filling(scene):
+    """The commands in flight fill at start-up (latencies 0, 1, 2 measured once each): a
+    steady latency, the law stays explicit. Latencies 2 and 3 recurring (an unsynchronised
+    driver stack): the law is evaluated on the state its own command leads to."""
+    sent = []
+    c = inputs(scene, sent, wrench_publishers=lambda: False, latency_periods=-1)
+    c.implicit_periods = 1
+    for k in range(40):
+        back = min(len(sent) - 1, 2)
+        state(c, k * 0.001, effort=sent[-1 - back] if sent else ())
+    assert c.measured_latency == 2 and not c.latency_varies() and c.implicit_commands == 0
+    for k in range(40, 52):
+        state(c, k * 0.001, effort=sent[-3 - k % 2])
+    assert c.latency_varies() and c.implicit_commands > 0
+    off = inputs(scene, [], wrench_publishers=lambda: False, latency_periods=-1)
+    assert off.implicit_periods == 0  # the input handling's default; the node's is 1
+    with pytest.raises(ValueError, match='implicit_periods = -1'):
+        inputs(scene, [], implicit_periods=-1)
+
+
+@pytest.mark.parametrize('latency, seed', [(0, 4), (1, 3), (2, 4)])
+def test_an_implicit_law_keeps_the_limit_cycle_when_the_latency_varies(scene, latency, seed):
+    """Each command a period later than ``latency`` at random (half of them): predicting over
+    the measured latency alone the arm strikes twice after some impacts; with the law
+    evaluated on the state its own command leads to (implicit_periods 1), once per cycle,
+    with the penetration of the run without latency."""
+    from impact_arm.tools.latency_study import closed_loop
+
+    base = closed_loop(scene, 0, 0, t_max=2.5)
+    explicit = closed_loop(scene, latency, -1, 2.5, jitter=0.5, seed=seed, implicit_periods=0)
+    implicit = closed_loop(scene, latency, -1, 2.5, jitter=0.5, seed=seed, implicit_periods=1)
+    assert explicit.second_strikes >= 1
+    assert not implicit.failed and implicit.second_strikes == 0
+    assert implicit.impacts == base.impacts
+    assert max(implicit.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
+
+
 def test_a_stale_echo_or_a_wild_prediction_does_not_steer_the_arm(scene):
     """An effort matching a command sent long ago (a driver holding an old one) is no
     latency; a prediction that leaves any arm's range (torques in flight no arm could take)

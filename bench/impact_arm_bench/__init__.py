@@ -72,7 +72,7 @@ SUBCOMMANDS = {
     ),
     'latency': (
         'impact_arm_bench.latency',
-        'limit cycle against command latency 0-3 periods, with and without prediction',
+        'limit cycle against steady and varying command latency, with and without prediction',
     ),
     'features': (
         'impact_arm_bench.features',

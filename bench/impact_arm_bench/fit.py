@@ -7,8 +7,9 @@
   scene's sensors section instead of that noise (encoder counts, difference rates,
   latencies: docs/scene.md);
 * cost: 2 and 8 parameters from 15 impacts in a fresh process (``impact-arm fit`` on a
-  rosbag2 folder: imports, the compiled kernel's loading, reading, fitting, writing the report
-  and figures), wall and CPU time with the load average around it;
+  rosbag2 folder, as the README starts it: imports, the compiled kernel's loading, reading,
+  fitting, writing the report and figures), wall and CPU time with the load average around
+  each run, ``--repeats`` runs (median and worst);
 * growth: fitting time in one process against the number of impacts and of parameters.
 """
 
@@ -48,6 +49,12 @@ def add_arguments(parser):
         help="a key of the scene's sensors section for the accuracy recordings (repeat), e.g. "
         "rate=difference, effort_latency=0.002: recordings like a real arm's driver makes "
         '(they then carry only the noise these keys give)',
+    )
+    parser.add_argument(
+        '--repeats',
+        type=int,
+        default=5,
+        help='fresh-process runs of each timing (default 5): median and worst',
     )
     parser.add_argument('--json', default=None, metavar='FILE', help='write the figures here')
 
@@ -166,16 +173,27 @@ EIGHT = {
 }
 
 
-def fresh_process(say, bounds=None):
+def _command():
+    """``impact-arm`` as the README starts it (the venv's console script), else the module."""
+    script = os.path.join(os.path.dirname(sys.executable), 'impact-arm')
+    if os.access(script, os.X_OK):
+        return [script]
+    return [sys.executable, '-m', 'impact_arm.tools.cli']
+
+
+def fresh_process(say, bounds=None, repeats=5):
     """Wall and CPU time of ``impact-arm fit`` (15 impacts; 2 parameters, or ``bounds``) in a
     new interpreter, as a user runs it (imports, the compiled kernel's loading, reading,
-    fitting, writing the report and figures), with the load average around it: on a shared
+    fitting, writing the report and figures: CPU time includes the figures' process), run
+    ``repeats`` times: median and worst, with the load average around each run: on a shared
     machine the CPU time is the figure that carries over to a quiet one."""
     import resource
+    import statistics
 
     from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
 
     bounds = bounds or {k: EIGHT[k] for k in ('surfaces[0].mu', 'materials.steel.S_y')}
+    runs = []
     with tempfile.TemporaryDirectory() as tmp:
         rec = synthetic_recording(
             'paper',
@@ -187,34 +205,45 @@ def fresh_process(say, bounds=None):
         )
         bag = os.path.join(tmp, 'bag')
         write_rosbag2(rec, bag)
-        cmd = [sys.executable, '-m', 'impact_arm.tools.cli', 'fit', bag]
+        cmd = _command() + ['fit', bag]
         for key, (lo, hi) in bounds.items():
             cmd += ['--param', f'{key}={lo:g}:{hi:g}']
         cmd += ['--out', os.path.join(tmp, 'out'), '--json', os.path.join(tmp, 'r.json')]
-        load0 = os.getloadavg()[0]
-        cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        t0 = time.perf_counter()
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        wall = time.perf_counter() - t0
-        cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        load1 = os.getloadavg()[0]
-        if done.returncode not in (0, 1):
-            raise RuntimeError(f'fresh fit failed: {done.stderr.strip()[-500:]}')
-        with open(os.path.join(tmp, 'r.json'), encoding='utf-8') as f:
-            data = json.load(f)
-    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+        for k in range(repeats):
+            load0 = os.getloadavg()[0]
+            cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t0 = time.perf_counter()
+            done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            wall = time.perf_counter() - t0
+            cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            load1 = os.getloadavg()[0]
+            if done.returncode not in (0, 1):
+                raise RuntimeError(f'fresh fit failed: {done.stderr.strip()[-500:]}')
+            with open(os.path.join(tmp, 'r.json'), encoding='utf-8') as f:
+                data = json.load(f)
+            cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+            runs.append({'wall': wall, 'cpu': cpu, 'load_average': [load0, load1]})
+            say(
+                f'  fresh process {k + 1}/{repeats}: {wall:.2f} s wall, {cpu:.2f} s CPU for '
+                f'{data["impacts_used"]} impacts, {len(bounds)} parameters '
+                f'({data["verdict"][:60]}); load average {load0:.1f} -> {load1:.1f} on '
+                f'{os.cpu_count()} CPUs'
+            )
+    walls, cpus = [r['wall'] for r in runs], [r['cpu'] for r in runs]
     say(
-        f'  fresh process: {wall:.2f} s wall, {cpu:.2f} s CPU for {data["impacts_used"]} '
-        f'impacts, {len(bounds)} parameters ({data["verdict"][:60]}); load average '
-        f'{load0:.1f} -> {load1:.1f} on {os.cpu_count()} CPUs'
+        f'  {len(bounds)} parameters, {repeats} runs: wall median {statistics.median(walls):.2f} '
+        f's, worst {max(walls):.2f} s; CPU median {statistics.median(cpus):.2f} s, worst '
+        f'{max(cpus):.2f} s'
     )
     return {
-        'wall': wall,
-        'cpu': cpu,
+        'wall': statistics.median(walls),
+        'wall_worst': max(walls),
+        'cpu': statistics.median(cpus),
+        'cpu_worst': max(cpus),
+        'runs': runs,
         'params': len(bounds),
         'impacts': data['impacts_used'],
         'verdict': data['verdict'],
-        'load_average': [load0, load1],
         'cpus': os.cpu_count(),
     }
 
@@ -275,9 +304,13 @@ def run(args) -> int:
         Study('paper').scene(sensors)
     report = {}
     if not args.skip_fresh:
+        if args.repeats < 1:
+            from impact_arm.physics.errors import ImpactArmError
+
+            raise ImpactArmError(f'--repeats {args.repeats}: must be at least 1')
         say('fresh process (15 impacts; 2 parameters, then 8):')
-        report['fresh'] = fresh_process(say)
-        report['fresh_8'] = fresh_process(say, EIGHT)
+        report['fresh'] = fresh_process(say, repeats=args.repeats)
+        report['fresh_8'] = fresh_process(say, EIGHT, repeats=args.repeats)
     if args.fresh_only:
         if args.json:
             from impact_arm.tools.cli import write_json

@@ -2,13 +2,17 @@
 stack adds, with and without the controller's prediction (its ``latency_periods``).
 
 1. offline (tools/latency_study.py): the simulator's lockstep session and the controller's
-   input handling joined by queues, the driver delaying each command by 0-3 periods, fixed or
-   with a jitter of one period (an unsynchronised controller manager);
+   input handling joined by queues, the driver delaying each command by 0-3 periods
+   (steady), or by k or k+1 periods at random (varying: an unsynchronised controller
+   manager), over several seeds;
 2. over DDS (``--dds``): the simulator node in lockstep with ``command_latency_periods`` and
    the controller node, ``latency_periods`` -1 (measured) or 0, on a free local domain.
 
+Controllers: no prediction, prediction over the measured latency with the explicit law
+(``implicit_periods`` 0), and the default (also the implicit law while the latency varies).
 For each: impacts, second strikes (an impact within 50 ms of the previous one), the largest
-penetration δm and the mean cycle period after the first five impacts.
+penetration δm and the mean cycle period after the first five impacts; over seeds the
+median, and the worst run in brackets.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import statistics
 import subprocess
 import sys
 import time
@@ -31,44 +36,108 @@ def add_arguments(parser):
         type=int,
         nargs='*',
         default=[0, 1, 2, 3],
-        help='command latencies to run, in control periods',
+        help='steady command latencies to run, in control periods',
     )
-    parser.add_argument('--jitter', type=float, default=0.3, help='offline jitter runs')
+    parser.add_argument(
+        '--varying',
+        type=int,
+        nargs='*',
+        default=[0, 1, 2],
+        help='k of the latencies that vary between k and k+1 periods',
+    )
+    parser.add_argument(
+        '--jitter',
+        type=float,
+        default=0.5,
+        help='varying latency: the chance that a command takes the extra period',
+    )
+    parser.add_argument('--seeds', type=int, default=5, help='varying latency: runs (seeds)')
     parser.add_argument('--dds', action='store_true', help='also over DDS (nodes)')
     parser.add_argument(
         '--dds-seconds', type=float, default=4.0, help='simulated s per run over DDS'
     )
 
 
-def _row(kind, latency, prediction, impacts, contacts, delta_m, failed=''):
+# the controller's settings compared: no prediction; prediction over the measured latency
+# with an explicit law; and the node's default, which also evaluates the law implicitly
+# while the measured latency varies
+CONTROLLERS = (('off', 0, 0), ('measured', -1, 0), ('measured + implicit', -1, 1))
+
+
+def _metrics(contacts, delta_m):
+    """(impacts, second strikes, largest δm [mm], mean cycle [s] after the 5th impact)."""
     gaps = [b - a for a, b in zip(contacts, contacts[1:])]
-    second = sum(g < 0.05 for g in gaps)
     cycles = [g for g in gaps[4:] if g >= 0.05]
+    return (
+        len(contacts),
+        sum(g < 0.05 for g in gaps),
+        max(delta_m) * 1e3 if delta_m else None,
+        sum(cycles) / len(cycles) if cycles else None,
+    )
+
+
+def _spread(values, fmt, worst=max):
+    """'median (worst)' over runs; '-' where a run had none (no cycle completed)."""
+    have = [v for v in values if v is not None]
+    if not have:
+        return '-'
+    median = statistics.median(have)
+    text = format(median, fmt)
+    if len(values) > 1:
+        bad = worst(have) if len(have) == len(values) else None
+        text += f' ({format(bad, fmt) if bad is not None else "-"})'
+    return text
+
+
+def _row(kind, latency, controller, runs):
+    """One table row over ``runs`` [(contacts, delta_m, failed)]: median and, for several
+    runs, the worst run beside it (most impacts and second strikes, largest δm, the cycle
+    farthest from the median)."""
+    metrics = [_metrics(c, d) for c, d, _ in runs]
+    cycles = [m[3] for m in metrics]
+    mid = statistics.median([c for c in cycles if c is not None] or [0.0])
+    failed = sorted({f[:40] for _, _, f in runs if f})
     return [
         kind,
-        str(latency),
-        prediction,
-        str(impacts),
-        str(second),
-        f'{max(delta_m) * 1e3:.3f}' if delta_m else '-',
-        f'{sum(cycles) / len(cycles):.4f}' if cycles else '-',
-        failed[:40] or 'ok',
+        latency,
+        controller,
+        str(len(runs)),
+        _spread([m[0] for m in metrics], 'g'),
+        _spread([m[1] for m in metrics], 'g'),
+        _spread([m[2] for m in metrics], '.3f'),
+        _spread(cycles, '.4f', worst=lambda v: max(v, key=lambda c: abs(c - mid))),
+        '; '.join(failed) or 'ok',
     ]
 
 
 def _offline(scene, args):
     from impact_arm.tools.latency_study import closed_loop
 
+    def run(latency, predicted, implicit, jitter=0.0, seed=0):
+        r = closed_loop(
+            scene,
+            latency,
+            predicted,
+            args.seconds,
+            jitter=jitter,
+            seed=seed,
+            implicit_periods=implicit,
+        )
+        return r.t_contact, r.delta_m, r.failed
+
     rows = []
-    for jitter in (0.0, args.jitter):
-        for latency in args.latencies:
-            for predicted, name in ((0, 'off'), (-1, 'measured')):
-                if jitter and not latency:
-                    continue
-                r = closed_loop(scene, latency, predicted, args.seconds, jitter=jitter, seed=1)
-                kind = f'offline, jitter {jitter:g}' if jitter else 'offline'
-                rows.append(_row(kind, latency, name, r.impacts, r.t_contact, r.delta_m, r.failed))
-                print('  ' + ' | '.join(rows[-1]), flush=True)
+    for latency in args.latencies:
+        for name, predicted, implicit in CONTROLLERS:
+            runs = [run(latency, predicted, implicit)]  # deterministic: one run
+            rows.append(_row('offline, steady', str(latency), name, runs))
+            print('  ' + ' | '.join(rows[-1]), flush=True)
+    for k in args.varying:
+        for name, predicted, implicit in CONTROLLERS:
+            runs = [
+                run(k, predicted, implicit, args.jitter, seed) for seed in range(1, args.seeds + 1)
+            ]
+            rows.append(_row('offline, varying', f'{k}..{k + 1}', name, runs))
+            print('  ' + ' | '.join(rows[-1]), flush=True)
     return rows
 
 
@@ -151,19 +220,10 @@ def _dds_run(scene_name, latency, predicted, seconds):
 def _dds(args):
     rows = []
     for latency in args.latencies:
-        for predicted, name in ((0, 'off'), (-1, 'measured')):
+        for predicted, name in ((0, 'off'), (-1, 'measured + implicit')):
             done, failed = _dds_run(args.scene, latency, predicted, args.dds_seconds)
-            rows.append(
-                _row(
-                    'DDS lockstep',
-                    latency,
-                    name,
-                    len(done),
-                    [r['t_contact'] for r in done],
-                    [r['delta_m'] for r in done],
-                    failed,
-                )
-            )
+            runs = [([r['t_contact'] for r in done], [r['delta_m'] for r in done], failed)]
+            rows.append(_row('DDS lockstep, steady', str(latency), name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)
     return rows
 
@@ -178,7 +238,8 @@ def run(args):
     header = [
         'loop',
         'latency [periods]',
-        'prediction',
+        'controller',
+        'runs',
         'impacts',
         'second strikes',
         'δm max [mm]',

@@ -109,6 +109,7 @@ class LocalFit:
         self.coef = np.zeros((n, self.DEGREE + 1))
         self.cov = np.zeros((n, self.DEGREE + 1, self.DEGREE + 1))
         self.chi2 = 0.0
+        self._states: dict = {}  # t -> (q, q̇, cov): see state()
         with_rates = rate_period is None
         dof = (2 if with_rates else 1) * len(tau) - (self.DEGREE + 1)
         for j in range(n):
@@ -145,6 +146,14 @@ class LocalFit:
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at ``t``: cov is (2n, 2n) over [q, q̇] (joints independent)."""
+        # a fit replays each impact from the same instant hundreds of times: each instant's
+        # state is computed once, and handed out as copies
+        known = self._states.get(t)
+        if known is None:
+            known = self._states[t] = self._state(t)
+        return known[0].copy(), known[1].copy(), known[2].copy()
+
+    def _state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v, d = self._rows(t)
         n = self.coef.shape[0]
         q, qd = self.coef @ v, self.coef @ d

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
+from collections import Counter, deque
 from typing import Callable, Sequence
 
 from ..contract import to_absolute
@@ -41,6 +41,11 @@ REPEAT_WINDOW = 1.5
 MAX_MEASURED_LATENCY = 8
 # commands kept to predict and to match the efforts a driver reports against
 SENT_HISTORY = 32
+# the latency varies when, among the measurements of this long a time (at the control rate),
+# two values or more were each measured at least LATENCY_RECURS times (a pipeline filling at
+# start-up measures each shorter latency once)
+LATENCY_WINDOW_S = 1.0
+LATENCY_RECURS = 3
 DROPPED = (
     'malformed_joint_states',
     'malformed_wrenches',
@@ -78,6 +83,7 @@ class ControlInputs:
         clock: Callable[[], float] = time.monotonic,
         latency_periods: int = 0,
         wrench_tolerance: float = math.inf,
+        implicit_periods: int = 0,
     ):
         self.ctrl = ctrl
         self.joint_names = list(joint_names)
@@ -119,6 +125,16 @@ class ControlInputs:
         self.latency_max = 0  # the largest measured
         self.sent: deque[list[float]] = deque(maxlen=SENT_HISTORY)  # joint order, newest last
         self.predictor = StatePredictor(ctrl.model, self.period) if latency_periods else None
+        # the latencies measured over the last LATENCY_WINDOW_S: when they differ, each
+        # command may act a period early or late and be held one period or two, and the law
+        # is evaluated on the state its own command leads to after ``implicit_periods``
+        # periods (StatePredictor.implicit_command); steady, the law stays the article's
+        if implicit_periods < 0:
+            raise ValueError(f'implicit_periods = {implicit_periods}: must be >= 0')
+        self.implicit_periods = implicit_periods
+        self.recent_latency: deque[int] = deque(maxlen=max(1, round(rate * LATENCY_WINDOW_S)))
+        self.latency_counts: Counter[int] = Counter()  # of recent_latency's values
+        self.implicit_commands = 0  # commands computed so
 
     def drop(self, counter: str, why: str) -> None:
         self.dropped[counter] += 1
@@ -281,6 +297,11 @@ class ControlInputs:
                 )
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
         self.normal_force = None  # the latch covers one tick
+        if self.implicit_periods and self.predictor is not None and self.latency_varies():
+            tau = self.predictor.implicit_command(
+                lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at), q, qd, tau, self.implicit_periods
+            )
+            self.implicit_commands += 1
         if not all(math.isfinite(v) for v in tau):
             self.drop(
                 'unsafe_torques',
@@ -297,6 +318,11 @@ class ControlInputs:
         """The sent commands that have not reached the actuators yet, oldest first."""
         k = self.measured_latency if self.latency_periods == -1 else self.latency_periods
         return list(self.sent)[len(self.sent) - k :] if k else []
+
+    def latency_varies(self) -> bool:
+        """Whether two latencies or more recur among those measured over the last
+        LATENCY_WINDOW_S."""
+        return sum(n >= LATENCY_RECURS for n in self.latency_counts.values()) >= 2
 
     def _measure_latency(self, effort: Sequence[float], index: list[int]) -> None:
         """The driver reports the torques acting now: the commands sent after the one it
@@ -317,4 +343,8 @@ class ControlInputs:
                     return
                 self.measured_latency = len(sent) - 1 - back
                 self.latency_max = max(self.latency_max, self.measured_latency)
+                if len(self.recent_latency) == self.recent_latency.maxlen:
+                    self.latency_counts[self.recent_latency[0]] -= 1
+                self.recent_latency.append(self.measured_latency)
+                self.latency_counts[self.measured_latency] += 1
                 return

@@ -129,6 +129,7 @@ class Controller(Node):
             wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0,
             latency_periods=p.latency_periods,
             wrench_tolerance=p.wrench_tolerance,
+            implicit_periods=p.implicit_periods,
         )
         if p.startup_hold > 0:
             self.get_logger().info(

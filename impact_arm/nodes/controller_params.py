@@ -177,6 +177,21 @@ def parameter_table(scene):
             read_only=True,
         ),
         Param(
+            'implicit_periods',
+            1,
+            'periods of its own command the law looks ahead when the measured latency '
+            'varies (two latencies recur within a second: an unsynchronised driver stack, '
+            'where a command acts a period early or late and is held one period or two): '
+            'the torque is the law evaluated on the state that torque itself leads to after '
+            'this many periods (implicit, a Newton step on the model), so that a command '
+            'held longer than planned does not overshoot; with a steady latency the law is '
+            "the scene's; 0: never (needs latency_periods -1)",
+            'int',
+            low=0,
+            high=8,
+            read_only=True,
+        ),
+        Param(
             'wrench_tolerance',
             0.01,
             's: a joint state waits for the contact wrench of its instant only while the '

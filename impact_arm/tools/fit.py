@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -82,53 +83,72 @@ def fit_recording(
     from ..calibration.study import Study
     from ..io.recording import read_recording
     from ..physics.model import ArmModel
+    from .side_process import SideProcess
 
     scene, scene_name = scene_of(recording, scene)
     base = Study(scene).scene()
     conflict = (corrections or Corrections()).shift_conflict(base.sensors, params)
     if conflict:  # refused before the recording is read: the efforts would be shifted twice
         raise ImpactArmError(conflict)
-    rec = read_recording(
-        recording,
-        joints,
-        base.n_links,
-        states_topic or JOINT_STATES,
-        wrench_topic,
-        scene_joints=base.joint_names,
-    )
-    diagnosis = diagnose(rec, ArmModel(base))
-    rec = correct(rec, corrections or Corrections(), diagnosis)
-    for line in diagnosis.lines():
-        say(line)
-    result = fit(rec, scene, params, options, progress)
-    if corrections is not None and corrections.effort_latency and result.timing == 'controller':
-        # the option was applied, but this reading replays no recorded effort
-        result.warnings.append(
-            f'--effort-latency {corrections.effort_latency:g} moved the efforts, but the fit '
-            "read them as the scene's own controller (the reading that best predicts the free "
-            'flight after the impacts), which replays none of them: the latency acts only on '
-            'which samples count as taken in a contact'
-        )
-    if out is False:
-        return result
-    out = out or default_out(recording)
-    os.makedirs(out, exist_ok=True)
-    fitted = os.path.join(out, 'fitted.yaml')
-    write_fitted_scene(scene, result.scene_overrides, fitted, recording)
-    result.scene_path = os.path.abspath(fitted)
-    from .cli import write_json
 
-    for path in filter(None, [os.path.join(out, 'fit.json'), json_path]):
-        write_json(path, {**result.to_json(), 'diagnosis': diagnosis.to_json()})
-        say(f'wrote {path}')
-    say(f'wrote {fitted}')
-    for path in write_figures(result, out):
-        say(f'wrote {path}')
-    report = os.path.join(out, 'report.md')
-    with open(report, 'w', encoding='utf-8') as f:
-        f.write(report_text(result, recording, scene_name, diagnosis))
-    say(f'wrote {report}')
-    return result
+    def read():
+        return read_recording(
+            recording,
+            joints,
+            base.n_links,
+            states_topic or JOINT_STATES,
+            wrench_topic,
+            scene_joints=base.joint_names,
+        )
+
+    # a second process reads the recording while this one imports the optimiser, then
+    # imports matplotlib while this one fits, and draws the figures (the diagnosis stays
+    # here: on a first run the model it needs compiles, which one notice tells)
+    side = SideProcess.start(read) if out is not False else None
+    try:
+        if side is not None:
+            import scipy.optimize  # noqa: F401  # the fit's, imported while the side reads
+
+        rec = read() if side is None else side.first_result()
+        diagnosis = diagnose(rec, ArmModel(base))
+        rec = correct(rec, corrections or Corrections(), diagnosis)
+        for line in diagnosis.lines():
+            say(line)
+        result = fit(rec, scene, params, options, progress)
+        if corrections is not None and corrections.effort_latency and result.timing == 'controller':
+            # the option was applied, but this reading replays no recorded effort
+            result.warnings.append(
+                f'--effort-latency {corrections.effort_latency:g} moved the efforts, but the fit '
+                "read them as the scene's own controller (the reading that best predicts the free "
+                'flight after the impacts), which replays none of them: the latency acts only on '
+                'which samples count as taken in a contact'
+            )
+        if out is False:
+            return result
+        out = out or default_out(recording)
+        os.makedirs(out, exist_ok=True)
+        data = figure_data(result)
+        if side is not None:
+            side.submit(data, out)  # drawn there while the rest is written here
+        fitted = os.path.join(out, 'fitted.yaml')
+        write_fitted_scene(scene, result.scene_overrides, fitted, recording)
+        result.scene_path = os.path.abspath(fitted)
+        from .cli import write_json
+
+        for path in filter(None, [os.path.join(out, 'fit.json'), json_path]):
+            write_json(path, {**result.to_json(), 'diagnosis': diagnosis.to_json()})
+            say(f'wrote {path}')
+        say(f'wrote {fitted}')
+        for path in side.figures() if side is not None else draw_figures(data, out):
+            say(f'wrote {path}')
+        report = os.path.join(out, 'report.md')
+        with open(report, 'w', encoding='utf-8') as f:
+            f.write(report_text(result, recording, scene_name, diagnosis))
+        say(f'wrote {report}')
+        return result
+    finally:
+        if side is not None:
+            side.close()
 
 
 def write_fitted_scene(scene, values: dict, path, recording=''):
@@ -318,76 +338,115 @@ def impact_replay(result, win):
     return pred, (stamps, *fitted_period_forces(pred.path, stamps, period, rec.n, lag))
 
 
+@dataclass
+class ImpactPanel:
+    """What one column of impacts.png shows, as plain arrays (times in ms from the contact):
+    no model in it, so a process that has only matplotlib can draw it."""
+
+    t_c: float  # the contact's time [s], for the title
+    recorded: list  # per joint: (t, rate) of the recorded samples around the impact
+    fitted: list  # per joint: (t, rate) of the fitted scene's replay ([] when it failed)
+    wrench: tuple | None  # (t, normal, tangential) of the recorded wrench, or None
+    forces: tuple | None  # (t, tangential, normal): the fitted period averages, or None
+
+
+@dataclass
+class FigureData:
+    """Everything write_figures draws, computed from a ``FitResult`` (the replays with dense
+    output are made here), picklable."""
+
+    joints: list
+    rows: int  # 2 with a recorded wrench
+    panels: list = field(default_factory=list)  # ImpactPanel per drawn impact (up to 4)
+    speeds: list = field(default_factory=list)  # per replayed impact, for cor.png
+    cor_recorded: list = field(default_factory=list)
+    cor_fitted: list = field(default_factory=list)
+    cor_start: list = field(default_factory=list)
+
+
+def figure_data(result) -> FigureData:
+    """The arrays of impacts.png (recorded vs fitted rates and wrench around up to 4 impacts)
+    and cor.png, from the fit's result."""
+    rec = result.recording
+    wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
+    data = FigureData(list(rec.joints), 2 if rec.wrench is not None else 1)
+    for w in wins:
+        dt = w.t_b - w.t_a
+        pred, fitted_wrench = impact_replay(result, w)
+        lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
+        sel = (rec.t >= lo) & (rec.t <= hi)
+        t_ms = functools.partial(_ms_from, w.t_c)
+        recorded = [(t_ms(rec.t[sel]), rec.velocity[sel, j]) for j in range(rec.n)]
+        fitted = (
+            []
+            if pred.error
+            else [(t_ms(pred.path[:, 0]), pred.path[:, 1 + j]) for j in range(rec.n)]
+        )
+        wrench = forces = None
+        if data.rows == 2:
+            wsel = (rec.wrench_t >= lo) & (rec.wrench_t <= hi)
+            wrench = (t_ms(rec.wrench_t[wsel]), rec.wrench[wsel, 1], rec.wrench[wsel, 0])
+            if fitted_wrench is not None:
+                ts, tangential, normal = fitted_wrench
+                forces = (t_ms(ts), tangential, normal)
+        data.panels.append(ImpactPanel(w.t_c, recorded, fitted, wrench, forces))
+    good = [r for r in result.per_impact if not r.get('error')]
+    data.speeds = [r['impact_speed'] for r in good]
+    data.cor_recorded = [r['cor_recorded'] for r in good]
+    data.cor_fitted = [r['cor_fitted'] for r in good]
+    data.cor_start = [r['cor_start'] for r in good]
+    return data
+
+
 def write_figures(result, out) -> list:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
+    return draw_figures(figure_data(result), out)
+
+
+def draw_figures(data: FigureData, out) -> list:
+    """Draw ``data`` into impacts.png and cor.png in ``out``; their paths."""
+    from matplotlib import rc_context
+
+    # titles at the axes' top, not placed above the axes' decorations there (they have none:
+    # the same pixels) by laying every tick label out once more
+    with rc_context({'axes.titley': 1.0}):
+        return _draw(data, out)
+
+
+def _draw(data: FigureData, out) -> list:
     # the object API with the Agg canvas, not pyplot: no backend machinery to import in the
     # fresh process a fit runs in
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    rec = result.recording
-    wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     made = []
-    rows = 2 if rec.wrench is not None else 1
-    fig = Figure(figsize=(4.2 * max(len(wins), 1), 3.4 * rows))
+    rows, columns = data.rows, max(len(data.panels), 1)
+    fig = Figure(figsize=(4.2 * columns, 3.4 * rows))
     FigureCanvasAgg(fig)
-    axes = fig.subplots(rows, max(len(wins), 1), squeeze=False)
+    axes = fig.subplots(rows, columns, squeeze=False)
     colors = ['tab:blue', 'tab:orange', 'tab:green', 'tab:red']
-    for c, w in enumerate(wins):
-        dt = w.t_b - w.t_a
-        pred, fitted_wrench = impact_replay(result, w)
+    for c, panel in enumerate(data.panels):
         ax = axes[0][c]
-        lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
-        sel = (rec.t >= lo) & (rec.t <= hi)
-        t_ms = functools.partial(_ms_from, w.t_c)
-        for j in range(rec.n):
-            ax.plot(
-                t_ms(rec.t[sel]),
-                rec.velocity[sel, j],
-                'o',
-                ms=3,
-                color=colors[j % 4],
-                label=f'{rec.joints[j]} recorded',
-            )
-            if not pred.error:
-                ax.plot(
-                    t_ms(pred.path[:, 0]),
-                    pred.path[:, 1 + j],
-                    '-',
-                    color=colors[j % 4],
-                    lw=1,
-                    label=f'{rec.joints[j]} fitted',
-                )
+        for j, joint in enumerate(data.joints):
+            ax.plot(*panel.recorded[j], 'o', ms=3, color=colors[j % 4], label=f'{joint} recorded')
+            if panel.fitted:
+                ax.plot(*panel.fitted[j], '-', color=colors[j % 4], lw=1, label=f'{joint} fitted')
         ax.set_xlabel('time from contact [ms]')
         ax.set_ylabel('joint rate [rad/s]')
-        ax.set_title(f'impact at t = {w.t_c:.3f} s', fontsize=9)
+        ax.set_title(f'impact at t = {panel.t_c:.3f} s', fontsize=9)
         if c == 0:
             ax.legend(fontsize=7)
         if rows == 2:
             ax = axes[1][c]
-            wsel = (rec.wrench_t >= lo) & (rec.wrench_t <= hi)
-            ax.plot(
-                t_ms(rec.wrench_t[wsel]),
-                rec.wrench[wsel, 1],
-                's',
-                ms=3,
-                color='k',
-                label='normal recorded',
-            )
-            ax.plot(
-                t_ms(rec.wrench_t[wsel]),
-                rec.wrench[wsel, 0],
-                '^',
-                ms=3,
-                color='tab:gray',
-                label='tangential recorded',
-            )
-            if fitted_wrench is not None:
-                ts, *forces = fitted_wrench
+            t, normal, tangential = panel.wrench
+            ax.plot(t, normal, 's', ms=3, color='k', label='normal recorded')
+            ax.plot(t, tangential, '^', ms=3, color='tab:gray', label='tangential recorded')
+            if panel.forces is not None:
+                t, *forces = panel.forces
                 for (name, mark, color), values in zip(
                     (('tangential', '+', 'tab:purple'), ('normal', 'x', 'tab:red')), forces
                 ):
-                    ax.plot(t_ms(ts), values, mark, ms=9, color=color, label=f'{name} fitted')
+                    ax.plot(t, values, mark, ms=9, color=color, label=f'{name} fitted')
             ax.set_xlabel('time from contact [ms]')
             ax.set_ylabel('period-averaged force [N]')
             if c == 0:
@@ -400,28 +459,12 @@ def write_figures(result, out) -> list:
     fig.savefig(path, dpi=110)
     made.append(path)
 
-    good = [r for r in result.per_impact if not r.get('error')]
     fig = Figure(figsize=(5.5, 4))
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    ax.plot(
-        [r['impact_speed'] for r in good], [r['cor_recorded'] for r in good], 'o', label='recorded'
-    )
-    ax.plot(
-        [r['impact_speed'] for r in good],
-        [r['cor_fitted'] for r in good],
-        'x',
-        ms=8,
-        label='fitted scene',
-    )
-    ax.plot(
-        [r['impact_speed'] for r in good],
-        [r['cor_start'] for r in good],
-        '+',
-        ms=8,
-        color='tab:gray',
-        label='starting scene',
-    )
+    ax.plot(data.speeds, data.cor_recorded, 'o', label='recorded')
+    ax.plot(data.speeds, data.cor_fitted, 'x', ms=8, label='fitted scene')
+    ax.plot(data.speeds, data.cor_start, '+', ms=8, color='tab:gray', label='starting scene')
     ax.set_xlabel('impact speed (tip, normal) [m/s]')
     ax.set_ylabel('kinematic coefficient of restitution [-]')
     ax.set_title('CoR against impact speed', fontsize=10)

@@ -64,6 +64,7 @@ def closed_loop(
     rate: float = 1000.0,
     jitter: float = 0.0,
     seed: int = 0,
+    implicit_periods: int = 1,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -71,7 +72,8 @@ def closed_loop(
 
     ``jitter`` > 0: each command takes one period more with this probability (an
     unsynchronised controller manager), so that some periods hold the previous command and
-    some commands are superseded before they act (the driver applies a period's newest)."""
+    some commands are superseded before they act (the driver applies a period's newest).
+    ``implicit_periods``: the controller's parameter of that name (0: off)."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
     ctrl = CycleController.for_scene(model, scene.controller)
@@ -106,6 +108,7 @@ def closed_loop(
         commands.append,
         latency_periods=predicted,
         clock=lambda: 0.0,
+        implicit_periods=implicit_periods,
     )
     rng = random.Random(seed)
     line: list[tuple[int, int, list[float]]] = []  # (period it acts from, order, torques)

@@ -7,6 +7,7 @@ from collections.abc import Callable, Sequence
 
 from dataclasses import dataclass, replace
 import copy
+import operator
 
 import numpy as np
 
@@ -75,7 +76,8 @@ class ImpactSet:
     def __init__(self, study: Study, specs: list, windows: list, use_wrench: bool):
         self.study, self.specs, self.windows = study, specs, windows
         self.use_wrench = use_wrench and any(w.impulse is not None for w in windows)
-        self.evaluations = 0
+        self.evaluations = 0  # replays of every impact (a point asked for again is not)
+        self._replayed: dict = {}  # (values, moved keys, reading) -> (windows, predictions)
         self.timing = 'linear'
         self.timing_misfit: float | None = None  # set by select
         self.penalty = PENALTY
@@ -121,13 +123,28 @@ class ImpactSet:
     def predict(
         self, values: Sequence[float] | np.ndarray, fixed: dict[str, float] | None = None
     ) -> list[Prediction]:
+        # the replays are a function of the values, the moved keys, the reading of the
+        # efforts and the windows: a point replayed before (each local search's and each
+        # refinement's start, their difference steps, the optimum) is not replayed again
+        key = (
+            np.asarray(values, float).tobytes(),
+            tuple(sorted((fixed or {}).items())),
+            self.timing,
+        )
+        replayed = self._replayed.get(key)
+        if replayed is not None and len(replayed[0]) == len(self.windows):
+            if all(map(operator.is_, replayed[0], self.windows)):  # the same impacts
+                return list(replayed[1])
         self.evaluations += 1
         try:
             model = self.model(values, fixed)
         except FitError as exc:  # a combination the scene's schema refuses: a penalty
             n = self.windows[0].post_qd.shape[1] if self.windows else 1
-            return [failed(n, FailureKind.SCENE_REFUSED, str(exc)) for _ in self.windows]
-        return [predict_impact(model, w, self.timing) for w in self.windows]
+            preds = [failed(n, FailureKind.SCENE_REFUSED, str(exc)) for _ in self.windows]
+        else:
+            preds = [predict_impact(model, w, self.timing) for w in self.windows]
+        self._replayed[key] = (tuple(self.windows), preds)
+        return list(preds)
 
     def select(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> list[str]:
         """At the starting ``values``: choose the reading of the efforts, move samples taken
