@@ -876,6 +876,14 @@ def test_the_fitted_force_drawn_beside_a_late_wrench_is_moved_by_its_latency():
         assert np.allclose(tangential, recorded[:, 0], atol=0.02 * peak)
         checked += 1
     assert checked >= 2
+    # and these are the forces impacts.png draws
+    from impact_arm.tools.fit import figure_data
+
+    panel = figure_data(result).panels[0]
+    win = next(w for w, p in zip(result.windows, result.predictions) if not p.error)
+    _, drawn = impact_replay(result, win)
+    np.testing.assert_array_equal(panel.forces[1], drawn[1])
+    np.testing.assert_array_equal(panel.forces[2], drawn[2])
 
 
 # ------------------------------------------------------------------ sensor latencies fitted
