@@ -142,6 +142,31 @@ def test_a_drivers_held_efforts_are_no_delay_until_they_are_late(model):
     assert late.estimates[FindingKind.EFFORT_DELAY] == pytest.approx(0.0035, abs=0.3e-3)
 
 
+def test_a_delay_the_scene_states_is_advised_without_the_option():
+    """A delay found in the recording that the scene already states (and the fit replays):
+    the advice is to give no option (it would shift the signal twice), and to correct the
+    scene's value when it differs from the one found."""
+
+    def advice(overrides, scene_overrides, kind):
+        rec = recording(overrides)
+        stating = ArmModel(Study('paper').scene(scene_overrides))
+        return next(f.advice for f in diagnose(rec, stating).findings if f.kind is kind)
+
+    late = {**EFFORT_LATE, 'sensors.effort_latency': 0.002}
+    said = advice(late, {'sensors.effort_latency': 0.002}, FindingKind.EFFORT_DELAY)
+    assert 'the scene states it' in said and 'give no --effort-latency' in said, said
+    assert 'differs' not in said
+    said = advice(late, {'sensors.effort_latency': 0.005}, FindingKind.EFFORT_DELAY)
+    assert "but it differs from the delay found: correct the scene's sensors.effort_" in said
+    said = advice(
+        {'sensors.wrench_latency': 0.002}, {'sensors.wrench_latency': 0.002}, FindingKind.WRENCH_LAG
+    )
+    assert 'give no --wrench-latency' in said and 'differs' not in said, said
+    assert 'fit with --wrench-latency' in advice(
+        {'sensors.wrench_latency': 0.002}, {}, FindingKind.WRENCH_LAG
+    )
+
+
 @pytest.mark.parametrize('noise, fires', [(1e-5, False), (1e-3, True)])
 def test_position_noise_far_above_the_encoder_resolution_is_named(noise, fires, model):
     rec = recording({**ENCODER, 'sensors.position_noise': noise})
