@@ -479,6 +479,26 @@ def test_a_driver_loop_on_a_coarse_encoders_difference_rates_covers_the_truth(ex
     assert hi / lo - 1 < 0.004, (lo, hi)  # the cubic's start left +-0.5 %
 
 
+def test_the_contact_periods_command_is_recomputed_only_by_the_recordings_controller():
+    """The command the contact's period does not record is recomputed by the scene's sampled
+    controller only where that controller gives the recorded commands before the impact: a
+    scene whose gains are 10 % off is not trusted with it (the command before stands in)."""
+    from impact_arm.calibration.fit.problem import read_impacts
+    from impact_arm.calibration.study import apply_overrides
+
+    sampled = {'controller.rate': 1000.0}
+    over = {**TRUTH, **sampled, 'sensors.rate': 'difference'}
+    rec = correct(
+        driver_recording('paper', over | ENCODER, cycles=4), Corrections(difference_rates=True)
+    )
+    kp = list(Study('paper').scene().controller.kp)
+    right = read_impacts(rec, Study(apply_overrides(Study('paper').data, sampled)))
+    assert right.windows and all(w.own_command for w in right.windows)
+    off = apply_overrides(Study('paper').data, {**sampled, 'controller.kp': [1.1 * k for k in kp]})
+    wrong = read_impacts(rec, Study(off))
+    assert wrong.windows and not any(w.own_command for w in wrong.windows)
+
+
 def test_a_latency_option_on_a_scene_that_states_it_is_refused(tmp_path, capsys):
     """The fit replays the scene's sensor latencies, so --effort-latency (or
     --wrench-latency) on top of a scene that states the same delay, or of a fit that frees

@@ -207,7 +207,8 @@ class ImpactWindow:
         effort_source: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
         widened: Callable[[str], ImpactWindow | None] = field(init=False)
         pre_samples: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
-        sample_a: tuple[np.ndarray, np.ndarray] = field(init=False)
+        controller_inputs: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
+        own_command: bool = field(init=False)  # the scene's controller gives the efforts
 
     def start_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at the last sample before the impact, where the replay starts."""
@@ -473,8 +474,12 @@ def make_window(
     win.effort_source = (rec.t, rec.effort, 6 * noise.effort + 1e-12)
     # the samples before the impact, for a start state shot through the model's flight
     win.pre_samples = (rec.t[pre_idx].copy(), rec.position[pre_idx].copy(), noise.position)
-    # the last sample before the impact as recorded: what a sampled controller saw there
-    win.sample_a = (rec.position[a].copy(), rec.velocity[a].copy())
+    # the samples before the impact as recorded: what a sampled controller saw there
+    win.controller_inputs = (
+        rec.t[pre_idx].copy(),
+        rec.position[pre_idx].copy(),
+        rec.velocity[pre_idx].copy(),
+    )
     # samples during the contact whose torque is zero within the noise: actuators off
     win.effort_off = [
         bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12)) for k in range(len(e_idx))

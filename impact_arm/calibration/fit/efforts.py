@@ -33,29 +33,61 @@ def wrench_shift(model: ArmModel) -> float:
     return float(sensors.wrench_latency - sensors.state_latency)
 
 
+def _sampled_controller(model: ArmModel):  # -> CycleController | None
+    """The scene's controller when it is a memoryless sampled law (``q``, ``pd`` at a
+    rate), approaching the surface; None otherwise."""
+    ctrl = model.scene.controller
+    if ctrl.rate <= 0 or ctrl.law not in ('q', 'pd'):
+        return None
+    from ...physics.control import CycleController
+
+    return CycleController.for_scene(model, ctrl)
+
+
+def controller_reproduces(model: ArmModel, win: ImpactWindow) -> bool:
+    """Whether the scene's sampled controller, from each recorded sample before the impact
+    (positions and rates as recorded), gives the effort recorded at the next sample one
+    period later (the command held over that period: the reading 'previous'), within six
+    standard deviations of the efforts' noise, at three such pairs or more: then it is the
+    recording's controller, and may stand in for a command the recording does not hold."""
+    ctrl = _sampled_controller(model)
+    inputs = getattr(win, 'controller_inputs', None)
+    if ctrl is None or inputs is None:
+        return False
+    t, q, qd = inputs
+    period = 1.0 / model.scene.controller.rate
+    pairs = [k for k in range(len(t) - 1) if abs(t[k + 1] - t[k] - period) < 0.1 * period]
+    if len(pairs) < 3:
+        return False
+    T = joint_to_absolute_matrix(model.n)
+    t_all, effort_all, floor = win.effort_source
+    shift = effort_shift(model)
+    for k in pairs:
+        command = np.array(ctrl.torque(T @ q[k], T @ qd[k]))
+        recorded = [np.interp(t[k + 1] + shift, t_all, effort_all[:, j]) for j in range(model.n)]
+        if np.any(np.abs(command - recorded) > floor):
+            return False
+    return True
+
+
 def contact_period_command(model: ArmModel, win: ImpactWindow) -> np.ndarray | None:
     """The command held over the period in which the contact begins, when the recording
     cannot hold it (the sample ending that period is taken in the contact with the actuators
     off, so it shows no torque): the scene's own sampled controller at the last sample
     before the impact, from that sample as recorded (the positions and rates the driver's
-    controller saw, difference rates included), approaching the surface. None when the
-    scene's controller is not a memoryless sampled law (``q``, ``pd`` at a rate) at the
-    recording's period, or the sample is not kept: the command of the period before stands
-    in. A controller acting on noisy rates makes each command differ from the one before by
-    its gain times that noise; standing in for it, the previous command moves the replayed
-    impact by as much, in step with the rate noise of the sample the replay starts from,
-    which biased the fitted law (docs/fit.md, step 4)."""
-    ctrl = model.scene.controller
-    sample = getattr(win, 'sample_a', None)
-    if sample is None or ctrl.rate <= 0 or ctrl.law not in ('q', 'pd'):
+    controller saw, difference rates included), approaching the surface. Only when that
+    controller reproduces the recorded commands before the impact (``controller_reproduces``,
+    checked once per window: ``own_command``); else None, and the command of the period
+    before stands in. A controller acting on noisy rates makes each command differ from the
+    one before by its gain times that noise; standing in, the previous command moves the
+    replayed impact by as much, in step with the rate noise of the sample the replay starts
+    from, which biased the fitted law (docs/fit.md, step 4)."""
+    ctrl = _sampled_controller(model)
+    if ctrl is None or not getattr(win, 'own_command', False):
         return None
-    if abs(1.0 / ctrl.rate - (win.t_b - win.t_a) / max(win.b - win.a, 1)) > 1e-3 / ctrl.rate:
-        return None  # a controller at another rate than the samples': not its command
-    from ...physics.control import CycleController
-
     T = joint_to_absolute_matrix(model.n)
-    q, qd = sample
-    return np.array(CycleController.for_scene(model, ctrl).torque(T @ q, T @ qd))
+    _, q, qd = win.controller_inputs
+    return np.array(ctrl.torque(T @ q[-1], T @ qd[-1]))
 
 
 class TorqueSchedule:

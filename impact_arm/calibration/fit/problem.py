@@ -25,7 +25,7 @@ from ..identify import (
     tip_normal_speed,
 )
 from ..study import Study
-from .efforts import effort_timing, effort_timing_and_latency, wrench_shift
+from .efforts import controller_reproduces, effort_timing, effort_timing_and_latency, wrench_shift
 from .parameters import FitError
 from .prestate import shot_start
 from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
@@ -194,7 +194,7 @@ class ImpactSet:
             else None
         )
         for w in self.windows:
-            w = self._shoot(model, w)
+            w = self._prepare(model, w)
             w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
                 notes.append(
@@ -234,9 +234,17 @@ class ImpactSet:
             if wider is None:
                 break
             wider.index = w.index
-            wider = self._shoot(model, wider)
+            wider = self._prepare(model, wider)
             w, base = wider, predict_impact(model, wider, self.timing)
         return w, base
+
+    def _prepare(self, model: ArmModel, w: ImpactWindow) -> ImpactWindow:
+        """The window as the replays of ``model`` use it (a new one): whether the scene's
+        sampled controller is the recording's (it then gives the command the contact's
+        period does not record, ``contact_period_command``), and the start of the replay."""
+        ready = copy.copy(w)
+        ready.own_command = controller_reproduces(model, w)
+        return self._shoot(model, ready)
 
     def _shoot(self, model: ArmModel, w: ImpactWindow) -> ImpactWindow:
         """Rates that are period means: the window whose replay starts from the state the
