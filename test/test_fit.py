@@ -852,6 +852,40 @@ def test_the_fitted_force_drawn_beside_a_three_link_arms_wrench_is_its_own(three
     assert checked >= 2
 
 
+def test_the_fitted_force_drawn_beside_a_late_wrench_is_moved_by_its_latency():
+    """A wrench published 2 ms late, fitted with the scene that states it: the impacts
+    figure's fitted forces at the recorded stamps lie on the recorded (noise-free) wrench,
+    each the period the stamp reports, 2 ms earlier in the replay (they were drawn at the
+    stamps themselves, a latency early)."""
+    from impact_arm.calibration.study import Study, apply_overrides
+    from impact_arm.tools.fit import impact_replay
+
+    late = {'sensors.wrench_latency': 0.002}
+    rec = synthetic_recording('paper', late, cycles=3, seed=3)
+    result = fit(rec, apply_overrides(Study('paper').data, late), {'surfaces[0].mu': (0.05, 1)})
+    checked = 0
+    for win, pred in zip(result.windows, result.predictions):
+        if pred.error:
+            continue
+        _, (ts, tangential, normal) = impact_replay(result, win)
+        recorded = rec.wrench[np.searchsorted(rec.wrench_t, ts)]
+        assert np.allclose(rec.wrench_t[np.searchsorted(rec.wrench_t, ts)], ts)
+        peak = recorded[:, 1].max()
+        assert peak > 100.0  # the impact's periods, not free flight
+        assert np.allclose(normal, recorded[:, 1], atol=0.02 * peak)
+        assert np.allclose(tangential, recorded[:, 0], atol=0.02 * peak)
+        checked += 1
+    assert checked >= 2
+    # and these are the forces impacts.png draws
+    from impact_arm.tools.fit import figure_data
+
+    panel = figure_data(result).panels[0]
+    win = next(w for w, p in zip(result.windows, result.predictions) if not p.error)
+    _, drawn = impact_replay(result, win)
+    np.testing.assert_array_equal(panel.forces[1], drawn[1])
+    np.testing.assert_array_equal(panel.forces[2], drawn[2])
+
+
 # ------------------------------------------------------------------ sensor latencies fitted
 def late_driver_recording(overrides):
     """The simulated driver's loop (1 kHz sampled controller, each effort the command held

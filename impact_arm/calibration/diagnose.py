@@ -26,6 +26,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from enum import Enum
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -41,6 +42,7 @@ from .identify import (
 
 if TYPE_CHECKING:
     from ..physics.model import ArmModel
+    from ..physics.scene import SensorSpec
 
 # A delay or a lag is reported from this many sample periods on: within one period the fit's
 # own reading of the efforts (the effort at the stamp, or held over the period before or
@@ -163,6 +165,38 @@ class Corrections:
     @property
     def requested(self) -> bool:
         return self != Corrections()
+
+    def shift_conflict(self, sensors: SensorSpec, fitted: Iterable[str]) -> str | None:
+        """Why these corrections cannot go with a scene that states or a fit that frees the
+        same delay, in one line (None when they can): the fit replays the scene's sensor
+        latencies (the efforts read ``effort_latency - state_latency`` later, the wrench
+        ``wrench_latency - state_latency``), so an option on top would shift them twice."""
+        fitted = set(fitted)
+        for option, key, shift in (
+            ('effort_latency', 'sensors.effort_latency', sensors.effort_latency),
+            ('wrench_latency', 'sensors.wrench_latency', sensors.wrench_latency),
+        ):
+            value = getattr(self, option)
+            if not value:
+                continue
+            flag = '--' + option.replace('_', '-')
+            freed = sorted(fitted & {key, 'sensors.state_latency'})
+            if freed:
+                return (
+                    f'{flag} {value:g} and the fitted {" and ".join(freed)} would both delay '
+                    f'the same signal: drop {flag} (the fit finds the delay) or fix the key '
+                    f'in the scene and drop its --param'
+                )
+            stated = shift - sensors.state_latency
+            if stated:
+                return (
+                    f"{flag} {value:g} and the scene's {key} = {shift:g} (less "
+                    f'sensors.state_latency = {sensors.state_latency:g}) would both delay the '
+                    f"same signal, the fit replaying the scene's latencies too: drop {flag} "
+                    f"(the scene's value is used) or set {key} to sensors.state_latency in the "
+                    f'scene'
+                )
+        return None
 
 
 # ------------------------------------------------------------------------------ checks
@@ -393,10 +427,42 @@ def check_effort_delay(
             f'the efforts are {abs(delay) * 1e3:.3g} ms {late} against the joint states '
             f'({abs(delay) / period:.2g} periods; from the power balance of the free flight: '
             f'F = {f_stat:.3g} against no delay)',
-            f'fit with --effort-latency {delay:.6g} (if the delay is known, give its value); '
-            f'mid-contact samples would otherwise be read with the wrong torque',
+            _latency_advice(
+                model,
+                'effort',
+                delay,
+                period,
+                f'fit with --effort-latency {delay:.6g} (if the delay is known, give its value); '
+                f'mid-contact samples would otherwise be read with the wrong torque',
+            ),
         ),
         delay,
+    )
+
+
+def _latency_advice(
+    model: ArmModel | None, signal: str, found: float, period: float, otherwise: str
+) -> str:
+    """The advice for a delay of the efforts or the wrench found in the recording: the
+    option (``otherwise``), or, when the scene states a delay of that signal (which the fit
+    replays, so the option would shift it twice), that the scene's is used, and whether it
+    agrees with the one found."""
+    if model is None:
+        return otherwise
+    sensors = model.scene.sensors
+    stated = getattr(sensors, f'{signal}_latency') - sensors.state_latency
+    if not stated:
+        return otherwise
+    key = f'sensors.{signal}_latency'
+    said = (
+        f'the scene states it ({key} less sensors.state_latency = {stated:.6g} s), which the '
+        f'fit replays: give no --{signal}-latency'
+    )
+    if abs(found - stated) <= DELAY_PERIODS * period:
+        return said
+    return (
+        f"{said}, but it differs from the delay found: correct the scene's {key}, or fit it "
+        f'(--param {key}=LO:HI)'
     )
 
 
@@ -492,7 +558,7 @@ def wrench_lag(rec: JointRecording, impacts: list[int]) -> float | None:
 
 
 def check_wrench_lag(
-    rec: JointRecording, impacts: list[int]
+    rec: JointRecording, impacts: list[int], model: ArmModel | None = None
 ) -> tuple[Finding | None, float | None]:
     lag = wrench_lag(rec, impacts)
     if lag is None:
@@ -508,9 +574,15 @@ def check_wrench_lag(
             's',
             f'the wrench rises {abs(lag) * 1e3:.3g} ms ({abs(lag) / period:.2g} periods) {late} '
             f'the impacts the joint rates show (median over {len(impacts)} impacts)',
-            f"fit with --wrench-latency {lag:.6g} (the force sensor's latency, if known), or "
-            f'--no-wrench; the wrench impulse of each impact is otherwise summed over the '
-            f'wrong periods',
+            _latency_advice(
+                model,
+                'wrench',
+                lag,
+                period,
+                f"fit with --wrench-latency {lag:.6g} (the force sensor's latency, if known), "
+                f'or --no-wrench; the wrench impulse of each impact is otherwise summed over '
+                f'the wrong periods',
+            ),
         ),
         lag,
     )
@@ -558,7 +630,7 @@ def diagnose(rec: JointRecording, model: ArmModel | None = None) -> Diagnosis:
     elif not impacts:
         out.skipped[FindingKind.WRENCH_LAG] = why
     else:
-        ran(FindingKind.WRENCH_LAG, *check_wrench_lag(rec, impacts))
+        ran(FindingKind.WRENCH_LAG, *check_wrench_lag(rec, impacts, model))
     return out
 
 

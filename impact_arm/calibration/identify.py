@@ -198,11 +198,21 @@ class ImpactWindow:
     wrench_timing_var: float = 0.0
     wrench_after: bool = False  # most of the normal force after the periods summed
     plate: np.ndarray | None = None  # the plates' recorded (z, ż) at t_a, flat; None: not recorded
+    # (q, q̇, cov) at t_a from the model's flight under the recorded efforts (fit/prestate.py,
+    # rates that are period means); None: the pre-impact cubic's
+    start: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
         effort_ib: int = field(init=False)
         effort_off: list[bool] = field(init=False)
         effort_source: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
         widened: Callable[[str], ImpactWindow | None] = field(init=False)
+        pre_samples: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
+        controller_inputs: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
+        own_command: bool = field(init=False)  # the scene's controller gives the efforts
+
+    def start_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, q̇, cov) at the last sample before the impact, where the replay starts."""
+        return self.start if self.start is not None else self.pre.state(self.t_a)
 
     def jump(self) -> np.ndarray:
         """Recorded joint-rate step at the contact time (post minus pre)."""
@@ -462,6 +472,14 @@ def make_window(
     win.effort_ib = int(np.flatnonzero(e_idx == b)[0])
     # the whole series, for a replay that reads the efforts later by a latency it fits
     win.effort_source = (rec.t, rec.effort, 6 * noise.effort + 1e-12)
+    # the samples before the impact, for a start state shot through the model's flight
+    win.pre_samples = (rec.t[pre_idx].copy(), rec.position[pre_idx].copy(), noise.position)
+    # the samples before the impact as recorded: what a sampled controller saw there
+    win.controller_inputs = (
+        rec.t[pre_idx].copy(),
+        rec.position[pre_idx].copy(),
+        rec.velocity[pre_idx].copy(),
+    )
     # samples during the contact whose torque is zero within the noise: actuators off
     win.effort_off = [
         bool(np.all(np.abs(win.effort[k]) < 6 * noise.effort + 1e-12)) for k in range(len(e_idx))

@@ -87,6 +87,9 @@ def fit_recording(
 
     scene, scene_name = scene_of(recording, scene)
     base = Study(scene).scene()
+    conflict = (corrections or Corrections()).shift_conflict(base.sensors, params)
+    if conflict:  # refused before the recording is read: the efforts would be shifted twice
+        raise ImpactArmError(conflict)
 
     def read():
         return read_recording(
@@ -292,18 +295,47 @@ def _ms_from(origin, t):
     return (np.asarray(t) - origin) * 1e3
 
 
-def fitted_period_forces(path, ts, period, n) -> tuple:
+def fitted_period_forces(path, ts, period, n, lag=0.0) -> tuple:
     """The fitted contact force averaged over each period ending at ``ts`` (a wrench's
     stamps), (tangential, normal), from a prediction's ``path`` rows: t, the ``n`` joint rates,
     then the cumulative impulse (tangential, normal): the impulse gained over the period over
-    its length, as a driver's period-averaged wrench reports it."""
+    its length, as a driver's period-averaged wrench reports it. ``lag`` [s]: the wrench is
+    published that much late (the scene's wrench latency less its state latency), so the
+    period a stamp reports ends that much earlier in the replay."""
+    ends = np.asarray(ts, float) - lag
     out = []
     for col in (1 + n, 2 + n):
-        gained = np.interp(ts, path[:, 0], path[:, col]) - np.interp(
-            ts - period, path[:, 0], path[:, col]
+        gained = np.interp(ends, path[:, 0], path[:, col]) - np.interp(
+            ends - period, path[:, 0], path[:, col]
         )
         out.append(gained / period)
     return tuple(out)
+
+
+def impact_replay(result, win):
+    """The fitted scene's replay of one impact for the figures, with its path at 80 instants
+    and, with a recorded wrench, at the ends of the periods its stamps report (moved back by
+    the wrench's delay, fitted or stated), and those stamps' fitted period-averaged forces:
+    (prediction, (stamps, tangential, normal) or None)."""
+    from ..calibration.fit import predict_impact
+    from ..calibration.fit.efforts import wrench_shift
+
+    rec = result.recording
+    extra = list(np.linspace(win.t_a, win.post_t[-1], 80))
+    stamps = period = None
+    lag = wrench_shift(result.model)  # a wrench published late shows the impact that late
+    if rec.wrench is not None:
+        ends = rec.wrench_t - lag
+        stamps = rec.wrench_t[(ends > win.t_a) & (ends <= win.post_t[-1])]
+        period = float(np.median(np.diff(rec.wrench_t)))
+        # the path at each period's end and start: the fitted period averages are then
+        # differences of exact cumulative impulses
+        ends = stamps - lag
+        extra += list(ends) + list(ends[ends - period > win.t_a] - period)
+    pred = predict_impact(result.model, win, result.timing, dense=extra)
+    if stamps is None or pred.error or not len(pred.path):
+        return pred, None
+    return pred, (stamps, *fitted_period_forces(pred.path, stamps, period, rec.n, lag))
 
 
 @dataclass
@@ -335,23 +367,12 @@ class FigureData:
 def figure_data(result) -> FigureData:
     """The arrays of impacts.png (recorded vs fitted rates and wrench around up to 4 impacts)
     and cor.png, from the fit's result."""
-    from ..calibration.fit import predict_impact
-
-    model = result.model
     rec = result.recording
     wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     data = FigureData(list(rec.joints), 2 if rec.wrench is not None else 1)
     for w in wins:
         dt = w.t_b - w.t_a
-        dense = np.linspace(w.t_a, w.post_t[-1], 80)
-        extra = list(dense)
-        if rec.wrench is not None:
-            # the path at each wrench stamp and one period before: the fitted period
-            # averages are then differences of exact cumulative impulses
-            stamps = rec.wrench_t[(rec.wrench_t > w.t_a) & (rec.wrench_t <= w.post_t[-1])]
-            period = float(np.median(np.diff(rec.wrench_t)))
-            extra += list(stamps) + list(stamps[stamps - period > w.t_a] - period)
-        pred = predict_impact(model, w, result.timing, dense=extra)
+        pred, fitted_wrench = impact_replay(result, w)
         lo, hi = w.t_a - 6 * dt, w.post_t[-1] + 3 * dt
         sel = (rec.t >= lo) & (rec.t <= hi)
         t_ms = functools.partial(_ms_from, w.t_c)
@@ -365,11 +386,9 @@ def figure_data(result) -> FigureData:
         if data.rows == 2:
             wsel = (rec.wrench_t >= lo) & (rec.wrench_t <= hi)
             wrench = (t_ms(rec.wrench_t[wsel]), rec.wrench[wsel, 1], rec.wrench[wsel, 0])
-            if not pred.error and len(pred.path):
-                dtw = float(np.median(np.diff(rec.wrench_t)))
-                ts = rec.wrench_t[wsel]
-                ts = ts[(ts > w.t_a) & (ts <= w.post_t[-1])]
-                forces = (t_ms(ts), *fitted_period_forces(pred.path, ts, dtw, rec.n))
+            if fitted_wrench is not None:
+                ts, tangential, normal = fitted_wrench
+                forces = (t_ms(ts), tangential, normal)
         data.panels.append(ImpactPanel(w.t_c, recorded, fitted, wrench, forces))
     good = [r for r in result.per_impact if not r.get('error')]
     data.speeds = [r['impact_speed'] for r in good]

@@ -13,14 +13,18 @@ def add_correction_arguments(parser) -> None:
         default=0.0,
         metavar='S',
         help='the efforts are reported S seconds late: read each one S earlier before the '
-        'fit (the diagnosis estimates it; default 0: nothing changed)',
+        'fit (the diagnosis estimates it; default 0: nothing changed). Refused with a scene '
+        'that states sensors.effort_latency (less sensors.state_latency) or a fit that frees '
+        'it: the fit replays that latency too, and the efforts would be shifted twice',
     )
     parser.add_argument(
         '--wrench-latency',
         type=float,
         default=0.0,
         metavar='S',
-        help='the wrench is stamped S seconds late: move its stamps S earlier',
+        help='the wrench is stamped S seconds late: move its stamps S earlier. Refused, as '
+        '--effort-latency, with a scene that states or a fit that frees '
+        'sensors.wrench_latency',
     )
     parser.add_argument(
         '--difference-rates',

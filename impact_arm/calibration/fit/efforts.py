@@ -33,6 +33,63 @@ def wrench_shift(model: ArmModel) -> float:
     return float(sensors.wrench_latency - sensors.state_latency)
 
 
+def _sampled_controller(model: ArmModel):  # -> CycleController | None
+    """The scene's controller when it is a memoryless sampled law (``q``, ``pd`` at a
+    rate), approaching the surface; None otherwise."""
+    ctrl = model.scene.controller
+    if ctrl.rate <= 0 or ctrl.law not in ('q', 'pd'):
+        return None
+    from ...physics.control import CycleController
+
+    return CycleController.for_scene(model, ctrl)
+
+
+def controller_reproduces(model: ArmModel, win: ImpactWindow) -> bool:
+    """Whether the scene's sampled controller, from each recorded sample before the impact
+    (positions and rates as recorded), gives the effort recorded at the next sample one
+    period later (the command held over that period: the reading 'previous'), within six
+    standard deviations of the efforts' noise, at three such pairs or more: then it is the
+    recording's controller, and may stand in for a command the recording does not hold."""
+    ctrl = _sampled_controller(model)
+    inputs = getattr(win, 'controller_inputs', None)
+    if ctrl is None or inputs is None:
+        return False
+    t, q, qd = inputs
+    period = 1.0 / model.scene.controller.rate
+    pairs = [k for k in range(len(t) - 1) if abs(t[k + 1] - t[k] - period) < 0.1 * period]
+    if len(pairs) < 3:
+        return False
+    T = joint_to_absolute_matrix(model.n)
+    t_all, effort_all, floor = win.effort_source
+    shift = effort_shift(model)
+    for k in pairs:
+        command = np.array(ctrl.torque(T @ q[k], T @ qd[k]))
+        recorded = [np.interp(t[k + 1] + shift, t_all, effort_all[:, j]) for j in range(model.n)]
+        if np.any(np.abs(command - recorded) > floor):
+            return False
+    return True
+
+
+def contact_period_command(model: ArmModel, win: ImpactWindow) -> np.ndarray | None:
+    """The command held over the period in which the contact begins, when the recording
+    cannot hold it (the sample ending that period is taken in the contact with the actuators
+    off, so it shows no torque): the scene's own sampled controller at the last sample
+    before the impact, from that sample as recorded (the positions and rates the driver's
+    controller saw, difference rates included), approaching the surface. Only when that
+    controller reproduces the recorded commands before the impact (``controller_reproduces``,
+    checked once per window: ``own_command``); else None, and the command of the period
+    before stands in. A controller acting on noisy rates makes each command differ from the
+    one before by its gain times that noise; standing in, the previous command moves the
+    replayed impact by as much, in step with the rate noise of the sample the replay starts
+    from, which biased the fitted law (docs/fit.md, step 4)."""
+    ctrl = _sampled_controller(model)
+    if ctrl is None or not getattr(win, 'own_command', False):
+        return None
+    T = joint_to_absolute_matrix(model.n)
+    _, q, qd = win.controller_inputs
+    return np.array(ctrl.torque(T @ q[-1], T @ qd[-1]))
+
+
 class TorqueSchedule:
     """The joint torque between samples from the recorded efforts, by how a driver reports
     them: 'linear' (the effort at a stamp is the torque at that instant; continuous between),
@@ -46,7 +103,13 @@ class TorqueSchedule:
     read ``latency`` later in the recording, linear between its samples (a continuous delay;
     a driver that delays by whole periods is the case of a whole number of periods)."""
 
-    def __init__(self, win: ImpactWindow, timing: str, latency: float = 0.0):
+    def __init__(
+        self,
+        win: ImpactWindow,
+        timing: str,
+        latency: float = 0.0,
+        contact_command: np.ndarray | None = None,
+    ):
         self.t, self.tau, self.timing = win.effort_t, win.effort.copy(), timing
         self.ib = ib = getattr(win, 'effort_ib', 2)
         off = getattr(win, 'effort_off', [])
@@ -64,9 +127,16 @@ class TorqueSchedule:
         # A sample taken during the contact with the actuators off shows no torque, not the
         # command: read as 'previous', that command acted before the contact began (the one
         # after it is reported at b), so the command of the last free sample stands in.
+        # ``contact_command`` (``contact_period_command``): the command of the period in
+        # which the contact begins, recomputed, in place of the one before it.
         for k in range(2, ib):
             if off[k]:
-                self.tau[k] = self.tau[1] if timing == 'previous' else self.tau[ib]
+                if timing != 'previous':
+                    self.tau[k] = self.tau[ib]
+                elif k == 2 and contact_command is not None:
+                    self.tau[k] = contact_command
+                else:
+                    self.tau[k] = self.tau[1]
 
     def __call__(self, t0: float, t1: float, side: str) -> np.ndarray:
         t, tau, mid, last = self.t, self.tau, 0.5 * (t0 + t1), len(self.t) - 1

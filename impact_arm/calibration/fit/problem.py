@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from dataclasses import dataclass, replace
+import copy
 import operator
 
 import numpy as np
@@ -24,8 +25,9 @@ from ..identify import (
     tip_normal_speed,
 )
 from ..study import Study
-from .efforts import effort_timing, effort_timing_and_latency, wrench_shift
+from .efforts import controller_reproduces, effort_timing, effort_timing_and_latency, wrench_shift
 from .parameters import FitError
+from .prestate import shot_start
 from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
 
 # The whitened residual of an impact the model cannot replay at some values (no contact, a
@@ -192,6 +194,7 @@ class ImpactSet:
             else None
         )
         for w in self.windows:
+            w = self._prepare(model, w)
             w, base = self._widen(model, w, predict_impact(model, w, self.timing))
             if base.error:
                 notes.append(
@@ -209,7 +212,7 @@ class ImpactSet:
             # robust weights for the global stage (no linearisation, which a bounce that
             # comes and goes with the parameters would spoil): each recorded rate's noise
             # plus the pre-impact rates' uncertainty, the impulse's noise
-            cov_pre = w.pre.state(w.t_a)[2]
+            cov_pre = w.start_state()[2]
             var = np.tile(sigma_qd**2 + np.diag(cov_pre)[model.n :], len(w.post_t))
             if self.wrench_at(w):
                 var = np.concatenate([var, self.wrench_var(w)])
@@ -231,8 +234,28 @@ class ImpactSet:
             if wider is None:
                 break
             wider.index = w.index
+            wider = self._prepare(model, wider)
             w, base = wider, predict_impact(model, wider, self.timing)
         return w, base
+
+    def _prepare(self, model: ArmModel, w: ImpactWindow) -> ImpactWindow:
+        """The window as the replays of ``model`` use it (a new one): whether the scene's
+        sampled controller is the recording's (it then gives the command the contact's
+        period does not record, ``contact_period_command``), and the start of the replay."""
+        ready = copy.copy(w)
+        ready.own_command = controller_reproduces(model, w)
+        return self._shoot(model, ready)
+
+    def _shoot(self, model: ArmModel, w: ImpactWindow) -> ImpactWindow:
+        """Rates that are period means: the window whose replay starts from the state the
+        model's flight under the recorded efforts gives at the last sample before the impact
+        (fitted to the positions before it), not from the cubic's (``prestate.py`` says why).
+        A new window when the start is set: one replayed before keeps its start."""
+        if w.rate_period is None:
+            return w
+        shot = copy.copy(w)
+        shot.start = shot_start(model, w, self.timing)
+        return shot
 
     def calibrate(self, values: Sequence[float] | np.ndarray, sigma_qd: np.ndarray) -> None:
         """The full whitening of each impact's residual at ``values`` (the optimum so far):
@@ -245,12 +268,13 @@ class ImpactSet:
             return
         n = model.n
         for i, w in enumerate(self.windows):
+            w = self._shoot(model, w)  # the flight before the impact, with ``values``' model
             base = predict_impact(model, w, self.timing)
             w, base = self._widen(model, w, base)
             if base.error:
                 continue
             self.windows[i] = w
-            q, qd, cov_pre = w.pre.state(w.t_a)
+            q, qd, cov_pre = w.start_state()
             x0 = np.concatenate([q, qd])
             y0 = self.outputs(base, w)
             m = len(w.post_t)

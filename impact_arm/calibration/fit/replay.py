@@ -17,7 +17,7 @@ from ...physics.errors import SimulationError
 from ...physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
-from .efforts import TorqueSchedule, effort_shift, wrench_shift
+from .efforts import TorqueSchedule, contact_period_command, effort_shift, wrench_shift
 
 FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
 # A sample this many rate standard deviations short of the model's separation is in the contact
@@ -82,7 +82,7 @@ def predict_impact(
     T = joint_to_absolute_matrix(n)
     heights = [s.height for s in model.surfaces]
     t0 = win.t_a
-    q, qd, _ = win.pre.state(t0)
+    q, qd, _ = win.start_state()
     if pre_state is not None:
         q, qd = pre_state
     if heights and tip_y(model, T @ q) <= max(heights):
@@ -103,7 +103,7 @@ def predict_impact(
     integ = PhaseIntegrator(
         model, state, control='held' if held else 'continuous', **window_options(model)
     )
-    torque = TorqueSchedule(win, timing, effort_shift(model))
+    torque = TorqueSchedule(win, timing, effort_shift(model), contact_period_command(model, win))
     first: Any = None  # the first and last contact events, once found
     last: Any = None
     contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
