@@ -157,6 +157,9 @@ class Controller(Node):
             )
         if p.trigger == 'timer':
             self.create_timer(1.0 / p.rate, self._on_timer)
+            # the ticks come from the executor thread (this one): at the control thread's
+            # priority, as all of the controller's work was before it had a thread of its own
+            realtime_priority(p.thread_priority)
         self.pub_diag = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS, contract.qos(DIAGNOSTICS).to_rclpy()
         )
