@@ -63,3 +63,33 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
     assert all(w.wrench.force.x == 0.0 and w.wrench.force.y >= 0.0 for _, w in peaks)
     f_max = {round(json.loads(msg.data)['F_max'], 3) for _, msg in reports}
     assert f_max & {round(w.wrench.force.y, 3) for _, w in peaks}
+
+
+def test_listeners_that_come_late_get_the_view_and_the_topic_hardware_states(
+    probe, ros_env, tmp_path
+):
+    """With nobody listening to /tf or /impact_markers the simulator stops their timer and
+    only looks for listeners now and then: a viewer, and topic hardware on
+    /robot_joint_states, that subscribe seconds after the start still get their messages."""
+    import time
+
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    states = probe.listen(JointState, '/joint_states', depth=10)
+    with start_process(
+        simulator('publish_rate:=100.0', 'tf_rate:=50.0'), ros_env, tmp_path, 'sim'
+    ) as sim:
+        assert wait_for(lambda: states or not sim.alive(), timeout=60), sim.stderr[-2000:]
+        time.sleep(1.5)  # several looks for a listener: the view's timer has stopped
+        # topic hardware alone first: the view's timer stays stopped meanwhile
+        hw_states = probe.listen(JointState, '/robot_joint_states', depth=10)
+        assert wait_for(lambda: hw_states or not sim.alive(), timeout=15), (
+            'no topic hardware states\n' + sim.stderr[-2000:]
+        )
+        markers = probe.listen(MarkerArray, '/impact_markers', depth=10)
+        assert wait_for(lambda: markers or not sim.alive(), timeout=15), (
+            'no markers\n' + sim.stderr[-2000:]
+        )
+    probe.forget(states, markers, hw_states)
+    assert any(m.ns == 'surface' for _, ma in markers for m in ma.markers)

@@ -499,6 +499,37 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
         assert sent and float(sent.group(1)) >= 2.5, ctl.stderr
 
 
+def test_controller_with_trigger_timer_drives_a_standin_driver(ros_env, tmp_path):
+    """trigger timer: the control thread takes the samples, a timer of the executor thread
+    ticks on the latest one (at 50 Hz against the stand-in's 200 Hz states) and drives the
+    joints to their targets."""
+    standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '40']
+    pd = [a for a in STANDIN_PD if not a.startswith('rate:=')]
+    params = (*pd, 'trigger:=timer', 'rate:=50.0', 'startup_hold:=0.0')
+    with (
+        start_process(standin, ros_env, tmp_path, 'standin') as driver,
+        start_process(
+            controller(*params, ros_args=['-r', '__node:=timer_controller']),
+            ros_env,
+            tmp_path,
+            'ctl',
+        ) as ctl,
+    ):
+
+        def position():
+            lines = [x for x in driver.lines() if 'q' in x]
+            return lines[-1]['q'] if lines else None
+
+        assert wait_for(
+            lambda: (
+                (q := position()) is not None
+                and all(abs(a - b) < 0.01 for a, b in zip(q, [-0.5, 0.3]))
+            ),
+            timeout=30,
+        ), (position(), ctl.stderr)
+        assert 'at 50 Hz (timer)' in ctl.stderr, ctl.stderr
+
+
 # ------------------------------------------------------------------------------ runner
 def freeze_recorder(domain, seconds):
     """SIGSTOP the run's recorder for ``seconds``, as a recorder starved by a busy machine."""

@@ -37,7 +37,9 @@ class PeriodPublishers:
         self.impact = make(String, IMPACT_REPORT, qos(IMPACT_REPORT))
         self.clock = make(Clock, CLOCK, qos(CLOCK)) if lockstep or p.rate_factor != 1.0 else None
         self.hw_states = make(JointState, p.joint_states_topic, qos(JOINT_STATES, depth))
-        self.hw_states_wanted = False  # someone listens there (updated at tf_rate)
+        # someone listens there (updated at tf_rate; every _visuals.LISTENER_CHECK s while
+        # nobody listens to the 3D view)
+        self.hw_states_wanted = False
         zeros = [0.0] * len(joint_names)
         self.wire_joints = PatchedMessage(
             JointState(name=joint_names, position=zeros, velocity=zeros, effort=zeros),
@@ -117,5 +119,6 @@ class PeriodPublishers:
         return 'samples sent: ' + ', '.join(f'{t} {n}' for t, n in counts)
 
     def _check_hw_listeners(self):
-        # asking DDS for the subscription count costs ~3 us: at tf_rate, not each period
+        # asking DDS for the subscription count costs ~3 us: with the 3D view's timer, not
+        # each period
         self.hw_states_wanted = self.hw_states.get_subscription_count() > 0

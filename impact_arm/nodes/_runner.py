@@ -48,6 +48,40 @@ def take_raw(subscription, msg_type=None):
         return handle.take_message(msg_type or subscription.msg_type, True)
 
 
+class SampleWait:
+    """Blocks a node's own thread until one of ``subscriptions`` (of a reader node that no
+    executor spins, ``reader_node``) has a sample queued, or until ``wake()``; the thread then
+    takes them with ``take_raw``. A loop that waits here handles each sample in one Python
+    call, where an executor wakes its spin, dispatches and calls back per sample.
+
+    ``owner`` is the reader node: the wake-up guard condition lives with it, so no executor
+    sees it either. rclpy's executors and ``wait_for_message`` wait on the same wait set; it
+    has no public wrapper."""
+
+    def __init__(self, owner, subscriptions):
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+
+        self.subscriptions = tuple(subscriptions)
+        self.guard = owner.create_guard_condition(lambda: None)
+        self._wait_set = rclpy_implementation.WaitSet(
+            len(self.subscriptions), 1, 0, 0, 0, 0, owner.context.handle
+        )
+
+    def wait(self, timeout: float) -> None:
+        """Until a sample is queued on any of the subscriptions, ``wake()`` or ``timeout`` s
+        (the GIL is released meanwhile)."""
+        wait_set = self._wait_set
+        wait_set.clear_entities()
+        for subscription in self.subscriptions:
+            wait_set.add_subscription(subscription.handle)
+        wait_set.add_guard_condition(self.guard.handle)
+        wait_set.wait(int(timeout * 1e9))
+
+    def wake(self) -> None:
+        """End the current (or next) ``wait`` at once, from any thread."""
+        self.guard.trigger()
+
+
 def reader_node(owner, suffix):
     """A helper node for ``owner``'s polled readers (no executor spins it), named
     ``_<owner>_<suffix>`` in the owner's namespace. It ignores the process's global ROS

@@ -2,7 +2,8 @@
 /tf and /impact_markers at ``tf_rate`` from a timer of the executor thread that reads the
 latest published period, and at each impact's first contact, maximum compression and
 separation (from the impact report, io/scene_visuals.py), so they cost the realtime loop
-nothing but one reference."""
+nothing but one reference. While nobody listens to either, the ``tf_rate`` timer stops and a
+slower one looks for listeners (``LISTENER_CHECK``)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,10 @@ from std_msgs.msg import String
 from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, VISUAL_TOPICS, to_absolute
 from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import SceneVisuals
+
+# s between two looks for a listener while nobody listens to /tf or /impact_markers: woken at
+# tf_rate only to find no listener, the executor thread took ~1.5 % of a core at 100 Hz
+LISTENER_CHECK = 0.2
 
 
 class VisualsPublisher:
@@ -46,7 +51,8 @@ class VisualsPublisher:
                 '(recordings still hold them; launch with tf:=rsp on a '
                 'ROS install)'
             )
-        node.create_timer(1.0 / tf_rate, self._publish)
+        self.timer = node.create_timer(1.0 / tf_rate, self._publish)
+        node.create_timer(LISTENER_CHECK, self._look_for_listeners)
 
     def observe(self, tick):
         """A published period (any thread). Its period-averaged force draws no arrow: it
@@ -58,12 +64,31 @@ class VisualsPublisher:
             for record, _rows in tick.impacts:
                 self.visuals.add_impact(record)
 
-    def _publish(self):
-        self._on_timer()
-        # built and sent only while someone subscribes: at 100 Hz the markers alone took ~5 %
-        # of a core of the simulator's executor thread (asking costs ~3 us)
+    def _listeners(self):
+        """The publishers of /tf and /impact_markers that have a subscriber (None for the
+        others): built and sent only while someone subscribes, since at 100 Hz the markers
+        alone took ~5 % of a core of the simulator's executor thread (asking costs ~3 us)."""
         tf = self.pub_tf if self.pub_tf and self.pub_tf.get_subscription_count() else None
         markers = self.pub_markers if self.pub_markers.get_subscription_count() else None
+        return tf, markers
+
+    def _look_for_listeners(self):
+        """While the tf_rate timer is stopped: restart it once someone listens; until then
+        drop the impacts' events (nobody is there to be shown them, as at tf_rate)."""
+        if not self.timer.is_canceled():
+            return
+        self._on_timer()
+        if self._listeners() == (None, None):
+            with self.lock:
+                self.visuals.take_events()
+        else:
+            self.timer.reset()
+
+    def _publish(self):
+        self._on_timer()
+        tf, markers = self._listeners()
+        if tf is None and markers is None:
+            self.timer.cancel()  # until someone listens (_look_for_listeners)
         with self.lock:  # each impact's events first: their stamps are older (the arm only)
             events = [
                 (tf and self.visuals.tf(q, t_ns), markers and self.visuals.markers(t_ns))

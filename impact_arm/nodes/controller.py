@@ -13,9 +13,19 @@ of ``rate`` (sensor-synchronous, deterministic on simulated time); trigger timer
 ``rate`` on the node's clock uses the latest joint state. Each input is checked before it can
 move the arm (ControlInputs); what is dropped is counted on /diagnostics (~1 Hz). On shutdown
 it sends a zero command.
+
+The samples are taken by a control thread of the node's own, like the simulator's loop: it
+waits on the two subscriptions (of a reader node no executor spins), reads the few fields it
+needs from the raw bytes and publishes the command from pre-serialized bytes. The executor
+keeps the rest (parameters, diagnostics, the timer trigger); one lock keeps them from acting
+on the inputs while a sample is handled.
 """
 
 from __future__ import annotations
+
+import sys
+import threading
+import traceback
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
@@ -35,7 +45,7 @@ from ..io.wire import (
     joint_state_fields,
     wrench_stamped_fields,
 )
-from ._runner import realtime_priority, run, take_raw
+from ._runner import SampleWait, name_thread, reader_node, realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
 from .params import (
     NODE_OPTIONS,
@@ -45,6 +55,11 @@ from .params import (
     startup_scene,
     validator,
 )
+
+# s: the control thread's longest wait for a sample before it looks at its stop flag again
+WAIT_TIMEOUT = 0.1
+# s: how long ``finish`` waits for the control thread to end before sending the zero command
+JOIN_TIMEOUT = 2.0
 
 # the settings whose change starts a fresh integral
 INTEGRAL_SETTINGS = (
@@ -59,7 +74,6 @@ INTEGRAL_SETTINGS = (
 
 class Controller(Node):
     executor_kind = 'events'  # see _runner.make_executor
-    done = False
 
     def __init__(self):
         super().__init__('controller', **NODE_OPTIONS)
@@ -108,14 +122,25 @@ class Controller(Node):
         # keep only the newest sample: a controller that fell behind acts on the present
         latest_only = contract.qos(JOINT_STATES).to_rclpy()
         latest_only.depth = 1
-        # raw: the callbacks read the few fields they need from the bytes, which costs a
-        # fraction of rclpy's conversion to message objects (twice per period)
-        self.sub_wrench = self.create_subscription(
-            WrenchStamped, CONTACT_WRENCH, self._on_wrench, latest_only, raw=True
+        # Taken by the control thread (_control_loop) from a helper node no executor spins:
+        # handled in the executor's callbacks, a period's two samples cost the callback
+        # thread ~10x the control law itself. Raw: the few fields needed are read from the
+        # bytes, a fraction of rclpy's conversion to message objects.
+        self.reader_node = reader = reader_node(self, 'state_reader')
+        self.sub_wrench = reader.create_subscription(
+            WrenchStamped, CONTACT_WRENCH, _unused, latest_only, raw=True
         )
-        self.sub_state = self.create_subscription(
-            JointState, JOINT_STATES, self._on_joint_state, latest_only, raw=True
+        self.sub_state = reader.create_subscription(
+            JointState, JOINT_STATES, _unused, latest_only, raw=True
         )
+        self.samples = SampleWait(reader, (self.sub_wrench, self.sub_state))
+        # the inputs and the control law are shared by the control thread and the executor
+        # (parameters, diagnostics, the timer trigger): one at a time. Reentrant: a strike's
+        # command publishes the diagnostics at once, from inside the control thread's turn.
+        self.lock = threading.RLock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.failure: str | None = None
         self.inputs = ControlInputs(
             self.ctrl,
             names,
@@ -137,7 +162,10 @@ class Controller(Node):
                 f'while DDS discovery settles (startup_hold)'
             )
         if p.trigger == 'timer':
-            self.create_timer(1.0 / p.rate, self.inputs.timer)
+            self.create_timer(1.0 / p.rate, self._on_timer)
+            # the ticks come from the executor thread (this one): at the control thread's
+            # priority, as all of the controller's work was before it had a thread of its own
+            realtime_priority(p.thread_priority)
         self.pub_diag = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS, contract.qos(DIAGNOSTICS).to_rclpy()
         )
@@ -145,13 +173,8 @@ class Controller(Node):
         self.wire_command = PatchedMessage(
             Float64MultiArray(data=[0.0] * self.n), ('data',), stamp=None
         )
-        # like a controller manager's update loop: the thread that runs the callbacks
-        self.scheduling = realtime_priority(p.thread_priority)
         self.middleware_priority = p.thread_priority  # for the runner (_runner.run)
-        self.get_logger().info(
-            f'law {p.law} at {p.rate:g} Hz ({p.trigger}), '
-            f'scene {scene.name!r}, scheduling {self.scheduling}'
-        )
+        self.get_logger().info(f'law {p.law} at {p.rate:g} Hz ({p.trigger}), scene {scene.name!r}')
 
     def _warm_up(self, scene):
         """Load the compiled laws and kinematics now: their first call reads numba's cache
@@ -174,6 +197,10 @@ class Controller(Node):
         )
 
     def _set_parameters(self, values):
+        with self.lock:  # never half-applied to a tick
+            self._apply_parameters(values)
+
+    def _apply_parameters(self, values):
         p = self.p.replace(**values)
         check(p, self.joint_names)
         c = self.ctrl
@@ -188,19 +215,56 @@ class Controller(Node):
         self.get_logger().info(f'parameters changed: {", ".join(sorted(values))}')
 
     # ------------------------------------------------------------------------- inputs
+    @property
+    def done(self):
+        return self.failure is not None
+
+    def start(self):
+        """Start the control thread once the process has settled (_runner.run)."""
+        self._thread = threading.Thread(target=self._control_loop, name='control', daemon=True)
+        self._thread.start()
+
+    def _control_loop(self):
+        try:
+            # the executor thread (parameters, diagnostics) shares the GIL with this one; a
+            # thread woken by a sample would otherwise wait up to the 5 ms switch interval
+            sys.setswitchinterval(5e-5)
+            name_thread('control')
+            # like a controller manager's update loop
+            scheduling = realtime_priority(self.p.thread_priority)
+            self.get_logger().info(f'control thread: scheduling {scheduling}')
+            wait, take, stop = self.samples.wait, self._take_samples, self._stop.is_set
+            while not stop():
+                wait(WAIT_TIMEOUT)
+                take()
+        except Exception as exc:  # noqa: BLE001 - reported, and the node stops with an error
+            self.get_logger().error(traceback.format_exc())
+            self.failure = f'the control thread failed: {type(exc).__name__}: {exc}'
+
+    def _take_samples(self):
+        """The queued samples (one of each at most: both readers keep only the newest), the
+        wrench first, as the driver publishes a period's wrench before its joint state
+        (ControlInputs takes either order). One that arrives meanwhile ends the next wait at
+        once."""
+        with self.lock:
+            taken = take_raw(self.sub_wrench)
+            if taken is not None:
+                self._on_wrench(taken[0])
+            taken = take_raw(self.sub_state)
+            if taken is not None:
+                self._on_joint_state(taken[0])
+
+    def _on_timer(self):
+        with self.lock:
+            self.inputs.timer()
+
     def _on_wrench(self, raw):
         try:
             fields = wrench_stamped_fields(raw)
         except MalformedMessage as exc:
             self.inputs.drop('malformed_wrenches', f'contact wrench dropped: {exc}')
             return
-        if self.inputs.wrench(*fields):
-            return
-        # the driver publishes the joint state of the same instant right after the wrench:
-        # when it is already here, take it now rather than after another executor wake-up
-        taken = take_raw(self.sub_state)
-        if taken is not None:
-            self._on_joint_state(taken[0])
+        self.inputs.wrench(*fields)
 
     def _on_joint_state(self, raw):
         try:
@@ -253,10 +317,28 @@ class Controller(Node):
                 f'(startup_hold {self.p.startup_hold:g} s)'
             )
 
+    def _stop_thread(self):
+        self._stop.set()
+        self.samples.wake()
+        if self._thread is not None:
+            self._thread.join(timeout=JOIN_TIMEOUT)
+            if self._thread.is_alive():
+                self.get_logger().warning(
+                    f'control thread still running {JOIN_TIMEOUT:g} s after the stop'
+                )
+
+    def destroy_node(self):
+        self.reader_node.destroy_node()
+        super().destroy_node()
+
     def finish(self, executor) -> int:
-        """Like a deactivated controller: leave the actuators with zero torque."""
+        """Like a deactivated controller: leave the actuators with zero torque (after the
+        control thread's last command)."""
         from rclpy.duration import Duration
 
+        self._stop_thread()
+        if self.failure is not None:
+            self.get_logger().error(self.failure)
         try:
             self._publish([0.0] * self.n)  # also after the cycles: the actuators let go
             self.pub.wait_for_all_acked(Duration(seconds=0.5))
@@ -267,9 +349,14 @@ class Controller(Node):
             f'{self.sent} commands sent; zero command on exit'
             + (f'; dropped: {dropped}' if dropped else '')
         )
-        return 0
+        return 1 if self.failure is not None else 0
 
     def _publish_diagnostics(self):
+        with self.lock:  # one instant's counts
+            msg = self._diagnostics()
+        self.pub_diag.publish(msg)
+
+    def _diagnostics(self):
         dropped = sum(self.inputs.dropped.values())
         message = 'cycles completed' if self.finished else 'running'
         status = DiagnosticStatus(
@@ -292,7 +379,11 @@ class Controller(Node):
         )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(msg)
+        return msg
+
+
+def _unused(raw):
+    """The callback of a subscription only taken from (``take_raw``): never called."""
 
 
 def main(args=None):
