@@ -475,6 +475,7 @@ class Losses:
         last = self.last.get(key)
         if last is None:
             self.before_first[topic] = self.before_first.get(topic, 0) + seq - 1
+            self.lost.setdefault(topic, 0)  # a counted topic says 0, not nothing
         elif seq > last + 1:
             self.lost[topic] = self.lost.get(topic, 0) + seq - last - 1
             self.changed = True
