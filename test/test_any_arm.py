@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from types import SimpleNamespace
 
 from ros_helpers import PYTHON
 
@@ -156,7 +157,8 @@ def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
         return {'t_contact': t, 'duration': 1e-4}
 
     run = Run.__new__(Run)  # the counting alone: no processes, no DDS
-    run.strikes, run.down_half_start = 0, {}
+    run.args, run.scene = SimpleNamespace(mode='realtime'), SimpleNamespace(cycles=2)
+    run.strikes, run.down_half_start, run.cycles_completed = 0, {}, 0
     # cycle 1: the strike's impact and two bounces while the arm goes up again
     run.impacts = [report(0.211), report(0.213), report(0.216)]
     assert not run._struck(2) and not run._struck(1)
@@ -166,6 +168,11 @@ def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
     run.strikes, run.down_half_start[2] = 2, 0.41
     assert not run._struck(2)
     run.impacts.append(report(0.619))
+    assert run._struck(2)
+    # lockstep: the recording ends where the controller stopped, at the scene's count
+    run.args.mode = 'lockstep'
+    assert not run._struck(2)
+    run.cycles_completed = 2
     assert run._struck(2)
 
 

@@ -92,3 +92,16 @@ def test_every_per_period_topic_of_the_file_must_cover_every_period(tmp_path):
     mounts = check_recording(whole_file, 1000.0, ('/surface_mounts',))
     assert mounts.missing_on['/surface_mounts'] == list(range(50))
     assert '50 periods missing on /surface_mounts (first: period 0)' in mounts.summary()
+
+
+def test_periods_after_the_files_last_sample_count_up_to_the_runs_end(tmp_path):
+    """A recorder that stopped receiving has no gap to show: the run's own end (``until``)
+    makes its lost tail missing periods, in lockstep and in realtime."""
+    from impact_arm.io.recording_check import check_recording
+
+    mcap = _recording(tmp_path / 'short', 50)  # periods 0..49: t = 0..0.049 s
+    assert check_recording(mcap, 1000.0, until=0.049).complete
+    cut = check_recording(mcap, 1000.0, until=0.0595)
+    assert cut.missing_periods == list(range(50, 60)), cut.missing_periods
+    assert not cut.complete
+    assert '10 periods not in the file' in cut.summary(lockstep=False)

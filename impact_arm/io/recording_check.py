@@ -10,6 +10,7 @@ rclpy): header stamps straight from the CDR bytes, impact reports as JSON.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -87,13 +88,16 @@ class RecordingCheck:
 
 
 def check_recording(
-    path: str | os.PathLike, rate: float, expected: tuple[str, ...] = ()
+    path: str | os.PathLike, rate: float, expected: tuple[str, ...] = (), until: float = 0.0
 ) -> RecordingCheck:
     """Count what ``path`` holds against a run at ``rate`` Hz that started at stamp 0.
     Period k has stamp k / rate on every per-period topic the file has (``PERIOD_TOPICS``)
     and on those ``expected`` (the run's own, e.g. /surface_mounts for a scene with a mount:
     absent from the file, it misses every period); each period after the first was started
-    by one command. (A run with a reset repeats stamps: they count once.)"""
+    by one command. (A run with a reset repeats stamps: they count once.) ``until``: the
+    run's last simulated time [s], when known: the periods up to it count even after the
+    file's last sample (a recorder that stopped receiving loses the tail without a gap its
+    sequence numbers could show)."""
     recorded = topics_info(path)
     periodic = [t for t in PERIOD_TOPICS if t == JOINT_STATES or t in recorded or t in expected]
     read_string = None
@@ -116,6 +120,7 @@ def check_recording(
             except (ValueError, KeyError, TypeError):
                 indices.append(None)
     last = max((max(seen, default=-1) for seen in stamps.values()), default=-1)
+    last = max(last, math.floor(until * rate + 1e-6))
     grid = set(range(last + 1))
     missing = sorted(grid - stamps[JOINT_STATES])
     missing_on = {t: sorted(grid - seen) for t, seen in stamps.items() if t != JOINT_STATES}

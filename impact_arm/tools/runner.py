@@ -146,7 +146,7 @@ def cli(args) -> int:
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
 
-        check = check_recording(output, args.rate, simulator_topics(scene))
+        check = check_recording(output, args.rate, simulator_topics(scene), until=run.sim_time)
         print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
@@ -420,6 +420,7 @@ class Run:
     def _await_graph(self, timeout=60.0):
         """Until the controller may start (``ready_for_commands``)."""
         recorder = RecorderProgress(self.node) if 'recorder' in self.procs else None
+        self.recorder_progress = recorder
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self._spin_once(0.05)
@@ -560,6 +561,25 @@ class Run:
             rclpy.spin_once(self.node, timeout_sec=0.05)
         return proc.returncode
 
+    def _await_recorder(self, settle=0.3, timeout=10.0):
+        """Before the recorder is ended: until what it has written reaches the run's last
+        simulated time and stays there for ``settle`` s (the last messages on their way), at
+        most ``timeout`` s. A recorder that lagged (descheduled, frozen) is still taking what
+        the transport buffered for it; ended then, it lost the tail without a gap to count."""
+        progress = getattr(self, 'recorder_progress', None)
+        if progress is None or self.node is None:
+            time.sleep(settle)
+            return
+        target = int(self.sim_time * 1e9) - 1_000_000  # one period of slack: stamps round
+        end = time.monotonic() + timeout
+        seen, since = progress.written_until, time.monotonic()
+        while time.monotonic() < end:
+            self._spin_once(0.05)
+            if progress.written_until != seen:
+                seen, since = progress.written_until, time.monotonic()
+            elif seen is not None and seen >= target and time.monotonic() - since >= settle:
+                return
+
     def stop(self) -> dict:
         """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any
         that does not exit; returns exit codes by node."""
@@ -570,7 +590,7 @@ class Run:
             if proc is None:
                 continue
             if name == 'recorder':
-                time.sleep(0.3)  # let the last messages reach it
+                self._await_recorder()
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
             try:
