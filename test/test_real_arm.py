@@ -109,3 +109,41 @@ def test_the_figures_of_a_three_link_recording_show_every_link(tmp_path):
         f'({p}) response of link {k + 1} (target {t:g}°)'
         for k, (p, t) in enumerate(zip('abc', np.degrees(run.target)))
     ]
+
+
+def test_a_fitted_urdf_scene_reads_its_urdf_from_the_fit_folder(tmp_path, monkeypatch):
+    """``impact-arm fit`` writes runs/fit_<name>/fitted.yaml, away from the scene's folder: a
+    relative ``arm.urdf`` is written relative to the new file, so the fitted scene loads from
+    any working directory (it was refused: the URDF was looked for beside the fitted file)."""
+    from impact_arm.physics.scene import load_scene
+    from impact_arm.tools.fit import write_fitted_scene
+
+    scenes = tmp_path / 'scenes'
+    scenes.mkdir()
+    shutil.copy(os.path.join(os.path.dirname(REAL_ARM), 'three_link.urdf'), scenes)
+    shutil.copy(REAL_ARM, scenes / 'arm.yaml')
+    (tmp_path / 'runs' / 'fit_arm').mkdir(parents=True)
+    monkeypatch.chdir(tmp_path)
+    write_fitted_scene('scenes/arm.yaml', {'surfaces[0].mu': 0.3}, 'runs/fit_arm/fitted.yaml')
+    monkeypatch.chdir(tmp_path / 'runs')
+    fitted = load_scene(str(tmp_path / 'runs' / 'fit_arm' / 'fitted.yaml'))
+    assert fitted.n_links == 3 and fitted.surfaces[0].mu == 0.3
+
+
+def test_the_step_response_of_a_mounted_plate_scene_runs_on_its_arms_kernel():
+    """analyze's Figure 3 takes the surfaces away; a mounted plate is part of the kernel's
+    shape, so it is kept, out of reach: the same compiled equations as the recorded run's (no
+    second compile), and the arm moves as with no surface at all."""
+    from dataclasses import replace
+
+    from impact_arm.physics.model import ArmModel
+    from impact_arm.physics.scene import load_scene
+    from impact_arm.tools.analysis import step_response, surfaces_out_of_reach
+
+    scene = load_scene(REAL_ARM)
+    assert len(surfaces_out_of_reach(scene)) == 1
+    response = step_response(scene, 'q', t_max=1.0)
+    assert ArmModel(response.scene).eq is ArmModel(scene).eq
+    bare = step_response(replace(scene, surfaces=()), 'q', t_max=1.0)
+    assert not response.impacts and len(response.t) == len(bare.t) > 900
+    assert np.allclose(response.q, bare.q, rtol=0, atol=1e-7)

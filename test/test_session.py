@@ -92,6 +92,20 @@ def test_realtime_session_status_snapshot_says_what_the_arm_does(scene):
     assert s.take_status().message == 'stopped: broken'
 
 
+def test_a_step_before_any_command_says_the_arm_waits_braked(scene):
+    """~/step while paused and not yet released: the periods are requested, but the arm
+    waits braked at t = 0 for a command (docs/ros2_control.md); the answer says so instead
+    of a bare 'requested' after which nothing moves."""
+    clock, published = FakeClock(), []
+    s = session(RealtimeSession, scene, clock, published)
+    s.publish_initial()
+    assert s.pause(True) == 'paused'
+    ok, message = s.step(2)
+    assert ok and message.startswith('2 period(s) requested; the arm stays braked')
+    s.offer(lambda: [1.0, 0.0])
+    assert s.step(2) == (True, '2 period(s) requested')
+
+
 def test_lockstep_session_runs_one_period_per_command_and_holds_while_paused(scene):
     clock, published = FakeClock(), []
     s = session(LockstepSession, scene, clock, published, rate_factor=0.0)

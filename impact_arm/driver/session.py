@@ -228,6 +228,11 @@ class Session:
         if not self.loop.paused:
             return False, 'not paused: ~/pause true first'
         self.loop.request_steps(periods)
+        if not self.released():  # a step answered with no motion must say why
+            return True, (
+                f'{periods} period(s) requested; the arm stays braked, time stopped, until a '
+                'command releases the brakes (none since the start or the last reset)'
+            )
         return True, f'{periods} period(s) requested'
 
     def run_steps(self, periods: int) -> tuple[bool, str]:

@@ -172,7 +172,7 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     controller = replace(scene.controller, law=law, rate=0.0)
     if law == 'pid' and not any(controller.ki):
         raise AnalysisError('--laws pid: the scene has no integral gains (controller.ki)')
-    sc = replace(scene, controller=controller, surfaces=(), cycles=0)
+    sc = replace(scene, controller=controller, surfaces=surfaces_out_of_reach(scene), cycles=0)
     progress(f'step response of law {law} for {t_max:g} s (no surface)')
     result = run(sc, t_max=t_max)
     if result.error:
@@ -180,6 +180,18 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     out = _offline_run(LAW_NAMES.get(law, law), result, sc, law)
     out.target = np.asarray(scene.controller.down_target, float)
     return out
+
+
+def surfaces_out_of_reach(scene) -> tuple:
+    """The surfaces a step response keeps: none but each mounted one, moved below the arm's
+    reach. A mounted plate adds its state to the compiled kernel's shape, so taking it away
+    would compile another kernel; out of reach and unloaded, its plate stays at rest and the
+    arm moves as with no surface."""
+    tip = math.hypot(*scene.tip_point) if scene.tip_point else 0.0
+    below = -(sum(scene.lengths) + tip + scene.tip_radius + 1.0)  # farther than any link reaches
+    return tuple(
+        replace(s, height=below) for s in scene.surfaces if s.mount is not None and s.law != 'none'
+    )
 
 
 def step_metrics(run: Run, band_deg: float = 0.1) -> dict:

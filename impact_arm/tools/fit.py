@@ -160,7 +160,8 @@ def write_fitted_scene(scene, values: dict, path, recording=''):
 
     study = Study(scene)
     data = apply_overrides(study.data, values)
-    parse_scene(data, origin=path)  # refuse now rather than hand out a broken file
+    _keep_urdf_reachable(data, study.path, path)
+    parse_scene(data, origin=path, path=path)  # refuse now rather than hand out a broken file
     if isinstance(data.get('name'), str):
         data['name'] = data['name'] + '_fitted'
     text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
@@ -170,6 +171,20 @@ def write_fitted_scene(scene, values: dict, path, recording=''):
     )
     with open(path, 'w', encoding='utf-8') as f:
         f.write(head + ''.join(f'#   {k} = {v:.6g}\n' for k, v in values.items()) + text)
+
+
+def _keep_urdf_reachable(data: dict, scene_path: str, fitted_path) -> None:
+    """A relative ``arm.urdf`` is relative to its scene file's directory: written into
+    another directory (runs/fit_<name>/), it is rewritten relative to the new file's
+    directory so that the fitted scene reads the same description."""
+    from ..physics.urdf_arm import resolve_urdf_path
+
+    arm = data.get('arm')
+    urdf = arm.get('urdf') if isinstance(arm, dict) else None
+    if not isinstance(urdf, str) or os.path.isabs(urdf):
+        return
+    full = os.path.abspath(resolve_urdf_path(urdf, scene_path))
+    arm['urdf'] = os.path.relpath(full, os.path.dirname(os.path.abspath(fitted_path)))
 
 
 def _fmt(v):
