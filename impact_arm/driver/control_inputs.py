@@ -123,6 +123,7 @@ class ControlInputs:
         self.latency_periods = latency_periods
         self.measured_latency = 0
         self.latency_max = 0  # the largest measured
+        self.latency_seen: Counter[int] = Counter()  # every measurement of the run, by value
         self.sent: deque[list[float]] = deque(maxlen=SENT_HISTORY)  # joint order, newest last
         self.predictor = StatePredictor(ctrl.model, self.period) if latency_periods else None
         # the latencies measured over the last LATENCY_WINDOW_S: when they differ, each
@@ -347,4 +348,5 @@ class ControlInputs:
                     self.latency_counts[self.recent_latency[0]] -= 1
                 self.recent_latency.append(self.measured_latency)
                 self.latency_counts[self.measured_latency] += 1
+                self.latency_seen[self.measured_latency] += 1
                 return
