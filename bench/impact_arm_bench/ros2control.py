@@ -54,6 +54,9 @@ def add_arguments(parser):
         metavar='FILE',
         help="another stand-in program with the same options (default: the tests' one)",
     )
+    parser.add_argument(
+        '--logs', metavar='DIR', help="keep each run's process output in DIR/run_N (default: none)"
+    )
     parser.add_argument('--json', metavar='FILE', help='write the runs as JSON')
 
 
@@ -173,8 +176,13 @@ def run(args) -> int:
         raise SystemExit(f'--order = {args.order}: must be a permutation of {",".join(ROLES)}')
     results = []
     for i in range(args.runs):
-        with tempfile.TemporaryDirectory(prefix='bench_ros2control_') as workdir:
+        if args.logs:
+            workdir = os.path.join(args.logs, f'run_{i + 1}')
+            os.makedirs(workdir, exist_ok=True)
             result = _one_run(args, order, workdir)
+        else:
+            with tempfile.TemporaryDirectory(prefix='bench_ros2control_') as workdir:
+                result = _one_run(args, order, workdir)
         results.append(result)
         cpu = ' '.join(f'{r} {v:.0f}%' for r, v in result['cpu_percent'].items())
         print(
