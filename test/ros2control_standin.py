@@ -26,23 +26,43 @@ by a period from command to command, some commands never reach the hardware and 
 written twice; counted in the JSON lines as "postponed". Decided per update, it stays on the
 updates' grid whatever the machine's scheduling.
 
+Scheduled as a controller_manager's update loop: each update sleeps until its deadline on a
+fixed schedule (missed deadlines are skipped), then reads what the subscriptions queued
+meanwhile (no executor, no timer); the loop thread and the middleware threads created with the
+node run under SCHED_FIFO ``--priority`` (the controller_manager's default 50; 0: normal
+scheduling; refused without the right, with a note on stderr).
+
 Prints JSON lines every 100 updates: {"event": "update", "n": updates, "zeros": zero
 commands written, "stale": updates whose effort controller had no newer command,
 "postponed": new commands taken an update later}.
 """
 
 import argparse
+import gc
 import json
+import os
 import random
+import sys
 import time
 from collections import deque
 
 import rclpy
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 JOINTS = ['joint1', 'joint2']
+WaitSet = rclpy_implementation.WaitSet  # what rclpy's executors wait on
+
+
+def set_fifo(task, priority):
+    if priority <= 0:
+        return
+    try:
+        os.sched_setscheduler(task, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:  # (PermissionError included) no right: normal scheduling
+        print(f'SCHED_FIFO {priority} refused: {exc}', file=sys.stderr, flush=True)
 
 
 def main():
@@ -53,9 +73,14 @@ def main():
     parser.add_argument('--unsynchronised', type=float, default=0.0, help='chance 0..1')
     parser.add_argument('--wait-for-peers', type=float, default=0.0, help='s, at most')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--priority', type=int, default=50, help='SCHED_FIFO, 0: normal')
     args = parser.parse_args()
     rclpy.init()
+    before = set(os.listdir('/proc/self/task'))
     node = rclpy.create_node('standin_controller_manager')
+    # the update thread and the middleware threads that deliver its samples
+    for task in [0] + sorted(set(os.listdir('/proc/self/task')) - before):
+        set_fifo(int(task), args.priority)
     qos = QoSProfile(depth=10)
     broadcast = node.create_publisher(JointState, '/joint_state_broadcaster/joint_states', qos)
     hardware_out = node.create_publisher(JointState, '/robot_joint_commands', qos)
@@ -71,8 +96,33 @@ def main():
             newest['command'] = list(msg.data)
             received['commands'] += 1
 
-    node.create_subscription(JointState, '/robot_joint_states', on_state, qos)
-    node.create_subscription(Float64MultiArray, '/arm_effort_controller/commands', on_command, qos)
+    readers = (
+        (node.create_subscription(JointState, '/robot_joint_states', on_state, qos), on_state),
+        (
+            node.create_subscription(
+                Float64MultiArray, '/arm_effort_controller/commands', on_command, qos
+            ),
+            on_command,
+        ),
+    )
+    wait_set = WaitSet(len(readers), 0, 0, 0, 0, 0, node.context.handle)
+
+    def read_queued():
+        """What the subscriptions queued since the last look, oldest first."""
+        for subscription, callback in readers:
+            while True:
+                with subscription.handle:
+                    taken = subscription.handle.take_message(subscription.msg_type, False)
+                if taken is None:
+                    break
+                callback(taken[0])
+
+    def wait_for_sample(timeout):
+        wait_set.clear_entities()
+        for subscription, _ in readers:
+            wait_set.add_subscription(subscription.handle)
+        wait_set.wait(int(timeout * 1e9))
+
     state_interfaces = None  # (position, velocity, effort) in JOINTS order
     command_interfaces = [0.0] * len(JOINTS)  # zeros from activation
     written = deque([list(command_interfaces)] * args.late)
@@ -91,8 +141,11 @@ def main():
         answered = not answer_due or received['commands'] > commands_before
         return received['states'] > states_read and answered
 
+    gc.collect()
+    gc.freeze()  # what lives for the whole run, out of the collector's sight
     while time.monotonic() - start < args.duration:
         # read
+        read_queued()
         msg = newest['state']
         states_read = received['states']
         if msg is not None:
@@ -143,14 +196,21 @@ def main():
                 flush=True,
             )
         # the next update at the next deadline of the schedule (missed ones are skipped, as
-        # the controller manager does); the subscriptions are served meanwhile, at least once
+        # the controller manager does): sleep until it, then (waiting for peers) until their
+        # samples are queued
         slot = max(slot + 1, int((time.monotonic() - start) / period))
         deadline = start + slot * period
-        while True:
-            now = time.monotonic()
-            if now >= deadline and (peers_ready() or now >= deadline + args.wait_for_peers):
-                break
-            rclpy.spin_once(node, timeout_sec=max(0.0, deadline - now) if now < deadline else 0.01)
+        now = time.monotonic()
+        if deadline > now:
+            time.sleep(deadline - now)
+        if args.wait_for_peers:
+            read_queued()
+            while not peers_ready():
+                left = deadline + args.wait_for_peers - time.monotonic()
+                if left <= 0:
+                    break
+                wait_for_sample(left)
+                read_queued()
     node.destroy_node()
     rclpy.try_shutdown()
 

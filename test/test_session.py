@@ -528,6 +528,21 @@ def test_an_implicit_law_keeps_the_limit_cycle_when_the_latency_varies(scene, la
     assert max(implicit.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
 
 
+@pytest.mark.parametrize('spread, seed', [(3, 5), (4, 4)])
+def test_the_implicit_law_looks_further_ahead_when_the_latency_varies_more(scene, spread, seed):
+    """Each command taking 1 to 1 + spread periods (a driver stack scheduled worse than the
+    controller's period, as a loaded machine makes it): the law looks ahead at least half
+    the recurring latencies' spread, and the arm strikes once per cycle, the base run's
+    impacts with its penetration. (One period ahead, these draws strike twice.)"""
+    from impact_arm.tools.latency_study import closed_loop
+
+    base = closed_loop(scene, 0, 0, t_max=10.0)
+    run = closed_loop(scene, 1, -1, 10.0, jitter=0.5, seed=seed, spread=spread)
+    assert not run.failed and run.second_strikes == 0
+    assert run.impacts == base.impacts
+    assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
+
+
 def test_a_stale_echo_or_a_wild_prediction_does_not_steer_the_arm(scene):
     """An effort matching a command sent long ago (a driver holding an old one) is no
     latency; a prediction that leaves any arm's range (torques in flight no arm could take)

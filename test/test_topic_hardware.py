@@ -217,6 +217,10 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
     # predicted over the commands it measured in flight
     assert seen['missing_wrenches'] == '0' and seen['stamp_jumps'] == '0', seen
     assert int(seen['latency_periods_max']) >= (3 if unsynchronised else 2), seen
+    histogram = dict(pair.split(':') for pair in seen['latency_histogram'].split())
+    assert int(histogram['2']) > 1000, seen  # each period's command measured
     if unsynchronised:  # the stand-in did miss commands
         updates = [e for e in cm.lines() if e.get('event') == 'update']
         assert updates[-1]['postponed'] > 100, updates[-1]
+        # two latencies recurred: the controller computed commands with the implicit law
+        assert int(histogram['3']) > 100 and int(seen['implicit_commands']) > 100, seen

@@ -74,6 +74,10 @@ SUBCOMMANDS = {
         'impact_arm_bench.latency',
         'limit cycle against steady and varying command latency, with and without prediction',
     ),
+    'ros2control': (
+        'impact_arm_bench.ros2control',
+        'the ros2_control set-up with the stand-in stack, realtime 1 kHz: cycles, latency, CPU',
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',

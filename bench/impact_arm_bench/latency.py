@@ -3,8 +3,8 @@ stack adds, with and without the controller's prediction (its ``latency_periods`
 
 1. offline (tools/latency_study.py): the simulator's lockstep session and the controller's
    input handling joined by queues, the driver delaying each command by 0-3 periods
-   (steady), or by k or k+1 periods at random (varying: an unsynchronised controller
-   manager), over several seeds;
+   (steady), or by k to k+1 periods at random (varying: an unsynchronised controller
+   manager; ``--spread`` S: k to k+S), over several seeds;
 2. over DDS (``--dds``): the simulator node in lockstep with ``command_latency_periods`` and
    the controller node, ``latency_periods`` -1 (measured) or 0, on a free local domain.
 
@@ -50,6 +50,12 @@ def add_arguments(parser):
         type=float,
         default=0.5,
         help='varying latency: the chance that a command takes the extra period',
+    )
+    parser.add_argument(
+        '--spread',
+        type=int,
+        default=1,
+        help='varying latency: k to k+SPREAD periods (SPREAD chances of an extra period each)',
     )
     parser.add_argument('--seeds', type=int, default=5, help='varying latency: runs (seeds)')
     parser.add_argument('--dds', action='store_true', help='also over DDS (nodes)')
@@ -122,6 +128,7 @@ def _offline(scene, args):
             jitter=jitter,
             seed=seed,
             implicit_periods=implicit,
+            spread=args.spread,
         )
         return r.t_contact, r.delta_m, r.failed
 
@@ -136,7 +143,7 @@ def _offline(scene, args):
             runs = [
                 run(k, predicted, implicit, args.jitter, seed) for seed in range(1, args.seeds + 1)
             ]
-            rows.append(_row('offline, varying', f'{k}..{k + 1}', name, runs))
+            rows.append(_row('offline, varying', f'{k}..{k + args.spread}', name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)
     return rows
 

@@ -123,6 +123,7 @@ class ControlInputs:
         self.latency_periods = latency_periods
         self.measured_latency = 0
         self.latency_max = 0  # the largest measured
+        self.latency_seen: Counter[int] = Counter()  # every measurement of the run, by value
         self.sent: deque[list[float]] = deque(maxlen=SENT_HISTORY)  # joint order, newest last
         self.predictor = StatePredictor(ctrl.model, self.period) if latency_periods else None
         # the latencies measured over the last LATENCY_WINDOW_S: when they differ, each
@@ -299,7 +300,7 @@ class ControlInputs:
         self.normal_force = None  # the latch covers one tick
         if self.implicit_periods and self.predictor is not None and self.latency_varies():
             tau = self.predictor.implicit_command(
-                lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at), q, qd, tau, self.implicit_periods
+                lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at), q, qd, tau, self.implicit_ahead()
             )
             self.implicit_commands += 1
         if not all(math.isfinite(v) for v in tau):
@@ -319,10 +320,24 @@ class ControlInputs:
         k = self.measured_latency if self.latency_periods == -1 else self.latency_periods
         return list(self.sent)[len(self.sent) - k :] if k else []
 
+    def latency_spread(self) -> int:
+        """The largest minus the smallest of the latencies that recur among those measured
+        over the last LATENCY_WINDOW_S (0: steady, or a single value recurs)."""
+        recurring = [k for k, n in self.latency_counts.items() if n >= LATENCY_RECURS]
+        return max(recurring) - min(recurring) if len(recurring) >= 2 else 0
+
     def latency_varies(self) -> bool:
         """Whether two latencies or more recur among those measured over the last
         LATENCY_WINDOW_S."""
-        return sum(n >= LATENCY_RECURS for n in self.latency_counts.values()) >= 2
+        return self.latency_spread() > 0
+
+    def implicit_ahead(self) -> int:
+        """Periods the implicit law looks ahead: ``implicit_periods``, and at least half the
+        recurring latencies' spread (rounded up) when they vary by more than two periods: a
+        command may then be held three periods or more, and one period ahead no longer
+        keeps the damping from overshooting (offline, latency 1..4 and 1..5: one period
+        ahead struck twice, two did not; docs/benchmarks.md)."""
+        return max(self.implicit_periods, -(-self.latency_spread() // 2))
 
     def _measure_latency(self, effort: Sequence[float], index: list[int]) -> None:
         """The driver reports the torques acting now: the commands sent after the one it
@@ -347,4 +362,5 @@ class ControlInputs:
                     self.latency_counts[self.recent_latency[0]] -= 1
                 self.recent_latency.append(self.measured_latency)
                 self.latency_counts[self.measured_latency] += 1
+                self.latency_seen[self.measured_latency] += 1
                 return

@@ -374,12 +374,21 @@ class Controller(Node):
                 # commands in flight the latest command was predicted over
                 KeyValue(key='latency_periods', value=str(len(self.inputs.in_flight()))),
                 KeyValue(key='latency_periods_max', value=str(self.inputs.latency_max)),
+                # the run's measured latencies, "periods:count" by periods
+                KeyValue(key='latency_histogram', value=latency_histogram(self.inputs)),
+                # commands computed with the implicit law (the measured latency varied)
+                KeyValue(key='implicit_commands', value=str(self.inputs.implicit_commands)),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         return msg
+
+
+def latency_histogram(inputs) -> str:
+    """The run's measured latencies as "periods:count" pairs, ascending ("" before any)."""
+    return ' '.join(f'{k}:{n}' for k, n in sorted(inputs.latency_seen.items()))
 
 
 def _unused(raw):

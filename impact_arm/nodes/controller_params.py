@@ -184,7 +184,9 @@ def parameter_table(scene):
             'where a command acts a period early or late and is held one period or two): '
             'the torque is the law evaluated on the state that torque itself leads to after '
             'this many periods (implicit, a Newton step on the model), so that a command '
-            'held longer than planned does not overshoot; with a steady latency the law is '
+            'held longer than planned does not overshoot; at least half the spread of the '
+            'recurring latencies, rounded up (a stack that makes them vary by three periods '
+            'or more holds a command longer still); with a steady latency the law is '
             "the scene's; 0: never (needs latency_periods -1)",
             'int',
             low=0,

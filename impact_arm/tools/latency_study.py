@@ -65,6 +65,7 @@ def closed_loop(
     jitter: float = 0.0,
     seed: int = 0,
     implicit_periods: int = 1,
+    spread: int = 1,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -72,7 +73,8 @@ def closed_loop(
 
     ``jitter`` > 0: each command takes one period more with this probability (an
     unsynchronised controller manager), so that some periods hold the previous command and
-    some commands are superseded before they act (the driver applies a period's newest).
+    some commands are superseded before they act (the driver applies a period's newest);
+    ``spread`` such chances per command: it takes ``latency`` to ``latency + spread`` periods.
     ``implicit_periods``: the controller's parameter of that name (0: off)."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
@@ -130,7 +132,8 @@ def closed_loop(
         # the delay line: each command acts from the period it arrives in, the newest wins
         while commands:
             sent += 1
-            delay = latency + (rng.random() < jitter) if sent > 1 else 0  # the release: at once
+            late = sum(rng.random() < jitter for _ in range(spread)) if sent > 1 else 0
+            delay = latency + late if sent > 1 else 0  # the release: at once
             line.append((arm.periods + delay, sent, commands.popleft()))
         arrived = [c for c in line if c[0] <= arm.periods]
         if arrived:
