@@ -567,14 +567,17 @@ class Run:
         most ``timeout`` s. A recorder that lagged (descheduled, frozen) is still taking what
         the transport buffered for it; ended then, it lost the tail without a gap to count."""
         progress = getattr(self, 'recorder_progress', None)
-        if progress is None or self.node is None:
-            time.sleep(settle)
+        if progress is None or self.node is None or self.interrupted.is_set():
+            time.sleep(settle)  # interrupted: the user wants it to end now
             return
+        import rclpy
+
         target = int(self.sim_time * 1e9) - 1_000_000  # one period of slack: stamps round
         end = time.monotonic() + timeout
         seen, since = progress.written_until, time.monotonic()
-        while time.monotonic() < end:
-            self._spin_once(0.05)
+        # rclpy.spin_once, not _spin_once: that raises once interrupted, and stop() must go on
+        while time.monotonic() < end and not self.interrupted.is_set():
+            rclpy.spin_once(self.node, timeout_sec=0.05)
             if progress.written_until != seen:
                 seen, since = progress.written_until, time.monotonic()
             elif seen is not None and seen >= target and time.monotonic() - since >= settle:
