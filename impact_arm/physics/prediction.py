@@ -35,10 +35,11 @@ class StatePredictor:
     """Free motion of ``model`` over whole periods of ``period`` seconds, one classical
     Runge-Kutta step of ``period / substeps`` at a time.
 
-    The state has two or three entries: numpy's overhead per operation would dwarf the
+    The state has a few entries: numpy's overhead per operation would dwarf the
     arithmetic, so the steps run on Python floats, in the order ``ArrayStatePredictor`` (the
     plain numpy version) does them; only the compiled acceleration sees arrays, buffers
-    reused from call to call (its array signature is compiled already)."""
+    reused from call to call (its array signature is compiled already). Two links in closed
+    form (the article's arm) run unrolled into scalars."""
 
     def __init__(self, model: ArmModel, period: float, substeps: int = 1):
         if not period > 0 or substeps < 1:
@@ -53,6 +54,8 @@ class StatePredictor:
         self._accel_of = model.eq.accel if model.eq.HAS_ACCEL else None
         self._mass_and_rhs = model.eq.mass_and_rhs
         self._parameters = (model.L, model.m, model.g)
+        # the article's two links in closed form: the steps unrolled into scalars
+        self._unrolled = model.n == 2 and self._accel_of is not None
 
     def _accel(self, q: Sequence[float], qd: Sequence[float]) -> Sequence[float]:
         bq, bqd = self._q, self._qd
@@ -78,6 +81,8 @@ class StatePredictor:
         self, q: list[float], qd: list[float], periods: int
     ) -> tuple[list[float], list[float]]:
         """(``q``, ``qd``) after ``periods`` periods under the torques ``_hold`` set."""
+        if self._unrolled:
+            return self._periods_two_links(q, qd, periods)
         h = self.h
         half, sixth = 0.5 * h, h / 6.0
         for _ in range(periods * self.substeps):
@@ -97,6 +102,40 @@ class StatePredictor:
                 for v, b1, b2, b3, b4 in zip(qd, a1, a2, a3, a4)
             ]
         return q, qd
+
+    def _periods_two_links(
+        self, q: list[float], qd: list[float], periods: int
+    ) -> tuple[list[float], list[float]]:
+        """``_periods`` for two links written out entry by entry (same operations in the same
+        order: the same bits, without the list building)."""
+        accel, generalized, (lengths, masses, g) = (
+            self._accel_of,
+            self._generalized,
+            self._parameters,
+        )
+        assert accel is not None
+        bq, bqd = self._q, self._qd
+        h = self.h
+        half, sixth = 0.5 * h, h / 6.0
+        x0, x1 = q
+        v0, v1 = qd
+        for _ in range(periods * self.substeps):
+            bq[0], bq[1], bqd[0], bqd[1] = x0, x1, v0, v1
+            a10, a11 = accel(bq, bqd, generalized, lengths, masses, g)
+            u0, u1 = v0 + half * a10, v1 + half * a11
+            bq[0], bq[1], bqd[0], bqd[1] = x0 + half * v0, x1 + half * v1, u0, u1
+            a20, a21 = accel(bq, bqd, generalized, lengths, masses, g)
+            w0, w1 = v0 + half * a20, v1 + half * a21
+            bq[0], bq[1], bqd[0], bqd[1] = x0 + half * u0, x1 + half * u1, w0, w1
+            a30, a31 = accel(bq, bqd, generalized, lengths, masses, g)
+            z0, z1 = v0 + h * a30, v1 + h * a31
+            bq[0], bq[1], bqd[0], bqd[1] = x0 + h * w0, x1 + h * w1, z0, z1
+            a40, a41 = accel(bq, bqd, generalized, lengths, masses, g)
+            x0 = x0 + sixth * (v0 + 2.0 * u0 + 2.0 * w0 + z0)
+            x1 = x1 + sixth * (v1 + 2.0 * u1 + 2.0 * w1 + z1)
+            v0 = v0 + sixth * (a10 + 2.0 * a20 + 2.0 * a30 + a40)
+            v1 = v1 + sixth * (a11 + 2.0 * a21 + 2.0 * a31 + a41)
+        return [x0, x1], [v0, v1]
 
     def ahead(
         self, q: Sequence[float], qd: Sequence[float], torques: Sequence[Sequence[float]]
