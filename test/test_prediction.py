@@ -6,10 +6,14 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from impact_arm.physics.control import CycleController
 from impact_arm.physics.model import ArmModel
-from impact_arm.physics.prediction import StatePredictor
-from impact_arm.physics.scene import load_scene, resolve_scene_path
+from impact_arm.physics.prediction import ArrayStatePredictor, StatePredictor, solve_small
+from impact_arm.physics.scene import load_scene, parse_scene, resolve_scene_path
+from scenes import arm_dict
 
 PERIOD = 1e-3
 
@@ -95,3 +99,72 @@ def test_an_implicit_damping_command_is_backward_euler_and_never_overshoots(mode
     assert kinetic(*predictor.ahead(q0, qd0, [explicit] * 2)) > start
     with pytest.raises(ValueError, match='periods = 0'):
         predictor.implicit_command(damping, q0, qd0, explicit, 0)
+
+
+angles = st.lists(st.floats(-math.pi, math.pi), min_size=2, max_size=2)
+rates = st.lists(st.floats(-30.0, 30.0), min_size=2, max_size=2)
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(q=angles, qd=rates, periods=st.integers(1, 3), substeps=st.integers(1, 2))
+def test_the_float_predictor_is_the_array_formula(model, q, qd, periods, substeps):
+    """``StatePredictor`` runs on Python floats for speed; ``ArrayStatePredictor`` is the
+    formula written with numpy arrays. Same operations in the same order: the prediction is
+    the same to the last bits, and the implicit command (whose 2x2 solve is done by hand
+    instead of LAPACK) to 1e-12 of its size, with the article's law and gains."""
+    scene = load_scene(resolve_scene_path('paper'))
+    c = scene.controller
+    ctrl = CycleController(
+        model,
+        'q',
+        c.kp,
+        c.kd,
+        c.ki,
+        c.down_target,
+        c.up_target,
+        c.switch_height,
+        scene.surfaces[0].height,
+    )
+    fast = StatePredictor(model, PERIOD, substeps)
+    reference = ArrayStatePredictor(model, PERIOD, substeps)
+    tau = ctrl.torque(q, qd)
+    held = [tau, [-t for t in tau], [0.5 * t for t in tau]][:periods]
+    for got_part, expected_part in zip(fast.ahead(q, qd, held), reference.ahead(q, qd, held)):
+        assert got_part == pytest.approx(expected_part, rel=1e-14, abs=0)
+    got = fast.implicit_command(ctrl.torque, q, qd, tau, periods)
+    expected = reference.implicit_command(ctrl.torque, q, qd, tau, periods)
+    size = max(1.0, *map(abs, expected))
+    assert got == pytest.approx(expected, rel=0, abs=1e-12 * size)
+    assert all(isinstance(t, float) for t in got + fast.ahead(q, qd, held)[1])
+
+
+def test_the_float_predictor_is_the_array_formula_on_a_four_link_arm():
+    """Four links: the mass matrix is solved numerically instead of in closed form (the
+    other branch of the acceleration); the fast path is still the array formula."""
+    model = ArmModel(parse_scene(arm_dict(4), origin='test'))
+    assert not model.eq.HAS_ACCEL
+
+    def damping(q, qd):
+        return [-50.0 * v for v in qd]
+
+    q, qd = [0.3, 0.2, -0.1, 0.4], [1.0, -2.0, 3.0, -1.0]
+    held = [[1.0, 2.0, 3.0, 4.0], [-4.0, 3.0, -2.0, 1.0]]
+    fast, reference = StatePredictor(model, PERIOD), ArrayStatePredictor(model, PERIOD)
+    for got_part, expected_part in zip(fast.ahead(q, qd, held), reference.ahead(q, qd, held)):
+        assert got_part == pytest.approx(expected_part, rel=1e-14, abs=0)
+    expected = reference.implicit_command(damping, q, qd, damping(q, qd), 2)
+    got = fast.implicit_command(damping, q, qd, damping(q, qd), 2)
+    assert got == pytest.approx(expected, rel=0, abs=1e-12 * max(map(abs, expected)))
+    assert got != pytest.approx(damping(q, qd), rel=1e-3)  # the step did something
+
+
+def test_the_small_solve_pivots_and_refuses_a_singular_matrix():
+    """Against numpy's solve, on a matrix that needs a row exchange; a singular one gives
+    None (the implicit law then keeps its explicit torque)."""
+    a = [[0.0, 2.0, 0.5], [3.0, -1.0, 2.0], [0.2, 4.0, -3.0]]  # row 0 cannot pivot
+    b = [1.0, -2.0, 0.5]
+    expected = np.linalg.solve(np.array(a), np.array(b))
+    assert solve_small([list(r) for r in a], list(b)) == pytest.approx(expected, rel=1e-13)
+    assert solve_small([[1.0, 2.0], [2.0, 4.0]], [1.0, 1.0]) is None

@@ -78,6 +78,10 @@ SUBCOMMANDS = {
         'impact_arm_bench.ros2control',
         'the ros2_control set-up with the stand-in stack, realtime 1 kHz: cycles, latency, CPU',
     ),
+    'implicit': (
+        'impact_arm_bench.implicit',
+        "the controller's state prediction and implicit law per call, numpy formula vs floats",
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',

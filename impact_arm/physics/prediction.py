@@ -17,6 +17,7 @@ backward-Euler step of the law): held one period or two, it never overshoots.
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Sequence
 
 import numpy as np
@@ -32,7 +33,192 @@ JACOBIAN_STEP = 1e-3
 
 class StatePredictor:
     """Free motion of ``model`` over whole periods of ``period`` seconds, one classical
-    Runge-Kutta step of ``period / substeps`` at a time."""
+    Runge-Kutta step of ``period / substeps`` at a time.
+
+    The state has a few entries: numpy's overhead per operation would dwarf the
+    arithmetic, so the steps run on Python floats, in the order ``ArrayStatePredictor`` (the
+    plain numpy version) does them; only the compiled acceleration sees arrays, buffers
+    reused from call to call (its array signature is compiled already). Two links in closed
+    form (the article's arm) run unrolled into scalars."""
+
+    def __init__(self, model: ArmModel, period: float, substeps: int = 1):
+        if not period > 0 or substeps < 1:
+            raise ValueError(f'period = {period} s, substeps = {substeps}: need > 0 and >= 1')
+        self.model = model
+        self.h = period / substeps
+        self.substeps = substeps
+        self._generalized = np.zeros(model.n)
+        self._q = np.zeros(model.n)
+        self._qd = np.zeros(model.n)
+        # the scene's compiled q̈, or its mass matrix and right-hand side to solve
+        self._accel_of = model.eq.accel if model.eq.HAS_ACCEL else None
+        self._mass_and_rhs = model.eq.mass_and_rhs
+        self._parameters = (model.L, model.m, model.g)
+        # the article's two links in closed form: the steps unrolled into scalars
+        self._unrolled = model.n == 2 and self._accel_of is not None
+
+    def _accel(self, q: Sequence[float], qd: Sequence[float]) -> Sequence[float]:
+        bq, bqd = self._q, self._qd
+        for i in range(len(q)):
+            bq[i] = q[i]
+            bqd[i] = qd[i]
+        if self._accel_of is not None:
+            return self._accel_of(bq, bqd, self._generalized, *self._parameters)
+        n = len(q)
+        values = self._mass_and_rhs(bq, bqd, self._generalized, *self._parameters)
+        return np.linalg.solve(
+            np.reshape(values[: n * n], (n, n)), np.asarray(values[n * n :])
+        ).tolist()
+
+    def _hold(self, tau: Sequence[float]) -> None:
+        """The generalized forces of joint torques ``tau`` (as ``add_joint_torques`` adds
+        them to zeros)."""
+        n = len(tau)
+        for i in range(n):
+            self._generalized[i] = 0.0 + (tau[i] - (tau[i + 1] if i + 1 < n else 0.0))
+
+    def _periods(
+        self, q: list[float], qd: list[float], periods: int
+    ) -> tuple[list[float], list[float]]:
+        """(``q``, ``qd``) after ``periods`` periods under the torques ``_hold`` set."""
+        if self._unrolled:
+            return self._periods_two_links(q, qd, periods)
+        h = self.h
+        half, sixth = 0.5 * h, h / 6.0
+        for _ in range(periods * self.substeps):
+            a1 = self._accel(q, qd)
+            v2 = [v + half * a for v, a in zip(qd, a1)]
+            a2 = self._accel([x + half * v for x, v in zip(q, qd)], v2)
+            v3 = [v + half * a for v, a in zip(qd, a2)]
+            a3 = self._accel([x + half * v for x, v in zip(q, v2)], v3)
+            v4 = [v + h * a for v, a in zip(qd, a3)]
+            a4 = self._accel([x + h * v for x, v in zip(q, v3)], v4)
+            q = [
+                x + sixth * (v + 2.0 * w2 + 2.0 * w3 + w4)
+                for x, v, w2, w3, w4 in zip(q, qd, v2, v3, v4)
+            ]
+            qd = [
+                v + sixth * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
+                for v, b1, b2, b3, b4 in zip(qd, a1, a2, a3, a4)
+            ]
+        return q, qd
+
+    def _periods_two_links(
+        self, q: list[float], qd: list[float], periods: int
+    ) -> tuple[list[float], list[float]]:
+        """``_periods`` for two links written out entry by entry (same operations in the same
+        order: the same bits, without the list building)."""
+        accel, generalized, (lengths, masses, g) = (
+            self._accel_of,
+            self._generalized,
+            self._parameters,
+        )
+        assert accel is not None
+        bq, bqd = self._q, self._qd
+        h = self.h
+        half, sixth = 0.5 * h, h / 6.0
+        x0, x1 = q
+        v0, v1 = qd
+        for _ in range(periods * self.substeps):
+            bq[0], bq[1], bqd[0], bqd[1] = x0, x1, v0, v1
+            a10, a11 = accel(bq, bqd, generalized, lengths, masses, g)
+            u0, u1 = v0 + half * a10, v1 + half * a11
+            bq[0], bq[1], bqd[0], bqd[1] = x0 + half * v0, x1 + half * v1, u0, u1
+            a20, a21 = accel(bq, bqd, generalized, lengths, masses, g)
+            w0, w1 = v0 + half * a20, v1 + half * a21
+            bq[0], bq[1], bqd[0], bqd[1] = x0 + half * u0, x1 + half * u1, w0, w1
+            a30, a31 = accel(bq, bqd, generalized, lengths, masses, g)
+            z0, z1 = v0 + h * a30, v1 + h * a31
+            bq[0], bq[1], bqd[0], bqd[1] = x0 + h * w0, x1 + h * w1, z0, z1
+            a40, a41 = accel(bq, bqd, generalized, lengths, masses, g)
+            x0 = x0 + sixth * (v0 + 2.0 * u0 + 2.0 * w0 + z0)
+            x1 = x1 + sixth * (v1 + 2.0 * u1 + 2.0 * w1 + z1)
+            v0 = v0 + sixth * (a10 + 2.0 * a20 + 2.0 * a30 + a40)
+            v1 = v1 + sixth * (a11 + 2.0 * a21 + 2.0 * a31 + a41)
+        return [x0, x1], [v0, v1]
+
+    def ahead(
+        self, q: Sequence[float], qd: Sequence[float], torques: Sequence[Sequence[float]]
+    ) -> tuple[list[float], list[float]]:
+        """The absolute link angles and rates one period per entry of ``torques`` (joint
+        torques, oldest first) after the state (``q``, ``qd``)."""
+        y_q = [float(x) for x in q]
+        y_v = [float(v) for v in qd]
+        for tau in torques:
+            self._hold([float(t) for t in tau])
+            y_q, y_v = self._periods(y_q, y_v, 1)
+        return y_q, y_v
+
+    def implicit_command(
+        self,
+        law: Callable[[list[float], list[float]], Sequence[float]],
+        q: Sequence[float],
+        qd: Sequence[float],
+        tau: Sequence[float],
+        periods: int = 1,
+    ) -> list[float]:
+        """The joint torques τ that ``law`` (joint torques of absolute angles and rates) gives
+        on the state τ itself leads to, held ``periods`` periods from (``q``, ``qd``):
+        τ = law(ahead(q, qd, [τ] * periods)), one Newton step from ``tau`` (the law's output
+        at (``q``, ``qd``)) with a finite-difference Jacobian. The explicit ``tau`` comes back
+        when the step cannot be taken (a singular Jacobian, a result that is not finite)."""
+        if periods < 1:
+            raise ValueError(f'periods = {periods}: must be >= 1')
+        q0 = [float(x) for x in q]
+        qd0 = [float(v) for v in qd]
+        torque = [float(t) for t in tau]
+
+        def closed(held: list[float]) -> list[float]:
+            self._hold(held)
+            return [float(t) for t in law(*self._periods(q0, qd0, periods))]
+
+        n = len(torque)
+        base = closed(torque)
+        # (I - J) τ = base - J τ0, row by row; J by forward differences, column by column
+        system = [[0.0] * n for _ in range(n)]
+        for j in range(n):
+            step = JACOBIAN_STEP * max(1.0, abs(torque[j]))
+            shifted = list(torque)
+            shifted[j] += step
+            for i, value in enumerate(closed(shifted)):
+                system[i][j] = (value - base[i]) / step
+        rhs = [b - sum(row[j] * torque[j] for j in range(n)) for b, row in zip(base, system)]
+        for i in range(n):
+            system[i] = [(1.0 if i == j else 0.0) - system[i][j] for j in range(n)]
+        out = solve_small(system, rhs)
+        if out is None or not all(math.isfinite(t) for t in out):
+            return torque
+        return out
+
+
+def solve_small(a: list[list[float]], b: list[float]) -> list[float] | None:
+    """x with ``a`` x = ``b`` by Gaussian elimination with partial pivoting (LAPACK's
+    algorithm, in Python floats: for the two or three joints of an arm numpy's call overhead
+    is most of the cost); None when a pivot is zero (a singular matrix). ``a`` and ``b`` are
+    overwritten."""
+    n = len(b)
+    for k in range(n):
+        pivot = max(range(k, n), key=lambda i: abs(a[i][k]))
+        if a[pivot][k] == 0.0:
+            return None
+        if pivot != k:
+            a[k], a[pivot] = a[pivot], a[k]
+            b[k], b[pivot] = b[pivot], b[k]
+        for i in range(k + 1, n):
+            factor = a[i][k] / a[k][k]
+            for j in range(k + 1, n):
+                a[i][j] -= factor * a[k][j]
+            b[i] -= factor * b[k]
+    x = [0.0] * n
+    for i in range(n - 1, -1, -1):
+        x[i] = (b[i] - sum(a[i][j] * x[j] for j in range(i + 1, n))) / a[i][i]
+    return x
+
+
+class ArrayStatePredictor:
+    """``StatePredictor`` written with numpy arrays, as it was first: the reference the
+    float-by-float ``StatePredictor`` is tested and benchmarked against (same operations in
+    the same order; slower by numpy's per-call overhead on arrays of two or three)."""
 
     def __init__(self, model: ArmModel, period: float, substeps: int = 1):
         if not period > 0 or substeps < 1:
