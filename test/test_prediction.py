@@ -115,18 +115,7 @@ def test_the_float_predictor_is_the_array_formula(model, q, qd, periods, substep
     the same to the last bits, and the implicit command (whose 2x2 solve is done by hand
     instead of LAPACK) to 1e-12 of its size, with the article's law and gains."""
     scene = load_scene(resolve_scene_path('paper'))
-    c = scene.controller
-    ctrl = CycleController(
-        model,
-        'q',
-        c.kp,
-        c.kd,
-        c.ki,
-        c.down_target,
-        c.up_target,
-        c.switch_height,
-        scene.surfaces[0].height,
-    )
+    ctrl = CycleController.for_scene(model, scene.controller)
     fast = StatePredictor(model, PERIOD, substeps)
     reference = ArrayStatePredictor(model, PERIOD, substeps)
     tau = ctrl.torque(q, qd)

@@ -4,8 +4,8 @@ controller runs (``StatePredictor``), in one run.
 
 Per call, best of ``--repeats`` rounds of ``--calls`` calls over a fixed set of states (the
 scene's arm, angles within ±π, rates within ±10 rad/s, seeded): the prediction over 1 and 3
-periods in flight, and the implicit law with the scene's controller law ('q', the
-controller's default) looking 1 and 2 periods ahead (the realtime set-up's latencies 1-3 give
+periods in flight, and the implicit law with the scene's controller (the article's: law 'q')
+looking 1 and 2 periods ahead (the realtime set-up's latencies 1-3 give
 1 and 2). Also the largest difference between the two, relative to the torque's size (they
 agree to rounding; the test suite checks it).
 """
@@ -53,18 +53,7 @@ def run(args):
 
     scene = load_scene(resolve_scene_path(args.scene))
     model = ArmModel(scene)
-    c = scene.controller
-    ctrl = CycleController(
-        model,
-        'q',
-        c.kp,
-        c.kd,
-        c.ki,
-        c.down_target,
-        c.up_target,
-        c.switch_height,
-        scene.surfaces[0].height if scene.surfaces else 0.0,
-    )
+    ctrl = CycleController.for_scene(model, scene.controller)
     rng = np.random.default_rng(1)
     states = []
     for _ in range(STATES):

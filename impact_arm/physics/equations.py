@@ -23,7 +23,7 @@ module with runtime flags could not. The kernel's source is ``kernel/`` (split b
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import hashlib
@@ -193,6 +193,25 @@ def _derive_source(n: int, general: bool = False) -> str:
 SYMBOLIC_LINKS = 3
 
 
+def _source_head(name: str, args: Sequence[str]) -> list[str]:
+    """The first lines of a generated chain function (a jit leaf)."""
+    return ['@jit_leaf', f'def {name}({", ".join(args)}):']
+
+
+def _source_trig(lines: list[str], n: int) -> None:
+    """c{i}, s{i}: the cosine and sine of each link's absolute angle."""
+    for i in range(n):
+        lines.append(f'    c{i} = cos(q[{i}])')
+        lines.append(f'    s{i} = sin(q[{i}])')
+
+
+def _source_tail_masses(lines: list[str], n: int) -> None:
+    """S{k}: the mass of links k .. n-1 (S{n} = 0)."""
+    lines.append(f'    S{n} = 0.0')
+    for k in reversed(range(n)):
+        lines.append(f'    S{k} = S{k + 1} + m[{k}]')
+
+
 def _chain_source(n: int) -> str:
     """The same functions as ``_derive_source`` for a planar chain of uniform rods, written
     from the chain's closed form instead of a symbolic expansion.
@@ -207,20 +226,6 @@ def _chain_source(n: int) -> str:
     2-4 links (test_equations.py)."""
     r = range(n)
 
-    def head(name: str, args: Sequence[str]) -> list[str]:
-        return ['@jit_leaf', f'def {name}({", ".join(args)}):']
-
-    def trig(lines: list[str], rows: Iterable[int] = r) -> None:
-        for i in rows:
-            lines.append(f'    c{i} = cos(q[{i}])')
-            lines.append(f'    s{i} = sin(q[{i}])')
-
-    def tail_masses(lines: list[str]) -> None:
-        # S{k}: mass of links k .. n-1 (S{n} = 0)
-        lines.append(f'    S{n} = 0.0')
-        for k in reversed(r):
-            lines.append(f'    S{k} = S{k + 1} + m[{k}]')
-
     def coefficient(i: int, j: int) -> str:
         if i == j:
             return f'L[{i}] * L[{i}] * (m[{i}] / 3.0 + S{i + 1})'
@@ -228,9 +233,9 @@ def _chain_source(n: int) -> str:
         return f'L[{a}] * L[{b}] * (0.5 * m[{b}] + S{b + 1})'
 
     funcs = []
-    lines = head('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'])
-    trig(lines)
-    tail_masses(lines)
+    lines = _source_head('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'])
+    _source_trig(lines, n)
+    _source_tail_masses(lines, n)
     for i in r:
         for j in range(i, n):
             lines.append(f'    C{i}_{j} = {coefficient(i, j)}')
@@ -278,8 +283,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
             out[j] += sn * qd[i] * qd[i]
             S[i * n + j] = c * cos(d)
             S[j * n + i] = S[i * n + j]""")
-    lines = head('tip', ['q', 'qd', 'L'])
-    trig(lines)
+    lines = _source_head('tip', ['q', 'qd', 'L'])
+    _source_trig(lines, n)
     lines.append(
         '    return ('
         + ' + '.join(f'L[{i}] * c{i}' for i in r)
@@ -293,8 +298,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
-    trig(lines)
+    lines = _source_head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
+    _source_trig(lines, n)
     lines.append(
         '    return ('
         + ' + '.join(f'L[{i}] * (-s{i} * qdd[{i}] - c{i} * qd[{i}] * qd[{i}])' for i in r)
@@ -304,8 +309,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('tip_jacobian', ['q', 'L'])
-    trig(lines)
+    lines = _source_head('tip_jacobian', ['q', 'L'])
+    _source_trig(lines, n)
     lines.append(
         '    return ('
         + ', '.join([f'-L[{i}] * s{i}' for i in r] + [f'L[{i}] * c{i}' for i in r])
@@ -313,8 +318,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('gravity_forces', ['q', 'L', 'm', 'g'])
-    tail_masses(lines)
+    lines = _source_head('gravity_forces', ['q', 'L', 'm', 'g'])
+    _source_tail_masses(lines, n)
     lines.append(
         '    return ('
         + ', '.join(f'-g * L[{i}] * cos(q[{i}]) * (0.5 * m[{i}] + S{i + 1})' for i in r)
@@ -322,8 +327,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('link_energies', ['q', 'qd', 'L', 'm'])
-    trig(lines)
+    lines = _source_head('link_energies', ['q', 'qd', 'L', 'm'])
+    _source_trig(lines, n)
     # centre velocity of link k: the joint's velocity (sum over the links before it) plus
     # half of its own link's
     lines.append('    jx = 0.0')
@@ -340,7 +345,7 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     lines.append('    return (' + ', '.join(f'T{k}' for k in r) + ',)')
     funcs.append('\n'.join(lines))
 
-    lines = head('potential', ['q', 'L', 'm', 'g'])
+    lines = _source_head('potential', ['q', 'L', 'm', 'g'])
     lines.append('    y = 0.0')
     lines.append('    V = 0.0')
     for k in r:
@@ -394,19 +399,6 @@ def _general_chain_source(n: int) -> str:
 
     tx, ty = f'L[{4 * n}]', f'L[{4 * n + 1}]'
 
-    def head(name: str, args: Sequence[str]) -> list[str]:
-        return ['@jit_leaf', f'def {name}({", ".join(args)}):']
-
-    def trig(lines: list[str]) -> None:
-        for i in r:
-            lines.append(f'    c{i} = cos(q[{i}])')
-            lines.append(f'    s{i} = sin(q[{i}])')
-
-    def tail_masses(lines: list[str]) -> None:
-        lines.append(f'    S{n} = 0.0')
-        for k in reversed(r):
-            lines.append(f'    S{k} = S{k + 1} + m[{k}]')
-
     def gravity_force(i: int) -> str:
         return f'-g * (L[{i}] * c{i} * S{i + 1} + m[{i}] * ({cx(i)} * c{i} - {cy(i)} * s{i}))'
 
@@ -416,9 +408,9 @@ def _general_chain_source(n: int) -> str:
         lines.append(f'    py = {tx} * s{last} + {ty} * c{last}')
 
     funcs = []
-    lines = head('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'])
-    trig(lines)
-    tail_masses(lines)
+    lines = _source_head('mass_and_rhs', ['q', 'qd', 'Qx', 'L', 'm', 'g'])
+    _source_trig(lines, n)
+    _source_tail_masses(lines, n)
     for i in r:
         lines.append(
             f'    M{i}_{i} = {jc(i)} + m[{i}] * ({cx(i)} * {cx(i)} + {cy(i)} * {cy(i)})'
@@ -473,8 +465,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     def joint_sum(term: str) -> str:
         return ' + '.join([term.format(i=i) for i in range(last)] or ['0.0'])
 
-    lines = head('tip', ['q', 'qd', 'L'])
-    trig(lines)
+    lines = _source_head('tip', ['q', 'qd', 'L'])
+    _source_trig(lines, n)
     rotated_tip(lines)
     lines.append(
         '    return ('
@@ -485,8 +477,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
-    trig(lines)
+    lines = _source_head('tip_acceleration', ['q', 'qd', 'qdd', 'L'])
+    _source_trig(lines, n)
     rotated_tip(lines)
     w = f'qd[{last}] * qd[{last}]'
     lines.append(
@@ -498,8 +490,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('tip_jacobian', ['q', 'L'])
-    trig(lines)
+    lines = _source_head('tip_jacobian', ['q', 'L'])
+    _source_trig(lines, n)
     rotated_tip(lines)
     lines.append(
         '    return ('
@@ -513,9 +505,9 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     )
     funcs.append('\n'.join(lines))
 
-    lines = head('gravity_forces', ['q', 'L', 'm', 'g'])
-    trig(lines)
-    tail_masses(lines)
+    lines = _source_head('gravity_forces', ['q', 'L', 'm', 'g'])
+    _source_trig(lines, n)
+    _source_tail_masses(lines, n)
     lines.append('    return (' + ', '.join(gravity_force(i) for i in r) + ',)')
     funcs.append('\n'.join(lines))
 
@@ -524,8 +516,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
         lines.append(f'    ux = {cx(k)} * c{k} - {cy(k)} * s{k}')
         lines.append(f'    uy = {cx(k)} * s{k} + {cy(k)} * c{k}')
 
-    lines = head('link_energies', ['q', 'qd', 'L', 'm'])
-    trig(lines)
+    lines = _source_head('link_energies', ['q', 'qd', 'L', 'm'])
+    _source_trig(lines, n)
     lines.append('    jx = 0.0')  # velocity of link k's joint
     lines.append('    jy = 0.0')
     for k in r:
@@ -540,8 +532,8 @@ def mass_and_rhs_into(q, qd, Qx, L, m, g, S, out):
     lines.append('    return (' + ', '.join(f'T{k}' for k in r) + ',)')
     funcs.append('\n'.join(lines))
 
-    lines = head('potential', ['q', 'L', 'm', 'g'])
-    trig(lines)
+    lines = _source_head('potential', ['q', 'L', 'm', 'g'])
+    _source_trig(lines, n)
     lines.append('    y = 0.0')
     lines.append('    V = 0.0')
     for k in r:

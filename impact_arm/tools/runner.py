@@ -175,18 +175,7 @@ def precompile(scene, rate):
 
     arm = SimulatedArm(scene, rate, trace=False)
     arm.warm_up()
-    c = scene.controller
-    ctrl = CycleController(
-        arm.model,
-        'q',
-        c.kp,
-        c.kd,
-        c.ki,
-        c.down_target,
-        c.up_target,
-        c.switch_height,
-        scene.surfaces[0].height if scene.surfaces else 0.0,
-    )
+    ctrl = CycleController.for_scene(arm.model, scene.controller)
     for ctrl.law in ('q', 'pid'):
         ctrl.torque(scene.q0, scene.qd0)
     arm.model.tip(scene.q0, scene.qd0)
