@@ -29,6 +29,7 @@ def generate_launch_description():
     rate, mode = LaunchConfiguration('rate'), LaunchConfiguration('mode')
     lockstep = PythonExpression(["'", mode, "' == 'lockstep'"])
     tf = LaunchConfiguration('tf')
+    cycles = LaunchConfiguration('cycles')
     rsp = PythonExpression(["'", tf, "' == 'rsp'"])
     # the URDF of the launched scene, as `impact-arm urdf` prints it (the scripts of an
     # ament_python package are not on PATH, the module is importable)
@@ -46,6 +47,11 @@ def generate_launch_description():
             ),
             DeclareLaunchArgument(
                 'mode', default_value='realtime', description='realtime or lockstep'
+            ),
+            DeclareLaunchArgument(
+                'cycles',
+                default_value='0',
+                description='down/up cycles after which the controller stops commanding (0: never)',
             ),
             DeclareLaunchArgument(
                 'output', default_value='runs/arm.mcap', description='MCAP file the recorder writes'
@@ -90,6 +96,7 @@ def generate_launch_description():
                         'scene': scene,
                         'law': law,
                         'rate': rate,
+                        'cycles': ParameterValue(cycles, value_type=int),
                         'command_readers': 2,  # simulator and recorder hear the start
                         # lockstep: history to resend what a starved recorder missed
                         'command_history': PythonExpression(

@@ -79,7 +79,10 @@ def test_launch_file_starts_the_three_nodes_with_their_parameter_files():
         a for a in actions if type(a).__name__ == 'Node' and a.kwargs['package'] == 'impact_arm'
     ]
     arguments = {a.args[0] for a in actions if type(a).__name__ == 'DeclareLaunchArgument'}
-    assert {'scene', 'law', 'rate', 'mode', 'tf', 'rviz'} <= arguments
+    assert {'scene', 'law', 'rate', 'mode', 'tf', 'rviz', 'cycles'} <= arguments
+    controller = next(n for n in nodes if n.kwargs['executable'] == 'controller')
+    cycles = controller.kwargs['parameters'][1]['cycles']
+    assert cycles.args[0].args == ('cycles',) and cycles.kwargs == {'value_type': int}
     assert sorted(n.kwargs['executable'] for n in nodes) == sorted(NODES)
     assert {n.kwargs['executable'] for n in nodes} <= console_scripts()
     for n in nodes:

@@ -472,6 +472,24 @@ def test_the_latency_is_measured_from_the_efforts_the_driver_reports(scene):
     assert len(fixed.in_flight()) == 1
 
 
+def test_warming_up_the_prediction_sends_nothing_and_changes_no_command(scene):
+    """The node warms the prediction and the implicit law before its first tick: no
+    command, no counter, and the commands that follow are those of a cold start."""
+    sent, cold = [], []
+    warm = inputs(scene, sent, wrench_publishers=lambda: False, latency_periods=-1)
+    reference = inputs(scene, cold, wrench_publishers=lambda: False, latency_periods=-1)
+    warm.warm_up(scene.q0, scene.qd0)
+    assert sent == [] and warm.implicit_commands == 0 and warm.latency_seen == {}
+    assert warm.ctrl.switches == 0 and warm.ctrl._last_t is None
+    for c, out in ((warm, sent), (reference, cold)):
+        c.implicit_periods = 1
+        for k in range(60):
+            back = min(len(out) - 1, 2 + (k > 40) * (k % 2))  # then 2 and 3 recur: implicit
+            state(c, k * 0.001, effort=out[-1 - back] if out else ())
+    assert warm.implicit_commands == reference.implicit_commands > 0
+    assert sent == cold
+
+
 def test_prediction_keeps_the_limit_cycle_under_command_latency(scene):
     """The article's controller and arm in one process (lockstep session and the
     controller's input handling, joined by queues), the driver delaying each command by one

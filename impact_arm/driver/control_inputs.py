@@ -137,6 +137,19 @@ class ControlInputs:
         self.latency_counts: Counter[int] = Counter()  # of recent_latency's values
         self.implicit_commands = 0  # commands computed so
 
+    def warm_up(self, q: Sequence[float], qd: Sequence[float]) -> None:
+        """Run the prediction and the implicit law once on (``q``, ``qd``), changing no
+        state: their first call loads compiled code (milliseconds, far more on a busy
+        machine), which must not fall on the first ticks after the brakes release."""
+        if self.predictor is None:
+            return
+        q, qd = [float(v) for v in q], [float(v) for v in qd]
+        tau = self.ctrl.torque(q, qd)
+        self.predictor.ahead(q, qd, [tau])
+        self.predictor.implicit_command(
+            lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at), q, qd, tau
+        )
+
     def drop(self, counter: str, why: str) -> None:
         self.dropped[counter] += 1
         self.log(f'{why} ({counter}: {self.dropped[counter]})')

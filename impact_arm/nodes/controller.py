@@ -156,6 +156,7 @@ class Controller(Node):
             wrench_tolerance=p.wrench_tolerance,
             implicit_periods=p.implicit_periods,
         )
+        self.inputs.warm_up(scene.q0, scene.qd0)
         if p.startup_hold > 0:
             self.get_logger().info(
                 f'first command held {p.startup_hold:g} s after start '
