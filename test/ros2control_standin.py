@@ -143,7 +143,7 @@ def main():
 
     gc.collect()
     gc.freeze()  # what lives for the whole run, out of the collector's sight
-    while time.monotonic() - start < args.duration:
+    while rclpy.ok() and time.monotonic() - start < args.duration:
         # read
         read_queued()
         msg = newest['state']
@@ -220,3 +220,7 @@ if __name__ == '__main__':
         main()
     except KeyboardInterrupt:
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # ended (SIGINT) between the loop's check and a publish: the context is gone

@@ -15,17 +15,11 @@ local DDS domain (localhost discovery) and are ended by PID.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import sys
 import tempfile
-import time
 
 from .common import cpu_seconds
-
-ROLES = ('standin', 'simulator', 'controller')
-CYCLES = 15
 
 
 def add_arguments(parser):
@@ -33,7 +27,7 @@ def add_arguments(parser):
     parser.add_argument(
         '--order',
         default='standin,simulator,controller',
-        help='start order, comma-separated permutation of ' + ','.join(ROLES),
+        help='start order, comma-separated permutation of standin,simulator,controller',
     )
     parser.add_argument('--timeout', type=float, default=40.0, help='s of wall time per run')
     parser.add_argument(
@@ -60,117 +54,25 @@ def add_arguments(parser):
     parser.add_argument('--json', metavar='FILE', help='write the runs as JSON')
 
 
-def _commands(args):
-    from ros_helpers import controller, simulator
-
-    tests = os.path.dirname(os.path.abspath(sys.modules[controller.__module__].__file__))
-    standin = args.standin or os.path.join(tests, 'ros2control_standin.py')
-    remaps = (
-        '-r',
-        '/joint_states:=/joint_state_broadcaster/joint_states',
-        '-r',
-        '/effort_controller/commands:=/arm_effort_controller/commands',
-    )
-    return {
-        'standin': [
-            sys.executable,
-            standin,
-            '--rate',
-            '1000',
-            '--late',
-            '1',
-            '--duration',
-            str(args.timeout + 30),
-            '--priority',
-            str(args.standin_priority),
-        ],
-        'simulator': simulator('mode:=realtime'),
-        'controller': controller(*args.controller_params, ros_args=remaps),
-    }
-
-
 def _one_run(args, order, workdir):
-    from diagnostic_msgs.msg import DiagnosticArray
-    from ros_helpers import Probe, diagnostics_values, from_simulator, make_env, start_process
-    from std_msgs.msg import String
+    from ros_helpers import make_env
+    from standin_stack import run_stack
 
-    from impact_arm.tools.latency_study import SECOND_STRIKE_S
-
-    env = make_env()
-    probe = Probe(int(env['ROS_DOMAIN_ID']))
-    reports = probe.listen(String, '/impact_report', transient=True)
-    sim_diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
-    ctrl_diags = probe.listen(
-        DiagnosticArray,
-        '/diagnostics',
-        keep=lambda m: bool(m.status) and 'controller' in m.status[0].name,
-    )
-    commands = _commands(args)
-    procs = {}
-    try:
-        with contextlib.ExitStack() as stack:
-            for role in order:
-                procs[role] = stack.enter_context(start_process(commands[role], env, workdir, role))
-                time.sleep(1.0)
-
-            def sim_values():
-                return diagnostics_values(sim_diags[-1][1]) if sim_diags else {}
-
-            # the driven part: from the simulator's first command on
-            deadline = time.monotonic() + 60
-            while int(sim_values().get('commands', '0') or 0) == 0:
-                if time.monotonic() > deadline or not procs['simulator'].alive():
-                    break
-                time.sleep(0.02)
-            cpu0 = {r: cpu_seconds(f'/proc/{p.pid}/stat') for r, p in procs.items()}
-            wall0 = time.monotonic()
-            end = wall0 + args.timeout
-            while (
-                len(reports) < CYCLES + 1
-                and time.monotonic() < end
-                and all(p.alive() for p in procs.values())
-            ):
-                time.sleep(0.05)
-            alive = {r: p.alive() for r, p in procs.items()}
-            cpu1 = {
-                r: cpu_seconds(f'/proc/{p.pid}/stat') if alive[r] else cpu0[r]
-                for r, p in procs.items()
-            }
-            wall = time.monotonic() - wall0
-            driven = [json.loads(m.data) for _, m in list(reports)]
-            time.sleep(1.2)  # one more report of each
-            sim = sim_values()
-            ctrl = diagnostics_values(ctrl_diags[-1][1]) if ctrl_diags else {}
-            updates = [e for e in procs['standin'].lines() if e.get('event') == 'update']
-            load = os.getloadavg()[0]
-    finally:
-        probe.close()
-    contacts = [r['t_contact'] for r in driven]
-    gaps = [b - a for a, b in zip(contacts, contacts[1:])]
-    return {
-        'order': list(order),
-        'impacts': len(driven),
-        'second_strikes': sum(g < SECOND_STRIKE_S for g in gaps),
-        'first_strike_s': contacts[0] if contacts else None,
-        'delta_m_max_mm': 1e3 * max((r['delta_m'] for r in driven), default=float('nan')),
-        'sim_time_s': float(sim.get('sim_time', 'nan')),
-        'wall_s': wall,
-        'alive': alive,
-        'latency_histogram': ctrl.get('latency_histogram', ''),
-        'implicit_commands': int(ctrl.get('implicit_commands', -1)),
-        'repeated_states': int(ctrl.get('repeated_states', -1)),
-        'overruns': int(sim.get('overruns', -1)),
-        'periods_skipped': int(sim.get('periods_skipped', -1)),
-        'periods_without_new_command': int(sim.get('periods_without_new_command', -1)),
-        'watchdog_timeouts': int(sim.get('watchdog_timeouts', -1)),
-        'zero_commands_before_release': int(sim.get('zero_commands_before_release', -1)),
-        'standin_updates': updates[-1] if updates else {},
-        'cpu_percent': {r: 100 * (cpu1[r] - cpu0[r]) / max(wall, 1e-9) for r in cpu0},
-        'load_average': load,
-    }
+    return run_stack(
+        order,
+        make_env(),
+        workdir,
+        timeout=args.timeout,
+        standin=args.standin,
+        standin_priority=args.standin_priority,
+        controller_params=args.controller_params,
+        cpu_seconds=lambda pid: cpu_seconds(f'/proc/{pid}/stat'),
+    ).as_dict()
 
 
 def run(args) -> int:
+    from standin_stack import CYCLES, ROLES
+
     order = [r.strip() for r in args.order.split(',')]
     if sorted(order) != sorted(ROLES):
         raise SystemExit(f'--order = {args.order}: must be a permutation of {",".join(ROLES)}')

@@ -1,0 +1,213 @@
+"""The ros2_control set-up of docs/ros2_control.md in real time at 1 kHz, with the stand-in stack
+(ros2control_standin.py) in place of controller_manager + TopicBasedSystem +
+joint_state_broadcaster + JointGroupEffortController: one run, shared by the realtime test
+(test_topic_hardware.py) and ``impact-arm bench ros2control``.
+
+The three processes start in the given order, a second apart: the stand-in at 1 000 updates
+per wall second on its sleep-until schedule (no waiting for peers), the simulator
+``mode:=realtime`` at 1 kHz, the project's controller remapped to the broadcaster's states and
+the effort controller's commands, with its default start-up hold. The run lasts until the
+article's 15 cycles (16 impacts), a process ends, or ``timeout`` wall seconds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from ros_helpers import (
+    Probe,
+    controller,
+    diagnostics_values,
+    from_simulator,
+    simulator,
+    start_process,
+)
+
+from impact_arm.tools.latency_study import SECOND_STRIKE_S
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROLES = ('standin', 'simulator', 'controller')
+CYCLES = 15  # the article's: 16 impacts
+START_SPACING_S = 1.0
+# the largest command latency (periods) the controller's law was shown to handle offline
+# (each command taking 1 to 5 periods at random; docs/ros2_control.md)
+HANDLED_LATENCY = 5
+REMAPS = (
+    '-r',
+    '/joint_states:=/joint_state_broadcaster/joint_states',
+    '-r',
+    '/effort_controller/commands:=/arm_effort_controller/commands',
+)
+
+
+@dataclass
+class StackRun:
+    """What one run showed: the simulator's impact reports while the controller drove the
+    arm, the last diagnostics of the simulator and the controller, the stand-in's counts."""
+
+    order: tuple[str, ...]
+    impacts: list[dict]
+    sim: dict
+    ctrl: dict
+    standin_updates: dict
+    alive: dict
+    cpu_percent: dict
+    wall_s: float
+    load_average: float
+    second_strike_s: float = SECOND_STRIKE_S
+    contacts: list[float] = field(init=False)
+
+    def __post_init__(self):
+        self.contacts = [r['t_contact'] for r in self.impacts]
+
+    @property
+    def second_strikes(self) -> int:
+        """Contacts that began within ``second_strike_s`` of the previous one."""
+        return sum(b - a < self.second_strike_s for a, b in zip(self.contacts, self.contacts[1:]))
+
+    @property
+    def held(self) -> bool:
+        return len(self.impacts) >= CYCLES + 1 and self.second_strikes == 0
+
+    def schedule_misses(self) -> list[str]:
+        """Where the machine did not give the loop the schedule its law is made for, from the
+        processes' own counters: a command silence the simulator's watchdog braked, or a
+        command latency beyond those the implicit law was shown to handle."""
+        misses = []
+        if int(self.sim.get('watchdog_timeouts', 0)) > 0:
+            misses.append(
+                f'{self.sim["watchdog_timeouts"]} watchdog timeouts (longest command silence '
+                f'{self.sim.get("longest_command_silence_s")} s)'
+            )
+        latency_max = int(self.ctrl.get('latency_periods_max', 0))
+        if latency_max > HANDLED_LATENCY:
+            misses.append(
+                f'command latency up to {latency_max} periods '
+                f'(histogram {self.ctrl.get("latency_histogram")})'
+            )
+        return misses
+
+    def as_dict(self) -> dict:
+        sim, ctrl = self.sim, self.ctrl
+        return {
+            'order': list(self.order),
+            'impacts': len(self.impacts),
+            'second_strikes': self.second_strikes,
+            'first_strike_s': self.contacts[0] if self.contacts else None,
+            'delta_m_max_mm': 1e3 * max((r['delta_m'] for r in self.impacts), default=float('nan')),
+            'sim_time_s': float(sim.get('sim_time', 'nan')),
+            'wall_s': self.wall_s,
+            'alive': self.alive,
+            'latency_histogram': ctrl.get('latency_histogram', ''),
+            'implicit_commands': int(ctrl.get('implicit_commands', -1)),
+            'repeated_states': int(ctrl.get('repeated_states', -1)),
+            'overruns': int(sim.get('overruns', -1)),
+            'periods_skipped': int(sim.get('periods_skipped', -1)),
+            'periods_without_new_command': int(sim.get('periods_without_new_command', -1)),
+            'watchdog_timeouts': int(sim.get('watchdog_timeouts', -1)),
+            'zero_commands_before_release': int(sim.get('zero_commands_before_release', -1)),
+            'standin_updates': self.standin_updates,
+            'cpu_percent': self.cpu_percent,
+            'load_average': self.load_average,
+        }
+
+
+def commands(
+    duration: float, standin: str | None = None, standin_priority: int = 50, controller_params=()
+) -> dict:
+    """Each role's command line."""
+    return {
+        'standin': [
+            sys.executable,
+            standin or os.path.join(HERE, 'ros2control_standin.py'),
+            '--rate',
+            '1000',
+            '--late',
+            '1',
+            '--duration',
+            str(duration),
+            '--priority',
+            str(standin_priority),
+        ],
+        'simulator': simulator('mode:=realtime'),
+        'controller': controller(*controller_params, ros_args=REMAPS),
+    }
+
+
+def run_stack(
+    order,
+    env: dict,
+    workdir: str,
+    timeout: float = 40.0,
+    standin: str | None = None,
+    standin_priority: int = 50,
+    controller_params=(),
+    cpu_seconds: Callable[[int], float] | None = None,
+) -> StackRun:
+    """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain; every process
+    is ended by PID on the way out. With ``cpu_seconds`` (a process's CPU time by PID), the
+    CPU each process used while the controller drove the arm."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import String
+
+    if sorted(order) != sorted(ROLES):
+        raise ValueError(f'order = {",".join(order)}: must be a permutation of {",".join(ROLES)}')
+    probe = Probe(int(env['ROS_DOMAIN_ID']))
+    reports = probe.listen(String, '/impact_report', transient=True)
+    sim_diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
+    ctrl_diags = probe.listen(
+        DiagnosticArray,
+        '/diagnostics',
+        keep=lambda m: bool(m.status) and 'controller' in m.status[0].name,
+    )
+    lines = commands(timeout + 30, standin, standin_priority, controller_params)
+    procs = {}
+    try:
+        with contextlib.ExitStack() as stack:
+            for role in order:
+                procs[role] = stack.enter_context(start_process(lines[role], env, workdir, role))
+                time.sleep(START_SPACING_S)
+
+            def sim_values():
+                return diagnostics_values(sim_diags[-1][1]) if sim_diags else {}
+
+            # the driven part: from the simulator's first command on
+            deadline = time.monotonic() + 60
+            while int(sim_values().get('commands', '0') or 0) == 0:
+                if time.monotonic() > deadline or not procs['simulator'].alive():
+                    break
+                time.sleep(0.02)
+            cpu0 = {r: cpu_seconds(p.pid) for r, p in procs.items()} if cpu_seconds else {}
+            wall0 = time.monotonic()
+            end = wall0 + timeout
+            while (
+                len(reports) < CYCLES + 1
+                and time.monotonic() < end
+                and all(p.alive() for p in procs.values())
+            ):
+                time.sleep(0.05)
+            alive = {r: p.alive() for r, p in procs.items()}
+            cpu1 = {r: cpu_seconds(procs[r].pid) if alive[r] else cpu0[r] for r in cpu0}
+            wall = time.monotonic() - wall0
+            driven = [json.loads(m.data) for _, m in list(reports)]
+            time.sleep(1.2)  # one more report of each
+            updates = [e for e in procs['standin'].lines() if e.get('event') == 'update']
+            return StackRun(
+                order=tuple(order),
+                impacts=driven,
+                sim=sim_values(),
+                ctrl=diagnostics_values(ctrl_diags[-1][1]) if ctrl_diags else {},
+                standin_updates=updates[-1] if updates else {},
+                alive=alive,
+                cpu_percent={r: 100 * (cpu1[r] - cpu0[r]) / max(wall, 1e-9) for r in cpu0},
+                wall_s=wall,
+                load_average=os.getloadavg()[0],
+            )
+    finally:
+        probe.close()
