@@ -106,8 +106,12 @@ _DOMAINS = iter(random.sample(domain_range(), len(domain_range())))
 
 
 # a joint-space PD on the stand-in driver (standin_driver.py), with no surface in reach: what
-# the controller tests drive it with
+# the controller tests drive it with. The stand-in's joints (unit inertia, no gravity) are not
+# the scene's arm, so the controller must not predict with the scene's model over the
+# commands in flight: a measured latency of one period would make it hold the joints where
+# the paper arm's gravity, predicted over that period, would carry them to the target
 STANDIN_PD = (
+    'latency_periods:=0',
     'law:=pd',
     'space:=joint',
     'p:=[40.0,40.0]',

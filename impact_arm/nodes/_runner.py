@@ -67,12 +67,13 @@ class SampleWait:
             len(self.subscriptions), 1, 0, 0, 0, 0, owner.context.handle
         )
 
-    def wait(self, timeout: float) -> None:
-        """Until a sample is queued on any of the subscriptions, ``wake()`` or ``timeout`` s
-        (the GIL is released meanwhile)."""
+    def wait(self, timeout: float, subscriptions=None) -> None:
+        """Until a sample is queued on any of ``subscriptions`` (a subset of the ones given
+        at construction; default all), ``wake()`` or ``timeout`` s (the GIL is released
+        meanwhile)."""
         wait_set = self._wait_set
         wait_set.clear_entities()
-        for subscription in self.subscriptions:
+        for subscription in self.subscriptions if subscriptions is None else subscriptions:
             wait_set.add_subscription(subscription.handle)
         wait_set.add_guard_condition(self.guard.handle)
         wait_set.wait(int(timeout * 1e9))

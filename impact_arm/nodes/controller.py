@@ -60,6 +60,9 @@ from .params import (
 WAIT_TIMEOUT = 0.1
 # s: how long ``finish`` waits for the control thread to end before sending the zero command
 JOIN_TIMEOUT = 2.0
+# wrenches queued between two states: more than a state's worth at any driver rate the
+# controller runs with, so none is lost to the latch while the thread sleeps until a state
+WRENCH_QUEUE = 16
 
 # the settings whose change starts a fresh integral
 INTEGRAL_SETTINGS = (
@@ -127,8 +130,12 @@ class Controller(Node):
         # thread ~10x the control law itself. Raw: the few fields needed are read from the
         # bytes, a fraction of rclpy's conversion to message objects.
         self.reader_node = reader = reader_node(self, 'state_reader')
+        # the wrenches since the last state, all of them (the largest force is latched): the
+        # thread wakes on states only, unless a state waits for its wrench (_control_loop)
+        wrenches = contract.qos(JOINT_STATES).to_rclpy()
+        wrenches.depth = WRENCH_QUEUE
         self.sub_wrench = reader.create_subscription(
-            WrenchStamped, CONTACT_WRENCH, _unused, latest_only, raw=True
+            WrenchStamped, CONTACT_WRENCH, _unused, wrenches, raw=True
         )
         self.sub_state = reader.create_subscription(
             JointState, JOINT_STATES, _unused, latest_only, raw=True
@@ -235,21 +242,26 @@ class Controller(Node):
             scheduling = realtime_priority(self.p.thread_priority)
             self.get_logger().info(f'control thread: scheduling {scheduling}')
             wait, take, stop = self.samples.wait, self._take_samples, self._stop.is_set
+            inputs, states_only = self.inputs, (self.sub_state,)
             while not stop():
-                wait(WAIT_TIMEOUT)
+                # a wrench alone does nothing until the next state: waking for it too would
+                # double the thread's wake-ups (the costliest part of its period)
+                wait(WAIT_TIMEOUT, None if inputs.waiting is not None else states_only)
                 take()
         except Exception as exc:  # noqa: BLE001 - reported, and the node stops with an error
             self.get_logger().error(traceback.format_exc())
             self.failure = f'the control thread failed: {type(exc).__name__}: {exc}'
 
     def _take_samples(self):
-        """The queued samples (one of each at most: both readers keep only the newest), the
-        wrench first, as the driver publishes a period's wrench before its joint state
+        """The queued samples: the wrenches, oldest first, then the state (its reader keeps
+        only the newest), as the driver publishes a period's wrench before its joint state
         (ControlInputs takes either order). One that arrives meanwhile ends the next wait at
         once."""
         with self.lock:
-            taken = take_raw(self.sub_wrench)
-            if taken is not None:
+            for _ in range(WRENCH_QUEUE):  # bounded: a flood cannot hold the thread here
+                taken = take_raw(self.sub_wrench)
+                if taken is None:
+                    break
                 self._on_wrench(taken[0])
             taken = take_raw(self.sub_state)
             if taken is not None:
