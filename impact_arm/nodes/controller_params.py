@@ -170,7 +170,8 @@ def parameter_table(scene):
             'one or two): the controller acts on the state predicted from the model and the '
             'commands still in flight; -1: measured from the efforts the driver reports '
             '(0 until one matches a command sent; set it for a driver that reports measured '
-            'torques); 0: no prediction',
+            "torques); 0: no prediction, also for an arm the scene's model does not describe "
+            "(the prediction would steer it by the model's dynamics)",
             'int',
             low=-1,
             high=SENT_HISTORY - 1,
