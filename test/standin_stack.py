@@ -59,6 +59,7 @@ class StackRun:
     alive: dict
     cpu_percent: dict
     wall_s: float
+    sim_time_s: float
     load_average: float
     second_strike_s: float = SECOND_STRIKE_S
     contacts: list[float] = field(init=False)
@@ -101,7 +102,7 @@ class StackRun:
             'second_strikes': self.second_strikes,
             'first_strike_s': self.contacts[0] if self.contacts else None,
             'delta_m_max_mm': 1e3 * max((r['delta_m'] for r in self.impacts), default=float('nan')),
-            'sim_time_s': float(sim.get('sim_time', 'nan')),
+            'sim_time_s': self.sim_time_s,
             'wall_s': self.wall_s,
             'alive': self.alive,
             'latency_histogram': ctrl.get('latency_histogram', ''),
@@ -196,7 +197,8 @@ def run_stack(
             cpu1 = {r: cpu_seconds(procs[r].pid) if alive[r] else cpu0[r] for r in cpu0}
             wall = time.monotonic() - wall0
             driven = [json.loads(m.data) for _, m in list(reports)]
-            time.sleep(1.2)  # one more report of each
+            sim_time = float(sim_values().get('sim_time', 'nan'))  # (its latest report)
+            time.sleep(1.2)  # one more report of each, for the counters
             updates = [e for e in procs['standin'].lines() if e.get('event') == 'update']
             return StackRun(
                 order=tuple(order),
@@ -207,6 +209,7 @@ def run_stack(
                 alive=alive,
                 cpu_percent={r: 100 * (cpu1[r] - cpu0[r]) / max(wall, 1e-9) for r in cpu0},
                 wall_s=wall,
+                sim_time_s=sim_time,
                 load_average=os.getloadavg()[0],
             )
     finally:

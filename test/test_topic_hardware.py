@@ -237,7 +237,7 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_from_either_end(
     """docs/ros2_control.md's set-up in real time at 1 kHz, the stand-in stack on its own
     wall-clock schedule (not waiting for anyone), started stack first or controller first: the
     arm waits braked for the controller, then strikes once per cycle for the article's 15
-    cycles, the first strike no earlier than the offline loop's. Judged on what the code controls:
+    cycles, the first strike when the offline loop's. Judged on what the code controls:
     when the processes' own counters show the machine did not keep the schedule the law is
     made for (a watchdog brake, a latency beyond the handled one), a failure says so and the
     test is skipped rather than failed."""
@@ -253,12 +253,11 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_from_either_end(
         failures.append(f'{len(run.impacts)} impacts where {CYCLES + 1} were due')
     if run.second_strikes:
         failures.append(f'{run.second_strikes} second strikes: contacts {run.contacts}')
-    # a dropped arm falls unbraked and strikes early (and hard); a first strike a little
-    # later than offline is the stack's start (the first commands' latency), no danger
-    if run.contacts and run.contacts[0] < offline.t_contact[0] - 0.02:
+    # a dropped arm falls unheld and strikes early (and hard); a controller that falls
+    # behind at the start (its first predictions loading compiled code) strikes late
+    if run.contacts and abs(run.contacts[0] - offline.t_contact[0]) > 0.02:
         failures.append(
-            f'first strike at {run.contacts[0]:.3f} s, offline {offline.t_contact[0]:.3f} s: '
-            f'the arm fell before the controller held it'
+            f'first strike at {run.contacts[0]:.3f} s, offline {offline.t_contact[0]:.3f} s'
         )
     if run.impacts and max(r['delta_m'] for r in run.impacts) > 1.5 * max(offline.delta_m):
         failures.append(f'largest penetration {max(r["delta_m"] for r in run.impacts):.3g} m')
