@@ -767,6 +767,24 @@ def test_dependence_on_a_fixed_parameter_set_to_zero_is_per_an_amount():
     assert refit == pytest.approx(dep[0].change, rel=0.15), (refit, dep[0])
 
 
+def test_a_dependence_states_an_absolute_change_in_the_fitted_parameters_unit():
+    """A parameter fitted on a linear scale (joint friction may be 0) moves by an amount of
+    its own unit, which the warning and the report's table must name."""
+    from impact_arm.calibration.fit.dependence import Dependence
+    from impact_arm.calibration.fit.parameters import schema_unit
+
+    # the fitted parameter's unit comes from the scene schema ('-', a pure number: none)
+    assert schema_unit('joints[0].friction') == 'N m' and schema_unit('surfaces[0].mu') == ''
+    assert schema_unit('sensors.effort_latency') == 's' and schema_unit('links[9].nope') == ''
+    absolute = Dependence(
+        'joints[0].friction', 'surfaces[0].height', 0.401, False, 0.0026, fitted_unit='N m'
+    )
+    assert absolute.sentence().startswith('friction moves 0.401 N m up per 1 % of')
+    assert absolute.change_text(signed=True) == '+0.401 N m'
+    relative = Dependence('materials.steel.S_y', 'links[0].mass', -0.78, True, 0.5)
+    assert relative.sentence().startswith('S_y moves 0.78 % down per 1 % of links[0].mass')
+
+
 # ------------------------------------------------------------------ an arm of three links
 @pytest.fixture(scope='module')
 def three_link_recording(tmp_path_factory):

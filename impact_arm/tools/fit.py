@@ -245,7 +245,7 @@ def report_text(result, recording, scene, diagnosis=None) -> str:
             '|---|---|---:|---:|',
         ]
         for d in result.dependences:
-            change = f'{d.change:+.3g} %' if d.relative else f'{d.change:+.3g}'
+            change = d.change_text(signed=True)
             per = '' if d.unit == '%' else f' per {d.step:g} {d.unit}'
             lines.append(
                 f'| `{d.fitted}` | `{d.fixed}` | {change}{per} | {d.tolerance:.2g} {d.unit} |'

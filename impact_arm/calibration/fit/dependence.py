@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import Parameter
+from .parameters import Parameter, schema_unit
 from .physical import physical_key, stated_parameters
 from .problem import ImpactSet
 
@@ -34,6 +34,14 @@ class Dependence:
     tolerance: float  # how well the fixed one must be known to move the fitted by < 1 σ
     step: float = 1.0  # the step of the fixed one: 1 (%), or an amount in ``unit``
     unit: str = '%'  # of step and tolerance: '%' of the fixed value, or its own unit
+    fitted_unit: str = ''  # of an absolute change (the fitted parameter's own unit)
+
+    def change_text(self, signed: bool = False) -> str:
+        """The change with its unit: % of the fitted value, or the fitted one's unit."""
+        size = self.change if signed else abs(self.change)
+        if self.relative:
+            return f'{size:{"+" if signed else ""}.3g} %'
+        return f'{size:{"+" if signed else ""}.3g} {self.fitted_unit}'.rstrip()
 
     @property
     def per_percent(self) -> float:
@@ -47,7 +55,7 @@ class Dependence:
 
     def sentence(self) -> str:
         name = self.fitted.rsplit('.', 1)[-1]
-        change = f'{abs(self.change):.2g} %' if self.relative else f'{abs(self.change):.3g}'
+        change = self.change_text()
         way = 'up' if self.change > 0 else 'down'
         per = f'{self.step:g} {self.unit}'.rstrip() if self.unit != '%' else '1 %'
         tol = f'{self.tolerance:.2g} {self.unit}'.rstrip()
@@ -91,7 +99,11 @@ def dependences(
             if abs(change) < (REPORTED if p.log else REPORTED * 0.01 * abs(values[i])):
                 continue
             tol = step * sigma[i] / abs(d_native[i]) if d_native[i] else math.inf
-            out.append(Dependence(p.key, key, float(change), p.log, float(tol), step, unit))
+            out.append(
+                Dependence(
+                    p.key, key, float(change), p.log, float(tol), step, unit, schema_unit(p.key)
+                )
+            )
     return sorted(out, key=lambda d: d.tolerance / d.step)  # the most demanding first
 
 

@@ -175,10 +175,10 @@ def _missing(study: Study, key: str) -> str:
     return f'--param {key}: not in the scene {study.origin}'
 
 
-def schema_default(key: str) -> float | None:
-    """The number the scene schema gives a key the scene leaves out (None: required, not a
-    number, or not in the schema), read from the schema along the key's path."""
-    node: tuple = ('dict', SCHEMA, '', None)  # a schema leaf: (kind, constraint, unit, default)
+def _schema_leaf(key: str) -> tuple | None:
+    """The scene schema's entry (kind, constraint, unit, default) along a key's path, or None
+    when the schema has no such path."""
+    node: tuple = ('dict', SCHEMA, '', None)
     for part in parse_key_path(key):
         kind, inner = node[0], node[1]
         if (kind == 'list' and isinstance(part, int)) or (kind == 'map' and isinstance(part, str)):
@@ -187,7 +187,25 @@ def schema_default(key: str) -> float | None:
             node = inner[part]
         else:
             return None
+    return node
+
+
+def schema_default(key: str) -> float | None:
+    """The number the scene schema gives a key the scene leaves out (None: required, not a
+    number, or not in the schema), read from the schema along the key's path."""
+    node = _schema_leaf(key)
+    if node is None or node[0] != 'num':
+        return None
     default = node[3]
-    if node[0] == 'num' and isinstance(default, (int, float)) and not isinstance(default, bool):
+    if isinstance(default, (int, float)) and not isinstance(default, bool):
         return float(default)
     return None
+
+
+def schema_unit(key: str) -> str:
+    """The unit the scene schema states for a number key ('' for none, a pure number or a
+    key the schema does not have)."""
+    node = _schema_leaf(key)
+    if node is None or node[0] != 'num' or node[2] == '-':
+        return ''
+    return str(node[2])
