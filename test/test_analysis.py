@@ -158,6 +158,37 @@ def test_limit_cycle_of_records():
     ]
     lc = limit_cycle(impacts)
     assert lc['settled_after'] == 4 and lc['period'] == pytest.approx(0.4)
+    assert lc['impacts_per_cycle'] == 1
+
+
+def test_a_limit_cycle_of_two_strikes_per_cycle_is_found_with_its_period():
+    """A strike and a light re-strike 2 ms later each cycle of 0.47 s (the three-link arm):
+    no impact repeats its predecessor, every one repeats the one two before it."""
+    from impact_arm.physics.metrics import limit_cycle as find, settle_index
+
+    impacts = []
+    for k in range(7):
+        for first in (True, False):
+            settling = 2.0 * 0.5**k  # the first cycles approach the limit cycle
+            impacts.append(
+                {
+                    't_contact': 0.47 * k + (0.0 if first else 0.002),
+                    'q_contact_deg': [-49.0 + settling, -22.0 if first else -22.5],
+                    'v_before': [-3.3, -4.9] if first else [-1.2, -0.4],
+                }
+            )
+    assert settle_index(impacts) is None  # not every impact repeats its predecessor
+    cycle = find(impacts)
+    assert cycle is not None and cycle.impacts_per_cycle == 2
+    # the 6th cycle (impacts 11, 12) repeats in the 7th within 1e-3 of 49 degrees; the 5th
+    # differs from the 6th by 0.0625 degrees
+    assert cycle.settled_after == 11
+    assert cycle.period(impacts) == pytest.approx(0.47)
+    lc = limit_cycle(impacts)
+    assert lc['impacts_per_cycle'] == 2 and lc['period'] == pytest.approx(0.47)
+    assert lc['period_last'] == pytest.approx(0.002)
+    # one repetition seen is not a cycle: the last two cycles only, and the 4th impact on
+    assert find(impacts[-3:]) is None and find(impacts[-4:]).settled_after == 1
 
 
 def small_recording(path):

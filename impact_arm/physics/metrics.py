@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -112,10 +113,12 @@ def settle_index(
     impacts: Sequence[dict],
     rel_tol: float = 1e-3,
     keys: Sequence[str] = ('q_contact_deg', 'v_before'),
+    every: int = 1,
 ) -> int | None:
-    """The number N of the impact (1-based) from which every later impact repeats its
-    predecessor's contact angles and velocities to ``rel_tol``: the limit cycle is reached
-    after N impacts. None if the run never settles (or has fewer than two impacts)."""
+    """The number N of the impact (1-based) from which every later impact repeats the one
+    ``every`` impacts before it (its predecessor by default) in contact angles and
+    velocities to ``rel_tol``: the limit cycle is reached after N impacts. None if the run
+    never settles so (or has too few impacts to show one whole repetition)."""
 
     def close(a: dict, b: dict) -> bool:
         for key in keys:
@@ -126,8 +129,43 @@ def settle_index(
 
     # one pass from the end: the earliest k from which every pair still repeats
     settled = len(impacts)
-    for j in range(len(impacts) - 1, 0, -1):
-        if not close(impacts[j], impacts[j - 1]):
+    for j in range(len(impacts) - 1, every - 1, -1):
+        if not close(impacts[j], impacts[j - every]):
             break
-        settled = j
-    return settled if settled < len(impacts) else None
+        settled = j - every + 1
+    # at least one whole cycle seen repeating: ``every`` pairs
+    return settled if settled <= len(impacts) - 2 * every + 1 else None
+
+
+@dataclass(frozen=True)
+class LimitCycle:
+    """Where a run's impacts start repeating: after ``settled_after`` impacts, with
+    ``impacts_per_cycle`` impacts per repetition (1 for the article's arm; 2 for an arm that
+    strikes, rebounds and strikes again in each cycle)."""
+
+    settled_after: int
+    impacts_per_cycle: int
+
+    def period(self, impacts: Sequence[dict]) -> float:
+        """The duration of one repetition, the mean over the settled part."""
+        times = [i['t_contact'] for i in impacts[self.settled_after - 1 :]]
+        every = self.impacts_per_cycle
+        spans = [b - a for a, b in zip(times, times[every:])]
+        return sum(spans) / len(spans)
+
+    def text(self) -> str:
+        per = f' ({self.impacts_per_cycle} impacts per cycle)' if self.impacts_per_cycle > 1 else ''
+        return f'reached after {self.settled_after} impacts{per}'
+
+
+MOST_IMPACTS_PER_CYCLE = 4
+
+
+def limit_cycle(impacts: Sequence[dict], rel_tol: float = 1e-3) -> LimitCycle | None:
+    """The limit cycle with the fewest impacts per repetition (up to
+    ``MOST_IMPACTS_PER_CYCLE``) the run settles into, or None."""
+    for every in range(1, MOST_IMPACTS_PER_CYCLE + 1):
+        settled = settle_index(impacts, rel_tol, every=every)
+        if settled is not None:
+            return LimitCycle(settled, every)
+    return None

@@ -21,7 +21,7 @@ from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
 from .integrator import Event, PhaseIntegrator, options_from_spec
 from .kinds import TextEnum
-from .metrics import ImpactBuilder, settle_index
+from .metrics import ImpactBuilder, limit_cycle, settle_index
 from .model import ArmModel
 from .scene import Scene
 
@@ -422,10 +422,15 @@ def format_table(result: RunResult) -> str:
         )
     )
     if s['period_last'] is not None:
-        settled = result.settled_after
+        cycle = limit_cycle(result.impacts)
         lines.append(
             f'last period {s["period_last"]:.5f} s; limit cycle '
-            + (f'reached after {settled} impacts' if settled else 'not reached')
+            + (cycle.text() if cycle else 'not reached')
+            + (
+                f', period {cycle.period(result.impacts):.5f} s'
+                if cycle and cycle.impacts_per_cycle > 1
+                else ''
+            )
         )
     if result.error:
         lines.append(f'STOPPED: {result.error}')

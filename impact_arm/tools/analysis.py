@@ -36,7 +36,7 @@ import numpy as np
 
 from ..contract import FEEDBACK_LAWS, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, to_absolute
 from ..physics.errors import ImpactArmError
-from ..physics.metrics import settle_index
+from ..physics.metrics import limit_cycle as find_limit_cycle
 
 
 class AnalysisError(ImpactArmError):
@@ -448,15 +448,21 @@ def poincare(t, q, qd, k: int) -> np.ndarray:
 
 
 def limit_cycle(impacts) -> dict:
-    """Impacts until the motion repeats itself (``metrics.settle_index``) and the period."""
+    """Impacts until the motion repeats itself (``metrics.limit_cycle``: every impact, or
+    every second one for an arm that strikes twice per cycle, ...) and the period: one
+    repetition's duration."""
     times = [i['t_contact'] for i in impacts]
     periods = np.diff(times)
-    settled = settle_index(impacts) if len(impacts) > 1 else None
-    after = periods[settled - 1 :] if settled else periods[-1:]
+    cycle = find_limit_cycle(impacts)
+    if cycle is not None:
+        period: float | None = cycle.period(impacts)
+    else:
+        period = float(periods[-1]) if len(periods) else None
     return {
         'impacts': len(impacts),
-        'settled_after': settled,
-        'period': float(np.mean(after)) if len(after) else None,
+        'settled_after': cycle.settled_after if cycle else None,
+        'impacts_per_cycle': cycle.impacts_per_cycle if cycle else None,
+        'period': period,
         'period_last': float(periods[-1]) if len(periods) else None,
         'periods': [float(p) for p in periods],
     }
@@ -737,8 +743,10 @@ def _record_from_trace(columns, rows, k):
 def _limit_cycle_text(lc) -> str:
     if not lc['impacts']:
         return 'no impacts recorded'
+    per = lc.get('impacts_per_cycle') or 1
     settled = (
         f'limit cycle reached after {lc["settled_after"]} impacts'
+        + (f' ({per} impacts per cycle)' if per > 1 else '')
         if lc['settled_after']
         else 'limit cycle not reached'
     )
