@@ -104,6 +104,20 @@ def test_a_run_with_overrides_is_the_event_run_of_the_scene_they_describe():
     assert study.run({'cycles': 4}).impacts != expected
 
 
+def test_an_arm_striking_twice_per_cycle_is_summarised_by_its_cycle():
+    """The three-link arm strikes, rebounds and strikes again 2 ms later in every cycle: the
+    summary counts two impacts per cycle, and its period is the cycle's, not the 2 ms."""
+    result = Study('three_link').run({'cycles': 10})
+    times = [i['t_contact'] for i in result.impacts]
+    assert not result.error and result.summary['impacts_per_cycle'] == 2
+    assert 0 < result.summary['settled_after'] < len(times) - 2
+    assert result.summary['period'] == times[-1] - times[-3]
+    assert times[-1] - times[-2] < 0.01 < 0.4 < result.summary['period']
+    # the article's arm: one impact per cycle, the period between the last two contacts
+    paper = Study('paper', LOOSE).run({'cycles': 8}).summary
+    assert paper['impacts_per_cycle'] == 1 and paper['settled_after'] > 0
+
+
 def test_refused_values_and_simulation_errors_are_results_not_exceptions():
     study = Study('paper', LOOSE)
     refused = study.run({'surfaces[0].mu': -1.0})

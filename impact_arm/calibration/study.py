@@ -33,7 +33,7 @@ import time
 from dataclasses import dataclass, field
 
 from ..physics.errors import SceneError
-from ..physics.metrics import settle_index
+from ..physics.metrics import limit_cycle
 from ..physics.scene import Scene, parse_scene, read_scene_file, scene_data
 from ..physics.simulate import run as run_scene
 
@@ -171,16 +171,21 @@ def summarize(
     stats: Stats | None = None,
     wall: float = math.nan,
 ) -> dict:
-    """The per-run numbers of a study: impacts, the last period between contacts (the limit
-    cycle's once settled), the impact from which the motion repeats, the final CoRs."""
+    """The per-run numbers of a study: impacts, the last period (the time the last
+    repetition took: between the last two contacts, or the last few for an arm that strikes
+    more than once per cycle), the impact from which the motion repeats and how many impacts
+    make one repetition, the final CoRs."""
     last = impacts[-1] if impacts else None
+    cycle = limit_cycle(impacts)
+    every = cycle.impacts_per_cycle if cycle else 1
     return {
         'impacts': len(impacts),
         't_end': t_end,
-        'period': impacts[-1]['t_contact'] - impacts[-2]['t_contact']
-        if len(impacts) > 1
+        'period': impacts[-1]['t_contact'] - impacts[-1 - every]['t_contact']
+        if len(impacts) > every
         else math.nan,
-        'settled_after': settle_index(impacts) or 0,
+        'settled_after': cycle.settled_after if cycle else 0,
+        'impacts_per_cycle': every if cycle else 0,
         'cor_kinematic': last['cor_kinematic'] if last else math.nan,
         'cor_energetic': last['cor_energetic'][-1] if last else math.nan,
         'rhs_evaluations': stats.rhs_evaluations if stats else 0,

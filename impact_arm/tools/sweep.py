@@ -537,6 +537,7 @@ COLUMN_UNITS = {
     't_end': 's',
     'period': 's',
     'settled_after': 'impacts',
+    'impacts_per_cycle': 'impacts',
     'cor_kinematic': '',
     'cor_energetic': '',
     'rhs_evaluations': '',
