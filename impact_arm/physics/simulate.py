@@ -21,7 +21,7 @@ from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
 from .integrator import Event, PhaseIntegrator, options_from_spec
 from .kinds import TextEnum
-from .metrics import ImpactBuilder, limit_cycle, settle_index
+from .metrics import ImpactBuilder, LimitCycle, limit_cycle
 from .model import ArmModel
 from .scene import Scene
 
@@ -142,8 +142,14 @@ class RunResult:
         return {'impacts': self.impacts, 'run': self.summary()}
 
     @property
+    def limit_cycle(self) -> LimitCycle | None:
+        """Where the impacts start repeating (one or a few per cycle), or None."""
+        return limit_cycle(self.impacts)
+
+    @property
     def settled_after(self) -> int | None:
-        return settle_index(self.impacts)
+        cycle = self.limit_cycle
+        return cycle.settled_after if cycle else None
 
 
 def run(
@@ -422,7 +428,7 @@ def format_table(result: RunResult) -> str:
         )
     )
     if s['period_last'] is not None:
-        cycle = limit_cycle(result.impacts)
+        cycle = result.limit_cycle
         lines.append(
             f'last period {s["period_last"]:.5f} s; limit cycle '
             + (cycle.text() if cycle else 'not reached')
