@@ -158,6 +158,8 @@ class LimitCycle:
         return f'reached after {self.settled_after} impacts{per}'
 
 
+# a strike and its rebounds: beyond a few, a run that has not settled would be read as a
+# long cycle that happens to repeat within the tolerance
 MOST_IMPACTS_PER_CYCLE = 4
 
 
