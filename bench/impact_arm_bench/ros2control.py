@@ -1,6 +1,8 @@
 """``impact-arm bench ros2control``: the ros2_control set-up of docs/ros2_control.md in real
 time at 1 kHz, with the stand-in stack (test/ros2control_standin.py) in place of
 controller_manager + TopicBasedSystem + joint_state_broadcaster + JointGroupEffortController.
+One run is test/standin_stack.py's, which the realtime test of test/test_topic_hardware.py
+runs too.
 
 Per run the three processes start in the chosen order (``--order``, a second apart): the
 stand-in at 1 000 updates per wall second on its sleep-until schedule (no waiting for peers),
