@@ -238,7 +238,8 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_in_any_start_order(
     """docs/ros2_control.md's set-up in real time at 1 kHz, the stand-in stack on its own
     wall-clock schedule (not waiting for anyone), started in each of the six orders: the
     arm waits braked for the controller, then strikes once per cycle for the article's 15
-    cycles, the first strike when the offline loop's. Judged on what the code controls:
+    cycles, the first strike when the offline loop's (not earlier: no zero command of the
+    stack released the arm, no late controller dropped it). Judged on what the code controls:
     when the processes' own counters show the machine did not keep the schedule the law is
     made for (a watchdog brake, a latency beyond the handled one), a failure says so and the
     test is skipped rather than failed."""
@@ -269,7 +270,8 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_in_any_start_order(
     if failures and misses:
         pytest.skip(f'the machine did not keep the schedule ({"; ".join(misses)}): {report}')
     assert not failures, report
-    # the stack's zeros came first where it ran before the simulator: the arm waited braked
-    if order.index('standin') < order.index('simulator'):
-        assert int(run.sim['zero_commands_before_release']) > 100, report
+    # (how many of the stack's zeros reach the simulator before the controller's first
+    # torque depends on when discovery matches them: 51 in one run with the simulator last.
+    # Had one released the arm, it would have struck early: the first strike checks it; the
+    # simulated-time test above counts the zeros.)
     assert run.ctrl['stamp_jumps'] == '0', report
