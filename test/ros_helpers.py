@@ -123,6 +123,31 @@ STANDIN_PD = (
 )
 
 
+@contextlib.contextmanager
+def driven_standin(env, workdir, seconds, params, name):
+    """The stand-in driver (standin_driver.py, running ``seconds``) and a controller node
+    named ``name`` with ``params`` driving it: yields the two processes (driver, controller),
+    both ended by PID on the way out."""
+    driver = [PYTHON, os.path.join(os.path.dirname(HERE), 'standin_driver.py'), str(seconds)]
+    node = controller(*params, ros_args=['-r', f'__node:={name}'])
+    with (
+        start_process(driver, env, workdir, 'standin') as standin,
+        start_process(node, env, workdir, 'ctl') as ctl,
+    ):
+        yield standin, ctl
+
+
+def driver_position(driver):
+    """The stand-in driver's joint positions at the latest command it printed, or None."""
+    lines = [x for x in driver.lines() if 'q' in x]
+    return lines[-1]['q'] if lines else None
+
+
+def driver_commands(driver):
+    """Every command the stand-in driver printed, oldest first."""
+    return [x['cmd'] for x in driver.lines() if 'cmd' in x]
+
+
 def make_env(domain=None, **extra) -> dict:
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

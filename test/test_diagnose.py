@@ -428,18 +428,16 @@ def test_a_known_effort_latency_changes_the_fit_of_the_real_arm_example(tmp_path
     assert any(w.startswith('--effort-latency 0.002 moved the efforts') for w in corrected.warnings)
 
 
-def test_a_driver_loops_difference_rates_fit_with_the_advice():
-    """The simulated driver's loop (efforts held over each period, a 1 kHz controller acting
-    on the published difference rates of a 20-bit encoder): with --difference-rates the
-    efforts' reading is chosen from mean rates too (the rate at the first sample after the
-    impact shot so that the replay reproduces the recorded first mean), 'previous' is found,
-    and the fit covers the truth (before: the midpoint reading, S_y 11 % off)."""
+def difference_rates_fit(sensors):
+    """The simulated driver's loop (a 1 kHz controller on the published difference rates,
+    with the encoder and noise of ``sensors``) fitted with --difference-rates, mu and S_y
+    free: it must read the efforts as 'previous', say `fits` and cover the truth."""
     from impact_arm.calibration.fit import fit
     from impact_arm.calibration.study import apply_overrides
 
     sampled = {'controller.rate': 1000.0}
     over = {**TRUTH, **sampled, 'sensors.rate': 'difference'}
-    rec = driver_recording('paper', over | {'sensors.counts_per_revolution': 1 << 20}, cycles=10)
+    rec = driver_recording('paper', over | sensors, cycles=10)
     scene = apply_overrides(Study('paper').data, sampled)
     bounds = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
     result = fit(correct(rec, Corrections(difference_rates=True)), scene, bounds)
@@ -448,6 +446,16 @@ def test_a_driver_loops_difference_rates_fit_with_the_advice():
     for key, value in TRUTH.items():
         lo, hi = result.parameters[key].ci95
         assert lo < value < hi, (key, lo, value, hi)
+    return result
+
+
+def test_a_driver_loops_difference_rates_fit_with_the_advice():
+    """The simulated driver's loop (efforts held over each period, a 1 kHz controller acting
+    on the published difference rates of a 20-bit encoder): with --difference-rates the
+    efforts' reading is chosen from mean rates too (the rate at the first sample after the
+    impact shot so that the replay reproduces the recorded first mean), 'previous' is found,
+    and the fit covers the truth (before: the midpoint reading, S_y 11 % off)."""
+    difference_rates_fit({'sensors.counts_per_revolution': 1 << 20})
 
 
 @pytest.mark.parametrize('extra', [{}, {'sensors.position_noise': 2e-5, 'sensors.seed': 2}])
@@ -461,20 +469,7 @@ def test_a_driver_loop_on_a_coarse_encoders_difference_rates_covers_the_truth(ex
     is the model's flight under the recorded efforts through the positions before it (a cubic
     cannot follow the torque's jumps from period to period): S_y within a fraction of its
     interval, the interval covering the truth and a tenth of a percent wide, not half one."""
-    from impact_arm.calibration.fit import fit
-    from impact_arm.calibration.study import apply_overrides
-
-    sampled = {'controller.rate': 1000.0}
-    over = {**TRUTH, **sampled, 'sensors.rate': 'difference'}
-    rec = driver_recording('paper', over | ENCODER | extra, cycles=10)
-    scene = apply_overrides(Study('paper').data, sampled)
-    bounds = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
-    result = fit(correct(rec, Corrections(difference_rates=True)), scene, bounds)
-    assert result.timing == 'previous'
-    assert result.fits, result.verdict
-    for key, value in TRUTH.items():
-        lo, hi = result.parameters[key].ci95
-        assert lo < value < hi, (key, lo, value, hi)
+    result = difference_rates_fit(ENCODER | extra)
     lo, hi = result.parameters['materials.steel.S_y'].ci95
     assert hi / lo - 1 < 0.004, (lo, hi)  # the cubic's start left +-0.5 %
 

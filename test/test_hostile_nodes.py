@@ -10,9 +10,10 @@ import time
 
 from ros_helpers import (
     STANDIN_PD,
-    PYTHON,
-    controller,
     diagnostics_values,
+    driven_standin,
+    driver_commands,
+    driver_position,
     from_simulator,
     node_args,
     simulator,
@@ -59,21 +60,11 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
 
-    standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '60']
-    params = STANDIN_PD
     states = probe.publisher(JointState, '/joint_states')
-    with (
-        start_process(standin, ros_env, tmp_path, 'standin') as driver,
-        start_process(
-            controller(*params, ros_args=['-r', '__node:=hostile_controller']),
-            ros_env,
-            tmp_path,
-            'ctl',
-        ) as ctl,
-    ):
+    with driven_standin(ros_env, tmp_path, 60, STANDIN_PD, 'hostile_controller') as (driver, ctl):
 
         def commands():
-            return [x['cmd'] for x in driver.lines() if 'cmd' in x]
+            return driver_commands(driver)
 
         assert wait_for(lambda: len(commands()) > 20, timeout=60), ctl.stderr
         rng = random.Random(17)
@@ -120,7 +111,7 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
         # still alive and still controlling on the driver's own states after all of that
         assert wait_for(lambda: len(commands()) > sent_before + 50, timeout=30), ctl.stderr
         assert ctl.alive(), ctl.stderr
-        q = [x['q'] for x in driver.lines() if 'q' in x][-1]
+        q = driver_position(driver)
         assert all(abs(a - b) < 0.05 for a, b in zip(q, [-0.5, 0.3])), q
 
         ctl.signal(signal.SIGINT)

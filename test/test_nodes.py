@@ -19,6 +19,9 @@ from ros_helpers import (
     PYTHON,
     controller,
     diagnostics_values,
+    driven_standin,
+    driver_commands,
+    driver_position,
     from_simulator,
     node_args,
     simulator,
@@ -416,21 +419,10 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
 
-    standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '60']
-    params = STANDIN_PD
-    with (
-        start_process(standin, ros_env, tmp_path, 'standin') as driver,
-        start_process(
-            controller(*params, ros_args=['-r', '__node:=standin_controller']),
-            ros_env,
-            tmp_path,
-            'ctl',
-        ) as ctl,
-    ):
+    with driven_standin(ros_env, tmp_path, 60, STANDIN_PD, 'standin_controller') as (driver, ctl):
 
         def position():
-            lines = [x for x in driver.lines() if 'q' in x]
-            return lines[-1]['q'] if lines else None
+            return driver_position(driver)
 
         def near(target):
             q = position()
@@ -465,8 +457,7 @@ def test_controller_drives_a_standin_driver(probe, ros_env, tmp_path):
         ctl.signal(signal.SIGINT)
         assert ctl.wait(10) == 0, ctl.stderr
         time.sleep(0.3)
-        commands = [x['cmd'] for x in driver.lines() if 'cmd' in x]
-        assert commands[-1] == [0.0, 0.0]
+        assert driver_commands(driver)[-1] == [0.0, 0.0]
         assert 'Traceback' not in ctl.stderr
 
 
@@ -475,22 +466,9 @@ def test_controller_holds_its_first_command_for_startup_hold(ros_env, tmp_path):
     it started (DDS discovery settles meanwhile), then drives the arm as usual."""
     import re
 
-    standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '30']
     params = ('law:=pd', 'space:=joint', 'rate:=200.0', 'startup_hold:=2.5')
-    with (
-        start_process(standin, ros_env, tmp_path, 'standin') as driver,
-        start_process(
-            controller(*params, ros_args=['-r', '__node:=held_controller']),
-            ros_env,
-            tmp_path,
-            'ctl',
-        ) as ctl,
-    ):
-
-        def commands():
-            return [x for x in driver.lines() if 'cmd' in x]
-
-        assert wait_for(lambda: len(commands()) > 10, timeout=60), ctl.stderr
+    with driven_standin(ros_env, tmp_path, 30, params, 'held_controller') as (driver, ctl):
+        assert wait_for(lambda: len(driver_commands(driver)) > 10, timeout=60), ctl.stderr
         assert re.search(r'\[held_controller\]: first command held 2\.5 s', ctl.stderr)
         # the hold by the controller's own clock, from its start to its first command: what
         # the code controls (two processes' log and receive times would also measure how a
@@ -503,30 +481,16 @@ def test_controller_with_trigger_timer_drives_a_standin_driver(ros_env, tmp_path
     """trigger timer: the control thread takes the samples, a timer of the executor thread
     ticks on the latest one (at 50 Hz against the stand-in's 200 Hz states) and drives the
     joints to their targets."""
-    standin = [PYTHON, os.path.join(HERE, 'standin_driver.py'), '40']
     pd = [a for a in STANDIN_PD if not a.startswith('rate:=')]
     params = (*pd, 'trigger:=timer', 'rate:=50.0', 'startup_hold:=0.0')
-    with (
-        start_process(standin, ros_env, tmp_path, 'standin') as driver,
-        start_process(
-            controller(*params, ros_args=['-r', '__node:=timer_controller']),
-            ros_env,
-            tmp_path,
-            'ctl',
-        ) as ctl,
-    ):
-
-        def position():
-            lines = [x for x in driver.lines() if 'q' in x]
-            return lines[-1]['q'] if lines else None
-
+    with driven_standin(ros_env, tmp_path, 40, params, 'timer_controller') as (driver, ctl):
         assert wait_for(
             lambda: (
-                (q := position()) is not None
+                (q := driver_position(driver)) is not None
                 and all(abs(a - b) < 0.01 for a, b in zip(q, [-0.5, 0.3]))
             ),
             timeout=30,
-        ), (position(), ctl.stderr)
+        ), (driver_position(driver), ctl.stderr)
         assert 'at 50 Hz (timer)' in ctl.stderr, ctl.stderr
 
 

@@ -107,6 +107,16 @@ def rejected(diag):
     return int(diagnostics_values(diag)['commands_rejected'])
 
 
+@pytest.fixture(scope='module')
+def offline_start():
+    """The article's loop offline, no latency, over its first second: where the first strike
+    comes and how deep it goes when nothing drops or delays the arm."""
+    from impact_arm.physics.scene import load_scene, resolve_scene_path
+    from impact_arm.tools.latency_study import closed_loop
+
+    return closed_loop(load_scene(resolve_scene_path('paper')), 0, 0, t_max=1.0)
+
+
 def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_env, tmp_path):
     by_array, hw_array, _ = drive(probe, ros_env, tmp_path, 'array')
     by_name, hw_name, diags = drive(probe, ros_env, tmp_path, 'joint_state')
@@ -137,7 +147,7 @@ STANDIN_CYCLES = 15  # impacts (the article's cycle strikes every ~0.4 s)
 
 @pytest.mark.parametrize('unsynchronised', [0.0, 0.5], ids=['synchronised', 'unsynchronised'])
 def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
-    probe, ros_env, tmp_path, unsynchronised
+    probe, ros_env, tmp_path, unsynchronised, offline_start
 ):
     """Hardware and controller manager first (zero commands from activation on, each
     update), then the simulator, then the controller remapped to the broadcaster's states
@@ -151,8 +161,7 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
     from ros_helpers import controller, from_simulator, helper_args
     from std_msgs.msg import String
 
-    from impact_arm.physics.scene import load_scene, resolve_scene_path
-    from impact_arm.tools.latency_study import SECOND_STRIKE_S, closed_loop
+    from impact_arm.tools.latency_study import SECOND_STRIKE_S
 
     reports = probe.listen(String, '/impact_report', transient=True)
     diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
@@ -210,7 +219,7 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
     gaps = [b - a for a, b in zip(contacts, contacts[1:])]
     assert min(gaps) > SECOND_STRIKE_S, contacts  # one strike per cycle
     # no dropped arm: the first strike is the controller's, when the offline loop strikes
-    offline = closed_loop(load_scene(resolve_scene_path('paper')), 0, 0, t_max=1.0)
+    offline = offline_start
     assert contacts[0] == pytest.approx(offline.t_contact[0], abs=0.02), contacts
     assert max(r['delta_m'] for r in impacts) < 1.5 * max(offline.delta_m)
     assert int(values['zero_commands_before_release']) > 100
@@ -233,7 +242,7 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
     ids=lambda order: '_'.join(order),
 )
 def test_the_standin_stack_in_real_time_runs_the_15_cycles_in_any_start_order(
-    ros_env, tmp_path, order
+    ros_env, tmp_path, order, offline_start
 ):
     """docs/ros2_control.md's set-up in real time at 1 kHz, the stand-in stack on its own
     wall-clock schedule (not waiting for anyone), started in each of the six orders: the
@@ -245,11 +254,8 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_in_any_start_order(
     test is skipped rather than failed."""
     from standin_stack import CYCLES, run_stack
 
-    from impact_arm.physics.scene import load_scene, resolve_scene_path
-    from impact_arm.tools.latency_study import closed_loop
-
     run = run_stack(order, ros_env, str(tmp_path), timeout=60.0)
-    offline = closed_loop(load_scene(resolve_scene_path('paper')), 0, 0, t_max=1.0)
+    offline = offline_start
     failures = []
     if len(run.impacts) < CYCLES + 1:
         failures.append(f'{len(run.impacts)} impacts where {CYCLES + 1} were due')

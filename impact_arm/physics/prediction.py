@@ -267,11 +267,7 @@ class ArrayStatePredictor:
         tau: Sequence[float],
         periods: int = 1,
     ) -> list[float]:
-        """The joint torques τ that ``law`` (joint torques of absolute angles and rates) gives
-        on the state τ itself leads to, held ``periods`` periods from (``q``, ``qd``):
-        τ = law(ahead(q, qd, [τ] * periods)), one Newton step from ``tau`` (the law's output
-        at (``q``, ``qd``)) with a finite-difference Jacobian. The explicit ``tau`` comes back
-        when the step cannot be taken (a singular Jacobian, a result that is not finite)."""
+        """``StatePredictor.implicit_command`` on numpy arrays, solved by LAPACK."""
         if periods < 1:
             raise ValueError(f'periods = {periods}: must be >= 1')
         tau0 = np.asarray(tau, dtype=float)
