@@ -104,4 +104,9 @@ def test_periods_after_the_files_last_sample_count_up_to_the_runs_end(tmp_path):
     cut = check_recording(mcap, 1000.0, until=0.0595)
     assert cut.missing_periods == list(range(50, 60)), cut.missing_periods
     assert not cut.complete
-    assert '10 periods not in the file' in cut.summary(lockstep=False)
+    assert cut.lost_tail == 10
+    assert (
+        '10 periods not in the file (the file ends at t = 0.049 s, the run at 0.059 s: '
+        'the recorder received nothing after it)' in cut.summary(lockstep=False)
+    )
+    assert 'the file ends' not in check_recording(mcap, 1000.0).summary(lockstep=False)

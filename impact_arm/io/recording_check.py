@@ -44,6 +44,10 @@ class RecordingCheck:
     # the other per-period topics: topic -> period numbers absent between 0 and the last
     # period of any of them (a topic expected but not in the file misses every period)
     missing_on: dict = field(default_factory=dict)
+    # the missing periods at the end, after the file's last /joint_states (a recorder that
+    # stopped receiving): no sequence gap shows them, the run's end does
+    lost_tail: int = 0
+    rate: float = 0.0  # Hz: the period grid, for times in the summary
 
     @property
     def complete(self) -> bool:
@@ -81,6 +85,13 @@ class RecordingCheck:
             text += ': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems)
         else:
             text += f', {len(self.missing_periods)} periods not in the file'
+            if self.lost_tail and self.rate > 0:
+                last = self.missing_periods[-1]
+                ends = (last - self.lost_tail) / self.rate
+                text += (
+                    f' (the file ends at t = {ends:.3f} s, the run at {last / self.rate:.3f} s: '
+                    'the recorder received nothing after it)'
+                )
         # what the recorder counted as never received (a best-effort /clock may lose samples
         # while the periods themselves are all there)
         lost = ', '.join(f'{t} {n}' for t, n in sorted(self.lost.items()) if n)
@@ -123,6 +134,7 @@ def check_recording(
     last = max(last, math.floor(until * rate + 1e-6))
     grid = set(range(last + 1))
     missing = sorted(grid - stamps[JOINT_STATES])
+    lost_tail = last - max(stamps[JOINT_STATES], default=-1)
     missing_on = {t: sorted(grid - seen) for t, seen in stamps.items() if t != JOINT_STATES}
     known = {i for i in indices if i is not None}
     missing_reports = sorted(set(range(1, max(known, default=0) + 1)) - known)
@@ -136,4 +148,6 @@ def check_recording(
         missing_reports,
         lost,
         missing_on,
+        lost_tail,
+        rate,
     )

@@ -146,7 +146,11 @@ def cli(args) -> int:
     if output and os.path.exists(output):
         from ..io.recording_check import check_recording
 
-        check = check_recording(output, args.rate, simulator_topics(scene), until=run.sim_time)
+        # until the simulator's last period: a recorder that stopped receiving (frozen, then
+        # starved) lost the tail without a sequence gap, and the run's own end can be earlier
+        # than the pause that ended it
+        until = max(run.sim_time, run.published_until)
+        check = check_recording(output, args.rate, simulator_topics(scene), until=until)
         print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
@@ -312,6 +316,9 @@ class Run:
         self.impacts = []
         self.diagnostics = {}
         self.sim_time = 0.0
+        # the simulator's own last reported time, its final report on exit included: the
+        # periods it published, whether or not the run counts them
+        self.published_until = 0.0
         self.rhs_evaluations = 0
         self.strikes = 0  # cycles whose down half an impact ended (the controller's count)
         self.down_half_start = {}  # strike count -> stamp at which that cycle's down half began
@@ -450,6 +457,8 @@ class Run:
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
+            published = float(values.get('sim_time', self.published_until))
+            self.published_until = max(self.published_until, published)
             if not self.stopping:  # the run's time ends with it; the counters with the node
                 self.sim_time = float(values.get('sim_time', self.sim_time))
             self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
@@ -561,7 +570,8 @@ class Run:
             return
         import rclpy
 
-        target = int(self.sim_time * 1e9) - 1_000_000  # one period of slack: stamps round
+        last = max(self.sim_time, self.published_until)
+        target = int(last * 1e9) - 1_000_000  # one period of slack: stamps round
         end = time.monotonic() + timeout
         seen, since = progress.written_until, time.monotonic()
         # rclpy.spin_once, not _spin_once: that raises once interrupted, and stop() must go on
