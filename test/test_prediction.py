@@ -149,6 +149,55 @@ def test_the_float_predictor_is_the_array_formula_on_a_four_link_arm():
     assert got != pytest.approx(damping(q, qd), rel=1e-3)  # the step did something
 
 
+@pytest.mark.parametrize('n', [2, 3, 4])
+def test_a_urdf_arms_prediction_is_pinocchios_forward_dynamics(tmp_path, n):
+    """A hand-written URDF arm (centres of mass off the axis, turned inertia tensors): the
+    prediction equals classical Runge-Kutta on Pinocchio's forward dynamics (ABA, its own
+    parser and algorithm) in joint angles θ with the same joint torques and step; the steps
+    commute with q = T θ, so the two agree to rounding. Two and three links take the
+    closed-form acceleration, four the numerical solve; a predictor handed the rod lengths
+    in place of a general link's geometry fails here."""
+    pin = pytest.importorskip('pinocchio')
+    from test_urdf_arm import load, random_urdf
+
+    rng = np.random.default_rng(70 + n)
+    text, _, _ = random_urdf(rng, n)
+    model = ArmModel(load(tmp_path, text, n))
+    assert model.general
+    robot = pin.buildModelFromXML(text)
+    data = robot.createData()
+
+    def accel(theta, theta_d, tau):
+        # continuous joints are (cos, sin) pairs in Pinocchio's configuration
+        config = np.concatenate(
+            [[a] if k % 2 else [math.cos(a), math.sin(a)] for k, a in enumerate(theta)]
+        )
+        return np.array(pin.aba(robot, data, config, theta_d, tau))
+
+    T = np.tril(np.ones((n, n)))
+    h = PERIOD / 2
+    for _ in range(3):
+        theta, theta_d = rng.uniform(-2.0, 2.0, n), rng.uniform(-3.0, 3.0, n)
+        held = [rng.uniform(-20.0, 20.0, n) for _ in range(3)]
+        y, v = theta.copy(), theta_d.copy()
+        for tau in held:
+            for _ in range(2):
+                a1 = accel(y, v, tau)
+                v2 = v + h / 2 * a1
+                a2 = accel(y + h / 2 * v, v2, tau)
+                v3 = v + h / 2 * a2
+                a3 = accel(y + h / 2 * v2, v3, tau)
+                v4 = v + h * a3
+                a4 = accel(y + h * v3, v4, tau)
+                y = y + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+                v = v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+        for predictor in (StatePredictor(model, PERIOD, 2), ArrayStatePredictor(model, PERIOD, 2)):
+            q, qd = predictor.ahead(T @ theta, T @ theta_d, [t.tolist() for t in held])
+            assert np.linalg.solve(T, q) == pytest.approx(y, rel=0, abs=1e-12)
+            assert np.linalg.solve(T, qd) == pytest.approx(v, rel=0, abs=1e-9)
+        assert not np.allclose(y, theta + 3 * PERIOD * theta_d, atol=1e-6)  # forces acted
+
+
 def test_the_small_solve_pivots_and_refuses_a_singular_matrix():
     """Against numpy's solve, on a matrix that needs a row exchange; a singular one gives
     None (the implicit law then keeps its explicit torque)."""

@@ -53,7 +53,9 @@ class StatePredictor:
         # the scene's compiled q̈, or its mass matrix and right-hand side to solve
         self._accel_of = model.eq.accel if model.eq.HAS_ACCEL else None
         self._mass_and_rhs = model.eq.mass_and_rhs
-        self._parameters = (model.L, model.m, model.g)
+        # the generated functions take the link geometry (rod lengths, or a general link's
+        # lengths, centres of mass, inertias and contact point), not the lengths alone
+        self._parameters = (model.geometry, model.m, model.g)
         # the article's two links in closed form: the steps unrolled into scalars
         self._unrolled = model.n == 2 and self._accel_of is not None
 
@@ -231,9 +233,9 @@ class ArrayStatePredictor:
     def _accel(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         m = self.model
         if m.eq.HAS_ACCEL:
-            return np.asarray(m.eq.accel(q, qd, self._generalized, m.L, m.m, m.g))
+            return np.asarray(m.eq.accel(q, qd, self._generalized, m.geometry, m.m, m.g))
         n = m.n
-        values = m.eq.mass_and_rhs(q, qd, self._generalized, m.L, m.m, m.g)
+        values = m.eq.mass_and_rhs(q, qd, self._generalized, m.geometry, m.m, m.g)
         return np.linalg.solve(np.reshape(values[: n * n], (n, n)), np.asarray(values[n * n :]))
 
     def ahead(
