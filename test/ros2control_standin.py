@@ -11,6 +11,9 @@ wire, one update loop at its own rate on the wall clock:
 * write: the hardware publishes the command interfaces as a JointState on
   /robot_joint_commands, stamped with the wall clock, ``--late`` updates late.
 
+``--joints``: the arm's joints, as the URDF's ``<ros2_control>`` block lists them (default:
+the article's joint1 joint2).
+
 ``--wait-for-peers S``: once the controller has sent its first command, an update does not
 start before the hardware's new state and the controller's answer to the previous update's
 state have arrived (or S seconds have passed): a controller_manager that never outruns its
@@ -52,7 +55,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-JOINTS = ['joint1', 'joint2']
+JOINTS = ['joint1', 'joint2']  # the article's arm: the URDF's <ros2_control> joints
 WaitSet = rclpy_implementation.WaitSet  # what rclpy's executors wait on
 
 
@@ -74,7 +77,11 @@ def main():
     parser.add_argument('--wait-for-peers', type=float, default=0.0, help='s, at most')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--priority', type=int, default=50, help='SCHED_FIFO, 0: normal')
+    parser.add_argument(
+        '--joints', nargs='+', default=JOINTS, help="the arm's joint names, base to tip"
+    )
     args = parser.parse_args()
+    joints = args.joints
     rclpy.init()
     before = set(os.listdir('/proc/self/task'))
     node = rclpy.create_node('standin_controller_manager')
@@ -92,7 +99,7 @@ def main():
         received['states'] += 1
 
     def on_command(msg):
-        if len(msg.data) == len(JOINTS):
+        if len(msg.data) == len(joints):
             newest['command'] = list(msg.data)
             received['commands'] += 1
 
@@ -123,8 +130,8 @@ def main():
             wait_set.add_subscription(subscription.handle)
         wait_set.wait(int(timeout * 1e9))
 
-    state_interfaces = None  # (position, velocity, effort) in JOINTS order
-    command_interfaces = [0.0] * len(JOINTS)  # zeros from activation
+    state_interfaces = None  # (position, velocity, effort) in joints order
+    command_interfaces = [0.0] * len(joints)  # zeros from activation
     written = deque([list(command_interfaces)] * args.late)
     period = 1.0 / args.rate
     start = time.monotonic()
@@ -149,7 +156,7 @@ def main():
         msg = newest['state']
         states_read = received['states']
         if msg is not None:
-            index = [list(msg.name).index(j) for j in JOINTS]
+            index = [list(msg.name).index(j) for j in joints]
             state_interfaces = tuple(
                 [float(values[i]) for i in index]
                 for values in (msg.position, msg.velocity, msg.effort)
@@ -157,7 +164,7 @@ def main():
         stamp = node.get_clock().now().to_msg()  # the update's wall-clock time
         # update: broadcaster, then the effort controller
         if state_interfaces is not None:
-            out = JointState(name=list(JOINTS))
+            out = JointState(name=list(joints))
             out.header.stamp = stamp
             out.position, out.velocity, out.effort = state_interfaces
             # a controller answers a new state, not a repetition
@@ -177,7 +184,7 @@ def main():
         # write, late by --late updates
         written.append(list(command_interfaces))
         value = written.popleft()
-        command = JointState(name=list(JOINTS), effort=value)
+        command = JointState(name=list(joints), effort=value)
         command.header.stamp = stamp
         hardware_out.publish(command)
         zeros += not any(value)

@@ -120,9 +120,19 @@ class StackRun:
 
 
 def commands(
-    duration: float, standin: str | None = None, standin_priority: int = 50, controller_params=()
+    duration: float,
+    standin: str | None = None,
+    standin_priority: int = 50,
+    controller_params=(),
+    scene: str | None = None,
 ) -> dict:
-    """Each role's command line."""
+    """Each role's command line; ``scene``: a scene file for the simulator and the
+    controller (default: the article's), whose joints the stand-in then drives."""
+    from impact_arm.nodes.params import scene_joint_names
+    from impact_arm.physics.scene import load_scene
+
+    joints = scene_joint_names(load_scene(scene)) if scene else []
+    scene_param = [f'scene:={os.path.abspath(scene)}'] if scene else []
     return {
         'standin': [
             sys.executable,
@@ -135,9 +145,10 @@ def commands(
             str(duration),
             '--priority',
             str(standin_priority),
+            *(['--joints', *joints] if joints else []),
         ],
-        'simulator': simulator('mode:=realtime'),
-        'controller': controller(*controller_params, ros_args=REMAPS),
+        'simulator': simulator('mode:=realtime', *scene_param),
+        'controller': controller(*scene_param, *controller_params, ros_args=REMAPS),
     }
 
 
@@ -150,10 +161,12 @@ def run_stack(
     standin_priority: int = 50,
     controller_params=(),
     cpu_seconds: Callable[[int], float] | None = None,
+    scene: str | None = None,
 ) -> StackRun:
-    """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain; every process
-    is ended by PID on the way out. With ``cpu_seconds`` (a process's CPU time by PID), the
-    CPU each process used while the controller drove the arm."""
+    """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain, of the
+    article's arm or ``scene``'s; every process is ended by PID on the way out. With
+    ``cpu_seconds`` (a process's CPU time by PID), the CPU each process used while the
+    controller drove the arm."""
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
 
@@ -167,7 +180,7 @@ def run_stack(
         '/diagnostics',
         keep=lambda m: bool(m.status) and 'controller' in m.status[0].name,
     )
-    lines = commands(timeout + 30, standin, standin_priority, controller_params)
+    lines = commands(timeout + 30, standin, standin_priority, controller_params, scene)
     procs = {}
     try:
         with contextlib.ExitStack() as stack:

@@ -33,6 +33,9 @@ def add_arguments(parser):
     )
     parser.add_argument('--timeout', type=float, default=40.0, help='s of wall time per run')
     parser.add_argument(
+        '--scene', help="scene file for the simulator and the controller (default: the article's)"
+    )
+    parser.add_argument(
         '--standin-priority',
         type=int,
         default=50,
@@ -69,6 +72,7 @@ def _one_run(args, order, workdir):
         standin_priority=args.standin_priority,
         controller_params=args.controller_params,
         cpu_seconds=lambda pid: cpu_seconds(f'/proc/{pid}/stat'),
+        scene=args.scene,
     ).as_dict()
 
 
