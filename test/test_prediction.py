@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from impact_arm.physics.control import CycleController
 from impact_arm.physics.model import ArmModel
-from impact_arm.physics.prediction import ArrayStatePredictor, StatePredictor, solve_small
+from impact_arm.physics.prediction import ArrayStatePredictor, StatePredictor, solve3, solve_small
 from impact_arm.physics.scene import load_scene, parse_scene, resolve_scene_path
 from scenes import arm_dict
 
@@ -206,3 +206,20 @@ def test_the_small_solve_pivots_and_refuses_a_singular_matrix():
     expected = np.linalg.solve(np.array(a), np.array(b))
     assert solve_small([list(r) for r in a], list(b)) == pytest.approx(expected, rel=1e-13)
     assert solve_small([[1.0, 2.0], [2.0, 4.0]], [1.0, 1.0]) is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.floats(-10.0, 10.0), min_size=9, max_size=9),
+    st.lists(st.floats(-100.0, 100.0), min_size=3, max_size=3),
+)
+def test_the_three_by_three_solve_is_numpys(entries, rhs):
+    """The adjugate solve three-link predictions use, against LAPACK: the residual within
+    rounding of the matrix's condition, on any matrix numpy solves; None on a singular one."""
+    a, r = np.reshape(entries, (3, 3)), np.array(rhs)
+    x = solve3([*entries, *rhs])
+    if np.linalg.cond(a) > 1e8:
+        return  # ill-conditioned: neither answer means much
+    assert x is not None
+    assert np.array(x) == pytest.approx(np.linalg.solve(a, r), rel=1e-6, abs=1e-6)
+    assert solve3([1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 5.0, 1.0, 1.0, 1.0]) is None
