@@ -110,3 +110,8 @@ def test_periods_after_the_files_last_sample_count_up_to_the_runs_end(tmp_path):
         'the recorder received nothing after it)' in cut.summary(lockstep=False)
     )
     assert 'the file ends' not in check_recording(mcap, 1000.0).summary(lockstep=False)
+    empty = check_recording(_recording(tmp_path / 'empty', 0), 1000.0, until=0.0095)
+    assert empty.missing_periods == list(range(10))
+    assert empty.summary(lockstep=False).endswith(
+        '10 periods not in the file (the recorder received no joint state)'
+    )

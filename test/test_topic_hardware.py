@@ -277,7 +277,6 @@ def test_the_standin_stack_in_real_time_drives_a_urdf_arm(ros_env, tmp_path):
         ('standin', 'simulator', 'controller'), ros_env, str(tmp_path), 60.0, scene=scene
     )
     judge_realtime_stack(run, offline)
-    assert run.standin_updates.get('n', 0) > 0
 
 
 def judge_realtime_stack(run, offline):

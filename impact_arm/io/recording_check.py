@@ -85,8 +85,10 @@ class RecordingCheck:
             text += ': complete' if not problems else ': INCOMPLETE, ' + '; '.join(problems)
         else:
             text += f', {len(self.missing_periods)} periods not in the file'
-            if self.lost_tail and self.rate > 0:
-                last = self.missing_periods[-1]
+            last = self.missing_periods[-1] if self.missing_periods else -1
+            if self.lost_tail > last:  # not one period in the file
+                text += ' (the recorder received no joint state)'
+            elif self.lost_tail and self.rate > 0:
                 ends = (last - self.lost_tail) / self.rate
                 text += (
                     f' (the file ends at t = {ends:.3f} s, the run at {last / self.rate:.3f} s: '
