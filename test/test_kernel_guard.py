@@ -1,6 +1,7 @@
 """Guard rails of the generated kernel: the stub kernel/injected.py declares exactly the names
 equations.py writes into each generated module (the template parts read them through the
-stub), and a scene shape's generated module can be dumped for reading."""
+stub), a scene shape's generated module can be dumped for reading, and the Python-side
+callers of the generated functions stay within their arrays (numba's bounds checks on)."""
 
 import ast
 import os
@@ -153,3 +154,59 @@ def test_editing_an_inlined_module_renames_the_kernel(tmp_path):
         path.write_bytes(original + b'\n# edited\n')
         assert equations.kernel_key(source, str(tmp_path)) != before, module
         path.write_bytes(original)
+
+
+BOUNDS_SCRIPT = """
+import sys
+from impact_arm.physics.control import CycleController
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.prediction import ArrayStatePredictor, StatePredictor
+from impact_arm.physics.scene import load_scene, resolve_scene_path
+from impact_arm.physics.simulate import run
+from impact_arm.tools.latency_study import closed_loop
+
+for name in sys.argv[1:]:
+    scene = load_scene(resolve_scene_path(name))
+    model = ArmModel(scene)
+    n, q, qd = model.n, list(scene.q0), [0.5] * model.n
+    model.tip(q, qd), model.tip_jacobian(q), model.gravity_forces(q)
+    model.link_energies(q, qd), model.potential_energy(q)
+    model.mass_matrix(q), model.free_forces(q, qd)
+    ctrl = CycleController.for_scene(model, scene.controller)
+    tau = ctrl.torque(q, qd)
+    for predictor in (StatePredictor(model, 1e-3), ArrayStatePredictor(model, 1e-3)):
+        predictor.ahead(q, qd, [tau, tau])
+        predictor.implicit_command(ctrl.torque, q, qd, tau, 2)
+    run(scene, t_max=0.3, control_rate=1000.0)
+    closed_loop(scene, 1, -1, t_max=0.3)
+    print(name, 'checked')
+"""
+
+
+@pytest.mark.slow
+def test_python_callers_of_the_generated_functions_stay_in_bounds(tmp_path):
+    """Compiled code does not check indices: a caller that hands a generated function a
+    shorter parameter block than it reads (once: the controller's prediction gave a URDF
+    arm's rod lengths where the whole link geometry belongs) reads garbage, and nothing
+    fails where it happens. Here every Python-side use of the generated functions (the
+    model's, the predictors', a sampled-control run, the closed loop with prediction) runs
+    for the article's arm and a URDF arm with numba's bounds checks on, compiled afresh in
+    a cache of its own: an out-of-bounds read raises."""
+    env = dict(os.environ)
+    env.update(
+        NUMBA_BOUNDSCHECK='1',
+        IMPACT_ARM_CACHE=str(tmp_path / 'cache'),
+        NUMBA_CACHE_DIR=str(tmp_path / 'numba'),
+        PYTHONPATH=ROOT,
+    )
+    example = os.path.join(ROOT, 'examples', 'real_arm.yaml')
+    done = subprocess.run(
+        [sys.executable, '-c', BOUNDS_SCRIPT, 'paper', example],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.count('checked') == 2, done.stdout
