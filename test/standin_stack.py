@@ -38,6 +38,10 @@ START_SPACING_S = 1.0
 # the largest command latency (periods) the controller's law was shown to handle offline
 # (each command taking 1 to 5 periods at random; docs/ros2_control.md)
 HANDLED_LATENCY = 5
+# a simulator stall (periods skipped after a late period) this long before an impact or
+# during its rebound changes the periods the law's commands act in, as no latency it was
+# shown to handle does
+STALL_BEFORE_S = 0.02
 REMAPS = (
     '-r',
     '/joint_states:=/joint_state_broadcaster/joint_states',
@@ -76,6 +80,21 @@ class StackRun:
     def held(self) -> bool:
         return len(self.impacts) >= CYCLES + 1 and self.second_strikes == 0
 
+    @property
+    def stalls(self) -> list[float]:
+        """The simulated times of the simulator's latest stalls (``periods_skipped_at_s``)."""
+        return [float(t) for t in self.sim.get('periods_skipped_at_s', '').split()]
+
+    def second_strikes_at_stalls(self) -> bool:
+        """Whether there are second strikes and each followed a simulator stall, between
+        ``STALL_BEFORE_S`` before its cycle's impact and the second contact."""
+        pairs = [
+            (a, b) for a, b in zip(self.contacts, self.contacts[1:]) if b - a < self.second_strike_s
+        ]
+        return bool(pairs) and all(
+            any(a - STALL_BEFORE_S <= t <= b for t in self.stalls) for a, b in pairs
+        )
+
     def schedule_misses(self) -> list[str]:
         """Where the machine did not give the loop the schedule its law is made for, from the
         processes' own counters: a command silence the simulator's watchdog braked, or a
@@ -110,6 +129,7 @@ class StackRun:
             'repeated_states': int(ctrl.get('repeated_states', -1)),
             'overruns': int(sim.get('overruns', -1)),
             'periods_skipped': int(sim.get('periods_skipped', -1)),
+            'periods_skipped_at_s': self.stalls,
             'periods_without_new_command': int(sim.get('periods_without_new_command', -1)),
             'watchdog_timeouts': int(sim.get('watchdog_timeouts', -1)),
             'zero_commands_before_release': int(sim.get('zero_commands_before_release', -1)),

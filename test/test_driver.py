@@ -159,6 +159,7 @@ def test_a_stall_skips_the_missed_periods_instead_of_bursting_through_them(scene
     # one late period; the deadlines at 5 and 6 ms passed during it and are skipped: the
     # next period runs at 7 ms, on the unchanged schedule, one simulated period later
     assert stats.overruns == 1 and loop.skipped == 2
+    assert list(loop.skipped_at) == pytest.approx([4 * P])  # after the late period
     assert [round(t.t * RATE) for t in published] == [1, 2, 3, 4, 5, 6]
     assert clock.now == pytest.approx(100.0 + 8 * P)
     assert clock.sleeps[-2:] == pytest.approx([0.5 * P, P])  # to 7 ms, then 8 ms

@@ -282,14 +282,20 @@ def test_the_standin_stack_in_real_time_drives_a_urdf_arm(ros_env, tmp_path):
 def judge_realtime_stack(run, offline):
     """16 impacts, no second strike, the first strike within 20 ms of ``offline``'s and no
     deeper than 1.5 times its, no process ended, no stamp jump; a failure that comes with a
-    schedule the machine did not keep is a skip naming both."""
+    schedule the machine did not keep is a skip naming both, and so are second strikes that
+    each followed a stall of the simulator itself (periods skipped: it fell behind its own
+    schedule, which none of the latencies the law was shown to handle includes)."""
     from standin_stack import CYCLES
 
-    failures = []
+    failures, stalled = [], []
     if len(run.impacts) < CYCLES + 1:
         failures.append(f'{len(run.impacts)} impacts where {CYCLES + 1} were due')
     if run.second_strikes:
-        failures.append(f'{run.second_strikes} second strikes: contacts {run.contacts}')
+        strikes = f'{run.second_strikes} second strikes: contacts {run.contacts}'
+        if run.second_strikes_at_stalls():  # each right after the simulator fell behind
+            stalled.append(f'{strikes}, each after a simulator stall (at {run.stalls})')
+        else:
+            failures.append(strikes)
     # a dropped arm falls unheld and strikes early (and hard); a controller that falls
     # behind at the start (its first predictions loading compiled code) strikes late
     if run.contacts and abs(run.contacts[0] - offline.t_contact[0]) > 0.02:
@@ -306,3 +312,5 @@ def judge_realtime_stack(run, offline):
         pytest.skip(f'the machine did not keep the schedule ({"; ".join(misses)}): {report}')
     assert not failures, report
     assert run.ctrl['stamp_jumps'] == '0', report
+    if stalled:
+        pytest.skip(f'the machine did not keep the schedule ({"; ".join(stalled)}): {report}')

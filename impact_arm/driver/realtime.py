@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from .arm import SimulatedArm, Tick
 
 PERIOD_PARTS = ('commands', 'physics', 'publish')  # where a period's compute goes
+SKIPS_KEPT = 8  # the latest stalls whose simulated times the diagnostics give
 
 # How long the driver holds the last command before it zeroes the torques [s]: 20 periods at
 # 1 kHz. Holding longer is what crashes a stiff loop. The middleware sometimes delivers
@@ -273,6 +274,9 @@ class DriverLoop:
         self.commands = 0
         self.impacts = 0
         self.skipped = 0  # periods skipped after stalls
+        # the simulated times at which the latest stalls skipped periods: what a stall did to
+        # the loop around it (an impact's rebound) can be told from the run's own record
+        self.skipped_at: deque[float] = deque(maxlen=SKIPS_KEPT)
         self.flooded = 0  # periods that left commands queued
         # commands taken but never checked: an accepted newer one of the same period
         # replaced them in the zero-order hold
@@ -400,6 +404,7 @@ class DriverLoop:
             self.commands = self.impacts = self.skipped = self.flooded = self.stale = (
                 self.superseded
             ) = 0
+            self.skipped_at.clear()
             self.first_command_wall = None
             self._steps = 0
             self._in_flight, self._newest = deque(), None
@@ -470,6 +475,7 @@ class DriverLoop:
             self._k += missed
             if count:
                 self.skipped += missed
+                self.skipped_at.append(self.arm.t)
 
     # ---------------------------------------------------------------------------- lockstep
     def lockstep_period(self, arrived: float, rate_factor: float) -> Tick:

@@ -327,6 +327,8 @@ class Session:
             'overruns': str(stats.overruns),
             # periods skipped after stalls (simulated time fell behind by as many periods)
             'periods_skipped': str(loop.skipped),
+            # the simulated times of the latest stalls that skipped periods [s], oldest first
+            'periods_skipped_at_s': ' '.join(f'{t:.6f}' for t in loop.skipped_at),
             # periods that left commands queued (a flood): the rest waited a period
             'commands_flooded': str(loop.flooded),
             # commands taken but not checked: a newer valid one of the same period held
