@@ -72,9 +72,15 @@ class StackRun:
         self.contacts = [r['t_contact'] for r in self.impacts]
 
     @property
+    def second_strike_pairs(self) -> list[tuple[float, float]]:
+        """(previous contact, second contact) for each contact that began within
+        ``second_strike_s`` of the previous one."""
+        pairs = zip(self.contacts, self.contacts[1:])
+        return [(a, b) for a, b in pairs if b - a < self.second_strike_s]
+
+    @property
     def second_strikes(self) -> int:
-        """Contacts that began within ``second_strike_s`` of the previous one."""
-        return sum(b - a < self.second_strike_s for a, b in zip(self.contacts, self.contacts[1:]))
+        return len(self.second_strike_pairs)
 
     @property
     def held(self) -> bool:
@@ -88,9 +94,7 @@ class StackRun:
     def second_strikes_at_stalls(self) -> bool:
         """Whether there are second strikes and each followed a simulator stall, between
         ``STALL_BEFORE_S`` before its cycle's impact and the second contact."""
-        pairs = [
-            (a, b) for a, b in zip(self.contacts, self.contacts[1:]) if b - a < self.second_strike_s
-        ]
+        pairs = self.second_strike_pairs
         return bool(pairs) and all(
             any(a - STALL_BEFORE_S <= t <= b for t in self.stalls) for a, b in pairs
         )

@@ -776,9 +776,7 @@ def test_a_dependence_states_an_absolute_change_in_the_fitted_parameters_unit():
     # the fitted parameter's unit comes from the scene schema ('-', a pure number: none)
     assert schema_unit('joints[0].friction') == 'N m' and schema_unit('surfaces[0].mu') == ''
     assert schema_unit('sensors.effort_latency') == 's' and schema_unit('links[9].nope') == ''
-    absolute = Dependence(
-        'joints[0].friction', 'surfaces[0].height', 0.401, False, 0.0026, fitted_unit='N m'
-    )
+    absolute = Dependence('joints[0].friction', 'surfaces[0].height', 0.401, False, 0.0026)
     assert absolute.sentence().startswith('friction moves 0.401 N m up per 1 % of')
     assert absolute.change_text(signed=True) == '+0.401 N m'
     relative = Dependence('materials.steel.S_y', 'links[0].mass', -0.78, True, 0.5)

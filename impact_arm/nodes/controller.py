@@ -132,7 +132,7 @@ class Controller(Node):
         self.reader_node = reader = reader_node(self, 'state_reader')
         # the wrenches since the last state, all of them (the largest force is latched): the
         # thread wakes on states only, unless a state waits for its wrench (_control_loop)
-        wrenches = contract.qos(JOINT_STATES).to_rclpy()
+        wrenches = contract.qos(CONTACT_WRENCH).to_rclpy()
         wrenches.depth = WRENCH_QUEUE
         self.sub_wrench = reader.create_subscription(
             WrenchStamped, CONTACT_WRENCH, _unused, wrenches, raw=True

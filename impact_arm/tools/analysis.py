@@ -36,6 +36,7 @@ import numpy as np
 
 from ..contract import FEEDBACK_LAWS, IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, to_absolute
 from ..physics.errors import ImpactArmError
+from ..physics.metrics import LimitCycle
 from ..physics.metrics import limit_cycle as find_limit_cycle
 
 
@@ -744,11 +745,8 @@ def _limit_cycle_text(lc) -> str:
     if not lc['impacts']:
         return 'no impacts recorded'
     per = lc.get('impacts_per_cycle') or 1
-    settled = (
-        f'limit cycle reached after {lc["settled_after"]} impacts'
-        + (f' ({per} impacts per cycle)' if per > 1 else '')
-        if lc['settled_after']
-        else 'limit cycle not reached'
+    settled = 'limit cycle ' + (
+        LimitCycle(lc['settled_after'], per).text() if lc['settled_after'] else 'not reached'
     )
     period = f'period {lc["period"]:.5f} s' if lc['period'] is not None else 'no period'
     return f'{lc["impacts"]} impacts; {settled}; {period}'

@@ -34,7 +34,11 @@ class Dependence:
     tolerance: float  # how well the fixed one must be known to move the fitted by < 1 σ
     step: float = 1.0  # the step of the fixed one: 1 (%), or an amount in ``unit``
     unit: str = '%'  # of step and tolerance: '%' of the fixed value, or its own unit
-    fitted_unit: str = ''  # of an absolute change (the fitted parameter's own unit)
+
+    @property
+    def fitted_unit(self) -> str:
+        """The unit of an absolute change: the fitted parameter's own, from the schema."""
+        return schema_unit(self.fitted)
 
     def change_text(self, signed: bool = False) -> str:
         """The change with its unit: % of the fitted value, or the fitted one's unit."""
@@ -99,11 +103,7 @@ def dependences(
             if abs(change) < (REPORTED if p.log else REPORTED * 0.01 * abs(values[i])):
                 continue
             tol = step * sigma[i] / abs(d_native[i]) if d_native[i] else math.inf
-            out.append(
-                Dependence(
-                    p.key, key, float(change), p.log, float(tol), step, unit, schema_unit(p.key)
-                )
-            )
+            out.append(Dependence(p.key, key, float(change), p.log, float(tol), step, unit))
     return sorted(out, key=lambda d: d.tolerance / d.step)  # the most demanding first
 
 
