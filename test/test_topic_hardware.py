@@ -83,7 +83,11 @@ def drive(probe, env, workdir, kind):
             wait_for(lambda: pub.get_subscription_count() > 0 or not sim.alive(), timeout=60)
             and sim.alive()
         ), sim.stderr
-        time.sleep(0.3)  # the initial state's subscribers matched too
+        # the simulator repeats the initial state every 0.1 s until the first command; our
+        # reader of it may match the simulator's writer well after the simulator matched ours
+        assert wait_for(lambda: 0 in states or not sim.alive(), timeout=60) and sim.alive(), (
+            sim.stderr
+        )
         if kind == 'joint_state':  # refused: unknown name; no efforts. Nothing moves.
             pub.publish(JointState(name=['joint1', 'elbow'], effort=[1.0, 2.0]))
             pub.publish(JointState(name=['joint1', 'joint2'], position=[0.1, 0.2]))
