@@ -62,6 +62,29 @@ def main():
         time.sleep(wait)
         seen[label] = latest.get('t')
 
+    def settle_until(label, done, then=0.3, timeout=10.0):
+        # this reader may lag the 1 kHz stream by more than a fixed wait on a busy machine:
+        # wait for the state the call should lead to, then a while for anything beyond it
+        end = time.monotonic() + timeout
+        while not (latest.get('t') is not None and done(latest['t'])):
+            if time.monotonic() > end:
+                break
+            time.sleep(0.01)
+        settle(label, then)
+
+    def settle_still(label, still=0.3, timeout=10.0):
+        # paused: the newest stamp this reader holds stops changing (a fixed wait may still
+        # show a backlog of states from before the pause)
+        end, last, since = time.monotonic() + timeout, None, time.monotonic()
+        while time.monotonic() < end:
+            now = latest.get('t')
+            if now != last:
+                last, since = now, time.monotonic()
+            elif time.monotonic() - since >= still:
+                break
+            time.sleep(0.01)
+        seen[label] = latest.get('t')
+
     def state(label):
         seen[label] = call(GetSimulationState, '/get_simulation_state').state.state
 
@@ -76,13 +99,13 @@ def main():
         call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_PAUSED),
     )
     state('state_paused')
-    settle('t_paused', 0.5)
+    settle_still('t_paused')
     result(
         'pause_again',
         call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_PAUSED),
     )
     result('step', call(StepSimulation, '/step_simulation', steps=5))
-    settle('t_stepped')
+    settle_until('t_stepped', lambda t: t >= seen['t_paused'] + 5e-3 - 1e-9)
     result(
         'reset_time_only',
         call(ResetSimulation, '/reset_simulation', scope=ResetSimulation.Request.SCOPE_TIME),
@@ -92,7 +115,7 @@ def main():
         call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_STOPPED),
     )
     state('state_stopped')
-    settle('t_stopped', 0.5)
+    settle_until('t_stopped', lambda t: t == 0.0)
     seen['position_stopped'] = latest.get('position')
     result(
         'play',
@@ -104,7 +127,7 @@ def main():
         'reset',
         call(ResetSimulation, '/reset_simulation', scope=ResetSimulation.Request.SCOPE_DEFAULT),
     )
-    settle('t_reset', 0.05)
+    settle_until('t_reset', lambda t: t < seen['t_played'], then=0.0)
     result(
         'quit',
         call(SetSimulationState, '/set_simulation_state', state=SimulationState.STATE_QUITTING),

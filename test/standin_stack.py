@@ -27,6 +27,7 @@ from ros_helpers import (
     from_simulator,
     simulator,
     start_process,
+    wait_for,
 )
 
 from impact_arm.tools.latency_study import SECOND_STRIKE_S
@@ -235,7 +236,11 @@ def run_stack(
             wall = time.monotonic() - wall0
             driven = [json.loads(m.data) for _, m in list(reports)]
             sim_time = float(sim_values().get('sim_time', 'nan'))  # (its latest report)
-            time.sleep(1.2)  # one more report of each, for the counters
+            # one more report of each (1 Hz), for the counters: a lagging probe may hold
+            # stale ones after a fixed wait, and a run to skip would read as a failure
+            seen = (len(sim_diags), len(ctrl_diags))
+            wait_for(lambda: len(sim_diags) > seen[0] and len(ctrl_diags) > seen[1], 5)
+            time.sleep(0.2)
             updates = [e for e in procs['standin'].lines() if e.get('event') == 'update']
             return StackRun(
                 order=tuple(order),

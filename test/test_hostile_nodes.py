@@ -264,10 +264,23 @@ def test_recorder_with_a_scene_stores_garbage_without_dying(probe, ros_env, tmp_
         'topics:=[/joint_states,/contact_wrench]',
         'flush_interval:=0.2',
     )
+    from impact_arm.nodes.recorder import MATCHED_LINE
+
+    def recorder_matched(topic):  # its readers, not only our writers (not symmetric in time)
+        return any(
+            MATCHED_LINE in line and topic in line.partition(MATCHED_LINE)[2].split()
+            for line in recorder.stderr.splitlines()
+        )
+
     with start_process(rec, ros_env, tmp_path, 'recorder') as recorder:
         assert wait_for(
-            lambda: states.get_subscription_count() >= 1 and wrenches.get_subscription_count() >= 1,
-            timeout=20,
+            lambda: (
+                states.get_subscription_count() >= 1
+                and wrenches.get_subscription_count() >= 1
+                and recorder_matched('/joint_states')
+                and recorder_matched('/contact_wrench')
+            ),
+            timeout=60,
         ), recorder.stderr
         good = serialize_message(
             JointState(name=['joint1', 'joint2'], position=[0.1, 0.2], velocity=[0.0, 0.0])

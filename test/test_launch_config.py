@@ -4,6 +4,7 @@
 import ast
 import contextlib
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -235,21 +236,17 @@ def test_parameter_files_are_accepted_by_the_nodes(ros_env, tmp_path, node):
     """Start the node with its parameter file; a bad key or value would stop it at once."""
     params = os.path.join(ROOT, 'config', f'{node}.yaml')
     assert yaml.safe_load(open(params))[node]['ros__parameters']
-    proc = subprocess.Popen(
-        [PYTHON, '-m', f'impact_arm.nodes.{node}', '--ros-args', '--params-file', params],
-        env=ros_env,
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
-        out, _ = proc.communicate(timeout=6)
-        pytest.fail(f'{node} exited with {proc.returncode}:\n{out}')
-    except subprocess.TimeoutExpired:
-        proc.send_signal(2)
-        out, _ = proc.communicate(timeout=10)
-    assert proc.returncode == 0, out
+    args = [PYTHON, '-m', f'impact_arm.nodes.{node}', '--ros-args', '--params-file', params]
+    with start_process(args, ros_env, tmp_path, node) as proc:
+        # its constructor, which checks the file, has logged (no fixed wait: a start-up on a
+        # busy machine may take longer, and a signal during the imports is a traceback)
+        assert wait_for(lambda: f'[{node}]:' in proc.stderr or not proc.alive(), 60)
+        time.sleep(1.0)  # past the constructor: a bad value may stop it a little later
+        assert proc.alive(), f'{node} exited with {proc.popen.returncode}:\n{proc.stderr}'
+        proc.signal(signal.SIGINT)
+        code = proc.wait(10)
+    out = proc.stdout + proc.stderr
+    assert code == 0, out
     assert 'Traceback' not in out and 'ERROR' not in out, out
 
 

@@ -71,15 +71,20 @@ def test_records_what_was_published(ros_env, tmp_path):
         'param_nodes:=[test_publisher]',
         'flush_interval:=0.2',
     )
+    go = tmp_path / 'go'
+    pub_args = ('pub', '--count', n, '--rate', 300, '--wrench', '--linger', 30.0)
     with (
         start_process(rec_args, ros_env, tmp_path, 'recorder') as rec,
         start_process(
-            helper_args('pub', '--count', n, '--rate', 300, '--wrench', '--linger', 30.0),
-            ros_env,
-            tmp_path,
-            'pub',
+            helper_args(*pub_args, '--wait-sub', 60, '--go-file', go), ros_env, tmp_path, 'pub'
         ) as pub,
     ):
+        # the publisher's writers matching says nothing of the recorder's readers (matching
+        # is not symmetric in time): it starts once the recorder's log says both matched
+        assert wait_for(
+            lambda: all(_matched(rec.stderr, t) for t in ('/joint_states', '/contact_wrench')), 60
+        ), rec.stderr
+        go.touch()
         assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), (
             pub.stderr + rec.stderr
         )

@@ -118,7 +118,8 @@ def observe(
             f'file:={recording}',
             f'rate:={rate}',
             'wait_for_subscribers:=1',
-            'delay:=0.3',
+            # its writers matched; the subscriber's readers may match up to ~0.3 s later
+            'delay:=1.0',
             *extra,
         )
         with start_process(args, ros_env, tmp_path, f'replay{rate:g}') as rep:

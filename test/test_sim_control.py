@@ -89,19 +89,21 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
             # pause: the held state goes on being published, its time frozen
             assert call(probe, SetBool, '/simulator/pause', SetBool.Request(data=True)).success
             paused_at = time.monotonic()
-            time.sleep(0.5)
-            frozen = [m for t, m in states if t > paused_at + 0.1]
-            assert len(frozen) > 100, 'nothing published while paused'
-            assert (
-                len({stamp(m) for m in frozen}) == 1
-                and len({tuple(m.position) for m in frozen}) == 1
-            )
+
+            def held():  # the newest 100 received since: one stamp (a lagging probe first
+                # drains states from before the pause, so no fixed wait suffices)
+                tail = [m for t, m in states if t > paused_at][-100:]
+                return len(tail) == 100 and len({stamp(m) for m in tail}) == 1 and tail
+
+            frozen = wait_for(held, timeout=10)
+            assert frozen, 'nothing published while paused, or its time not frozen'
+            assert len({tuple(m.position) for m in frozen}) == 1
             t_frozen = stamp(frozen[-1])
             assert latest_diagnostics(diags, time.monotonic())['paused'] == 'true'
             # step: exactly step_periods periods
             assert call(probe, Trigger, '/simulator/step', Trigger.Request()).success
-            assert wait_for(lambda: stamp(states[-1][1]) > t_frozen, timeout=5)
-            time.sleep(0.3)
+            assert wait_for(lambda: stamp(states[-1][1]) >= t_frozen + 5e-3 - 1e-9, timeout=5)
+            time.sleep(0.3)  # and no period more
             assert stamp(states[-1][1]) == pytest.approx(t_frozen + 5e-3, abs=1e-9)
             assert call(probe, SetBool, '/simulator/pause', SetBool.Request(data=False)).success
             assert wait_for(lambda: stamp(states[-1][1]) > t_frozen + 0.1, timeout=5)

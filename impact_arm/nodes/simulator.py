@@ -305,8 +305,11 @@ class Simulator(Node):
             self._thread.join(timeout=2.0)
         if executor is not None:
             self._publish_diagnostics()
+            per_period = (self.out.joints, self.out.wrench, self.out.peak, self.out.mounts)
             await_acknowledgements(
-                self, (self.out.impact, self.out.wrench, self.out.joints, self.pub_diag), ACK_WAIT
+                self,
+                (self.out.impact, *(p for p in per_period if p is not None), self.pub_diag),
+                ACK_WAIT,
             )
         loop = self.session.loop
         self.get_logger().info(
