@@ -30,6 +30,7 @@ from ros_helpers import (
     wait_for,
 )
 
+from impact_arm.driver.control_inputs import DROPPED
 from impact_arm.tools.latency_study import SECOND_STRIKE_S
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -78,6 +79,17 @@ class StackRun:
         ``second_strike_s`` of the previous one."""
         pairs = zip(self.contacts, self.contacts[1:])
         return [(a, b) for a, b in pairs if b - a < self.second_strike_s]
+
+    def second_strike_details(self) -> list[list[dict]]:
+        """For each second strike, what the simulator reported of the strike before it and
+        of itself (tip velocities before and after, penetration, contact duration): whether
+        the rebound was weak or the arm came back down fast says where to look."""
+        keys = ('t_contact', 'v_before', 'v_after', 'cor_kinematic', 'delta_m', 'duration')
+        by_contact = {r['t_contact']: r for r in self.impacts}
+        return [
+            [{k: by_contact[t].get(k) for k in keys} for t in pair]
+            for pair in self.second_strike_pairs
+        ]
 
     @property
     def second_strikes(self) -> int:
@@ -131,6 +143,8 @@ class StackRun:
             'alive': self.alive,
             'latency_histogram': ctrl.get('latency_histogram', ''),
             'implicit_commands': int(ctrl.get('implicit_commands', -1)),
+            # what the controller dropped or refused (its non-zero counters)
+            'controller_dropped': {k: ctrl[k] for k in DROPPED if ctrl.get(k, '0') != '0'},
             'repeated_states': int(ctrl.get('repeated_states', -1)),
             'overruns': int(sim.get('overruns', -1)),
             'periods_skipped': int(sim.get('periods_skipped', -1)),

@@ -295,7 +295,10 @@ def judge_realtime_stack(run, offline):
     if len(run.impacts) < CYCLES + 1:
         failures.append(f'{len(run.impacts)} impacts where {CYCLES + 1} were due')
     if run.second_strikes:
-        strikes = f'{run.second_strikes} second strikes: contacts {run.contacts}'
+        strikes = (
+            f'{run.second_strikes} second strikes: contacts {run.contacts}; the strikes '
+            f'before them and the second strikes: {run.second_strike_details()}'
+        )
         if run.second_strikes_at_stalls():  # each right after the simulator fell behind
             stalled.append(f'{strikes}, each after a simulator stall (at {run.stalls})')
         else:
