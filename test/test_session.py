@@ -509,6 +509,25 @@ def test_prediction_keeps_the_limit_cycle_under_command_latency(scene):
         assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
 
 
+@pytest.mark.parametrize('latency', [4, 5])
+def test_without_a_force_sensor_a_predicting_controller_sees_the_impact_in_the_sample(
+    scene, latency
+):
+    """No contact wrench (an arm without a force sensor): the controller tells the impact
+    from the tip's reversal. Judged on its prediction, whose free motion goes through the
+    surface, the reversal showed periods late and at 4 periods of latency the arm struck
+    twice every cycle; judged on the sample, it strikes as the run with the wrench does."""
+    from impact_arm.tools.latency_study import closed_loop
+
+    sensed = closed_loop(scene, latency, -1, t_max=2.5)
+    blind = closed_loop(scene, latency, -1, t_max=2.5, force_sensor=False)
+    assert sensed.second_strikes == 0 and sensed.impacts >= 5
+    assert not blind.failed and blind.second_strikes == 0
+    # (at some impacts the reversal shows a period after the force: ms over the run)
+    assert blind.t_contact == pytest.approx(sensed.t_contact, abs=5e-3)
+    assert max(blind.delta_m) == pytest.approx(max(sensed.delta_m), rel=0.02)
+
+
 def test_a_latency_that_varies_by_a_period_is_told_from_a_pipeline_filling(scene):
     """The commands in flight fill at start-up (latencies 0, 1, 2 measured once each): a
     steady latency, the law stays explicit. Latencies 2 and 3 recurring (an unsynchronised

@@ -294,6 +294,7 @@ class ControlInputs:
             self.first_command_after = now - self.created
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         ahead = self.in_flight()
+        sensed = None
         if ahead and self.predictor is not None:
             # act on the state this command will meet: the driver applies it only after
             # the commands still on their way
@@ -301,7 +302,7 @@ class ControlInputs:
             if all(abs(v) <= MAX_ANGLE for v in q_ahead) and all(
                 abs(v) <= MAX_RATE for v in qd_ahead
             ):  # (also false for NaN)
-                q, qd = q_ahead, qd_ahead
+                sensed, (q, qd) = (q, qd), (q_ahead, qd_ahead)
                 t += len(ahead) * self.period
             else:  # the model's free motion left any arm's range: act on the sample itself
                 self.drop(
@@ -309,7 +310,7 @@ class ControlInputs:
                     f'state predicted {len(ahead)} periods ahead of {t:.6f} s out of '
                     f'range: acting on the sampled state',
                 )
-        tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force)
+        tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force, sensed=sensed)
         self.normal_force = None  # the latch covers one tick
         if self.implicit_periods and self.predictor is not None and self.latency_varies():
             tau = self.predictor.implicit_command(

@@ -218,21 +218,30 @@ class CycleController:
         q: Sequence[float] | np.ndarray,
         qd: Sequence[float] | np.ndarray,
         normal_force: float | None = None,
+        sensed: tuple[Sequence[float], Sequence[float]] | None = None,
     ) -> list[float]:
-        """Torques for the sample at time t (the caller holds them until the next sample)."""
+        """Torques for the sample at time t (the caller holds them until the next sample).
+
+        ``sensed``: the sampled (q, qd) when ``q``, ``qd`` are a prediction of the state the
+        torques will meet. The impact is then judged on the sample: the prediction's free
+        motion goes through the surface, so a tip reversal it shows comes periods after the
+        one the sample shows (with no wrench, four periods of latency struck twice)."""
         _, y_tip, _, vy_tip = self.model.tip(q, qd)
+        y_seen, vy_seen = y_tip, vy_tip
+        if sensed is not None:
+            _, y_seen, _, vy_seen = self.model.tip(*sensed)
         if self.mode == 'down' and self.surface_height is not None:
             hit = normal_force is not None and normal_force > self.force_threshold
             reversed_near = (
                 self._last_vy is not None
-                and self._last_vy < 0 <= vy_tip
-                and y_tip < self.surface_height + self.reversal_band
+                and self._last_vy < 0 <= vy_seen
+                and y_seen < self.surface_height + self.reversal_band
             )
             if hit or reversed_near:
                 self._switch('up')
         elif self.mode == 'up' and y_tip >= self.switch_height:
             self._switch('down')
-        self._last_vy = vy_tip
+        self._last_vy = vy_seen
         dt = 0.0 if self._last_t is None else t - self._last_t
         self._last_t = t
         return self.torque(q, qd, dt)

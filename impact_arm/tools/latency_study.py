@@ -66,6 +66,7 @@ def closed_loop(
     seed: int = 0,
     implicit_periods: int = 1,
     spread: int = 1,
+    force_sensor: bool = True,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -75,7 +76,9 @@ def closed_loop(
     unsynchronised controller manager), so that some periods hold the previous command and
     some commands are superseded before they act (the driver applies a period's newest);
     ``spread`` such chances per command: it takes ``latency`` to ``latency + spread`` periods.
-    ``implicit_periods``: the controller's parameter of that name (0: off)."""
+    ``implicit_periods``: the controller's parameter of that name (0: off).
+    ``force_sensor`` False: no contact wrench reaches the controller (an arm without a force
+    sensor): it tells an impact from the tip's reversal alone."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
     ctrl = CycleController.for_scene(model, scene.controller)
@@ -111,6 +114,7 @@ def closed_loop(
         latency_periods=predicted,
         clock=lambda: 0.0,
         implicit_periods=implicit_periods,
+        wrench_publishers=lambda: force_sensor,
     )
     rng = random.Random(seed)
     line: list[tuple[int, int, list[float]]] = []  # (period it acts from, order, torques)
@@ -121,7 +125,8 @@ def closed_loop(
         while ticks:
             tick = ticks.popleft()
             sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-            inputs.wrench(sec, nsec, (tick.wrench[0], tick.wrench[1], 0.0))
+            if force_sensor:
+                inputs.wrench(sec, nsec, (tick.wrench[0], tick.wrench[1], 0.0))
             inputs.joint_state(sec, nsec, names, tick.position, tick.velocity, tick.effort)
         if not commands:
             return _result(latency, predicted, t_max, contacts, 'the controller sent nothing')
