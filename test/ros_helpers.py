@@ -267,6 +267,18 @@ def helper_args(*args):
     return [PYTHON, HERE] + [str(a) for a in args]
 
 
+def recorder_matched(log, topic):
+    """The recorder's log says its reader matched a publisher on ``topic`` (its readers, not
+    only the publisher's writers: matching is not symmetric in time). A line may name other
+    topics matched in the same round."""
+    from impact_arm.nodes.recorder import MATCHED_LINE
+
+    return any(
+        MATCHED_LINE in line and topic in line.partition(MATCHED_LINE)[2].split()
+        for line in log.splitlines()
+    )
+
+
 def wait_for(predicate, timeout=10.0, interval=0.05):
     end = time.monotonic() + timeout
     while time.monotonic() < end:

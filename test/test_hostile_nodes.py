@@ -16,6 +16,7 @@ from ros_helpers import (
     driver_position,
     from_simulator,
     node_args,
+    recorder_matched,
     simulator,
     start_process,
     wait_for,
@@ -264,21 +265,13 @@ def test_recorder_with_a_scene_stores_garbage_without_dying(probe, ros_env, tmp_
         'topics:=[/joint_states,/contact_wrench]',
         'flush_interval:=0.2',
     )
-    from impact_arm.nodes.recorder import MATCHED_LINE
-
-    def recorder_matched(topic):  # its readers, not only our writers (not symmetric in time)
-        return any(
-            MATCHED_LINE in line and topic in line.partition(MATCHED_LINE)[2].split()
-            for line in recorder.stderr.splitlines()
-        )
-
     with start_process(rec, ros_env, tmp_path, 'recorder') as recorder:
         assert wait_for(
             lambda: (
                 states.get_subscription_count() >= 1
                 and wrenches.get_subscription_count() >= 1
-                and recorder_matched('/joint_states')
-                and recorder_matched('/contact_wrench')
+                and recorder_matched(recorder.stderr, '/joint_states')
+                and recorder_matched(recorder.stderr, '/contact_wrench')
             ),
             timeout=60,
         ), recorder.stderr

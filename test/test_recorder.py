@@ -16,7 +16,15 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from impact_arm import contract
-from ros_helpers import controller, helper_args, node_args, simulator, start_process, wait_for
+from ros_helpers import (
+    controller,
+    helper_args,
+    node_args,
+    recorder_matched,
+    simulator,
+    start_process,
+    wait_for,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAPER = os.path.join(ROOT, 'config', 'paper.yaml')
@@ -82,7 +90,10 @@ def test_records_what_was_published(ros_env, tmp_path):
         # the publisher's writers matching says nothing of the recorder's readers (matching
         # is not symmetric in time): it starts once the recorder's log says both matched
         assert wait_for(
-            lambda: all(_matched(rec.stderr, t) for t in ('/joint_states', '/contact_wrench')), 60
+            lambda: all(
+                recorder_matched(rec.stderr, t) for t in ('/joint_states', '/contact_wrench')
+            ),
+            60,
         ), rec.stderr
         go.touch()
         assert wait_for(lambda: any(e.get('event') == 'done' for e in pub.lines()), 30), (
@@ -174,14 +185,6 @@ def test_records_what_was_published(ros_env, tmp_path):
     assert 'use_sim_time' in meta['parameters/test_publisher/start']
 
 
-def _matched(log, topic):
-    """The recorder's log says its reader matched a publisher on ``topic``."""
-    return any(
-        'publishers matched on' in line and topic in line.split('matched on', 1)[1].split()
-        for line in log.splitlines()
-    )
-
-
 def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
     out = tmp_path / 'killed.mcap'
     rec_args = node_args(RECORDER, f'output:={out}', 'flush_interval:=0.2', 'param_nodes:=[""]')
@@ -198,7 +201,7 @@ def test_sigkill_leaves_a_readable_file(ros_env, tmp_path):
         # the recorder's reader has matched the publisher: nothing published from now on is
         # dropped at the start (the file must hold a prefix of what was published)
         # (the line may name other topics matched in the same round: /diagnostics too)
-        assert wait_for(lambda: _matched(rec.stderr, '/joint_states'), 30), rec.stderr
+        assert wait_for(lambda: recorder_matched(rec.stderr, '/joint_states'), 30), rec.stderr
         go.touch()
         seen = wait_for(lambda: (count_messages(out) or 0) >= 60 and count_messages(out), 30)
         assert seen, rec.stderr + pub.stderr
