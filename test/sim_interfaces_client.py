@@ -11,6 +11,7 @@ import time
 import rclpy
 from sensor_msgs.msg import JointState
 from simulation_interfaces.msg import SimulationState
+from ros_helpers import wait_for
 from simulation_interfaces.srv import (
     GetSimulationState,
     GetSimulatorFeatures,
@@ -65,11 +66,7 @@ def main():
     def settle_until(label, done, then=0.3, timeout=10.0):
         # this reader may lag the 1 kHz stream by more than a fixed wait on a busy machine:
         # wait for the state the call should lead to, then a while for anything beyond it
-        end = time.monotonic() + timeout
-        while not (latest.get('t') is not None and done(latest['t'])):
-            if time.monotonic() > end:
-                break
-            time.sleep(0.01)
+        wait_for(lambda: latest.get('t') is not None and done(latest['t']), timeout, 0.01)
         settle(label, then)
 
     def settle_still(label, still=0.3, timeout=10.0):

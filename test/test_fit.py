@@ -9,7 +9,6 @@ import os
 import re
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
@@ -236,7 +235,7 @@ def side_processes(monkeypatch):
     """The side processes fit_recording starts (None where it could not)."""
     from impact_arm.tools import side_process
 
-    others = [t.name for t in threading.enumerate() if t is not threading.main_thread()]
+    others = side_process.other_threads()
     if others:  # (a dask client run earlier in this process leaves its offload thread)
         pytest.skip(f'threads {others} already run in this process: fork is not safe here')
     started = []

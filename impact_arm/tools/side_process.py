@@ -58,6 +58,12 @@ def _serve(conn: Any, first: Callable[[], Any]) -> None:
             conn.send(('failed', f'{type(exc).__name__}: {exc}'))
 
 
+def other_threads() -> list[str]:
+    """The names of this process's threads besides the main one: fork is only safe without
+    them (a child would inherit their locks held)."""
+    return [t.name for t in threading.enumerate() if t is not threading.main_thread()]
+
+
 class SideProcess:
     """``start(first)`` forks the process, which runs ``first`` (None when it cannot fork);
     ``first_result()`` is its value; ``submit(data, out)`` hands it the figures,
@@ -71,7 +77,7 @@ class SideProcess:
 
     @classmethod
     def start(cls, first: Callable[[], Any]) -> SideProcess | None:
-        if not sys.platform.startswith('linux') or threading.active_count() > 1:
+        if not sys.platform.startswith('linux') or other_threads():
             return None  # fork is only safe without other threads (and is POSIX's)
         try:
             context = multiprocessing.get_context('fork')
