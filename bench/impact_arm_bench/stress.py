@@ -48,7 +48,8 @@ class Case:
 
 def paper_dict():
     import yaml
-    from impact_arm.physics.scene import _SceneLoader, resolve_scene_path
+    from impact_arm.physics.scene import resolve_scene_path
+    from impact_arm.physics.scene.files import _SceneLoader
 
     with open(resolve_scene_path('paper'), encoding='utf-8') as f:
         return yaml.load(f.read(), Loader=_SceneLoader)

@@ -26,7 +26,7 @@ Each link's ``<inertial>`` is the model's: the centre of mass at (along, 0, acro
 frame (a rod's: mid-length), ``iyy`` the inertia about it about the joint axis (``izz`` the
 same, as for a body slender along x). ``tip`` sits at the scene's contact point on the last
 link (a rod's end unless the scene says otherwise); a scene reading this file back with
-``arm: {urdf: ..., contact: {link: tip}}`` is the same arm (physics/urdf_arm.py).
+``arm: {urdf: ..., contact: {link: tip}}`` is the same arm (physics/scene/urdf.py).
 
 Rods are drawn as cylinders of ``rod_radius`` (a visual setting: the model's rods are lines;
 default ``ROD_RADIUS_PER_LENGTH`` of the shortest link). The tip sphere's collision radius is

@@ -177,7 +177,7 @@ def _keep_urdf_reachable(data: dict, scene_path: str, fitted_path) -> None:
     """A relative ``arm.urdf`` is relative to its scene file's directory: written into
     another directory (runs/fit_<name>/), it is rewritten relative to the new file's
     directory so that the fitted scene reads the same description."""
-    from ..physics.urdf_arm import resolve_urdf_path
+    from ..physics.scene.urdf import resolve_urdf_path
 
     arm = data.get('arm')
     urdf = arm.get('urdf') if isinstance(arm, dict) else None

@@ -33,8 +33,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NoReturn
 
-from .errors import SceneError
-from .scene import JointSpec
+from ..errors import SceneError
+from .types import JointSpec
 
 MAX_URDF_BYTES = 4 << 20  # descriptions with long inline meshes lists run to a few 100 kB
 MOVING = ('revolute', 'continuous')

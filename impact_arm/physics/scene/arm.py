@@ -1,0 +1,173 @@
+"""The arm's links as the model takes them: from the scene's ``links`` or its URDF
+(``arm.urdf`` or ``arm.description``), with the values the scene states instead of the file's."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .schema import LINK, TIP_RADIUS_RANGE, SceneChecker
+from .types import JointSpec, rod_centres, rod_inertias
+from .urdf import parse_urdf_arm, read_urdf_file, resolve_urdf_path
+
+
+@dataclass(frozen=True)
+class _ArmLinks:
+    """The arm's links from the scene's ``links`` or its ``arm.urdf``."""
+
+    lengths: tuple[float, ...]
+    masses: tuple[float, ...]
+    com: tuple[tuple[float, float], ...]
+    inertias: tuple[float, ...]
+    tip_point: tuple[float, float]
+    tip_radius: float
+    joints: tuple[JointSpec, ...]
+    link_names: tuple[str, ...]
+    urdf_path: str
+    key: str  # the scene key the links come from, for refusals
+    urdf_text: str = ''
+
+
+def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
+    from ...contract import joint_names
+
+    if raw['arm'] is not None:
+        for key, instead in (
+            ('links', 'the links'),
+            ('tip_radius', "the contact sphere's radius (arm.contact.radius)"),
+        ):
+            if raw[key] is not None:
+                check.fail(key, f'is given with arm.urdf, which gives {instead}: give one of them')
+        contact = raw['arm'].get('contact') or {}
+        point = contact.get('point')
+        if point is not None and len(point) != 3:
+            check.fail(
+                'arm.contact.point',
+                f"has {len(point)} entries: must be x y z (m) in the contact link's frame",
+            )
+        given = [key for key in ('urdf', 'description') if raw['arm'][key] is not None]
+        if len(given) != 1:
+            check.fail(
+                'arm',
+                'gives both urdf and description: give one of them'
+                if given
+                else 'needs urdf (a URDF file) or description (its text)',
+            )
+        urdf, urdf_text = _urdf_arm(
+            check.origin,
+            raw['arm']['urdf'],
+            raw['arm']['description'],
+            scene_path,
+            contact.get('link'),
+            point,
+            contact.get('radius'),
+        )
+        urdf = _with_link_values(check, urdf, raw['arm']['links'])
+        for k, name in enumerate(urdf.link_names):
+            where = f"arm.{given[0]} link '{name}'"
+            length = 'contact point distance' if k == len(urdf.link_names) - 1 else 'length'
+            for what, value, spec in (
+                (length, urdf.lengths[k], LINK['length']),
+                ('mass', urdf.masses[k], LINK['mass']),
+                ('centre of mass x', urdf.com[k][0], LINK['com_x']),
+                ('centre of mass z', urdf.com[k][1], LINK['com_y']),
+                ('inertia', urdf.inertias[k], LINK['inertia']),
+            ):
+                check.number(f'{where} {what}', value, spec[1], spec[2])
+        check.number('arm.contact.radius', urdf.tip_radius, TIP_RADIUS_RANGE, 'm')
+        return _ArmLinks(
+            urdf.lengths,
+            urdf.masses,
+            urdf.com,
+            urdf.inertias,
+            urdf.tip_point,
+            urdf.tip_radius,
+            urdf.joints,
+            urdf.link_names,
+            raw['arm']['urdf'] or '',
+            f'arm.{given[0]}',
+            urdf_text,
+        )
+    for key in ('links', 'tip_radius'):
+        if raw[key] is None:
+            check.fail(key, 'is missing (required unless arm.urdf gives the arm)')
+    entries = raw['links']
+    n = len(entries)
+    if n < 2:
+        check.fail('links', f'has {n} entries: an arm needs at least 2 links')
+    lengths = tuple(entry['length'] for entry in entries)
+    masses = tuple(entry['mass'] for entry in entries)
+    rod_c, rod_i = rod_centres(lengths), rod_inertias(lengths, masses)
+    return _ArmLinks(
+        lengths,
+        masses,
+        tuple(
+            (rod_c[k][0] if entry['com_x'] is None else entry['com_x'], entry['com_y'])
+            for k, entry in enumerate(entries)
+        ),
+        tuple(
+            rod_i[k] if entry['inertia'] is None else entry['inertia']
+            for k, entry in enumerate(entries)
+        ),
+        (lengths[-1], 0.0),
+        raw['tip_radius'],
+        tuple(JointSpec(name) for name in joint_names(n)),
+        (),
+        '',
+        'links',
+    )
+
+
+def _with_link_values(check: SceneChecker, urdf: Any, values: Sequence[dict] | None) -> Any:
+    """The URDF's arm with the values ``arm.links`` states instead of the file's."""
+    from dataclasses import replace
+
+    if values is None:
+        return urdf
+    n = len(urdf.link_names)
+    if len(values) != n:
+        check.fail(
+            'arm.links',
+            f'has {len(values)} entries: must have one per moving link of the URDF ({n}: '
+            f'{", ".join(urdf.link_names)})',
+        )
+    masses, com, inertias = list(urdf.masses), list(urdf.com), list(urdf.inertias)
+    for k, entry in enumerate(values):
+        if entry['mass'] is not None:
+            masses[k] = entry['mass']
+        com[k] = (
+            com[k][0] if entry['com_x'] is None else entry['com_x'],
+            com[k][1] if entry['com_y'] is None else entry['com_y'],
+        )
+        if entry['inertia'] is not None:
+            inertias[k] = entry['inertia']
+    return replace(urdf, masses=tuple(masses), com=tuple(com), inertias=tuple(inertias))
+
+
+_URDF_CACHE: dict[tuple, Any] = {}  # a study loads one scene many times: read its URDF once
+
+
+def _urdf_arm(origin, path, description, scene_path, link, point, radius):
+    """(the parsed arm, the URDF text) of ``arm.urdf`` (a file) or ``arm.description``."""
+    if path is None:
+        key: tuple = (hash(description), description, link, point, radius)
+    else:
+        full = resolve_urdf_path(path, scene_path)
+        try:
+            info = os.stat(full)
+            stamp: tuple = (info.st_mtime_ns, info.st_size)
+        except OSError:
+            stamp = ()
+        key = (os.path.abspath(full), stamp, link, point, radius)
+    if key not in _URDF_CACHE:
+        if path is None:
+            text, where = description, f"scene '{origin}': arm.description"
+        else:
+            text = read_urdf_file(full, f"scene '{origin}': arm.urdf")
+            where = f"scene '{origin}': arm.urdf '{path}'"
+        if len(_URDF_CACHE) > 64:
+            _URDF_CACHE.clear()
+        _URDF_CACHE[key] = (parse_urdf_arm(text, where, link, point, radius), text)
+    return _URDF_CACHE[key]
