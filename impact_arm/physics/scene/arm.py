@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .schema import LINK, TIP_RADIUS_RANGE, SceneChecker
-from .types import JointSpec, rod_centres, rod_inertias
+from .types import JointSpec, PlaneFrame, rod_centres, rod_inertias
 from .urdf import parse_urdf_arm, read_urdf_file, resolve_urdf_path
 
 
@@ -28,6 +28,10 @@ class _ArmLinks:
     urdf_path: str
     key: str  # the scene key the links come from, for refusals
     urdf_text: str = ''
+    locked: tuple[tuple[str, float], ...] = ()
+    plane: PlaneFrame | None = None
+    gravity_scale: float = 1.0  # the part of the scene's gravity in the arm's plane
+    notes: tuple[str, ...] = ()
 
 
 def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
@@ -55,6 +59,7 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
                 if given
                 else 'needs urdf (a URDF file) or description (its text)',
             )
+        locked = raw['arm']['locked']
         urdf, urdf_text = _urdf_arm(
             check.origin,
             raw['arm']['urdf'],
@@ -63,6 +68,8 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
             contact.get('link'),
             point,
             contact.get('radius'),
+            raw['arm']['joints'],
+            None if locked is None else tuple(sorted(locked.items())),
         )
         urdf = _with_link_values(check, urdf, raw['arm']['links'])
         for k, name in enumerate(urdf.link_names):
@@ -89,6 +96,10 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
             raw['arm']['urdf'] or '',
             f'arm.{given[0]}',
             urdf_text,
+            urdf.locked,
+            urdf.plane,
+            urdf.gravity_scale,
+            urdf.notes,
         )
     for key in ('links', 'tip_radius'):
         if raw[key] is None:
@@ -149,10 +160,12 @@ def _with_link_values(check: SceneChecker, urdf: Any, values: Sequence[dict] | N
 _URDF_CACHE: dict[tuple, Any] = {}  # a study loads one scene many times: read its URDF once
 
 
-def _urdf_arm(origin, path, description, scene_path, link, point, radius):
-    """(the parsed arm, the URDF text) of ``arm.urdf`` (a file) or ``arm.description``."""
+def _urdf_arm(origin, path, description, scene_path, link, point, radius, joints, locked):
+    """(the parsed arm, the URDF text) of ``arm.urdf`` (a file) or ``arm.description``;
+    ``joints``: the moving joints or None, ``locked``: sorted (name, value) pairs or None."""
+    choice = (link, point, radius, joints, locked)
     if path is None:
-        key: tuple = (hash(description), description, link, point, radius)
+        key: tuple = (hash(description), description, *choice)
     else:
         full = resolve_urdf_path(path, scene_path)
         try:
@@ -160,7 +173,7 @@ def _urdf_arm(origin, path, description, scene_path, link, point, radius):
             stamp: tuple = (info.st_mtime_ns, info.st_size)
         except OSError:
             stamp = ()
-        key = (os.path.abspath(full), stamp, link, point, radius)
+        key = (os.path.abspath(full), stamp, *choice)
     if key not in _URDF_CACHE:
         if path is None:
             text, where = description, f"scene '{origin}': arm.description"
@@ -169,5 +182,6 @@ def _urdf_arm(origin, path, description, scene_path, link, point, radius):
             where = f"scene '{origin}': arm.urdf '{path}'"
         if len(_URDF_CACHE) > 64:
             _URDF_CACHE.clear()
-        _URDF_CACHE[key] = (parse_urdf_arm(text, where, link, point, radius), text)
+        arm = parse_urdf_arm(text, where, link, point, radius, joints, dict(locked or ()))
+        _URDF_CACHE[key] = (arm, text)
     return _URDF_CACHE[key]

@@ -72,6 +72,8 @@ ARM: dict[str, Any] = {
     'urdf': ('str', None, '', None),  # a file, or
     'description': ('str', None, '', None),  # its text (recordings store the scene so)
     'links': ('list', ARM_LINK, '', None),  # one per moving link: values instead of the file's
+    'joints': ('names', None, '', None),  # the moving joints, base to tip
+    'locked': ('values', number_spec(-1e3, 1e3), 'rad or m', None),  # the others' values
     'contact': (
         'dict',
         {
@@ -290,6 +292,24 @@ class SceneChecker:
             return tuple(
                 self.number(f'{path}[{i}]', v, constraint[1], unit) for i, v in enumerate(value)
             )
+        if kind == 'names':
+            if (
+                not isinstance(value, (list, tuple))
+                or not value
+                or not all(isinstance(v, str) and v for v in value)
+            ):
+                self.fail(path, f'= {_show.repr(value)} must be a non-empty list of names')
+            return tuple(
+                self.leaf(f'{path}[{i}]', v, ('str', None, '', None)) for i, v in enumerate(value)
+            )
+        if kind == 'values':
+            if not isinstance(value, dict):
+                self.fail(
+                    path, f'= {_show.repr(value)} must be a mapping of names to numbers ({unit})'
+                )
+            return {
+                str(k): self.number(f'{path}.{k}', v, constraint[1], unit) for k, v in value.items()
+            }
         if kind == 'dict':
             return self.mapping(path, value, constraint, known)
         if kind == 'list':

@@ -121,6 +121,27 @@ class JointSpec:
     # friction tanh(ω / friction_v_d)
     friction_v_d: float = 0.01  # rad/s, the Coulomb law's smoothing rate
     armature: float = 0.0  # kg m^2, rotor inertia reflected to the joint
+    # the robot's joint angle θ (its zero and sign, as its driver reports it) against the
+    # model's relative angle r = q_k - q_(k-1): r = sign θ + offset (docs/scene.md)
+    sign: float = 1.0
+    offset: float = 0.0  # rad
+
+
+@dataclass(frozen=True)
+class PlaneFrame:
+    """Where the model's plane lies in the description's world (at the robot's zero of the
+    moving joints, locked joints at their values): its origin O (the first moving joint),
+    its x and y axes and its normal (the first moving joint's axis), all in the world."""
+
+    origin: tuple[float, float, float]
+    x: tuple[float, float, float]
+    y: tuple[float, float, float]
+    axis: tuple[float, float, float]
+
+    def to_plane(self, point: Sequence[float]) -> tuple[float, float]:
+        """A world point's coordinates in the plane (its projection)."""
+        d = [p - o for p, o in zip(point, self.origin)]
+        return (sum(a * b for a, b in zip(d, self.x)), sum(a * b for a, b in zip(d, self.y)))
 
 
 @dataclass(frozen=True)
@@ -149,6 +170,10 @@ class Scene:
     joints: tuple[JointSpec, ...] = ()  # empty: joint1..N, continuous, no dynamics
     link_names: tuple[str, ...] = ()  # the URDF's names of the moving links
     urdf_path: str = ''  # the file the arm came from ('' : the scene's links or arm.description)
+    # a URDF arm's other joints of the chain, locked at these values (rad, m), published so
+    # that the whole robot shows; and where the model's plane lies in the URDF's world
+    locked_joints: tuple[tuple[str, float], ...] = ()
+    plane: PlaneFrame | None = None
     urdf_text: str = field(default='', compare=False, repr=False)  # the URDF the arm came from
     sensors: SensorSpec = field(default_factory=SensorSpec)
     source_text: str = field(default='', compare=False, repr=False)
