@@ -288,6 +288,64 @@ def to_absolute(values) -> list:
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class JointCoordinates:
+    """The robot's joint coordinates against the model's absolute link angles q.
+
+    A robot's joint angle θ_k (its URDF's zero and sign, as its driver reports it) is the
+    model's relative angle r_k = q_k - q_(k-1) up to a sign and an offset:
+    r_k = sign_k θ_k + offset_k; its torque τ_k acts on r_k as sign_k τ_k. Everything on the
+    wire (/joint_states, the commands, recordings, the controller's targets) is in the
+    robot's coordinates; the physics in q. For the scene's own rods, and a URDF written in
+    the model's convention, every sign is 1 and every offset 0: θ = r (``to_joint_space``)."""
+
+    signs: tuple[float, ...]
+    offsets: tuple[float, ...]
+
+    @classmethod
+    def identity(cls, n: int) -> 'JointCoordinates':
+        return cls((1.0,) * n, (0.0,) * n)
+
+    @property
+    def is_identity(self) -> bool:
+        return all(s == 1.0 for s in self.signs) and not any(self.offsets)
+
+    def positions(self, q) -> list:
+        """Absolute link angles -> the robot's joint angles."""
+        r = to_joint_space(q)
+        if self.is_identity:
+            return r
+        return [s * (v - c) for s, v, c in zip(self.signs, r, self.offsets)]
+
+    def rates(self, qd) -> list:
+        """Absolute link rates -> the robot's joint rates."""
+        r = to_joint_space(qd)
+        return r if self.is_identity else [s * v for s, v in zip(self.signs, r)]
+
+    def efforts(self, tau) -> list:
+        """The model's joint torques (on r) -> the robot's joint efforts."""
+        return [float(v) if s == 1.0 else s * v for s, v in zip(self.signs, tau)]
+
+    def absolute(self, theta) -> list:
+        """The robot's joint angles -> absolute link angles."""
+        if self.is_identity:
+            return to_absolute(theta)
+        return to_absolute([s * float(v) + c for s, v, c in zip(self.signs, theta, self.offsets)])
+
+    def absolute_rates(self, theta_d) -> list:
+        """The robot's joint rates -> absolute link rates."""
+        return to_absolute(self.efforts(theta_d))
+
+    def model_efforts(self, effort) -> list:
+        """The robot's joint efforts -> the model's joint torques (the sign is its own
+        inverse)."""
+        return self.efforts(effort)
+
+    def relative(self, theta) -> list:
+        """The robot's joint angles -> the model's relative angles r."""
+        return [s * float(v) + c for s, v, c in zip(self.signs, theta, self.offsets)]
+
+
 # ------------------------------------------------------------------------------- frames
 PLANE_AXIS_IN_WORLD = (0.0, -1.0, 0.0)  # the model's z (positive angles) in the world
 GRAVITY_IN_WORLD = (0.0, 0.0, -1.0)  # the model's -y

@@ -17,6 +17,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from impact_arm.contract import to_joint_space
 from impact_arm.io.urdf import robot_description
 from impact_arm.physics.errors import SceneError
 from impact_arm.physics.model import ArmModel
@@ -92,7 +93,10 @@ def scene_data(urdf_path, n, **contact):
     controller = data['controller']
     for key in ('kp', 'kd', 'ki', 'down_target_deg', 'up_target_deg'):
         controller[key] = (controller[key] * n)[:n]
-    data['initial'] = {'q_deg': [60.0 - 10 * k for k in range(n)]}
+    # a URDF arm's angles are the robot's joint angles: relative ones for this convention
+    for key in ('down_target_deg', 'up_target_deg'):
+        controller[key] = to_joint_space(controller[key])
+    data['initial'] = {'q_deg': to_joint_space([60.0 - 10 * k for k in range(n)])}
     data['surfaces'] = [{'height': -0.25, 'material': 'steel'}]
     return data
 

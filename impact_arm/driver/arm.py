@@ -16,7 +16,6 @@ from typing import Iterable
 
 import numpy as np
 
-from ..contract import to_joint_space
 from ..physics.control import q_law
 from ..physics.errors import ImpactArmError
 from ..physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
@@ -76,7 +75,9 @@ class SimulatedArm:
         self.model = ArmModel(scene)
         self.n = self.model.n
         self.rate = float(rate)
-        self.max_effort = float(max_effort)
+        self.set_max_effort(max_effort)
+        # the wire is in the robot's joint coordinates (its URDF's zero and sign)
+        self.coordinates = scene.joint_coordinates
         # how the driver reports the state (the scene's sensors section; ideal by default)
         self.sensors = Sensors(scene.sensors, self.rate, self.n)
         self._reading: tuple | None = None  # (period, state bytes, reading) of the last one
@@ -153,15 +154,26 @@ class SimulatedArm:
             )
         return out
 
+    def set_max_effort(self, limit: float) -> None:
+        """The driver's own torque limit: each joint's drive clips at its own limit (the
+        scene's ``joints[i].max_effort``, else the URDF's), and at this where it is lower."""
+        self.max_effort = float(limit)
+        self.effort_limits = [min(self.max_effort, j) for j in self.scene.effort_limits]
+
+    def clips(self, values: Iterable[float]) -> bool:
+        """Whether a command exceeds any joint's limit."""
+        return any(abs(v) > limit for v, limit in zip(values, self.effort_limits))
+
     def apply(self, values: Iterable[float]) -> None:
-        """Hold ``values`` (joint torques, N m) from now on, clipped to ±max_effort."""
+        """Hold ``values`` (the robot's joint efforts, N m) from now on, each clipped to its
+        joint's effort limit."""
         self.apply_checked(self.check_command(values))
 
     def apply_checked(self, tau: list[float]) -> None:
         """``apply`` for torques ``check_command`` has already passed (a driver checks each
         command once, when it arrives, and applies it at its next period)."""
-        limit = self.max_effort
-        self._hold([min(max(v, -limit), limit) for v in tau])
+        clipped = [min(max(v, -limit), limit) for v, limit in zip(tau, self.effort_limits)]
+        self._hold(self.coordinates.model_efforts(clipped))
 
     def release(self) -> None:
         """Zero torque (watchdog expired, controller gone)."""
@@ -222,11 +234,13 @@ class SimulatedArm:
         tau = self.integrator.torque()
         effort = list(tau) if tau is not None else [0.0] * n
         plates = self.model.plate_states(st.y)
+        coordinates = self.coordinates
+        effort = coordinates.efforts(effort)
         if self.sensors.ideal:
             return Tick(
                 st.t,
-                to_joint_space(q),
-                to_joint_space(qd),
+                coordinates.positions(q),
+                coordinates.rates(qd),
                 effort,
                 tuple(wrench),
                 list(impacts),
@@ -234,7 +248,9 @@ class SimulatedArm:
             )
         key = (self.periods, st.y.tobytes())
         if self._reading is None or self._reading[:2] != key:
-            reading = self.sensors.read(to_joint_space(q), to_joint_space(qd), effort, wrench)
+            reading = self.sensors.read(
+                coordinates.positions(q), coordinates.rates(qd), effort, wrench
+            )
             self._reading = (*key, reading)
         r = self._reading[2]
         return Tick(st.t, r.position, r.velocity, r.effort, r.wrench, list(impacts), plates=plates)

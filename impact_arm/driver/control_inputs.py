@@ -18,7 +18,7 @@ import time
 from collections import Counter, deque
 from typing import Callable, Sequence
 
-from ..contract import to_absolute
+from ..contract import JointCoordinates
 from ..physics.control import CycleController
 from ..physics.prediction import StatePredictor
 
@@ -84,8 +84,11 @@ class ControlInputs:
         latency_periods: int = 0,
         wrench_tolerance: float = math.inf,
         implicit_periods: int = 0,
+        coordinates: JointCoordinates | None = None,
     ):
         self.ctrl = ctrl
+        # the wire's joint coordinates (the robot's zero and sign) against the law's
+        self.coordinates = coordinates or JointCoordinates.identity(len(joint_names))
         self.joint_names = list(joint_names)
         self.order = list(order)
         self.period = 1.0 / rate
@@ -242,7 +245,11 @@ class ControlInputs:
         self.jump_from = None
         if self.latest is not None and t > self.latest[0] and not same:
             self.sample_gap = t - self.latest[0]
-        self.latest = (t, to_absolute(pos), to_absolute(vel))
+        self.latest = (
+            t,
+            self.coordinates.absolute(pos),
+            self.coordinates.absolute_rates(vel),
+        )
         self.latest_joint = (pos, vel)
         if effort and self.latency_periods == -1:
             self._measure_latency(effort, index)
@@ -326,6 +333,7 @@ class ControlInputs:
             self.ctrl.rearm()
             return
         self.sent.append(tau)
+        tau = self.coordinates.efforts(tau)
         self.send([tau[j] for j in self.order])
 
     # ------------------------------------------------------------------------- latency

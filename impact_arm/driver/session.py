@@ -189,7 +189,7 @@ class Session:
             self.zero_before_release += 1
             return True
         now = self.clock() if now is None else now
-        self.clipped += any(abs(v) > self.arm.max_effort for v in torques)
+        self.clipped += self.arm.clips(torques)
         self.loop.command(torques, now)
         self._commanded(now)
         return True
@@ -208,7 +208,7 @@ class Session:
 
     # -------------------------------------------------------------------------- control
     def set_max_effort(self, limit: float) -> None:
-        self.arm.max_effort = limit
+        self.arm.set_max_effort(limit)
         self.loop.watchdog.reapply()  # re-clip the held command with the new limit
 
     def set_command_timeout(self, timeout: float) -> None:

@@ -84,7 +84,6 @@ from ..contract import (
     TRACE_QOS,
     TRACE_TYPE,
     WRENCH_FRAME,
-    to_joint_space,
 )
 from ..driver.sensors import Sensors
 from ..physics.scene import self_contained_text
@@ -196,6 +195,7 @@ class OfflineRecorder:
         self.sensors = (
             None if scene.sensors.ideal else Sensors(scene.sensors, scene.publish_rate, self.n)
         )
+        self.coordinates = scene.joint_coordinates  # the robot's, on the wire
         self.writer.flush()
         self._closed = False
 
@@ -203,8 +203,9 @@ class OfflineRecorder:
     def on_sample(self, sample: Sample) -> None:
         t_ns = sim_time_ns(sample.t)
         T = self._types
-        position, velocity = to_joint_space(sample.q), to_joint_space(sample.qd)
-        effort, wrench = list(sample.tau), tuple(sample.wrench)
+        coordinates = self.coordinates
+        position, velocity = coordinates.positions(sample.q), coordinates.rates(sample.qd)
+        effort, wrench = coordinates.efforts(sample.tau), tuple(sample.wrench)
         if self.sensors is not None:
             read = self.sensors.read(position, velocity, effort, wrench)
             position, velocity, effort, wrench = (

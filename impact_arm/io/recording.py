@@ -20,7 +20,7 @@ from operator import attrgetter
 
 import numpy as np
 
-from ..contract import CONTACT_WRENCH, JOINT_STATES, SURFACE_MOUNTS, joint_names
+from ..contract import CONTACT_WRENCH, JOINT_STATES, SURFACE_MOUNTS, JointCoordinates, joint_names
 from ..physics.errors import ImpactArmError
 from ..calibration.identify import JointRecording
 from .wire import CdrReader, _doubles_at, _header, _strings
@@ -108,13 +108,18 @@ def read_recording(
     wrench_topic: str | None = None,
     progress: Callable[..., Any] | None = None,
     scene_joints: Sequence[str] | None = None,
+    coordinates: JointCoordinates | None = None,
 ) -> JointRecording:
     """The joint states of ``joints`` (default ``scene_joints``, the recorded arm's scene's
     ``Scene.joint_names``; without it joint1..jointN) and, if recorded, the wrench.
 
     ``wrench_topic`` None reads ``/contact_wrench`` when the recording has it; a topic named
     explicitly must be there. Samples whose values are not finite are dropped and counted in
-    ``notes``; refused in one line: a missing topic, joints not in the messages, no samples."""
+    ``notes``; refused in one line: a missing topic, joints not in the messages, no samples.
+
+    ``coordinates``: the scene's ``Scene.joint_coordinates``; the recording holds the robot's
+    joint angles, efforts and rates, the result the model's relative ones (r = sign θ +
+    offset), as the model's equations take them."""
     files = mcap_files(path)
     topics = _topics(files)
     given = bool(joints)
@@ -192,6 +197,8 @@ def read_recording(
             f"joints: give the recorded arm's scene (--scene) or its joints (--joints)"
         )
     rec = _assemble(states, wrenches, joints, os.fspath(path), notes)
+    if coordinates is not None and not coordinates.is_identity:
+        to_model(rec, coordinates)
     widths = {len(p[2]) for p in plates}
     if plates and len(widths) == 1 and widths != {0}:
         stamps = _stamps([p[0] for p in plates], [p[1] for p in plates])
@@ -201,6 +208,14 @@ def read_recording(
         rec.plates_t = ((stamps[order] - rec.t0_ns) * 1e-9)[good]
         rec.plates = values[order][good]
     return rec
+
+
+def to_model(rec: JointRecording, coordinates: JointCoordinates) -> None:
+    """A recording in the robot's joint coordinates to the model's relative angles, in place."""
+    signs = np.asarray(coordinates.signs, float)
+    rec.position = rec.position * signs + np.asarray(coordinates.offsets, float)
+    rec.velocity = rec.velocity * signs
+    rec.effort = rec.effort * signs
 
 
 def recorded_scene(path: str | os.PathLike) -> Any:

@@ -50,7 +50,6 @@ from ..contract import (
     WORLD_FRAME,
     plane_rotation,
     surface_frame,
-    to_joint_space,
 )
 from ..physics.errors import ImpactArmError
 
@@ -290,7 +289,8 @@ def robot_description(
         _sub(joint, 'child', link=t.child)
         roll = 2 * math.atan2(t.rotation[0], t.rotation[3])  # only rotations about x here
         _sub(joint, 'origin', xyz=f'{_num(t.x)} {_num(t.y)} {_num(t.z)}', rpy=f'{_num(roll)} 0 0')
-    _ros2_control(robot, joints, joint_commands_topic, joint_states_topic, to_joint_space(scene.q0))
+    initial = scene.joint_coordinates.positions(scene.q0)
+    _ros2_control(robot, joints, joint_commands_topic, joint_states_topic, initial)
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding='unicode') + '\n'
 

@@ -11,7 +11,7 @@ import threading
 
 from std_msgs.msg import String
 
-from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, VISUAL_TOPICS, to_absolute
+from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, VISUAL_TOPICS
 from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import SceneVisuals
 
@@ -106,7 +106,8 @@ class VisualsPublisher:
         t_ns = round(tick.t * 1e9)
         if tf is not None:
             plates = tick.plates if self.visuals.mounted else None
-            tf.publish(self.visuals.tf(to_absolute(tick.position), t_ns, plates))
+            q = self.visuals.scene.joint_coordinates.absolute(tick.position)
+            tf.publish(self.visuals.tf(q, t_ns, plates))
         if markers is not None:
             with self.lock:
                 markers_msg = self.visuals.markers(t_ns)

@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from .. import contract
-from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, to_absolute
+from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
@@ -86,6 +86,8 @@ class Controller(Node):
         p = self.p = declare(self, self.table)
         self.n = scene.n_links
         self.model = ArmModel(scene)
+        # targets and joint states in the robot's joint coordinates; the law in the model's
+        self.coordinates = scene.joint_coordinates
         names = self.joint_names = scene_joint_names(scene)
         command_order = check(p, names)
         refuse_unknown(self, self.table)
@@ -95,8 +97,8 @@ class Controller(Node):
             p.p,
             p.d,
             p.i,
-            to_absolute(p.down_target),
-            to_absolute(p.up_target),
+            self.coordinates.absolute(p.down_target),
+            self.coordinates.absolute(p.up_target),
             p.switch_height,
             p.surface_height,
             space=p.space,
@@ -162,6 +164,7 @@ class Controller(Node):
             latency_periods=p.latency_periods,
             wrench_tolerance=p.wrench_tolerance,
             implicit_periods=p.implicit_periods,
+            coordinates=self.coordinates,
         )
         self.inputs.warm_up(scene.q0, scene.qd0)
         if p.startup_hold > 0:
@@ -216,7 +219,10 @@ class Controller(Node):
             c.integral = self._integrator(p)
         c.law, c.space = p.law, p.space
         c.kp, c.ki, c.kd = list(p.p), list(p.i), list(p.d)
-        c.targets = {'down': to_absolute(p.down_target), 'up': to_absolute(p.up_target)}
+        c.targets = {
+            'down': self.coordinates.absolute(p.down_target),
+            'up': self.coordinates.absolute(p.up_target),
+        }
         c.switch_height, c.surface_height = p.switch_height, p.surface_height
         c.force_threshold, c.reversal_band = p.force_threshold, p.reversal_band
         self.p = p

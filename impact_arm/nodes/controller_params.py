@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from .. import contract
-from ..contract import ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES, to_joint_space
+from ..contract import ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES
 from ..driver.control_inputs import SENT_HISTORY
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
@@ -120,18 +120,18 @@ def parameter_table(scene):
         ),
         Param(
             'down_target',
-            to_joint_space(c.down_target),
+            scene.joint_coordinates.positions(c.down_target),
             'joint positions aimed at on the way down [rad]',
             'floats',
             low=-4 * math.pi,
             high=4 * math.pi,
             size=n,
             shown_default="scene's",
-            doc=' (relative: joint1 = q1, joint_k = q_k − q_(k−1))',
+            doc=" (the robot's joint angles; for rods joint_k = q_k − q_(k−1))",
         ),
         Param(
             'up_target',
-            to_joint_space(c.up_target),
+            scene.joint_coordinates.positions(c.up_target),
             'joint positions aimed at on the way up [rad]',
             'floats',
             low=-4 * math.pi,

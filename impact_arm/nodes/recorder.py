@@ -159,6 +159,7 @@ class Recorder(Node):
                 del self.wanted[topic]
             self._q = None  # absolute link angles of the latest joint state
             self._joints = scene_joint_names(self.visuals.visuals.scene)
+            self._coordinates = self.visuals.visuals.scene.joint_coordinates
             self._read_string = _string_reader()
         self.subs = {}
         # what has been written, for a lockstep simulator that waits for the recording
@@ -340,7 +341,7 @@ class Recorder(Node):
             sec, nanosec, names, position, _ = joint_state_fields(data)
             by_name = dict(zip(names, position))
             try:
-                self._q = contract.to_absolute([by_name[j] for j in self._joints])
+                self._q = self._coordinates.absolute([by_name[j] for j in self._joints])
             except KeyError:
                 return  # not this scene's joints: nothing to draw
             self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)

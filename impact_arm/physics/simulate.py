@@ -223,12 +223,16 @@ def run(
     k_pub, k_ctl = 0, 0
     dt_pub = 1.0 / publish_rate
     dt_ctl = 1.0 / control_rate if control_rate else math.inf
+    limits = scene.effort_limits  # (a sign never changes a symmetric limit)
+    clip = any(math.isfinite(limit) for limit in limits)
 
     def apply_control(t: float) -> tuple[str, str]:
         q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
         fn = impulse_since_ctl[1] / dt_ctl if dt_ctl < math.inf else None
         mode_before = ctrl.mode
         tau = ctrl.update(t, q, qd, normal_force=fn)
+        if clip:  # each joint's drive clips at its limit, as the driver does
+            tau = [min(max(v, -limit), limit) for v, limit in zip(tau, limits)]
         integ.set_held_torque(tau)
         return mode_before, ctrl.mode
 

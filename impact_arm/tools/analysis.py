@@ -83,6 +83,9 @@ def load(path, progress=_quiet) -> Run:
     total = sum(i.message_count for i in info.values()) or 1
     progress(f'reading {path} ({total} messages)')
     t, pos, vel, impacts, traces = [], [], [], [], []
+    scene = _scene(metadata)
+    # the wire holds the robot's joint angles; the analysis the model's absolute ones
+    coordinates = scene.joint_coordinates if scene is not None else None
     wanted = [JOINT_STATES, IMPACT_REPORT, IMPACT_TRACE]
     for k, m in enumerate(iter_raw(path, [w for w in wanted if w in info])):
         if k and k % 20000 == 0:
@@ -90,10 +93,20 @@ def load(path, progress=_quiet) -> Run:
         msg = deserialize_cdr(m.data, m.type_name)
         if m.topic == JOINT_STATES:
             t.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
-            pos.append(to_absolute(msg.position))
-            vel.append(
-                to_absolute(msg.velocity) if len(msg.velocity) else [math.nan] * len(msg.position)
-            )
+            if coordinates is None:
+                pos.append(to_absolute(msg.position))
+                vel.append(
+                    to_absolute(msg.velocity)
+                    if len(msg.velocity)
+                    else [math.nan] * len(msg.position)
+                )
+            else:
+                pos.append(coordinates.absolute(msg.position))
+                vel.append(
+                    coordinates.absolute_rates(msg.velocity)
+                    if len(msg.velocity)
+                    else [math.nan] * len(msg.position)
+                )
         elif m.topic == IMPACT_REPORT:
             try:
                 impacts.append(json.loads(msg.data))
@@ -117,7 +130,6 @@ def load(path, progress=_quiet) -> Run:
     # after newer messages (impact reports by their contact time, joint states by stamp)
     impacts.sort(key=lambda record: _number(record.get('t_contact')))
     order = np.argsort(t, kind='stable')
-    scene = _scene(metadata)
     law = scene.controller.law if scene is not None else ''
     return Run(
         os.path.basename(path),

@@ -117,14 +117,27 @@ def compare(
     study = Study(kin_scene)
     kin = study.scene()
     n, names = kin.n_links, kin.joint_names
+    coordinates = kin.joint_coordinates
     rec_a = read_recording(
-        a, joints, n, states_topic or JOINT_STATES, wrench_topic, scene_joints=names
+        a,
+        joints,
+        n,
+        states_topic or JOINT_STATES,
+        wrench_topic,
+        scene_joints=names,
+        coordinates=coordinates,
     )
     a_rows, preds, _ = recorded_impacts(rec_a, study)
     a_origin = a_rows[0]['t'] if a_rows else 0.0
     if b_is_recording:
         rec_b = read_recording(
-            b, joints, n, states_topic or JOINT_STATES, wrench_topic, scene_joints=names
+            b,
+            joints,
+            n,
+            states_topic or JOINT_STATES,
+            wrench_topic,
+            scene_joints=names,
+            coordinates=coordinates,
         )
         b_rows = recorded_impacts(rec_b, study)[0]
         what = f'recording {b}'

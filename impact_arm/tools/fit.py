@@ -99,6 +99,7 @@ def fit_recording(
             states_topic or JOINT_STATES,
             wrench_topic,
             scene_joints=base.joint_names,
+            coordinates=base.joint_coordinates,
         )
 
     # a second process reads the recording while this one imports the optimiser, then

@@ -15,6 +15,7 @@ import numpy as np
 from ..contract import CONTACT_WRENCH, JOINT_STATES, SURFACE_MOUNTS, to_joint_space
 from ..calibration.identify import JointRecording
 from ..driver.sensors import sensed_series
+from ..io.recording import to_model
 
 REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
 
@@ -54,6 +55,7 @@ def synthetic_recording(
     rng = np.random.default_rng(seed)
     s = result.samples
     t = np.array([x.t for x in s])
+    # the model's relative angles (a JointRecording's, as read_recording gives them)
     q = np.array([to_joint_space(x.q) for x in s])
     qd = np.array([to_joint_space(x.qd) for x in s])
     tau = np.array([x.tau for x in s], float)
@@ -190,7 +192,6 @@ def driver_recording(
     command held over the period that ends at the stamp; the scene's ``sensors`` section
     applied) under the scene's controller sampled at ``rate`` — the reading of efforts of a
     ros2_control driver. The controller sees what is published, as over the topics."""
-    from ..contract import to_absolute
     from ..physics.control import CycleController
     from ..driver.arm import SimulatedArm
     from ..calibration.study import Study
@@ -203,12 +204,15 @@ def driver_recording(
     tick = arm.sample()
     while done < cycles and tick.t < t_end:
         before = ctrl.mode
+        coordinates = arm.coordinates  # the wire's: the robot's joint coordinates
         arm.apply(
-            ctrl.update(
-                tick.t,
-                to_absolute(tick.position),
-                to_absolute(tick.velocity),
-                normal_force=tick.wrench[1],
+            coordinates.efforts(
+                ctrl.update(
+                    tick.t,
+                    coordinates.absolute(tick.position),
+                    coordinates.absolute_rates(tick.velocity),
+                    normal_force=tick.wrench[1],
+                )
             )
         )
         done += before == 'up' and ctrl.mode == 'down'
@@ -221,7 +225,7 @@ def driver_recording(
         _noisy(x, noise.get(name, 0.0), rng)
         for x, name in ((q, 'position'), (qd, 'velocity'), (tau, 'effort'), (w, 'wrench'))
     )
-    return JointRecording(
+    rec = JointRecording(
         t=t - t[0],
         position=q,
         velocity=qd,
@@ -232,3 +236,6 @@ def driver_recording(
         source=f'driver {scene}',
         t0_ns=round(t[0] * 1e9),
     )
+    if not sc.joint_coordinates.is_identity:
+        to_model(rec, sc.joint_coordinates)  # as read_recording gives a recording
+    return rec

@@ -6,6 +6,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from ...contract import JointCoordinates
 from .arm import _arm_links
 from .checks import MAX_YIELD_STRAIN, _check_joints, _check_physics, _joint_values, _sensor_spec
 from .schema import REQUIRED, SCHEMA, SceneChecker
@@ -38,6 +39,17 @@ def parse_scene(
             check.fail(path, f'has {len(values)} entries: must have one per link ({n})')
         return tuple(values)
 
+    # A URDF arm's angles are the robot's joint angles (its zero and sign); the scene's rods
+    # give absolute link angles. Inside, everything is absolute.
+    robot_coordinates = links.key != 'links'
+    coordinates = JointCoordinates(
+        tuple(j.sign for j in links.joints), tuple(j.offset for j in links.joints)
+    )
+
+    def angles(path: str, degrees: Sequence) -> tuple:
+        values = [math.radians(v) for v in vector(path, degrees)]
+        return tuple(coordinates.absolute(values) if robot_coordinates else values)
+
     materials = {k: Material(**v) for k, v in raw['materials'].items()}
 
     def material(path: str, name: str) -> Material:
@@ -68,18 +80,18 @@ def parse_scene(
         kp=vector('controller.kp', c['kp']),
         kd=vector('controller.kd', c['kd']),
         ki=vector('controller.ki', c['ki'], 0.0),
-        down_target=tuple(
-            map(math.radians, vector('controller.down_target_deg', c['down_target_deg']))
-        ),
-        up_target=tuple(map(math.radians, vector('controller.up_target_deg', c['up_target_deg']))),
+        down_target=angles('controller.down_target_deg', c['down_target_deg']),
+        up_target=angles('controller.up_target_deg', c['up_target_deg']),
         switch_height=c['switch_height'],
         rate=c['rate'],
     )
     if controller.law == 'pid' and not any(controller.ki):
         check.fail('controller.ki', '= all zero with law pid: use law pd, or give integral gains')
 
-    q0 = tuple(map(math.radians, vector('initial.q_deg', raw['initial']['q_deg'])))
+    q0 = angles('initial.q_deg', raw['initial']['q_deg'])
     qd0 = vector('initial.qd', raw['initial']['qd'], 0.0)
+    if robot_coordinates:
+        qd0 = tuple(coordinates.absolute_rates(qd0))
     reach = sum(links.lengths[:-1]) + math.hypot(*links.tip_point)
     for i, s in enumerate(surfaces):
         if s.law != 'none' and abs(s.height) >= reach:

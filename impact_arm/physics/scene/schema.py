@@ -90,6 +90,8 @@ JOINT = {  # absent: the URDF's value for damping and friction, else the ideal j
     'friction': number_spec(0, 1e6, unit='N m', default=None),
     'friction_v_d': number_spec(1e-6, 10, unit='rad/s', default=None),
     'armature': number_spec(0, 1e6, unit='kg m^2', default=None),
+    # absent: the URDF's <limit effort> (none for the scene's rods)
+    'max_effort': number_spec(0, 1e9, low_open=True, unit='N m', default=None),
 }
 SURFACE = {
     'height': number_spec(-1e3, 1e3, unit='m'),

@@ -10,6 +10,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
+from ...contract import JointCoordinates
+
 CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
 
 
@@ -125,6 +127,15 @@ class JointSpec:
     # model's relative angle r = q_k - q_(k-1): r = sign θ + offset (docs/scene.md)
     sign: float = 1.0
     offset: float = 0.0  # rad
+    max_effort: float | None = None  # N m, the scene's limit instead of the URDF's
+
+    @property
+    def effort_limit(self) -> float:
+        """The torque the joint's drive clips to [N m] (inf: none). A URDF effort of 0 is
+        taken as not given: no drive is rated for nothing."""
+        if self.max_effort is not None:
+            return self.max_effort
+        return self.effort if self.effort else math.inf
 
 
 @dataclass(frozen=True)
@@ -187,6 +198,19 @@ class Scene:
     def joint_specs(self) -> tuple[JointSpec, ...]:
         """One ``JointSpec`` per joint (ideal ones, joint1..N, when the scene has none)."""
         return self.joints or tuple(JointSpec(f'joint{i + 1}') for i in range(len(self.lengths)))
+
+    @property
+    def joint_coordinates(self) -> JointCoordinates:
+        """The robot's joint coordinates (what the wire carries) against the model's
+        absolute angles: identity for the scene's rods and a URDF in the model's convention."""
+        specs = self.joint_specs
+        return JointCoordinates(tuple(j.sign for j in specs), tuple(j.offset for j in specs))
+
+    @property
+    def effort_limits(self) -> tuple[float, ...]:
+        """Each joint's effort limit [N m]: the scene's ``joints[i].max_effort``, else the
+        URDF's ``<limit effort>``, else none (inf)."""
+        return tuple(j.effort_limit for j in self.joint_specs)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
