@@ -312,7 +312,7 @@ def _xacro_message(exc: BaseException, xacro: Any, top: str) -> str:
     """One line for an exception out of xacro, naming the included file it happened in."""
     from xml.parsers.expat import ExpatError
 
-    from xacro.substitution_args import ArgException
+    from xacro.substitution_args import ArgException, SubstitutionException
 
     inner: Any = getattr(exc, 'exc', None)
     while isinstance(getattr(inner, 'exc', None), BaseException):
@@ -324,6 +324,8 @@ def _xacro_message(exc: BaseException, xacro: Any, top: str) -> str:
             f"xacro arg '{inner}' has no value: give it in arm.args "
             f'(the file declares no default for it with <xacro:arg>)'
         )
+    elif isinstance(inner, SubstitutionException):  # xacro repeats it after its class
+        message = f'$(...): {inner}'
     elif isinstance(inner, OSError) and inner.filename:
         message = f"cannot read '{inner.filename}': {inner.strerror}"
     else:
