@@ -80,7 +80,9 @@ ROBOT = """<?xml version="1.0"?>
   </joint>
   <xacro:rod name="$(arg prefix)link2" length="${L}" mass="${mass / 2}"/>
   <xacro:if value="$(arg with_tool)">
-    <link name="$(arg prefix)tool"><collision><geometry><sphere radius="${width}"/></geometry></collision></link>
+    <link name="$(arg prefix)tool">
+      <collision><geometry><sphere radius="${width}"/></geometry></collision>
+    </link>
   </xacro:if>
 </robot>
 """
@@ -129,11 +131,7 @@ def by_name(root, tag):
 
 @pytest.mark.parametrize('where', ['package', 'src', 'ws'])
 def test_find_resolves_through_the_package_or_a_directory_holding_it(workspace, where):
-    path = {
-        'package': workspace,
-        'src': workspace.parent,
-        'ws': workspace.parent.parent,
-    }[where]
+    path = {'package': workspace, 'src': workspace.parent, 'ws': workspace.parent.parent}[where]
     text = expand_xacro(robot_file(workspace), None, [str(path)], ORIGIN)
     root = ET.fromstring(text.split('?>', 1)[1])
     assert root.tag == 'robot' and root.get('name') == 'two'
@@ -339,9 +337,7 @@ def test_expansions_in_threads_do_not_mix(tmp_path):
     def expand(k):
         barrier.wait()
         return [
-            expand_xacro(
-                robot_file(packages[k]), {'with_tool': True}, [str(packages[k])], ORIGIN
-            )
+            expand_xacro(robot_file(packages[k]), {'with_tool': True}, [str(packages[k])], ORIGIN)
             for _ in range(3)
         ]
 
@@ -414,3 +410,8 @@ def test_a_substitution_error_is_told_once(workspace):
     )
     message = refusal(robot_file(workspace), None, [str(workspace)], ORIGIN)
     assert message.count('IMPACT_ARM_NO_SUCH_VARIABLE') == 1 and '<class' not in message
+    (workspace / 'urdf' / 'robot.urdf.xacro').write_text(
+        ROBOT.replace('"$(arg prefix)base"/>', '"$(eval 1 +)base"/>')
+    )
+    message = refusal(robot_file(workspace), None, [str(workspace)], ORIGIN)
+    assert message.count('invalid syntax') == 1 and '<class' not in message

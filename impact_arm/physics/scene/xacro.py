@@ -234,8 +234,8 @@ class _ArgsSeen(dict):
 
 @contextmanager
 def _xacro_session(find: Callable[[str], str]) -> Iterator[Any]:
-    """The ``xacro`` module with ``$(find)`` (and ``find()`` in ``$(eval)``) resolving through
-    ``find``, serialised, and left as it was found afterwards.
+    """The ``xacro`` module with ``$(find)`` resolving through ``find``, serialised, and left
+    as it was found afterwards.
 
     Why substitute xacro's find function: xacro resolves ``$(find pkg)`` by calling
     ``substitution_args._eval_find`` (which asks ``ament_index_python``), and ``$(eval
@@ -328,6 +328,8 @@ def _xacro_message(exc: BaseException, xacro: Any, top: str) -> str:
         message = f'$(...): {inner}'
     elif isinstance(inner, OSError) and inner.filename:
         message = f"cannot read '{inner.filename}': {inner.strerror}"
+    elif inner is not None and str(exc).startswith(f'{type(inner)}: '):  # from a $(...)
+        message = f'$(...): {type(inner).__name__}: {inner}'
     else:
         message = str(exc) or type(exc).__name__
         if isinstance(inner, NameError):
