@@ -1,7 +1,7 @@
 # Two commands for a fresh machine: `make run` and `make test`. Both create .venv on first use.
 # `make run` installs what running needs (the package with numpy, scipy, sympy, numba, mcap,
-# rosbags, matplotlib, PyYAML, and rclpy with the message packages from PyPI); `make test` adds
-# the test, lint and type-check tools (requirements-dev.txt) and the `studies` extra.
+# rosbags, matplotlib, PyYAML, xacro, and rclpy with the message packages from PyPI); `make test`
+# adds the test, lint and type-check tools (requirements-dev.txt) and the `studies` extra.
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python

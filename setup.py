@@ -17,8 +17,9 @@ setup(
     ],
     # rclpy and the message packages come from the ROS install (package.xml) or, without ROS,
     # from the PyPI wheels the Makefile installs; they are deliberately not listed here.
+    # xacro: a scene's arm.xacro is expanded in-process (pure Python, needs only PyYAML)
     install_requires=['setuptools', 'numpy', 'scipy', 'sympy', 'PyYAML', 'mcap', 'matplotlib',
-                      'Pillow', 'numba', 'rosbags'],
+                      'Pillow', 'numba', 'rosbags', 'xacro'],
     # studies (impact-arm sweep): Parquet tables and the Dask scheduler; imported lazily, so
     # the nodes and `simulate` never load them
     extras_require={'studies': ['pyarrow', 'dask[distributed]']},

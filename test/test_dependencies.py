@@ -44,6 +44,7 @@ ROS_PACKAGES = {
     'launch',
     'launch_ros',
     'simulation_interfaces',
+    'xacro',  # a ROS package, and on PyPI under the same name (setup.py)
 }
 # imported only where a feature asks for it, behind an ImportError with the pip command:
 # studies (`pip install .[studies]`) and the peer comparison of the benchmarks
