@@ -11,6 +11,7 @@ from typing import Any
 from .schema import LINK, TIP_RADIUS_RANGE, SceneChecker
 from .types import JointSpec, PlaneFrame, rod_centres, rod_inertias
 from .urdf import parse_urdf_arm, read_urdf_file, resolve_urdf_path
+from .xacro import expand_xacro
 
 
 @dataclass(frozen=True)
@@ -51,19 +52,22 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
                 'arm.contact.point',
                 f"has {len(point)} entries: must be x y z (m) in the contact link's frame",
             )
-        given = [key for key in ('urdf', 'description') if raw['arm'][key] is not None]
+        given = [key for key in ('urdf', 'xacro', 'description') if raw['arm'][key] is not None]
         if len(given) != 1:
             check.fail(
                 'arm',
-                'gives both urdf and description: give one of them'
+                f'gives {" and ".join(given)}: give one of them'
                 if given
-                else 'needs urdf (a URDF file) or description (its text)',
+                else 'needs urdf (a URDF file), xacro (a xacro file) or description (its text)',
             )
+        for key in ('args', 'package_paths'):
+            if raw['arm'][key] is not None and given != ['xacro']:
+                check.fail(f'arm.{key}', 'applies to arm.xacro only')
         locked = raw['arm']['locked']
         urdf, urdf_text = _urdf_arm(
             check.origin,
             raw['arm']['urdf'],
-            raw['arm']['description'],
+            raw['arm']['description'] if given != ['xacro'] else _xacro_text(check, raw, scene_path),
             scene_path,
             contact.get('link'),
             point,
@@ -93,7 +97,7 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
             urdf.tip_radius,
             urdf.joints,
             urdf.link_names,
-            raw['arm']['urdf'] or '',
+            raw['arm']['urdf'] or raw['arm']['xacro'] or '',
             f'arm.{given[0]}',
             urdf_text,
             urdf.locked,
@@ -157,6 +161,35 @@ def _with_link_values(check: SceneChecker, urdf: Any, values: Sequence[dict] | N
     return replace(urdf, masses=tuple(masses), com=tuple(com), inertias=tuple(inertias))
 
 
+def _xacro_text(check: SceneChecker, raw: dict, scene_path: str) -> str:
+    """The URDF text of ``arm.xacro``, expanded with its args and package paths."""
+    arm = raw['arm']
+    base = os.path.dirname(os.path.abspath(scene_path)) if scene_path else ''
+    key = (
+        arm['xacro'],
+        base,
+        tuple(sorted((arm['args'] or {}).items())),
+        tuple(arm['package_paths'] or ()),
+    )
+    try:
+        info = os.stat(os.path.join(base, arm['xacro']))
+        key += (info.st_mtime_ns, info.st_size)
+    except OSError:
+        pass
+    if key not in _XACRO_CACHE:
+        if len(_XACRO_CACHE) > 16:
+            _XACRO_CACHE.clear()
+        _XACRO_CACHE[key] = expand_xacro(
+            arm['xacro'],
+            arm['args'],
+            arm['package_paths'] or (),
+            f"scene '{check.origin}': arm.xacro '{arm['xacro']}'",
+            base,
+        )
+    return _XACRO_CACHE[key]
+
+
+_XACRO_CACHE: dict[tuple, str] = {}  # a study loads one scene many times: expand it once
 _URDF_CACHE: dict[tuple, Any] = {}  # a study loads one scene many times: read its URDF once
 
 

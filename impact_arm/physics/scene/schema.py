@@ -72,6 +72,9 @@ ARM: dict[str, Any] = {
     'urdf': ('str', None, '', None),  # a file, or
     'description': ('str', None, '', None),  # its text (recordings store the scene so)
     'links': ('list', ARM_LINK, '', None),  # one per moving link: values instead of the file's
+    'xacro': ('str', None, '', None),  # a xacro file (expanded in-process), or
+    'args': ('args', None, '', None),  # its xacro args: name -> string, number or boolean
+    'package_paths': ('names', None, '', None),  # where $(find pkg) looks first
     'joints': ('names', None, '', None),  # the moving joints, base to tip
     'locked': ('values', number_spec(-1e3, 1e3), 'rad or m', None),  # the others' values
     'contact': (
@@ -304,6 +307,14 @@ class SceneChecker:
             return tuple(
                 self.leaf(f'{path}[{i}]', v, ('str', None, '', None)) for i, v in enumerate(value)
             )
+        if kind == 'args':
+            if not isinstance(value, dict) or not all(
+                isinstance(v, (str, int, float)) and isinstance(k, str) for k, v in value.items()
+            ):
+                self.fail(
+                    path, f'= {_show.repr(value)} must map names to strings, numbers or booleans'
+                )
+            return dict(value)
         if kind == 'values':
             if not isinstance(value, dict):
                 self.fail(
