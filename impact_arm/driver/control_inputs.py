@@ -245,11 +245,7 @@ class ControlInputs:
         self.jump_from = None
         if self.latest is not None and t > self.latest[0] and not same:
             self.sample_gap = t - self.latest[0]
-        self.latest = (
-            t,
-            self.coordinates.absolute(pos),
-            self.coordinates.absolute_rates(vel),
-        )
+        self.latest = (t, self.coordinates.absolute(pos), self.coordinates.absolute_rates(vel))
         self.latest_joint = (pos, vel)
         if effort and self.latency_periods == -1:
             self._measure_latency(effort, index)

@@ -91,6 +91,10 @@ class ImpactBuilder:
             'index': len(self.impacts) + 1,
             't_contact': t0,
             'q_contact_deg': [math.degrees(a) for a in impact['q']],
+            # the robot's joint angles (its URDF's zero and sign; relative angles for rods)
+            'joints_contact_deg': [
+                math.degrees(a) for a in self.model.scene.joint_coordinates.positions(impact['q'])
+            ],
             'duration': t_sep - t0,
             'delta_m': impact['delta_m'],
             'delta_r': impact['delta_r'],

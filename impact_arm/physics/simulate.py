@@ -402,7 +402,10 @@ def format_table(result: RunResult) -> str:
     """The impact table people read in a terminal."""
     # every link's contact angle (the article's two in its columns)
     n = len(result.impacts[0]['q_contact_deg']) if result.impacts else 2
-    angles = ','.join(f'q{k + 1}' for k in range(n)) + ' [deg]'
+    # a URDF arm's own joint angles; the article's absolute link angles for the scene's rods
+    robot = not result.scene.joint_coordinates.is_identity
+    key = 'joints_contact_deg' if robot else 'q_contact_deg'
+    angles = ','.join(f'{"θ" if robot else "q"}{k + 1}' for k in range(n)) + ' [deg]'
     lines = [
         f'{"#":>3} {"t [s]":>9} {angles:>{8 * n - 1}} {"dur [us]":>9} {"dm [um]":>8} '
         f'{"dr [um]":>8} {"Fmax [kN]":>9} {"vx,vy before":>14} {"vx,vy after":>14} '
@@ -411,7 +414,7 @@ def format_table(result: RunResult) -> str:
     for i in result.impacts:
         lines.append(
             f'{i["index"]:>3} {i["t_contact"]:>9.5f} '
-            f'{",".join(f"{a:>7.2f}" for a in i["q_contact_deg"])} '
+            f'{",".join(f"{a:>7.2f}" for a in i[key])} '
             f'{i["duration"] * 1e6:>9.2f} {i["delta_m"] * 1e6:>8.2f} {i["delta_r"] * 1e6:>8.2f} '
             f'{i["F_max"] / 1e3:>9.3f} '
             f'{i["v_before"][0]:>6.3f},{i["v_before"][1]:>7.3f} '

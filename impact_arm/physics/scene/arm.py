@@ -67,7 +67,9 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
         urdf, urdf_text = _urdf_arm(
             check.origin,
             raw['arm']['urdf'],
-            raw['arm']['description'] if given != ['xacro'] else _xacro_text(check, raw, scene_path),
+            raw['arm']['description']
+            if given != ['xacro']
+            else _xacro_text(check, raw, scene_path),
             scene_path,
             contact.get('link'),
             point,

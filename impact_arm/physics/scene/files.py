@@ -248,7 +248,9 @@ def self_contained_text(scene: Scene) -> str:
     if not scene.urdf_path or not scene.source_text:
         return scene.source_text
     data = scene_data(scene.source_text, scene.source_path or scene.name)
-    arm = {k: v for k, v in data['arm'].items() if k not in ('urdf', 'xacro', 'args', 'package_paths')}
+    arm = {
+        k: v for k, v in data['arm'].items() if k not in ('urdf', 'xacro', 'args', 'package_paths')
+    }
     arm['description'] = scene.urdf_text
     data['arm'] = arm
     header = (
