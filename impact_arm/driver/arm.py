@@ -75,7 +75,7 @@ class SimulatedArm:
         self.model = ArmModel(scene)
         self.n = self.model.n
         self.rate = float(rate)
-        self.set_max_effort(max_effort)
+        self.max_effort = max_effort
         # the wire is in the robot's joint coordinates (its URDF's zero and sign)
         self.coordinates = scene.joint_coordinates
         # how the driver reports the state (the scene's sensors section; ideal by default)
@@ -154,11 +154,16 @@ class SimulatedArm:
             )
         return out
 
-    def set_max_effort(self, limit: float) -> None:
-        """The driver's own torque limit: each joint's drive clips at its own limit (the
-        scene's ``joints[i].max_effort``, else the URDF's), and at this where it is lower."""
-        self.max_effort = float(limit)
-        self.effort_limits = [min(self.max_effort, j) for j in self.scene.effort_limits]
+    @property
+    def max_effort(self) -> float:
+        """The driver's own torque limit [N m]: each joint's drive clips at its own limit
+        (the scene's ``joints[i].max_effort``, else the URDF's), and at this where lower."""
+        return self._max_effort
+
+    @max_effort.setter
+    def max_effort(self, limit: float) -> None:
+        self._max_effort = float(limit)
+        self.effort_limits = [min(self._max_effort, j) for j in self.scene.effort_limits]
 
     def clips(self, values: Iterable[float]) -> bool:
         """Whether a command exceeds any joint's limit."""

@@ -208,7 +208,7 @@ class Session:
 
     # -------------------------------------------------------------------------- control
     def set_max_effort(self, limit: float) -> None:
-        self.arm.set_max_effort(limit)
+        self.arm.max_effort = limit
         self.loop.watchdog.reapply()  # re-clip the held command with the new limit
 
     def set_command_timeout(self, timeout: float) -> None:

@@ -403,7 +403,7 @@ def format_table(result: RunResult) -> str:
     # every link's contact angle (the article's two in its columns)
     n = len(result.impacts[0]['q_contact_deg']) if result.impacts else 2
     # a URDF arm's own joint angles; the article's absolute link angles for the scene's rods
-    robot = not result.scene.joint_coordinates.is_identity
+    robot = result.scene is not None and not result.scene.joint_coordinates.is_identity
     key = 'joints_contact_deg' if robot else 'q_contact_deg'
     angles = ','.join(f'{"θ" if robot else "q"}{k + 1}' for k in range(n)) + ' [deg]'
     lines = [

@@ -4,6 +4,7 @@ unit-cube / log coordinates the search and the covariance use."""
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -87,6 +88,75 @@ def _state_arm_links(study: Study, parts: Sequence) -> None:
     study.data = apply_overrides(study.data, {'arm.links': [{} for _ in range(n)]})
 
 
+_NAMED = re.compile(r'^(links|joints)\[([A-Za-z_][A-Za-z0-9_\-/]*)\]\.([A-Za-z_]+)$')
+_JOINT_DEFAULTS = ('damping', 'friction', 'friction_v_d', 'armature', 'max_effort')
+
+
+def resolve_named_keys(study: Study, bounds: dict) -> dict:
+    """Keys that name a URDF arm's links and joints by their URDF names (``links[NAME].KEY``,
+    ``joints[NAME].KEY``) as the scene's key paths (``arm.links[k].KEY``, ``joints[k].KEY``);
+    a name the arm does not have is refused naming the ones it has. A ``joints[k]`` key of a
+    scene that states no ``joints`` gets one empty entry per joint (the URDF's values stand)."""
+    out = {}
+    for key, given in bounds.items():
+        match = _NAMED.match(key)
+        if match is None:
+            out[key] = given
+            continue
+        kind, name, leaf = match.groups()
+        try:
+            scene = study.scene()
+        except SceneError as exc:
+            raise FitError(f'--param {key}: {exc}') from None
+        names = scene.link_names if kind == 'links' else scene.joint_names
+        allowed = _LINK_DEFAULTS if kind == 'links' else _JOINT_DEFAULTS
+        if kind == 'links' and not scene.link_names:
+            raise FitError(
+                f"--param {key}: the scene's links have no names (give links[INDEX].{leaf})"
+            )
+        if name not in names:
+            raise FitError(
+                f'--param {key}: the arm has no {kind[:-1]} {name!r}; its {kind}: '
+                f'{", ".join(names)}'
+            )
+        if leaf not in allowed:
+            raise FitError(
+                f'--param {key}: {leaf!r} is not a fit key of a {kind[:-1]}; '
+                f'allowed: {", ".join(allowed)}'
+            )
+        k = names.index(name)
+        out[f'arm.links[{k}].{leaf}' if kind == 'links' else f'joints[{k}].{leaf}'] = given
+    return out
+
+
+def _state_joints(study: Study, parts: Sequence) -> None:
+    """A fit of ``joints[i].KEY`` of a scene that states no ``joints``: one empty entry per
+    joint, for the fit to set (the URDF's or the ideal joint's values stand)."""
+    if parts[0] != 'joints' or not isinstance(study.data, dict) or study.data.get('joints'):
+        return
+    try:
+        n = study.scene().n_links
+    except SceneError as exc:
+        raise FitError(f'--param joints: {exc}') from None
+    study.data = apply_overrides(study.data, {'joints': [{} for _ in range(n)]})
+
+
+def _joint_default(study: Study, parts: Sequence) -> float | None:
+    """The value a ``joints[i].KEY`` the scene leaves out stands at (the URDF's damping or
+    friction, the ideal joint's), None if ``parts`` is no such key."""
+    if len(parts) != 3 or parts[0] != 'joints' or not isinstance(parts[1], int):
+        return None
+    if parts[2] not in _JOINT_DEFAULTS:
+        return None
+    scene = study.scene()
+    if parts[1] >= scene.n_links:
+        return None
+    value = getattr(scene.joint_specs[parts[1]], parts[2])
+    if parts[2] == 'max_effort' and value is None:
+        value = scene.joint_specs[parts[1]].effort_limit
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
 def parameter_specs(study: Study, bounds: dict) -> list:
     """Check each key against the scene and its bounds ({key: (lo, hi)} or (lo, hi, start)):
     the key holds a number in the scene, or is one the scene may leave out (its value is then
@@ -95,6 +165,7 @@ def parameter_specs(study: Study, bounds: dict) -> list:
     if not bounds:
         raise FitError('no parameter to fit: give at least one --param KEY=LO:HI')
     specs: list[Parameter] = []
+    bounds = resolve_named_keys(study, bounds)
     for key, given in bounds.items():
         if len(given) not in (2, 3):
             raise FitError(f'--param {key}: expected (lo, hi) or (lo, hi, start), got {given!r}')
@@ -104,9 +175,12 @@ def parameter_specs(study: Study, bounds: dict) -> list:
         except SceneError as exc:
             raise FitError(f'--param {key}: {exc}') from None
         _state_arm_links(study, parts)
+        _state_joints(study, parts)
         stated = _scene_value(study, key)
         if stated is None:  # a link key left to its default (a rod's, the URDF's)
             stated = _link_default(study, key, parts)
+        if stated is None:  # a joint key left to the URDF's or the ideal joint's value
+            stated = _joint_default(study, parts)
         if stated is None:  # a key the scene leaves out: the schema's default, if it has one
             stated = schema_default(key)
             if stated is None:

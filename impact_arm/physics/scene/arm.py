@@ -56,7 +56,7 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
         if len(given) != 1:
             check.fail(
                 'arm',
-                f'gives {" and ".join(given)}: give one of them'
+                f'gives both {" and ".join(given)}: give one of them'
                 if given
                 else 'needs urdf (a URDF file), xacro (a xacro file) or description (its text)',
             )
@@ -167,7 +167,7 @@ def _xacro_text(check: SceneChecker, raw: dict, scene_path: str) -> str:
     """The URDF text of ``arm.xacro``, expanded with its args and package paths."""
     arm = raw['arm']
     base = os.path.dirname(os.path.abspath(scene_path)) if scene_path else ''
-    key = (
+    key: tuple = (
         arm['xacro'],
         base,
         tuple(sorted((arm['args'] or {}).items())),
