@@ -30,9 +30,12 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from .errors import SceneError, UnstableControlWarning
 
 if TYPE_CHECKING:
     from .model import ArmModel
@@ -115,34 +118,36 @@ class StabilityReport:
         over = self.offending()
         return min(over, key=lambda j: j.margin) if over else None
 
-    def sentence(self, where: str = 'controller') -> str:
-        """One line for a refusal or warning: 'controller.kd[2] = 50 is unstable at ...'."""
-        rate = f'{self.rate:g} Hz'
+    def key(self) -> str:
+        """The scene key the refusal names: the worst joint's ``controller.kd[i]``."""
+        worst = self.worst_joint()
+        return f'controller.kd[{worst.index}]' if worst is not None else 'controller.law'
+
+    def refusal(self, rate_source: str = '') -> str:
+        """The rest of the one-line refusal after ``key()``: '= 50 is unstable at 1000 Hz:
+        joint3 ...', with each offending joint's margin and largest stable kd.
+        ``rate_source``: where the rate came from when not the scene's (e.g. '--control-rate')."""
+        rate = f'{self.rate:g} Hz' + (f' ({rate_source})' if rate_source else '')
         worst = self.worst_joint()
         over = self.offending()
-        head = (
-            f'{where}.kd[{worst.index}] = {worst.kd:g} is unstable at {rate}'
-            if worst is not None
-            else f'{where} law {self.law!r} is unstable at {rate}'
-        )
         posture = ', '.join(f'{math.degrees(a):.0f}' for a in self.posture)
-        parts = [
+        head = (
+            f'= {worst.kd:g} is unstable at {rate}' if worst is not None else
+            f'= {self.law!r} is unstable at {rate}'
+        )
+        text = (
             f'{head}: spectral radius {self.spectral_radius:.4g} (margin {self.margin:+.3g}) '
-            f'at q = ({posture}) deg, the commands would alternate in sign and grow'
-        ]
+            f'at q = ({posture}) deg: the commands would alternate in sign every period and grow'
+        )
         if over:
-            parts.append('; '.join(j.text() for j in over))
-            parts.append(
-                'largest stable kd at this rate is per joint, the other gains as they are'
-                + (
-                    f'; or every kd times {self.kd_scale:.3g}'
-                    if self.kd_scale is not None and self.kd_scale > 0
-                    else ''
-                )
-            )
+            text += '; ' + '; '.join(j.text() for j in over)
+            text += ' (largest stable kd at this rate: per joint, the other gains as they are'
+            if self.kd_scale is not None and 0 < self.kd_scale < 1:
+                text += f'; or every kd times {self.kd_scale:.3g}'
+            text += ')'
         else:
-            parts.append('every kd is within its largest stable value: the loop needs damping')
-        return ': '.join(parts[:1]) + ('; ' + '; '.join(parts[1:]) if parts[1:] else '')
+            text += '; every kd is within its largest stable value: the loop needs more damping'
+        return text
 
 
 def _expm(a: np.ndarray) -> np.ndarray:
@@ -321,6 +326,35 @@ def analyse(
         if kd.any():
             scale = _largest_stable(lambda s: loops.stable(kp, kd * s, ki, joint), 1.0)
     return StabilityReport(rate, law, radii[worst], loops.postures[worst], joints, scale)
+
+
+def check_stability(
+    scene: Scene,
+    rate: float | None = None,
+    law: str | None = None,
+    *,
+    rate_source: str = '',
+    origin: str = '',
+    model: ArmModel | None = None,
+) -> StabilityReport | None:
+    """Refuse ``scene``'s law if it is unstable at ``rate`` (default: the scene's own), with a
+    ``SceneError`` naming the joint, its margin and the largest stable kd; with
+    ``controller.allow_unstable`` the same sentence is an ``UnstableControlWarning`` and the
+    run goes on. The report, or None when nothing is sampled. ``origin``: the scene's name in
+    the message (default: its file, else its name)."""
+    report = analyse(scene, rate, law, margins=False, model=model)
+    if report is None or report.stable:
+        return report
+    origin = origin or scene.source_path or scene.name
+    text = f"scene '{origin}': {report.key()} {report.refusal(rate_source)}"
+    if scene.controller.allow_unstable:
+        warnings.warn(
+            f'{text}; run anyway (controller.allow_unstable: true)',
+            UnstableControlWarning,
+            stacklevel=2,
+        )
+        return report
+    raise SceneError(f'{text}; lower it, or set controller.allow_unstable: true to run it anyway')
 
 
 # --- chatter in a run's commands ---

@@ -84,6 +84,13 @@ def cli(args) -> int:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
     scene_path = resolve_scene_path(args.scene)
     scene = load_scene(scene_path)
+    # the controller node samples at the run's rate, not the scene's: refused (or warned)
+    # here, before any node starts, as simulate --control-rate does
+    from ..physics.stability import check_stability
+
+    rate = getattr(args, 'control_rate', None) or args.rate
+    if rate != scene.controller.rate or args.law:
+        check_stability(scene, rate, args.law, rate_source="--rate, the controller node's")
     name = args.name or f'{scene.name}-{time.strftime("%Y%m%d-%H%M%S")}'
     output = os.path.join(args.out, name + '.mcap') if not args.no_record else None
     if output:
