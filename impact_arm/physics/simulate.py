@@ -209,7 +209,7 @@ def run(
     model = ArmModel(scene)
     if control_rate and control_rate != scene.controller.rate:
         # the scene's own rate was checked on load; refused (or warned) before running
-        check_stability(scene, control_rate, rate_source='the run\'s control rate', model=model)
+        check_stability(scene, control_rate, rate_source="the run's control rate", model=model)
     integ = PhaseIntegrator(
         model, control='held' if control_rate else 'continuous', trace=True, **options
     )

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import math
 import warnings
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,8 +133,9 @@ class StabilityReport:
         over = self.offending()
         posture = ', '.join(f'{math.degrees(a):.0f}' for a in self.posture)
         head = (
-            f'= {worst.kd:g} is unstable at {rate}' if worst is not None else
-            f'= {self.law!r} is unstable at {rate}'
+            f'= {worst.kd:g} is unstable at {rate}'
+            if worst is not None
+            else f'= {self.law!r} is unstable at {rate}'
         )
         text = (
             f'{head}: spectral radius {self.spectral_radius:.4g} (margin {self.margin:+.3g}) '
@@ -359,8 +361,10 @@ def check_stability(
 
 # --- chatter in a run's commands ---
 
-CHATTER_PERIODS = 16  # consecutive alternating command steps that make chatter
-CHATTER_GROWTH = 2.0  # the alternation's amplitude, last 4 steps over first 4, at least
+CHATTER_PERIODS = 24  # consecutive alternating command steps that make chatter
+CHATTER_GROWTH = 4.0  # the alternation's amplitude over those periods grows at least this much
+CHATTER_FIT = 0.9  # ... steadily: correlation of its logarithm with time at least this
+CHATTER_WINDOW = 64  # the latest alternation amplitudes kept per joint
 
 
 @dataclass(frozen=True)
@@ -371,7 +375,7 @@ class Chatter:
     name: str
     t_start: float  # s, the first command of the alternation
     periods: int  # consecutive alternating steps seen
-    growth: float  # the step amplitude at its largest over its first
+    growth: float  # the alternation's amplitude over the periods it was found in (a fit)
     peak: float  # the largest |command| during it [N m]
 
     def text(self) -> str:
@@ -392,18 +396,19 @@ class Chatter:
 
 
 class _JointWatch:
-    """One joint's run of alternating command steps (O(1) memory). The alternation's
+    """One joint's run of alternating command steps (bounded memory). The alternation's
     amplitude is read from the difference of consecutive steps, |d_k - d_(k-1)| (twice the
-    amplitude): a slow drift of the command adds the same to both steps and cancels, where
-    it would make the steps themselves look small at the start of a run and then grow."""
+    amplitude): a slow drift of the command adds the same to both steps and cancels. Growth is
+    the straight-line fit of its logarithm over the run's latest periods: chatter grows
+    geometrically (a fit close to a line); noise, whose steps also alternate (two times in
+    three for white noise), does not."""
 
     def __init__(self) -> None:
         self.last: float | None = None
         self.step = 0.0  # the last nonzero step
         self.run = 0  # alternating steps in a row
         self.t_start = 0.0
-        self.first: list[float] = []  # the run's first few alternation amplitudes
-        self.largest = 0.0
+        self.swings: deque[float] = deque(maxlen=CHATTER_WINDOW)
         self.peak = 0.0
         self.found: Chatter | None = None
 
@@ -414,29 +419,43 @@ class _JointWatch:
         step = u - self.last
         if self.run and step * self.step < 0:
             self.run += 1
-            swing = abs(step - self.step)
-            if len(self.first) < 4:
-                self.first.append(swing)
-            self.largest = max(self.largest, swing)
+            self.swings.append(abs(step - self.step))
         else:
-            self.run, self.t_start, self.first, self.largest, self.peak = 1, t_prev, [], 0.0, 0.0
+            self.run, self.t_start, self.peak = 1, t_prev, 0.0
+            self.swings.clear()
         self.step, self.last = step, u
         self.peak = max(self.peak, abs(u))
-        if self.run >= CHATTER_PERIODS:
-            growth = self.largest / max(sum(self.first) / len(self.first), 1e-300)
-            # the first run that qualifies, followed to its end
-            same_run = self.found is not None and self.found.t_start == self.t_start
-            if growth >= CHATTER_GROWTH and (self.found is None or same_run):
+        if self.found is not None and self.found.t_start == self.t_start:
+            # the run that was found goes on: followed to its end
+            self.found = Chatter(joint, name, self.t_start, self.run, self.found.growth, self.peak)
+        elif self.found is None and self.run >= CHATTER_PERIODS:
+            growth = _steady_growth(self.swings)
+            if growth >= CHATTER_GROWTH:
                 self.found = Chatter(joint, name, self.t_start, self.run, growth, self.peak)
+
+
+def _steady_growth(swings: Sequence[float]) -> float:
+    """The growth over ``swings`` of a line fitted to their logarithm, 0 unless the fit is
+    close (correlation >= CHATTER_FIT)."""
+    values = np.log(np.maximum(np.asarray(swings, float), 1e-300))
+    k = np.arange(values.size, dtype=float)
+    if values.std() == 0:
+        return 1.0
+    r = float(np.corrcoef(k, values)[0, 1])
+    if r < CHATTER_FIT:
+        return 0.0
+    slope = float(np.polyfit(k, values, 1)[0])
+    return math.exp(slope * (values.size - 1))
 
 
 class ChatterWatch:
     """Feed it each command (time, one torque per joint) in order; ``found`` lists the joints
     that chattered: their commands alternated in sign step to step for at least
-    ``CHATTER_PERIODS`` periods while the steps grew at least ``CHATTER_GROWTH`` times. The
-    first such run of each joint is kept. A held command repeated at a faster sample rate is
-    one period. Smooth motion, a slow oscillation (many periods per swing) and noise (whose
-    steps alternate 16 times in a row with probability 3e-5 and do not grow) are not chatter."""
+    ``CHATTER_PERIODS`` periods while the alternation grew steadily, ``CHATTER_GROWTH`` times
+    at least. The first such run of each joint is kept. A held command repeated at a faster
+    sample rate is one period. Smooth motion, an oscillation of several periods per swing, a
+    decaying alternation and noise (its steps alternate too, but do not grow steadily) are
+    not chatter."""
 
     def __init__(self, names: Sequence[str]):
         self.names = tuple(names)
