@@ -222,3 +222,34 @@ def test_a_held_command_repeated_at_a_faster_sample_rate_is_one_period():
     t = np.arange(sampled.size) * 2.5e-4
     found = stability.find_chatter(t, np.column_stack([sampled, 0 * sampled]), NAMES)
     assert [c.name for c in found] == ['a'] and found[0].periods >= 90
+
+
+# ------------------------------------------------------------------ analyze
+def test_analyze_reads_the_chatter_from_a_recordings_efforts(tmp_path):
+    from impact_arm.tools import analysis
+    from impact_arm.tools.cli import main
+
+    files = {}
+    for label, gains in (('old', OLD_THREE_LINK_GAINS), ('new', {})):
+        data = with_controller(three_link_dict(), allow_unstable=True, **gains)
+        data['t_max'] = 0.25
+        path = tmp_path / f'{label}.yaml'
+        path.write_text(yaml.safe_dump(data))
+        files[label] = tmp_path / f'{label}.mcap'
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', UnstableControlWarning)
+            code = main(
+                [
+                    'simulate',
+                    '--scene',
+                    str(path),
+                    '--control-rate',
+                    '1000',
+                    '--mcap',
+                    str(files[label]),
+                ]
+            )
+        assert code == 0
+    found = analysis.chatter(analysis.load(files['old']))
+    assert 'joint3' in {c.name for c in found}
+    assert analysis.chatter(analysis.load(files['new'])) == []
