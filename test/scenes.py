@@ -30,19 +30,20 @@ def scene_from(changes=None, **top):
 
 # arms of more links, for the paths that must run any arm the offline path runs: link
 # lengths and masses, then per joint (kp, kd, ki, down target, up target, initial angle)
-# with absolute angles in degrees
+# with absolute angles in degrees; each stable sampled at 1 kHz (physics/stability.py), as
+# the lockstep runs and simulate --control-rate 1000 sample them
 _ARMS = {
     3: (
         [(0.7, 1.0), (0.7, 1.0), (0.6, 0.8)],
-        [(600, 100, 1000, -80, 80, 60), (300, 100, 120, -70, 70, 45), (150, 50, 60, -60, 60, 30)],
+        [(600, 100, 1000, -80, 80, 60), (150, 50, 120, -70, 70, 45), (75, 25, 60, -60, 60, 30)],
     ),
     4: (
         [(0.6, 1.0), (0.5, 1.0), (0.5, 0.8), (0.4, 0.8)],
         [
             (600, 100, 1000, -80, 80, 60),
-            (300, 60, 120, -70, 70, 45),
-            (150, 30, 60, -60, 60, 30),
-            (60, 8, 30, -50, 50, 20),
+            (150, 30, 120, -70, 70, 45),
+            (75, 15, 60, -60, 60, 30),
+            (30, 4, 30, -50, 50, 20),
         ],
     ),
 }

@@ -92,7 +92,9 @@ def test_cli_json_has_exactly_the_documented_structure(tmp_path):
         'vy_range',
         'rhs_evaluations',
         'wall_time',
+        'chatter',
     }
+    assert data['run']['chatter'] == []
     assert data['run']['impacts'] == 15 == len(data['impacts'])
 
 

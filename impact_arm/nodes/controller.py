@@ -38,6 +38,7 @@ from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
+from ..physics.stability import ChatterWatch, analyse
 from ..io.wire import (
     MalformedMessage,
     PatchedMessage,
@@ -91,6 +92,7 @@ class Controller(Node):
         names = self.joint_names = scene_joint_names(scene)
         command_order = check(p, names)
         refuse_unknown(self, self.table)
+        self._check_stability(scene)
         self.ctrl = CycleController(
             self.model,
             p.law,
@@ -167,6 +169,8 @@ class Controller(Node):
             coordinates=self.coordinates,
         )
         self.inputs.warm_up(scene.q0, scene.qd0)
+        # its own commands, in the order sent: chatter is reported on /diagnostics
+        self.chatter = ChatterWatch([names[j] for j in self.inputs.order])
         if p.startup_hold > 0:
             self.get_logger().info(
                 f'first command held {p.startup_hold:g} s after start '
@@ -296,6 +300,32 @@ class Controller(Node):
         self.inputs.joint_state(*fields, effort)
 
     # ------------------------------------------------------------------------ output
+    def _check_stability(self, scene):
+        """Warn at start when the law, at this node's rate with its gains, is unstable on the
+        scene's arm: its commands would chatter. A warning, not a refusal: the node may drive
+        an arm that is not the scene's (a stand-in, hardware); ``impact-arm run`` and
+        ``simulate --control-rate`` refuse it for the simulated arm."""
+        import dataclasses
+
+        p = self.p
+        spec = dataclasses.replace(
+            scene.controller,
+            law=p.law,
+            space=p.space,
+            kp=tuple(p.p),
+            kd=tuple(p.d),
+            ki=tuple(p.i),
+            rate=p.rate,
+        )
+        report = analyse(
+            dataclasses.replace(scene, controller=spec), margins=False, model=self.model
+        )
+        if report is not None and not report.stable:
+            self.get_logger().warning(
+                f"on the scene's arm {report.key().replace('controller.kd', 'd')} "
+                f'{report.refusal("the rate parameter")}'
+            )
+
     def _readers_matched(self):
         """The arm is held until our first command: send it only once the readers we were
         told of (command_readers) and every one the graph already knows of are matched (our
@@ -319,6 +349,8 @@ class Controller(Node):
                 )
                 self._publish_diagnostics()  # now: a run ends on it
                 return
+        latest = self.inputs.latest
+        self.chatter.add(latest[0] if latest is not None else 0.0, values)
         self._publish(values)
         if mode != self._mode:
             if self._mode == 'up':
@@ -378,12 +410,19 @@ class Controller(Node):
     def _diagnostics(self):
         dropped = sum(self.inputs.dropped.values())
         message = 'cycles completed' if self.finished else 'running'
+        chatter = self.chatter.summary()
+        if dropped:
+            message = f'{dropped} inputs dropped'
+        if chatter:
+            message = f'chatter: {chatter}'
         status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK,
+            level=DiagnosticStatus.WARN if dropped or chatter else DiagnosticStatus.OK,
             name=contract.CONTROLLER_STATUS,
             hardware_id='impact_arm_controller',
-            message=f'{dropped} inputs dropped' if dropped else message,
+            message=message,
             values=[
+                # the joints whose commands alternated in sign and grew ('' : none)
+                KeyValue(key='chatter', value=chatter),
                 KeyValue(key='commands_sent', value=str(self.sent)),
                 KeyValue(key='strikes', value=str(self.strikes)),
                 KeyValue(key='cycles_completed', value=str(self.cycles_completed)),

@@ -20,3 +20,8 @@ class SimulationError(ImpactArmError):
 
 class RunBudgetError(SimulationError):
     """A run took far more steps per simulated second than any meaningful scene needs."""
+
+
+class UnstableControlWarning(UserWarning):
+    """A sampled control law unstable at its rate that the scene allows
+    (``controller.allow_unstable``): its commands will chatter (physics/stability.py)."""

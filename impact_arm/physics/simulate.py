@@ -24,6 +24,7 @@ from .kinds import TextEnum
 from .metrics import ImpactBuilder, LimitCycle, limit_cycle
 from .model import ArmModel
 from .scene import Scene
+from .stability import ChatterWatch, check_stability
 
 if TYPE_CHECKING:
     import numpy as np
@@ -107,6 +108,7 @@ class RunResult:
     error: str = ''
     exception: SimulationError | None = None  # what ended the run early, if anything
     integrator: PhaseIntegrator | None = None
+    chatter: list = field(default_factory=list)  # stability.Chatter of each joint that chattered
 
     @property
     def stopped(self) -> str:
@@ -136,6 +138,7 @@ class RunResult:
             'vy_range': ranges.v_range(1),
             'rhs_evaluations': self.rhs_evaluations,
             'wall_time': self.wall_time,
+            'chatter': [c.to_json() for c in self.chatter],
         }
 
     def to_json(self) -> dict:
@@ -204,12 +207,16 @@ def run(
             f'streams them: no limit there)'
         )
     model = ArmModel(scene)
+    if control_rate and control_rate != scene.controller.rate:
+        # the scene's own rate was checked on load; refused (or warned) before running
+        check_stability(scene, control_rate, rate_source="the run's control rate", model=model)
     integ = PhaseIntegrator(
         model, control='held' if control_rate else 'continuous', trace=True, **options
     )
     st = integ.state
     n = model.n
     ctrl: Any = None  # a CycleController when the control is sampled
+    chatter = ChatterWatch(scene.joint_names)
     if control_rate:
         ctrl = CycleController.for_scene(model, scene.controller)
     builder = ImpactBuilder(model)
@@ -231,6 +238,7 @@ def run(
         fn = impulse_since_ctl[1] / dt_ctl if dt_ctl < math.inf else None
         mode_before = ctrl.mode
         tau = ctrl.update(t, q, qd, normal_force=fn)
+        chatter.add(t, tau)  # what the law commands, before the drive clips it
         if clip:  # each joint's drive clips at its limit, as the driver does
             tau = [min(max(v, -limit), limit) for v, limit in zip(tau, limits)]
         integ.set_held_torque(tau)
@@ -327,6 +335,7 @@ def run(
                 break
     except SimulationError as exc:  # keep what was simulated; the caller reports the error
         result.fail(exc)
+    result.chatter = chatter.found
     return _finish(result, integ, wall0)
 
 
@@ -445,6 +454,8 @@ def format_table(result: RunResult) -> str:
                 else ''
             )
         )
+    for chatter in result.chatter:
+        lines.append(f'CHATTER: {chatter.text()}: the law is unstable at its rate')
     if result.error:
         lines.append(f'STOPPED: {result.error}')
     return '\n'.join(lines)

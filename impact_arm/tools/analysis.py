@@ -58,6 +58,8 @@ class Run:
     metadata: dict = field(default_factory=dict)
     law: str = ''
     topics: tuple = ()  # the topics the file holds (with or without messages)
+    effort: np.ndarray | None = None  # (N, n) the joint states' efforts [N m]; None: not all
+    joint_names: tuple = ()  # of the first joint state
 
 
 def _quiet(text):
@@ -82,7 +84,8 @@ def load(path, progress=_quiet) -> Run:
         raise AnalysisError(f'{path}: no /joint_states recorded (topics: {sorted(info)})')
     total = sum(i.message_count for i in info.values()) or 1
     progress(f'reading {path} ({total} messages)')
-    t, pos, vel, impacts, traces = [], [], [], [], []
+    t, pos, vel, impacts, traces, effort = [], [], [], [], [], []
+    names: tuple = ()
     scene = _scene(metadata)
     # the wire holds the robot's joint angles; the analysis the model's absolute ones
     coordinates = scene.joint_coordinates if scene is not None else None
@@ -107,6 +110,9 @@ def load(path, progress=_quiet) -> Run:
                     if len(msg.velocity)
                     else [math.nan] * len(msg.position)
                 )
+            if len(msg.effort) == len(msg.position):
+                effort.append(list(msg.effort))
+            names = names or tuple(msg.name)
         elif m.topic == IMPACT_REPORT:
             try:
                 impacts.append(json.loads(msg.data))
@@ -142,7 +148,21 @@ def load(path, progress=_quiet) -> Run:
         metadata,
         law,
         tuple(sorted(info)),
+        np.asarray(effort, float)[order] if len(effort) == len(t) else None,
+        names,
     )
+
+
+def chatter(run: Run) -> list:
+    """The joints whose reported efforts (the held commands) alternated in sign every period
+    and grew (``physics.stability.ChatterWatch``): a sampled law unstable at its rate."""
+    from ..physics.stability import find_chatter
+
+    if run.effort is None or not len(run.effort):
+        return []
+    n = run.effort.shape[1]
+    names = run.joint_names if len(run.joint_names) == n else [f'joint{k + 1}' for k in range(n)]
+    return find_chatter(run.t, run.effort, names)
 
 
 def _number(value) -> float:
@@ -621,6 +641,8 @@ def cli(args) -> int:
     else:
         print(f'no impacts in {args.file}: {no_impact_reason(run)}')
     print(_limit_cycle_text(lc), flush=True)
+    for found in chatter(run):
+        print(f'CHATTER: {found.text()}: the law is unstable at its rate', flush=True)
     missing = []
     steps = []
     if laws and run.scene is None:

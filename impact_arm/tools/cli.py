@@ -8,18 +8,20 @@ never as a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import sys
 import time
+import warnings
 
 STARTED = time.perf_counter()  # this module's import: the fallback for the command's start
 NOTICE = []  # the command's CompileNotice (how long it compiled)
 
 # (the clock above starts before the package's own imports: they count in the command's time)
 from ..contract import INTEGRATOR_PRESETS  # noqa: E402
-from ..physics.errors import ImpactArmError  # noqa: E402
+from ..physics.errors import ImpactArmError, UnstableControlWarning  # noqa: E402
 from .progress import CompileNotice, Progress  # noqa: E402
 
 DEFAULT_SCENE = 'paper'
@@ -408,6 +410,24 @@ def _missing(prog):
     raise ImpactArmError(f'{prog} is not available in this version')
 
 
+@contextlib.contextmanager
+def _warnings(args):
+    """The core's warnings meant for the user (an unstable law the scene allows) as one line
+    on stderr, like the errors; other warnings as Python shows them."""
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, UnstableControlWarning):
+            print(f'impact-arm {args.command}: warning: {message}', file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter('always', UnstableControlWarning)
+        warnings.showwarning = show
+        yield
+
+
 def main(argv=None) -> int:
     # every sub-command that touches DDS keeps discovery on this machine unless the user
     # chose otherwise
@@ -416,7 +436,7 @@ def main(argv=None) -> int:
     selected = next((a for a in argv if not a.startswith('-')), None)
     args = build_parser(selected).parse_args(argv)
     try:
-        with CompileNotice(prefix=f'impact-arm {args.command}: ') as notice:
+        with CompileNotice(prefix=f'impact-arm {args.command}: ') as notice, _warnings(args):
             NOTICE.append(notice)
             return args.func(args)
     except ImpactArmError as exc:

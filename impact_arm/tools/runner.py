@@ -84,6 +84,13 @@ def cli(args) -> int:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
     scene_path = resolve_scene_path(args.scene)
     scene = load_scene(scene_path)
+    # the controller node samples at the run's rate, not the scene's: refused (or warned)
+    # here, before any node starts, as simulate --control-rate does
+    from ..physics.stability import check_stability
+
+    rate = getattr(args, 'control_rate', None) or args.rate
+    if rate != scene.controller.rate or args.law:
+        check_stability(scene, rate, args.law, rate_source="--rate, the controller node's")
     name = args.name or f'{scene.name}-{time.strftime("%Y%m%d-%H%M%S")}'
     output = os.path.join(args.out, name + '.mcap') if not args.no_record else None
     if output:
@@ -124,6 +131,8 @@ def cli(args) -> int:
         stop_detail=outcome,
     )
     print(format_table(result))
+    if run.chatter:
+        print(f'CHATTER: {run.chatter}: the law is unstable at its rate')
     if args.mode == 'lockstep' and run.wall > 0:
         print(
             f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
@@ -320,6 +329,7 @@ class Run:
         # periods it published, whether or not the run counts them
         self.published_until = 0.0
         self.rhs_evaluations = 0
+        self.chatter = ''  # the controller's /diagnostics 'chatter'
         self.strikes = 0  # cycles whose down half an impact ended (the controller's count)
         self.down_half_start = {}  # strike count -> stamp at which that cycle's down half began
         self.cycles_completed = 0  # the controller's count of cycles whose up half ended
@@ -446,6 +456,8 @@ class Run:
     def _on_diagnostics(self, msg):
         controller = simulator_diagnostics(msg, contract.CONTROLLER_STATUS)
         if controller is not None and not self.stopping:
+            # the controller's own commands alternating in sign and growing ('' : none)
+            self.chatter = controller.get('chatter', '') or self.chatter
             strikes = int(controller.get('strikes', 0))
             self.strikes = max(self.strikes, strikes)
             self.cycles_completed = max(

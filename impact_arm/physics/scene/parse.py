@@ -84,6 +84,7 @@ def parse_scene(
         up_target=angles('controller.up_target_deg', c['up_target_deg']),
         switch_height=c['switch_height'],
         rate=c['rate'],
+        allow_unstable=c['allow_unstable'],
     )
     if controller.law == 'pid' and not any(controller.ki):
         check.fail('controller.ki', '= all zero with law pid: use law pd, or give integral gains')
@@ -118,7 +119,7 @@ def parse_scene(
     _check_joints(check, links, joints)
     integ = IntegratorSpec(**raw['integrator'])
     sensors = _sensor_spec(check, raw['sensors'])
-    return Scene(
+    scene = Scene(
         name=raw['name'],
         lengths=links.lengths,
         masses=links.masses,
@@ -147,3 +148,16 @@ def parse_scene(
         source_text=text,
         source_path=path,
     )
+    _check_stability(origin, scene)
+    return scene
+
+
+def _check_stability(origin: str, scene: Scene) -> None:
+    """A sampled law unstable at the scene's own rate is refused (or warned, with
+    ``controller.allow_unstable``): its commands would chatter (``physics/stability.py``)."""
+    c = scene.controller
+    if not c.rate or c.law == 'none':
+        return
+    from ..stability import check_stability
+
+    check_stability(scene, origin=origin)  # named as the other refusals name it

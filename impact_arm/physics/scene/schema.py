@@ -123,6 +123,7 @@ CONTROLLER = {
     'up_target_deg': ('vec', number_spec(-360, 360), 'deg', REQUIRED),
     'switch_height': number_spec(-1e3, 1e3, unit='m', default=1.0),
     'rate': number_spec(0, 1e6, unit='Hz', default=0.0),
+    'allow_unstable': ('bool', None, '', False),
 }
 INTEGRATOR = {
     'preset': choice_spec(INTEGRATOR_PRESETS, 'balanced'),

@@ -63,6 +63,7 @@ class ControllerSpec:
     up_target: tuple[float, ...]  # rad
     switch_height: float  # tip height that ends the up phase [m]
     rate: float  # Hz; 0 = continuous (evaluated in the right-hand side)
+    allow_unstable: bool = False  # run a law unstable at its sampled rate (warned), not refuse it
 
 
 @dataclass(frozen=True)
