@@ -40,6 +40,7 @@ controller_manager can drive the simulator through its topic-hardware interface
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
@@ -56,6 +57,7 @@ from ..contract import (
 from ..physics.errors import ImpactArmError
 from .robot_tf import (
     RobotTree,
+    UrdfJoint,
     homogeneous,
     quaternion_from_rotation,
     rpy_from_rotation,
@@ -401,7 +403,8 @@ class WholeRobot:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
-        self.tree = RobotTree(scene.urdf_text)
+        self.element, old_tip = _original_robot(scene)
+        self.tree = RobotTree(ET.tostring(self.element, encoding='unicode'))
         self.moving_names = list(scene.joint_names)
         self.locked = dict(scene.locked_joints)
         reserved = {IMPACT_PLANE, TIP, *surface_frames(scene)}
@@ -423,9 +426,23 @@ class WholeRobot:
         zero = self.values([0.0] * scene.n_links)
         link = self.tree.poses(zero)[scene.link_names[-1]]
         q = scene.joint_coordinates.absolute([0.0] * scene.n_links)
-        x, y = tip_position(scene.lengths, q, scene.contact_point)
-        in_plane = homogeneous(_model_link_rotation(q[-1]), (x, 0.0, y))
-        self.tip = np.linalg.inv(link) @ self.plane @ in_plane
+        # B relative to the last model link's joint, turned into the URDF link's frame, plus
+        # the link origin's step onto the plane (its offset along the axis, if any). Numbers
+        # within SNAP of 0 or ±1 are taken as exact: a description in the model's own frames
+        # gets its contact point back to the last bit
+        R = _snap(link[:3, :3].T @ self.plane[:3, :3] @ _model_link_rotation(q[-1]))
+        along, across = scene.contact_point
+        axis = np.array(scene.plane.axis)  # type: ignore[union-attr]  # a URDF arm's
+        off_plane = (link[:3, 3] - self.plane[:3, 3]) @ axis
+        step = _snap(link[:3, :3].T @ (-off_plane * axis))
+        self.tip = homogeneous(R, R @ np.array([float(along), 0.0, float(across)]) + step)
+        self.keep_tip = False
+        if old_tip is not None and old_tip.parent == scene.link_names[-1]:
+            # a tip a description written here added, where the scene puts it: kept as
+            # written, so that the robot read back from it is the same arm to the last bit
+            if np.allclose(old_tip.origin, self.tip, rtol=0.0, atol=1e-9):
+                self.tip, self.keep_tip = old_tip.origin, True
+                self.tip_origin = (old_tip.xyz, old_tip.rpy)
 
     def values(self, theta: Sequence[float]) -> dict[str, float]:
         """Every joint's value for the robot's joint angles ``theta`` of the moving joints."""
@@ -468,6 +485,61 @@ class WholeRobot:
         return [_as_transform(j.parent, j.child, T) for j, T in self.tree.transforms(values)]
 
 
+SNAP = 1e-12
+
+
+def _snap(a: np.ndarray) -> np.ndarray:
+    """``a`` with its entries within ``SNAP`` of 0, 1 or -1 made exact."""
+    out = np.array(a, dtype=float)
+    for exact in (0.0, 1.0, -1.0):
+        out[np.abs(out - exact) < SNAP] = exact
+    return out
+
+
+def _original_robot(scene: Scene) -> tuple[ET.Element, UrdfJoint | None]:
+    """The URDF's ``<robot>`` (its comments kept) without its ``<ros2_control>`` elements
+    and without the frames a description written here added (a leaf link named ``tip``,
+    ``impact_plane`` or ``surfaceK`` on a fixed joint ``<name>_joint``): a robot read back
+    from ``impact-arm urdf`` gets them again, at the scene's values. Also the removed
+    ``tip_joint``, if any."""
+    robot = ET.fromstring(
+        scene.urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    )
+    for element in robot.findall('ros2_control'):
+        robot.remove(element)
+    old_tip = None
+    removed = True
+    while removed:  # leaves first: the surfaces, then impact_plane they hang from
+        removed = False
+        parents = {
+            j.find('parent').get('link')  # type: ignore[union-attr]
+            for j in robot.findall('joint')
+            if j.find('parent') is not None
+        }
+        for joint in robot.findall('joint'):
+            child = joint.find('child')
+            name = '' if child is None else child.get('link', '')
+            added = name in (TIP, IMPACT_PLANE) or re.fullmatch(r'surface[1-9][0-9]*', name)
+            if not (
+                added
+                and joint.get('type') == 'fixed'
+                and joint.get('name') == f'{name}_joint'
+                and name not in parents
+            ):
+                continue
+            if name == TIP:
+                old_tip = RobotTree(
+                    f'<robot><link name="{joint.find("parent").get("link")}"/>'  # type: ignore[union-attr]
+                    f'<link name="{TIP}"/>{ET.tostring(joint, encoding="unicode")}</robot>'
+                ).joints[0]
+            robot.remove(joint)
+            for link in robot.findall('link'):
+                if link.get('name') == name:
+                    robot.remove(link)
+            removed = True
+    return robot, old_tip
+
+
 def _as_transform(parent: str, child: str, T: np.ndarray) -> Transform:
     x, y, z = (float(v) for v in T[:3, 3])
     return Transform(parent, child, x, y, z, quaternion_from_rotation(T[:3, :3]))
@@ -485,11 +557,7 @@ def whole_robot_description(
     moving joints; plus ``impact_plane``, ``tip`` and the surfaces (``WholeRobot``)."""
     whole = WholeRobot(scene)
     thickness, reach = _geometry_sizes(scene)
-    robot = ET.fromstring(
-        scene.urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
-    )
-    for element in robot.findall('ros2_control'):
-        robot.remove(element)
+    robot = whole.element
     for parent, child, T, height in whole.added_poses():
         link = _sub(robot, 'link', name=child)
         if child == TIP:
@@ -518,7 +586,15 @@ def whole_robot_description(
             xyz, rpy = (0.0, 0.0, height), (math.pi / 2, 0.0, 0.0)
         else:
             xyz, rpy = tuple(float(v) for v in T[:3, 3]), rpy_from_rotation(T[:3, :3])
-        _sub(joint, 'origin', xyz=' '.join(map(_num, xyz)), rpy=' '.join(map(_num, rpy)))
+        if child == TIP and whole.keep_tip:
+            xyz, rpy = whole.tip_origin
+        # (+ 0.0: no '-0.0' in the text)
+        _sub(
+            joint,
+            'origin',
+            xyz=' '.join(_num(v + 0.0) for v in xyz),
+            rpy=' '.join(_num(v + 0.0) for v in rpy),
+        )
     initial = scene.joint_coordinates.positions(scene.q0)
     _ros2_control(robot, whole.moving_names, joint_commands_topic, joint_states_topic, initial)
     ET.indent(robot)
