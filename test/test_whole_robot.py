@@ -34,7 +34,10 @@ UR5_JOINTS = [
     'wrist_2_joint',
     'wrist_3_joint',
 ]
-SURFACES = [{'height': -0.3, 'material': 'steel'}, {'height': 0.5, 'law': 'none', 'material': 'steel'}]
+SURFACES = [
+    {'height': -0.3, 'material': 'steel'},
+    {'height': 0.5, 'law': 'none', 'material': 'steel'},
+]
 
 
 def ur5_path():
@@ -203,9 +206,7 @@ def test_tf_for_a_joint_state_is_pinocchios_robot_and_the_markers_land_on_it():
         # ... and frame 'tip' of the description sits there too
         assert compose(transforms, 'tip', 'world')[:3, 3] == pytest.approx(projected, abs=1e-9)
     # impact points and the force arrow are drawn in impact_plane
-    visuals.add_impact(
-        {'t_contact': 0.001, 'F_max': 100.0, 'q_contact_deg': list(np.degrees(q))}
-    )
+    visuals.add_impact({'t_contact': 0.001, 'F_max': 100.0, 'q_contact_deg': list(np.degrees(q))})
     from impact_arm.io.msgdefs import typestore
 
     markers = typestore().deserialize_cdr(
@@ -272,9 +273,7 @@ def test_an_offline_recording_names_every_joint_and_reads_back(ur5_recording):
     assert run.q[0] == pytest.approx(q0, abs=1e-12)
 
 
-def test_impact_arm_urdf_keeps_rrbots_base_height_and_names_its_moving_joints(
-    tmp_path, capsys
-):
+def test_impact_arm_urdf_keeps_rrbots_base_height_and_names_its_moving_joints(tmp_path, capsys):
     from impact_arm.tools.cli import main
 
     data = scene_data(

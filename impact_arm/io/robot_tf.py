@@ -82,7 +82,7 @@ def quaternion_from_rotation(R: np.ndarray) -> tuple[float, float, float, float]
     return x, y, z, w
 
 
-def homogeneous(R: np.ndarray, p: Sequence[float]) -> np.ndarray:
+def homogeneous(R: np.ndarray, p: Sequence[float] | np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = p
@@ -141,10 +141,14 @@ class RobotTree:
         robot = ET.fromstring(text)
         joints = []
         for element in robot.findall('joint'):
-            origin, axis, mimic = element.find('origin'), element.find('axis'), element.find('mimic')
+            origin, axis, mimic = (
+                element.find('origin'),
+                element.find('axis'),
+                element.find('mimic'),
+            )
             parent, child = element.find('parent'), element.find('child')
             if parent is None or child is None:
-                raise ValueError(f"joint {element.get('name')!r}: no parent or child")
+                raise ValueError(f'joint {element.get("name")!r}: no parent or child')
             raw = _numbers(None if axis is None else axis.get('xyz'), (1.0, 0.0, 0.0))
             norm = math.sqrt(sum(a * a for a in raw)) or 1.0
             joints.append(

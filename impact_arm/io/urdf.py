@@ -55,13 +55,7 @@ from ..contract import (
     surface_frame,
 )
 from ..physics.errors import ImpactArmError
-from .robot_tf import (
-    RobotTree,
-    UrdfJoint,
-    homogeneous,
-    quaternion_from_rotation,
-    rpy_from_rotation,
-)
+from .robot_tf import RobotTree, UrdfJoint, homogeneous, quaternion_from_rotation, rpy_from_rotation
 
 from ..physics.scene import JointSpec
 
@@ -475,9 +469,7 @@ class WholeRobot:
 
     def static(self) -> list[Transform]:
         """/tf_static: the URDF's fixed joints, then the added frames."""
-        return [
-            _as_transform(j.parent, j.child, j.origin) for j in self.tree.fixed
-        ] + self.added()
+        return [_as_transform(j.parent, j.child, j.origin) for j in self.tree.fixed] + self.added()
 
     def moving(self, q: Sequence[float]) -> list[Transform]:
         """/tf for absolute link angles ``q``: every non-fixed joint of the URDF."""
@@ -582,6 +574,8 @@ def whole_robot_description(
         joint = _sub(robot, 'joint', name=f'{child}_joint', type='fixed')
         _sub(joint, 'parent', link=parent)
         _sub(joint, 'child', link=child)
+        xyz: Sequence[float]
+        rpy: Sequence[float]
         if T is None:
             xyz, rpy = (0.0, 0.0, height), (math.pi / 2, 0.0, 0.0)
         else:
@@ -599,4 +593,3 @@ def whole_robot_description(
     _ros2_control(robot, whole.moving_names, joint_commands_topic, joint_states_topic, initial)
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding='unicode') + '\n'
-

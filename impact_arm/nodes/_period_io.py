@@ -97,13 +97,10 @@ class PeriodPublishers:
         if self._locked_tails:
             values, zeros = self._locked_tails
             states = self.wire_joints.fill(
-                [*tick.position, *values, *tick.velocity, *zeros, *tick.effort, *zeros],
-                (sec, nsec),
+                [*tick.position, *values, *tick.velocity, *zeros, *tick.effort, *zeros], (sec, nsec)
             )
         else:
-            states = self.wire_joints.fill(
-                tick.position + tick.velocity + tick.effort, (sec, nsec)
-            )
+            states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
         if self.mounts is not None:
             msg = self.mount_state
             msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec

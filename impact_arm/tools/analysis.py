@@ -115,9 +115,7 @@ def load(path, progress=_quiet) -> Run:
                 position, velocity = _scene_joints(scene, msg.name, position, velocity)
             if coordinates is None:
                 pos.append(to_absolute(position))
-                vel.append(
-                    to_absolute(velocity) if len(velocity) else [math.nan] * len(position)
-                )
+                vel.append(to_absolute(velocity) if len(velocity) else [math.nan] * len(position))
             else:
                 pos.append(coordinates.absolute(position))
                 vel.append(
