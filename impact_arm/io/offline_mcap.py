@@ -13,6 +13,9 @@ Topics
 ``publish_rate``): names ``joint1`` … ``jointN``; position and velocity are the *relative*
 encoder angles (joint1 = q1, joint_k = q_k − q_(k−1)) and their rates; effort = the joint
 torques applied at that instant (T01, T12 …; zero while the actuators are off in contact).
+An arm from a URDF names its moving joints as the URDF does (their values the robot's joint
+angles), then every locked joint (``Scene.locked_joints``) at its value, velocity and effort
+0, so that robot_state_publisher shows the whole robot.
 Header stamp = sample time, frame_id ''. A ``sensors`` section in the scene makes these, and the
 wrench below, what a real driver reports (``driver/sensors.py``: encoder counts, noise,
 difference rates, latencies); the 3D view and the impact reports stay exact.
@@ -138,7 +141,11 @@ class OfflineRecorder:
         self.n = scene.n_links
         self._store = typestore()
         self._types = self._store.types
-        self._names = list(scene.joint_names)
+        # the moving joints, then every locked joint at its value (robot_state_publisher
+        # shows the whole robot); the scene's rods have none
+        self._names = list(scene.joint_names) + [name for name, _ in scene.locked_joints]
+        self._locked = [float(value) for _, value in scene.locked_joints]
+        self._locked_zeros = [0.0] * len(self._locked)
         self._columns = trace_columns(self.n)
         self._mount_frames = [frame for frame, _ in mounted_surfaces(scene)]
         self.topics = dict(OFFLINE_TOPICS)
@@ -217,9 +224,9 @@ class OfflineRecorder:
         js = T['sensor_msgs/msg/JointState'](
             header=self._header(t_ns, ''),
             name=self._names,
-            position=np.array(position),
-            velocity=np.array(velocity),
-            effort=np.array(effort, dtype=np.float64),
+            position=np.array(list(position) + self._locked),
+            velocity=np.array(list(velocity) + self._locked_zeros),
+            effort=np.array(list(effort) + self._locked_zeros, dtype=np.float64),
         )
         self._write(JOINT_STATES, js, t_ns)
         Vector3 = T['geometry_msgs/msg/Vector3']

@@ -53,8 +53,10 @@ from ..contract import (
 )
 from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (
+    IMPACT_PLANE,
     SURFACE_THICKNESS_PER_REACH,
     WORLD,
+    WholeRobot,
     Transform,
     moving_transforms,
     robot_description,
@@ -62,6 +64,7 @@ from .urdf import (
     scene_link_names,
     static_transforms,
     surface_frames,
+    tip_position,
 )
 
 if TYPE_CHECKING:
@@ -78,18 +81,6 @@ ARROW_HOLD = 0.35
 IMPACT_POINT_PER_REACH = 0.04
 IMPACT_POINT_RGBA = (0.0, 0.85, 1.0, 1.0)
 IMPACT_EVENTS = ('contact', 'max_compression', 'separation')
-
-
-def tip_position(
-    lengths: Sequence[float], q: Sequence[float], tip_point: Sequence[float] | None = None
-) -> tuple[float, float]:
-    """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``;
-    ``tip_point``: B on the last link (along, across; default: its end)."""
-    along, across = (lengths[-1], 0.0) if tip_point is None else tip_point
-    x = [L * math.cos(a) for L, a in zip(lengths[:-1], q)]
-    y = [L * math.sin(a) for L, a in zip(lengths[:-1], q)]
-    c, s = math.cos(q[len(lengths) - 1]), math.sin(q[len(lengths) - 1])
-    return math.fsum(x + [along * c - across * s]), math.fsum(y + [along * s + across * c])
 
 
 def arrow_length(force: float, reach: float) -> float:
@@ -151,6 +142,10 @@ class SceneVisuals:
         self.reach = math.fsum(scene.lengths)
         self.mounted = mounted_surfaces(scene)
         self.links = scene_link_names(scene)  # the frames /tf moves, as the description names them
+        # a URDF arm: the whole robot, its joints as robot_state_publisher moves them, and the
+        # model's plane in frame impact_plane; the rods: the model's plane is the world's x-z
+        self.robot = WholeRobot(scene) if scene.plane is not None and scene.urdf_text else None
+        self.frame = WORLD if self.robot is None else IMPACT_PLANE
         self._next_tf = 0  # index k of the next /tf time k / tf_rate
         self.impacts: list[tuple] = []  # (contact stamp [ns], contact point (x, z), F_max [N])
         self._events: list[tuple] = []  # event frames not yet taken: (stamp [ns], q)
@@ -173,7 +168,7 @@ class SceneVisuals:
         return self._TF(
             transforms=[
                 self._transform(t, t_ns)
-                for t in static_transforms(self.scene)
+                for t in (self.robot.static() if self.robot else static_transforms(self.scene))
                 if t.child not in moving
             ]
         )
@@ -189,7 +184,10 @@ class SceneVisuals:
     def tf(self, q: Sequence[float], t_ns: int, plates: Sequence[float] | None = None) -> Any:
         """The joint transforms for absolute link angles ``q``; with ``plates`` ((z, ż) per
         mounted surface, flat, of the same instant) also each mounted surface's frame."""
-        transforms = moving_transforms(self.scene.lengths, q, self.links)
+        if self.robot is not None:
+            transforms = self.robot.moving(q)
+        else:
+            transforms = moving_transforms(self.scene.lengths, q, self.links)
         if plates is not None:
             transforms += self._surface_transforms(plates)
         return self._TF(transforms=[self._transform(t, t_ns) for t in transforms])
@@ -203,7 +201,9 @@ class SceneVisuals:
 
     def _surface_transforms(self, plates):
         return [
-            Transform(WORLD, frame, 0.0, 0.0, height + float(plates[2 * j]), PLANE_FRAME_ROTATION)
+            Transform(
+                self.frame, frame, 0.0, 0.0, height + float(plates[2 * j]), PLANE_FRAME_ROTATION
+            )
             for j, (frame, height) in enumerate(self.mounted)
         ]
 
@@ -261,7 +261,7 @@ class SceneVisuals:
         if self._prefixes is None or self._drawn_points < len(self.impacts):
             for k in range(self._drawn_points, len(self.impacts)):
                 x, z = self.impacts[k][1]
-                m = self._marker('impact_points', k, M.SPHERE, WORLD, 0, IMPACT_POINT_RGBA)
+                m = self._marker('impact_points', k, M.SPHERE, self.frame, 0, IMPACT_POINT_RGBA)
                 size = IMPACT_POINT_PER_REACH * self.reach
                 # the bead's top touches the contact point from below the surface
                 m.pose.position.x, m.pose.position.z = x, z - size / 2
@@ -277,7 +277,7 @@ class SceneVisuals:
         if held is None:
             return self._prefixes[0]
         t_contact, (x, z), force = held
-        arrow = self._marker('contact_force', 0, M.ARROW, WORLD, t_ns, (1.0, 0.2, 0.1, 1.0))
+        arrow = self._marker('contact_force', 0, M.ARROW, self.frame, t_ns, (1.0, 0.2, 0.1, 1.0))
         # from the contact point along the outward normal (world +z): the force on the tip
         length = arrow_length(force, self.reach)
         arrow.points = [self._Point(x=x, z=z), self._Point(x=x, z=z + length)]

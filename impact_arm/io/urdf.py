@@ -40,9 +40,12 @@ controller_manager can drive the simulator through its topic-hardware interface
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
 
 from ..contract import (
     PLANE_AXIS_IN_WORLD,
@@ -52,6 +55,7 @@ from ..contract import (
     surface_frame,
 )
 from ..physics.errors import ImpactArmError
+from .robot_tf import RobotTree, UrdfJoint, homogeneous, quaternion_from_rotation, rpy_from_rotation
 
 from ..physics.scene import JointSpec
 
@@ -159,7 +163,10 @@ def moving_transforms(
 
 
 def static_transforms(scene: Scene) -> list[Transform]:
-    """The fixed transforms: the tip on the last link, each surface on the world."""
+    """The fixed transforms: the tip on the last link, each surface on the world (a URDF
+    arm's: ``WholeRobot.static``)."""
+    if scene.plane is not None and scene.urdf_text:
+        return WholeRobot(scene).static()
     along, across = scene.contact_point
     out = [
         Transform(
@@ -201,6 +208,32 @@ def _visual_and_collision(link, origin, geometry_tag, material=None, **size):
 
 
 def robot_description(
+    scene: Scene,
+    *,
+    name: str = 'impact_arm',
+    joint_commands_topic: str = JOINT_COMMANDS_TOPIC,
+    joint_states_topic: str = JOINT_STATES_TOPIC,
+    rod_radius: float | None = None,
+) -> str:
+    """URDF text of ``scene``: for a URDF arm the whole robot (``whole_robot_description``),
+    else the rods (the module docstring gives frames and conventions)."""
+    if scene.plane is not None and scene.urdf_text:
+        return whole_robot_description(
+            scene,
+            joint_commands_topic=joint_commands_topic,
+            joint_states_topic=joint_states_topic,
+            rod_radius=rod_radius,
+        )
+    return _rods_description(
+        scene,
+        name=name,
+        joint_commands_topic=joint_commands_topic,
+        joint_states_topic=joint_states_topic,
+        rod_radius=rod_radius,
+    )
+
+
+def _rods_description(
     scene: Scene,
     *,
     name: str = 'impact_arm',
@@ -319,3 +352,244 @@ def _ros2_control(robot, joints, commands_topic, states_topic, initial_positions
             # arm there, not one for an arm at zero angles
             initial = position if state == 'position' else 0.0
             _sub(interface, 'param', name='initial_value').text = _num(initial)
+
+
+# ------------------------------------------------------------------ the whole robot
+IMPACT_PLANE = 'impact_plane'
+TIP_RGBA, SURFACE_RGBA = '0.9 0.3 0.2 1', '0.6 0.6 0.6 1'
+
+
+def tip_position(
+    lengths: Sequence[float], q: Sequence[float], tip_point: Sequence[float] | None = None
+) -> tuple[float, float]:
+    """(x, y) of the tip centre B in the model's plane for absolute link angles ``q``;
+    ``tip_point``: B on the last link (along, across; default: its end)."""
+    along, across = (lengths[-1], 0.0) if tip_point is None else tip_point
+    x = [L * math.cos(a) for L, a in zip(lengths[:-1], q)]
+    y = [L * math.sin(a) for L, a in zip(lengths[:-1], q)]
+    c, s = math.cos(q[len(lengths) - 1]), math.sin(q[len(lengths) - 1])
+    return math.fsum(x + [along * c - across * s]), math.fsum(y + [along * s + across * c])
+
+
+def plane_pose(scene: Scene) -> np.ndarray:
+    """4x4 of frame ``impact_plane`` in the URDF's root frame: origin O, rotation with the
+    columns [x, -axis, y] of the model's plane, so that a point (x, y) of the plane is
+    (x, 0, y) in it, as ``contract.plane_to_world`` puts it in ``world`` for the rods."""
+    plane = scene.plane
+    assert plane is not None
+    R = np.column_stack([plane.x, [-a for a in plane.axis], plane.y])
+    return homogeneous(R, plane.origin)
+
+
+def _model_link_rotation(angle: float) -> np.ndarray:
+    """A rod frame's rotation in the plane frame at absolute angle ``angle``: about the
+    model's z (the frame's -y), as ``contract.plane_rotation``."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+
+
+class WholeRobot:
+    """A URDF arm's frames as robot_state_publisher gives them (io/robot_tf.py), with the
+    frames the project adds: ``impact_plane`` on the root link (``plane_pose``), ``tip`` on
+    the last moving link at the model's contact point B (the rods' tip frame: x along the
+    last model link, y = the plane's -axis), the surfaces on ``impact_plane``. Locked joints
+    sit at ``Scene.locked_joints``, the moving ones at the robot's joint angles."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self.element, old_tip = _original_robot(scene)
+        self.tree = RobotTree(ET.tostring(self.element, encoding='unicode'))
+        self.moving_names = list(scene.joint_names)
+        self.locked = dict(scene.locked_joints)
+        reserved = {IMPACT_PLANE, TIP, *surface_frames(scene)}
+        taken = [name for name in self.tree.links if name in reserved]
+        if taken:
+            raise VisualSettingError(
+                f"arm.urdf link '{taken[0]}': the name of a frame the description adds "
+                f'({", ".join(sorted(reserved))}): rename the link'
+            )
+        joints = {f'{frame}_joint' for frame in reserved}
+        taken = [j.name for j in self.tree.joints if j.name in joints]
+        if taken:
+            raise VisualSettingError(
+                f"arm.urdf joint '{taken[0]}': the name of a joint the description adds "
+                f'({", ".join(sorted(joints))}): rename the joint'
+            )
+        self.plane = plane_pose(scene)
+        # the tip frame on the last moving link, where the model puts B at the robot's zero
+        zero = self.values([0.0] * scene.n_links)
+        link = self.tree.poses(zero)[scene.link_names[-1]]
+        q = scene.joint_coordinates.absolute([0.0] * scene.n_links)
+        # B relative to the last model link's joint, turned into the URDF link's frame, plus
+        # the link origin's step onto the plane (its offset along the axis, if any). Numbers
+        # within SNAP of 0 or ±1 are taken as exact: a description in the model's own frames
+        # gets its contact point back to the last bit
+        R = _snap(link[:3, :3].T @ self.plane[:3, :3] @ _model_link_rotation(q[-1]))
+        along, across = scene.contact_point
+        axis = np.array(scene.plane.axis)  # type: ignore[union-attr]  # a URDF arm's
+        off_plane = (link[:3, 3] - self.plane[:3, 3]) @ axis
+        step = _snap(link[:3, :3].T @ (-off_plane * axis))
+        self.tip = homogeneous(R, R @ np.array([float(along), 0.0, float(across)]) + step)
+        self.keep_tip = False
+        if old_tip is not None and old_tip.parent == scene.link_names[-1]:
+            # a tip a description written here added, where the scene puts it: kept as
+            # written, so that the robot read back from it is the same arm to the last bit
+            if np.allclose(old_tip.origin, self.tip, rtol=0.0, atol=1e-9):
+                self.tip, self.keep_tip = old_tip.origin, True
+                self.tip_origin = (old_tip.xyz, old_tip.rpy)
+
+    def values(self, theta: Sequence[float]) -> dict[str, float]:
+        """Every joint's value for the robot's joint angles ``theta`` of the moving joints."""
+        out = dict(self.locked)
+        out.update((name, float(v)) for name, v in zip(self.moving_names, theta))
+        return out
+
+    def added_poses(self) -> list[tuple[str, str, np.ndarray | None, float]]:
+        """(parent, child, pose, surface height) of the frames the project adds (all fixed):
+        impact_plane and tip (pose: 4x4 in the parent), the surfaces (pose None: at their
+        height, turned +90 deg about x like the rods' surfaces)."""
+        out: list[tuple[str, str, np.ndarray | None, float]] = [
+            (self.tree.root, IMPACT_PLANE, self.plane, 0.0),
+            (self.scene.link_names[-1], TIP, self.tip, 0.0),
+        ]
+        out += [
+            (IMPACT_PLANE, name, None, float(s.height))
+            for name, s in zip(surface_frames(self.scene), self.scene.surfaces)
+        ]
+        return out
+
+    def added(self) -> list[Transform]:
+        """The frames the project adds, as transforms."""
+        return [
+            Transform(parent, child, 0.0, 0.0, height, PLANE_FRAME_ROTATION)
+            if T is None
+            else _as_transform(parent, child, T)
+            for parent, child, T, height in self.added_poses()
+        ]
+
+    def static(self) -> list[Transform]:
+        """/tf_static: the URDF's fixed joints, then the added frames."""
+        return [_as_transform(j.parent, j.child, j.origin) for j in self.tree.fixed] + self.added()
+
+    def moving(self, q: Sequence[float]) -> list[Transform]:
+        """/tf for absolute link angles ``q``: every non-fixed joint of the URDF."""
+        values = self.values(self.scene.joint_coordinates.positions(q))
+        return [_as_transform(j.parent, j.child, T) for j, T in self.tree.transforms(values)]
+
+
+SNAP = 1e-12
+
+
+def _snap(a: np.ndarray) -> np.ndarray:
+    """``a`` with its entries within ``SNAP`` of 0, 1 or -1 made exact."""
+    out = np.array(a, dtype=float)
+    for exact in (0.0, 1.0, -1.0):
+        out[np.abs(out - exact) < SNAP] = exact
+    return out
+
+
+def _original_robot(scene: Scene) -> tuple[ET.Element, UrdfJoint | None]:
+    """The URDF's ``<robot>`` (its comments kept) without its ``<ros2_control>`` elements
+    and without the frames a description written here added (a leaf link named ``tip``,
+    ``impact_plane`` or ``surfaceK`` on a fixed joint ``<name>_joint``): a robot read back
+    from ``impact-arm urdf`` gets them again, at the scene's values. Also the removed
+    ``tip_joint``, if any."""
+    robot = ET.fromstring(
+        scene.urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    )
+    for element in robot.findall('ros2_control'):
+        robot.remove(element)
+    old_tip = None
+    removed = True
+    while removed:  # leaves first: the surfaces, then impact_plane they hang from
+        removed = False
+        parents = {
+            j.find('parent').get('link')  # type: ignore[union-attr]
+            for j in robot.findall('joint')
+            if j.find('parent') is not None
+        }
+        for joint in robot.findall('joint'):
+            child = joint.find('child')
+            name = '' if child is None else child.get('link', '')
+            added = name in (TIP, IMPACT_PLANE) or re.fullmatch(r'surface[1-9][0-9]*', name)
+            if not (
+                added
+                and joint.get('type') == 'fixed'
+                and joint.get('name') == f'{name}_joint'
+                and name not in parents
+            ):
+                continue
+            if name == TIP:
+                old_tip = RobotTree(
+                    f'<robot><link name="{joint.find("parent").get("link")}"/>'  # type: ignore[union-attr]
+                    f'<link name="{TIP}"/>{ET.tostring(joint, encoding="unicode")}</robot>'
+                ).joints[0]
+            robot.remove(joint)
+            for link in robot.findall('link'):
+                if link.get('name') == name:
+                    robot.remove(link)
+            removed = True
+    return robot, old_tip
+
+
+def _as_transform(parent: str, child: str, T: np.ndarray) -> Transform:
+    x, y, z = (float(v) for v in T[:3, 3])
+    return Transform(parent, child, x, y, z, quaternion_from_rotation(T[:3, :3]))
+
+
+def whole_robot_description(
+    scene: Scene,
+    *,
+    joint_commands_topic: str = JOINT_COMMANDS_TOPIC,
+    joint_states_topic: str = JOINT_STATES_TOPIC,
+    rod_radius: float | None = None,
+) -> str:
+    """A URDF arm's description: the original robot as it ships (its root pose kept, its
+    comments too), its ``<ros2_control>`` elements replaced by the project's, naming the
+    moving joints; plus ``impact_plane``, ``tip`` and the surfaces (``WholeRobot``)."""
+    whole = WholeRobot(scene)
+    thickness, reach = _geometry_sizes(scene)
+    robot = whole.element
+    for parent, child, T, height in whole.added_poses():
+        link = _sub(robot, 'link', name=child)
+        if child == TIP:
+            _visual_and_collision(
+                link, {'xyz': '0 0 0', 'rpy': '0 0 0'}, 'sphere', radius=_num(scene.tip_radius)
+            )
+            # drawn at least TIP_PER_ROD rod radii, as the rods' tip
+            link.find('visual/geometry/sphere').set(
+                'radius', _num(tip_visual_radius(scene, rod_radius))
+            )
+        elif child != IMPACT_PLANE:
+            # a thin slab whose top face is the surface plane, wide enough for any reach
+            _visual_and_collision(
+                link,
+                {'xyz': f'0 {_num(-thickness / 2)} 0', 'rpy': '0 0 0'},
+                'box',
+                size=f'{_num(2 * reach)} {_num(thickness)} {_num(reach / 2)}',
+            )
+        if child != IMPACT_PLANE:  # inline materials: no clash with the robot's names
+            material = _sub(link.find('visual'), 'material', name=f'impact_arm_{child}')
+            _sub(material, 'color', rgba=TIP_RGBA if child == TIP else SURFACE_RGBA)
+        joint = _sub(robot, 'joint', name=f'{child}_joint', type='fixed')
+        _sub(joint, 'parent', link=parent)
+        _sub(joint, 'child', link=child)
+        xyz: Sequence[float]
+        rpy: Sequence[float]
+        if T is None:
+            xyz, rpy = (0.0, 0.0, height), (math.pi / 2, 0.0, 0.0)
+        else:
+            xyz, rpy = tuple(float(v) for v in T[:3, 3]), rpy_from_rotation(T[:3, :3])
+        if child == TIP and whole.keep_tip:
+            xyz, rpy = whole.tip_origin
+        # (+ 0.0: no '-0.0' in the text)
+        _sub(
+            joint,
+            'origin',
+            xyz=' '.join(_num(v + 0.0) for v in xyz),
+            rpy=' '.join(_num(v + 0.0) for v in rpy),
+        )
+    initial = scene.joint_coordinates.positions(scene.q0)
+    _ros2_control(robot, whole.moving_names, joint_commands_topic, joint_states_topic, initial)
+    ET.indent(robot)
+    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding='unicode') + '\n'

@@ -41,10 +41,26 @@ class PeriodPublishers:
         # nobody listens to the 3D view)
         self.hw_states_wanted = False
         zeros = [0.0] * len(joint_names)
-        self.wire_joints = PatchedMessage(
-            JointState(name=joint_names, position=zeros, velocity=zeros, effort=zeros),
-            ('position', 'velocity', 'effort'),
+        fields = ('position', 'velocity', 'effort')
+        self.hw_joints = PatchedMessage(
+            JointState(name=joint_names, position=zeros, velocity=zeros, effort=zeros), fields
         )
+        # /joint_states: the moving joints, then every locked joint at its value (velocity
+        # and effort 0), so that robot_state_publisher shows the whole robot; the topic
+        # hardware gets the joints its <ros2_control> block names: the moving ones
+        locked = [name for name, _ in scene.locked_joints]
+        self.wire_joints = self.hw_joints
+        self._locked_tails = ()
+        if locked:
+            names, all_zeros = list(joint_names) + locked, [0.0] * (len(joint_names) + len(locked))
+            self.wire_joints = PatchedMessage(
+                JointState(name=names, position=all_zeros, velocity=all_zeros, effort=all_zeros),
+                fields,
+            )
+            self._locked_tails = (
+                [float(value) for _, value in scene.locked_joints],
+                [0.0] * len(locked),
+            )
         wrench = WrenchStamped()
         wrench.header.frame_id = p.frame_id
         self.wire_wrench = PatchedMessage(wrench, ('wrench.force.x', 'wrench.force.y'))
@@ -78,7 +94,13 @@ class PeriodPublishers:
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
-        states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
+        if self._locked_tails:
+            values, zeros = self._locked_tails
+            states = self.wire_joints.fill(
+                [*tick.position, *values, *tick.velocity, *zeros, *tick.effort, *zeros], (sec, nsec)
+            )
+        else:
+            states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
         if self.mounts is not None:
             msg = self.mount_state
             msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
@@ -86,7 +108,11 @@ class PeriodPublishers:
             self._send(self.mounts, msg)
         self._send(self.joints, states)
         if self.hw_states_wanted:
-            self._send(self.hw_states, states)
+            if self.hw_joints is not self.wire_joints:
+                hw = self.hw_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
+            else:
+                hw = states
+            self._send(self.hw_states, hw)
         self.visuals.observe(tick)
         if self.clock is not None:
             self._send(self.clock, self.wire_clock.fill((), (sec, nsec)))

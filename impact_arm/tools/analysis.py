@@ -66,6 +66,21 @@ def _quiet(text):
     pass
 
 
+def _scene_joints(scene, names, position, velocity):
+    """The positions and velocities of ``scene``'s moving joints in a joint state: picked
+    by name when the message names them all, else its first ``scene.n_links`` entries."""
+    n = scene.n_links
+    names = list(names)
+    wanted = list(scene.joint_names)
+    if names[:n] == wanted or not all(j in names for j in wanted):
+        return position[:n], velocity[:n]
+    index = [names.index(j) for j in wanted]
+    return (
+        [position[k] for k in index],
+        [velocity[k] for k in index] if len(velocity) == len(names) else velocity[:0],
+    )
+
+
 def load(path, progress=_quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
     from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info, unreadable_reason
@@ -96,19 +111,20 @@ def load(path, progress=_quiet) -> Run:
         msg = deserialize_cdr(m.data, m.type_name)
         if m.topic == JOINT_STATES:
             t.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+            position, velocity = msg.position, msg.velocity
+            if scene is not None:
+                # the scene's joints by name (a URDF arm's locked joints follow them), else
+                # the first n_links entries
+                position, velocity = _scene_joints(scene, msg.name, position, velocity)
             if coordinates is None:
-                pos.append(to_absolute(msg.position))
-                vel.append(
-                    to_absolute(msg.velocity)
-                    if len(msg.velocity)
-                    else [math.nan] * len(msg.position)
-                )
+                pos.append(to_absolute(position))
+                vel.append(to_absolute(velocity) if len(velocity) else [math.nan] * len(position))
             else:
-                pos.append(coordinates.absolute(msg.position))
+                pos.append(coordinates.absolute(position))
                 vel.append(
-                    coordinates.absolute_rates(msg.velocity)
-                    if len(msg.velocity)
-                    else [math.nan] * len(msg.position)
+                    coordinates.absolute_rates(velocity)
+                    if len(velocity)
+                    else [math.nan] * len(position)
                 )
             if len(msg.effort) == len(msg.position):
                 effort.append(list(msg.effort))
