@@ -16,6 +16,7 @@ from typing import Iterable
 
 import numpy as np
 
+from ..physics.limits import LimitWatch
 from ..physics.control import q_law
 from ..physics.errors import ImpactArmError
 from ..physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
@@ -106,6 +107,8 @@ class SimulatedArm:
         self.command = [0.0] * self.n  # the torque being held (after clipping)
         self.sensors.reset()
         self._reading = None
+        # the periods the published joint states spend beyond the robot's limits
+        self.limits = LimitWatch(self.scene)
 
     def warm_up(self) -> None:
         """Load every compiled function the stepping path may call (numba loads them from its
@@ -227,6 +230,7 @@ class SimulatedArm:
         self.periods += 1
         tick = self.sample(wrench=(jt * self.rate, jn * self.rate), impacts=impacts)
         tick.force_peak = self.integrator.take_peak()
+        self.limits.add(tick.position, tick.velocity)
         return tick
 
     def sample(self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable = ()) -> Tick:

@@ -85,10 +85,15 @@ class ControlInputs:
         wrench_tolerance: float = math.inf,
         implicit_periods: int = 0,
         coordinates: JointCoordinates | None = None,
+        effort_limits: Sequence[float] = (),
     ):
         self.ctrl = ctrl
         # the wire's joint coordinates (the robot's zero and sign) against the law's
         self.coordinates = coordinates or JointCoordinates.identity(len(joint_names))
+        # the robot's effort limits (inf: none): a command never asks for more, as a
+        # ros2_control stack with joint limits never sends more
+        self.effort_limits = list(effort_limits) or [math.inf] * len(joint_names)
+        self.clip = any(math.isfinite(limit) for limit in self.effort_limits)
         self.joint_names = list(joint_names)
         self.order = list(order)
         self.period = 1.0 / rate
@@ -330,6 +335,8 @@ class ControlInputs:
             return
         self.sent.append(tau)
         tau = self.coordinates.efforts(tau)
+        if self.clip:
+            tau = [min(max(v, -limit), limit) for v, limit in zip(tau, self.effort_limits)]
         self.send([tau[j] for j in self.order])
 
     # ------------------------------------------------------------------------- latency

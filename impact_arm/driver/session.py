@@ -368,6 +368,8 @@ class Session:
             'commands': str(loop.commands),
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
+            # the periods beyond the robot's position and velocity limits ('' : none)
+            'limits': '; '.join(e.text() for e in self.arm.limits.found),
             # all-zero commands that did not release the brakes (release_on)
             'zero_commands_before_release': str(self.zero_before_release),
             'publish_failures': str(self.out.failures()),

@@ -167,6 +167,7 @@ class Controller(Node):
             wrench_tolerance=p.wrench_tolerance,
             implicit_periods=p.implicit_periods,
             coordinates=self.coordinates,
+            effort_limits=scene.effort_limits,
         )
         self.inputs.warm_up(scene.q0, scene.qd0)
         # its own commands, in the order sent: chatter is reported on /diagnostics

@@ -16,6 +16,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+from .limits import LimitWatch
 from .control import CycleController
 from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
@@ -109,6 +110,7 @@ class RunResult:
     exception: SimulationError | None = None  # what ended the run early, if anything
     integrator: PhaseIntegrator | None = None
     chatter: list = field(default_factory=list)  # stability.Chatter of each joint that chattered
+    limits: list = field(default_factory=list)  # limits.LimitExcursion: periods beyond a limit
 
     @property
     def stopped(self) -> str:
@@ -139,6 +141,7 @@ class RunResult:
             'rhs_evaluations': self.rhs_evaluations,
             'wall_time': self.wall_time,
             'chatter': [c.to_json() for c in self.chatter],
+            'limits': [e.to_json() for e in self.limits],
         }
 
     def to_json(self) -> dict:
@@ -217,6 +220,8 @@ def run(
     n = model.n
     ctrl: Any = None  # a CycleController when the control is sampled
     chatter = ChatterWatch(scene.joint_names)
+    limits_watch = LimitWatch(scene)
+    coordinates = scene.joint_coordinates
     if control_rate:
         ctrl = CycleController.for_scene(model, scene.controller)
     builder = ImpactBuilder(model)
@@ -265,6 +270,8 @@ def run(
     def publish(sample: Sample, tip_velocity: Sequence[float] | np.ndarray) -> None:
         if keep_samples:
             result.samples.append(sample)
+        if limits_watch.active:  # the robot's joint angles against its URDF's limits
+            limits_watch.add(coordinates.positions(sample.q), coordinates.rates(sample.qd))
         result.ranges.add(sample.q, tip_velocity)
         if observer is not None and hasattr(observer, 'on_sample'):
             observer.on_sample(sample)
@@ -336,6 +343,7 @@ def run(
     except SimulationError as exc:  # keep what was simulated; the caller reports the error
         result.fail(exc)
     result.chatter = chatter.found
+    result.limits = limits_watch.found
     return _finish(result, integ, wall0)
 
 
@@ -456,6 +464,8 @@ def format_table(result: RunResult) -> str:
         )
     for chatter in result.chatter:
         lines.append(f'CHATTER: {chatter.text()}: the law is unstable at its rate')
+    for excursion in result.limits:
+        lines.append(f'LIMIT: {excursion.text()}')
     if result.error:
         lines.append(f'STOPPED: {result.error}')
     return '\n'.join(lines)

@@ -659,6 +659,11 @@ def cli(args) -> int:
     print(_limit_cycle_text(lc), flush=True)
     for found in chatter(run):
         print(f'CHATTER: {found.text()}: the law is unstable at its rate', flush=True)
+    if run.scene is not None:
+        from ..physics.limits import limit_excursions
+
+        for excursion in limit_excursions(run.scene, run.q, run.qd):
+            print(f'LIMIT: {excursion.text()}', flush=True)
     missing = []
     steps = []
     if laws and run.scene is None:

@@ -46,6 +46,8 @@ def cmd_simulate(args) -> int:
     from ..physics.simulate import format_table, run
 
     scene = load_scene(args.scene)
+    for note in scene.notes:
+        print(f'impact-arm simulate: note: {note}', file=sys.stderr)
     from ..physics import jit
 
     if not jit.AVAILABLE:

@@ -133,6 +133,8 @@ def cli(args) -> int:
     print(format_table(result))
     if run.chatter:
         print(f'CHATTER: {run.chatter}: the law is unstable at its rate')
+    if run.diagnostics.get('limits'):
+        print(f'LIMIT: {run.diagnostics["limits"]}')
     if args.mode == 'lockstep' and run.wall > 0:
         print(
             f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '

@@ -143,6 +143,7 @@ def parse_scene(
         urdf_path=links.urdf_path,
         locked_joints=links.locked,
         plane=links.plane,
+        notes=links.notes,
         urdf_text=links.urdf_text,
         sensors=sensors,
         source_text=text,

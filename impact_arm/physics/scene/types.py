@@ -188,6 +188,8 @@ class Scene:
     plane: PlaneFrame | None = None
     urdf_text: str = field(default='', compare=False, repr=False)  # the URDF the arm came from
     sensors: SensorSpec = field(default_factory=SensorSpec)
+    # what loading assumed of the description (said once: the CLI prints them)
+    notes: tuple[str, ...] = field(default=(), compare=False)
     source_text: str = field(default='', compare=False, repr=False)
     source_path: str = field(default='', compare=False, repr=False)
 

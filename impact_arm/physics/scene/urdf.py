@@ -616,6 +616,7 @@ def parse_urdf_arm(
     lengths.append(math.hypot(*tip))
 
     joint_specs = []
+    notes: list[str] = []
     previous = 0.0
     for k, joint in enumerate(chain):
         limit = joint.element.find('limit')
@@ -628,6 +629,17 @@ def parse_urdf_arm(
             lower, upper = lower or 0.0, upper or 0.0  # URDF's defaults
             if lower > upper:
                 fail(f'{where} limit lower = {lower:g} > upper = {upper:g} (rad)')
+            if lower == upper:
+                notes.append(
+                    f"joint '{joint.name}' limit lower = upper = {lower:g} rad: a joint that "
+                    f'cannot move; taken as no position limit'
+                )
+        effort_limit = _number(limit, 'effort', f'{where} limit effort', fail)
+        if effort_limit == 0:
+            notes.append(
+                f"joint '{joint.name}' limit effort = 0: taken as no effort limit (set "
+                f'joints[{k}].max_effort to clip)'
+            )
         offset = headings[k] - previous
         offset = math.remainder(offset, 2 * math.pi) if offset else 0.0
         previous = headings[k]
@@ -636,7 +648,7 @@ def parse_urdf_arm(
                 name=joint.name,
                 lower=lower,
                 upper=upper,
-                effort=_number(limit, 'effort', f'{where} limit effort', fail),
+                effort=effort_limit,
                 velocity=_number(limit, 'velocity', f'{where} limit velocity', fail),
                 damping=_number(dynamics, 'damping', f'{where} dynamics damping', fail) or 0.0,
                 friction=_number(dynamics, 'friction', f'{where} dynamics friction', fail) or 0.0,
@@ -644,7 +656,6 @@ def parse_urdf_arm(
                 offset=offset,
             )
         )
-    notes = []
     if hanging:
         notes.append(
             f'joints {", ".join(hanging[:8])} hang off the arm and are not in arm.locked: '
