@@ -199,3 +199,75 @@ def test_a_sub_chain_that_is_not_planar_is_refused_naming_the_joints(change, mes
     with pytest.raises(SceneError) as refused:
         robot_scene(arm, n, [0.0] * n)
     assert message in str(refused.value) and '\n' not in str(refused.value)
+
+
+STRIKES = {  # gains, targets (the robot's joint angles) and a surface each one strikes
+    'pendulum': dict(
+        kp=[2.0, 1.0],
+        kd=[0.1, 0.05],
+        down=[170.0, 10.0],
+        up=[120.0, 0.0],
+        start=[150.0, 0.0],
+        switch=-0.15,
+        height=-0.25,
+    ),
+    'rrbot': dict(
+        kp=[800.0, 300.0],
+        kd=[80.0, 30.0],
+        down=[130.0, 60.0],
+        up=[60.0, 0.0],
+        start=[60.0, 0.0],
+        switch=-0.5,
+        height=-1.2,
+    ),
+}
+
+
+@pytest.mark.parametrize('robot', ['pendulum', 'rrbot'])
+def test_each_robot_runs_through_simulate_analyze_urdf_and_compare(robot, tmp_path, monkeypatch):
+    """The pendulum and the RRBot as they ship, offline: a sampled run recorded to MCAP
+    (read back with rosbags under the robot's joint names, in its joint angles), analyzed,
+    written as a URDF and compared with their scene."""
+    import yaml
+    from rosbags.highlevel import AnyReader
+    from pathlib import Path
+
+    from impact_arm.tools.analysis import load
+    from impact_arm.tools.cli import main
+
+    _, arm, n, _ = cases()[robot]
+    s = STRIKES[robot]
+    data = copy.deepcopy(paper_dict())
+    del data['links'], data['tip_radius']
+    data['arm'] = arm
+    data['controller'] = {
+        'law': 'q',
+        'kp': s['kp'],
+        'kd': s['kd'],
+        'down_target_deg': s['down'],
+        'up_target_deg': s['up'],
+        'switch_height': s['switch'],
+        'rate': 1000.0,
+    }
+    data['initial'] = {'q_deg': s['start']}
+    data['surfaces'] = [{'height': s['height'], 'material': 'steel'}]
+    data['cycles'], data['t_max'] = 3, 10.0
+    (tmp_path / 'robot.yaml').write_text(yaml.safe_dump(data))
+    monkeypatch.chdir(tmp_path)
+    assert main(['simulate', '--scene', 'robot.yaml', '--mcap', 'run.mcap']) == 0
+    scene = parse_scene(data, origin='robot')
+    with AnyReader([Path('run.mcap')]) as reader:
+        states = [
+            reader.deserialize(raw, conn.msgtype)
+            for conn, _, raw in reader.messages()
+            if conn.topic == '/joint_states'
+        ]
+    assert all(list(m.name[:n]) == list(scene.joint_names) for m in states)
+    assert np.degrees(states[0].position[:n]) == pytest.approx(s['start'], abs=1e-9)
+    run = load('run.mcap')
+    assert len(run.impacts) >= 2 and run.q.shape[1] == n
+    # analyze's absolute angles are the scene's: the first row is the scene's start
+    assert run.q[0] == pytest.approx(scene.q0, abs=1e-9)
+    assert main(['analyze', 'run.mcap', '--out', 'analysis', '--no-animation', '--laws', '']) == 0
+    assert main(['urdf', '--scene', 'robot.yaml']) == 0
+    assert main(['compare', 'run.mcap', 'robot.yaml', '--out', 'compare']) == 0
