@@ -129,7 +129,10 @@ _PARAMS_BEFORE_JOINTS = (
         'commanded torques are clipped to +-max_effort [N m]',
         low=1e-3,
         high=1e9,
-        doc=" (the article's Q law peaks near 2 kN m)",
+        doc=(
+            " (the article's Q law peaks near 2 kN m); each joint also at its own effort "
+            "limit, the scene's joints[i].max_effort or its URDF's, where that is lower"
+        ),
     ),
 )
 _PARAMS_AFTER_JOINTS = (
