@@ -68,6 +68,7 @@ def test_cli_json_has_exactly_the_documented_structure(tmp_path):
         'index',
         't_contact',
         'q_contact_deg',
+        'joints_contact_deg',
         'duration',
         'delta_m',
         'delta_r',
@@ -93,8 +94,9 @@ def test_cli_json_has_exactly_the_documented_structure(tmp_path):
         'rhs_evaluations',
         'wall_time',
         'chatter',
+        'limits',
     }
-    assert data['run']['chatter'] == []
+    assert data['run']['chatter'] == [] and data['run']['limits'] == []
     assert data['run']['impacts'] == 15 == len(data['impacts'])
 
 
