@@ -159,7 +159,10 @@ def write_fitted_scene(scene, values: dict, path, recording=''):
     from ..physics.scene import parse_scene
     from ..calibration.study import Study, apply_overrides
 
+    from ..calibration.fit import state_fit_keys
+
     study = Study(scene)
+    state_fit_keys(study, list(values))  # arm.links / joints the scene leaves to its URDF
     data = apply_overrides(study.data, values)
     _keep_urdf_reachable(data, study.path, path)
     parse_scene(data, origin=path, path=path)  # refuse now rather than hand out a broken file

@@ -7,7 +7,7 @@ search (global stage, trust-region refinement) -> report (covariance, intervals,
 """
 
 from .efforts import EFFORT_TIMINGS, TorqueSchedule, effort_timing
-from .parameters import FitError, Parameter, parameter_specs
+from .parameters import FitError, Parameter, parameter_specs, state_fit_keys
 from .problem import FitOptions, ImpactSet, RecordedImpacts, contact_test, prepare, read_impacts
 from .replay import FailureKind, Prediction, predict_impact, recorded_cor
 from .report import FitResult, ParameterEstimate
@@ -29,6 +29,7 @@ __all__ = [
     'effort_timing',
     'fit',
     'parameter_specs',
+    'state_fit_keys',
     'predict_impact',
     'prepare',
     'read_impacts',

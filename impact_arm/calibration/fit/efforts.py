@@ -44,6 +44,14 @@ def _sampled_controller(model: ArmModel):  # -> CycleController | None
     return CycleController.for_scene(model, ctrl)
 
 
+def _law_command(ctrl, model: ArmModel, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """The sampled law's command at absolute angles and rates, clipped at each joint's
+    effort limit as the driver clips it (a symmetric limit: the joint's sign changes
+    nothing)."""
+    limits = np.asarray(model.scene.effort_limits, float)
+    return np.clip(np.array(ctrl.torque(q, qd)), -limits, limits)
+
+
 def controller_reproduces(model: ArmModel, win: ImpactWindow) -> bool:
     """Whether the scene's sampled controller, from each recorded sample before the impact
     (positions and rates as recorded), gives the effort recorded at the next sample one
@@ -63,7 +71,7 @@ def controller_reproduces(model: ArmModel, win: ImpactWindow) -> bool:
     t_all, effort_all, floor = win.effort_source
     shift = effort_shift(model)
     for k in pairs:
-        command = np.array(ctrl.torque(T @ q[k], T @ qd[k]))
+        command = _law_command(ctrl, model, T @ q[k], T @ qd[k])
         recorded = [np.interp(t[k + 1] + shift, t_all, effort_all[:, j]) for j in range(model.n)]
         if np.any(np.abs(command - recorded) > floor):
             return False
@@ -87,7 +95,7 @@ def contact_period_command(model: ArmModel, win: ImpactWindow) -> np.ndarray | N
         return None
     T = joint_to_absolute_matrix(model.n)
     _, q, qd = win.controller_inputs
-    return np.array(ctrl.torque(T @ q[-1], T @ qd[-1]))
+    return _law_command(ctrl, model, T @ q[-1], T @ qd[-1])
 
 
 class TorqueSchedule:

@@ -157,6 +157,18 @@ def _joint_default(study: Study, parts: Sequence) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
 
 
+def state_fit_keys(study: Study, keys: Sequence[str]) -> None:
+    """Give ``study``'s data the entries the fitted keys need where the scene leaves them to
+    the URDF (``arm.links``, ``joints``): a fitted scene is written from the same data."""
+    for key in keys:
+        try:
+            parts = parse_key_path(key)
+        except SceneError as exc:
+            raise FitError(f'--param {key}: {exc}') from None
+        _state_arm_links(study, parts)
+        _state_joints(study, parts)
+
+
 def parameter_specs(study: Study, bounds: dict) -> list:
     """Check each key against the scene and its bounds ({key: (lo, hi)} or (lo, hi, start)):
     the key holds a number in the scene, or is one the scene may leave out (its value is then
