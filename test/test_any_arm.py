@@ -19,6 +19,8 @@ from types import SimpleNamespace
 from ros_helpers import PYTHON
 
 from impact_arm import contract
+from impact_arm.physics.scene import load_scene
+from impact_arm.physics.simulate import run
 from scenes import arm_dict, write_arm_scene
 from test_visuals import stamp_ns, tip_in_world
 
@@ -98,6 +100,12 @@ def test_lockstep_run_of_an_arm_of_n_links_completes_records_and_draws_it(
         if value.key == 'strikes'
     ]
     assert strikes and max(strikes) >= cycles, strikes
+    # the same scene offline, its controller sampled at the same 1 kHz: the same impacts
+    offline = run(load_scene(scene_path), control_rate=1000.0)
+    times = [i['t_contact'] for i in offline.impacts]
+    shared = min(len(times), len(reports))
+    assert shared >= cycles
+    assert [r['t_contact'] for r in reports[:shared]] == pytest.approx(times[:shared], abs=1e-9)
 
     # TF: at each impact, a frame inside its contact puts the tip on the surface, where the
     # link lengths and the reported contact angles put the end of the arm
@@ -245,3 +253,30 @@ def test_a_urdf_arm_runs_under_its_own_joint_names_and_its_recording_reads_back(
     )
     assert result.impacts_used >= 1
     assert result.parameters['materials.steel.S_y'].value == pytest.approx(1.12e9, rel=1e-3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('scene_name', ['three_link', 'examples/three_link.yaml'])
+def test_a_shipped_scene_runs_in_lockstep_as_offline_at_the_same_rate(
+    ros_env, tmp_path, scene_name
+):
+    """The shipped three-link arms (rods, and from their URDF with effort limits) through
+    ``impact-arm run`` in lockstep at 1 kHz and offline with the controller sampled at
+    1 kHz: the same impacts, to 1e-9 s."""
+    from impact_arm.physics.scene import resolve_scene_path
+
+    repo = Path(__file__).resolve().parent.parent
+    path = str(repo / scene_name) if '/' in scene_name else resolve_scene_path(scene_name)
+    code, out = impact_arm_run(
+        ['--scene', path, '--mode', 'lockstep', '--name', 'arm', '--out', 'runs'], ros_env, tmp_path
+    )
+    assert code == 0 and ': complete' in out, out
+    reports = [
+        json.loads(m.data) for m in read_back(tmp_path / 'runs' / 'arm.mcap')['/impact_report']
+    ]
+    offline = run(load_scene(path), control_rate=1000.0)
+    shared = min(len(reports), len(offline.impacts))
+    assert shared >= load_scene(path).cycles
+    assert [r['t_contact'] for r in reports[:shared]] == pytest.approx(
+        [i['t_contact'] for i in offline.impacts[:shared]], abs=1e-9
+    )

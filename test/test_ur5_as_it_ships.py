@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
+from impact_arm.physics.scene import load_scene
+from impact_arm.physics.simulate import run
 from test_any_arm import impact_arm_run, read_back
 from test_robot_descriptions import cases
 
@@ -86,6 +88,14 @@ def test_the_ur5_strikes_over_dds_in_its_own_joints_and_its_forearm_mass_is_fitt
     assert np.all(efforts <= np.array([150.0, 150.0, 28.0]) * (1 + 1e-12))
     reports = [json.loads(m.data) for m in by_topic['/impact_report']]
     assert len(reports) >= 3
+    # the same scene offline, its controller sampled at 1 kHz and clipped at the same limits:
+    # the same impacts to 1e-9 s
+    offline = run(load_scene(str(tmp_path / 'truth.yaml')), control_rate=1000.0)
+    shared = min(len(offline.impacts), len(reports))
+    assert shared >= 3
+    assert [r['t_contact'] for r in reports[:shared]] == pytest.approx(
+        [i['t_contact'] for i in offline.impacts[:shared]], abs=1e-9
+    )
     # every link of the whole robot moves in /tf (the locked ones at their values)
     children = {t.child_frame_id for m in by_topic['/tf'] for t in m.transforms}
     for link in ('shoulder_link', 'upper_arm_link', 'forearm_link', 'wrist_1_link'):
