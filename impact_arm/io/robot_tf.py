@@ -25,27 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..physics.scene.urdf import axis_rotation, rotation_from_rpy
+
 STILL = ('fixed', 'floating', 'planar')  # taken at their origin: no single value moves them
-
-
-def rotation_from_rpy(rpy: Sequence[float]) -> np.ndarray:
-    """URDF's fixed-axis roll, pitch, yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = (
-        math.cos(r),
-        math.sin(r),
-        math.cos(p),
-        math.sin(p),
-        math.cos(y),
-        math.sin(y),
-    )
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 def rpy_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
@@ -89,13 +71,6 @@ def homogeneous(R: np.ndarray, p: Sequence[float] | np.ndarray) -> np.ndarray:
     return T
 
 
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation by ``angle`` about the unit ``axis`` (Rodrigues)."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * (K @ K)
-
-
 def _numbers(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
     if text is None:
         return default
@@ -131,7 +106,7 @@ class UrdfJoint:
         axis = np.array(self.axis)
         if self.kind == 'prismatic':
             return T @ homogeneous(np.eye(3), axis * value)
-        return T @ homogeneous(_axis_rotation(axis, value), (0.0, 0.0, 0.0))
+        return T @ homogeneous(axis_rotation(axis, value), (0.0, 0.0, 0.0))
 
 
 class RobotTree:

@@ -75,17 +75,25 @@ def _link_default(study: Study, key: str, parts: Sequence) -> float | None:
     return float(_LINK_DEFAULTS[parts[-1]](scene, parts[-2]))
 
 
-def _state_arm_links(study: Study, parts: Sequence) -> None:
-    """A fit of ``arm.links[i].KEY`` of a scene that states no ``arm.links``: the study's
-    data gets one empty entry per link (the URDF's values stand), for the fit to set."""
-    arm = study.data.get('arm') if isinstance(study.data, dict) else None
-    if tuple(parts[:2]) != ('arm', 'links') or not isinstance(arm, dict) or 'links' in arm:
+def _state_entries(study: Study, parts: Sequence) -> None:
+    """A fit of ``arm.links[i].KEY`` or ``joints[i].KEY`` of a scene that states no such
+    list: the study's data gets one empty entry per link (the URDF's, or the ideal joint's,
+    values stand), for the fit to set."""
+    data = study.data if isinstance(study.data, dict) else {}
+    arm = data.get('arm')
+    if tuple(parts[:2]) == ('arm', 'links'):
+        if not isinstance(arm, dict) or 'links' in arm:
+            return
+        key = 'arm.links'
+    elif parts[0] == 'joints' and not data.get('joints'):
+        key = 'joints'
+    else:
         return
     try:
         n = study.scene().n_links
     except SceneError as exc:
-        raise FitError(f'--param arm.links: {exc}') from None
-    study.data = apply_overrides(study.data, {'arm.links': [{} for _ in range(n)]})
+        raise FitError(f'--param {key}: {exc}') from None
+    study.data = apply_overrides(study.data, {key: [{} for _ in range(n)]})
 
 
 _NAMED = re.compile(r'^(links|joints)\[([A-Za-z_][A-Za-z0-9_\-/]*)\]\.([A-Za-z_]+)$')
@@ -129,18 +137,6 @@ def resolve_named_keys(study: Study, bounds: dict) -> dict:
     return out
 
 
-def _state_joints(study: Study, parts: Sequence) -> None:
-    """A fit of ``joints[i].KEY`` of a scene that states no ``joints``: one empty entry per
-    joint, for the fit to set (the URDF's or the ideal joint's values stand)."""
-    if parts[0] != 'joints' or not isinstance(study.data, dict) or study.data.get('joints'):
-        return
-    try:
-        n = study.scene().n_links
-    except SceneError as exc:
-        raise FitError(f'--param joints: {exc}') from None
-    study.data = apply_overrides(study.data, {'joints': [{} for _ in range(n)]})
-
-
 def _joint_default(study: Study, parts: Sequence) -> float | None:
     """The value a ``joints[i].KEY`` the scene leaves out stands at (the URDF's damping or
     friction, the ideal joint's), None if ``parts`` is no such key."""
@@ -165,8 +161,7 @@ def state_fit_keys(study: Study, keys: Sequence[str]) -> None:
             parts = parse_key_path(key)
         except SceneError as exc:
             raise FitError(f'--param {key}: {exc}') from None
-        _state_arm_links(study, parts)
-        _state_joints(study, parts)
+        _state_entries(study, parts)
 
 
 def parameter_specs(study: Study, bounds: dict) -> list:
@@ -186,8 +181,7 @@ def parameter_specs(study: Study, bounds: dict) -> list:
             parts = parse_key_path(key)
         except SceneError as exc:
             raise FitError(f'--param {key}: {exc}') from None
-        _state_arm_links(study, parts)
-        _state_joints(study, parts)
+        _state_entries(study, parts)
         stated = _scene_value(study, key)
         if stated is None:  # a link key left to its default (a rod's, the URDF's)
             stated = _link_default(study, key, parts)

@@ -5,34 +5,23 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 from .schema import LINK, TIP_RADIUS_RANGE, SceneChecker
-from .types import JointSpec, PlaneFrame, rod_centres, rod_inertias
-from .urdf import parse_urdf_arm, read_urdf_file, resolve_urdf_path
+from .types import JointSpec, rod_centres, rod_inertias
+from .urdf import UrdfArm, parse_urdf_arm, read_urdf_file, resolve_urdf_path
 from .xacro import expand_xacro
 
 
 @dataclass(frozen=True)
-class _ArmLinks:
-    """The arm's links from the scene's ``links`` or its ``arm.urdf``."""
+class _ArmLinks(UrdfArm):
+    """The arm's links as the model takes them (``UrdfArm``'s record, which the scene's rods
+    fill too), and where they come from: the scene key, for refusals, and the URDF."""
 
-    lengths: tuple[float, ...]
-    masses: tuple[float, ...]
-    com: tuple[tuple[float, float], ...]
-    inertias: tuple[float, ...]
-    tip_point: tuple[float, float]
-    tip_radius: float
-    joints: tuple[JointSpec, ...]
-    link_names: tuple[str, ...]
-    urdf_path: str
-    key: str  # the scene key the links come from, for refusals
+    key: str = 'links'
+    urdf_path: str = ''
     urdf_text: str = ''
-    locked: tuple[tuple[str, float], ...] = ()
-    plane: PlaneFrame | None = None
-    gravity_scale: float = 1.0  # the part of the scene's gravity in the arm's plane
-    notes: tuple[str, ...] = ()
 
 
 def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
@@ -91,21 +80,10 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
                 check.number(f'{where} {what}', value, spec[1], spec[2])
         check.number('arm.contact.radius', urdf.tip_radius, TIP_RADIUS_RANGE, 'm')
         return _ArmLinks(
-            urdf.lengths,
-            urdf.masses,
-            urdf.com,
-            urdf.inertias,
-            urdf.tip_point,
-            urdf.tip_radius,
-            urdf.joints,
-            urdf.link_names,
-            raw['arm']['urdf'] or raw['arm']['xacro'] or '',
-            f'arm.{given[0]}',
-            urdf_text,
-            urdf.locked,
-            urdf.plane,
-            urdf.gravity_scale,
-            urdf.notes,
+            **{f.name: getattr(urdf, f.name) for f in fields(urdf)},
+            key=f'arm.{given[0]}',
+            urdf_path=raw['arm']['urdf'] or raw['arm']['xacro'] or '',
+            urdf_text=urdf_text,
         )
     for key in ('links', 'tip_radius'):
         if raw[key] is None:
@@ -118,22 +96,20 @@ def _arm_links(check: SceneChecker, raw: dict, scene_path: str) -> _ArmLinks:
     masses = tuple(entry['mass'] for entry in entries)
     rod_c, rod_i = rod_centres(lengths), rod_inertias(lengths, masses)
     return _ArmLinks(
-        lengths,
-        masses,
-        tuple(
+        link_names=(),
+        lengths=lengths,
+        masses=masses,
+        com=tuple(
             (rod_c[k][0] if entry['com_x'] is None else entry['com_x'], entry['com_y'])
             for k, entry in enumerate(entries)
         ),
-        tuple(
+        inertias=tuple(
             rod_i[k] if entry['inertia'] is None else entry['inertia']
             for k, entry in enumerate(entries)
         ),
-        (lengths[-1], 0.0),
-        raw['tip_radius'],
-        tuple(JointSpec(name) for name in joint_names(n)),
-        (),
-        '',
-        'links',
+        tip_point=(lengths[-1], 0.0),
+        tip_radius=raw['tip_radius'],
+        joints=tuple(JointSpec(name) for name in joint_names(n)),
     )
 
 

@@ -102,7 +102,7 @@ def _number(
     return value
 
 
-def _rotation(rpy: Sequence[float]) -> np.ndarray:
+def rotation_from_rpy(rpy: Sequence[float]) -> np.ndarray:
     """URDF's fixed-axis roll, pitch, yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
     r, p, y = rpy
     if r == p == y == 0:
@@ -124,7 +124,7 @@ def _rotation(rpy: Sequence[float]) -> np.ndarray:
     )
 
 
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation by ``angle`` about the unit ``axis`` (Rodrigues)."""
     if angle == 0:
         return np.eye(3)
@@ -146,13 +146,13 @@ class _Joint:
 
     def motion(self, value: float) -> tuple[np.ndarray, np.ndarray]:
         """(rotation, translation) of the child frame in the parent's at joint ``value``."""
-        R = _rotation(self.rpy)
+        R = rotation_from_rpy(self.rpy)
         p = np.array(self.xyz, dtype=float)
         if value == 0 or self.kind == 'fixed':
             return R, p
         if self.kind == 'prismatic':
             return R, p + R @ (self.axis * value)
-        return R @ _axis_rotation(self.axis, value), p
+        return R @ axis_rotation(self.axis, value), p
 
 
 @dataclass(frozen=True)
@@ -313,7 +313,7 @@ class _Description:
                 [e['ixz'], e['iyz'], e['izz']],
             ]
         )
-        R = _rotation(rpy)
+        R = rotation_from_rpy(rpy)
         # given in the inertial frame: in the link frame it is R I R^T
         return _Inertial(mass, np.array(xyz, dtype=float), R @ tensor @ R.T)
 
