@@ -189,8 +189,20 @@ def _time_series(t, series, ylabels, titles):
 
 
 def fig4_link_angles(run, out):
-    """Every link's angle: the article's two panels, one more per further link."""
+    """Every link's angle: the article's two panels, one more per further link. A URDF arm
+    whose joint angles are not the model's link angles is drawn in its own joint angles,
+    as its driver reports them, under its joint names."""
     links = range(run.q.shape[1])
+    scene = run.scene
+    if scene is not None and not scene.joint_coordinates.is_identity:
+        theta = np.array([scene.joint_coordinates.positions(q) for q in run.q])
+        names = scene.joint_names
+        return _time_series(
+            run.t,
+            [_deg(theta[:, k]) for k in links],
+            [f'{names[k]} [deg]' for k in links],
+            [f'({PANEL[k]}) {names[k]}(t)' for k in links],
+        )
     return _time_series(
         run.t,
         [_deg(run.q[:, k]) for k in links],
