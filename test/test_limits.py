@@ -90,3 +90,30 @@ def test_a_description_s_empty_limits_are_said_not_enforced():
     assert not LimitWatch(scene).active  # lower = upper = 0, velocity 0: none
     assert any('limit effort = 0: taken as no effort limit' in note for note in scene.notes)
     assert any('lower = upper = 0 rad' in note for note in scene.notes)
+
+
+def test_joint_limits_stop_ends_a_run_at_the_first_period_beyond_a_limit():
+    """``joint_limits: stop``: offline, the run stops at the first sample beyond a limit
+    with the joint, the value and the limit; the simulated driver's period raises the same
+    stop (the simulator node then stops stepping and says so)."""
+    import dataclasses
+
+    from impact_arm.driver.arm import SimulatedArm
+    from impact_arm.physics.limits import JointLimitStop
+
+    scene = dataclasses.replace(ur5(), joint_limits='stop')
+    result = run(scene, control_rate=1000.0)
+    assert isinstance(result.exception, JointLimitStop)
+    assert 'beyond its velocity limit ±3.15 rad/s: protective stop' in result.error
+    reported = run(ur5(), control_rate=1000.0)
+    first = min(
+        k
+        for k, s in enumerate(reported.samples)
+        if np.any(np.abs(scene.joint_coordinates.rates(s.qd)) > [3.15, 3.15, 3.2])
+    )
+    assert result.samples[-1].t < reported.samples[first].t + 1e-12
+    arm = SimulatedArm(scene, 1000.0)
+    with pytest.raises(JointLimitStop):
+        for _ in range(2000):
+            arm.apply([150.0, 150.0, 28.0])
+            arm.step()

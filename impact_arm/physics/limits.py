@@ -13,7 +13,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 
+from .errors import SimulationError
 from .scene import Scene
+
+
+class JointLimitStop(SimulationError):
+    """A joint went beyond its position or velocity limit under ``joint_limits: stop``: the
+    run stops there, as a driver's protective stop halts the arm."""
 
 
 class LimitKind(str, Enum):
@@ -58,6 +64,7 @@ class LimitWatch:
 
     def __init__(self, scene: Scene) -> None:
         specs = scene.joint_specs
+        self.stop = scene.joint_limits == 'stop'
         self.names = [j.name for j in specs]
         self.ranges = [
             (j.lower, j.upper)
@@ -87,6 +94,13 @@ class LimitWatch:
         self._count[kind][k] += 1
         if abs(value - bound) >= abs(self._worst[kind][k] - self._bound[kind][k]):
             self._worst[kind][k], self._bound[kind][k] = float(value), float(bound)
+        if self.stop:
+            unit = 'rad' if kind is LimitKind.POSITION else 'rad/s'
+            shown = f'{bound:g}' if kind is LimitKind.POSITION else f'±{abs(bound):g}'
+            raise JointLimitStop(
+                f"joint '{self.names[k]}' at {value:.4g} {unit}, beyond its {kind.value} "
+                f'limit {shown} {unit}: protective stop (joint_limits: stop)'
+            )
 
     @property
     def found(self) -> list[LimitExcursion]:

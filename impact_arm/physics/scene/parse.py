@@ -144,6 +144,7 @@ def parse_scene(
         locked_joints=links.locked,
         plane=links.plane,
         notes=links.notes,
+        joint_limits=raw['joint_limits'],
         urdf_text=links.urdf_text,
         sensors=sensors,
         source_text=text,

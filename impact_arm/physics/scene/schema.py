@@ -174,6 +174,8 @@ SCHEMA = {
     'publish_rate': number_spec(1, 1e6, unit='Hz', default=1000.0),
     'integrator': ('dict', INTEGRATOR, '', {'preset': 'balanced'}),
     'sensors': ('dict', SENSORS, '', {}),
+    # a URDF arm's position and velocity limits: reported, or a protective stop
+    'joint_limits': choice_spec(('report', 'stop'), 'report'),
 }
 
 

@@ -188,6 +188,7 @@ class Scene:
     plane: PlaneFrame | None = None
     urdf_text: str = field(default='', compare=False, repr=False)  # the URDF the arm came from
     sensors: SensorSpec = field(default_factory=SensorSpec)
+    joint_limits: str = 'report'  # report | stop: what a run does beyond a joint's limits
     # what loading assumed of the description (said once: the CLI prints them)
     notes: tuple[str, ...] = field(default=(), compare=False)
     source_text: str = field(default='', compare=False, repr=False)
