@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .identify import (
+    contact_test,
     IdentifyError,
     JointRecording,
     RateMeaning,
@@ -343,15 +344,9 @@ def _impacts(rec: JointRecording, model: ArmModel | None) -> list[int]:
     """The impacts of the recording; with a model, only steps with the tip near a surface."""
     if model is None:
         return find_impacts(rec)
-    T = joint_to_absolute_matrix(rec.n)
-    heights = [s.height for s in model.surfaces]
-    reach = float(np.sum(model.L))
-
-    def near_surface(q: np.ndarray, qd_before: np.ndarray, qd_after: np.ndarray) -> bool:
-        y = float(model.tip(T @ q, T @ qd_before)[1])
-        return any(abs(y - h) < 0.05 * reach for h in heights)
-
-    return find_impacts(rec, is_contact=near_surface)
+    # the fit's own test: near a surface, the tip moving down before the step and less so
+    # after it (a torque step near the surface, a drive leaving its limit, is no contact)
+    return find_impacts(rec, is_contact=contact_test(model))
 
 
 def _free(rec: JointRecording, impacts: list[int]) -> np.ndarray:

@@ -617,3 +617,22 @@ def summarize_jump(model: ArmModel, win: ImpactWindow) -> tuple[float, float]:
     v_in = tip_normal_speed(model, T @ q, T @ qd_pre)
     v_out = tip_normal_speed(model, T @ q, T @ qd_post)
     return v_in, (-v_out / v_in if v_in else math.nan)
+
+
+def contact_test(
+    model: ArmModel, tolerance: float = 0.05
+) -> Callable[[np.ndarray, np.ndarray, np.ndarray], bool]:
+    """``is_contact`` for ``find_impacts``: the tip is within ``tolerance`` x the arm's reach
+    of a surface's height, moving down before the step and less so after it."""
+    n = model.n
+    T = joint_to_absolute_matrix(n)
+    heights = [s.height for s in model.surfaces]
+    reach = float(np.sum(model.L))
+
+    def is_contact(q: np.ndarray, qd_before: np.ndarray, qd_after: np.ndarray) -> bool:
+        y = float(model.tip(T @ q, np.zeros(n))[1])
+        v0 = tip_normal_speed(model, T @ q, T @ qd_before)
+        v1 = tip_normal_speed(model, T @ q, T @ qd_after)
+        return any(abs(y - h) < tolerance * reach for h in heights) and v0 < 0 and v1 > v0
+
+    return is_contact

@@ -3,7 +3,7 @@ residuals whose sum of squares is a chi-square when the scene is right."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 from dataclasses import dataclass, replace
 import copy
@@ -16,19 +16,18 @@ from ...physics.errors import SceneError
 from ..identify import (
     IdentifyError,
     ImpactWindow,
+    contact_test,
     JointRecording,
     Noise,
     estimate_noise,
     find_impacts,
     impact_windows,
-    joint_to_absolute_matrix,
-    tip_normal_speed,
 )
 from ..study import Study
 from .efforts import controller_reproduces, effort_timing, effort_timing_and_latency, wrench_shift
 from .parameters import FitError
 from .prestate import shot_start
-from .replay import FailureKind, Prediction, failed, predict_impact, tip_y
+from .replay import FailureKind, Prediction, failed, predict_impact
 
 # The whitened residual of an impact the model cannot replay at some values (no contact, a
 # contact outside the law's validity): well above any misfit near the start, so that the
@@ -307,25 +306,6 @@ class ImpactSet:
             else:
                 out.append(L @ (self.outputs(p, w) - self.recorded(w)))
         return np.concatenate(out) if out else np.zeros(0)
-
-
-def contact_test(
-    model: ArmModel, tolerance: float = 0.05
-) -> Callable[[np.ndarray, np.ndarray, np.ndarray], bool]:
-    """``is_contact`` for ``find_impacts``: the tip is within ``tolerance`` x the arm's reach
-    of a surface's height, moving down before the step and less so after it."""
-    n = model.n
-    T = joint_to_absolute_matrix(n)
-    heights = [s.height for s in model.surfaces]
-    reach = float(np.sum(model.L))
-
-    def is_contact(q: np.ndarray, qd_before: np.ndarray, qd_after: np.ndarray) -> bool:
-        y = tip_y(model, T @ q)
-        v0 = tip_normal_speed(model, T @ q, T @ qd_before)
-        v1 = tip_normal_speed(model, T @ q, T @ qd_after)
-        return any(abs(y - h) < tolerance * reach for h in heights) and v0 < 0 and v1 > v0
-
-    return is_contact
 
 
 def prepare(
