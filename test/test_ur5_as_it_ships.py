@@ -84,8 +84,12 @@ def test_the_ur5_strikes_over_dds_in_its_own_joints_and_its_forearm_mass_is_fitt
     assert np.all(locked == [0.4, 0.0, -0.3])  # the locked joints at their values
     # the robot's own joint angles: the first state is the scene's start, in degrees there
     assert np.degrees(states[0].position[:3]) == pytest.approx([-90.0, 60.0, -30.0], abs=1e-9)
+    limits = np.array([150.0, 150.0, 28.0])
     efforts = np.abs(np.array([s.effort[:3] for s in states]))
-    assert np.all(efforts <= np.array([150.0, 150.0, 28.0]) * (1 + 1e-12))
+    assert np.all(efforts <= limits * (1 + 1e-12))
+    # the controller never asks for more either, and this swing makes it ask for all of it
+    commands = np.abs(np.array([c.data for c in by_topic['/effort_controller/commands']]))
+    assert np.all(commands <= limits * (1 + 1e-12)) and np.any(commands == limits)
     reports = [json.loads(m.data) for m in by_topic['/impact_report']]
     assert len(reports) >= 3
     # the same scene offline, its controller sampled at 1 kHz and clipped at the same limits:
