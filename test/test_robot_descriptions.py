@@ -45,6 +45,14 @@ def robots_dir():
     pytest.skip('example-robot-data has no ur5_robot.urdf')
 
 
+UR5_JOINTS = [  # the UR5's six joints, base to flange
+    'shoulder_pan_joint',
+    'shoulder_lift_joint',
+    'elbow_joint',
+    'wrist_1_joint',
+    'wrist_2_joint',
+    'wrist_3_joint',
+]
 UR5_ARM = {
     'joints': ['shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint'],
     'locked': {'shoulder_pan_joint': 0.3, 'wrist_2_joint': 0.0, 'wrist_3_joint': 0.7},

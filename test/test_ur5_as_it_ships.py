@@ -15,20 +15,13 @@ import yaml
 from impact_arm.physics.scene import load_scene
 from impact_arm.physics.simulate import run
 from test_any_arm import impact_arm_run, read_back
-from test_robot_descriptions import cases
+from test_robot_descriptions import UR5_JOINTS, cases
 
 pytest.importorskip('pinocchio')
 
 FOREARM = 2.275  # kg, the UR5 description's forearm_link mass
 TRUTH = 1.08 * FOREARM  # the "real" arm's forearm: 8 % heavier than its description says
-SIX = [
-    'shoulder_pan_joint',
-    'shoulder_lift_joint',
-    'elbow_joint',
-    'wrist_1_joint',
-    'wrist_2_joint',
-    'wrist_3_joint',
-]
+SIX = UR5_JOINTS
 
 
 def ur5_scene(urdf, forearm_mass=None):

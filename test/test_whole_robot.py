@@ -23,17 +23,9 @@ from impact_arm.io.robot_tf import (
 )
 from impact_arm.physics.model import ArmModel
 from scenes import paper_dict
-from test_robot_descriptions import HERE, UR5_ARM, robots_dir
+from test_robot_descriptions import HERE, UR5_ARM, UR5_JOINTS, robots_dir
 
 pin = pytest.importorskip('pinocchio')
-UR5_JOINTS = [
-    'shoulder_pan_joint',
-    'shoulder_lift_joint',
-    'elbow_joint',
-    'wrist_1_joint',
-    'wrist_2_joint',
-    'wrist_3_joint',
-]
 SURFACES = [
     {'height': -0.3, 'material': 'steel'},
     {'height': 0.5, 'law': 'none', 'material': 'steel'},

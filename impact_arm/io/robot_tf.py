@@ -25,9 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics.scene.urdf import axis_rotation, rotation_from_rpy
-
-STILL = ('fixed', 'floating', 'planar')  # taken at their origin: no single value moves them
+from ..physics.scene.urdf import joint_motion, rotation_from_rpy
 
 
 def rpy_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
@@ -100,13 +98,7 @@ class UrdfJoint:
 
     def transform(self, value: float = 0.0) -> np.ndarray:
         """4x4 of the child's frame in the parent's at joint ``value``."""
-        T = self.origin
-        if self.kind in STILL or value == 0:
-            return T
-        axis = np.array(self.axis)
-        if self.kind == 'prismatic':
-            return T @ homogeneous(np.eye(3), axis * value)
-        return T @ homogeneous(axis_rotation(axis, value), (0.0, 0.0, 0.0))
+        return homogeneous(*joint_motion(self.kind, self.xyz, self.rpy, self.axis, value))
 
 
 class RobotTree:

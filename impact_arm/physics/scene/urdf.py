@@ -146,13 +146,29 @@ class _Joint:
 
     def motion(self, value: float) -> tuple[np.ndarray, np.ndarray]:
         """(rotation, translation) of the child frame in the parent's at joint ``value``."""
-        R = rotation_from_rpy(self.rpy)
-        p = np.array(self.xyz, dtype=float)
-        if value == 0 or self.kind == 'fixed':
-            return R, p
-        if self.kind == 'prismatic':
-            return R, p + R @ (self.axis * value)
-        return R @ axis_rotation(self.axis, value), p
+        return joint_motion(self.kind, self.xyz, self.rpy, self.axis, value)
+
+
+STILL = ('fixed', 'floating', 'planar')  # taken at their origin: no single value moves them
+
+
+def joint_motion(
+    kind: str,
+    xyz: Sequence[float],
+    rpy: Sequence[float],
+    axis: Sequence[float] | np.ndarray,
+    value: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation, translation) of a URDF joint's child frame in its parent's at ``value``
+    (rad, or m for a prismatic joint; ``axis`` a unit vector): the origin, then the motion
+    about or along the axis, as robot_state_publisher composes them."""
+    R = rotation_from_rpy(rpy)
+    p = np.array(xyz, dtype=float)
+    if value == 0 or kind in STILL:
+        return R, p
+    if kind == 'prismatic':
+        return R, p + R @ (np.asarray(axis, dtype=float) * value)
+    return R @ axis_rotation(np.asarray(axis, dtype=float), value), p
 
 
 @dataclass(frozen=True)
