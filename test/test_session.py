@@ -257,6 +257,24 @@ def test_a_stamp_jump_is_dropped_unless_the_next_sample_confirms_it(scene):
     assert len(sent) == 4 and c.ctrl.mode == 'down'
 
 
+def test_a_stream_that_paused_resumes_with_its_stamps_ahead(scene):
+    """A driver stamping with the wall clock and paused by its machine for 3 s resumes 3 s
+    ahead: that time passed, the sample ticks. The same jump after 1 ms of silence is a bad
+    stamp."""
+    sent = []
+    clock = FakeClock()
+    c = inputs(scene, sent, clock=clock, wrench_publishers=lambda: False)
+    state(c, 0.0)
+    clock.now += 0.001
+    state(c, 0.001)
+    clock.now += 3.0
+    state(c, 3.001)
+    assert len(sent) == 3 and c.dropped['stamp_jumps'] == 0
+    clock.now += 0.001
+    state(c, 6.002)
+    assert len(sent) == 3 and c.dropped['stamp_jumps'] == 1
+
+
 def test_bad_samples_are_dropped_and_counted(scene):
     sent = []
     c = inputs(scene, sent, wrench_publishers=lambda: False)

@@ -28,8 +28,9 @@ STAMP_EPS = 1e-9  # stamps are integer nanoseconds: ticks compare to 1 ns
 MAX_ANGLE = 1e3  # rad
 MAX_RATE = 1e4  # rad/s
 MAX_FORCE = 1e12  # N, a contact wrench beyond any scene's
-# samples come at >= 1 Hz (a scene's slowest publish_rate): a longer gap forward, or any step
-# back, is a reset or a bad stamp, and the cycle re-arms at the new time
+# samples come at >= 1 Hz (a scene's slowest publish_rate): a longer gap forward than the
+# stream was silent for, or any step back, is a reset or a bad stamp, and the cycle re-arms at
+# the new time
 MAX_STAMP_GAP = 1.0  # s
 # A state whose stamp is within this fraction of a control period (or of the state stream's
 # own spacing, when finer) before the next tick still ticks: a driver stamping with its own
@@ -58,9 +59,12 @@ DROPPED = (
 )
 
 
-def follows(before: float, t: float) -> bool:
-    """Whether a stamp t continues a stream whose previous sample had stamp ``before``."""
-    return before - STAMP_EPS <= t <= before + MAX_STAMP_GAP
+def follows(before: float, t: float, silent: float = 0.0) -> bool:
+    """Whether a stamp t continues a stream whose previous sample had stamp ``before`` and
+    which was silent for ``silent`` seconds (by the receiver's clock) before t came: a driver
+    paused by its machine for longer than MAX_STAMP_GAP resumes with a stamp that far ahead,
+    and that is time that passed, not a bad stamp."""
+    return before - STAMP_EPS <= t <= before + MAX_STAMP_GAP + max(silent, 0.0)
 
 
 class ControlInputs:
@@ -107,6 +111,7 @@ class ControlInputs:
         self.first_command_after: float | None = None
         self.next_tick = 0.0
         self.latest: tuple[float, list[float], list[float]] | None = None  # absolute angles
+        self.latest_arrival = -math.inf  # when it came, by ``clock``
         self.latest_joint: tuple[list[float], list[float]] = ([], [])  # as received
         # a joint state waiting for its wrench
         self.waiting: tuple[float, list[float], list[float]] | None = None
@@ -225,7 +230,9 @@ class ControlInputs:
                 f'{MAX_RATE:g} rad/s',
             )
             return
-        if self.latest is not None and not follows(self.latest[0], t):
+        if self.latest is not None and not follows(
+            self.latest[0], t, self.clock() - self.latest_arrival
+        ):
             # a reset, or one bad stamp: a second sample that follows the new one confirms a
             # reset; until then the sample is dropped (one stamp of 2^31 s must not silence
             # the controller, nor stamps alternating between two clocks make it tick on each)
@@ -251,6 +258,7 @@ class ControlInputs:
         if self.latest is not None and t > self.latest[0] and not same:
             self.sample_gap = t - self.latest[0]
         self.latest = (t, self.coordinates.absolute(pos), self.coordinates.absolute_rates(vel))
+        self.latest_arrival = self.clock()
         self.latest_joint = (pos, vel)
         if effort and self.latency_periods == -1:
             self._measure_latency(effort, index)
