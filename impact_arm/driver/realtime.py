@@ -12,6 +12,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
@@ -204,6 +205,19 @@ class Watchdog:
         return self.state
 
 
+@dataclass(frozen=True)
+class LoopCounts:
+    """The loop's schedule counters at one instant ``now`` (wall time): periods published,
+    the simulated time of the last of them, periods skipped after stalls and the simulated
+    times of the latest stalls."""
+
+    now: float
+    published: int
+    t_published: float
+    skipped: int
+    skipped_at: tuple[float, ...]
+
+
 class DriverLoop:
     """Runs the arm's periods. ``take_command()`` returns the next queued serialized command
     (oldest first) or None; ``accept(raw, now)`` checks one and, when valid, hands it to
@@ -276,7 +290,9 @@ class DriverLoop:
         self.skipped = 0  # periods skipped after stalls
         # the simulated times at which the latest stalls skipped periods: what a stall did to
         # the loop around it (an impact's rebound) can be told from the run's own record
-        self.skipped_at: deque[float] = deque(maxlen=SKIPS_KEPT)
+        # (a tuple replaced, never changed in place: other threads read it while the loop
+        # thread records a stall)
+        self.skipped_at: tuple[float, ...] = ()
         self.flooded = 0  # periods that left commands queued
         # commands taken but never checked: an accepted newer one of the same period
         # replaced them in the zero-order hold
@@ -293,6 +309,20 @@ class DriverLoop:
         self._frozen = 0.0  # wall time spent paused [s]
         self._paused_at: float | None = None
         self._k = 0  # index of the next period's deadline
+
+    def counts(self, now: float | None = None) -> LoopCounts:
+        """The schedule's counters as one snapshot, with the wall time they hold at: taken
+        under the lock the loop thread updates them with, so that periods published plus
+        skipped never run ahead of the wall time read beside them."""
+        stats = self.stats
+        with stats.lock:
+            return LoopCounts(
+                now=self.clock() if now is None else now,
+                published=stats.published,
+                t_published=stats.t_published,
+                skipped=self.skipped,
+                skipped_at=self.skipped_at,
+            )
 
     # -------------------------------------------------------------------- commands in
     def command(self, torques: list[float], now: float) -> None:
@@ -401,10 +431,9 @@ class DriverLoop:
             self.arm.reset()
             self.watchdog = Watchdog(self.watchdog.timeout, self.watchdog.policy)
             self.stats = PeriodStats(self.stats.nominal)
-            self.commands = self.impacts = self.skipped = self.flooded = self.stale = (
-                self.superseded
-            ) = 0
-            self.skipped_at.clear()
+            with self.stats.lock:
+                self.skipped, self.skipped_at = 0, ()
+            self.commands = self.impacts = self.flooded = self.stale = self.superseded = 0
             self.first_command_wall = None
             self._steps = 0
             self._in_flight, self._newest = deque(), None
@@ -441,7 +470,8 @@ class DriverLoop:
             # statistics start with the motion); paused: the held state, its time frozen
             self._hold(woke)
             self.publish(self.arm.sample())
-            self.stats.published += 1
+            with self.stats.lock:
+                self.stats.published += 1
             self._next_deadline(self.clock(), deadline, count=False)
             return None
         if self.paused:
@@ -474,8 +504,9 @@ class DriverLoop:
             missed = int((done - self.start_wall) / self.wall_period) - self._k
             self._k += missed
             if count:
-                self.skipped += missed
-                self.skipped_at.append(self.arm.t)
+                with self.stats.lock:  # read with ``published`` as one snapshot
+                    self.skipped += missed
+                    self.skipped_at = (*self.skipped_at[-(SKIPS_KEPT - 1) :], self.arm.t)
 
     # ---------------------------------------------------------------------------- lockstep
     def lockstep_period(self, arrived: float, rate_factor: float) -> Tick:

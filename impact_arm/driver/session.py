@@ -290,14 +290,14 @@ class Session:
     def take_status(self, now: float | None = None) -> SessionStatus:
         """The status as of ``now``; its jitter and achieved rate cover the time since the
         previous call (which this one ends)."""
-        now = self.clock() if now is None else now
         loop, stats, dog = self.loop, self.loop.stats, self.loop.watchdog
+        # one snapshot: the wall time and the periods published and skipped up to it
+        counts = loop.counts(now)
+        now, published, t_published = counts.now, counts.published, counts.t_published
         watchdog = dog.status(now)
         intervals, computes = stats.take()
         window = now - self._diag_window_start
         self._diag_window_start = now
-        with stats.lock:  # a consistent pair: periods counted up to this simulated time
-            published, t_published = stats.published, stats.t_published
         if published < self._diag_published:  # a reset
             self._diag_published = 0
         achieved = (published - self._diag_published) / window if window > 0 else 0.0
@@ -326,9 +326,9 @@ class Session:
             'wall_time': f'{now - start if start else 0.0:.6f}',
             'overruns': str(stats.overruns),
             # periods skipped after stalls (simulated time fell behind by as many periods)
-            'periods_skipped': str(loop.skipped),
+            'periods_skipped': str(counts.skipped),
             # the simulated times of the latest stalls that skipped periods [s], oldest first
-            'periods_skipped_at_s': ' '.join(f'{t:.6f}' for t in loop.skipped_at),
+            'periods_skipped_at_s': ' '.join(f'{t:.6f}' for t in counts.skipped_at),
             # periods that left commands queued (a flood): the rest waited a period
             'commands_flooded': str(loop.flooded),
             # commands taken but not checked: a newer valid one of the same period held
@@ -369,7 +369,7 @@ class Session:
             'commands_rejected': str(self.rejected),
             'commands_clipped': str(self.clipped),
             # the periods beyond the robot's position and velocity limits ('' : none)
-            'limits': '; '.join(e.text() for e in self.arm.limits.found),
+            'limits': '; '.join(e.text() for e in tuple(self.arm.limits.found)),
             # all-zero commands that did not release the brakes (release_on)
             'zero_commands_before_release': str(self.zero_before_release),
             'publish_failures': str(self.out.failures()),
