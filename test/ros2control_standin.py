@@ -14,6 +14,10 @@ wire, one update loop at its own rate on the wall clock:
 ``--joints``: the arm's joints, as the URDF's ``<ros2_control>`` block lists them (default:
 the article's joint1 joint2).
 
+``--initial-positions``: the state interfaces' ``initial_value`` of the URDF's position
+interfaces (default 0, as TopicBasedSystem without one; velocities and efforts 0): until the
+hardware's first state the broadcaster publishes these, every update, as the real one does.
+
 ``--wait-for-peers S``: once the controller has sent its first command, an update does not
 start before the hardware's new state and the controller's answer to the previous update's
 state have arrived (or S seconds have passed): a controller_manager that never outruns its
@@ -80,8 +84,14 @@ def main():
     parser.add_argument(
         '--joints', nargs='+', default=JOINTS, help="the arm's joint names, base to tip"
     )
+    parser.add_argument(
+        '--initial-positions', nargs='+', type=float, help='rad (default 0 for each joint)'
+    )
     args = parser.parse_args()
     joints = args.joints
+    initial = args.initial_positions or [0.0] * len(joints)
+    if len(initial) != len(joints):
+        parser.error(f'--initial-positions: {len(initial)} values for {len(joints)} joints')
     rclpy.init()
     before = set(os.listdir('/proc/self/task'))
     node = rclpy.create_node('standin_controller_manager')
@@ -130,7 +140,9 @@ def main():
             wait_set.add_subscription(subscription.handle)
         wait_set.wait(int(timeout * 1e9))
 
-    state_interfaces = None  # (position, velocity, effort) in joints order
+    # (position, velocity, effort) in joints order: the initial values until the hardware's
+    # first state
+    state_interfaces = (list(initial), [0.0] * len(joints), [0.0] * len(joints))
     command_interfaces = [0.0] * len(joints)  # zeros from activation
     written = deque([list(command_interfaces)] * args.late)
     period = 1.0 / args.rate
@@ -162,16 +174,16 @@ def main():
                 for values in (msg.position, msg.velocity, msg.effort)
             )
         stamp = node.get_clock().now().to_msg()  # the update's wall-clock time
-        # update: broadcaster, then the effort controller
-        if state_interfaces is not None:
-            out = JointState(name=list(joints))
-            out.header.stamp = stamp
-            out.position, out.velocity, out.effort = state_interfaces
-            # a controller answers a new state, not a repetition
-            answer_due = list(out.position) != previous_position
-            previous_position = list(out.position)
-            commands_before = received['commands']
-            broadcast.publish(out)
+        # update: the broadcaster (every update from activation on, the initial values until
+        # the hardware's first state), then the effort controller
+        out = JointState(name=list(joints))
+        out.header.stamp = stamp
+        out.position, out.velocity, out.effort = state_interfaces
+        # a controller answers a new state, not a repetition
+        answer_due = list(out.position) != previous_position
+        previous_position = list(out.position)
+        commands_before = received['commands']
+        broadcast.publish(out)
         if newest['command'] is not None:
             fresh = newest['command'] is not command_interfaces
             if fresh and not missed and rng.random() < args.unsynchronised:

@@ -170,7 +170,11 @@ def commands(
     from impact_arm.nodes.params import scene_joint_names
     from impact_arm.physics.scene import load_scene
 
-    joints = scene_joint_names(load_scene(scene)) if scene else []
+    loaded = load_scene(scene or 'paper')
+    joints = scene_joint_names(loaded) if scene else []
+    # what the URDF's ros2_control block seeds the state interfaces with (impact-arm urdf):
+    # the broadcaster publishes it until the simulator's first state
+    initial = loaded.joint_coordinates.positions(loaded.q0)
     scene_param = [f'scene:={os.path.abspath(scene)}'] if scene else []
     return {
         'standin': [
@@ -185,9 +189,13 @@ def commands(
             '--priority',
             str(standin_priority),
             *(['--joints', *joints] if joints else []),
+            '--initial-positions',
+            *(repr(float(v)) for v in initial),
         ],
         'simulator': simulator('mode:=realtime', *scene_param),
-        'controller': controller(*scene_param, *controller_params, ros_args=REMAPS),
+        'controller': controller(
+            'start_after:=wrench', *scene_param, *controller_params, ros_args=REMAPS
+        ),
     }
 
 

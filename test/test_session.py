@@ -673,3 +673,41 @@ def test_diagnostics_read_while_the_loop_records_stalls_see_one_snapshot(scene):
         sys.setswitchinterval(switch)
     assert not failures, failures
     assert s.loop.skipped > 1000 and snapshots > 10
+
+
+def test_the_law_waits_until_the_driver_answers_its_first_command(scene):
+    """A driver stack's initial values (the same state restamped each update, efforts zero):
+    the first command goes out and then again, unchanged, the law never running on a state
+    that does not answer. Once the driver reports the first command's effort the law runs."""
+    from impact_arm.driver.control_inputs import Answer
+
+    sent = []
+    clock = FakeClock()
+    c = inputs(scene, sent, clock=clock, wrench_publishers=lambda: False, latency_periods=-1)
+    q0 = (1.0, 0.5)
+    for k in range(200):
+        clock.now += 0.001
+        state(c, 0.001 * k, q=q0, effort=(0.0, 0.0))
+    assert len(sent) > 50 and all(command == sent[0] for command in sent)
+    assert c.answered_by is None and c.unanswered == len(sent) - 1
+    assert c.ctrl.switches == 0
+    clock.now += 0.001
+    state(c, 0.2, q=q0, effort=sent[0])  # the hardware applies it (the arm still braked)
+    assert c.answered_by is Answer.EFFORT
+    clock.now += 0.001
+    state(c, 0.201, q=(1.0001, 0.5), qd=(0.1, 0.0), effort=sent[0])
+    assert sent[-1] != sent[0]  # the law's own command
+
+
+def test_a_driver_that_reports_no_effort_answers_by_moving(scene):
+    sent = []
+    clock = FakeClock()
+    c = inputs(scene, sent, clock=clock, wrench_publishers=lambda: False)
+    state(c, 0.0, q=(1.0, 0.5))
+    clock.now += 0.002
+    state(c, 0.002, q=(1.0, 0.5))  # a repetition after the window: the first command again
+    assert len(sent) == 2 and sent[1] == sent[0] and c.answered_by is None
+    clock.now += 0.001
+    state(c, 0.003, q=(1.001, 0.5), qd=(0.5, 0.0))
+    assert c.answered_by is not None and c.answered_by.value == 'motion'
+    assert len(sent) == 3 and sent[2] != sent[0]

@@ -260,6 +260,9 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_in_any_start_order(
 
     run = run_stack(order, ros_env, str(tmp_path), timeout=60.0)
     judge_realtime_stack(run, offline_start)
+    # the controller's first command waited for the simulator's first wrench, whatever the
+    # broadcaster published before (the scene's initial pose): the driver answered it
+    assert run.ctrl['driver_answered'] in ('effort', 'motion'), run.ctrl
     # (how many of the stack's zeros reach the simulator before the controller's first
     # torque depends on when discovery matches them: 51 in one run with the simulator last.
     # Had one released the arm, it would have struck early: the first strike checks it; the

@@ -19,6 +19,7 @@ from collections import Counter, deque
 from typing import Callable, Sequence
 
 from ..contract import JointCoordinates
+from ..physics.kinds import TextEnum
 from ..physics.control import CycleController
 from ..physics.prediction import StatePredictor
 
@@ -67,6 +68,24 @@ def follows(before: float, t: float, silent: float = 0.0) -> bool:
     return before - STAMP_EPS <= t <= before + MAX_STAMP_GAP + max(silent, 0.0)
 
 
+class StartAfter(TextEnum):
+    """What the start-up hold counts from: the first joint state, or the first contact wrench
+    (a simulator's own sample: through a driver stack the joint states may be the stack's
+    initial values, published before the hardware runs)."""
+
+    JOINT_STATE = 'joint_state'
+    WRENCH = 'wrench'
+
+
+class Answer(TextEnum):
+    """How the driver showed that it applies the controller's commands: a reported effort
+    equal to a command sent, or a state other than the one the first command was computed
+    on (the arm moved)."""
+
+    EFFORT = 'effort'
+    MOTION = 'motion'
+
+
 class ControlInputs:
     """Samples in, commands out. ``ready()`` says whether the first command may go (its
     readers are matched); ``wrench_publishers()`` whether anyone publishes wrenches;
@@ -84,6 +103,7 @@ class ControlInputs:
         ready: Callable[[], bool] = lambda: True,
         wrench_publishers: Callable[[], bool] = lambda: True,
         startup_hold: float = 0.0,
+        start_after: StartAfter | str = StartAfter.JOINT_STATE,
         clock: Callable[[], float] = time.monotonic,
         latency_periods: int = 0,
         wrench_tolerance: float = math.inf,
@@ -106,7 +126,22 @@ class ControlInputs:
         self.wrench_publishers = wrench_publishers
         self.clock = clock
         self.created = clock()
-        self.hold_until = self.created + startup_hold
+        # the first command waits ``startup_hold`` after the first joint state or wrench
+        # (``start_after``): discovery settles around the driver's publisher, whenever the
+        # driver starts
+        self.startup_hold = startup_hold
+        self.start_after = StartAfter(start_after)
+        self.hold_until = math.inf
+        # The loop is closed once the driver answers the first command (``Answer``). Until
+        # then each tick sends the first command again and the law does not run: a driver
+        # stack publishes its initial values before its hardware's first state (a
+        # broadcaster over TopicBasedSystem, the simulator not started yet): a law run on
+        # them would integrate, predict over its commands in flight and switch on a state
+        # that is not the arm's, and meet the arm with what it computed meanwhile.
+        self.answered_by: Answer | None = None
+        self.first_efforts: list[float] | None = None  # as sent, in joint_names order
+        self.first_state: tuple[list[float], list[float]] | None = None  # as received
+        self.unanswered = 0  # ticks that sent the first command again
         # when the first command went, by this clock, after the inputs were created
         self.first_command_after: float | None = None
         self.next_tick = 0.0
@@ -178,6 +213,8 @@ class ControlInputs:
             )
             return False
         self.wrench_stamp = sec + nanosec * 1e-9
+        if math.isinf(self.hold_until) and self.start_after is StartAfter.WRENCH:
+            self.hold_until = self.clock() + self.startup_hold
         # latched until the next tick: an impact is seen even when the wrench sample of its
         # period comes late or after a newer one (the largest force counts)
         self.normal_force = (
@@ -259,6 +296,10 @@ class ControlInputs:
             self.sample_gap = t - self.latest[0]
         self.latest = (t, self.coordinates.absolute(pos), self.coordinates.absolute_rates(vel))
         self.latest_arrival = self.clock()
+        if math.isinf(self.hold_until) and self.start_after is StartAfter.JOINT_STATE:
+            self.hold_until = self.latest_arrival + self.startup_hold
+        if self.first_efforts is not None and self.answered_by is None:
+            self._check_answer(pos, vel, effort, index)
         self.latest_joint = (pos, vel)
         if effort and self.latency_periods == -1:
             self._measure_latency(effort, index)
@@ -289,6 +330,28 @@ class ControlInputs:
         self.waiting = None
         self._tick(*self.latest)
 
+    def _check_answer(
+        self, pos: list[float], vel: list[float], effort: Sequence[float], index: list[int]
+    ) -> None:
+        try:
+            acting = [float(effort[k]) for k in index] if effort else None
+        except IndexError:
+            acting = None
+        if acting == self.first_efforts:
+            self.answered_by = Answer.EFFORT
+        elif (pos, vel) != self.first_state:
+            self.answered_by = Answer.MOTION
+        else:
+            return
+        if self.unanswered:
+            # the law starts now, from the driver's answer: not from the first command's
+            # time (a PID would integrate the wait), nor with its tip velocity
+            self.ctrl.rearm()
+            self.log(
+                f'the driver answered the first command ({self.answered_by.value}) after '
+                f'{self.unanswered} ticks that sent it again: the law runs'
+            )
+
     def _spacing(self) -> float:
         """The stamp spacing of the driver's new samples: a control period, or the stream's
         own when coarser (a simulator slower than real time behind a wall-clock broadcaster)."""
@@ -309,6 +372,10 @@ class ControlInputs:
             self.started = True
             self.first_command_after = now - self.created
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
+        if self.first_efforts is not None and self.answered_by is None:
+            self.unanswered += 1
+            self.send([self.first_efforts[j] for j in self.order])
+            return
         ahead = self.in_flight()
         sensed = None
         if ahead and self.predictor is not None:
@@ -345,6 +412,9 @@ class ControlInputs:
         tau = self.coordinates.efforts(tau)
         if self.clip:
             tau = [min(max(v, -limit), limit) for v, limit in zip(tau, self.effort_limits)]
+        if self.first_efforts is None:
+            self.first_efforts = [float(v) for v in tau]
+            self.first_state = self.latest_joint
         self.send([tau[j] for j in self.order])
 
     # ------------------------------------------------------------------------- latency

@@ -162,6 +162,7 @@ class Controller(Node):
             log=lambda text: self.get_logger().warning(text, throttle_duration_sec=2.0),
             ready=self._readers_matched,
             startup_hold=p.startup_hold,
+            start_after=p.start_after,
             wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0,
             latency_periods=p.latency_periods,
             wrench_tolerance=p.wrench_tolerance,
@@ -174,7 +175,8 @@ class Controller(Node):
         self.chatter = ChatterWatch([names[j] for j in self.inputs.order])
         if p.startup_hold > 0:
             self.get_logger().info(
-                f'first command held {p.startup_hold:g} s after start '
+                f'first command held {p.startup_hold:g} s after the first '
+                f'{p.start_after.replace("_", " ")} '
                 f'while DDS discovery settles (startup_hold)'
             )
         if p.trigger == 'timer':
@@ -366,7 +368,8 @@ class Controller(Node):
         if self.sent == 1 and self.inputs.first_command_after is not None:
             self.get_logger().info(
                 f'first command sent {self.inputs.first_command_after:.3f} s after start '
-                f'(startup_hold {self.p.startup_hold:g} s)'
+                f'(startup_hold {self.p.startup_hold:g} s after the first '
+                f'{self.p.start_after.replace("_", " ")})'
             )
 
     def _stop_thread(self):
@@ -437,6 +440,13 @@ class Controller(Node):
                 KeyValue(key='latency_histogram', value=latency_histogram(self.inputs)),
                 # commands computed with the implicit law (the measured latency varied)
                 KeyValue(key='implicit_commands', value=str(self.inputs.implicit_commands)),
+                # how the driver showed it applies the commands ('' : not yet), and the
+                # ticks that sent the first command again until it did
+                KeyValue(
+                    key='driver_answered',
+                    value=self.inputs.answered_by.value if self.inputs.answered_by else '',
+                ),
+                KeyValue(key='unanswered_ticks', value=str(self.inputs.unanswered)),
                 *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
             ],
         )

@@ -229,13 +229,26 @@ def parameter_table(scene):
         Param(
             'startup_hold',
             contract.STARTUP_HOLD,
-            'seconds after start before the first '
-            'command: the arm is held while DDS discovery settles, because Fast DDS can '
+            'seconds after the first joint state (or wrench: '
+            'start_after) before the first command: the arm is held while DDS discovery '
+            'settles, because Fast DDS can '
             "stop a process's reception for 0.33 s when it discovers a participant late "
             '(docs/nodes.md); impact-arm run and the launch file set 0 in lockstep',
             low=0.0,
             high=60.0,
             read_only=True,
+        ),
+        Param(
+            'start_after',
+            'joint_state',
+            'what startup_hold counts from: joint_state, the '
+            "first joint state; wrench, the first contact wrench (the simulator's own sample: "
+            'behind a driver stack the joint states start as its initial values, before the '
+            'simulator runs)',
+            'str',
+            choices=('joint_state', 'wrench'),
+            read_only=True,
+            doc=' (docs/ros2_control.md sets wrench)',
         ),
         Param(
             'command_history',
