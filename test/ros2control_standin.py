@@ -82,6 +82,14 @@ def main():
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--priority', type=int, default=50, help='SCHED_FIFO, 0: normal')
     parser.add_argument(
+        '--fifo-threads',
+        choices=('all', 'update'),
+        default='all',
+        help='which threads run under --priority: all (the update thread and the middleware '
+        "threads that deliver its samples) or update (the controller_manager's own choice: its "
+        'update thread only, the executor and the middleware at normal priority)',
+    )
+    parser.add_argument(
         '--joints', nargs='+', default=JOINTS, help="the arm's joint names, base to tip"
     )
     parser.add_argument(
@@ -96,7 +104,8 @@ def main():
     before = set(os.listdir('/proc/self/task'))
     node = rclpy.create_node('standin_controller_manager')
     # the update thread and the middleware threads that deliver its samples
-    for task in [0] + sorted(set(os.listdir('/proc/self/task')) - before):
+    middleware = sorted(set(os.listdir('/proc/self/task')) - before)
+    for task in [0] + (middleware if args.fifo_threads == 'all' else []):
         set_fifo(int(task), args.priority)
     qos = QoSProfile(depth=10)
     broadcast = node.create_publisher(JointState, '/joint_state_broadcaster/joint_states', qos)

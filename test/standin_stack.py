@@ -164,6 +164,7 @@ def commands(
     standin_priority: int = 50,
     controller_params=(),
     scene: str | None = None,
+    standin_args=(),
 ) -> dict:
     """Each role's command line; ``scene``: a scene file for the simulator and the
     controller (default: the article's), whose joints the stand-in then drives."""
@@ -191,6 +192,7 @@ def commands(
             *(['--joints', *joints] if joints else []),
             '--initial-positions',
             *(repr(float(v)) for v in initial),
+            *standin_args,
         ],
         'simulator': simulator('mode:=realtime', *scene_param),
         'controller': controller(
@@ -209,6 +211,7 @@ def run_stack(
     controller_params=(),
     cpu_seconds: Callable[[int], float] | None = None,
     scene: str | None = None,
+    standin_args=(),
 ) -> StackRun:
     """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain, of the
     article's arm or ``scene``'s; every process is ended by PID on the way out. With
@@ -227,7 +230,9 @@ def run_stack(
         '/diagnostics',
         keep=lambda m: bool(m.status) and 'controller' in m.status[0].name,
     )
-    lines = commands(timeout + 30, standin, standin_priority, controller_params, scene)
+    lines = commands(
+        timeout + 30, standin, standin_priority, controller_params, scene, standin_args
+    )
     procs = {}
     try:
         with contextlib.ExitStack() as stack:

@@ -49,6 +49,14 @@ def add_arguments(parser):
         help='extra controller parameters (e.g. implicit_periods:=0)',
     )
     parser.add_argument(
+        '--standin-fifo-threads',
+        choices=('all', 'update'),
+        default='all',
+        help="the stand-in's threads under SCHED_FIFO: all (default) or update (the "
+        "controller_manager's own choice: its update thread only, the middleware at normal "
+        'priority)',
+    )
+    parser.add_argument(
         '--standin',
         metavar='FILE',
         help="another stand-in program with the same options (default: the tests' one)",
@@ -70,6 +78,7 @@ def _one_run(args, order, workdir):
         timeout=args.timeout,
         standin=args.standin,
         standin_priority=args.standin_priority,
+        standin_args=('--fifo-threads', args.standin_fifo_threads),
         controller_params=args.controller_params,
         cpu_seconds=lambda pid: cpu_seconds(f'/proc/{pid}/stat'),
         scene=args.scene,
