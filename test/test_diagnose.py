@@ -20,7 +20,7 @@ from impact_arm.calibration.diagnose import (
 )
 from impact_arm.calibration.study import Study
 from impact_arm.physics.model import ArmModel
-from impact_arm.tools.synthetic import driver_recording, synthetic_recording
+from impact_arm.io.synthetic import driver_recording, synthetic_recording
 
 PERIOD = 1e-3
 ENCODER = {'sensors.counts_per_revolution': 1 << 17}
@@ -335,7 +335,7 @@ def test_bad_corrections_are_refused_in_one_line():
 # --------------------------------------------------------------------------------- CLI
 def test_fit_says_what_the_diagnosis_found_and_reports_it(tmp_path, capsys):
     from impact_arm.tools.cli import main
-    from impact_arm.tools.synthetic import write_rosbag2
+    from impact_arm.io.synthetic import write_rosbag2
 
     folder = tmp_path / 'late_bag'
     write_rosbag2(recording(EFFORT_LATE, cycles=6), str(folder), extra_joint=False)
@@ -401,7 +401,7 @@ def test_a_known_effort_latency_changes_the_fit_of_the_real_arm_example(tmp_path
     import os
 
     from impact_arm.tools.fit import fit_recording
-    from impact_arm.tools.synthetic import write_rosbag2
+    from impact_arm.io.synthetic import write_rosbag2
 
     scene = os.path.join(os.path.dirname(__file__), '..', 'examples', 'real_arm.yaml')
     late = synthetic_recording(scene, {'sensors.effort_latency': 0.002}, cycles=3, seed=3, noise={})
@@ -503,7 +503,7 @@ def test_a_latency_option_on_a_scene_that_states_it_is_refused(tmp_path, capsys)
 
     from impact_arm.calibration.study import apply_overrides
     from impact_arm.tools.cli import main
-    from impact_arm.tools.synthetic import write_rosbag2
+    from impact_arm.io.synthetic import write_rosbag2
 
     folder = tmp_path / 'bag'
     write_rosbag2(recording(EFFORT_LATE, cycles=2), str(folder), extra_joint=False)

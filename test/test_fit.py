@@ -17,7 +17,7 @@ from impact_arm.physics.errors import ImpactArmError
 from impact_arm.calibration.fit import FitError, fit
 from impact_arm.calibration.identify import IdentifyError, JointRecording, LocalFit, find_impacts
 from impact_arm.io.recording import RecordingInputError, read_recording
-from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
+from impact_arm.io.synthetic import synthetic_recording, write_rosbag2
 
 BOUNDS = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
 WALL_CLOCK = 1.7e9  # stamps of a machine's clock, not from zero
@@ -302,11 +302,11 @@ def test_a_recording_refused_by_the_side_process_is_refused_here(bag, tmp_path, 
 
 
 def test_compare_checks_a_fitted_scene_against_another_recording(bag, tmp_path):
-    from impact_arm.tools.compare import compare
+    from impact_arm import compare
 
     folder, truth = bag
     scene = tmp_path / 'truth.yaml'
-    from impact_arm.tools.fit import write_fitted_scene
+    from impact_arm import write_fitted_scene
 
     write_fitted_scene('paper', truth, str(scene))
     right = compare(folder, str(scene))
@@ -391,7 +391,7 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
     the period before it, sampled 1 kHz control), an aluminium-like arm and floor, other
     targets and start: the reading is told from the free flight, the values come back."""
     from impact_arm.calibration.study import Study, apply_overrides
-    from impact_arm.tools.synthetic import driver_recording
+    from impact_arm.io.synthetic import driver_recording
 
     variant = {
         'materials.steel.E': 70e9,
@@ -445,7 +445,7 @@ def test_noise_free_recording_with_a_start_up_hold_is_fitted_exactly():
 def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
     """Two recordings of the same arm (other noise, other lost samples, another clock, no
     extra joint in the second): every impact matched, the CoR the same within the noise."""
-    from impact_arm.tools.compare import compare
+    from impact_arm import compare
 
     folder, truth = bag
     other = tmp_path / 'other_bag'
@@ -454,7 +454,8 @@ def test_compare_two_recordings_matches_their_impacts(bag, tmp_path):
         str(other),
         extra_joint=False,
     )
-    result = compare(folder, str(other))
+    # these recordings store no scene: the API assumes no arm, the scene is given
+    result = compare(folder, str(other), scene='paper')
     d = np.array([r['d_cor'] for r in result['table']])
     assert len(d) == len(result['a']) == len(result['b'])
     assert np.max(np.abs(d)) < 0.01
@@ -514,27 +515,27 @@ def _rows(z_rates, speeds):
 
 
 def test_chi_square_in_its_tail_does_not_fit_whatever_the_rms_ratio():
-    from impact_arm.calibration.fit.verdict import VerdictKind, judge
+    from impact_arm.calibration.fit.verdict import Verdict, judge
 
     rng = np.random.default_rng(3)
     rows = _rows(rng.normal(0, 1, 15), rng.uniform(1, 3, 15))
     # 1.2x the noise over 400 degrees of freedom: p ~ 1e-9, well inside "rms < 1.5x"
     verdict = judge(rows, ['joint1', 'joint2'], 1.2**2 * 400, 400)
-    assert verdict.kind is VerdictKind.CHI2_TAIL and 'p = ' in verdict.text
+    assert verdict.kind is Verdict.CHI2_TAIL and 'p = ' in verdict.text
     assert judge(rows, ['joint1', 'joint2'], 400.0, 400).fits
 
 
 def test_one_sided_and_trending_residuals_are_named():
-    from impact_arm.calibration.fit.verdict import VerdictKind, judge
+    from impact_arm.calibration.fit.verdict import Verdict, judge
 
     rng = np.random.default_rng(4)
     speeds = rng.uniform(1.0, 3.0, 15)
     noise = rng.normal(0, 0.3, 15)
     biased = judge(_rows(-1.0 + noise, speeds), ['shoulder', 'elbow'], 30.0, 30)
-    assert biased.kind is VerdictKind.SYSTEMATIC
+    assert biased.kind is Verdict.SYSTEMATIC
     assert 'the recorded shoulder rate after the impact is below the fitted one at' in biased.text
     trend = judge(_rows(3.0 * (speeds - speeds.mean()) + noise, speeds), ['a', 'b'], 30.0, 30)
-    assert trend.kind is VerdictKind.SYSTEMATIC
+    assert trend.kind is Verdict.SYSTEMATIC
     assert 'a rate after the impact rises with the impact speed' in trend.text
     # the same trend at one impact speed (a limit cycle) cannot be seen, and is not claimed
     flat = judge(_rows(noise, np.full(15, 2.0)), ['a', 'b'], 30.0, 30)
@@ -727,7 +728,7 @@ def test_the_reading_of_the_efforts_is_not_lost_to_one_impact_that_meets_the_sur
     again; that impact says nothing of the readings and no longer disqualifies the right one
     (before: 'linear' was chosen and the fit said 'does not fit' at 600x the noise)."""
     from impact_arm.calibration.study import Study, apply_overrides
-    from impact_arm.tools.synthetic import driver_recording
+    from impact_arm.io.synthetic import driver_recording
 
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
     rec = driver_recording('paper', {**truth, 'controller.rate': 1000.0}, cycles=6, seed=3)
@@ -816,7 +817,7 @@ def test_fit_and_compare_read_a_three_link_arm_with_the_scene_it_stores(
     three_link_recording, tmp_path, capsys
 ):
     from impact_arm.tools.cli import main
-    from impact_arm.tools.compare import compare
+    from impact_arm import compare
 
     mcap = three_link_recording
     code = main(
@@ -912,7 +913,7 @@ def test_the_fitted_force_drawn_beside_a_late_wrench_is_moved_by_its_latency():
 def late_driver_recording(overrides):
     """The simulated driver's loop (1 kHz sampled controller, each effort the command held
     over the period that ends at its stamp) through a scene whose sensors are late."""
-    from impact_arm.tools.synthetic import driver_recording
+    from impact_arm.io.synthetic import driver_recording
 
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
     noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}

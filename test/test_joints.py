@@ -359,7 +359,7 @@ def test_a_recording_of_an_arm_with_joint_friction_fits_once_the_scene_has_it():
     free it fits, finds the contact's μ and S_y, and its intervals hold the friction drawn."""
     from impact_arm.calibration.fit import fit
     from impact_arm.calibration.study import Study, apply_overrides
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     truth = {'joints[0].friction': 1.0, 'joints[1].friction': 1.0}
     rec = synthetic_recording('paper', truth, cycles=6, drop=0.02, clock_offset=1.7e9, seed=5)

@@ -1,7 +1,9 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
-(mypy), every public function of physics/, driver/, calibration/ and io/ annotated, and imports
-point down the layers physics -> driver, calibration (side by side) -> io -> nodes -> tools, with
-contract.py at the bottom importing nothing of the package."""
+(mypy), every public function of physics/, driver/, calibration/, io/ and api/ annotated, and
+imports point down the layers physics -> driver, calibration (side by side) -> io -> nodes, api
+(side by side) -> tools, with contract.py at the bottom importing nothing of the package. The
+top-level package is the API's face (``import impact_arm as ia``): it sits in the api layer, so
+the core never imports its names, and it may import nothing but the api package."""
 
 import ast
 import os
@@ -19,9 +21,10 @@ LAYERS = {
     'calibration': 2,
     'io': 3,
     'nodes': 4,
+    'api': 4,
     'tools': 5,
 }
-TYPED = ('physics', 'driver', 'calibration', 'io')
+TYPED = ('physics', 'driver', 'calibration', 'io', 'api')
 
 
 def _tool(module, *args):
@@ -135,8 +138,31 @@ def imported(path, parts):
         yield from (n for n in names if n[0] == 'impact_arm')
 
 
+def _top_level_names():
+    """The names the top-level package offers (its ``__all__``), read from its source."""
+    tree = ast.parse(open(os.path.join(PACKAGE, '__init__.py'), encoding='utf-8').read())
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == '__all__' for t in node.targets
+        ):
+            return set(ast.literal_eval(node.value))
+    return set()
+
+
+TOP_LEVEL_NAMES = _top_level_names()
+
+
 def layer(parts):
+    """The layer of a module of the package, or of what an import names in it: the top-level
+    package and the API names it offers are the api layer's."""
+    if parts == ['impact_arm'] or (len(parts) > 1 and parts[1] in TOP_LEVEL_NAMES):
+        return LAYERS['api']
     return LAYERS.get(parts[1]) if len(parts) > 1 else None
+
+
+def _package(parts):
+    """The layer's package a module or an import belongs to ('api' for the top level)."""
+    return 'api' if layer(parts) == LAYERS['api'] and parts[1:2] != ['nodes'] else parts[1]
 
 
 def test_imports_point_down_the_layers_only():
@@ -145,7 +171,7 @@ def test_imports_point_down_the_layers_only():
         own = layer(parts)
         for target in imported(path, parts):
             theirs = layer(target)
-            side_by_side = theirs == own and target[1] != parts[1]
+            side_by_side = theirs == own and _package(target) != _package(parts)
             if own is not None and theirs is not None and (theirs > own or side_by_side):
                 upward.append(f'{".".join(parts)} imports {".".join(target)}')
     assert not upward, upward
@@ -171,3 +197,37 @@ def test_the_layer_check_sees_a_sibling_import(tmp_path):
     module.write_text('from ..calibration import fit\n')
     (target,) = imported(str(module), ['impact_arm', 'driver', 'bad'])
     assert layer(target) == layer(['impact_arm', 'driver', 'bad']) and target[1] != 'driver'
+
+
+def test_the_top_level_imports_only_the_api():
+    """``import impact_arm`` offers the API and nothing else of the package: what it imports
+    (lazily, on first use) is the api package."""
+    path = os.path.join(PACKAGE, '__init__.py')
+    targets = {'.'.join(t[:2]) for t in imported(path, ['impact_arm'])}
+    assert targets == {'impact_arm.api'}, targets
+
+
+def test_the_layer_check_sees_the_core_import_the_api(tmp_path):
+    """The core must not import the API (by its package or the names the top level offers),
+    nor the API the command line."""
+    module = tmp_path / 'bad.py'
+    module.write_text('from .. import simulate\nfrom ..api import fit\nimport impact_arm\n')
+    found = list(imported(str(module), ['impact_arm', 'physics', 'bad']))
+    assert [t[:2] for t in found] == [
+        ['impact_arm', 'simulate'],
+        ['impact_arm', 'api'],
+        ['impact_arm'],
+    ]
+    assert all(layer(t) > layer(['impact_arm', 'physics', 'bad']) for t in found)
+    module.write_text('from ..tools import cli\n')
+    (target,) = imported(str(module), ['impact_arm', 'api', 'bad'])
+    assert layer(target) > layer(['impact_arm', 'api', 'bad'])
+
+
+def test_the_api_and_the_nodes_sit_side_by_side(tmp_path):
+    """The nodes do not import the API (the API has no ROS), nor the API the nodes."""
+    module = tmp_path / 'bad.py'
+    module.write_text('from ..nodes import simulator\n')
+    (target,) = imported(str(module), ['impact_arm', 'api', 'bad'])
+    assert layer(target) == layer(['impact_arm', 'api', 'bad'])
+    assert _package(target) != _package(['impact_arm', 'api', 'bad'])

@@ -297,7 +297,7 @@ def test_a_recording_of_a_plate_on_a_stiff_mount_is_fitted_with_the_mount_in_the
     yielding); with the mount in the scene S_y and μ come back within their intervals."""
     from impact_arm.calibration.fit import fit
     from impact_arm.calibration.study import Study, apply_overrides
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     # damped so the plate is at rest again by the next impact: a fit window starts from the
     # recorded joint states only, and its plate at rest

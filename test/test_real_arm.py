@@ -137,7 +137,7 @@ def test_a_fitted_urdf_scene_reads_its_urdf_from_the_fit_folder(tmp_path, monkey
     relative ``arm.urdf`` is written relative to the new file, so the fitted scene loads from
     any working directory (it was refused: the URDF was looked for beside the fitted file)."""
     from impact_arm.physics.scene import load_scene
-    from impact_arm.tools.fit import write_fitted_scene
+    from impact_arm import write_fitted_scene
 
     scenes = tmp_path / 'scenes'
     scenes.mkdir()

@@ -216,7 +216,7 @@ def test_sensors_refuse_a_bad_rate():
 
 # ------------------------------------------------------------------ synthetic recordings
 def test_synthetic_recordings_carry_the_scenes_sensor_effects():
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     exact = synthetic_recording(cycles=1, noise={})
     late = synthetic_recording(
@@ -236,7 +236,7 @@ def test_synthetic_recordings_carry_the_scenes_sensor_effects():
 
 
 def test_driver_recordings_read_through_the_same_sensors():
-    from impact_arm.tools.synthetic import driver_recording
+    from impact_arm.io.synthetic import driver_recording
 
     rec = driver_recording(cycles=1, overrides={'sensors.rate': 'difference'}, t_max=0.3)
     rate = 1000.0  # the driver's rate

@@ -653,7 +653,7 @@ def test_fit_recovers_a_contact_parameter_of_a_urdf_arm():
     """A recording of the example's URDF arm with friction 0.3 (sampled as a driver reports):
     the fit, starting from the scene's 0.2, finds 0.3 within its interval."""
     from impact_arm.calibration.fit import fit
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     rec = synthetic_recording(
         EXAMPLE, {'surfaces[0].mu': 0.3}, cycles=3, seed=5, control_rate=1000.0
@@ -669,7 +669,7 @@ def test_a_urdf_arms_link_values_are_scene_keys_for_fit_and_sweep():
     fit finds a link 5 % heavier than the URDF says, starting from the URDF's mass."""
     from impact_arm.calibration.fit import fit, parameter_specs
     from impact_arm.calibration.study import Study, load_scene_data
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     data, _ = load_scene_data(EXAMPLE)
     data['arm']['urdf'] = os.path.join(os.path.dirname(EXAMPLE), 'three_link.urdf')

@@ -87,7 +87,7 @@ def accuracy(cases, impacts, say, sensors=None):
     import numpy as np
 
     from impact_arm.calibration.fit import fit
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     rng = np.random.default_rng(2026)
     rows = []
@@ -190,7 +190,7 @@ def fresh_process(say, bounds=None, repeats=5):
     import resource
     import statistics
 
-    from impact_arm.tools.synthetic import synthetic_recording, write_rosbag2
+    from impact_arm.io.synthetic import synthetic_recording, write_rosbag2
 
     bounds = bounds or {k: EIGHT[k] for k in ('surfaces[0].mu', 'materials.steel.S_y')}
     runs = []
@@ -250,7 +250,7 @@ def fresh_process(say, bounds=None, repeats=5):
 
 def growth(say):
     from impact_arm.calibration.fit import fit
-    from impact_arm.tools.synthetic import synthetic_recording
+    from impact_arm.io.synthetic import synthetic_recording
 
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
     out = {'impacts': [], 'params': []}

@@ -2,7 +2,7 @@
 computed from the positions, and readings that arrive late. The physics is untouched; this
 is the one implementation of the scene's ``sensors`` section, used by the simulated driver
 (``driver/arm.py``, hence the simulator node) and by the synthetic recordings
-(``tools/synthetic.py``).
+(``io/synthetic.py``).
 
 Each period the driver takes one reading of the true state, in this order:
 

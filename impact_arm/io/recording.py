@@ -103,7 +103,7 @@ def _wrench(raw: bytes):
 def read_recording(
     path: str | os.PathLike,
     joints: Sequence[str] | None = None,
-    n_joints: int = 2,
+    n_joints: int | None = None,
     states_topic: str = JOINT_STATES,
     wrench_topic: str | None = None,
     progress: Callable[..., Any] | None = None,
@@ -111,7 +111,9 @@ def read_recording(
     coordinates: JointCoordinates | None = None,
 ) -> JointRecording:
     """The joint states of ``joints`` (default ``scene_joints``, the recorded arm's scene's
-    ``Scene.joint_names``; without it joint1..jointN) and, if recorded, the wrench.
+    ``Scene.joint_names``; without it joint1..joint``n_joints``; without that, the joints and
+    coordinates of the scene the recording stores, refused when it stores none: no arm's
+    joint count is assumed) and, if recorded, the wrench.
 
     ``wrench_topic`` None reads ``/contact_wrench`` when the recording has it; a topic named
     explicitly must be there. Samples whose values are not finite are dropped and counted in
@@ -123,7 +125,6 @@ def read_recording(
     files = mcap_files(path)
     topics = _topics(files)
     given = bool(joints)
-    joints = list(joints or scene_joints or joint_names(n_joints))
     if states_topic not in topics:
         raise RecordingInputError(
             f'--states-topic {states_topic}: not in the recording '
@@ -138,6 +139,16 @@ def read_recording(
                 f'(topics: {", ".join(sorted(topics))})'
             )
         wrench_topic = None
+    if not (joints or scene_joints or n_joints):
+        stored = recorded_scene(path)
+        if stored is None:
+            raise RecordingInputError(
+                f'recording {os.fspath(path)}: stores no scene, so its joints are unknown: '
+                f"give the recorded arm's scene (--scene) or its joints (--joints)"
+            )
+        scene_joints = stored.joint_names
+        coordinates = stored.joint_coordinates if coordinates is None else coordinates
+    joints = list(joints or scene_joints or joint_names(n_joints or 0))
     from .mcap_ros2 import iter_raw
 
     # the mounted surfaces' plates, when recorded (the simulator's recordings have them):

@@ -9,6 +9,9 @@ impulse, joint rates just after); the impacts are matched one to one by time and
 differences printed and written with overlay plots. A scene "driven by the recording's
 efforts" replays each recorded impact from its recorded pre-impact state (as ``fit`` does):
 this is how a fitted scene is checked against a recording it was not fitted on.
+
+The comparison is ``impact_arm.compare`` (the method: calibration/compare.py); this module
+is the command over it: the recording's scene or the article's, the table, the files.
 """
 
 from __future__ import annotations
@@ -18,170 +21,8 @@ import os
 
 import numpy as np
 
+from ..contract import JOINT_STATES
 from ..physics.errors import ImpactArmError
-
-COLUMNS = ('t', 'impact_speed', 'cor', 'impulse_n', 'impulse_t', 'qd_after')
-
-
-def _is_recording(path) -> bool:
-    p = os.fspath(path)
-    return os.path.isdir(p) or (os.path.isfile(p) and p.endswith('.mcap'))
-
-
-def recorded_impacts(rec, study, timing=None) -> tuple:
-    """Rows of the impacts of a recording; the scene gives the kinematics and the free flight
-    that carries the first sample after an impact back to its separation (for the CoR)."""
-    from ..calibration.fit import predict_impact, read_impacts, recorded_cor
-    from ..calibration.identify import joint_to_absolute_matrix, tip_normal_speed
-    from ..physics.model import ArmModel
-
-    model = ArmModel(study.scene())
-    impacts = read_impacts(rec, study)
-    T = joint_to_absolute_matrix(rec.n)
-    rows, preds = [], []
-    for w in impacts.windows:
-        p = predict_impact(model, w, impacts.timing)
-        q, qd_pre, _ = w.pre.state(w.t_c)
-        v_in = tip_normal_speed(model, T @ q, T @ qd_pre)
-        imp = w.impulse if w.impulse is not None else [math.nan, math.nan]
-        rows.append(
-            {
-                't': w.t_c,
-                'impact_speed': -v_in,
-                'cor': recorded_cor(model, w, p, impacts.timing, v_in),
-                'impulse_n': float(imp[1]),
-                'impulse_t': float(imp[0]),
-                'qd_after': w.post_qd[0].tolist(),
-            }
-        )
-        preds.append((w, p))
-    return rows, preds, impacts
-
-
-def replayed_impacts(preds, model) -> list:
-    """Rows of the scene's predictions of each recorded impact (from the recorded state)."""
-    from ..calibration.identify import joint_to_absolute_matrix, tip_normal_speed
-
-    rows = []
-    for w, p in preds:
-        if p.error:
-            continue
-        T = joint_to_absolute_matrix(model.n)
-        q, qd_pre, _ = w.pre.state(w.t_c)
-        rows.append(
-            {
-                't': w.t_c,
-                'impact_speed': -tip_normal_speed(model, T @ q, T @ qd_pre),
-                'cor': -p.v_out / p.v_in,
-                'impulse_n': float(p.impulse[1]),
-                'impulse_t': float(p.impulse[0]),
-                'qd_after': p.qd[0].tolist(),
-            }
-        )
-    return rows
-
-
-def match(a_rows, b_rows) -> list:
-    """Pairs (i, j) one to one: times from each side's first impact, nearest first, within
-    half the typical interval between impacts."""
-    if not a_rows or not b_rows:
-        return []
-    ta = np.array([r['t'] for r in a_rows]) - a_rows[0]['t']
-    tb = np.array([r['t'] for r in b_rows]) - b_rows[0]['t']
-    gaps = np.diff(ta) if len(ta) > 1 else np.array([1.0])
-    tol = 0.5 * float(np.median(gaps))
-    pairs = sorted(
-        ((abs(x - y), i, j) for i, x in enumerate(ta) for j, y in enumerate(tb) if abs(x - y) < tol)
-    )
-    used_a, used_b, out = set(), set(), []
-    for _, i, j in pairs:
-        if i not in used_a and j not in used_b:
-            used_a.add(i)
-            used_b.add(j)
-            out.append((i, j))
-    return sorted(out)
-
-
-def compare(
-    a, b, *, scene=None, joints=None, controller=False, states_topic=None, wrench_topic=None
-) -> dict:
-    """Python API: {'a': rows, 'b': rows, 'pairs': [(i, j)], 'table': [...], 'what': text}."""
-    from ..contract import JOINT_STATES
-    from ..calibration.study import Study
-    from ..io.recording import read_recording
-
-    from .fit import scene_of
-
-    b_is_recording = _is_recording(b)
-    kin_scene = scene_of(a, scene)[0] if b_is_recording else b
-    study = Study(kin_scene)
-    kin = study.scene()
-    n, names = kin.n_links, kin.joint_names
-    coordinates = kin.joint_coordinates
-    rec_a = read_recording(
-        a,
-        joints,
-        n,
-        states_topic or JOINT_STATES,
-        wrench_topic,
-        scene_joints=names,
-        coordinates=coordinates,
-    )
-    a_rows, preds, _ = recorded_impacts(rec_a, study)
-    a_origin = a_rows[0]['t'] if a_rows else 0.0
-    if b_is_recording:
-        rec_b = read_recording(
-            b,
-            joints,
-            n,
-            states_topic or JOINT_STATES,
-            wrench_topic,
-            scene_joints=names,
-            coordinates=coordinates,
-        )
-        b_rows = recorded_impacts(rec_b, study)[0]
-        what = f'recording {b}'
-    elif controller:
-        from .synthetic import synthetic_recording
-
-        rec_b = synthetic_recording(b, noise={}, publish_rate=1.0 / rec_a.period)
-        b_rows = recorded_impacts(rec_b, study)[0]
-        what = f'scene {b} with its own controller'
-    else:
-        from ..physics.model import ArmModel
-
-        b_rows = replayed_impacts(preds, ArmModel(study.scene()))
-        what = f'scene {b} replaying each impact of {a} from its recorded state and efforts'
-    b_origin = b_rows[0]['t'] if b_rows else 0.0
-    pairs = match(a_rows, b_rows)
-    table = []
-    for i, j in pairs:
-        ra, rb = a_rows[i], b_rows[j]
-        table.append(
-            {
-                'a_t': ra['t'] - a_origin,
-                'b_t': rb['t'] - b_origin,
-                **{
-                    f'{k}_{side}': r[k]
-                    for k in ('impact_speed', 'cor', 'impulse_n', 'impulse_t')
-                    for side, r in (('a', ra), ('b', rb))
-                },
-                'qd_after_a': ra['qd_after'],
-                'qd_after_b': rb['qd_after'],
-                'd_cor': rb['cor'] - ra['cor'],
-                'd_impulse_n': rb['impulse_n'] - ra['impulse_n'],
-                'd_qd_after': (np.array(rb['qd_after']) - np.array(ra['qd_after'])).tolist(),
-            }
-        )
-    return {
-        'a': a_rows,
-        'b': b_rows,
-        'pairs': pairs,
-        'table': table,
-        'what': what,
-        'unmatched_a': len(a_rows) - len(pairs),
-        'unmatched_b': len(b_rows) - len(pairs),
-    }
 
 
 def format_table(result) -> str:
@@ -283,13 +124,18 @@ def cli(args) -> int:
             f'--out {out}: holds an earlier comparison ({", ".join(earlier)}); pass --force '
             f'to replace it, or another --out'
         )
+    from ..api.comparing import compare, is_recording
+    from .fit import scene_of
+
+    # both recordings: read with the scene given, else the one A stores, else the article's
+    scene = scene_of(args.a, args.scene)[0] if is_recording(args.b) else None
     result = compare(
         args.a,
         args.b,
-        scene=args.scene,
+        scene=scene,
         joints=joints,
         controller=args.controller,
-        states_topic=args.states_topic,
+        states_topic=args.states_topic or JOINT_STATES,
         wrench_topic=args.wrench_topic,
     )
     print(f'A: {args.a}\nB: {result["what"]}')

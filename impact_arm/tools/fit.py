@@ -3,9 +3,10 @@
     impact-arm fit runs/arm.mcap --scene config/paper.yaml \\
         --param surfaces[0].mu=0.05:1 --param materials.steel.S_y=2e8:5e9
 
-The method lives in calibration/fit/ (docs/fit.md); this module reads the recording, runs the fit
-with a progress line and writes the JSON, the fitted scene, report.md and the figures.
-Python API: ``fit_recording(...)`` returns the ``FitResult`` and writes the same files.
+The method lives in calibration/fit/ (docs/fit.md) and the Python API over it is
+``impact_arm.fit`` (docs/api.md); this module is the command: it reads the recording, diagnoses
+it, runs the fit with a progress line and writes the JSON, the fitted scene, report.md and the
+figures. ``fit_recording(...)`` does all that from Python and returns the ``FitResult``.
 """
 
 from __future__ import annotations
@@ -77,11 +78,10 @@ def fit_recording(
     hi)}) of ``scene`` and write ``out``/fitted.yaml, fit.json, report.md and the PNGs
     (``out`` None: the default runs/fit_<name>/; False: write nothing). Returns the
     ``FitResult``."""
+    from ..api import fit, read_recording, write_fitted_scene
     from ..contract import JOINT_STATES
     from ..calibration.diagnose import Corrections, correct, diagnose
-    from ..calibration.fit import fit
     from ..calibration.study import Study
-    from ..io.recording import read_recording
     from ..physics.model import ArmModel
     from .side_process import SideProcess
 
@@ -94,12 +94,10 @@ def fit_recording(
     def read():
         return read_recording(
             recording,
-            joints,
-            base.n_links,
-            states_topic or JOINT_STATES,
-            wrench_topic,
-            scene_joints=base.joint_names,
-            coordinates=base.joint_coordinates,
+            base,
+            joints=joints,
+            states_topic=states_topic or JOINT_STATES,
+            wrench_topic=wrench_topic,
         )
 
     # a second process reads the recording while this one imports the optimiser, then
@@ -115,7 +113,7 @@ def fit_recording(
         rec = correct(rec, corrections or Corrections(), diagnosis)
         for line in diagnosis.lines():
             say(line)
-        result = fit(rec, scene, params, options, progress)
+        result = fit(rec, scene, params, options=options, progress=progress)
         if corrections is not None and corrections.effort_latency and result.timing == 'controller':
             # the option was applied, but this reading replays no recorded effort
             result.warnings.append(
@@ -150,45 +148,6 @@ def fit_recording(
     finally:
         if side is not None:
             side.close()
-
-
-def write_fitted_scene(scene, values: dict, path, recording=''):
-    """The scene with the fitted values: a file ``impact-arm simulate --scene`` runs."""
-    import yaml
-
-    from ..physics.scene import parse_scene
-    from ..calibration.study import Study, apply_overrides
-
-    from ..calibration.fit import state_fit_keys
-
-    study = Study(scene)
-    state_fit_keys(study, list(values))  # arm.links / joints the scene leaves to its URDF
-    data = apply_overrides(study.data, values)
-    _keep_urdf_reachable(data, study.path, path)
-    parse_scene(data, origin=path, path=path)  # refuse now rather than hand out a broken file
-    if isinstance(data.get('name'), str):
-        data['name'] = data['name'] + '_fitted'
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
-    head = (
-        f'# {os.path.basename(path)}: {study.origin} with values fitted to '
-        f'{os.fspath(recording)} by impact-arm fit\n'
-    )
-    with open(path, 'w', encoding='utf-8') as f:
-        f.write(head + ''.join(f'#   {k} = {v:.6g}\n' for k, v in values.items()) + text)
-
-
-def _keep_urdf_reachable(data: dict, scene_path: str, fitted_path) -> None:
-    """A relative ``arm.urdf`` is relative to its scene file's directory: written into
-    another directory (runs/fit_<name>/), it is rewritten relative to the new file's
-    directory so that the fitted scene reads the same description."""
-    from ..physics.scene.urdf import resolve_urdf_path
-
-    arm = data.get('arm')
-    urdf = arm.get('urdf') if isinstance(arm, dict) else None
-    if not isinstance(urdf, str) or os.path.isabs(urdf):
-        return
-    full = os.path.abspath(resolve_urdf_path(urdf, scene_path))
-    arm['urdf'] = os.path.relpath(full, os.path.dirname(os.path.abspath(fitted_path)))
 
 
 def _fmt(v):

@@ -17,7 +17,7 @@ from .parameters import Parameter
 from .physical import out_of_range
 from .problem import ImpactSet
 from .replay import Prediction, recorded_cor
-from .verdict import OutputTest, VerdictKind, judge
+from .verdict import OutputTest, Verdict, judge
 
 
 def interval_digits(value: float, lo: float, hi: float) -> int:
@@ -95,7 +95,7 @@ class FitResult:
     scene_path: str = ''
     timing: str = ''  # how the efforts were read between samples
     model: ArmModel | None = field(default=None, repr=False)  # the fitted scene's model
-    verdict_kind: VerdictKind = VerdictKind.FITS
+    verdict_kind: Verdict = Verdict.FITS
     output_tests: list[OutputTest] = field(default_factory=list)  # per output over the impacts
     dependences: list[Dependence] = field(default_factory=list)  # on the fixed parameters
     warnings: list[str] = field(default_factory=list)  # what limits the values, to read first

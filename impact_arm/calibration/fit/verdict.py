@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import enum
 import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ...physics.kinds import TextEnum
 
 CHI2_TAIL = 1e-3  # the chi-square's upper tail beyond which the scene does not fit
 SIGN_LEVEL = 1e-2  # two-sided sign test of one output's residuals over the impacts
@@ -22,7 +23,10 @@ MISMATCH = 'the contact law or a fixed parameter does not match the arm'  # the 
 DOES_NOT_FIT = 'does not fit: '
 
 
-class VerdictKind(enum.Enum):
+class Verdict(TextEnum):
+    """What a fit's verdict says, as a kind (``FitResult.verdict_kind``; the sentence with
+    its reasons is ``FitResult.verdict``). A str: ``Verdict.FITS == 'fits'``."""
+
     FITS = 'fits'
     REPLAY_FAILED = 'replay failed'  # the fitted scene reproduces no contact at some impacts
     CHI2_TAIL = 'chi-square in its tail'
@@ -157,14 +161,16 @@ def restitution_sentence(per_impact: list[dict]) -> str:
 
 
 @dataclass
-class Verdict:
-    kind: VerdictKind
+class Judgement:
+    """The verdict with what it was judged from: the kind, the sentence, the output tests."""
+
+    kind: Verdict
     text: str  # 'fits' or 'does not fit: <why>'
     tests: list[OutputTest]
 
     @property
     def fits(self) -> bool:
-        return self.kind is VerdictKind.FITS
+        return self.kind is Verdict.FITS
 
 
 def judge(
@@ -173,7 +179,7 @@ def judge(
     chi2: float,
     dof: int,
     context: Sequence[str] = (),
-) -> Verdict:
+) -> Judgement:
     """The verdict: replays that fail at the optimum, then the chi-square's tail, then the
     per-output tests. ``context`` adds what the report knows about where the misfit lies."""
     # scipy.special, not scipy.stats: the same tail, without seconds of import in a fresh
@@ -183,30 +189,30 @@ def judge(
     tests = output_tests(per_impact, joints)
     failed = [x for x in per_impact if x.get('error')]
     if failed:
-        return Verdict(
-            VerdictKind.REPLAY_FAILED,
+        return Judgement(
+            Verdict.REPLAY_FAILED,
             f'does not fit: the fitted scene reproduces no contact at {len(failed)} of '
             f'{len(per_impact)} impacts ({failed[0]["error"]})',
             tests,
         )
     p_value = float(chdtrc(dof, chi2))
     reasons = []
-    kind = VerdictKind.FITS
+    kind = Verdict.FITS
     if p_value < CHI2_TAIL:
-        kind = VerdictKind.CHI2_TAIL
+        kind = Verdict.CHI2_TAIL
         reasons.append(
             f'residuals {math.sqrt(chi2 / dof):.2f}x the noise (chi2 = {chi2:.4g} over {dof} '
             f'degrees of freedom, p = {p_value:.2g} < {CHI2_TAIL:g})'
         )
     systematic = [t.sentence() for t in tests if t.biased or t.trending]
     if systematic:
-        kind = VerdictKind.SYSTEMATIC if kind is VerdictKind.FITS else kind
+        kind = Verdict.SYSTEMATIC if kind is Verdict.FITS else kind
         reasons += systematic
-    if kind is VerdictKind.FITS:
-        return Verdict(kind, 'fits', tests)
+    if kind is Verdict.FITS:
+        return Judgement(kind, 'fits', tests)
     cor = restitution_sentence(per_impact)
     if cor:
         reasons.append(cor)
     reasons += list(context)
     reasons.append(MISMATCH)
-    return Verdict(kind, DOES_NOT_FIT + '; '.join(reasons), tests)
+    return Judgement(kind, DOES_NOT_FIT + '; '.join(reasons), tests)

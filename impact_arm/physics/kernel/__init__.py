@@ -29,6 +29,8 @@ only after the kinds of event it needs to act on.
 
 import os
 
+__all__ = ['MARKER', 'PARTS', 'template_source']
+
 PARTS = ('rhs', 'steps', 'events', 'phases', 'output', 'loop')
 MARKER = '# --- template: equations.py copies what follows into the generated module ---\n'
 

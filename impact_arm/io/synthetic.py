@@ -10,30 +10,35 @@ arm's". With that section the ``noise`` argument defaults to none (the section s
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
+import os
+
 import numpy as np
 
 from ..contract import CONTACT_WRENCH, JOINT_STATES, SURFACE_MOUNTS, to_joint_space
 from ..calibration.identify import JointRecording
 from ..driver.sensors import sensed_series
-from ..io.recording import to_model
+from .recording import to_model
 
 REALISTIC_NOISE = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
 
 
 def synthetic_recording(
-    scene='paper',
-    overrides=None,
+    scene: Any = 'paper',
+    overrides: dict | None = None,
     *,
-    cycles=None,
-    publish_rate=1000.0,
-    noise=None,
-    drop=0.0,
-    jitter=0.0,
-    clock_offset=0.0,
-    seed=0,
-    wrench=True,
-    control_rate=None,
-    plates=True,
+    cycles: int | None = None,
+    publish_rate: float = 1000.0,
+    noise: dict | None = None,
+    drop: float = 0.0,
+    jitter: float = 0.0,
+    clock_offset: float = 0.0,
+    seed: int = 0,
+    wrench: bool = True,
+    control_rate: float | None = None,
+    plates: bool = True,
 ) -> JointRecording:
     """Simulate ``scene`` with ``overrides`` and sample it as a driver would: through the
     scene's ``sensors`` section, then adding Gaussian ``noise`` (per signal, see
@@ -86,7 +91,9 @@ def synthetic_recording(
         # the mounted surfaces' plates, as the simulator publishes them (/surface_mounts)
         rec.plates_t = rec.t.copy()
         rec.plates = np.array([x.plates for x in s], float)[keep]
-    rec.truth = result.impacts
+    # the impacts simulated, for the tests that compare a fit with them (not a field: a
+    # recording read from a file has no truth)
+    rec.truth = result.impacts  # type: ignore[attr-defined]
     return rec
 
 
@@ -106,7 +113,7 @@ def _messages(rec: JointRecording):
     for k in range(len(rec.t)):
         ns = rec.t0_ns + round(rec.t[k] * 1e9)
         out.append((ns, 'js', k))
-    if rec.wrench is not None:
+    if rec.wrench is not None and rec.wrench_t is not None:
         for k in range(len(rec.wrench_t)):
             out.append((rec.t0_ns + round(rec.wrench_t[k] * 1e9), 'w', k))
     if rec.plates is not None and rec.plates_t is not None:
@@ -118,13 +125,13 @@ def _messages(rec: JointRecording):
 
 def write_rosbag2(
     rec: JointRecording,
-    folder,
-    joints=None,
-    states_topic=JOINT_STATES,
-    wrench_topic=CONTACT_WRENCH,
-    extra_joint=True,
-    frame='surface',
-):
+    folder: str | os.PathLike,
+    joints: Sequence[str] | None = None,
+    states_topic: str = JOINT_STATES,
+    wrench_topic: str = CONTACT_WRENCH,
+    extra_joint: bool = True,
+    frame: str = 'surface',
+) -> None:
     """A rosbag2 folder (metadata.yaml + MCAP) written by the rosbags library, not by us; the
     joint states carry an extra joint first (as a real arm's driver may: a gripper)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -140,7 +147,7 @@ def write_rosbag2(
     names = list(joints or rec.joints)
     if extra_joint:
         names = ['gripper'] + names
-    with Writer(folder, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+    with Writer(os.fspath(folder), version=8, storage_plugin=StoragePlugin.MCAP) as writer:
         cjs = writer.add_connection(states_topic, JS.__msgtype__, typestore=store)
         cw = (
             writer.add_connection(wrench_topic, WS.__msgtype__, typestore=store)
@@ -165,6 +172,8 @@ def write_rosbag2(
                 )
                 writer.write(cjs, ns, store.serialize_cdr(msg, JS.__msgtype__))
             elif kind == 'p':
+                # _messages lists plates and wrenches only for a recording that has them
+                assert cp is not None and rec.plates is not None
                 plate = rec.plates[k]
                 msg = JS(
                     header=H(stamp=stamp, frame_id=''),
@@ -175,6 +184,7 @@ def write_rosbag2(
                 )
                 writer.write(cp, ns, store.serialize_cdr(msg, JS.__msgtype__))
             else:
+                assert cw is not None and rec.wrench is not None
                 fx, fy = rec.wrench[k]
                 msg = WS(
                     header=H(stamp=stamp, frame_id=frame),
@@ -186,7 +196,14 @@ def write_rosbag2(
 
 
 def driver_recording(
-    scene='paper', overrides=None, *, rate=1000.0, cycles=6, noise=None, seed=0, t_max=None
+    scene: Any = 'paper',
+    overrides: dict | None = None,
+    *,
+    rate: float = 1000.0,
+    cycles: int = 6,
+    noise: dict | None = None,
+    seed: int = 0,
+    t_max: float | None = None,
 ) -> JointRecording:
     """What the simulator node publishes (``SimulatedArm``: each period's effort is the
     command held over the period that ends at the stamp; the scene's ``sensors`` section
