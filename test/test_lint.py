@@ -1,6 +1,6 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
 (mypy), every public function of physics/, driver/, calibration/ and io/ annotated, and imports
-point down the layers physics -> driver, calibration (side by side) -> io -> nodes -> tools, with
+point down the layers physics -> driver, calibration, export (side by side) -> io -> nodes -> tools, with
 contract.py at the bottom importing nothing of the package."""
 
 import ast
@@ -17,11 +17,12 @@ LAYERS = {
     'physics': 1,
     'driver': 2,
     'calibration': 2,
+    'export': 2,
     'io': 3,
     'nodes': 4,
     'tools': 5,
 }
-TYPED = ('physics', 'driver', 'calibration', 'io')
+TYPED = ('physics', 'driver', 'calibration', 'io', 'export')
 
 
 def _tool(module, *args):

@@ -8,7 +8,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from .strike import Outcome, Strike
+from .strike import Outcome, Strike, StrikeKind
 
 
 class Quantity(enum.Enum):
@@ -34,12 +34,14 @@ def error(ours: Outcome, peer: Outcome, quantity: Quantity, strike: Strike) -> f
     return (value(peer, quantity) - value(ours, quantity)) / scale
 
 
-# the arm lives at the limit-cycle speed: its strikes count this many times the others
-CYCLE_SPEED_WEIGHT = 3.0
+# the arm lives at its limit-cycle impact (the oblique strike at 1x): it counts this many
+# times each other strike, so that the exported peer rebounds there as ours does
+CYCLE_IMPACT_WEIGHT = 10.0
 
 
 def strike_weight(strike: Strike) -> float:
-    return CYCLE_SPEED_WEIGHT if strike.speed_ratio == 1.0 else 1.0
+    cycle = strike.kind is StrikeKind.OBLIQUE and strike.speed_ratio == 1.0
+    return CYCLE_IMPACT_WEIGHT if cycle else 1.0
 
 
 def cost(ours: Sequence[Outcome], peer: Sequence[Outcome], strikes: Sequence[Strike]) -> float:
