@@ -1,7 +1,7 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
-(mypy), every public function of physics/, driver/, calibration/ and io/ annotated, and imports
-point down the layers physics -> driver, calibration, export (side by side) -> io -> nodes -> tools, with
-contract.py at the bottom importing nothing of the package."""
+(mypy), every public function of physics/, driver/, calibration/, export/ and io/ annotated,
+and imports point down the layers physics -> driver, calibration, export (side by side) -> io
+-> nodes -> tools, with contract.py at the bottom importing nothing of the package."""
 
 import ast
 import os

@@ -50,12 +50,12 @@ def readme(arm: PlanarArm, peer: Peer, contact: object, timestep: float) -> str:
     common = (
         f'# {arm.name} for {peer.value}\n\n'
         'Written by `impact-arm export`. The arm moves in the world x-z plane (z up); its '
-        f'joints {names} carry the scene\'s joint names and read the angles of its '
+        f"joints {names} carry the scene's joint names and read the angles of its "
         '/joint_states (same zero, same sign). The tip sphere is `tip`; the struck surfaces '
         "`surface1`, ... sit one tip radius below the scene's heights, because the package "
         "measures indentation at the tip's centre. Mounted surfaces are exported rigid. "
         f'Run at the time step the contact was fitted at: **{timestep:g} s**. '
-        'report.md and report.json give the residual against the package\'s model.\n\n'
+        "report.md and report.json give the residual against the package's model.\n\n"
     )
     if peer is Peer.MUJOCO:
         return common + (
@@ -97,7 +97,7 @@ def readme(arm: PlanarArm, peer: Peer, contact: object, timestep: float) -> str:
         '`gz sim world.sdf` (the world holds the ODE engine at the fitted step, the '
         "scene's gravity and the arm). The arm's joints have no actuators here: add the "
         '`gz_ros2_control` plugin and a `<ros2_control>` block for its joints.\n\n'
-        '**Not run in Gazebo**: the contact parameters come from a model of ODE\'s contact '
+        "**Not run in Gazebo**: the contact parameters come from a model of ODE's contact "
         '(docs/export.md).\n'
     )
 

@@ -39,8 +39,9 @@ def tip_inverse_mass(scene: Scene, strike: Strike) -> np.ndarray:
 
 def ode_outcome(contact: GazeboContact, strike: Strike, inverse_mass: np.ndarray) -> Outcome:
     h = contact.timestep
-    (w_tt, w_tn), (w_nt, w_nn) = (float(x) for x in inverse_mass[0]), (
-        float(x) for x in inverse_mass[1]
+    (w_tt, w_tn), (w_nt, w_nn) = (
+        (float(x) for x in inverse_mass[0]),
+        (float(x) for x in inverse_mass[1]),
     )
     erp = h * contact.kp / (h * contact.kp + contact.kd)
     cfm = 1.0 / (h * contact.kp + contact.kd)

@@ -28,7 +28,7 @@ LIMITS = {
         'which follows our trend in kind but not in measure, and its force is linear in the '
         'penetration where ours is Hertz (x^1.5) and then elasto-plastic. The residual dent '
         "is not kept. Drake's SDF joints have viscous damping and rotor inertia but no "
-        'Coulomb friction: the scene\'s joint friction is written and ignored by Drake.'
+        "Coulomb friction: the scene's joint friction is written and ignored by Drake."
     ),
     Peer.GAZEBO: (
         "Gazebo's ODE contact is a spring-damper (kp, kd as ERP and CFM) with a "

@@ -136,8 +136,8 @@ def to_markdown(report: PeerReport) -> str:
         '',
         LIMITS[report.peer],
         '',
-        'Strikes: the whole arm, unpowered, in the posture of the scene\'s limit-cycle '
-        'impact; oblique at that impact\'s joint rates times the speed ratio, normal at the '
+        "Strikes: the whole arm, unpowered, in the posture of the scene's limit-cycle "
+        "impact; oblique at that impact's joint rates times the speed ratio, normal at the "
         'rates of least norm giving the same tip speed straight down. "(stuck)": the tip '
         'had not left the surface when the run ended.',
         '',

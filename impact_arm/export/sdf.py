@@ -112,10 +112,7 @@ def _contact(contact: DrakeContact | GazeboContact | None, indent: str) -> list[
 def sdf_model(arm: PlanarArm, contact: DrakeContact | GazeboContact | None) -> list[str]:
     """The <model> element's lines (``contact`` None: the peer's default contact)."""
     lines = [f'  <model name="{arm.name}">']
-    lines += [
-        '    <link name="surfaces">',
-        '      <inertial><mass>1</mass></inertial>',
-    ]
+    lines += ['    <link name="surfaces">', '      <inertial><mass>1</mass></inertial>']
     for surface in arm.surfaces:
         geometry = '<geometry><plane><normal>0 0 1</normal><size>4 4</size></plane></geometry>'
         lines += [

@@ -44,15 +44,12 @@ class Tuned(Generic[Contact]):
     evaluations: int
 
 
-def values(parameters: Sequence[Parameter], x: Sequence[float]) -> dict[str, float]:
+def values(parameters: Sequence[Parameter], x: Sequence[float] | np.ndarray) -> dict[str, float]:
     return {p.name: float(10.0**v if p.log else v) for p, v in zip(parameters, x)}
 
 
 def tune(
-    problem: PeerProblem[Contact],
-    strikes: Sequence[Strike],
-    ours: Sequence[Outcome],
-    budget: int,
+    problem: PeerProblem[Contact], strikes: Sequence[Strike], ours: Sequence[Outcome], budget: int
 ) -> Tuned[Contact]:
     """The peer's contact of least cost found within ``budget`` peer evaluations."""
     from scipy.optimize import minimize
