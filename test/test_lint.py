@@ -1,9 +1,10 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
-(mypy), every public function of physics/, driver/, calibration/, io/ and api/ annotated, and
-imports point down the layers physics -> driver, calibration (side by side) -> io -> nodes, api
-(side by side) -> tools, with contract.py at the bottom importing nothing of the package. The
-top-level package is the API's face (``import impact_arm as ia``): it sits in the api layer, so
-the core never imports its names, and it may import nothing but the api package."""
+(mypy), every public function of physics/, driver/, calibration/, export/, io/ and api/
+annotated, and imports point down the layers physics -> driver, calibration, export (side by
+side) -> io -> nodes, api (side by side) -> tools, with contract.py at the bottom importing
+nothing of the package. The top-level package is the API's face (``import impact_arm as ia``):
+it sits in the api layer, so the core never imports its names, and it may import nothing but
+the api package."""
 
 import ast
 import os
@@ -19,12 +20,13 @@ LAYERS = {
     'physics': 1,
     'driver': 2,
     'calibration': 2,
+    'export': 2,
     'io': 3,
     'nodes': 4,
     'api': 4,
     'tools': 5,
 }
-TYPED = ('physics', 'driver', 'calibration', 'io', 'api')
+TYPED = ('physics', 'driver', 'calibration', 'export', 'io', 'api')
 
 
 def _tool(module, *args):

@@ -386,6 +386,10 @@ COMMANDS = {
         'impact_arm.tools.kernel',
         "kernel dump: print the generated kernel module of a scene's shape",
     ),
+    'export': (
+        'impact_arm.tools.export',
+        'the arm and its contact for MuJoCo, Drake or Gazebo, tuned by running them',
+    ),
     'bench': (
         'impact_arm.tools.bench_command',
         "benchmarks from the repository's bench/ folder: speed, tradeoff, stress, "

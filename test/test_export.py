@@ -1,0 +1,180 @@
+"""impact-arm export: the peers load the written models, the joints are the scene's (names,
+zero, sign), and the tuned contact rebounds as ours does, closer than the peer's defaults.
+Small search budgets and two speed ratios keep this to tens of seconds."""
+
+import json
+
+import numpy as np
+import pytest
+
+from impact_arm.export.arm import planar_arm
+from impact_arm.export.exporter import export, fitted_scene, recommended_timestep
+from impact_arm.export.mjcf import MujocoContact, mjcf, mujoco_defaults
+from impact_arm.export.sdf import DrakeContact, drake_sdf
+from impact_arm.export.strike import Outcome, StrikeKind, limit_cycle_impact, strikes
+from impact_arm.physics.model import ArmModel
+from impact_arm.physics.scene import load_scene
+
+RATIOS = (0.75, 1.0)
+REAL_ARM = 'examples/real_arm.yaml'
+
+
+@pytest.fixture(scope='module')
+def paper():
+    return load_scene('paper')
+
+
+@pytest.fixture(scope='module')
+def real_arm():
+    import os
+
+    return load_scene(os.path.join(os.path.dirname(os.path.dirname(__file__)), REAL_ARM))
+
+
+def _cycle_strike(report):
+    return next(s for s in report.strikes if s.kind is StrikeKind.OBLIQUE and s.speed_ratio == 1.0)
+
+
+@pytest.mark.parametrize('scene_name', ['paper', 'real_arm'])
+def test_the_mjcf_tip_is_ours_at_the_scene_joint_angles(scene_name, paper, real_arm):
+    """MuJoCo loads the MJCF, and at the scene's joint angles (its /joint_states: same zero,
+    same sign) the tip site is where our kinematics puts the tip."""
+    mujoco = pytest.importorskip('mujoco')
+    scene = paper if scene_name == 'paper' else real_arm
+    arm = planar_arm(scene)
+    model = mujoco.MjModel.from_xml_string(mjcf(arm, mujoco_defaults(5e-6)))
+    data = mujoco.MjData(model)
+    names = [model.joint(i).name for i in range(model.njnt)]
+    assert names == list(scene.joint_names)
+    assert model.geom('tip').size[0] == scene.tip_radius
+    assert [model.geom(f'surface{k + 1}').id for k in range(len(arm.surfaces))]
+    ours = ArmModel(scene)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        theta = rng.uniform(-1.5, 1.5, scene.n_links)
+        data.qpos[:] = theta
+        mujoco.mj_forward(model, data)
+        q = scene.joint_coordinates.absolute(theta)
+        x, y, _, _ = ours.tip(q, np.zeros(scene.n_links))
+        site = data.site('tip').xpos
+        assert site[0] == pytest.approx(x, abs=1e-9)
+        assert site[2] == pytest.approx(y, abs=1e-9)
+        assert site[1] == pytest.approx(0.0, abs=1e-12)
+    assert model.opt.gravity[2] == pytest.approx(-ours.g)
+
+
+def test_a_urdf_arm_keeps_its_joint_names_in_drake(real_arm):
+    """The URDF arm's joints keep their names in the SDF Drake loads, and the tip frame sits
+    where our kinematics puts it at the robot's joint angles."""
+    pytest.importorskip('pydrake')
+    from impact_arm.export.drake_strike import DrakeStriker
+
+    arm = planar_arm(real_arm)
+    assert arm.joint_names == ('shoulder', 'elbow', 'wrist')
+    striker = DrakeStriker(arm, DrakeContact(1e9, 0.1, 0.2, 5e-6), 5e-6)
+    plant = striker.plant
+    context = plant.CreateDefaultContext()
+    theta = [0.3, -0.4, 0.5]
+    for joint, angle in zip(striker.joints, theta):
+        assert joint.name() in arm.joint_names
+        joint.set_angle(context, angle)
+    tip = striker.tip.CalcPoseInWorld(context).translation()
+    x, y, _, _ = ArmModel(real_arm).tip(
+        real_arm.joint_coordinates.absolute(theta), np.zeros(real_arm.n_links)
+    )
+    assert tip[0] == pytest.approx(x, abs=1e-9)
+    assert tip[2] == pytest.approx(y, abs=1e-9)
+
+
+def test_the_sdf_carries_the_joint_dynamics_and_effort_limits(real_arm):
+    text = drake_sdf(planar_arm(real_arm), DrakeContact(1e9, 0.1, 0.2, 5e-6))
+    assert '<joint name="elbow" type="revolute">' in text
+    assert '<effort>1200</effort>' in text
+    assert '<damping>0.05</damping><friction>0.3</friction>' in text
+    assert '<drake:point_contact_stiffness>1000000000</drake:point_contact_stiffness>' in text
+
+
+def test_strikes_span_the_speed_range_at_the_limit_cycle_posture(paper):
+    record = limit_cycle_impact(paper)
+    chosen = strikes(paper, (0.5, 1.0, 1.5), record)
+    speed = float(np.hypot(*record['v_before']))
+    for s in chosen:
+        assert s.speed == pytest.approx(s.speed_ratio * speed, rel=1e-9)
+        if s.kind is StrikeKind.NORMAL:
+            assert s.v_before[0] == pytest.approx(0.0, abs=1e-9)
+        else:
+            assert s.v_before[0] / s.v_before[1] == pytest.approx(
+                record['v_before'][0] / record['v_before'][1]
+            )
+    with pytest.raises(ValueError, match='speed ratio'):
+        strikes(paper, (0.0,), record)
+
+
+def test_the_recommended_step_resolves_the_shortest_contact():
+    outs = [Outcome(0.4, 142e-6, 3e4, 0.0), Outcome(0.4, 160e-6, 3e4, 0.0)]
+    assert recommended_timestep(outs) == 5e-6
+    assert recommended_timestep([Outcome(0.4, 1e-3, 1.0, 0.0)]) == 2e-5
+
+
+def test_bad_contact_parameters_are_refused_by_name():
+    with pytest.raises(ValueError, match='dampratio'):
+        MujocoContact(1e-4, -1.0, 0.9, 0.95, 1e-3, 0.2, 5e-6)
+    with pytest.raises(ValueError, match='stiffness'):
+        DrakeContact(float('nan'), 0.1, 0.2, 5e-6)
+
+
+def _check_export(report, out, model_file):
+    assert (out / model_file).exists() and (out / 'README.md').exists()
+    data = json.loads((out / 'report.json').read_text())
+    assert set(data['residual']) == {'cor', 'duration', 'F_max', 'v_t_after'}
+    assert 'cannot' in (out / 'report.md').read_text() or data['cannot_represent']
+    cycle = _cycle_strike(report)
+    tuned = abs(report.cor_error_at(cycle, report.tuned))
+    default = abs(report.cor_error_at(cycle, report.default_outcomes))
+    return tuned, default, data
+
+
+def test_mujoco_export_rebounds_as_ours_at_the_limit_cycle(tmp_path):
+    """The done criterion, with a small budget: the exported MJCF, loaded again from the
+    file, rebounds at the limit-cycle impact within 5 % of our e, and the tuned contact's
+    rms error of e is below MuJoCo's defaults' (the report's numbers)."""
+    mujoco = pytest.importorskip('mujoco')
+    report = export('paper', 'mujoco', str(tmp_path), budget=120, ratios=RATIOS)
+    tuned, _, data = _check_export(report, tmp_path, 'arm.xml')
+    assert tuned < 0.05
+    assert data['residual']['cor']['rms'] < data['residual_defaults']['cor']['rms']
+    # the written file itself, not the striker's in-memory model
+    from impact_arm.export.mujoco_strike import MujocoStriker
+
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / 'arm.xml'))
+    assert model.opt.timestep == report.timestep
+    striker = MujocoStriker(planar_arm(load_scene('paper')), report.contact)
+    assert striker.outcome(_cycle_strike(report)).cor == pytest.approx(
+        report.tuned[list(report.strikes).index(_cycle_strike(report))].cor
+    )
+
+
+def test_drake_export_rebounds_as_ours_at_the_limit_cycle(tmp_path):
+    pytest.importorskip('pydrake')
+    report = export('paper', 'drake', str(tmp_path), budget=40, ratios=RATIOS)
+    tuned, default, data = _check_export(report, tmp_path, 'arm.sdf')
+    assert tuned < 0.05
+    assert tuned < default  # Drake's defaults: the tip does not leave the surface
+    assert data['residual']['cor']['rms'] < data['residual_defaults']['cor']['rms']
+
+
+def test_gazebo_export_writes_a_world_and_says_it_was_not_run(tmp_path):
+    report = export('paper', 'gazebo', str(tmp_path), budget=150, ratios=RATIOS)
+    _, _, data = _check_export(report, tmp_path, 'world.sdf')
+    world = (tmp_path / 'world.sdf').read_text()
+    assert '<restitution_coefficient>' in world and '<max_step_size>' in world
+    assert 'Not run in Gazebo' in (tmp_path / 'README.md').read_text()
+    assert data['residual']['cor']['rms'] < data['residual_defaults']['cor']['rms']
+
+
+def test_fitted_takes_the_fit_json_scene(tmp_path):
+    (tmp_path / 'fit.json').write_text(json.dumps({'scene': 'fitted.yaml'}))
+    assert fitted_scene(str(tmp_path / 'fit.json')) == str(tmp_path / 'fitted.yaml')
+    (tmp_path / 'bad.json').write_text('{}')
+    with pytest.raises(ValueError, match='scene'):
+        fitted_scene(str(tmp_path / 'bad.json'))
