@@ -2,3 +2,9 @@
 (MuJoCo, Drake, Gazebo): the peers' model files, the contact parameters fitted by running
 each peer through the same strikes as the package's model, and the residual each leaves
 (docs/export.md). Plain Python: no ROS, and each peer imported only when it is used."""
+
+from .exporter import export
+from .peers import Peer
+from .report import PeerReport
+
+__all__ = ['Peer', 'PeerReport', 'export']
