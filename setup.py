@@ -22,7 +22,11 @@ setup(
                       'Pillow', 'numba', 'rosbags', 'xacro'],
     # studies (impact-arm sweep): Parquet tables and the Dask scheduler; imported lazily, so
     # the nodes and `simulate` never load them
-    extras_require={'studies': ['pyarrow', 'dask[distributed]']},
+    extras_require={
+        'studies': ['pyarrow', 'dask[distributed]'],
+        # impact-arm export runs the peers to tune their contact
+        'export': ['mujoco', 'drake'],
+    },
     zip_safe=True,
     maintainer='impact_arm developers',
     maintainer_email='impact-arm@example.com',

@@ -47,8 +47,9 @@ ROS_PACKAGES = {
     'xacro',  # a ROS package, and on PyPI under the same name (setup.py)
 }
 # imported only where a feature asks for it, behind an ImportError with the pip command:
-# studies (`pip install .[studies]`) and the peer comparison of the benchmarks
-OPTIONAL = {'pyarrow', 'dask', 'distributed', 'mujoco', 'simulation_interfaces'}
+# studies (`pip install .[studies]`), the export to the peer simulators (`pip install
+# .[export]`) and the peer comparison of the benchmarks
+OPTIONAL = {'pyarrow', 'dask', 'distributed', 'mujoco', 'pydrake', 'simulation_interfaces'}
 
 
 def declared() -> set:

@@ -178,3 +178,13 @@ def test_fitted_takes_the_fit_json_scene(tmp_path):
     (tmp_path / 'bad.json').write_text('{}')
     with pytest.raises(ValueError, match='scene'):
         fitted_scene(str(tmp_path / 'bad.json'))
+
+
+def test_a_missing_peer_package_is_named_with_its_pip_command(monkeypatch):
+    from impact_arm.export import peers
+
+    monkeypatch.setitem(peers.PACKAGES, peers.Peer.DRAKE, ('no_such_module_here', 'drake'))
+    with pytest.raises(peers.PeerMissing, match=r'--to drake: .*pip install drake'):
+        peers.require(peers.Peer.DRAKE)
+    peers.require(peers.Peer.MUJOCO)  # installed for the tests
+    peers.require(peers.Peer.GAZEBO)  # not run: nothing to install

@@ -16,7 +16,7 @@ from ..physics.model import ArmModel
 from ..physics.scene import Scene, load_scene
 from .arm import planar_arm
 from .files import MODEL_FILES, model_text, readme, write
-from .peers import Peer
+from .peers import Peer, require
 from .report import PeerReport, to_json, to_markdown
 from .strike import SPEED_RATIOS, Outcome, Strike, limit_cycle_impact, our_outcome, strikes
 from .tuning import tune
@@ -121,6 +121,7 @@ def export(
     report into ``out``; returns the report."""
     started = time.perf_counter()
     peer = Peer(peer)
+    require(peer)
     the_scene = load_scene(fitted_scene(fitted) if fitted else scene)
     chosen = strikes(the_scene, ratios, limit_cycle_impact(the_scene))
     ours = [our_outcome(the_scene, s) for s in chosen]

@@ -3,12 +3,36 @@
 from __future__ import annotations
 
 import enum
+import importlib.util
+
+from ..physics.errors import ImpactArmError
 
 
 class Peer(enum.Enum):
     MUJOCO = 'mujoco'
     DRAKE = 'drake'
     GAZEBO = 'gazebo'
+
+
+class PeerMissing(ImpactArmError):
+    """The peer's Python package is not installed (the export runs the peer to tune it)."""
+
+
+# the module each peer is run through, and its PyPI package (Gazebo is not run: a model here)
+PACKAGES = {Peer.MUJOCO: ('mujoco', 'mujoco'), Peer.DRAKE: ('pydrake', 'drake')}
+
+
+def require(peer: Peer) -> None:
+    """Raise PeerMissing, with the pip command, when ``peer``'s package is not installed."""
+    if peer not in PACKAGES:
+        return
+    module, package = PACKAGES[peer]
+    if importlib.util.find_spec(module) is None:
+        raise PeerMissing(
+            f'--to {peer.value}: the export runs {peer.value} to tune its contact, and the '
+            f'{package} package is not installed: pip install {package} '
+            f"(or pip install 'impact_arm[export]' for both peers)"
+        )
 
 
 # in words, for the report: what stays of our contact model however the peer is tuned
