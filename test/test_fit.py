@@ -268,7 +268,8 @@ def test_what_the_side_process_reads_and_draws_is_what_this_one_would(
 ):
     """The recording and the figures are the same whether the side process reads and draws
     them, or this one does when the side process is gone."""
-    from impact_arm.tools.fit import draw_figures, figure_data, fit_recording
+    from impact_arm.tools.fit import figure_data, fit_recording
+    from impact_arm.tools.fit_figures import draw_figures
 
     folder, _ = bag
     aside = fit_recording(folder, 'paper', BOUNDS, out=str(tmp_path / 'aside'), say=print)

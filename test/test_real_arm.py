@@ -113,7 +113,7 @@ def test_a_real_arm_runs_over_dds_is_recorded_analysed_and_fitted(
 def test_the_figures_of_a_three_link_recording_show_every_link(tmp_path):
     """Figures 3 and 4 (and the compared recordings) draw one panel per link: a three-link
     arm's third link was left out of them."""
-    from impact_arm.tools.analysis import Run
+    from impact_arm.tools.run_data import Run
     from impact_arm.tools.figures import fig3_controllers, fig4_link_angles, fig_recordings
 
     t = np.linspace(0.0, 1.0, 50)
@@ -159,7 +159,7 @@ def test_the_step_response_of_a_mounted_plate_scene_runs_on_its_arms_kernel():
 
     from impact_arm.physics.model import ArmModel
     from impact_arm.physics.scene import load_scene
-    from impact_arm.tools.analysis import step_response, surfaces_out_of_reach
+    from impact_arm.tools.step_responses import step_response, surfaces_out_of_reach
 
     scene = load_scene(REAL_ARM)
     assert len(surfaces_out_of_reach(scene)) == 1

@@ -44,7 +44,7 @@ print(json.dumps({'imports': t1 - t0, 'scene': t2 - t1, 'equations': t3 - t2,
 
 def chain_scene(n: int) -> dict:
     """The article's scene with an n-link arm of the same 2 m reach and 2 kg mass."""
-    from .stress import paper_dict
+    from .common import paper_dict
 
     data = paper_dict()
     data['links'] = [{'length': 2.0 / n, 'mass': 2.0 / n}] * n

@@ -245,3 +245,13 @@ def cpu_seconds(stat_path) -> float:
     with open(stat_path) as f:
         fields = f.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def paper_dict():
+    """The article's scene file as YAML data, to vary in the benchmarks."""
+    import yaml
+    from impact_arm.physics.scene import resolve_scene_path
+    from impact_arm.physics.scene.files import _SceneLoader
+
+    with open(resolve_scene_path('paper'), encoding='utf-8') as f:
+        return yaml.load(f.read(), Loader=_SceneLoader)

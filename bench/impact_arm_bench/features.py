@@ -20,7 +20,7 @@ import copy
 
 from impact_arm.contract import INTEGRATOR_PRESETS
 from . import common
-from .stress import paper_dict
+from .common import paper_dict
 
 
 def _free(data):

@@ -181,7 +181,7 @@ class Worker:
 def run_fuzz(count, seed, timeout, keep_dir=None) -> tuple[dict, list]:
     """The tally of classes, and the unhandled scenes (each also written to ``keep_dir``
     as soon as it is found, as fuzz_SEED_INDEX.yaml)."""
-    from .stress import paper_dict
+    from .common import paper_dict
 
     rng = random.Random(seed)
     base = paper_dict()

@@ -28,6 +28,7 @@ import numpy as np
 
 from impact_arm.contract import INTEGRATOR_METHODS
 from . import common
+from .common import paper_dict
 
 OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
 
@@ -44,15 +45,6 @@ class Case:
     min_impacts: int = 1
     preset: str = 'balanced'
     note: str = ''
-
-
-def paper_dict():
-    import yaml
-    from impact_arm.physics.scene import resolve_scene_path
-    from impact_arm.physics.scene.files import _SceneLoader
-
-    with open(resolve_scene_path('paper'), encoding='utf-8') as f:
-        return yaml.load(f.read(), Loader=_SceneLoader)
 
 
 def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):

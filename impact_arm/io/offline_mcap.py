@@ -133,7 +133,6 @@ class OfflineRecorder:
         compression: str = 'zstd',
         tf_rate: float = DEFAULT_TF_RATE,
     ):
-        from .. import __version__
         from .mcap_ros2 import Ros2McapWriter, package_version, ros_distro
 
         self.path = os.fspath(path)
@@ -167,7 +166,7 @@ class OfflineRecorder:
                 else None,
             )
         rate = scene.controller.rate if control_rate is None else float(control_rate)
-        version = package_version() or __version__
+        version = package_version()
         self.writer.add_metadata(
             'impact_arm',
             {

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 
 from .jit import jit_leaf as jit
-from .scene import Material, reduced_modulus
+from .scene.types import Material, reduced_modulus
 
 YIELD_ONSET_FACTOR = 1.9  # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
 

@@ -20,7 +20,7 @@ import numpy as np
 from . import layout
 from .contact import ContactConstants, contact_constants
 from .equations import load_equations
-from .scene import Mount, Scene
+from .scene.types import Mount, Scene
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

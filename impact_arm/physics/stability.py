@@ -40,7 +40,7 @@ from .errors import SceneError, UnstableControlWarning
 
 if TYPE_CHECKING:
     from .model import ArmModel
-    from .scene import Scene
+    from .scene.types import Scene
 
 # a spectral radius above 1 + this is unstable (round-off of the eigenvalues of a marginal
 # loop, e.g. the integrator pole of kp = 0, stays far below it)

@@ -382,7 +382,7 @@ def add_arguments(parser):
 
 
 def cli(args) -> int:
-    from .analysis import load
+    from .run_data import load
 
     out = args.out or os.path.join(
         'runs', os.path.splitext(os.path.basename(args.file))[0] + '.gif'

@@ -75,7 +75,7 @@ def fig3_controllers(runs, out):
     """The article's Figure 3: step responses of the control laws (no impact), each link in
     its panel, the target dotted, a zoom on the approach to the target where PD's offset and
     PID's overshoot show, and each law's numbers under its panel."""
-    from .analysis import step_metrics
+    from .step_responses import step_metrics
 
     plt = _plt()
     fig, axes = plt.subplots(1, runs[0].q.shape[1], figsize=FIGURE_INCHES)

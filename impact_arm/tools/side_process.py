@@ -37,7 +37,7 @@ def _serve(conn: Any, first: Callable[[], Any]) -> None:
         return
     except Exception as exc:  # noqa: BLE001 - the parent does it again, and raises it there
         conn.send(('failed', f'{type(exc).__name__}: {exc}'))
-    from .fit import draw_figures
+    from .fit_figures import draw_figures
 
     try:
         import matplotlib.backends.backend_agg  # noqa: F401  # the import this process is for
@@ -114,7 +114,7 @@ class SideProcess:
 
     def figures(self) -> list:
         """The figures' paths, drawn by the process, or here if it could not."""
-        from .fit import draw_figures
+        from .fit_figures import draw_figures
 
         assert self._job is not None, 'submit() first'
         status, answer = self._answer()
