@@ -6,7 +6,7 @@ every timing below is exact and nothing depends on the machine's load."""
 import pytest
 
 from impact_arm.driver.arm import SimulatedArm
-from impact_arm.driver.realtime import DriverLoop
+from impact_arm.driver.realtime import DriverLoop, WatchdogPolicy
 from impact_arm.physics.scene import load_scene, resolve_scene_path
 
 RATE = 1000.0
@@ -35,10 +35,20 @@ def scene():
     return load_scene(resolve_scene_path('paper'))
 
 
-def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.1, checked=None):
+def make_loop(
+    scene,
+    clock,
+    commands=None,
+    published=None,
+    logs=None,
+    timeout=0.1,
+    checked=None,
+    policy=WatchdogPolicy.ZERO,
+):
     """A loop whose queued commands come from ``commands`` (wall time of arrival ->
     torques; the string 'garbage' is a message that fails its check); ``checked`` collects
-    every message the loop checks, in order."""
+    every message the loop checks, in order. The watchdog's ``policy`` is zero torque here,
+    which these tests were written for (the driver's default brakes)."""
     arm = SimulatedArm(scene, RATE, max_effort=5000.0, trace=False)
     step = arm.step
     commands = commands if commands is not None else {}
@@ -73,6 +83,7 @@ def make_loop(scene, clock, commands=None, published=None, logs=None, timeout=0.
         clock=clock,
         sleep=clock.sleep,
         max_takes=10,
+        policy=policy,
     )
     return loop
 

@@ -46,7 +46,7 @@ def session(kind, scene, clock, published, logs=None, **kwargs):
         outputs=outputs,
         clock=clock,
         sleep=clock.sleep,
-        **kwargs,
+        **{'policy': WatchdogPolicy.ZERO, **kwargs},
     )
 
 

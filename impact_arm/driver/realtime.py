@@ -53,6 +53,12 @@ class WatchdogPolicy(TextEnum):
     ZERO = 'zero'
 
 
+# what the watchdog does unless told otherwise, in the driver and the simulator node alike: a
+# real drive's safe stop holds the joints (zero torque lets the arm fall onto the part, where
+# it chatters)
+DEFAULT_WATCHDOG_POLICY = WatchdogPolicy.BRAKE
+
+
 class PeriodStats:
     """Timing of the published periods, kept by the stepping thread, read by diagnostics."""
 
@@ -139,7 +145,7 @@ class Watchdog:
     before the newest command and ``longest_silence`` the longest one of the run (s): a
     middleware stall shows there with its length."""
 
-    def __init__(self, timeout: float, policy: WatchdogPolicy | str = WatchdogPolicy.ZERO):
+    def __init__(self, timeout: float, policy: WatchdogPolicy | str = DEFAULT_WATCHDOG_POLICY):
         self.timeout = timeout
         self.policy = WatchdogPolicy(policy)
         self.state = WatchdogState.WAITING
@@ -251,7 +257,7 @@ class DriverLoop:
         sleep: Callable[[float], None] = time.sleep,
         max_takes: int = 100,
         take_budget: float = 0.5,
-        policy: WatchdogPolicy | str = WatchdogPolicy.ZERO,
+        policy: WatchdogPolicy | str = DEFAULT_WATCHDOG_POLICY,
         latency: int = 0,
     ):
         self.arm = arm

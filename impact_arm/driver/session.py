@@ -26,7 +26,13 @@ from ..physics import jit
 from ..physics.kinds import TextEnum
 from .arm import CommandError, SimulatedArm, Tick
 from ..physics.errors import SimulationError
-from .realtime import PERIOD_PARTS, DriverLoop, WatchdogPolicy, WatchdogState
+from .realtime import (
+    DEFAULT_WATCHDOG_POLICY,
+    PERIOD_PARTS,
+    DriverLoop,
+    WatchdogPolicy,
+    WatchdogState,
+)
 
 LOCKSTEP_REPEAT_S = 1.0  # lockstep: publish a period again when unanswered this long
 
@@ -110,7 +116,7 @@ class Session:
         command_timeout: float,
         command_order: list[int],
         outputs: Outputs | None = None,
-        policy: WatchdogPolicy = WatchdogPolicy.ZERO,
+        policy: WatchdogPolicy = DEFAULT_WATCHDOG_POLICY,
         take_command: Callable[[], Any] | None = None,
         max_takes: int = 100,
         release: Release = Release.FIRST_COMMAND,

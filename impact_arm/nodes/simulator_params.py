@@ -5,7 +5,7 @@ through ``params.declare``, the typed object the node reads."""
 from .. import contract
 from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES
 from ..driver.arm import DEFAULT_BRAKE_TORQUE
-from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy
+from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, DEFAULT_WATCHDOG_POLICY, WatchdogPolicy
 from ..driver.session import Release
 from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
@@ -81,7 +81,7 @@ _PARAMS_BEFORE_JOINTS = (
     # stop holds the joints. zero stays for a controller that must see the arm go limp.
     Param(
         'watchdog_policy',
-        WatchdogPolicy.BRAKE.value,
+        DEFAULT_WATCHDOG_POLICY.value,
         'on a command timeout: brake (hold '
         "the joints where they are, each joint's torque limited to brake_torque, until the "
         'next valid command) or zero (zero torque: the arm falls)',
