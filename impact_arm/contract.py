@@ -61,6 +61,77 @@ DIAGNOSTICS = '/diagnostics'
 # the names of the nodes' DiagnosticStatus (both publish on /diagnostics)
 SIMULATOR_STATUS = 'impact_arm: simulator'
 CONTROLLER_STATUS = 'impact_arm: controller'
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerStatus:
+    """The controller's /diagnostics values (status ``CONTROLLER_STATUS``) with one codec both
+    ways: ``values()`` is what the node publishes, ``parse(values)`` what a reader (``impact-arm
+    run``, the tests, a stand-in) makes of them. Counts are since the node started."""
+
+    chatter: str = ''  # the joints whose commands alternated in sign and grew ('' : none)
+    commands_sent: int = 0
+    strikes: int = 0  # cycles whose down half an impact ended
+    cycles_completed: int = 0  # cycles whose up half ended
+    down_half_start: float = 0.0  # the latest down half's start (sample stamp) [s]
+    repeated_states: int = 0  # the driver's repetitions of a sample, not new periods
+    latency_periods: int = 0  # commands in flight the latest command was predicted over
+    latency_periods_max: int = 0
+    # the run's measured latencies: (periods, count), ascending
+    latency_histogram: tuple[tuple[int, int], ...] = ()
+    implicit_commands: int = 0  # computed with the implicit law (the latency varied)
+    # how the driver showed it applies the commands ('' : not yet), and the ticks that sent
+    # the first command again until it did
+    driver_answered: str = ''
+    unanswered_ticks: int = 0
+    # the inputs dropped, by reason (each a key of its own on the wire), in the node's order
+    dropped: tuple[tuple[str, int], ...] = ()
+
+    def values(self) -> list[tuple[str, str]]:
+        """The key-value pairs of the DiagnosticStatus, in this order."""
+        out: list[tuple[str, str]] = []
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if field.name == 'dropped':
+                out.extend((reason, str(count)) for reason, count in value)
+            elif field.name == 'latency_histogram':
+                out.append((field.name, ' '.join(f'{k}:{n}' for k, n in value)))
+            elif field.name == 'down_half_start':
+                out.append((field.name, repr(float(value))))
+            else:
+                out.append((field.name, str(value)))
+        return out
+
+    @classmethod
+    def parse(cls, values: dict[str, str]) -> ControllerStatus:
+        """The status from its key-values (a DiagnosticStatus's, as a dict). A key the fields
+        do not name is a dropped-input counter; a value that is not of its field's kind
+        raises ValueError naming the key."""
+        known = {field.name: field for field in dataclasses.fields(cls)}
+        kwargs: dict = {}
+        dropped = []
+        for key, text in values.items():
+            try:
+                if key == 'latency_histogram':
+                    pairs = (pair.split(':') for pair in text.split())
+                    kwargs[key] = tuple((int(k), int(n)) for k, n in pairs)
+                elif key in ('chatter', 'driver_answered'):
+                    kwargs[key] = text
+                elif key == 'down_half_start':
+                    kwargs[key] = float(text)
+                elif key in known:
+                    kwargs[key] = int(text)
+                else:
+                    dropped.append((key, int(text)))
+            except ValueError:
+                raise ValueError(f'controller status {key} = {text!r}: not a valid value') from None
+        return cls(**kwargs, dropped=tuple(dropped))
+
+    def dropped_count(self, reason: str) -> int:
+        """Inputs dropped for ``reason`` (0 when the node does not count it)."""
+        return dict(self.dropped).get(reason, 0)
+
+
 RECORDER_STATUS = 'impact_arm: recorder'
 # MCAP metadata record where the recorder writes the samples lost per topic
 # ('lost:/joint_states': '12', 'before_first:/joint_states': '0', ...)

@@ -161,3 +161,32 @@ def test_the_plate_topic_has_its_contract_qos_before_any_publisher_exists():
 
     mounts = contract.qos(contract.SURFACE_MOUNTS, contract.TopicQos(reliability='best_effort'))
     assert mounts == contract.SURFACE_MOUNTS_QOS and mounts.reliability == 'reliable'
+
+
+def test_the_controller_status_codec_round_trips_and_names_a_bad_value():
+    import pytest
+
+    from impact_arm.contract import ControllerStatus
+    from impact_arm.driver.control_inputs import DROPPED
+
+    status = ControllerStatus(
+        chatter='joint2',
+        commands_sent=6251,
+        strikes=16,
+        cycles_completed=15,
+        down_half_start=5.123456789,
+        latency_periods=2,
+        latency_histogram=((0, 1), (2, 6000), (3, 40)),
+        driver_answered='effort',
+        unanswered_ticks=1,
+        dropped=tuple((reason, k) for k, reason in enumerate(DROPPED)),
+    )
+    values = dict(status.values())
+    assert values['latency_histogram'] == '0:1 2:6000 3:40'
+    assert values['stamp_jumps'] == str(DROPPED.index('stamp_jumps'))  # a key of its own
+    assert ControllerStatus.parse(values) == status
+    assert ControllerStatus.parse(values).dropped_count('stamp_jumps') == DROPPED.index(
+        'stamp_jumps'
+    )
+    with pytest.raises(ValueError, match='strikes'):
+        ControllerStatus.parse({**values, 'strikes': 'many'})

@@ -411,6 +411,25 @@ class Controller(Node):
             msg = self._diagnostics()
         self.pub_diag.publish(msg)
 
+    def status(self) -> contract.ControllerStatus:
+        """What /diagnostics reports of the controller now (under ``lock``)."""
+        inputs = self.inputs
+        return contract.ControllerStatus(
+            chatter=self.chatter.summary(),
+            commands_sent=self.sent,
+            strikes=self.strikes,
+            cycles_completed=self.cycles_completed,
+            down_half_start=self.down_half_start,
+            repeated_states=inputs.repeated,
+            latency_periods=len(inputs.in_flight()),
+            latency_periods_max=inputs.latency_max,
+            latency_histogram=tuple(sorted(inputs.latency_seen.items())),
+            implicit_commands=inputs.implicit_commands,
+            driver_answered=inputs.answered_by.value if inputs.answered_by else '',
+            unanswered_ticks=inputs.unanswered,
+            dropped=tuple(inputs.dropped.items()),
+        )
+
     def _diagnostics(self):
         dropped = sum(self.inputs.dropped.values())
         message = 'cycles completed' if self.finished else 'running'
@@ -424,40 +443,11 @@ class Controller(Node):
             name=contract.CONTROLLER_STATUS,
             hardware_id='impact_arm_controller',
             message=message,
-            values=[
-                # the joints whose commands alternated in sign and grew ('' : none)
-                KeyValue(key='chatter', value=chatter),
-                KeyValue(key='commands_sent', value=str(self.sent)),
-                KeyValue(key='strikes', value=str(self.strikes)),
-                KeyValue(key='cycles_completed', value=str(self.cycles_completed)),
-                KeyValue(key='down_half_start', value=repr(self.down_half_start)),
-                # the driver's repetitions of a sample, not taken as new periods
-                KeyValue(key='repeated_states', value=str(self.inputs.repeated)),
-                # commands in flight the latest command was predicted over
-                KeyValue(key='latency_periods', value=str(len(self.inputs.in_flight()))),
-                KeyValue(key='latency_periods_max', value=str(self.inputs.latency_max)),
-                # the run's measured latencies, "periods:count" by periods
-                KeyValue(key='latency_histogram', value=latency_histogram(self.inputs)),
-                # commands computed with the implicit law (the measured latency varied)
-                KeyValue(key='implicit_commands', value=str(self.inputs.implicit_commands)),
-                # how the driver showed it applies the commands ('' : not yet), and the
-                # ticks that sent the first command again until it did
-                KeyValue(
-                    key='driver_answered',
-                    value=self.inputs.answered_by.value if self.inputs.answered_by else '',
-                ),
-                KeyValue(key='unanswered_ticks', value=str(self.inputs.unanswered)),
-                *(KeyValue(key=k, value=str(v)) for k, v in self.inputs.dropped.items()),
-            ],
+            values=[KeyValue(key=k, value=v) for k, v in self.status().values()],
         )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         return msg
-
-
-def latency_histogram(inputs) -> str:
-    """The run's measured latencies as "periods:count" pairs, ascending ("" before any)."""
-    return ' '.join(f'{k}:{n}' for k, n in sorted(inputs.latency_seen.items()))
 
 
 def _unused(raw):

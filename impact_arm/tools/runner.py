@@ -456,18 +456,17 @@ class Run:
             self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
-        controller = simulator_diagnostics(msg, contract.CONTROLLER_STATUS)
-        if controller is not None and not self.stopping:
+        values = simulator_diagnostics(msg, contract.CONTROLLER_STATUS)
+        if values is not None and not self.stopping:
+            values.pop('level'), values.pop('message')
+            controller = contract.ControllerStatus.parse(values)
             # the controller's own commands alternating in sign and growing ('' : none)
-            self.chatter = controller.get('chatter', '') or self.chatter
-            strikes = int(controller.get('strikes', 0))
-            self.strikes = max(self.strikes, strikes)
-            self.cycles_completed = max(
-                self.cycles_completed, int(controller.get('cycles_completed', 0))
-            )
+            self.chatter = controller.chatter or self.chatter
+            self.strikes = max(self.strikes, controller.strikes)
+            self.cycles_completed = max(self.cycles_completed, controller.cycles_completed)
             # the first message of a strike count comes at the strike, while its cycle's
             # down half is still the latest
-            self.down_half_start.setdefault(strikes, float(controller.get('down_half_start', 0)))
+            self.down_half_start.setdefault(controller.strikes, controller.down_half_start)
         values = simulator_diagnostics(msg)
         if values is not None:
             self.diagnostics = values
