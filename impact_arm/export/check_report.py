@@ -31,8 +31,14 @@ def _value(column: Column, x: float) -> str:
     return format(x * scale, fmt)
 
 
-def _difference(column: Column, x: float) -> str:
-    return format(x * UNITS[column][4], '+.2f')
+def _difference(column: Column, x: float, signed: bool = True) -> str:
+    return format(x * UNITS[column][4], '+.2f' if signed else '.2f')
+
+
+def _count(result: CheckResult, rows: tuple[ImpactRow, ...], stopped: str) -> str:
+    """How many impacts a side gave, and why it stopped when they are too few."""
+    short = len(rows) < result.impacts_wanted
+    return f'{len(rows)} impacts' + (f' (stopped: {stopped})' if short else '')
 
 
 def headline(result: CheckResult) -> list[str]:
@@ -43,8 +49,8 @@ def headline(result: CheckResult) -> list[str]:
         f"loop with the scene's controller at {result.rate:g} Hz (zero-order hold), ours "
         f"beside {peer} at the export's time step {result.timestep:g} s.",
         f'The controller sees {CONTROLLER_INPUT}.',
-        f'Ours: {len(result.ours)} impacts ({result.our_stopped}), {result.our_seconds:.1f} s; '
-        f'{peer}: {len(result.theirs)} impacts ({result.peer_stopped}), '
+        f'Ours: {_count(result, result.ours, result.our_stopped)}, {result.our_seconds:.1f} s; '
+        f'{peer}: {_count(result, result.theirs, result.peer_stopped)}, '
         f'{result.peer_steps} steps, {result.peer_seconds:.1f} s.',
     ]
 
@@ -72,7 +78,8 @@ def summary(result: CheckResult) -> list[str]:
         name, unit = UNITS[s.column][0], UNITS[s.column][3]
         lines.append(
             f'| {name.split(" [")[0]} {unit} | {_difference(s.column, s.first)} | '
-            f'{_difference(s.column, s.mean)} | {_difference(s.column, s.worst)} ({s.at}) |'
+            f'{_difference(s.column, s.mean, False)} | '
+            f'{_difference(s.column, s.worst, False)} ({s.at}) |'
         )
     return lines
 
