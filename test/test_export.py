@@ -239,3 +239,17 @@ def test_check_refuses_what_it_cannot_run(tmp_path, paper):
     with pytest.raises(CheckRefused, match=r'--rate 3000: .* whole number'):
         control_rate(paper, 5e-6, 3000.0)
     assert control_rate(paper, 5e-6) == 1000.0  # paper's control is continuous
+
+
+def test_a_nan_in_the_impact_tables_is_a_failure_not_skipped():
+    from impact_arm.export.check import CheckResult
+    from impact_arm.export.impacts import ImpactRow
+    from impact_arm.export.peers import Peer
+
+    row = ImpactRow(0.24, 5.5, 0.39, 142e-6, 3e4)
+    bad = ImpactRow(0.2401, 5.5, float('nan'), 140e-6, 3e4)
+    result = CheckResult('d', 'paper', Peer.MUJOCO, 5e-6, 1000.0, 1, (row, row), (row, bad),
+                         '', '', 0.0, 0.0, 0)  # fmt: skip
+    cor = next(s for s in result.summary if s.column.value == 'cor')
+    assert np.isnan(cor.worst) and cor.at == 2
+    assert result.failures == ['mujoco: cor is nan at impact 2']

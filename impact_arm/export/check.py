@@ -22,7 +22,7 @@ from ..physics.scene import Scene, scene_from_text
 from ..physics.simulate import run
 from .exporter import SCENE_FILE
 from .files import MODEL_FILES
-from .impacts import ColumnSummary, ImpactRow, summarise
+from .impacts import Column, ColumnSummary, ImpactRow, summarise
 from .peers import Peer, require
 from .strike import rigid
 
@@ -89,6 +89,13 @@ class CheckResult:
         for side, rows in (('ours', self.ours), (self.peer.value, self.theirs)):
             if len(rows) != self.impacts_wanted:
                 out.append(f'{side}: {len(rows)} impacts of {self.impacts_wanted}')
+        for side, rows in (('ours', self.ours), (self.peer.value, self.theirs)):
+            out += [
+                f'{side}: {c.value} is {getattr(r, c.value)} at impact {k + 1}'
+                for k, r in enumerate(rows)
+                for c in Column
+                if not math.isfinite(getattr(r, c.value))
+            ]
         worst = self.summary[0]
         if not worst.worst <= self.tolerance:  # NaN fails too
             out.append(

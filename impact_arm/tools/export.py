@@ -23,7 +23,9 @@ def _at_least_one(what: str) -> Callable[[str], int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--scene', default='paper', help='scene file or installed scene name')
+    parser.add_argument(
+        '--scene', default=None, help='scene file or installed scene name (default paper)'
+    )
     parser.add_argument(
         '--fitted',
         metavar='FILE',
@@ -79,6 +81,11 @@ def _check(args: argparse.Namespace) -> int:
 
 def cli(args: argparse.Namespace) -> int:
     if args.check:
+        given = [f for f in ('scene', 'fitted', 'to', 'out', 'budget') if getattr(args, f)]
+        if given:
+            raise ImpactArmError(
+                f'--check DIR takes the export in DIR as it is: no --{", --".join(given)}'
+            )
         return _check(args)
     if args.cycles is not None or args.rate is not None:
         raise ImpactArmError('--cycles and --rate go with --check DIR')
@@ -86,7 +93,7 @@ def cli(args: argparse.Namespace) -> int:
         raise ImpactArmError('--to mujoco|drake|gazebo and --out DIR are required (or --check DIR)')
     from ..export.exporter import BUDGET, export
 
-    report = export(args.scene, args.to, args.out, args.fitted, args.budget or BUDGET)
+    report = export(args.scene or 'paper', args.to, args.out, args.fitted, args.budget or BUDGET)
     for line in [
         f'wrote {args.out}: the {args.to} model, README.md, report.md, report.json, scene.yaml',
         f'time step {report.timestep:g} s; export took {report.seconds:.1f} s',
