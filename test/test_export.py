@@ -188,3 +188,68 @@ def test_a_missing_peer_package_is_named_with_its_pip_command(monkeypatch):
         peers.require(peers.Peer.DRAKE)
     peers.require(peers.Peer.MUJOCO)  # installed for the tests
     peers.require(peers.Peer.GAZEBO)  # not run: nothing to install
+
+
+def _wrong_contact(source, target):
+    """A copy of the export in ``source`` with a contact of too little damping (e about 0.7
+    where ours is 0.39)."""
+    import re
+    import shutil
+
+    shutil.copytree(source, target)
+    model = target / 'arm.xml'
+    model.write_text(re.sub(r'solref="(\S+) \S+"', r'solref="\1 0.1"', model.read_text()))
+    return target
+
+
+def test_check_reruns_the_mujoco_export_beside_ours(tmp_path, capsys):
+    """--check on a fresh MuJoCo export of paper: 16 impacts on both sides, every contact
+    time within two control periods of ours (each sampled switch may fall one period apart;
+    the exported contact's cycle keeps ours to a constant offset). A contact that rebounds
+    too much shortens every cycle by about a period: its contact times drift past the
+    tolerance by the 6th impact, and --check says they differ."""
+    pytest.importorskip('mujoco')
+    from impact_arm.export.check import check
+    from impact_arm.tools.cli import main
+
+    out = tmp_path / 'paper'
+    export('paper', 'mujoco', str(out), budget=40, ratios=RATIOS)
+    result = check(str(out))
+    assert len(result.ours) == len(result.theirs) == 16
+    assert result.tolerance == pytest.approx(2e-3)
+    assert not result.failures
+    assert max(abs(b.t_contact - a.t_contact) for a, b in zip(result.ours, result.theirs)) < 2e-3
+    wrong = _wrong_contact(out, tmp_path / 'wrong')
+    assert main(['export', '--check', str(wrong)]) == 1
+    printed = capsys.readouterr().out
+    assert 'DIFFER: contact time' in printed and '| 16 |' in printed
+    data = json.loads((wrong / 'check.json').read_text())
+    assert not data['agree'] and len(data['peer_impacts']) == 16
+    assert data['summary']['t_contact']['worst_abs'] > 2e-3
+
+
+def test_check_refuses_what_it_cannot_run(tmp_path, paper):
+    from impact_arm.export.check import CheckRefused, control_rate, read_export
+
+    with pytest.raises(CheckRefused, match='not an export'):
+        read_export(str(tmp_path))
+    (tmp_path / 'report.json').write_text(json.dumps({'peer': 'drake', 'timestep': 5e-6}))
+    with pytest.raises(CheckRefused, match=r'an export to drake; --check runs mujoco'):
+        read_export(str(tmp_path))
+    with pytest.raises(CheckRefused, match=r'--rate 3000: .* whole number'):
+        control_rate(paper, 5e-6, 3000.0)
+    assert control_rate(paper, 5e-6) == 1000.0  # paper's control is continuous
+
+
+def test_a_nan_in_the_impact_tables_is_a_failure_not_skipped():
+    from impact_arm.export.check import CheckResult
+    from impact_arm.export.impacts import ImpactRow
+    from impact_arm.export.peers import Peer
+
+    row = ImpactRow(0.24, 5.5, 0.39, 142e-6, 3e4)
+    bad = ImpactRow(0.2401, 5.5, float('nan'), 140e-6, 3e4)
+    result = CheckResult('d', 'paper', Peer.MUJOCO, 5e-6, 1000.0, 1, (row, row), (row, bad),
+                         '', '', 0.0, 0.0, 0)  # fmt: skip
+    cor = next(s for s in result.summary if s.column.value == 'cor')
+    assert np.isnan(cor.worst) and cor.at == 2
+    assert result.failures == ['mujoco: cor is nan at impact 2']

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..physics.model import ArmModel
-from ..physics.scene import Scene, load_scene
+from ..physics.scene import Scene, load_scene, self_contained_text
 from .arm import planar_arm
 from .files import MODEL_FILES, model_text, readme, write
 from .peers import Peer, require
@@ -22,6 +22,7 @@ from .strike import SPEED_RATIOS, Outcome, Strike, limit_cycle_impact, our_outco
 from .tuning import tune
 
 BUDGET = 400  # peer evaluations (each: every strike) of the CLI's search
+SCENE_FILE = 'scene.yaml'  # the exported scene's YAML, in the export's directory
 STEPS_PER_CONTACT = 25  # the recommended time step resolves our shortest contact this finely
 
 
@@ -117,8 +118,8 @@ def export(
     ratios: tuple[float, ...] = SPEED_RATIOS,
 ) -> PeerReport:
     """Write ``peer``'s model of ``scene`` (or of the ``fitted`` scene) with its contact
-    tuned on the strikes at ``ratios`` of the limit-cycle speed, the README and the
-    report into ``out``; returns the report."""
+    tuned on the strikes at ``ratios`` of the limit-cycle speed, the README, the report
+    and the scene's YAML (``SCENE_FILE``) into ``out``; returns the report."""
     started = time.perf_counter()
     peer = Peer(peer)
     require(peer)
@@ -145,6 +146,9 @@ def export(
     arm = planar_arm(the_scene)
     write(out, MODEL_FILES[peer], model_text(arm, peer, tuned.contact))
     write(out, 'README.md', readme(arm, peer, tuned.contact, dt))
+    # the scene itself (a URDF arm's description inlined), so that ``--check`` rebuilds our
+    # side of the comparison from DIR alone, wherever the scene's own files are
+    write(out, SCENE_FILE, self_contained_text(the_scene))
     import dataclasses
 
     report = dataclasses.replace(report, seconds=time.perf_counter() - started)

@@ -55,7 +55,9 @@ def readme(arm: PlanarArm, peer: Peer, contact: object, timestep: float) -> str:
         "`surface1`, ... sit one tip radius below the scene's heights, because the package "
         "measures indentation at the tip's centre. Mounted surfaces are exported rigid. "
         f'Run at the time step the contact was fitted at: **{timestep:g} s**. '
-        "report.md and report.json give the residual against the package's model.\n\n"
+        "report.md and report.json give the residual against the package's model; "
+        'scene.yaml is the exported scene, which `impact-arm export --check DIR` reruns '
+        'beside the package in closed loop (MuJoCo).\n\n'
     )
     if peer is Peer.MUJOCO:
         return common + (
