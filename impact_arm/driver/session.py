@@ -462,6 +462,7 @@ class LockstepSession(Session):
             raise ValueError(f'release_after = {release_after}: must be >= 0 s')
         self.release_after = release_after
         self._last_braked = -math.inf  # when the latest braked period ran (wall clock)
+        self._braked_start: float | None = None  # when the first one ran
         self.loop.stats.nominal = None  # lockstep has no wall period to jitter around
         self.window_ns = round(recorder_window * 1e9 / self.publish_rate)
         self.recorder_window = recorder_window
@@ -487,8 +488,16 @@ class LockstepSession(Session):
         return False
 
     def _braked_period(self, now: float) -> None:
+        """One braked period, no sooner than in real time from the first (the controller has
+        ``release_after`` wall seconds from the simulator's start to send its first command)."""
         if self.failed:
             return
+        if self._braked_start is None:
+            self._braked_start = now
+        due = self._braked_start + self.braked_periods / self.arm.rate
+        if due > now:
+            self.sleep(due - now)
+            now = self.clock()
         self.arm.hold_still()
         self.braked_periods += 1
         self._last_braked = now
@@ -519,6 +528,7 @@ class LockstepSession(Session):
     def _reset(self) -> bool:
         self.loop.request_reset(None)
         self.braked_periods = 0
+        self._braked_start = None
         self.deferred = None
         self.recorded_until = None  # the recorder's next progress is after the reset
         self.out.publish(self.arm.sample())

@@ -118,7 +118,8 @@ _PARAMS_BEFORE_JOINTS = (
         'release_after',
         0.0,
         'lockstep: > 0: every command before the release runs a braked period (time advances, '
-        'the arm held, /clock published) and the brakes release at the first command release_on '
+        'no faster than real time, the arm held, /clock published) and the brakes release at '
+        'the first command release_on '
         'takes from this simulated time on [s]: a stack on use_sim_time keeps updating and '
         'starts at a fixed time; 0: time stopped until the release',
         low=0.0,
