@@ -33,6 +33,21 @@ by a period from command to command, some commands never reach the hardware and 
 written twice; counted in the JSON lines as "postponed". Decided per update, it stays on the
 updates' grid whatever the machine's scheduling.
 
+``--use-sim-time``: the update loop on simulated time, as ``ros2_control_node`` with
+``use_sim_time`` (4.26: it sleeps with ``cm->get_clock()->sleep_until(current_time +
+period)``): an update runs at time 0 (no /clock yet), then each time /clock reaches the
+previous update's time + 1/``--rate``; the broadcaster's states and the commands are stamped
+with that time. Its read waits (at most ``--wait-for-peers`` wall seconds, default 1 here) for
+the hardware's state stamped with the update's time: /clock and the states are different
+topics, and the real TopicBasedSystem takes the newest state it has, which may be the
+previous period's (a period of variation the stand-in does not show). Its effort controller,
+when the state it broadcast has moved (an answer is due), waits (as long) for the controller's
+answer to it before it takes the newest command: the controller as if it ran inside the update,
+as gz_ros2_control's and mujoco_ros2_control's controllers do; the real
+JointGroupEffortController takes what has arrived. Waits that ran out are counted in the JSON
+lines ("late_states", "unanswered"). Written ``--late`` updates late (default 1): a command
+computed from the state at t acts from t + 1/rate on, whatever the machine's load.
+
 Scheduled as a controller_manager's update loop: each update sleeps until its deadline on a
 fixed schedule (missed deadlines are skipped), then reads what the subscriptions queued
 meanwhile (no executor, no timer); the loop thread and the middleware threads created with the
@@ -55,7 +70,8 @@ from collections import deque
 
 import rclpy
 from rclpy.impl.implementation_singleton import rclpy_implementation
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -78,7 +94,10 @@ def main():
     parser.add_argument('--late', type=int, default=1, help='updates a command is written late')
     parser.add_argument('--duration', type=float, default=60.0)
     parser.add_argument('--unsynchronised', type=float, default=0.0, help='chance 0..1')
-    parser.add_argument('--wait-for-peers', type=float, default=0.0, help='s, at most')
+    parser.add_argument('--wait-for-peers', type=float, help='s, at most (default 0; sim time 1)')
+    parser.add_argument(
+        '--use-sim-time', action='store_true', help='update on /clock (simulated time)'
+    )
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--priority', type=int, default=50, help='SCHED_FIFO, 0: normal')
     parser.add_argument(
@@ -96,6 +115,8 @@ def main():
         '--initial-positions', nargs='+', type=float, help='rad (default 0 for each joint)'
     )
     args = parser.parse_args()
+    if args.wait_for_peers is None:
+        args.wait_for_peers = 1.0 if args.use_sim_time else 0.0
     joints = args.joints
     initial = args.initial_positions or [0.0] * len(joints)
     if len(initial) != len(joints):
@@ -122,8 +143,27 @@ def main():
             newest['command'] = list(msg.data)
             received['commands'] += 1
 
+    clock = {'ns': 0}  # simulated time: 0 until the first /clock, as rclpy's
+
+    def on_clock(msg):
+        clock['ns'] = max(clock['ns'], msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
+
+    states_by_stamp = {}  # sim time: the states by stamp (ns), until read
+
+    def on_state_stamped(msg):
+        on_state(msg)
+        states_by_stamp[msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec] = msg
+
     readers = (
-        (node.create_subscription(JointState, '/robot_joint_states', on_state, qos), on_state),
+        (
+            node.create_subscription(
+                JointState,
+                '/robot_joint_states',
+                on_state_stamped if args.use_sim_time else on_state,
+                qos,
+            ),
+            on_state_stamped if args.use_sim_time else on_state,
+        ),
         (
             node.create_subscription(
                 Float64MultiArray, '/arm_effort_controller/commands', on_command, qos
@@ -131,6 +171,9 @@ def main():
             on_command,
         ),
     )
+    if args.use_sim_time:  # (the simulator's /clock is best effort, as rclcpp's ClockQoS)
+        clock_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        readers += ((node.create_subscription(Clock, '/clock', on_clock, clock_qos), on_clock),)
     wait_set = WaitSet(len(readers), 0, 0, 0, 0, 0, node.context.handle)
 
     def read_queued():
@@ -169,8 +212,73 @@ def main():
         answered = not answer_due or received['commands'] > commands_before
         return received['states'] > states_read and answered
 
+    def wait_until(condition):
+        """Take samples until ``condition()`` or --wait-for-peers wall seconds; whether it
+        held."""
+        read_queued()
+        end = time.monotonic() + args.wait_for_peers
+        while not condition():
+            left = end - time.monotonic()
+            if left <= 0:
+                return False
+            wait_for_sample(left)
+            read_queued()
+        return True
+
     gc.collect()
     gc.freeze()  # what lives for the whole run, out of the collector's sight
+    if args.use_sim_time:
+        counts = {'n': 0, 'zeros': 0, 'late_states': 0, 'unanswered': 0}
+        now_ns = 0
+        period_ns = round(1e9 / args.rate)
+        previous = None  # the positions broadcast by the previous update
+        while rclpy.ok() and time.monotonic() - start < args.duration:
+            # read: the state stamped with this update's time (else, after the wait, the
+            # newest: what the real TopicBasedSystem takes at once)
+            if not wait_until(lambda t=now_ns: t in states_by_stamp):
+                counts['late_states'] += 1
+            msg = states_by_stamp.get(now_ns, newest['state'])
+            for stamp_ns in [t for t in states_by_stamp if t <= now_ns]:
+                del states_by_stamp[stamp_ns]
+            if msg is not None:
+                index = [list(msg.name).index(j) for j in joints]
+                state_interfaces = tuple(
+                    [float(values[i]) for i in index]
+                    for values in (msg.position, msg.velocity, msg.effort)
+                )
+            stamp = JointState().header.stamp
+            stamp.sec, stamp.nanosec = divmod(now_ns, 1_000_000_000)
+            out = JointState(name=list(joints))
+            out.header.stamp = stamp
+            out.position, out.velocity, out.effort = state_interfaces
+            before = received['commands']
+            broadcast.publish(out)
+            # the controller answers a state that moved (not a repetition): taken in this
+            # update, as a controller inside the update loop would be
+            if previous is not None and list(out.position) != previous:
+                if not wait_until(lambda n=before: received['commands'] > n):
+                    counts['unanswered'] += 1
+            previous = list(out.position)
+            if newest['command'] is not None:
+                command_interfaces = newest['command']
+            written.append(list(command_interfaces))
+            value = written.popleft()
+            command = JointState(name=list(joints), effort=value)
+            command.header.stamp = stamp
+            hardware_out.publish(command)
+            counts['zeros'] += not any(value)
+            counts['n'] += 1
+            if counts['n'] % 100 == 0:
+                print(json.dumps({'event': 'update', **counts}), flush=True)
+            # sleep until /clock reaches this update's time + period
+            due = now_ns + period_ns
+            while rclpy.ok() and time.monotonic() - start < args.duration:
+                if wait_until(lambda t=due: clock['ns'] >= t):
+                    break
+            now_ns = clock['ns']
+        node.destroy_node()
+        rclpy.try_shutdown()
+        return
     while rclpy.ok() and time.monotonic() - start < args.duration:
         # read
         read_queued()

@@ -8,6 +8,12 @@ per wall second on its sleep-until schedule (no waiting for peers), the simulato
 ``mode:=realtime`` at 1 kHz, the project's controller remapped to the broadcaster's states and
 the effort controller's commands, with its default start-up hold. The run lasts until the
 article's 15 cycles (16 impacts), a process ends, or ``timeout`` wall seconds.
+
+``sim_time`` = X s: docs/ros2_control.md's reproducible set-up instead: the stand-in on
+simulated time (``--use-sim-time``, commands written one update late), the simulator
+``mode:=lockstep`` as fast as the stack goes with ``release_after:=X`` (braked, time running,
+until X), the controller with ``use_sim_time:=true`` and a start-up hold of 0.5 s (it must
+send its first command before the simulator reaches X).
 """
 
 from __future__ import annotations
@@ -67,6 +73,7 @@ class StackRun:
     wall_s: float
     sim_time_s: float
     load_average: float
+    thread_cpu_percent: dict = field(default_factory=dict)
     second_strike_s: float = SECOND_STRIKE_S
     contacts: list[float] = field(init=False)
 
@@ -154,6 +161,7 @@ class StackRun:
             'zero_commands_before_release': int(sim.get('zero_commands_before_release', -1)),
             'standin_updates': self.standin_updates,
             'cpu_percent': self.cpu_percent,
+            'thread_cpu_percent': self.thread_cpu_percent,
             'load_average': self.load_average,
         }
 
@@ -165,6 +173,7 @@ def commands(
     controller_params=(),
     scene: str | None = None,
     standin_args=(),
+    sim_time: float | None = None,
 ) -> dict:
     """Each role's command line; ``scene``: a scene file for the simulator and the
     controller (default: the article's), whose joints the stand-in then drives."""
@@ -177,6 +186,12 @@ def commands(
     # the broadcaster publishes it until the simulator's first state
     initial = loaded.joint_coordinates.positions(loaded.q0)
     scene_param = [f'scene:={os.path.abspath(scene)}'] if scene else []
+    if sim_time:
+        sim = ['mode:=lockstep', 'rate_factor:=0.0', f'release_after:={sim_time!r}']
+        standin_args = ('--use-sim-time', *standin_args)
+        controller_params = ('use_sim_time:=true', 'startup_hold:=0.5', *controller_params)
+    else:
+        sim = ['mode:=realtime']
     return {
         'standin': [
             sys.executable,
@@ -194,7 +209,7 @@ def commands(
             *(repr(float(v)) for v in initial),
             *standin_args,
         ],
-        'simulator': simulator('mode:=realtime', *scene_param),
+        'simulator': simulator(*sim, *scene_param),
         'controller': controller(
             'start_after:=wrench', *scene_param, *controller_params, ros_args=REMAPS
         ),
@@ -212,11 +227,16 @@ def run_stack(
     cpu_seconds: Callable[[int], float] | None = None,
     scene: str | None = None,
     standin_args=(),
+    sim_time: float | None = None,
+    cycles: int = CYCLES,
+    thread_cpu: Callable[[int], dict[str, float]] | None = None,
 ) -> StackRun:
     """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain, of the
     article's arm or ``scene``'s; every process is ended by PID on the way out. With
     ``cpu_seconds`` (a process's CPU time by PID), the CPU each process used while the
-    controller drove the arm."""
+    controller drove the arm, and with ``thread_cpu`` (a process's CPU time by thread name)
+    each thread's. ``sim_time``: the reproducible set-up on simulated time (``commands``);
+    ``cycles``: the run ends after cycles + 1 impacts."""
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
 
@@ -231,7 +251,7 @@ def run_stack(
         keep=lambda m: bool(m.status) and 'controller' in m.status[0].name,
     )
     lines = commands(
-        timeout + 30, standin, standin_priority, controller_params, scene, standin_args
+        timeout + 30, standin, standin_priority, controller_params, scene, standin_args, sim_time
     )
     procs = {}
     try:
@@ -250,16 +270,18 @@ def run_stack(
                     break
                 time.sleep(0.02)
             cpu0 = {r: cpu_seconds(p.pid) for r, p in procs.items()} if cpu_seconds else {}
+            threads0 = {r: thread_cpu(p.pid) for r, p in procs.items()} if thread_cpu else {}
             wall0 = time.monotonic()
             end = wall0 + timeout
             while (
-                len(reports) < CYCLES + 1
+                len(reports) < cycles + 1
                 and time.monotonic() < end
                 and all(p.alive() for p in procs.values())
             ):
                 time.sleep(0.05)
             alive = {r: p.alive() for r, p in procs.items()}
             cpu1 = {r: cpu_seconds(procs[r].pid) if alive[r] else cpu0[r] for r in cpu0}
+            threads1 = {r: thread_cpu(procs[r].pid) if alive[r] else {} for r in threads0}
             wall = time.monotonic() - wall0
             driven = [json.loads(m.data) for _, m in list(reports)]
             sim_time = float(sim_values().get('sim_time', 'nan'))  # (its latest report)
@@ -277,6 +299,13 @@ def run_stack(
                 standin_updates=updates[-1] if updates else {},
                 alive=alive,
                 cpu_percent={r: 100 * (cpu1[r] - cpu0[r]) / max(wall, 1e-9) for r in cpu0},
+                thread_cpu_percent={
+                    r: {
+                        name: 100 * (t - threads0[r].get(name, 0.0)) / max(wall, 1e-9)
+                        for name, t in threads1[r].items()
+                    }
+                    for r in threads0
+                },
                 wall_s=wall,
                 sim_time_s=sim_time,
                 load_average=os.getloadavg()[0],

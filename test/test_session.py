@@ -711,3 +711,45 @@ def test_a_driver_that_reports_no_effort_answers_by_moving(scene):
     state(c, 0.003, q=(1.001, 0.5), qd=(0.5, 0.0))
     assert c.answered_by is not None and c.answered_by.value == 'motion'
     assert len(sent) == 3 and sent[2] != sent[0]
+
+
+def test_release_after_runs_braked_periods_until_its_time_then_releases():
+    """Lockstep ``release_after``: each command before the release runs a braked period (time
+    advances, the arm stays, the period goes out), zero or not; from the release time on the
+    first non-zero JointState command releases the brakes and runs the first real period."""
+    from impact_arm.driver.session import JointCommand, LockstepSession, Outputs
+
+    arm = SimulatedArm(load_scene(resolve_scene_path('paper')), RATE, trace=False)
+    q0 = arm.sample().position
+    ticks = []
+    session = LockstepSession(
+        arm,
+        publish_rate=RATE,
+        rate_factor=0.0,
+        command_timeout=math.inf,
+        command_order=[0, 1],
+        outputs=Outputs(publish=ticks.append),
+        clock=lambda: 0.0,
+        sleep=lambda s: None,
+        release_after=3 / RATE,
+        release='nonzero_joint_command',
+    )
+    for torques in ([0.0, 0.0], [5.0, 1.0], [5.0, 1.0]):
+        assert session.offer(JointCommand(lambda t=torques: list(t)))
+    assert not session.released() and session.braked_periods == 3
+    assert [t.t for t in ticks] == pytest.approx([1 / RATE, 2 / RATE, 3 / RATE])
+    assert all(t.position == q0 for t in ticks) and session.zero_before_release == 1
+    session.offer(JointCommand(lambda: [0.0, 0.0]))  # zero: braked still, time running
+    assert not session.released() and session.braked_periods == 4
+    session.offer(JointCommand(lambda: [5.0, 1.0]))
+    assert session.released() and arm.periods == 5 and ticks[-1].position != q0
+    assert session.take_status(0.0).value('braked_periods') == '4'
+    with pytest.raises(ValueError, match='release_after'):
+        LockstepSession(
+            arm,
+            publish_rate=RATE,
+            rate_factor=0.0,
+            command_timeout=1.0,
+            command_order=[0, 1],
+            release_after=float('nan'),
+        )

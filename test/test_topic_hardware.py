@@ -324,3 +324,68 @@ def judge_realtime_stack(run, offline):
     assert run.ctrl['stamp_jumps'] == '0', report
     if stalled:
         pytest.skip(f'the machine did not keep the schedule ({"; ".join(stalled)}): {report}')
+
+
+# The reproducible set-up on simulated time (docs/ros2_control.md): the stand-in updates on
+# /clock, the simulator in lockstep runs braked until SIM_TIME_RELEASE s, the controller uses
+# simulated time. A command computed from the state at t acts from t + 1 period, whatever the
+# machine's load: the run is the offline closed loop's at one period of latency, bit for bit.
+SIM_TIME_RELEASE = 3.0  # s: the controller has as many wall seconds to start
+SIM_TIME_CYCLES = 3  # 4 impacts
+
+
+def test_the_sim_time_standin_stack_repeats_the_offline_loop_at_any_load(ros_env, tmp_path):
+    """Two runs, the second beside two busy loops: the same impacts to the bit (t_contact,
+    δm, F_max), each the offline closed loop's with one period of latency and the same
+    release, and the controller measured one period throughout (0 once, at the release)."""
+    import subprocess
+    import sys
+
+    from standin_stack import run_stack
+
+    from impact_arm.physics.scene import load_scene, resolve_scene_path
+    from impact_arm.tools.latency_study import closed_loop
+
+    offline = closed_loop(
+        load_scene(resolve_scene_path('paper')),
+        1,
+        -1,
+        t_max=SIM_TIME_RELEASE + 0.4 * (SIM_TIME_CYCLES + 1) + 0.2,
+        release_after=SIM_TIME_RELEASE,
+    )
+    runs = []
+    for busy_loops in (0, 2):
+        busy = [
+            subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(busy_loops)
+        ]
+        workdir = tmp_path / f'busy_{busy_loops}'
+        workdir.mkdir()
+        try:
+            runs.append(
+                run_stack(
+                    ('standin', 'simulator', 'controller'),
+                    ros_env,
+                    str(workdir),
+                    timeout=60.0,
+                    sim_time=SIM_TIME_RELEASE,
+                    cycles=SIM_TIME_CYCLES,
+                )
+            )
+        finally:
+            for p in busy:
+                p.kill()
+                p.wait()
+    n = SIM_TIME_CYCLES + 1
+    for run in runs:
+        assert len(run.impacts) >= n and all(run.alive.values()), run.as_dict()
+        # released at the fixed time: the controller's first command came before it
+        assert run.contacts[:n] == list(offline.t_contact[:n]), (run.contacts, offline)
+        assert [r['delta_m'] for r in run.impacts[:n]] == list(offline.delta_m[:n])
+        latencies = dict(p.split(':') for p in run.ctrl['latency_histogram'].split())
+        assert set(latencies) <= {'0', '1'} and int(latencies.get('0', 0)) <= 1, run.ctrl
+        assert run.standin_updates['late_states'] <= 1, run.standin_updates  # (its first)
+        assert run.standin_updates['unanswered'] == 0, run.standin_updates
+    first, second = (
+        [(r['t_contact'], r['delta_m'], r['F_max']) for r in run.impacts[:n]] for run in runs
+    )
+    assert first == second

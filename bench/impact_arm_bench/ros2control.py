@@ -12,13 +12,24 @@ impacts) or ``--timeout``: impacts, second strikes (two within 50 ms), the first
 simulated time, the largest penetration δm, the controller's measured latency histogram and
 implicit commands, the simulator's overruns and skipped periods, the stand-in's stale updates,
 and CPU per process (user + system over the driven part of the run). Processes run on a free
-local DDS domain (localhost discovery) and are ended by PID.
+local DDS domain (localhost discovery) and are ended by PID. ``--threads``: CPU per thread
+too (user + system from /proc/PID/task/*/stat, by thread name).
+
+``--sim-time X``: docs/ros2_control.md's reproducible set-up on simulated time instead (the
+stand-in updating on /clock, the simulator in lockstep braked until X s, the controller with
+use_sim_time), and the offline closed loop (impact_arm.tools.latency_study.closed_loop) at the
+latency it fixes, one period, with the same release: per run whether the impacts equal the
+offline loop's to the bit (t_contact, δm), and whether all runs are identical (t_contact, δm,
+F_max and the controller's latency histogram). ``--busy N`` runs N busy loops beside the
+even-numbered runs (run 2, 4, ...): the same run at another load.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 import tempfile
 
 from .common import cpu_seconds
@@ -65,6 +76,20 @@ def add_arguments(parser):
         '--logs', metavar='DIR', help="keep each run's process output in DIR/run_N (default: none)"
     )
     parser.add_argument('--json', metavar='FILE', help='write the runs as JSON')
+    parser.add_argument(
+        '--sim-time',
+        type=float,
+        metavar='X',
+        help='the reproducible set-up on simulated time, the arm released at X s (e.g. 3)',
+    )
+    parser.add_argument(
+        '--busy',
+        type=int,
+        default=0,
+        metavar='N',
+        help='busy loops beside every second run (default 0)',
+    )
+    parser.add_argument('--threads', action='store_true', help='CPU per thread too')
 
 
 def _one_run(args, order, workdir):
@@ -81,8 +106,58 @@ def _one_run(args, order, workdir):
         standin_args=('--fifo-threads', args.standin_fifo_threads),
         controller_params=args.controller_params,
         cpu_seconds=lambda pid: cpu_seconds(f'/proc/{pid}/stat'),
+        thread_cpu=thread_cpu_seconds if args.threads else None,
         scene=args.scene,
-    ).as_dict()
+        sim_time=args.sim_time,
+    )
+
+
+def thread_cpu_seconds(pid: int) -> dict[str, float]:
+    """User + system CPU seconds of each of a process's threads, by ``name/tid`` (a thread
+    that ended meanwhile is left out)."""
+    out = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            with open(f'/proc/{pid}/task/{tid}/comm') as f:
+                name = f.read().strip()
+            out[f'{name}/{tid}'] = cpu_seconds(f'/proc/{pid}/task/{tid}/stat')
+        except OSError:
+            continue
+    return out
+
+
+def _offline(args):
+    """The offline closed loop the sim-time set-up is compared with: one period of latency,
+    the latency measured from the efforts, the same release."""
+    from standin_stack import CYCLES
+
+    from impact_arm.physics.scene import load_scene, resolve_scene_path
+    from impact_arm.tools.latency_study import closed_loop
+
+    scene = load_scene(args.scene or resolve_scene_path('paper'))
+    return closed_loop(
+        scene, 1, -1, t_max=args.sim_time + 0.4 * (CYCLES + 2), release_after=args.sim_time
+    )
+
+
+def _busy(n):
+    return [
+        subprocess.Popen([sys.executable, '-c', 'while True: pass'], stdin=subprocess.DEVNULL)
+        for _ in range(n)
+    ]
+
+
+def _identical(runs) -> bool:
+    """The first CYCLES + 1 impacts to the bit, and the latencies the controller measured
+    (its histogram's counts run on until its latest diagnostics, at a wall-clock moment)."""
+    from standin_stack import CYCLES
+
+    def key(run):
+        impacts = [(r['t_contact'], r['delta_m'], r['F_max']) for r in run.impacts[: CYCLES + 1]]
+        latencies = sorted(p.split(':')[0] for p in run.ctrl.get('latency_histogram', '').split())
+        return impacts, latencies
+
+    return len({repr(key(r)) for r in runs}) == 1
 
 
 def run(args) -> int:
@@ -91,15 +166,32 @@ def run(args) -> int:
     order = [r.strip() for r in args.order.split(',')]
     if sorted(order) != sorted(ROLES):
         raise SystemExit(f'--order = {args.order}: must be a permutation of {",".join(ROLES)}')
-    results = []
+    results, runs = [], []
+    offline = _offline(args) if args.sim_time else None
     for i in range(args.runs):
-        if args.logs:
-            workdir = os.path.join(args.logs, f'run_{i + 1}')
-            os.makedirs(workdir, exist_ok=True)
-            result = _one_run(args, order, workdir)
-        else:
-            with tempfile.TemporaryDirectory(prefix='bench_ros2control_') as workdir:
-                result = _one_run(args, order, workdir)
+        busy = _busy(args.busy) if i % 2 else []
+        try:
+            if args.logs:
+                workdir = os.path.join(args.logs, f'run_{i + 1}')
+                os.makedirs(workdir, exist_ok=True)
+                run_i = _one_run(args, order, workdir)
+            else:
+                with tempfile.TemporaryDirectory(prefix='bench_ros2control_') as workdir:
+                    run_i = _one_run(args, order, workdir)
+        finally:
+            for p in busy:
+                p.kill()
+                p.wait()
+        runs.append(run_i)
+        result = run_i.as_dict()
+        result['busy_loops'] = len(busy)
+        if offline is not None:
+            n = min(len(run_i.impacts), CYCLES + 1)
+            result['equals_offline'] = (
+                n > 0
+                and [r['t_contact'] for r in run_i.impacts] == list(offline.t_contact[:n])
+                and [r['delta_m'] for r in run_i.impacts] == list(offline.delta_m[:n])
+            )
         results.append(result)
         cpu = ' '.join(f'{r} {v:.0f}%' for r, v in result['cpu_percent'].items())
         print(
@@ -112,11 +204,22 @@ def run(args) -> int:
             f'no new command {result["periods_without_new_command"]}, watchdog '
             f'{result["watchdog_timeouts"]}; stand-in '
             f'{result["standin_updates"]}; CPU {cpu}; load {result["load_average"]:.1f}; '
-            f'ended: {[r for r, up in result["alive"].items() if not up]}',
+            f'ended: {[r for r, up in result["alive"].items() if not up]}'
+            + (f'; busy loops {len(busy)}' if busy else '')
+            + (f'; equals offline: {result["equals_offline"]}' if offline is not None else ''),
             flush=True,
         )
+        for role, threads in result['thread_cpu_percent'].items():
+            top = sorted(threads.items(), key=lambda kv: -kv[1])
+            print(f'  {role} threads: ' + ', '.join(f'{k} {v:.1f}%' for k, v in top if v >= 0.1))
     held = sum(r['impacts'] >= CYCLES + 1 and r['second_strikes'] == 0 for r in results)
     print(f'{held} of {len(results)} runs: {CYCLES} cycles, no second strike')
+    if offline is not None:
+        print(
+            f'offline closed loop, 1 period of latency, released at {args.sim_time:g} s: first '
+            f'strike {offline.t_contact[0]!r} s, δm {offline.delta_m[0]!r} m; runs identical '
+            f'(t_contact, δm, F_max, latency histogram): {_identical(runs)}'
+        )
     if args.json:
         with open(args.json, 'w') as f:
             json.dump(results, f, indent=1)

@@ -221,6 +221,13 @@ class SimulatedArm:
     def t(self) -> float:
         return self.integrator.state.t
 
+    def hold_still(self) -> None:
+        """A braked period: simulated time advances one period and the arm stays where it is
+        (no physics runs; whatever command was held stays held)."""
+        self.periods += 1
+        y, n = self.integrator.state.y, self.n
+        self.integrator.set_state(self.periods / self.rate, y[:n].copy(), y[n : 2 * n].copy())
+
     def step(self) -> Tick:
         """Advance one period under the held command; raises SimulationError when the physics
         leaves its validity (the state stays at the last good point)."""

@@ -35,6 +35,9 @@ from .realtime import (
 )
 
 LOCKSTEP_REPEAT_S = 1.0  # lockstep: publish a period again when unanswered this long
+# lockstep release_after: before the release, a braked period of its own when no command came
+# for this long
+LOCKSTEP_BRAKED_S = 0.1
 
 
 class Level(IntEnum):
@@ -127,6 +130,7 @@ class Session:
         self.arm = arm
         self.release = Release(release)
         self.zero_before_release = 0  # all-zero commands that left the brakes on
+        self.braked_periods = 0  # lockstep release_after: periods run braked before the release
         self.out = outputs or Outputs()
         self.publish_rate, self.rate_factor = publish_rate, rate_factor
         self.command_order = command_order
@@ -170,7 +174,7 @@ class Session:
 
     def released(self) -> bool:
         """Whether a command has released the brakes (since the start or the last reset)."""
-        return self.loop.watchdog.pending is not None or self.arm.periods > 0
+        return self.loop.watchdog.pending is not None or self.arm.periods > self.braked_periods
 
     def offer(self, read: Callable[[], list[float]], now: float | None = None) -> bool:
         """One command: ``read()`` gives its joint torques, or raises CommandError or
@@ -181,23 +185,26 @@ class Session:
             torques = read()
         except (CommandError, ValueError) as exc:
             return self._reject(exc, now)
-        if (
-            not any(torques)
-            and self.release.needs_torque(isinstance(read, JointCommand))
-            and not self.released()
-        ):
-            if not self.zero_before_release:
-                self.out.log(
-                    'info',
-                    'zero command: brakes stay on until a command with a torque '
-                    f'(release_on {self.release})',
-                )
-            self.zero_before_release += 1
+        if not self.released() and self._keeps_brakes(torques, isinstance(read, JointCommand), now):
             return True
         now = self.clock() if now is None else now
         self.clipped += self.arm.clips(torques)
         self.loop.command(torques, now)
         self._commanded(now)
+        return True
+
+    def _keeps_brakes(self, torques: list[float], joint_command: bool, now: float | None) -> bool:
+        """Before the release: whether this valid command leaves the brakes on (an all-zero
+        one the ``release`` rule ignores), counted and logged."""
+        if any(torques) or not self.release.needs_torque(joint_command):
+            return False
+        if not self.zero_before_release:
+            self.out.log(
+                'info',
+                'zero command: brakes stay on until a command with a torque '
+                f'(release_on {self.release})',
+            )
+        self.zero_before_release += 1
         return True
 
     def _reject(self, exc: Exception, now: float | None) -> bool:
@@ -453,9 +460,15 @@ class LockstepSession(Session):
         recorder_window: int = 0,
         recorder_present: Callable[[], bool] = lambda: True,
         controller_present: Callable[[], bool] = lambda: True,
+        release_after: float = 0.0,
         **kwargs: Any,
     ) -> None:
         super().__init__(arm, **kwargs)
+        if not release_after >= 0.0:  # (also false for NaN)
+            raise ValueError(f'release_after = {release_after}: must be >= 0 s')
+        self.release_after = release_after
+        self._last_braked = -math.inf  # when the latest braked period ran (wall clock)
+        self._braked_start: float | None = None  # when the first one ran
         self.loop.stats.nominal = None  # lockstep has no wall period to jitter around
         self.window_ns = round(recorder_window * 1e9 / self.publish_rate)
         self.recorder_window = recorder_window
@@ -465,6 +478,38 @@ class LockstepSession(Session):
         self.waits_for_recorder = 0  # periods that waited
         self.recorder_seen = False
         self.repeats = 0
+
+    def _keeps_brakes(self, torques: list[float], joint_command: bool, now: float | None) -> bool:
+        """``release_after`` > 0: every command before the release runs a braked period
+        (simulated time advances, the arm stays where it is, the period's messages and /clock go
+        out), so that a driver stack updating on /clock keeps writing; the brakes release at
+        the first command the ``release`` rule takes once simulated time has reached
+        ``release_after``. 0: time stays stopped until the release."""
+        zero_held = super()._keeps_brakes(torques, joint_command, now)
+        if not self.release_after:
+            return zero_held
+        if zero_held or self.arm.t < self.release_after - 0.5 / self.arm.rate:
+            self._braked_period(self.clock() if now is None else now)
+            return True
+        return False
+
+    def _braked_period(self, now: float) -> None:
+        """One braked period, no sooner than in real time from the first (the controller has
+        ``release_after`` wall seconds from the simulator's start to send its first command)."""
+        if self.failed:
+            return
+        if self._braked_start is None:
+            self._braked_start = now
+        due = self._braked_start + self.braked_periods / self.arm.rate
+        if due > now:
+            self.sleep(due - now)
+            now = self.clock()
+        self.arm.hold_still()
+        self.braked_periods += 1
+        self._last_braked = now
+        tick = self.arm.sample()
+        self.out.publish(tick)
+        self.last_tick = (tick, now)
 
     def _commanded(self, now):
         if self.failed:
@@ -488,6 +533,8 @@ class LockstepSession(Session):
 
     def _reset(self) -> bool:
         self.loop.request_reset(None)
+        self.braked_periods = 0
+        self._braked_start = None
         self.deferred = None
         self.recorded_until = None  # the recorder's next progress is after the reset
         self.out.publish(self.arm.sample())
@@ -538,6 +585,16 @@ class LockstepSession(Session):
         if self.failed:
             return
         if self.loop.commands == 0:
+            now = self.clock() if now is None else now
+            if (
+                self.release_after
+                and self.arm.t < self.release_after - 1.5 / self.arm.rate
+                and now - self._last_braked >= LOCKSTEP_BRAKED_S
+            ):
+                # no command for a while (a stack on /clock that wrote before the simulator
+                # was there waits for the clock): a braked period of its own wakes it
+                self._braked_period(now)
+                return
             self.out.publish(self.arm.sample())
             return
         if self.deferred is not None:
@@ -577,4 +634,6 @@ class LockstepSession(Session):
         return {
             'lockstep_repeats': str(self.repeats),
             'periods_waiting_for_recorder': str(self.waits_for_recorder),
+            # periods run braked before the release (release_after), simulated time running
+            'braked_periods': str(self.braked_periods),
         }

@@ -117,6 +117,7 @@ class Simulator(Node):
             self.session = LockstepSession(
                 arm,
                 recorder_window=p.recorder_window,
+                release_after=p.release_after,
                 **common,
                 recorder_present=lambda: self.progress_sub.get_publisher_count() > 0,
                 controller_present=lambda: self.command_sub.get_publisher_count() > 0,

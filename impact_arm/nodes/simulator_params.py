@@ -112,6 +112,21 @@ _PARAMS_BEFORE_JOINTS = (
         choices=tuple(r.value for r in Release),
         read_only=True,
     ),
+    # a driver stack on simulated time (ros2_control_node with use_sim_time) updates only
+    # when /clock advances: with time stopped until its controller's torque it never takes it
+    Param(
+        'release_after',
+        0.0,
+        'lockstep: > 0: every command before the release runs a braked period (time advances, '
+        'no faster than real time, the arm held, /clock published) and the brakes release at '
+        'the first command release_on '
+        'takes from this simulated time on [s]: a stack on use_sim_time keeps updating and '
+        'starts at a fixed time; 0: time stopped until the release',
+        low=0.0,
+        high=1e6,
+        read_only=True,
+        doc=' (docs/ros2_control.md, "A reproducible run on simulated time")',
+    ),
     Param(
         'command_latency_periods',
         0,
@@ -251,6 +266,10 @@ def check(p, names):
             f'parameter joint_states_topic = {p.joint_states_topic!r}, '
             f'joint_commands_topic = {p.joint_commands_topic!r}: the topic hardware '
             f'needs its own topics (not /joint_states, not {COMMANDS})'
+        )
+    if p.mode == 'realtime' and p.release_after > 0.0:
+        raise ParameterError(
+            f'parameter release_after = {p.release_after}: lockstep only (realtime: 0.0)'
         )
     if p.mode == 'realtime' and p.rate_factor == 0.0:
         raise ParameterError(

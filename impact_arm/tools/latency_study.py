@@ -67,6 +67,7 @@ def closed_loop(
     implicit_periods: int = 1,
     spread: int = 1,
     force_sensor: bool = True,
+    release_after: float = 0.0,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -78,7 +79,10 @@ def closed_loop(
     ``spread`` such chances per command: it takes ``latency`` to ``latency + spread`` periods.
     ``implicit_periods``: the controller's parameter of that name (0: off).
     ``force_sensor`` False: no contact wrench reaches the controller (an arm without a force
-    sensor): it tells an impact from the tip's reversal alone."""
+    sensor): it tells an impact from the tip's reversal alone.
+    ``release_after`` > 0: the simulator's parameter of that name (the arm braked, time
+    running, until then); meanwhile the driver writes its newest command each period, as a
+    ros2_control stack does."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
     ctrl = CycleController.for_scene(model, scene.controller)
@@ -102,6 +106,7 @@ def closed_loop(
         command_latency=0 if jitter else latency,
         clock=lambda: 0.0,
         sleep=lambda s: None,
+        release_after=release_after,
     )
     names = joint_names(arm.n)
     inputs = ControlInputs(
@@ -128,11 +133,15 @@ def closed_loop(
             if force_sensor:
                 inputs.wrench(sec, nsec, (tick.wrench[0], tick.wrench[1], 0.0))
             inputs.joint_state(sec, nsec, names, tick.position, tick.velocity, tick.effort)
+        if not commands and release_after and not session.released() and acting:
+            session.offer(functools.partial(list, acting))  # the driver writes it again
+            continue
         if not commands:
             return _result(latency, predicted, t_max, contacts, 'the controller sent nothing')
         if not jitter:
             while commands:
-                session.offer(functools.partial(list, commands.popleft()))
+                acting = commands.popleft()
+                session.offer(functools.partial(list, acting))
             continue
         # the delay line: each command acts from the period it arrives in, the newest wins
         while commands:
