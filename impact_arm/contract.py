@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from enum import Enum
 from typing import Optional
 
 # ------------------------------------------------------------------------------- topics
@@ -439,9 +440,64 @@ PLANE_FRAME_ROTATION = (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
 
 
 # ------------------------------------------------------------------------------- names
-INTEGRATOR_PRESETS = ('reference', 'accurate', 'balanced', 'fast')
-INTEGRATOR_METHODS = ('dopri5', 'rosenbrock')
-CONTROL_LAWS = ('q', 'pid', 'pd', 'none')  # 'none': no controller (zero torque)
-FEEDBACK_LAWS = ('q', 'pid', 'pd')  # the laws the controller node runs
-PID_SPACES = ('absolute', 'joint')
-ANTIWINDUP_STRATEGIES = ('none', 'legacy', 'conditional_integration')
+class TextEnum(str, Enum):
+    """An enum whose members behave as their text (``str(m) == m.value``, ``f'{m}'``,
+    dictionary keys, JSON), like Python 3.11's StrEnum, for Python 3.10 as well: the names
+    below are parsed once where text comes in (a scene file, a parameter) and compared as
+    members inside, while files and messages keep their text."""
+
+    __str__ = str.__str__
+    __hash__ = str.__hash__
+
+    def __format__(self, spec: str) -> str:
+        return str.__format__(self.value, spec)
+
+    def __repr__(self) -> str:
+        return f'{type(self).__name__}.{self.name}'
+
+
+class IntegratorPreset(TextEnum):
+    REFERENCE = 'reference'
+    ACCURATE = 'accurate'
+    BALANCED = 'balanced'
+    FAST = 'fast'
+
+
+class StepMethod(TextEnum):
+    DOPRI5 = 'dopri5'
+    ROSENBROCK = 'rosenbrock'
+
+
+class ControlLaw(TextEnum):
+    Q = 'q'  # the article's eq. 9
+    PID = 'pid'  # eq. 10
+    PD = 'pd'  # eq. 10 with Ki = 0
+    NONE = 'none'  # no controller (zero torque)
+
+
+class PidSpace(TextEnum):
+    """The angles the PID/PD acts on."""
+
+    ABSOLUTE = 'absolute'
+    JOINT = 'joint'
+
+
+class AntiWindup(TextEnum):
+    NONE = 'none'
+    LEGACY = 'legacy'
+    CONDITIONAL_INTEGRATION = 'conditional_integration'
+
+
+class CycleMode(TextEnum):
+    """The striking cycle's half: down to the surface, up to the switch height."""
+
+    DOWN = 'down'
+    UP = 'up'
+
+
+INTEGRATOR_PRESETS = tuple(m.value for m in IntegratorPreset)
+INTEGRATOR_METHODS = tuple(m.value for m in StepMethod)
+CONTROL_LAWS = tuple(m.value for m in ControlLaw)
+FEEDBACK_LAWS = (ControlLaw.Q.value, ControlLaw.PID.value, ControlLaw.PD.value)  # the node's
+PID_SPACES = tuple(m.value for m in PidSpace)
+ANTIWINDUP_STRATEGIES = tuple(m.value for m in AntiWindup)

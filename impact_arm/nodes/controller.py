@@ -313,8 +313,8 @@ class Controller(Node):
         p = self.p
         spec = dataclasses.replace(
             scene.controller,
-            law=p.law,
-            space=p.space,
+            law=contract.ControlLaw(p.law),
+            space=contract.PidSpace(p.space),
             kp=tuple(p.p),
             kd=tuple(p.d),
             ki=tuple(p.i),

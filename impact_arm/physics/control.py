@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..contract import ANTIWINDUP_STRATEGIES
+from ..contract import ANTIWINDUP_STRATEGIES, AntiWindup, ControlLaw, CycleMode, PidSpace
 from .jit import jit_leaf as jit
 
 if TYPE_CHECKING:
@@ -95,7 +95,7 @@ class PidIntegrator:
     n: int
     i_clamp_max: float = math.inf
     i_clamp_min: float = -math.inf
-    antiwindup: str = 'none'
+    antiwindup: AntiWindup | str = AntiWindup.NONE
     u_clamp_max: float = math.inf
     u_clamp_min: float = -math.inf
     value: list = field(default_factory=list)
@@ -103,9 +103,10 @@ class PidIntegrator:
     def __post_init__(self) -> None:
         if self.antiwindup not in ANTIWINDUP_STRATEGIES:
             raise ValueError(
-                f'antiwindup_strategy = {self.antiwindup!r}: choose one of '
+                f"antiwindup_strategy = '{self.antiwindup}': choose one of "
                 f'{", ".join(ANTIWINDUP_STRATEGIES)}'
             )
+        self.antiwindup = AntiWindup(self.antiwindup)  # parsed once: compared as a member
         if not self.u_clamp_min <= self.u_clamp_max:
             raise ValueError(
                 f'u_clamp_min = {self.u_clamp_min:g} > u_clamp_max = {self.u_clamp_max:g}'
@@ -131,10 +132,10 @@ class PidIntegrator:
         saturated: Sequence[bool] | None = None,
     ) -> None:
         for i in range(self.n):
-            if self.antiwindup == 'conditional_integration' and saturated and saturated[i]:
+            if self.antiwindup is AntiWindup.CONDITIONAL_INTEGRATION and saturated and saturated[i]:
                 continue  # hold the integral while the actuator is at its limit
             self.value[i] += error[i] * dt
-            if self.antiwindup == 'legacy' and ki[i] > 0:
+            if self.antiwindup is AntiWindup.LEGACY and ki[i] > 0:
                 # clamp the integral *term* ki·∫e to [i_clamp_min, i_clamp_max]
                 term = min(max(ki[i] * self.value[i], self.i_clamp_min), self.i_clamp_max)
                 self.value[i] = term / ki[i]
@@ -152,7 +153,7 @@ class CycleController:
     def __init__(
         self,
         model: ArmModel,
-        law: str,
+        law: ControlLaw | str,
         kp: Sequence[float],
         kd: Sequence[float],
         ki: Sequence[float],
@@ -160,22 +161,22 @@ class CycleController:
         up_target: Sequence[float],
         switch_height: float,
         surface_height: float | None,
-        space: str = 'absolute',
+        space: PidSpace | str = PidSpace.ABSOLUTE,
         force_threshold: float = 1.0,
         reversal_band: float = 0.01,
         integrator: PidIntegrator | None = None,
     ):
         self.model = model
-        self.law = law
+        self.law = ControlLaw(law)  # parsed once: compared as members below
         self.kp, self.kd, self.ki = list(kp), list(kd), list(ki)
-        self.targets = {'down': list(down_target), 'up': list(up_target)}
+        self.targets = {CycleMode.DOWN: list(down_target), CycleMode.UP: list(up_target)}
         self.switch_height = switch_height
         self.surface_height = surface_height
-        self.space = space
+        self.space = PidSpace(space)
         self.force_threshold = force_threshold
         self.reversal_band = reversal_band
         self.integral = integrator or PidIntegrator(len(kp))
-        self.mode = 'down'
+        self.mode = CycleMode.DOWN
         self.switches = 0
         self._last_t: float | None = None
         self._last_vy: float | None = None
@@ -205,7 +206,16 @@ class CycleController:
         self._last_vy = None
         self.integral.reset()
         if restart:
-            self.mode = 'down'
+            self.mode = CycleMode.DOWN
+
+    @property
+    def mode(self) -> CycleMode:
+        """The cycle's half now (set as a member or its text)."""
+        return self._mode
+
+    @mode.setter
+    def mode(self, mode: CycleMode | str) -> None:
+        self._mode = CycleMode(mode)
 
     def _switch(self, mode):
         self.mode = mode
@@ -230,7 +240,7 @@ class CycleController:
         y_seen, vy_seen = y_tip, vy_tip
         if sensed is not None:
             _, y_seen, _, vy_seen = self.model.tip(*sensed)
-        if self.mode == 'down' and self.surface_height is not None:
+        if self.mode is CycleMode.DOWN and self.surface_height is not None:
             hit = normal_force is not None and normal_force > self.force_threshold
             reversed_near = (
                 self._last_vy is not None
@@ -238,9 +248,9 @@ class CycleController:
                 and y_seen < self.surface_height + self.reversal_band
             )
             if hit or reversed_near:
-                self._switch('up')
-        elif self.mode == 'up' and y_tip >= self.switch_height:
-            self._switch('down')
+                self._switch(CycleMode.UP)
+        elif self.mode is CycleMode.UP and y_tip >= self.switch_height:
+            self._switch(CycleMode.DOWN)
         self._last_vy = vy_seen
         dt = 0.0 if self._last_t is None else t - self._last_t
         self._last_t = t
@@ -254,9 +264,9 @@ class CycleController:
         n = q.shape[0]
         out = np.zeros(n)
         target = np.asarray(self.targets[self.mode], dtype=float)
-        if self.law == 'none':
+        if self.law is ControlLaw.NONE:
             return out.tolist()
-        if self.law == 'q':
+        if self.law is ControlLaw.Q:
             q_law(
                 q,
                 qd,
@@ -268,12 +278,12 @@ class CycleController:
             )
             return out.tolist()
         error, rate = np.zeros(n), np.zeros(n)
-        pid_error(q, qd, target, self.space == 'joint', error, rate)
-        ki = self.ki if self.law == 'pid' else [0.0] * n
+        pid_error(q, qd, target, self.space is PidSpace.JOINT, error, rate)
+        ki = self.ki if self.law is ControlLaw.PID else [0.0] * n
         gains = np.asarray(self.kp, float), np.asarray(self.kd, float), np.asarray(ki, float)
-        if self.law == 'pid' and dt > 0:
+        if self.law is ControlLaw.PID and dt > 0:
             saturated = None
-            if self.integral.antiwindup == 'conditional_integration':
+            if self.integral.antiwindup is AntiWindup.CONDITIONAL_INTEGRATION:
                 # the output the actuator gets before this sample's integration
                 pid_law(error, rate, np.asarray(self.integral.value, float), *gains, out)
                 saturated = self.integral.saturated(out)

@@ -4,21 +4,9 @@ code, files and messages that spoke the text keep working while new code names t
 
 from __future__ import annotations
 
-from enum import Enum
+from ..contract import TextEnum
 
-
-class TextEnum(str, Enum):
-    """An enum whose members behave as their text (``str(m) == m.value``, ``f'{m}'``,
-    dictionary keys), like Python 3.11's StrEnum, for Python 3.10 as well."""
-
-    __str__ = str.__str__
-    __hash__ = str.__hash__
-
-    def __format__(self, spec: str) -> str:
-        return str.__format__(self.value, spec)
-
-    def __repr__(self) -> str:
-        return f'{type(self).__name__}.{self.name}'
+__all__ = ['TextEnum', 'EventKind']
 
 
 class EventKind(TextEnum):

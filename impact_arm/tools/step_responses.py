@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..contract import FEEDBACK_LAWS
+from ..contract import FEEDBACK_LAWS, ControlLaw
 from .run_data import AnalysisError, Run, _quiet
 
 
@@ -26,7 +26,7 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
 
     if law not in FEEDBACK_LAWS:
         raise AnalysisError(f'--laws: {law!r} is not one of {", ".join(FEEDBACK_LAWS)}')
-    controller = replace(scene.controller, law=law, rate=0.0)
+    controller = replace(scene.controller, law=ControlLaw(law), rate=0.0)
     if law == 'pid' and not any(controller.ki):
         raise AnalysisError('--laws pid: the scene has no integral gains (controller.ki)')
     sc = replace(scene, controller=controller, surfaces=surfaces_out_of_reach(scene), cycles=0)

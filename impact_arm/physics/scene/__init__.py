@@ -62,6 +62,7 @@ from .schema import (
 )
 from .types import (
     CONTACT_LAWS,
+    ContactLaw,
     ControllerSpec,
     IntegratorSpec,
     JointSpec,
@@ -80,6 +81,7 @@ __all__ = [
     'ARM',
     'ARM_LINK',
     'CONTACT_LAWS',
+    'ContactLaw',
     'CONTROLLER',
     'INTEGRATOR',
     'JOINT',

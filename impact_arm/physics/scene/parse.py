@@ -2,15 +2,25 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from typing import Any
 
-from ...contract import JointCoordinates
+from ...contract import ControlLaw, IntegratorPreset, JointCoordinates, PidSpace, StepMethod
 from .arm import _arm_links
 from .checks import MAX_YIELD_STRAIN, _check_joints, _check_physics, _joint_values, _sensor_spec
 from .schema import REQUIRED, SCHEMA, SceneChecker
-from .types import ControllerSpec, IntegratorSpec, Material, Mount, Scene, Surface, reduced_modulus
+from .types import (
+    ContactLaw,
+    ControllerSpec,
+    IntegratorSpec,
+    Material,
+    Mount,
+    Scene,
+    Surface,
+    reduced_modulus,
+)
 
 
 def parse_scene(
@@ -61,7 +71,7 @@ def parse_scene(
     surfaces = tuple(
         Surface(
             height=s['height'],
-            law=s['law'],
+            law=ContactLaw(s['law']),
             mu=s['mu'],
             v_d=s['v_d'],
             material=material(f'surfaces[{i}].material', s['material']),
@@ -75,8 +85,8 @@ def parse_scene(
 
     c = raw['controller']
     controller = ControllerSpec(
-        law=c['law'],
-        space=c['space'],
+        law=ControlLaw(c['law']),
+        space=PidSpace(c['space']),
         kp=vector('controller.kp', c['kp']),
         kd=vector('controller.kd', c['kd']),
         ki=vector('controller.ki', c['ki'], 0.0),
@@ -118,6 +128,9 @@ def parse_scene(
     _check_physics(check, raw, links, surfaces, arm)
     _check_joints(check, links, joints)
     integ = IntegratorSpec(**raw['integrator'])
+    integ = dataclasses.replace(
+        integ, preset=IntegratorPreset(integ.preset), method=StepMethod(integ.method)
+    )
     sensors = _sensor_spec(check, raw['sensors'])
     scene = Scene(
         name=raw['name'],

@@ -10,9 +10,26 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
-from ...contract import JointCoordinates
+from ...contract import (
+    ControlLaw,
+    IntegratorPreset,
+    JointCoordinates,
+    PidSpace,
+    StepMethod,
+    TextEnum,
+)
 
-CONTACT_LAWS = ('elastoplastic', 'hertz', 'none')
+
+class ContactLaw(TextEnum):
+    """The normal contact law of a surface: Jackson-Green elasto-plastic compression with its
+    restitution, Hertz (elastic) throughout, or no contact (the tip passes through)."""
+
+    ELASTOPLASTIC = 'elastoplastic'
+    HERTZ = 'hertz'
+    NONE = 'none'
+
+
+CONTACT_LAWS = tuple(m.value for m in ContactLaw)
 
 
 @dataclass(frozen=True)
@@ -45,7 +62,7 @@ class Mount:
 @dataclass(frozen=True)
 class Surface:
     height: float  # y of the horizontal surface [m]; the tip strikes it from above
-    law: str  # elastoplastic | hertz | none
+    law: ContactLaw
     mu: float  # Coulomb friction coefficient (0 = no friction force)
     v_d: float  # tanh smoothing velocity [m/s]
     material: Material
@@ -54,8 +71,8 @@ class Surface:
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    law: str  # q | pid | pd | none
-    space: str  # absolute | joint (angles the PID/PD acts on)
+    law: ControlLaw
+    space: PidSpace  # the angles the PID/PD acts on
     kp: tuple[float, ...]
     kd: tuple[float, ...]
     ki: tuple[float, ...]
@@ -68,11 +85,11 @@ class ControllerSpec:
 
 @dataclass(frozen=True)
 class IntegratorSpec:
-    preset: str
+    preset: IntegratorPreset
     rtol: float | None = None
     atol: float | None = None
     max_step: float | None = None
-    method: str = 'dopri5'
+    method: StepMethod = StepMethod.DOPRI5
     contact_rtol: float | None = None
 
 
