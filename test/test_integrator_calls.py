@@ -3,6 +3,7 @@ and ``set_state`` (the arm placed elsewhere). After either, the integration must
 fresh integrator started there would take: nothing cached from before may leak into it."""
 
 import numpy as np
+import pytest
 
 from impact_arm.physics.integrator import PhaseIntegrator
 from impact_arm.physics.model import ArmModel
@@ -50,3 +51,23 @@ def test_a_state_set_from_outside_is_integrated_from_there():
     fresh = _fresh(model, 0.2, y0, integ.state.held_torque)
     fresh.advance(0.25)
     assert np.allclose(integ.state.y, fresh.state.y, rtol=1e-7, atol=1e-9)
+
+
+def test_integrator_options_one_record_from_the_scene_or_the_caller():
+    from dataclasses import replace
+
+    from impact_arm.physics.integrator import IntegratorOptions
+
+    scene = scene_from()
+    spec = replace(scene.integrator, rtol=1e-9, atol=1e-11, max_step=0.01, method='rosenbrock')
+    own = IntegratorOptions.of_scene(spec)
+    assert (own.rtol, own.atol, own.max_step, own.method) == (1e-9, 1e-11, 0.01, 'rosenbrock')
+    # a preset named by the caller: its tolerances, not the scene's; method and max_step stay
+    named = IntegratorOptions.of_scene(spec, preset='fast')
+    assert (named.preset, named.rtol, named.atol) == ('fast', None, None)
+    assert (named.max_step, named.method) == (0.01, 'rosenbrock')
+    assert named.free_rtol() == 1e-5
+    integ = PhaseIntegrator(ArmModel(scene), options=named)
+    assert integ.rtol == 1e-5 and integ.contact_rtol == 3e-7 and integ.max_step == 0.01
+    with pytest.raises(TypeError, match='not both'):
+        PhaseIntegrator(ArmModel(scene), options=named, rtol=1e-6)

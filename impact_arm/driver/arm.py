@@ -19,7 +19,7 @@ import numpy as np
 from ..physics.limits import LimitWatch
 from ..physics.control import q_law
 from ..physics.errors import ImpactArmError
-from ..physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
+from ..physics.integrator import PRESETS, IntegratorOptions, PhaseIntegrator
 from ..physics.metrics import ImpactBuilder
 from ..physics.periods import advance_period
 from ..physics.model import ArmModel
@@ -92,16 +92,15 @@ class SimulatedArm:
         self._brake_at = None  # absolute link angles the brake holds
         spec = scene.integrator
         # the scene's own tolerances apply with its own preset
-        self._options = dict(
-            control='held',
-            trace=trace,
-            **options_from_spec(spec, None if preset == spec.preset else preset),
-        )
+        self._options = IntegratorOptions.of_scene(spec, None if preset == spec.preset else preset)
+        self._trace = trace
         self.reset()
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0, zero torque, no impact in progress."""
-        self.integrator = PhaseIntegrator(self.model, **self._options)
+        self.integrator = PhaseIntegrator(
+            self.model, options=self._options, control='held', trace=self._trace
+        )
         self.builder = ImpactBuilder(self.model)
         self.periods = 0
         self.command = [0.0] * self.n  # the torque being held (after clipping)

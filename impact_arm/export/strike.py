@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.errors import SimulationError
-from ..physics.integrator import PhaseIntegrator, options_from_spec
+from ..physics.integrator import IntegratorOptions, PhaseIntegrator
 from ..physics.metrics import ImpactBuilder
 from ..physics.model import ArmModel
 from ..physics.periods import feed_events
@@ -159,7 +159,10 @@ def our_outcome(scene: Scene, strike: Strike) -> Outcome:
     state.y[:n], state.y[n : 2 * n] = q - qd * LEAD_TIME, qd
     state.mode = 'up'  # the controller is off (held zero torque); no down/up switch matters
     integ = PhaseIntegrator(
-        model, state, control='held', **options_from_spec(scene.integrator, preset='balanced')
+        model,
+        state,
+        control='held',
+        options=IntegratorOptions.of_scene(scene.integrator, preset='balanced'),
     )
     builder = ImpactBuilder(model)
     t_end = 0.05  # far longer than any contact of a stiff surface

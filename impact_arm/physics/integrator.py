@@ -55,30 +55,49 @@ PRESET_CONTACT_RTOL = {'fast': 3e-7}
 METHODS = dict(zip(INTEGRATOR_METHODS, (layout.METHOD_DOPRI5, layout.METHOD_ROSENBROCK)))
 
 
-def options_from_spec(
-    spec: IntegratorSpec,
-    preset: str | None = None,
-    rtol: float | None = None,
-    atol: float | None = None,
-    contact_rtol: float | None = None,
-) -> dict:
-    """PhaseIntegrator options for a scene's ``integrator`` section (``scene.IntegratorSpec``):
-    its own settings, unless the caller names a preset (then the preset's tolerances, not the
-    scene's rtol/atol/contact_rtol overrides) or tolerances of its own. The scene's step method
-    and max_step always apply."""
-    scene_tolerances = preset is None and rtol is None and atol is None
-    return {
-        'preset': preset or spec.preset,
-        'rtol': rtol if rtol is not None else spec.rtol if scene_tolerances else None,
-        'atol': atol if atol is not None else spec.atol if scene_tolerances else None,
-        'contact_rtol': contact_rtol
-        if contact_rtol is not None
-        else spec.contact_rtol
-        if scene_tolerances
-        else None,
-        'max_step': spec.max_step,
-        'method': spec.method,
-    }
+@dataclass(frozen=True)
+class IntegratorOptions:
+    """How a ``PhaseIntegrator`` steps, as one record: a preset's tolerances or the caller's
+    ``rtol``/``atol``, the contact phases' ``contact_rtol`` (None: the preset's, else rtol),
+    the largest step [s] (None: unbounded) and the step method."""
+
+    preset: str = 'balanced'
+    rtol: float | None = None
+    atol: float | None = None
+    max_step: float | None = None
+    method: str = 'dopri5'
+    contact_rtol: float | None = None
+
+    @classmethod
+    def of_scene(
+        cls,
+        spec: IntegratorSpec,
+        preset: str | None = None,
+        rtol: float | None = None,
+        atol: float | None = None,
+        contact_rtol: float | None = None,
+    ) -> IntegratorOptions:
+        """The options of a scene's ``integrator`` section: its own settings, unless the
+        caller names a preset (then the preset's tolerances, not the scene's
+        rtol/atol/contact_rtol overrides) or tolerances of its own. The scene's step method
+        and max_step always apply."""
+        scene_tolerances = preset is None and rtol is None and atol is None
+        return cls(
+            preset=preset or spec.preset,
+            rtol=rtol if rtol is not None else spec.rtol if scene_tolerances else None,
+            atol=atol if atol is not None else spec.atol if scene_tolerances else None,
+            contact_rtol=contact_rtol
+            if contact_rtol is not None
+            else spec.contact_rtol
+            if scene_tolerances
+            else None,
+            max_step=spec.max_step,
+            method=spec.method,
+        )
+
+    def free_rtol(self) -> float:
+        """The free flight's relative tolerance these options give."""
+        return self.rtol if self.rtol is not None else PRESETS[self.preset][0]
 
 
 @dataclass
@@ -174,15 +193,26 @@ class PhaseIntegrator:
         model: ArmModel,
         state: ArmState | None = None,
         *,
-        preset='balanced',
+        options: IntegratorOptions | None = None,
+        control='continuous',
+        trace=False,
+        preset=None,
         rtol=None,
         atol=None,
         max_step=None,
-        control='continuous',
-        trace=False,
-        method='dopri5',
+        method=None,
         contact_rtol=None,
     ):
+        separate = (preset, rtol, atol, max_step, method, contact_rtol)
+        if options is not None and any(v is not None for v in separate):
+            raise TypeError('PhaseIntegrator: give options or the separate settings, not both')
+        if options is None:  # (the separate settings: tests and benchmarks name one or two)
+            options = IntegratorOptions(
+                preset or 'balanced', rtol, atol, max_step, method or 'dopri5', contact_rtol
+            )
+        preset, rtol, atol = options.preset, options.rtol, options.atol
+        max_step, method, contact_rtol = options.max_step, options.method, options.contact_rtol
+        self.options = options
         if preset not in PRESETS:
             raise ValueError(f'integrator preset {preset!r}: choose one of {", ".join(PRESETS)}')
         if control not in ('continuous', 'held'):

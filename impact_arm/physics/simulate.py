@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -20,7 +21,7 @@ from .limits import LimitWatch
 from .control import CycleController
 from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
-from .integrator import Event, PhaseIntegrator, options_from_spec
+from .integrator import Event, IntegratorOptions, PhaseIntegrator
 from .kinds import TextEnum
 from .metrics import ImpactBuilder, LimitCycle, limit_cycle
 from .model import ArmModel
@@ -189,10 +190,12 @@ def run(
     them all in ``result.samples``, refused beyond ``MAX_KEPT_SAMPLES`` (publish_rate * t_max).
     With ``keep_samples=False`` memory stays bounded whatever the sample count."""
     control_rate = scene.controller.rate if control_rate is None else control_rate
-    options = options_from_spec(scene.integrator, preset, rtol, atol, contact_rtol)
-    if max_step is not None:
-        options['max_step'] = max_step
-    options['method'] = method or options['method']
+    options = IntegratorOptions.of_scene(scene.integrator, preset, rtol, atol, contact_rtol)
+    options = dataclasses.replace(
+        options,
+        max_step=max_step if max_step is not None else options.max_step,
+        method=method or options.method,
+    )
     t_max = scene.t_max if t_max is None else t_max
     if not samples:
         if control_rate or observer is not None or trace:
@@ -214,7 +217,7 @@ def run(
         # the scene's own rate was checked on load; refused (or warned) before running
         check_stability(scene, control_rate, rate_source="the run's control rate", model=model)
     integ = PhaseIntegrator(
-        model, control='held' if control_rate else 'continuous', trace=True, **options
+        model, control='held' if control_rate else 'continuous', trace=True, options=options
     )
     st = integ.state
     n = model.n
@@ -471,11 +474,11 @@ def format_table(result: RunResult) -> str:
     return '\n'.join(lines)
 
 
-def _run_events(scene: Scene, t_max: float, options: dict, progress=None) -> RunResult:
+def _run_events(scene: Scene, t_max: float, options: IntegratorOptions, progress=None) -> RunResult:
     """``run(samples=False)``: the scene's cycles on the event-only path. A cycle ends at a
     switch; the kernel crosses each impact's phases by itself."""
     model = ArmModel(scene)
-    integ = PhaseIntegrator(model, **options)
+    integ = PhaseIntegrator(model, options=options)
     builder = ImpactBuilder(model)
     result = RunResult(scene=scene, impacts=builder.impacts)
     cycles = 0

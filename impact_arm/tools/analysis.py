@@ -107,7 +107,7 @@ def reintegrated_trace(scene, record: dict, guess=None):
     as /impact_trace carries them and the re-integrated record (to compare with the
     reported one)."""
     from ..physics.periods import feed_events
-    from ..physics.integrator import PhaseIntegrator, options_from_spec
+    from ..physics.integrator import IntegratorOptions, PhaseIntegrator
     from ..physics.metrics import ImpactBuilder
     from ..physics.model import ArmModel
     from ..io.offline_mcap import trace_columns
@@ -122,7 +122,11 @@ def reintegrated_trace(scene, record: dict, guess=None):
     state.t = float(record['t_contact']) - back
     state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
     integ = PhaseIntegrator(
-        model, state, control='held', trace=True, **options_from_spec(scene.integrator)
+        model,
+        state,
+        control='held',
+        trace=True,
+        options=IntegratorOptions.of_scene(scene.integrator),
     )
     builder = ImpactBuilder(model)
     t_end = state.t + 10 * max(float(record['duration']), 1e-6)
@@ -159,7 +163,7 @@ def elastic_curve(scene, record: dict, points: int = 80, guess=None) -> ElasticC
     grid). None when the record cannot be integrated again (``trace_missing_reason``) or has
     no elastic phase."""
     from ..physics.contact import hertz_force
-    from ..physics.integrator import PhaseIntegrator, options_from_spec
+    from ..physics.integrator import IntegratorOptions, PhaseIntegrator
     from ..physics.model import ArmModel
 
     if scene is None or scene.actuators_during_contact:
@@ -179,7 +183,9 @@ def elastic_curve(scene, record: dict, points: int = 80, guess=None) -> ElasticC
     state = model.initial_state()
     state.t = float(record['t_contact']) - back
     state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
-    integ = PhaseIntegrator(model, state, control='held', **options_from_spec(scene.integrator))
+    integ = PhaseIntegrator(
+        model, state, control='held', options=IntegratorOptions.of_scene(scene.integrator)
+    )
     dt = float(durations[0]) / points
     integ.start_output(dt, math.ceil(float(record['t_contact']) / dt))
     t_end = state.t + 10 * max(float(record['duration']), 1e-6)

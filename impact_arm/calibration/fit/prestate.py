@@ -65,7 +65,7 @@ def _flight(
     state = model.initial_state()
     state.t = float(t[0])
     state.y[:n], state.y[n : 2 * n] = T @ x0[:n], T @ x0[n:]
-    integ = PhaseIntegrator(model, state, control='held', **window_options(model))
+    integ = PhaseIntegrator(model, state, control='held', options=window_options(model))
     positions = [x0[:n].copy()]
     k = 1
     try:

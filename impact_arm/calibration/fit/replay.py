@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...physics.errors import SimulationError
-from ...physics.integrator import PRESETS, PhaseIntegrator, options_from_spec
+from ...physics.integrator import IntegratorOptions, PhaseIntegrator
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
 from .efforts import TorqueSchedule, contact_period_command, effort_shift, wrench_shift
@@ -24,18 +24,15 @@ FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobia
 INSIDE_SIGMAS = 3.0
 
 
-def window_options(model: ArmModel) -> dict:
+def window_options(model: ArmModel) -> IntegratorOptions:
     """Integrator options of the replays: the scene's own (the fitted scene will run with
     them, and a second contact on the edge of happening is found or missed as the scene's
     runs find or miss it), tightened to 'balanced' when looser than FIT_RTOL."""
-    opts = getattr(model, '_fit_options', None)
-    if opts is None:
-        spec = model.scene.integrator
-        opts = options_from_spec(spec)
-        rtol = opts['rtol'] if opts['rtol'] is not None else PRESETS[opts['preset']][0]
-        if max(rtol, opts['contact_rtol'] or rtol) > FIT_RTOL:
-            opts = options_from_spec(spec, preset='balanced')
-        model._fit_options = opts  # type: ignore[attr-defined]  # cached per model instance
+    spec = model.scene.integrator
+    opts = IntegratorOptions.of_scene(spec)
+    rtol = opts.free_rtol()
+    if max(rtol, opts.contact_rtol or rtol) > FIT_RTOL:
+        opts = IntegratorOptions.of_scene(spec, preset='balanced')
     return opts
 
 
@@ -101,7 +98,7 @@ def predict_impact(
     held = timing != 'controller'
     state.mode = 'down'  # the scene's controller, if used, is approaching the surface
     integ = PhaseIntegrator(
-        model, state, control='held' if held else 'continuous', **window_options(model)
+        model, state, control='held' if held else 'continuous', options=window_options(model)
     )
     torque = TorqueSchedule(win, timing, effort_shift(model), contact_period_command(model, win))
     first: Any = None  # the first and last contact events, once found
@@ -262,7 +259,7 @@ def free_flight(
     held = timing != 'controller'
     state.mode = 'up'
     integ = PhaseIntegrator(
-        model, state, control='held' if held else 'continuous', **window_options(model)
+        model, state, control='held' if held else 'continuous', options=window_options(model)
     )
     torque = TorqueSchedule(win, timing, effort_shift(model))
     try:
