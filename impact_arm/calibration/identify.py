@@ -55,8 +55,9 @@ class JointRecording:
     # as t) and (z, ż) of each plate, flat, in surface order [m, m/s]
     plates_t: np.ndarray | None = None
     plates: np.ndarray | None = None
-    if TYPE_CHECKING:  # set by find_impacts (not a dataclass field)
-        step_z: np.ndarray = field(init=False)
+    # the rate-step statistic per sample gap, set by find_impacts (make_window stops its
+    # comparison at a further contact); None before
+    step_z: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -166,6 +167,14 @@ class LocalFit:
         return q, qd, cov
 
 
+def _no_series() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return np.empty(0), np.empty((0, 0)), np.empty(0)
+
+
+def _not_widened(side: str) -> ImpactWindow | None:
+    return None
+
+
 @dataclass
 class ImpactWindow:
     """One impact seen in the recording: the last sample before (index a), the first after
@@ -201,14 +210,21 @@ class ImpactWindow:
     # (q, q̇, cov) at t_a from the model's flight under the recorded efforts (fit/prestate.py,
     # rates that are period means); None: the pre-impact cubic's
     start: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-    if TYPE_CHECKING:  # set by make_window after construction (not dataclass fields)
-        effort_ib: int = field(init=False)
-        effort_off: list[bool] = field(init=False)
-        effort_source: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
-        widened: Callable[[str], ImpactWindow | None] = field(init=False)
-        pre_samples: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
-        controller_inputs: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False)
-        own_command: bool = field(init=False)  # the scene's controller gives the efforts
+    # what make_window adds from the recording around the impact:
+    effort_ib: int = 0  # index in ``effort`` of the sample b
+    # per effort sample: zero torque within the noise (actuators off during the contact)
+    effort_off: list[bool] = field(default_factory=list)
+    # the whole series (t, efforts, noise), for a replay that reads them by a fitted latency
+    effort_source: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=_no_series)
+    # the window one sample wider on a side ('pre' or 'post'), or None where it cannot be
+    widened: Callable[[str], ImpactWindow | None] = _not_widened
+    # (t, positions, noise) before the impact: a start state shot through the model's flight
+    pre_samples: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=_no_series)
+    # (t, positions, rates) before the impact as recorded: what a sampled controller saw
+    controller_inputs: tuple[np.ndarray, np.ndarray, np.ndarray] = field(
+        default_factory=_no_series
+    )
+    own_command: bool = False  # the scene's controller gives the efforts (fit/problem.py)
 
     def start_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, q̇, cov) at the last sample before the impact, where the replay starts."""
@@ -501,7 +517,7 @@ def _before_next_contact(rec, noise, idx, own_wrench=None, z_min=30.0) -> int:
     """How many of the post-impact samples ``idx`` come before a further contact (a bounce:
     a rate step, or wrench in the period that ends at the sample, unless stamped up to
     ``own_wrench``, the impact's own wrench published late); at least one."""
-    z = getattr(rec, 'step_z', None)
+    z = rec.step_z
     dt = rec.period
     for count, j in enumerate(idx[1:], start=1):
         # the step statistic of the two gaps after an impact still sees that impact

@@ -5,7 +5,7 @@ A replay that cannot be made says why by a ``FailureKind``."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import enum
 import math
@@ -57,10 +57,11 @@ class Prediction:
     error: str = ''  # why the replay failed, in words ('' when it did not)
     failure: FailureKind | None = None  # ... and as a kind, for the code that acts on it
     wrench_timing: float = math.nan  # centroid of the normal force in the wrench's periods
-    if TYPE_CHECKING:  # set after construction by predict_impact (not dataclass fields)
-        path: np.ndarray = field(init=False)
-        t_sep: float = field(init=False)
-        y_sep: np.ndarray = field(init=False)
+    # set by predict_impact once the contacts are through: the dense rows (``dense``), and
+    # the time and state (q, q̇ absolute) at the last separation
+    path: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    t_sep: float = math.nan
+    y_sep: np.ndarray = field(default_factory=lambda: np.empty(0))
 
 
 def predict_impact(
