@@ -233,8 +233,8 @@ def test_check_refuses_what_it_cannot_run(tmp_path, paper):
 
     with pytest.raises(CheckRefused, match='not an export'):
         read_export(str(tmp_path))
-    (tmp_path / 'report.json').write_text(json.dumps({'peer': 'drake', 'timestep': 5e-6}))
-    with pytest.raises(CheckRefused, match=r'an export to drake; --check runs mujoco'):
+    (tmp_path / 'report.json').write_text(json.dumps({'peer': 'gazebo', 'timestep': 5e-6}))
+    with pytest.raises(CheckRefused, match=r'an export to gazebo; --check runs mujoco and drake'):
         read_export(str(tmp_path))
     with pytest.raises(CheckRefused, match=r'--rate 3000: .* whole number'):
         control_rate(paper, 5e-6, 3000.0)
