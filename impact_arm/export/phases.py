@@ -64,5 +64,12 @@ def mean(outcomes: Sequence[Outcome]) -> Outcome:
 def over_phases(
     run: Callable[[Strike], Outcome], strike: Strike, timestep: float, count: int = PHASES
 ) -> Outcome:
-    """``run`` of the strike at each phase of ``offsets(count)``, and their mean."""
-    return mean([run(shifted(strike, f, timestep)) for f in offsets(count)])
+    """``run`` of the strike at each phase of ``offsets(count)``, and their mean; the phases
+    stop at the first whose tip does not leave the surface (the mean is then unseparated,
+    which the tuning scores as no rebound: a stuck strike runs the peer's longest)."""
+    out = []
+    for fraction in offsets(count):
+        out.append(run(shifted(strike, fraction, timestep)))
+        if not out[-1].separated:
+            break
+    return mean(out)
