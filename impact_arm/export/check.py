@@ -3,7 +3,8 @@ loop with the scene's controller, its impact table beside the package's own.
 
 Our side is the offline sampled loop (``simulate.run`` at the control rate: the
 ``CycleController`` held for a period, the mean normal contact force of the period ended
-given to it); the peer's is the same law on the exported model (``mujoco_loop``). Both run
+given to it); the peer's is the same law on the exported model (``closed_loop`` with
+``mujoco_loop`` or ``drake_loop``). Both run
 until ``cycles + 1`` impacts: the strike of each cycle and the one that starts the next, as
 the article's 15 cycles give 16 impacts. The scene is the one the export wrote into DIR
 (``scene.yaml``), with its surfaces rigid as the export writes them."""
@@ -16,6 +17,7 @@ import math
 import os
 import time
 from dataclasses import dataclass
+from typing import Any
 
 from ..physics.errors import ImpactArmError
 from ..physics.scene import Scene, scene_from_text
@@ -33,11 +35,20 @@ DEFAULT_RATE = 1000.0
 # that begins just after a sample on one side and just before it on the other moves the
 # switch, and the rest of the cycle, by one period; the two switches: two periods.
 TOLERANCE_PERIODS = 2.0
-CONTROLLER_INPUT = (
-    'the mean normal contact force of each control period (as the offline loop gives it; '
-    "MuJoCo's mj_contactForce), and the joint state sampled at the period's start"
-)
-CHECKED_PEERS = (Peer.MUJOCO,)
+# where the peer's normal contact force comes from, for the controller input's description
+FORCE_SOURCE = {
+    Peer.MUJOCO: "MuJoCo's mj_contactForce",
+    Peer.DRAKE: "Drake's point-pair contact results",
+}
+CHECKED_PEERS = (Peer.MUJOCO, Peer.DRAKE)
+
+
+def controller_input(peer: Peer) -> str:
+    """What the controller sees on the peer's side, in words."""
+    return (
+        'the mean normal contact force of each control period (as the offline loop gives '
+        f"it; {FORCE_SOURCE[peer]}), and the joint state sampled at the period's start"
+    )
 
 
 class CheckRefused(ImpactArmError):
@@ -125,11 +136,10 @@ def read_export(directory: str) -> ExportedDir:
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise _refuse(directory, f'report.json is not an export report ({exc})') from None
     if peer not in CHECKED_PEERS:
-        why = 'not built yet' if peer is Peer.DRAKE else 'not run here'
         raise _refuse(
             directory,
             f'an export to {peer.value}; --check runs '
-            f'{", ".join(p.value for p in CHECKED_PEERS)} ({peer.value}: {why})',
+            f'{" and ".join(p.value for p in CHECKED_PEERS)} ({peer.value}: not run here)',
         )
     if not (math.isfinite(timestep) and timestep > 0.0):
         raise _refuse(directory, f'report.json timestep = {timestep}: must be > 0 s')
@@ -179,6 +189,17 @@ def our_impacts(scene: Scene, impacts: int, rate: float) -> tuple[list[ImpactRow
     return rows, result.stopped + (f': {result.error}' if result.error else '')
 
 
+def _peer_loop(exported: ExportedDir, rate: float) -> Any:
+    """The peer's closed loop (its package is imported only here)."""
+    if exported.peer is Peer.DRAKE:
+        from .drake_loop import DrakeLoop
+
+        return DrakeLoop(exported.model_path, exported.scene, exported.timestep, rate)
+    from .mujoco_loop import MujocoLoop
+
+    return MujocoLoop(exported.model_path, exported.scene, exported.timestep, rate)
+
+
 def check(directory: str, cycles: int | None = None, rate: float | None = None) -> CheckResult:
     """Run both sides of the export in ``directory`` for ``cycles`` cycles (the scene's by
     default) at the control ``rate`` (see ``control_rate``)."""
@@ -195,11 +216,8 @@ def check(directory: str, cycles: int | None = None, rate: float | None = None) 
     started = time.perf_counter()
     ours, our_stopped = our_impacts(scene, wanted, rate)
     our_seconds = time.perf_counter() - started
-    from .mujoco_loop import MujocoLoop
-
     started = time.perf_counter()
-    loop = MujocoLoop(exported.model_path, scene, exported.timestep, rate)
-    peer = loop.run(wanted, scene.t_max)
+    peer = _peer_loop(exported, rate).run(wanted, scene.t_max)
     return CheckResult(
         directory,
         scene.name,

@@ -7,7 +7,7 @@ import dataclasses
 import json
 import math
 
-from .check import CONTROLLER_INPUT, CheckResult
+from .check import CheckResult, controller_input
 from .files import write
 from .impacts import Column, ImpactRow, differences
 
@@ -48,7 +48,7 @@ def headline(result: CheckResult) -> list[str]:
         f'{result.scene}: {result.cycles} cycles ({result.impacts_wanted} impacts) in closed '
         f"loop with the scene's controller at {result.rate:g} Hz (zero-order hold), ours "
         f"beside {peer} at the export's time step {result.timestep:g} s.",
-        f'The controller sees {CONTROLLER_INPUT}.',
+        f'The controller sees {controller_input(result.peer)}.',
         f'Ours: {_count(result, result.ours, result.our_stopped)}, {result.our_seconds:.1f} s; '
         f'{peer}: {_count(result, result.theirs, result.peer_stopped)}, '
         f'{result.peer_steps} steps, {result.peer_seconds:.1f} s.',
@@ -117,7 +117,7 @@ def to_json(result: CheckResult) -> dict:
         'timestep': result.timestep,
         'rate': result.rate,
         'cycles': result.cycles,
-        'controller_input': CONTROLLER_INPUT,
+        'controller_input': controller_input(result.peer),
         'ours': [row(r) for r in result.ours],
         'peer_impacts': [row(r) for r in result.theirs],
         'differences': [

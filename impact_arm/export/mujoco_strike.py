@@ -1,6 +1,7 @@
 """A strike run in MuJoCo: the exported MJCF loaded, the arm set at contact with the
 strike's joint angles and rates (the robot's coordinates: the MJCF's), stepped with the
-motors off until the tip leaves the surface."""
+motors off until the tip leaves the surface; at each phase of the time step (``phases``),
+the outcome their mean."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 
 from .arm import PlanarArm
 from .mjcf import MujocoContact, mjcf
+from .phases import PHASES, over_phases
 from .strike import Outcome, Strike
 
 MAX_CONTACT_TIME = 0.1  # [s] a strike still in contact after this is reported unseparated
@@ -55,7 +57,12 @@ class MujocoStriker:
             total += float(wrench[0])
         return total
 
-    def outcome(self, strike: Strike) -> Outcome:
+    def outcome(self, strike: Strike, phases: int = PHASES) -> Outcome:
+        """The mean of the strike over ``phases`` phases of the time step."""
+        return over_phases(self.one_phase, strike, self.contact.timestep, phases)
+
+    def one_phase(self, strike: Strike) -> Outcome:
+        """The strike from its joint state at time 0 (the phase its start gives)."""
         mujoco, m, d = self.mujoco, self.model, self.data
         mujoco.mj_resetData(m, d)
         d.qpos[:] = strike.joints

@@ -27,11 +27,24 @@ def value(outcome: Outcome, quantity: Quantity) -> float:
     return float(getattr(outcome, quantity.value))
 
 
+def _scale(ours: Outcome, quantity: Quantity, strike: Strike) -> float:
+    """What an error is relative to: our value; the strike's speed for the tangential
+    velocity (it passes through zero across the range)."""
+    return strike.speed if quantity is Quantity.V_T_AFTER else abs(value(ours, quantity))
+
+
 def error(ours: Outcome, peer: Outcome, quantity: Quantity, strike: Strike) -> float:
-    """The peer's error, relative to our value; the tangential velocity relative to the
-    strike's speed (it passes through zero across the range)."""
-    scale = strike.speed if quantity is Quantity.V_T_AFTER else abs(value(ours, quantity))
-    return (value(peer, quantity) - value(ours, quantity)) / scale
+    """The peer's error (its phase mean's), relative as ``_scale`` says."""
+    return (value(peer, quantity) - value(ours, quantity)) / _scale(ours, quantity, strike)
+
+
+def spread(ours: Outcome, peer: Outcome, quantity: Quantity, strike: Strike) -> float | None:
+    """The range (max - min) of the peer's quantity over the phases of its time step,
+    relative as the error is; None when the peer ran one phase (no spread measured)."""
+    if not peer.phases:
+        return None
+    values = [value(p, quantity) for p in peer.phases]
+    return (max(values) - min(values)) / _scale(ours, quantity, strike)
 
 
 # the arm lives at its limit-cycle impact (the oblique strike at 1x): it counts this many
@@ -63,9 +76,13 @@ def cost(ours: Sequence[Outcome], peer: Sequence[Outcome], strikes: Sequence[Str
 @dataclass(frozen=True)
 class Worst:
     quantity: Quantity
-    rms: float  # root mean square relative error over the strikes
+    rms: float  # root mean square relative error (of the phase means) over the strikes
     worst: float  # largest absolute relative error
     at: str  # the strike where it is largest
+    # the largest range over the phases of the step at one strike, relative (None: one
+    # phase run): the peer's own scatter in a closed loop, which no parameter removes
+    spread: float | None = None
+    spread_at: str = ''
 
 
 def summary(
@@ -76,5 +93,18 @@ def summary(
         errors = [error(o, p, quantity, s) for o, p, s in zip(ours, peer, strikes)]
         k = max(range(len(errors)), key=lambda i: abs(errors[i]))
         rms = math.sqrt(sum(e * e for e in errors) / len(errors))
-        out.append(Worst(quantity, rms, abs(errors[k]), strikes[k].label))
+        spreads = [spread(o, p, quantity, s) for o, p, s in zip(ours, peer, strikes)]
+        measured = [(x, s.label) for x, s in zip(spreads, strikes) if x is not None]
+        # NaN is not smaller than anything: a NaN spread is the largest, never skipped
+        widest = max(measured, key=lambda m: math.inf if math.isnan(m[0]) else m[0], default=None)
+        out.append(
+            Worst(
+                quantity,
+                rms,
+                abs(errors[k]),
+                strikes[k].label,
+                None if widest is None else widest[0],
+                '' if widest is None else widest[1],
+            )
+        )
     return out

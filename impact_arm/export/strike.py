@@ -67,6 +67,9 @@ class Outcome:
     F_max: float  # peak normal force [N]
     v_t_after: float  # tip velocity along the surface after the contact [m/s]
     separated: bool = True  # False: the tip had not left the surface when the run ended
+    # a peer's outcomes at the phases of its time step this one is the mean of (``phases``);
+    # empty for ours (continuous time) and for one phase
+    phases: tuple[Outcome, ...] = ()
 
 
 def rigid(scene: Scene) -> Scene:
