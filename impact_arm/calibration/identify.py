@@ -221,9 +221,7 @@ class ImpactWindow:
     # (t, positions, noise) before the impact: a start state shot through the model's flight
     pre_samples: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=_no_series)
     # (t, positions, rates) before the impact as recorded: what a sampled controller saw
-    controller_inputs: tuple[np.ndarray, np.ndarray, np.ndarray] = field(
-        default_factory=_no_series
-    )
+    controller_inputs: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=_no_series)
     own_command: bool = False  # the scene's controller gives the efforts (fit/problem.py)
 
     def start_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
