@@ -66,3 +66,23 @@ def test_default_limits_leave_the_output_alone():
 def test_refuses_crossed_output_limits():
     with pytest.raises(ValueError, match='u_clamp_min = 1 > u_clamp_max = -1'):
         PidIntegrator(2, u_clamp_max=-1.0, u_clamp_min=1.0)
+
+
+def test_a_law_set_by_its_text_at_run_time_is_the_law_used():
+    """The controller node applies a changed ``law`` parameter as text: the controller
+    parses it, and computes that law (the Q law's gravity term, not the PD's error alone)."""
+    from impact_arm.contract import ControlLaw, CycleMode
+
+    scene = scene_from()
+    model = ArmModel(scene)
+    c = CycleController.for_scene(model, scene.controller)
+    q, qd = [0.3, -0.2], [0.0, 0.0]
+    by_member = c.torque(q, qd)
+    c.law = 'pd'
+    assert c.law is ControlLaw.PD and c.torque(q, qd) != by_member
+    c.law = 'q'
+    assert c.law is ControlLaw.Q and c.torque(q, qd) == by_member
+    c.mode = 'up'
+    assert c.mode is CycleMode.UP
+    with pytest.raises(ValueError):
+        c.law = 'p'

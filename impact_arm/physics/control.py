@@ -167,12 +167,12 @@ class CycleController:
         integrator: PidIntegrator | None = None,
     ):
         self.model = model
-        self.law = ControlLaw(law)  # parsed once: compared as members below
+        self.law = law  # (parsed by the property: compared as a member below)
         self.kp, self.kd, self.ki = list(kp), list(kd), list(ki)
         self.targets = {CycleMode.DOWN: list(down_target), CycleMode.UP: list(up_target)}
         self.switch_height = switch_height
         self.surface_height = surface_height
-        self.space = PidSpace(space)
+        self.space = space
         self.force_threshold = force_threshold
         self.reversal_band = reversal_band
         self.integral = integrator or PidIntegrator(len(kp))
@@ -207,6 +207,24 @@ class CycleController:
         self.integral.reset()
         if restart:
             self.mode = CycleMode.DOWN
+
+    @property
+    def law(self) -> ControlLaw:
+        """The control law (set as a member or its text: a parameter changed at run time)."""
+        return self._law
+
+    @law.setter
+    def law(self, law: ControlLaw | str) -> None:
+        self._law = ControlLaw(law)
+
+    @property
+    def space(self) -> PidSpace:
+        """The angles the PID/PD acts on (set as a member or its text)."""
+        return self._space
+
+    @space.setter
+    def space(self, space: PidSpace | str) -> None:
+        self._space = PidSpace(space)
 
     @property
     def mode(self) -> CycleMode:
