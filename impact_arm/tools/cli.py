@@ -111,7 +111,9 @@ def cmd_simulate(args) -> int:
         write_json(args.json, result.to_json())
         print(f'wrote {args.json}')
     if args.mcap:
-        print(f'wrote {args.mcap}')
+        from ..io.viewer_layout import write_layout_beside
+
+        print(f'wrote {args.mcap}; its viewer layout {write_layout_beside(args.mcap, scene)}')
     return 1 if result.error else 0
 
 
@@ -389,6 +391,10 @@ COMMANDS = {
     'export': (
         'impact_arm.tools.export',
         'the arm and its contact for MuJoCo, Drake or Gazebo, tuned by running them',
+    ),
+    'layout': (
+        'impact_arm.tools.layout_command',
+        'the Foxglove/Lichtblick layout made for a recording or a scene (every joint, plates)',
     ),
     'bench': (
         'impact_arm.tools.bench_command',
