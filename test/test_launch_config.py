@@ -169,12 +169,15 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     layout = json.load(open(os.path.join(ROOT, 'config', 'impact_arm.foxglove.json')))
 
     def panels(node):
-        return [node] if isinstance(node, str) else panels(node['first']) + panels(node['second'])
+        if isinstance(node, str):  # a tab panel holds the layouts of its tabs
+            tabs = layout['configById'][node].get('tabs', [])
+            return [node] + [p for tab in tabs for p in panels(tab['layout'])]
+        return panels(node['first']) + panels(node['second'])
 
     shown = panels(layout['layout'])
     assert sorted(shown) == sorted(layout['configById'])
     kinds = {panel.split('!')[0] for panel in shown}
-    assert kinds == {'3D', 'Plot', 'Table'}
+    assert kinds == {'3D', 'Plot', 'Table', 'Tab'}
     three_d = layout['configById']['3D!arm']
     camera = three_d['cameraState']
     # the 3D panel's camera: spherical (distance, phi from +z, theta = -thetaOffset)
@@ -207,7 +210,7 @@ def test_foxglove_layout_shows_the_arm_plots_and_impact_table(tmp_path):
     (script,) = layout['userNodes'].values()
     inputs = re.search(r'inputs = \[([^]]*)\]', script['sourceCode']).group(1)
     output = re.search(r'output = "([^"]+)"', script['sourceCode']).group(1)
-    assert [t.strip().strip('"') for t in inputs.split(',')] == ['/impact_report']
+    assert [t.strip().strip('"') for t in inputs.split(',')] == ['/impact_table']
     used = set()
     for config in layout['configById'].values():
         for entry in config.get('paths', []):

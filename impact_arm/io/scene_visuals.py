@@ -429,15 +429,12 @@ class VisualsWriter:
         self.visuals.add_impact(record)
         offset = 0 if self._last is None else self._last[2] - self._last[0]
         events = self.visuals.take_events()
-        for t_ns, q in events:
-            self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None else log_time_ns)
-        # stamped like the contact's frame: a seek to the impact shows its row
-        t_ns = events[0][0]
-        self._write(
-            IMPACT_TABLE,
-            self.visuals.table(),
-            t_ns + offset if log_time_ns is None else log_time_ns,
-        )
+        log = [t + offset if log_time_ns is None else log_time_ns for t, _ in events]
+        # the table first, logged with the contact's frame (in time order): a seek to the
+        # impact shows its row
+        self._write(IMPACT_TABLE, self.visuals.table(), log[0])
+        for (t_ns, q), log_ns in zip(events, log):
+            self._frame_at_event(t_ns, q, log_ns)
 
     def _frame_at_event(self, t_ns, q, log):
         self._write(TF, self.visuals.tf(q, t_ns), log)
