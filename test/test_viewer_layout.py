@@ -128,6 +128,7 @@ def test_the_articles_layout_reads_its_recording(paper):
     positions = layout['configById']['Plot!positions']['paths']
     assert [p['label'] for p in positions] == ['joint1 [rad]', 'joint2 [rad]']
     assert 'Plot!plates' not in layout['configById']  # no mount: no plate to plot
+    assert layout['configById']['3D!arm']['scene']['transforms']['showLabel'] is True
     # the recording's own layout, from its stored scene and topics, is the shipped one
     assert recording_layout(str(path)) == layout
 
@@ -147,11 +148,25 @@ def test_the_three_link_arm_plots_every_joint_by_name_and_its_plate(real_arm):
     mount = messages['/surface_mounts'][0][1]
     index = int(re.search(r'\[(\d+)\]', plate['value']).group(1))
     assert plate['label'].startswith(mount.name[index])
-    # the plate moves: its plot is not a flat line
-    zs = [m.position[index] for _, m in messages['/surface_mounts']]
-    assert max(zs) - min(zs) > 1e-7
+    # the plate moves by a few µm: its plot's y range is set from the recording (the apps'
+    # own was +-1 mm, a flat line), the largest displacement within it but above half of it
+    zs = [abs(m.position[index]) for _, m in messages['/surface_mounts']]
+    config = layout['configById']['Plot!plates']
+    assert config['minYValue'] == -config['maxYValue']
+    assert max(zs) < config['maxYValue'] < 4 * max(zs) and max(zs) > 1e-7
+    # the frames of a URDF arm share origins: no labels, which overprinted each other
+    assert layout['configById']['3D!arm']['scene']['transforms']['showLabel'] is False
     # the 3D camera scaled to the arm, not the article's view copied
     assert layout != json.load(open(SHIPPED, encoding='utf-8'))
+
+
+def test_plot_bounds_are_round_numbers_just_above_the_extent():
+    from impact_arm.io.viewer_layout import nice_bound
+
+    assert nice_bound(7.86e-6) == pytest.approx(1e-5)
+    assert nice_bound(1e-5) == pytest.approx(2e-5)
+    assert nice_bound(3.9e-4) == pytest.approx(5e-4)
+    assert nice_bound(0.0) == nice_bound(float('nan')) == 0.0
 
 
 def test_a_recording_without_a_topic_gets_no_panel_for_it():

@@ -24,6 +24,8 @@ from __future__ import annotations
 from collections.abc import Collection, Sequence
 from typing import TYPE_CHECKING, Any
 
+import math
+
 from ..contract import (
     CONTACT_FORCE_PEAK,
     CONTACT_WRENCH,
@@ -36,6 +38,7 @@ from ..contract import (
     TF,
     TF_STATIC,
 )
+from .impact_table import COLUMNS
 from .scene_visuals import mounted_surfaces
 
 if TYPE_CHECKING:
@@ -45,18 +48,27 @@ if TYPE_CHECKING:
 # arms scale with their reach
 CAMERA_DISTANCE_PER_REACH = 3.25
 CAMERA_DROP_PER_REACH = 0.15
+# px of the legend beside a plot: the longest label and its value at the cursor
+LEGEND_WIDTH = 215
 TABLE_SCRIPT_OUTPUT = '/studio_script/impacts'
 TABLE_PATH = TABLE_SCRIPT_OUTPUT + '.rows'
 TABLE_TITLE = 'Impacts so far: time, duration [µs], deformation [µm], force [kN], CoR'
+TAB_TITLE = 'Impacts so far'  # a tab shows ~15 characters of its title
 # the user script: /impact_table's JSON as rows, unchanged (rounded where it is written,
-# io/impact_table.py); stateless, so a seek cannot leave it holding part of the table
+# io/impact_table.py); stateless, so a seek cannot leave it holding part of the table. The
+# apps derive the output's message definition from its TypeScript type, which must name every
+# field (an index signature or a union such as ``number | null`` fails to compile there)
+TABLE_COLUMNS = ('impact', 't_contact [s]', *(column for column, _, _ in COLUMNS))
+_ROW_FIELDS = '\n'.join(f'  "{column}": number;' for column in TABLE_COLUMNS)
 TABLE_SCRIPT = f"""// every impact so far (/impact_table, JSON) as the rows of a table
 import {{ Input }} from "./types";
 
 export const inputs = ["{IMPACT_TABLE}"];
 export const output = "{TABLE_SCRIPT_OUTPUT}";
 
-type Row = {{ [column: string]: number | null }};
+type Row = {{
+{_ROW_FIELDS}
+}};
 type Output = {{ rows: Row[] }};
 
 export default function script(event: Input<"{IMPACT_TABLE}">): Output {{
@@ -91,16 +103,16 @@ def _plot(title: str, paths: Sequence[tuple[str, str]]) -> dict[str, Any]:
             'showXAxisLabels': True,
             'showYAxisLabels': True,
             'showLegend': True,
-            'legendDisplay': 'top',
+            'legendDisplay': 'left',
             'showPlotValuesInLegend': True,
             'isSynced': True,
             'xAxisVal': 'timestamp',
-            'sidebarDimension': 240,
+            'sidebarDimension': LEGEND_WIDTH,
         },
     )
 
 
-def _three_d(reach: float) -> dict[str, Any]:
+def _three_d(reach: float, urdf_arm: bool) -> dict[str, Any]:
     return _titled(
         'Arm in its plane (URDF, TF, impact points coloured by peak force)',
         {
@@ -116,11 +128,20 @@ def _three_d(reach: float) -> dict[str, Any]:
                 'near': 0.01,
                 'far': 5000,
             },
+            # no followTf and no grid frameId: naming 'world' there made the 3D panel log
+            # "Frame world not found" and "Missing transform from frame <world>" at every
+            # load, before the first TF message reached it; unnamed, both are the root
+            # frame of the TF tree, which is world for every arm
             'followMode': 'follow-none',
-            'followTf': 'world',
             'scene': {
                 'backgroundColor': '#202020',
-                'transforms': {'showLabel': True, 'axisScale': 0.4, 'enablePreloading': True},
+                # a URDF arm's frames share origins (world, impact_plane, its base link):
+                # their labels overprinted each other into one unreadable word
+                'transforms': {
+                    'showLabel': not urdf_arm,
+                    'axisScale': 0.4,
+                    'enablePreloading': True,
+                },
             },
             'transforms': {},
             'topics': {ROBOT_DESCRIPTION: {'visible': True}, IMPACT_MARKERS: {'visible': True}},
@@ -128,7 +149,6 @@ def _three_d(reach: float) -> dict[str, Any]:
                 'grid': {
                     'layerId': 'foxglove.Grid',
                     'visible': True,
-                    'frameId': 'world',
                     'label': 'Grid (x-z plane, 0.25 m)',
                     'size': 5,
                     'divisions': 20,
@@ -165,9 +185,23 @@ def _column(panels: Sequence[Any], direction: str = 'column') -> Any:
     }
 
 
-def viewer_layout(scene: Scene, topics: Collection[str] | None = None) -> dict[str, Any]:
+def nice_bound(extent: float) -> float:
+    """The y bound a plot of values within +-``extent`` gets: 1.25 x extent rounded up to
+    1, 2 or 5 times a power of ten (0 for no extent)."""
+    if not (math.isfinite(extent) and extent > 0):
+        return 0.0
+    target = 1.25 * extent
+    power = 10.0 ** math.floor(math.log10(target))
+    return next(m * power for m in (1, 2, 5, 10) if m * power >= target * (1 - 1e-12))
+
+
+def viewer_layout(
+    scene: Scene, topics: Collection[str] | None = None, plate_extent: float | None = None
+) -> dict[str, Any]:
     """The layout for ``scene`` and a recording holding ``topics`` (default: what a recording
-    of the scene holds). Raises ValueError when the topics allow no panel at all."""
+    of the scene holds); ``plate_extent``: the largest plate displacement [m] recorded, which
+    fixes the plate plot's y range (the apps' own range for a few µm was +-1 mm, a flat
+    line). Raises ValueError when the topics allow no panel at all."""
     have = recording_topics(scene) if topics is None else set(topics)
     joints = list(scene.joint_names)
     configs: dict[str, Any] = {}
@@ -175,7 +209,7 @@ def viewer_layout(scene: Scene, topics: Collection[str] | None = None) -> dict[s
     left: list[Any] = []
     right: list[Any] = []
     if have & {ROBOT_DESCRIPTION, TF, IMPACT_MARKERS}:
-        configs['3D!arm'] = _three_d(sum(scene.lengths))
+        configs['3D!arm'] = _three_d(sum(scene.lengths), bool(scene.urdf_text))
         left.append('3D!arm')
     if JOINT_STATES in have:
         configs['Plot!positions'] = _plot(
@@ -188,9 +222,10 @@ def viewer_layout(scene: Scene, topics: Collection[str] | None = None) -> dict[s
         )
         right += ['Plot!positions', 'Plot!efforts']
     forces = [
-        (f'{CONTACT_FORCE_PEAK}.wrench.force.y', 'normal, peak of the period [N]'),
-        (f'{CONTACT_WRENCH}.wrench.force.y', 'normal, period average [N]'),
-        (f'{CONTACT_WRENCH}.wrench.force.x', 'tangential, period average [N]'),
+        # short: the legend beside the plot shows ~20 characters
+        (f'{CONTACT_FORCE_PEAK}.wrench.force.y', 'normal peak [N]'),
+        (f'{CONTACT_WRENCH}.wrench.force.y', 'normal mean [N]'),
+        (f'{CONTACT_WRENCH}.wrench.force.x', 'tangential mean [N]'),
     ]
     forces = [(path, label) for path, label in forces if path.split('.')[0] in have]
     if forces:
@@ -202,12 +237,15 @@ def viewer_layout(scene: Scene, topics: Collection[str] | None = None) -> dict[s
             'Plate displacement from rest, up [m]',
             [(f'{SURFACE_MOUNTS}.position[{j}]', f'{f} z [m]') for j, (f, _) in enumerate(mounted)],
         )
+        bound = nice_bound(plate_extent or 0.0)
+        if bound > 0:
+            configs['Plot!plates'].update(minYValue=-bound, maxYValue=bound)
         right.append('Plot!plates')
     if IMPACT_TABLE in have:
         configs['Table!impacts'] = _titled(TABLE_TITLE, {'topicPath': TABLE_PATH})
         configs['Tab!impacts'] = _titled(
             TABLE_TITLE,
-            {'activeTabIdx': 0, 'tabs': [{'title': TABLE_TITLE, 'layout': 'Table!impacts'}]},
+            {'activeTabIdx': 0, 'tabs': [{'title': TAB_TITLE, 'layout': 'Table!impacts'}]},
         )
         user_nodes['impact-table'] = {'name': 'impacts', 'sourceCode': TABLE_SCRIPT}
         left.append('Tab!impacts')
@@ -251,16 +289,23 @@ def recording_layout(recording: str, scene: Scene | None = None) -> dict[str, An
     from .mcap_ros2 import topics_info
     from .recording import RecordingInputError, mcap_files, recorded_scene
 
+    from .mcap_ros2 import iter_raw
+    from .recording import _joint_state  # the one JointState reader of the package
+
     topics: set[str] = set()
+    extent = 0.0
     for f in mcap_files(recording):
         topics |= set(topics_info(f))
+        for m in iter_raw(f, [SURFACE_MOUNTS], log_time_order=False):
+            z = [abs(v) for v in _joint_state(m.data)[2] if math.isfinite(v)]
+            extent = max([extent, *z])
     if scene is None:
         scene = recorded_scene(recording)
     if scene is None:
         raise RecordingInputError(
             f'recording {recording}: it stores no scene; give the one it ran (--scene)'
         )
-    return viewer_layout(scene, topics)
+    return viewer_layout(scene, topics, extent)
 
 
 def layout_text(layout: dict[str, Any]) -> str:
