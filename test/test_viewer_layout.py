@@ -79,6 +79,13 @@ def resolve(message, path):
 
 def check_layout(layout, messages):
     """What a viewer needs of ``layout`` to show ``messages`` (topic -> [(log ns, msg)])."""
+    # what the apps require of a layout file before they install it (Lichtblick refuses one
+    # without these): objects for configById and globalVariables, a numeric playback speed,
+    # userNodes an object, layout a panel id or a split tree
+    assert isinstance(layout['configById'], dict) and isinstance(layout['globalVariables'], dict)
+    assert isinstance(layout['playbackConfig']['speed'], (int, float))
+    assert isinstance(layout['userNodes'], dict)
+    assert isinstance(layout['layout'], (str, dict))
     shown = panels_of(layout)
     assert sorted(shown) == sorted(layout['configById']), 'a panel without config or unshown'
     assert {p.split('!')[0] for p in shown} <= PANEL_KINDS
