@@ -148,6 +148,9 @@ ROBOT_DESCRIPTION = '/robot_description'  # the visual topics (io/scene_visuals.
 TF_STATIC = '/tf_static'
 TF = '/tf'
 IMPACT_MARKERS = '/impact_markers'
+# every impact so far, rounded, one JSON String at each impact (io/impact_table.py): what a
+# viewer's table shows after a seek
+IMPACT_TABLE = '/impact_table'
 E_STOP = '/e_stop'  # std_msgs/msg/Bool: true = zero torque, latched (simulator)
 # builtin_interfaces/msg/Time: the stamp of the newest /joint_states the recorder has written.
 # In lockstep the simulator stays at most ``recorder_window`` periods ahead of it, so a
@@ -327,6 +330,7 @@ VISUAL_TOPICS = {  # topic -> (type, QoS); latched ones as robot_state_publisher
     TF_STATIC: (TF_TYPE, LATCHED_1),
     TF: (TF_TYPE, TopicQos(depth=100)),
     IMPACT_MARKERS: (MARKERS_TYPE, TopicQos(depth=10)),
+    IMPACT_TABLE: (STRING_TYPE, LATCHED_1),  # the newest holds every row: a late reader too
 }
 
 

@@ -23,6 +23,7 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
 
     reports = probe.listen(String, '/impact_report', transient=True)
     markers = probe.listen(MarkerArray, '/impact_markers')
+    tables = probe.listen(String, '/impact_table', transient=True)
     wrenches = probe.listen(WrenchStamped, '/contact_wrench', depth=100)
     peaks = probe.listen(WrenchStamped, '/contact_force_peak', depth=100)
     with (
@@ -41,7 +42,12 @@ def test_live_markers_show_every_impact_at_its_contact_point(probe, ros_env, tmp
             ),
             timeout=10,
         )
-    probe.forget(reports, markers, wrenches, peaks)
+    probe.forget(reports, markers, tables, wrenches, peaks)
+    # the table a viewer shows: each message holds every impact so far, rounded
+    rows = json.loads(tables[-1][1].data)['rows']
+    assert [r['impact'] for r in rows] == list(range(1, len(rows) + 1)) and len(rows) >= 3
+    first = json.loads(reports[0][1].data)
+    assert rows[0]['F max [kN]'] == pytest.approx(first['F_max'] / 1e3, rel=5e-4)
     scene = load_scene('paper')
     model, height = ArmModel(scene), scene.surfaces[0].height
     arrows = {

@@ -54,6 +54,7 @@ def test_topics_types_and_counts(offline):
         '/tf_static': ('tf2_msgs/msg/TFMessage', 1),
         '/tf': ('tf2_msgs/msg/TFMessage', n_tf),
         '/impact_markers': ('visualization_msgs/msg/MarkerArray', n_tf),
+        '/impact_table': ('std_msgs/msg/String', k),
     }
 
 
@@ -121,8 +122,8 @@ def test_metadata_scene_and_summary_indexes(offline):
     assert (
         bag['message_count']
         == summary.statistics.message_count
-        == 3 * len(result.samples) + 2 * 15 + 2 + 2 * n_tf
-    )  # + description, static, tf, markers
+        == 3 * len(result.samples) + 3 * 15 + 2 + 2 * n_tf
+    )  # states, wrenches, peaks; reports, traces, tables; description, static; tf, markers
     assert summary.chunk_indexes and all(c.message_index_offsets for c in summary.chunk_indexes)
 
 

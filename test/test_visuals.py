@@ -15,7 +15,7 @@ from impact_arm.physics.model import ArmModel
 from impact_arm.physics.simulate import run
 from impact_arm.contract import to_absolute
 from impact_arm.io.offline_mcap import OfflineRecorder
-from impact_arm.io.scene_visuals import ARROW_HOLD
+from impact_arm.io.scene_visuals import ARROW_HOLD, force_colour
 from impact_arm.io.urdf import robot_description
 from scenes import scene_from
 
@@ -215,14 +215,21 @@ def test_markers_show_the_surface_the_contact_force_and_every_impact(recording):
     points = [m for m in last if m.ns == 'impact_points']
     assert len(points) == len(result.impacts)
     reach = sum(scene.lengths)
-    for m in points:
-        # below the surface, its top at the contact point: apart from the tip and the arrow
-        assert m.pose.position.z + m.scale.z / 2 == pytest.approx(height, abs=1e-9)
+    forces = [i['F_max'] for i in result.impacts]
+    for m, force in zip(points, forces):
+        # resting on the surface at the contact point: above the slab's top face, which
+        # hid them from below (any zoom); apart from the tip and the arrow by colour
+        assert m.pose.position.z - m.scale.z / 2 == pytest.approx(height, abs=1e-9)
         assert m.pose.position.y == 0.0
-        # large enough to see in the shipped view (6.5 m away): 4 % of the reach
-        assert m.scale.x == m.scale.z == pytest.approx(0.04 * reach)
-        assert m.color.b > 0.5 > m.color.r  # cyan, where the arrow is red
+        # large enough to see in the shipped view (6.5 m away) at 1x: 6 % of the reach
+        assert m.scale.x == m.scale.z == pytest.approx(0.06 * reach)
+        assert (m.color.r, m.color.g, m.color.b, m.color.a) == pytest.approx(force_colour(force))
         assert arrows[0].color.r > 0.5 > arrows[0].color.b
+    surfaces = [m for m in last if m.ns == 'surface']
+    # opaque: a translucent slab is drawn after the opaque beads and over them
+    assert all(m.color.a == 1.0 for m in surfaces)
+    # the slab lies below the plane: its top face at the surface
+    assert all(m.pose.position.y + m.scale.y / 2 == pytest.approx(0, abs=1e-12) for m in surfaces)
     assert sum(m.ns == 'surface' for m in last) == len(scene.surfaces)
 
 
@@ -304,7 +311,9 @@ def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
     before = len(writer.written)
     visuals.impact(json.dumps(report))
     events = writer.written[before:]
-    assert [topic for topic, _, _ in events] == ['/tf', '/impact_markers'] * 3
+    assert [topic for topic, _, _ in events] == ['/impact_table'] + ['/tf', '/impact_markers'] * 3
+    # the table: logged with the contact's frame, so a seek to the impact shows its row
+    assert events.pop(0)[2] == events[0][2]
     stamps = [t for _, t, _ in event_states(report)]
     assert stamps[0] <= stamps[1] <= stamps[2] and stamps[0] >= report['t_contact'] * 1e9
     assert [log for _, _, log in events[::2]] == [t + offset + 123 for t in stamps]
@@ -349,3 +358,20 @@ def test_a_malformed_report_is_refused_with_a_value_error_and_draws_nothing(bad)
     with pytest.raises(ValueError, match='impact report'):
         visuals.add_impact(json.dumps(bad))
     assert visuals.impacts == [] and visuals.take_events() == []
+
+
+def test_impact_points_are_coloured_by_peak_force_on_a_log_scale():
+    """Cyan at 1 kN and below, magenta at 100 kN and above, the stops in between exact, and
+    each colour channel moving one way between two stops; no colour for a NaN force."""
+    from impact_arm.io.scene_visuals import FORCE_COLOURS
+
+    assert force_colour(10.0) == force_colour(1e3) == (*FORCE_COLOURS[0][1], 1.0)
+    assert force_colour(1e7) == (*FORCE_COLOURS[-1][1], 1.0)
+    for force, rgb in FORCE_COLOURS:
+        assert force_colour(force) == pytest.approx((*rgb, 1.0))
+    # the article's 27.8 kN and 30.7 kN impacts: between green and yellow, then past yellow
+    a, b = force_colour(27.8e3), force_colour(30.7e3)
+    assert a != b and a[0] < b[0] <= 1.0
+    for bad in (math.nan, math.inf, -1.0):
+        with pytest.raises(ValueError):
+            force_colour(bad)

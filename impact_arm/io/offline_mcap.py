@@ -46,8 +46,9 @@ trace belongs to the k-th report.
 ``/robot_description``, ``/tf_static`` (once, at t = 0), ``/tf`` and ``/impact_markers`` (at
 ``tf_rate`` of simulated time, on the joint-state samples, and at each impact's first contact,
 maximum compression and separation): the arm in 3D, REP 103 frames (z up), see
-io/scene_visuals.py. The event frames are written when the report comes, before the samples
-after the separation, so the file stays in time order. /tf is tf2_msgs/msg/TFMessage with its
+io/scene_visuals.py; ``/impact_table`` at each impact's first contact (io/impact_table.py).
+The event frames are written when the report comes, before the samples after the
+separation, so the file stays in time order. /tf is tf2_msgs/msg/TFMessage with its
 full definition and type hash even where the tf2_msgs package is absent.
 
 Stored with the messages

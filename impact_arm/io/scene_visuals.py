@@ -13,6 +13,8 @@ topic                  type                               content
                                                           and at each impact's events
 /impact_markers        visualization_msgs/msg/MarkerArray surfaces, contact-force arrow, impact
                                                           points; with each /tf message
+/impact_table          std_msgs/msg/String                every impact so far, rounded
+                                                          (io/impact_table.py), at each impact
 =====================  =================================  =====================================
 
 A contact lasts ~0.1 ms, far less than a /tf period (10 ms): sampled at ``tf_rate`` alone an
@@ -43,6 +45,7 @@ import math
 
 from ..contract import (
     IMPACT_MARKERS,
+    IMPACT_TABLE,
     ROBOT_DESCRIPTION,
     TF,
     TF_STATIC,
@@ -51,6 +54,7 @@ from ..contract import (
     VISUAL_TOPICS,
     plane_to_world,
 )
+from .impact_table import table_json, table_row
 from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (
     IMPACT_PLANE,
@@ -75,11 +79,22 @@ ARROW_HALF_FORCE = 1000.0  # N at which the arrow is half the reach long
 # s the force arrow stays after a contact: >= 0.3 s, ~20 frames at 1x, and gone before the
 # article's next impact (0.4 s later)
 ARROW_HOLD = 0.35
-# the impact points: cyan beads just under the surface, 4 % of the reach across (80 mm on the
-# article's 2 m arm, ~9 pixels in the shipped Foxglove view), so that they show at the default
-# zoom, apart from the tip (red-orange, above the surface) and the arrow (red, pointing up)
-IMPACT_POINT_PER_REACH = 0.04
-IMPACT_POINT_RGBA = (0.0, 0.85, 1.0, 1.0)
+# the impact points: beads resting on the surface, 6 % of the reach across (120 mm on the
+# article's 2 m arm, ~15 pixels in the shipped view at 1x). Inside the slab under the contact
+# point (as drawn before) the opaque face of the surface hid them at any zoom; on top of it
+# nothing of the surface stands between them and a camera above the surface plane.
+IMPACT_POINT_PER_REACH = 0.06
+# their colour: the impact's peak normal force on a log scale, cyan at FORCE_COLOURS[0][0]
+# and below, magenta at the last stop and above (impact forces span decades: 28-31 kN for
+# the article's arm, a few kN for soft contacts); no red, which is the tip's and the arrow's
+FORCE_COLOURS = (
+    (1e3, (0.2, 0.9, 1.0)),  # cyan
+    (1e4, (0.55, 1.0, 0.3)),  # green
+    (3e4, (1.0, 0.9, 0.2)),  # yellow
+    (1e5, (1.0, 0.3, 1.0)),  # magenta
+)
+# the surface: opaque, so that no viewer's transparency sorting draws it over the beads
+SURFACE_RGBA = (0.45, 0.45, 0.5, 1.0)
 IMPACT_EVENTS = ('contact', 'max_compression', 'separation')
 
 
@@ -87,6 +102,23 @@ def arrow_length(force: float, reach: float) -> float:
     """Length [m] drawn for a contact force [N]: half the reach at ``ARROW_HALF_FORCE``,
     approaching the reach for far larger forces."""
     return reach * force / (force + ARROW_HALF_FORCE)
+
+
+def force_colour(force: float) -> tuple[float, float, float, float]:
+    """RGBA of an impact point whose peak normal force is ``force`` [N]: linear in log F
+    between the stops of ``FORCE_COLOURS``, clamped at both ends. A non-finite or negative
+    force is refused (the reports' forces are checked finite before)."""
+    if not (math.isfinite(force) and force >= 0):
+        raise ValueError(f'force {force!r} N: no colour for it')
+    stops = FORCE_COLOURS
+    if force <= stops[0][0]:
+        return (*stops[0][1], 1.0)
+    for (f0, c0), (f1, c1) in zip(stops, stops[1:]):
+        if force <= f1:
+            w = math.log(force / f0) / math.log(f1 / f0)
+            r, g, b = (a + w * (b_ - a) for a, b_ in zip(c0, c1))
+            return (r, g, b, 1.0)
+    return (*stops[-1][1], 1.0)
 
 
 def event_states(record: Mapping[str, Any]) -> list[tuple[str, int, list[float]]]:
@@ -148,6 +180,7 @@ class SceneVisuals:
         self.frame = WORLD if self.robot is None else IMPACT_PLANE
         self._next_tf = 0  # index k of the next /tf time k / tf_rate
         self.impacts: list[tuple] = []  # (contact stamp [ns], contact point (x, z), F_max [N])
+        self.rows: list[dict] = []  # the impacts as /impact_table rows
         self._events: list[tuple] = []  # event frames not yet taken: (stamp [ns], q)
         self._fixed_markers: list = []  # surfaces, then impact points, as drawn so far
         self._drawn_points = 0
@@ -215,6 +248,7 @@ class SceneVisuals:
         # ignored [arg-type], [call-overload, index]: ``record`` is the mapping from here on
         try:
             events = event_states(record)  # type: ignore[arg-type]
+            row = table_row(record)  # type: ignore[arg-type]
             force = float(record['F_max'])  # type: ignore[call-overload,index]
             _, t_contact, q_contact = events[0]
             # the model's contact begins when the tip centre B reaches the surface plane
@@ -235,7 +269,12 @@ class SceneVisuals:
         if not all(math.isfinite(v) for v in numbers) or any(len(q) != n for _, _, q in events):
             raise ValueError(f'impact report not usable: non-finite values or not {n} angles')
         self.impacts.append((t_contact, (x, z), force))
+        self.rows.append(row)
         self._events.extend((t, q) for _, t, q in events)
+
+    def table(self) -> Any:
+        """The /impact_table message: every impact so far as a rounded row."""
+        return self._String(data=table_json(self.rows))
 
     def take_events(self) -> list:
         """[(stamp [ns], absolute link angles)] of the event frames queued since the last
@@ -253,18 +292,19 @@ class SceneVisuals:
         if not self._fixed_markers:
             thickness = SURFACE_THICKNESS_PER_REACH * self.reach
             for i, frame in enumerate(surface_frames(self.scene)):
-                m = self._marker('surface', i, M.CUBE, frame, 0, (0.6, 0.6, 0.6, 0.5))
+                m = self._marker('surface', i, M.CUBE, frame, 0, SURFACE_RGBA)
                 # the surface frame's y is the normal: the slab lies below the plane
                 m.pose.position.y = -thickness / 2
                 m.scale.x, m.scale.y, m.scale.z = 2 * self.reach, thickness, self.reach / 2
                 self._fixed_markers.append(m)
         if self._prefixes is None or self._drawn_points < len(self.impacts):
             for k in range(self._drawn_points, len(self.impacts)):
-                x, z = self.impacts[k][1]
-                m = self._marker('impact_points', k, M.SPHERE, self.frame, 0, IMPACT_POINT_RGBA)
+                _, (x, z), force = self.impacts[k]
+                m = self._marker('impact_points', k, M.SPHERE, self.frame, 0, force_colour(force))
                 size = IMPACT_POINT_PER_REACH * self.reach
-                # the bead's top touches the contact point from below the surface
-                m.pose.position.x, m.pose.position.z = x, z - size / 2
+                # the bead rests on the surface at the contact point: above the slab's top
+                # face, where the surface cannot hide it
+                m.pose.position.x, m.pose.position.z = x, z + size / 2
                 m.scale.x = m.scale.y = m.scale.z = size
                 self._fixed_markers.append(m)
             self._drawn_points = len(self.impacts)
@@ -388,8 +428,13 @@ class VisualsWriter:
         (log time - stamp): the stamp itself where log time is simulated time."""
         self.visuals.add_impact(record)
         offset = 0 if self._last is None else self._last[2] - self._last[0]
-        for t_ns, q in self.visuals.take_events():
-            self._frame_at_event(t_ns, q, t_ns + offset if log_time_ns is None else log_time_ns)
+        events = self.visuals.take_events()
+        log = [t + offset if log_time_ns is None else log_time_ns for t, _ in events]
+        # the table first, logged with the contact's frame (in time order): a seek to the
+        # impact shows its row
+        self._write(IMPACT_TABLE, self.visuals.table(), log[0])
+        for (t_ns, q), log_ns in zip(events, log):
+            self._frame_at_event(t_ns, q, log_ns)
 
     def _frame_at_event(self, t_ns, q, log):
         self._write(TF, self.visuals.tf(q, t_ns), log)

@@ -11,7 +11,7 @@ import threading
 
 from std_msgs.msg import String
 
-from ..contract import IMPACT_MARKERS, ROBOT_DESCRIPTION, TF, TF_STATIC, VISUAL_TOPICS
+from ..contract import IMPACT_MARKERS, IMPACT_TABLE, ROBOT_DESCRIPTION, TF, TF_STATIC, VISUAL_TOPICS
 from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import SceneVisuals
 
@@ -36,6 +36,8 @@ class VisualsPublisher:
             self.visuals.description()
         )
         self.pub_markers = node.create_publisher(MarkerArray, IMPACT_MARKERS, qos(IMPACT_MARKERS))
+        # latched: a viewer that connects later still gets every impact so far
+        self.pub_table = node.create_publisher(String, IMPACT_TABLE, qos(IMPACT_TABLE))
         tf_class = type(self.visuals.tf_static())
         self.pub_tf = None
         # without tf2_msgs rclpy has no type support for TFMessage, so no live TF: the
@@ -63,6 +65,12 @@ class VisualsPublisher:
         with self.lock:
             for record, _rows in tick.impacts:
                 self.visuals.add_impact(record)
+            table = self.visuals.table() if tick.impacts else None
+        if table is not None:  # one message a tick, at impacts only
+            try:
+                self.pub_table.publish(table)
+            except RuntimeError:  # refused by the middleware: lost like a dropped packet,
+                pass  # the next impact's table holds this row again
 
     def _listeners(self):
         """The publishers of /tf and /impact_markers that have a subscriber (None for the

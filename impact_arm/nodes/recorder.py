@@ -13,7 +13,7 @@ After each drain the recorder publishes the newest /joint_states stamp it has wr
 
 With a ``scene``, the file also shows the arm in 3D by itself (docs/topics.md): the recorder
 derives /robot_description and /tf_static (once, at the start), /tf and /impact_markers (at
-``tf_rate`` of the joint-state stamps) from the scene and the recorded /joint_states,
+``tf_rate`` of the joint-state stamps) and /impact_table (at each impact) from the scene and the recorded /joint_states,
 /contact_wrench and /impact_report, exactly as ``simulate --mcap`` does (io/scene_visuals.py).
 It does not subscribe to those topics: /tf needs tf2_msgs, which PyPI does not provide, and a
 derived stream does not depend on the simulator's tf settings.

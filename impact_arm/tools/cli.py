@@ -111,7 +111,13 @@ def cmd_simulate(args) -> int:
         write_json(args.json, result.to_json())
         print(f'wrote {args.json}')
     if args.mcap:
-        print(f'wrote {args.mcap}')
+        from ..io.viewer_layout import write_layout_beside
+
+        try:  # made for this arm and the file's topics (every joint, the plates)
+            layout = write_layout_beside(args.mcap, scene)
+        except OSError as exc:  # the run and its file stand without it
+            layout = f'not written ({exc})'
+        print(f'wrote {args.mcap}; its viewer layout {layout}')
     return 1 if result.error else 0
 
 
@@ -389,6 +395,10 @@ COMMANDS = {
     'export': (
         'impact_arm.tools.export',
         'the arm and its contact for MuJoCo, Drake or Gazebo, tuned by running them',
+    ),
+    'layout': (
+        'impact_arm.tools.layout_command',
+        'the Foxglove/Lichtblick layout made for a recording or a scene (every joint, plates)',
     ),
     'bench': (
         'impact_arm.tools.bench_command',

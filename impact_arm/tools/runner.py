@@ -163,6 +163,14 @@ def cli(args) -> int:
         until = max(run.sim_time, run.published_until)
         check = check_recording(output, args.rate, simulator_topics(scene), until=until)
         print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
+        from ..io.viewer_layout import write_layout_beside
+
+        # made for this arm and the topics the file holds (every joint, the plates); a file
+        # the recorder left unreadable has no layout, and the check above says why
+        try:
+            print(f'viewer layout: {write_layout_beside(output, scene)}')
+        except Exception as exc:  # noqa: BLE001 - any reader failure: no layout, the run stands
+            print(f'no viewer layout: {exc}')
         # lockstep waits for the recorder: a gap there is a defect, not load
         incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
     elif output:
