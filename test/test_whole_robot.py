@@ -198,7 +198,9 @@ def test_tf_for_a_joint_state_is_pinocchios_robot_and_the_markers_land_on_it():
         # ... and frame 'tip' of the description sits there too
         assert compose(transforms, 'tip', 'world')[:3, 3] == pytest.approx(projected, abs=1e-9)
     # impact points and the force arrow are drawn in impact_plane
-    visuals.add_impact({'t_contact': 0.001, 'F_max': 100.0, 'q_contact_deg': list(np.degrees(q))})
+    visuals.add_impact(
+        {'index': 1, 't_contact': 0.001, 'F_max': 100.0, 'q_contact_deg': list(np.degrees(q))}
+    )
     from impact_arm.io.msgdefs import typestore
 
     markers = typestore().deserialize_cdr(
