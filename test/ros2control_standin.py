@@ -45,7 +45,8 @@ when the state it broadcast has moved (an answer is due), waits (as long) for th
 answer to it before it takes the newest command: the controller as if it ran inside the update,
 as gz_ros2_control's and mujoco_ros2_control's controllers do; the real
 JointGroupEffortController takes what has arrived. Waits that ran out are counted in the JSON
-lines ("late_states", "unanswered"). Written ``--late`` updates late (default 1): a command
+lines ("late_states", of which "late_driven" once a torque was written, and "unanswered").
+Written ``--late`` updates late (default 1): a command
 computed from the state at t acts from t + 1/rate on, whatever the machine's load.
 
 Scheduled as a controller_manager's update loop: each update sleeps until its deadline on a
@@ -228,7 +229,8 @@ def main():
     gc.collect()
     gc.freeze()  # what lives for the whole run, out of the collector's sight
     if args.use_sim_time:
-        counts = {'n': 0, 'zeros': 0, 'late_states': 0, 'unanswered': 0}
+        # late_driven: late states once a torque has been written (the arm released)
+        counts = {'n': 0, 'zeros': 0, 'late_states': 0, 'late_driven': 0, 'unanswered': 0}
         now_ns = 0
         period_ns = round(1e9 / args.rate)
         previous = None  # the positions broadcast by the previous update
@@ -237,6 +239,7 @@ def main():
             # newest: what the real TopicBasedSystem takes at once)
             if not wait_until(lambda t=now_ns: t in states_by_stamp):
                 counts['late_states'] += 1
+                counts['late_driven'] += counts['n'] > counts['zeros']
             msg = states_by_stamp.get(now_ns, newest['state'])
             for stamp_ns in [t for t in states_by_stamp if t <= now_ns]:
                 del states_by_stamp[stamp_ns]

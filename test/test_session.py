@@ -691,6 +691,8 @@ def test_the_law_waits_until_the_driver_answers_its_first_command(scene):
     assert len(sent) > 50 and all(command == sent[0] for command in sent)
     assert c.answered_by is None and c.unanswered == len(sent) - 1
     assert c.ctrl.switches == 0
+    # each one in the history the latency is measured against, as the law's own would be
+    assert len(c.sent) == min(len(sent), c.sent.maxlen)
     clock.now += 0.001
     state(c, 0.2, q=q0, effort=sent[0])  # the hardware applies it (the arm still braked)
     assert c.answered_by is Answer.EFFORT

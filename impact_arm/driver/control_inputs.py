@@ -374,6 +374,11 @@ class ControlInputs:
         self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
         if self.first_efforts is not None and self.answered_by is None:
             self.unanswered += 1
+            # in the history as the law's own would be (the same command on the same held
+            # state): the latency measured later matches efforts against it, and a lone
+            # first command there would be an unambiguous match a run that never waited
+            # does not have
+            self.sent.append(self.sent[-1])
             self.send([self.first_efforts[j] for j in self.order])
             return
         ahead = self.in_flight()
