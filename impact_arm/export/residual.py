@@ -49,7 +49,7 @@ def spread(ours: Outcome, peer: Outcome, quantity: Quantity, strike: Strike) -> 
 
 # the arm lives at its limit-cycle impact (the oblique strike at 1x): it counts this many
 # times each other strike, so that the exported peer rebounds there as ours does
-CYCLE_IMPACT_WEIGHT = 10.0
+CYCLE_IMPACT_WEIGHT = 25.0
 
 
 def strike_weight(strike: Strike) -> float:
