@@ -198,6 +198,17 @@ def main():
     state_interfaces = (list(initial), [0.0] * len(joints), [0.0] * len(joints))
     command_interfaces = [0.0] * len(joints)  # zeros from activation
     written = deque([list(command_interfaces)] * args.late)
+
+    def write(interfaces, stamp):
+        """The hardware's write, ``--late`` updates late: the command ``interfaces`` of
+        that update as a JointState stamped ``stamp``; returns the efforts written."""
+        written.append(list(interfaces))
+        value = written.popleft()
+        command = JointState(name=list(joints), effort=value)
+        command.header.stamp = stamp
+        hardware_out.publish(command)
+        return value
+
     period = 1.0 / args.rate
     start = time.monotonic()
     k = zeros = slot = stale = postponed = 0
@@ -264,11 +275,7 @@ def main():
             previous = list(out.position)
             if newest['command'] is not None:
                 command_interfaces = newest['command']
-            written.append(list(command_interfaces))
-            value = written.popleft()
-            command = JointState(name=list(joints), effort=value)
-            command.header.stamp = stamp
-            hardware_out.publish(command)
+            value = write(command_interfaces, stamp)
             counts['zeros'] += not any(value)
             counts['n'] += 1
             if counts['n'] % 100 == 0:
@@ -314,11 +321,7 @@ def main():
                 stale += not fresh
                 command_interfaces = newest['command']
         # write, late by --late updates
-        written.append(list(command_interfaces))
-        value = written.popleft()
-        command = JointState(name=list(joints), effort=value)
-        command.header.stamp = stamp
-        hardware_out.publish(command)
+        value = write(command_interfaces, stamp)
         zeros += not any(value)
         k += 1
         if k % 100 == 0:
