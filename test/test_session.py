@@ -643,12 +643,16 @@ def test_diagnostics_read_while_the_loop_records_stalls_see_one_snapshot(scene):
 
     s.arm.step = costly_step
     assert s.offer(lambda: s.ordered([0.0, 0.0]))
-    done = threading.Event()
+    done, stop = threading.Event(), threading.Event()
     failures = []
 
     def loop():
         try:
-            for _ in range(1500):
+            # until the reader has taken its snapshots (how many periods that takes depends
+            # on the machine), with a bound
+            for _ in range(200_000):
+                if stop.is_set():
+                    break
                 s.loop.realtime_period()
         except Exception as exc:  # noqa: BLE001 - reported by the test
             failures.append(exc)
@@ -668,11 +672,13 @@ def test_diagnostics_read_while_the_loop_records_stalls_see_one_snapshot(scene):
             assert scheduled <= wall * RATE + 2, values  # (one period in progress)
             assert len(values['periods_skipped_at_s'].split()) <= 8
             snapshots += 1
+            if snapshots >= 50:
+                stop.set()
         thread.join()
     finally:
         sys.setswitchinterval(switch)
     assert not failures, failures
-    assert s.loop.skipped > 1000 and snapshots > 10
+    assert s.loop.skipped > 100 and snapshots >= 50
 
 
 def test_the_law_waits_until_the_driver_answers_its_first_command(scene):
