@@ -580,13 +580,22 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     mcap = tmp_path / 'runs' / 'r.mcap'
     with AnyReader([Path(mcap)]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        reports = [
-            json.loads(reader.deserialize(raw, c.msgtype).data)['index']
-            for c, _, raw in reader.messages(
+        logged = [
+            (json.loads(reader.deserialize(raw, c.msgtype).data), log_ns)
+            for c, log_ns, raw in reader.messages(
                 [c for c in reader.connections if c.topic == '/impact_report']
             )
         ]
+    reports = [record['index'] for record, _ in logged]
     assert reports == list(range(1, 16)), reports
+    # each report at its impact's separation, however late the frozen recorder received it
+    # (the newest joint-state stamp then lay up to the simulator's window past the impact)
+    late = [
+        (record['index'], log_ns * 1e-9)
+        for record, log_ns in logged
+        if abs(log_ns * 1e-9 - record['t_contact'] - record['duration']) > 1e-6
+    ]
+    assert not late, late
     # the held initial state (stamp 0) and then every period, 1 ms apart, to the end, in
     # the order they were written; a command started each period after the first
     with open(mcap, 'rb') as f:

@@ -2,8 +2,9 @@
 
 Parameters: output, topics, scene, param_nodes, flush_interval, tf_rate, log_time (see their
 descriptions). Messages are stored as received (no deserialization): log time = the newest
-/clock or /joint_states stamp (simulated time, one clock for the whole file; ``log_time:
-reception`` keeps the wall clock), publish time = the publisher's source timestamp. The file
+/clock or /joint_states stamp (simulated time, one clock for the whole file; an
+/impact_report is logged at its impact's separation; ``log_time: reception`` keeps the wall
+clock), publish time = the publisher's source timestamp. The file
 also holds the scene YAML (attachment and metadata), the parameters of ``param_nodes`` at
 start and at shutdown, the package version and the samples lost on the way per topic (from
 the writers' sequence numbers: ``contract.LOSSES_METADATA``, also on /diagnostics).
@@ -140,6 +141,8 @@ class Recorder(Node):
             name, _, type_name = entry.partition(':')
             self.wanted[name] = type_name or TOPICS.get(name, ('',))[0]
         self.visuals = None
+        # reads /impact_report: its log time (stamps) and its 3D event frames (a scene)
+        self._read_string = _string_reader() if self.by_stamps or scene_text else None
         if scene_text is not None:
             from ..physics.scene import scene_from_text
 
@@ -160,7 +163,6 @@ class Recorder(Node):
             self._q = None  # absolute link angles of the latest joint state
             self._joints = scene_joint_names(self.visuals.visuals.scene)
             self._coordinates = self.visuals.visuals.scene.joint_coordinates
-            self._read_string = _string_reader()
         self.subs = {}
         # what has been written, for a lockstep simulator that waits for the recording
         self.progress = self.create_publisher(
@@ -296,14 +298,39 @@ class Recorder(Node):
             return None
         return stamp if 0 <= stamp < 1 << 63 else None  # a hostile peer's negative stamp
 
+    def _report(self, data):
+        """The impact record in an /impact_report sample, None for one that is not."""
+        try:
+            record = json.loads(self._read_string(data).data)
+        except (SerdeError, ValueError) as e:
+            self.get_logger().warning(f'impact report not read: {e}')
+            return None
+        return record if isinstance(record, dict) else None
+
+    @staticmethod
+    def _separation_ns(record):
+        """Simulated time [ns] an impact record ends (its separation), None if it has none."""
+        try:
+            t = float(record['t_contact']) + float(record['duration'])
+        except (KeyError, TypeError, ValueError):
+            return None
+        return round(t * 1e9) if 0.0 <= t < 9e9 else None
+
     def _store(self, topic, data, received, published):
         try:
             stamp = self._stamp(topic, data)
+            record = self._report(data) if topic == contract.IMPACT_REPORT else None
             if self.by_stamps:
                 # simulated time, one clock for the whole file: a viewer plays it at 1x
                 # and its index is in stamp order
                 self.now_ns = self.now_ns if stamp is None else stamp
                 received = self.now_ns
+                # a report is logged when its impact ended, as offline files log it: a
+                # recorder that was descheduled receives it only after the states that
+                # followed it, and the newest stamp would then log it late, even after
+                # the next impact's report
+                ended = None if record is None else self._separation_ns(record)
+                received = received if ended is None else ended
             if not self.writer.has_topic(topic):
                 # Like rosbag2: store the QoS the publishers actually offer, else the contract's.
                 pubs = self.get_publishers_info_by_topic(topic)
@@ -320,7 +347,7 @@ class Recorder(Node):
             if topic == contract.JOINT_STATES and stamp is not None:
                 self.written_until = stamp
             if self.visuals is not None:
-                self._derive_visuals(topic, data, received)
+                self._derive_visuals(topic, data, received, record)
         except RecordingError as e:
             self._fail(e)
         except MalformedMessage as e:
@@ -331,7 +358,7 @@ class Recorder(Node):
                 throttle_duration_sec=2.0,
             )
 
-    def _derive_visuals(self, topic, data, received):
+    def _derive_visuals(self, topic, data, received, record=None):
         """Feed the recorded state to the visuals; a wrench may arrive before or after the
         joint state of its period, so it is drawn at the latest known arm pose."""
         if topic == contract.CONTACT_WRENCH:
@@ -350,10 +377,10 @@ class Recorder(Node):
             sec, nanosec, _, position, velocity = joint_state_fields(data)
             plates = [v for pair in zip(position, velocity) for v in pair]
             self.visuals.plates(sec * 1_000_000_000 + nanosec, plates, received)
-        elif topic == contract.IMPACT_REPORT:
+        elif topic == contract.IMPACT_REPORT and record is not None:
             try:
-                self.visuals.impact(self._read_string(data).data)
-            except (SerdeError, ValueError, KeyError) as e:
+                self.visuals.impact(record)
+            except (ValueError, KeyError, TypeError) as e:
                 self.get_logger().warning(f'impact report not drawn: {e}')
 
     def _publish_diagnostics(self):

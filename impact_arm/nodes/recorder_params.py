@@ -62,7 +62,8 @@ PARAMS = (
         'log_time',
         'stamps',
         'log time of each message: stamps = the newest /clock or /joint_states stamp '
-        'received (simulated time, as ros2 bag record --use-sim-time; 0 before the first), '
+        'received (simulated time, as ros2 bag record --use-sim-time; 0 before the first; '
+        "an /impact_report at its impact's separation), "
         'reception = the wall clock',
         'str',
         choices=LOG_TIMES,
