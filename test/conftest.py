@@ -1,10 +1,13 @@
-"""Shared fixtures. Every test process keeps DDS on this machine (CONTRIBUTING.md). The
-benchmarks' package (bench/impact_arm_bench) is importable: some tests check its helpers."""
+"""Shared fixtures. Every test process keeps DDS on this machine (CONTRIBUTING.md). The tests
+mirror the package in folders (test/physics, test/driver, ...); their helpers, stand-in scripts
+and paths are in test/support, importable by name from every folder. The benchmarks' package
+(bench/impact_arm_bench) is importable: some tests check its helpers."""
 
 import os
 import random
 import sys
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), 'support'))
 sys.path.insert(
     0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bench')
 )

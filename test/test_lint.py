@@ -233,3 +233,68 @@ def test_the_api_and_the_nodes_sit_side_by_side(tmp_path):
     (target,) = imported(str(module), ['impact_arm', 'api', 'bad'])
     assert layer(target) == layer(['impact_arm', 'api', 'bad'])
     assert _package(target) != _package(['impact_arm', 'api', 'bad'])
+
+
+TESTS = os.path.join(ROOT, 'test')
+# test folders that mirror no package: whole workflows, shared helpers, test data
+NOT_A_PACKAGE = {'integration', 'support', 'data'}
+
+
+def imports_of_test_modules(folder=TESTS):
+    """(importer, imported) for every test module that imports another test module."""
+    found = []
+    for base, dirs, files in os.walk(folder):
+        dirs[:] = [d for d in dirs if d not in ('data', '__pycache__')]
+        for name in files:
+            if not (name.startswith('test_') and name.endswith('.py')):
+                continue
+            path = os.path.join(base, name)
+            with open(path, encoding='utf-8') as f:
+                tree = ast.parse(f.read(), path)
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and (node.module or '').startswith('test_'):
+                    found.append((os.path.relpath(path, folder), node.module))
+                elif isinstance(node, ast.Import):
+                    found += [
+                        (os.path.relpath(path, folder), a.name)
+                        for a in node.names
+                        if a.name.startswith('test_')
+                    ]
+    return found
+
+
+def test_no_test_module_imports_another():
+    """What two test modules share lives in test/support: a test module imported by another
+    is found only when pytest happened to collect its folder first."""
+    assert not imports_of_test_modules()
+
+
+def test_the_import_check_sees_a_test_importing_a_test(tmp_path):
+    (tmp_path / 'physics').mkdir()
+    (tmp_path / 'physics' / 'test_a.py').write_text('from test_b import helper\n')
+    assert imports_of_test_modules(str(tmp_path)) == [
+        (os.path.join('physics', 'test_a.py'), 'test_b')
+    ]
+
+
+def test_test_folders_mirror_the_package():
+    """Each test folder is named after the package it tests (or is one of NOT_A_PACKAGE), and
+    every test module sits in a folder but the repository-wide ones and the contract's."""
+    packages = {d for d in os.listdir(PACKAGE) if os.path.isdir(os.path.join(PACKAGE, d))}
+    folders = {d for d in os.listdir(TESTS) if os.path.isdir(os.path.join(TESTS, d))}
+    folders.discard('__pycache__')
+    assert not folders - packages - NOT_A_PACKAGE
+    for base, dirs, _ in os.walk(TESTS):
+        rel = os.path.relpath(base, TESTS)
+        if rel == '.' or rel.split(os.sep)[0] in NOT_A_PACKAGE:
+            continue
+        dirs[:] = [d for d in dirs if d != '__pycache__']
+        assert os.path.isdir(os.path.join(PACKAGE, rel)), f'test/{rel} mirrors no package'
+    top = sorted(f for f in os.listdir(TESTS) if f.startswith('test_') and f.endswith('.py'))
+    assert top == [
+        'test_contract.py',
+        'test_dependencies.py',
+        'test_import_graph.py',
+        'test_license.py',
+        'test_lint.py',
+    ]

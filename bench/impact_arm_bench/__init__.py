@@ -7,8 +7,8 @@ sub-command is a module with ``add_arguments(parser)`` and ``run(args) -> int``;
 ``SUBCOMMANDS`` maps its name to (module path, one-line help): to add one, write the module
 here and add its line. Modules import their heavy dependencies inside ``run`` (so ``bench
 speed`` never loads rclpy). The hostile-input generators they share with the tests are in
-test/generators.py: importing this package puts test/ (and bench/, for the worker processes
-the benchmarks start) on the path.
+test/support/generators.py: importing this package puts test/support (and bench/, for the worker
+processes the benchmarks start) on the path.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import os
 import sys
 
 _BENCH = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-_TESTS = os.path.join(os.path.dirname(_BENCH), 'test')
+_TESTS = os.path.join(os.path.dirname(_BENCH), 'test', 'support')
 for _folder in (_TESTS, _BENCH):
     if _folder not in sys.path:
         sys.path.insert(0, _folder)

@@ -26,7 +26,7 @@ import sys
 import tempfile
 import time
 
-from generators import malformed_commands  # test/generators.py (on the path: __init__)
+from generators import malformed_commands  # test/support/generators.py (on the path: __init__)
 
 BURST_PERIOD = 0.005  # s between two bursts of a flooder
 PAYLOADS = 4000  # distinct garbage payloads a flooder cycles through

@@ -30,7 +30,7 @@ import time
 import traceback
 
 from . import common
-from generators import mutate  # test/generators.py (on the path: __init__)
+from generators import mutate  # test/support/generators.py (on the path: __init__)
 
 CLASSES = ('accepted-finite', 'refused', 'stopped-at-limit', 'traceback', 'hang', 'non-finite')
 GOOD = CLASSES[:3]

@@ -1,7 +1,7 @@
 """``impact-arm bench ros2control``: the ros2_control set-up of docs/ros2_control.md in real
-time at 1 kHz, with the stand-in stack (test/ros2control_standin.py) in place of
+time at 1 kHz, with the stand-in stack (test/support/ros2control_standin.py) in place of
 controller_manager + TopicBasedSystem + joint_state_broadcaster + JointGroupEffortController.
-One run is test/standin_stack.py's, which the realtime test of test/test_topic_hardware.py
+One run is test/support/standin_stack.py's, which the realtime test of test/nodes/test_topic_hardware.py
 runs too.
 
 Per run the three processes start in the chosen order (``--order``, a second apart): the

@@ -13,7 +13,7 @@ results or stop with a clear error naming the limit it crossed. Checked on every
   which conserves energy, |ΔE| itself);
 * no impact missed: cases whose geometry forces an impact state how many they expect.
 
-The fast cases (``FAST``) run in ``make test`` (test/test_stress.py); ``bench stress`` runs the
+The fast cases (``FAST``) run in ``make test`` (test/integration/test_stress.py); ``bench stress`` runs the
 full sweep, including a soak of 10 000 impacts, and prints the matrix as a table.
 """
 

@@ -2,7 +2,7 @@
 
 ``viewer_layout(scene, topics)`` is the layout ``impact-arm layout`` prints and ``impact-arm
 run`` / ``simulate --mcap`` write beside each recording; for the article's scene it is
-``config/impact_arm.foxglove.json`` (test/test_viewer_layout.py keeps the two equal). What
+``config/impact_arm.foxglove.json`` (test/io/test_viewer_layout.py keeps the two equal). What
 it holds, and why:
 
 - a 3D panel facing the arm's x-z plane, its camera distance scaled by the arm's reach;
