@@ -60,6 +60,13 @@ def add_arguments(parser):
         help='extra controller parameters (e.g. implicit_periods:=0)',
     )
     parser.add_argument(
+        '--simulator-params',
+        nargs='*',
+        default=[],
+        metavar='K:=V',
+        help='extra simulator parameters (e.g. thread_priority:=0)',
+    )
+    parser.add_argument(
         '--standin-fifo-threads',
         choices=('all', 'update'),
         default='all',
@@ -105,6 +112,7 @@ def _one_run(args, order, workdir):
         standin_priority=args.standin_priority,
         standin_args=('--fifo-threads', args.standin_fifo_threads),
         controller_params=args.controller_params,
+        simulator_params=args.simulator_params,
         cpu_seconds=lambda pid: cpu_seconds(f'/proc/{pid}/stat'),
         thread_cpu=thread_cpu_seconds if args.threads else None,
         scene=args.scene,

@@ -174,6 +174,7 @@ def commands(
     scene: str | None = None,
     standin_args=(),
     sim_time: float | None = None,
+    simulator_params=(),
 ) -> dict:
     """Each role's command line; ``scene``: a scene file for the simulator and the
     controller (default: the article's), whose joints the stand-in then drives."""
@@ -209,7 +210,7 @@ def commands(
             *(repr(float(v)) for v in initial),
             *standin_args,
         ],
-        'simulator': simulator(*sim, *scene_param),
+        'simulator': simulator(*sim, *scene_param, *simulator_params),
         'controller': controller(
             'start_after:=wrench', *scene_param, *controller_params, ros_args=REMAPS
         ),
@@ -230,6 +231,7 @@ def run_stack(
     sim_time: float | None = None,
     cycles: int = CYCLES,
     thread_cpu: Callable[[int], dict[str, float]] | None = None,
+    simulator_params=(),
 ) -> StackRun:
     """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain, of the
     article's arm or ``scene``'s; every process is ended by PID on the way out. With
@@ -251,7 +253,14 @@ def run_stack(
         keep=lambda m: bool(m.status) and 'controller' in m.status[0].name,
     )
     lines = commands(
-        timeout + 30, standin, standin_priority, controller_params, scene, standin_args, sim_time
+        timeout + 30,
+        standin,
+        standin_priority,
+        controller_params,
+        scene,
+        standin_args,
+        sim_time,
+        simulator_params,
     )
     procs = {}
     try:
