@@ -22,6 +22,11 @@ class RunBudgetError(SimulationError):
     """A run took far more steps per simulated second than any meaningful scene needs."""
 
 
+class ContactStateError(ImpactArmError):
+    """No joint rates give a reported contact's tip velocity and link energies, so the
+    impact cannot be integrated again from it (physics/replay.py, ``contact_rates``)."""
+
+
 class UnstableControlWarning(UserWarning):
     """A sampled control law unstable at its rate that the scene allows
     (``controller.allow_unstable``): its commands will chatter (physics/stability.py)."""

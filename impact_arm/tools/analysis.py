@@ -30,7 +30,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +39,9 @@ from ..physics.metrics import LimitCycle
 from ..physics.metrics import limit_cycle as find_limit_cycle
 from .run_data import AnalysisError, Run, _quiet, chatter, load
 from .step_responses import STEP_LAWS, step_metrics, step_response
+
+if TYPE_CHECKING:
+    from ..physics.replay import ElasticCurve
 
 
 # ------------------------------------------------------------------ impacts of live files
@@ -61,42 +64,41 @@ def trace_missing_reason(run: Run) -> str:
 
 def contact_state(model, record: dict, guess=None) -> tuple[np.ndarray, np.ndarray]:
     """(q, q̇) at an impact's contact from its /impact_report: the angles it gives, and the
-    joint rates from the tip velocity v (q̇ = J(q)⁻¹ v) for two links. A longer chain has
-    more rates than v has components: they are the rates that give v and every link's
-    kinetic energy at contact (``T_before``), solved by least squares from ``guess`` (the
-    recording's last joint rates before the contact: of the discrete solutions, the one the
-    motion was on). Refused (AnalysisError) when no rates give both."""
-    n = model.n
+    joint rates that give its tip velocity (and, beyond two links, every link's kinetic
+    energy ``T_before``; ``guess``: the recording's last joint rates before the contact),
+    ``physics.replay.contact_rates``. Refused (AnalysisError) when no rates give both."""
+    from ..physics.errors import ContactStateError
+    from ..physics.replay import contact_rates
+
     q = np.radians(np.asarray(record['q_contact_deg'], float))
     v = np.asarray(record['v_before'], float)
-    jacobian = np.asarray(model.tip_jacobian(q), float).reshape(2, n)
-    if n == 2:
-        return q, np.linalg.solve(jacobian, v)
-    from scipy.optimize import least_squares
-
-    energies = np.asarray(record['T_before'][:n], float)
-    v_scale = max(float(np.hypot(*v)), 1e-9)
-    t_scale = max(float(np.sum(energies)), 1e-12)
-
-    def residuals(qd):
-        return np.concatenate(
-            [(jacobian @ qd - v) / v_scale, (model.link_energies(q, qd) - energies) / t_scale]
-        )
-
-    start = np.zeros(n) if guess is None else np.asarray(guess, float)
-    fit = least_squares(residuals, start, method='lm', xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    if not np.max(np.abs(fit.fun)) < 1e-8:
-        raise AnalysisError(
-            f'impact {record.get("index")}: no joint rates give its reported tip velocity '
-            f'and link energies at contact (worst relative misfit {np.max(np.abs(fit.fun)):.1e})'
-        )
-    return q, fit.x
+    energies = np.asarray(record['T_before'][: model.n], float) if model.n > 2 else None
+    try:
+        return q, contact_rates(model, q, v, energies, guess)
+    except ContactStateError as exc:
+        raise AnalysisError(f'impact {record.get("index")}: {exc}') from None
 
 
 def rates_before(run: Run, t: float):
     """The joint rates of ``run``'s last joint state at or before time ``t`` (None if none)."""
     i = int(np.searchsorted(run.t, t, side='right')) - 1
     return run.qd[i] if i >= 0 and np.all(np.isfinite(run.qd[i])) else None
+
+
+def _contact_replay(scene, record: dict, guess, **kwargs):
+    """Impact ``record`` integrated again from its reported contact state
+    (``physics.replay.replay_impact``, from a moment before the contact, with the scene's
+    integrator options); given up after ten times its reported duration."""
+    from ..physics.integrator import IntegratorOptions
+    from ..physics.model import ArmModel
+    from ..physics.replay import ReplayStart, replay_impact
+
+    model = ArmModel(scene)
+    q, qd = contact_state(model, record, guess)
+    start = ReplayStart.before_contact(float(record['t_contact']), q, qd)
+    horizon = start.t + 10 * max(float(record['duration']), 1e-6)
+    options = IntegratorOptions.of_scene(scene.integrator)
+    return model, replay_impact(model, start, options, horizon, **kwargs)
 
 
 def reintegrated_trace(scene, record: dict, guess=None):
@@ -106,54 +108,15 @@ def reintegrated_trace(scene, record: dict, guess=None):
     so the impact is the recorded one to the integrator's tolerance. Returns (columns, rows)
     as /impact_trace carries them and the re-integrated record (to compare with the
     reported one)."""
-    from ..physics.periods import feed_events
-    from ..physics.integrator import IntegratorOptions, PhaseIntegrator
-    from ..physics.metrics import ImpactBuilder
-    from ..physics.model import ArmModel
     from ..io.offline_mcap import trace_columns
 
-    model = ArmModel(scene)
-    n = model.n
-    q, qd = contact_state(model, record, guess)
-    # start a moment before contact (0.1 µs: ~0.6 µm above the surface) so that the contact
-    # event is located as in the run, not taken as already crossed
-    back = 1e-7
-    state = model.initial_state()
-    state.t = float(record['t_contact']) - back
-    state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
-    integ = PhaseIntegrator(
-        model,
-        state,
-        control='held',
-        trace=True,
-        options=IntegratorOptions.of_scene(scene.integrator),
-    )
-    builder = ImpactBuilder(model)
-    t_end = state.t + 10 * max(float(record['duration']), 1e-6)
-    for made, rows in feed_events(integ, builder, integ.advance(t_end, stop_at_event=True)):
-        return (trace_columns(n), np.asarray(rows, float)), made
-    while state.t < t_end:
-        done = feed_events(integ, builder, integ.advance(t_end, stop_at_event=True))
-        if done:
-            made, rows = done[0]
-            return (trace_columns(n), np.asarray(rows, float)), made
-    raise AnalysisError(
-        f'impact {record.get("index")} did not end when integrated again from '
-        f'its reported contact state'
-    )
-
-
-@dataclass(frozen=True)
-class ElasticCurve:
-    """The elastic (Hertz) phase of one impact on a fine time grid: the integrator's output
-    between contact and the end of the phase (yield at 1.9 δc, or maximum compression for a
-    contact that stays elastic). The phase lasts ~1 µs, a step or two of the integrator: its
-    step ends alone draw it as a straight segment."""
-
-    t: np.ndarray  # [s]
-    delta: np.ndarray  # indentation [m]
-    force: np.ndarray  # normal force [N], Hertz at delta
-    end: str  # the event that ends the phase: 'yield' or 'max_compression'
+    model, replay = _contact_replay(scene, record, guess, trace=True)
+    if replay.record is None:
+        raise AnalysisError(
+            f'impact {record.get("index")} did not end when integrated again from '
+            f'its reported contact state'
+        )
+    return (trace_columns(model.n), replay.trace), replay.record
 
 
 def elastic_curve(scene, record: dict, points: int = 80, guess=None) -> ElasticCurve | None:
@@ -162,9 +125,8 @@ def elastic_curve(scene, record: dict, points: int = 80, guess=None) -> ElasticC
     over its elastic phase (the integrator's continuous extension; contact steps end on the
     grid). None when the record cannot be integrated again (``trace_missing_reason``) or has
     no elastic phase."""
-    from ..physics.contact import hertz_force
-    from ..physics.integrator import IntegratorOptions, PhaseIntegrator
-    from ..physics.model import ArmModel
+    from ..physics.kinds import EventKind
+    from ..physics.replay import OutputGrid, elastic_phase
 
     if scene is None or scene.actuators_during_contact:
         return None
@@ -173,47 +135,18 @@ def elastic_curve(scene, record: dict, points: int = 80, guess=None) -> ElasticC
         return None
     if scene.n_links > 2 and 'T_before' not in record:
         return None
-    model = ArmModel(scene)
-    n = model.n
+    dt = float(durations[0]) / points
     try:
-        q, qd = contact_state(model, record, guess)
+        model, replay = _contact_replay(
+            scene,
+            record,
+            guess,
+            end_at=(EventKind.YIELD, EventKind.MAX_COMPRESSION),
+            output=OutputGrid.from_time(dt, float(record['t_contact'])),
+        )
     except AnalysisError:
         return None
-    back = 1e-7  # start a moment before contact, as reintegrated_trace does
-    state = model.initial_state()
-    state.t = float(record['t_contact']) - back
-    state.y[:n], state.y[n : 2 * n] = q - qd * back, qd
-    integ = PhaseIntegrator(
-        model, state, control='held', options=IntegratorOptions.of_scene(scene.integrator)
-    )
-    dt = float(durations[0]) / points
-    integ.start_output(dt, math.ceil(float(record['t_contact']) / dt))
-    t_end = state.t + 10 * max(float(record['duration']), 1e-6)
-    contact = end = None
-    while state.t < t_end and end is None:
-        for event in integ.advance(t_end, stop_at_event=True):
-            if event.kind == 'contact' and contact is None:
-                contact = event
-            elif contact is not None and event.kind in ('yield', 'max_compression'):
-                end = event
-                break
-    if contact is None or end is None:
-        return None
-    rows = integ.take_output()
-    surface = model.surfaces[contact.surface]
-    level = float(state.levels[contact.surface])
-
-    def indentation(y):
-        if model.general:  # the tip B anywhere on the last link
-            return level - float(model.tip(y[:n], np.zeros(n))[1])
-        return level - float(np.sum(model.L * np.sin(y[:n])))
-
-    t = [contact.t] + [r[0] for r in rows if contact.t < r[0] < end.t] + [end.t]
-    ys = [contact.y] + [r[1 : 1 + model.size] for r in rows if contact.t < r[0] < end.t] + [end.y]
-    delta = np.array([max(indentation(y), 0.0) for y in ys])
-    c = surface.constants
-    force = np.array([hertz_force(d, c.E, c.R) for d in delta])
-    return ElasticCurve(np.asarray(t), delta, force, end.kind)
+    return elastic_phase(model, replay)
 
 
 def with_contact_point(columns, rows, record):

@@ -386,7 +386,7 @@ def _note(ax, impact):
 
 
 def _elastic(elastic, impact, x='t'):
-    """{1: (x, y)} of the elastic phase's dense curve (``analysis.ElasticCurve``): x in µs
+    """{1: (x, y)} of the elastic phase's dense curve (``physics.replay.ElasticCurve``): x in µs
     since contact (or the indentation, ``x='delta'``, in µm); y in the trace's own unit
     (the caller scales)."""
     if elastic is None:
@@ -678,7 +678,7 @@ def draw_all(
     recordings to compare with ``run``; ``constants``: the impacted surface's contact
     constants (the model's curves in the force–indentation plot); ``style``: format and dpi
     (default: PNG at ``DPI``); ``elastic``: the impact's elastic phase on a fine grid
-    (``analysis.ElasticCurve``), drawn as the line of that phase in Figures 8 and 10."""
+    (``physics.replay.ElasticCurve``), drawn as the line of that phase in Figures 8 and 10."""
     style = style or Style()
     jobs = []
     if steps:

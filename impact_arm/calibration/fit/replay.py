@@ -5,7 +5,6 @@ A replay that cannot be made says why by a ``FailureKind``."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import enum
 import math
@@ -14,8 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...physics.errors import SimulationError
-from ...physics.integrator import IntegratorOptions, PhaseIntegrator
+from ...physics.integrator import IntegratorOptions
 from ...physics.model import ArmModel
+from ...physics.replay import Replay, ReplayStart, start_replay
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
 from .efforts import TorqueSchedule, contact_period_command, effort_shift, wrench_shift
 
@@ -89,22 +89,15 @@ def predict_impact(
             FailureKind.SURFACE_ABOVE_TIP,
             "the scene's surface is above the arm's tip before the recorded contact",
         )
-    state = model.initial_state()
-    state.t = t0
-    state.y[:n], state.y[n : 2 * n] = T @ q, T @ qd
-    if win.plate is not None and len(win.plate) == 2 * model.n_mount:
-        # a plate still ringing from the impacts before: from its recorded state
-        for i, surface in enumerate(model.mounted):
-            state.y[surface.mount_state : surface.mount_state + 2] = win.plate[2 * i : 2 * i + 2]
+    # a plate still ringing from the impacts before: from its recorded state
+    ringing = win.plate is not None and len(win.plate) == 2 * model.n_mount
+    # the scene's controller, if used, is approaching the surface
+    start = ReplayStart(t0, T @ q, T @ qd, mode='down', plates=win.plate if ringing else None)
     held = timing != 'controller'
-    state.mode = 'down'  # the scene's controller, if used, is approaching the surface
-    integ = PhaseIntegrator(
-        model, state, control='held' if held else 'continuous', options=window_options(model)
-    )
+    replay = Replay(model, start, window_options(model), control='held' if held else 'continuous')
+    integ = replay.integrator
     torque = TorqueSchedule(win, timing, effort_shift(model), contact_period_command(model, win))
-    first: Any = None  # the first and last contact events, once found
-    last: Any = None
-    contacts, side, rates, path, impulse = 0, 'pre', [], [], np.zeros(2)
+    rates, path, impulse = [], [], np.zeros(2)
     targets = list(win.post_t)
     edges = torque.boundaries(t0, targets[-1])
     extra: set[float] = set()
@@ -131,15 +124,9 @@ def predict_impact(
             while integ.state.t < edge:
                 if held:  # (ignored by the kernel while actuators are off in contact)
                     integ.set_held_torque(
-                        torque(integ.state.t, edge, 'pre' if side == 'pre' else 'post')
+                        torque(integ.state.t, edge, 'pre' if replay.side == 'pre' else 'post')
                     )
-                for event in integ.advance(edge, stop_at_event=('contact', 'separation')):
-                    if event.kind == 'contact':
-                        contacts += 1
-                        first = first or event
-                        side = 'contact'
-                    elif event.kind == 'separation':
-                        last, side = event, 'post'
+                replay.advance(edge, stop_at=('contact', 'separation'))
             if period is not None:
                 positions[edge] = np.linalg.solve(T, integ.state.y[:n])
             if dense is not None or lag_ends is not None:
@@ -149,21 +136,22 @@ def predict_impact(
                     [integ.state.t, *np.linalg.solve(T, integ.state.y[n : 2 * n]), *impulse]
                 )
             if targets and abs(edge - targets[0]) < 1e-12:
-                if side == 'contact':
+                if replay.side == 'contact':
                     # a contact ending just after the sample in the model, just before it in
                     # the recording (the start state is uncertain by microseconds): let it
                     # end within a tenth of a period and compare there, unless what is left
                     # of it changes the rates beyond their noise (the sample was then taken
                     # in the contact, and is no free flight)
-                    first_contact = last is None
+                    first_contact = replay.last is None
                     at_sample = np.linalg.solve(T, integ.state.y[n : 2 * n])
-                    for event in integ.advance(
-                        edge + 0.1 * (win.t_b - win.t_a), stop_at_event=('separation',)
+                    replay.advance(edge + 0.1 * (win.t_b - win.t_a), stop_at=('separation',))
+                    if (
+                        first_contact
+                        and replay.last is not None
+                        and replay.side == 'post'
+                        and win.rate_sigma is not None
                     ):
-                        if event.kind == 'separation':
-                            last, side = event, 'post'
-                    if first_contact and side == 'post' and win.rate_sigma is not None:
-                        rest = np.linalg.solve(T, last.y[n : 2 * n]) - at_sample
+                        rest = np.linalg.solve(T, replay.last.y[n : 2 * n]) - at_sample
                         sigmas = float(np.max(np.abs(rest) / win.rate_sigma))
                         if sigmas > INSIDE_SIGMAS:
                             return failed(
@@ -172,8 +160,8 @@ def predict_impact(
                                 f'the first sample after the impact is taken in the contact '
                                 f'(the rest of it changes the rates by {sigmas:.3g} σ)',
                             )
-                if side == 'pre' or last is None:
-                    if side == 'pre':
+                if replay.side == 'pre' or replay.last is None:
+                    if replay.side == 'pre':
                         return failed(
                             n,
                             FailureKind.NO_CONTACT,
@@ -200,12 +188,15 @@ def predict_impact(
     except SimulationError as exc:
         return failed(n, FailureKind.SIMULATION, str(exc))
     impulse += integ.take_impulse()
+    first, last = replay.first, replay.last
+    # every compared sample was reached after a separation (or the replay failed above)
+    assert first is not None and last is not None
     pred = Prediction(
         np.array(rates),
         impulse,
         tip_normal_speed(model, first.y[:n], first.y[n : 2 * n]),
         tip_normal_speed(model, last.y[:n], last.y[n : 2 * n]),
-        contacts,
+        replay.contacts,
         np.linalg.solve(T, last.y[n : 2 * n]),
     )
     pred.path = np.array(path)
@@ -255,12 +246,12 @@ def free_flight(
     """Joint rates at ``t1`` after free flight from absolute state ``y0`` at ``t0`` under
     the torque ``timing`` uses after the impact (None if a contact intervenes)."""
     n = model.n
-    state = model.initial_state()
-    state.t, state.y[: 2 * n] = t0, y0
     held = timing != 'controller'
-    state.mode = 'up'
-    integ = PhaseIntegrator(
-        model, state, control='held' if held else 'continuous', options=window_options(model)
+    integ = start_replay(
+        model,
+        ReplayStart(t0, y0[:n], y0[n : 2 * n], mode='up'),
+        window_options(model),
+        control='held' if held else 'continuous',
     )
     torque = TorqueSchedule(win, timing, effort_shift(model))
     try:
