@@ -49,7 +49,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from enum import Enum
-from typing import Optional
+from typing import Any, Callable, Mapping, Optional
 
 # ------------------------------------------------------------------------------- topics
 JOINT_STATES = '/joint_states'
@@ -59,7 +59,8 @@ CONTACT_WRENCH = '/contact_wrench'
 CONTACT_FORCE_PEAK = '/contact_force_peak'
 IMPACT_REPORT = '/impact_report'
 DIAGNOSTICS = '/diagnostics'
-# the names of the nodes' DiagnosticStatus (both publish on /diagnostics)
+# the names of the nodes' DiagnosticStatus (both publish on /diagnostics); the simulator's
+# values are ``SimulatorStatus`` (below, after the names it uses)
 SIMULATOR_STATUS = 'impact_arm: simulator'
 CONTROLLER_STATUS = 'impact_arm: controller'
 
@@ -505,3 +506,201 @@ CONTROL_LAWS = tuple(m.value for m in ControlLaw)
 FEEDBACK_LAWS = (ControlLaw.Q.value, ControlLaw.PID.value, ControlLaw.PD.value)  # the node's
 PID_SPACES = tuple(m.value for m in PidSpace)
 ANTIWINDUP_STRATEGIES = tuple(m.value for m in AntiWindup)
+
+
+class SimulatorMode(TextEnum):
+    """How the simulator runs its periods (its ``mode`` parameter, ``impact-arm run --mode``)."""
+
+    REALTIME = 'realtime'  # paced by the wall clock
+    LOCKSTEP = 'lockstep'  # one period per received command
+
+
+class ControlTrigger(TextEnum):
+    """What makes the controller compute a command (its ``trigger`` parameter)."""
+
+    JOINT_STATES = 'joint_states'  # each joint state whose stamp reaches the next tick
+    TIMER = 'timer'  # a timer at the control rate on the node clock
+
+
+class StartAfter(TextEnum):
+    """What the controller's start-up hold counts from: the first joint state, or the first
+    contact wrench (a simulator's own sample: through a driver stack the joint states may be
+    the stack's initial values, published before the hardware runs)."""
+
+    JOINT_STATE = 'joint_state'
+    WRENCH = 'wrench'
+
+
+class WatchdogState(TextEnum):
+    """waiting: no command yet (brakes on); ok: a fresh command is held; timeout: the newest
+    command is older than the timeout (the policy acts)."""
+
+    WAITING = 'waiting'
+    OK = 'ok'
+    TIMEOUT = 'timeout'
+
+
+class WatchdogPolicy(TextEnum):
+    """What the driver does on a command timeout. brake: hold the joints where they are
+    (``SimulatedArm.brake``), as a real drive's safe stop does; zero: zero torque, the arm
+    falls under gravity (onto the part, where it chatters)."""
+
+    BRAKE = 'brake'
+    ZERO = 'zero'
+
+
+SIMULATOR_MODES = tuple(m.value for m in SimulatorMode)
+CONTROL_TRIGGERS = tuple(m.value for m in ControlTrigger)
+START_AFTER = tuple(m.value for m in StartAfter)
+
+
+def _shown(spec: str) -> dict:
+    """Field metadata: the format spec its number is written with on the wire."""
+    return {'format': spec}
+
+
+def _flag(text: str) -> bool:
+    if text not in ('true', 'false'):
+        raise ValueError(text)
+    return text == 'true'
+
+
+def _times(text: str) -> tuple[float, ...]:
+    return tuple(float(t) for t in text.split())
+
+
+@dataclasses.dataclass(frozen=True)
+class SimulatorStatus:
+    """The simulator's /diagnostics values (status ``SIMULATOR_STATUS``) with one codec both
+    ways: ``values()`` is what the node publishes, ``parse(values)`` what a reader (``impact-arm
+    run``, the benchmarks, the tests) makes of them. Numbers are held as the wire shows them
+    (rounded by their format), so a parsed status writes the same text again. The jitter,
+    rate and ``compute_max_us`` cover the time since the previous status; ``*_run_*``,
+    ``*_worst_*``, the means and the counts the whole run (since the start or a reset)."""
+
+    mode: SimulatorMode = SimulatorMode.REALTIME
+    publish_rate_requested: float = dataclasses.field(default=0.0, metadata=_shown('g'))
+    publish_rate_achieved: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    jitter_p50_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    jitter_p99_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    jitter_max_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    jitter_run_p50_us: float = dataclasses.field(default=0.0, metadata=_shown('.0f'))
+    jitter_run_p99_us: float = dataclasses.field(default=0.0, metadata=_shown('.0f'))
+    jitter_run_max_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    jitter_run_max_at_s: float = dataclasses.field(default=0.0, metadata=_shown('.6f'))
+    periods_published: int = 0
+    periods_published_until_s: float = dataclasses.field(default=0.0, metadata=_shown('.6f'))
+    wall_time: float = dataclasses.field(default=0.0, metadata=_shown('.6f'))  # since the start
+    overruns: int = 0
+    # periods skipped after stalls (simulated time fell behind by as many periods)
+    periods_skipped: int = 0
+    # the simulated times of the latest stalls that skipped periods [s], oldest first
+    periods_skipped_at_s: tuple[float, ...] = dataclasses.field(default=(), metadata=_shown('.6f'))
+    # periods that left commands queued (a flood): the rest waited a period
+    commands_flooded: int = 0
+    # commands taken but not checked: a newer valid one of the same period held
+    commands_superseded: int = 0
+    watchdog_timeouts: int = 0
+    # the longest wait between two commands taken [s]: a stall of the transport
+    longest_command_silence_s: float = dataclasses.field(default=0.0, metadata=_shown('.6f'))
+    # realtime periods run with no command newer than the previous period's
+    periods_without_new_command: int = 0
+    paused: bool = False
+    e_stop: bool = False
+    kernel: str = ''  # 'compiled (numba)' or 'interpreted (<why>)'
+    compute_max_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    compute_worst_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    compute_worst_at_s: float = dataclasses.field(default=0.0, metadata=_shown('.6f'))
+    period_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    # where a realtime period's time goes (whole-run means): taking commands, the physics,
+    # publishing the period's messages (the driver's PERIOD_PARTS)
+    compute_commands_mean_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    compute_physics_mean_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    compute_publish_mean_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    # lockstep only (None: not on the wire): the mean wait for each period's command
+    lockstep_wait_mean_us: Optional[float] = dataclasses.field(default=None, metadata=_shown('.1f'))
+    # and the worst period's (is it the physics of an impact, or a stall?)
+    compute_worst_commands_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    compute_worst_physics_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    compute_worst_publish_us: float = dataclasses.field(default=0.0, metadata=_shown('.1f'))
+    watchdog: WatchdogState = WatchdogState.WAITING
+    watchdog_policy: WatchdogPolicy = WatchdogPolicy.BRAKE
+    # each timeout the brake policy answered by holding the joints, and the largest torque the
+    # brake needed (each joint's is limited to brake_torque_limit_nm)
+    brake_events: int = 0
+    brake_torque_limit_nm: float = dataclasses.field(default=0.0, metadata=_shown('g'))
+    brake_torque_max_nm: float = dataclasses.field(default=0.0, metadata=_shown('.3f'))
+    scheduling: str = ''  # what the stepping thread obtained ('normal', a priority, ...)
+    commands: int = 0
+    commands_rejected: int = 0
+    commands_clipped: int = 0
+    # the periods beyond the robot's position and velocity limits ('' : none)
+    limits: str = ''
+    # all-zero commands that did not release the brakes (release_on)
+    zero_commands_before_release: int = 0
+    publish_failures: int = 0
+    # lockstep only (None: not on the wire): periods published again unanswered, periods that
+    # waited for the recorder, periods run braked before the release (release_after)
+    lockstep_repeats: Optional[int] = None
+    periods_waiting_for_recorder: Optional[int] = None
+    braked_periods: Optional[int] = None
+    sim_time: float = dataclasses.field(default=0.0, metadata=_shown('.6f'))
+    # simulated over wall time since the first command (None: no command yet, '0' on the wire)
+    real_time_factor: Optional[float] = dataclasses.field(default=None, metadata=_shown('.3f'))
+    impacts: int = 0
+    rhs_evaluations: int = 0
+    steps: int = 0
+    rejected_steps: int = 0
+    events: int = 0
+
+    def values(self) -> list[tuple[str, str]]:
+        """The key-value pairs of the DiagnosticStatus, in this order."""
+        out: list[tuple[str, str]] = []
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            spec = field.metadata.get('format', '')
+            if value is None:
+                if field.name == 'real_time_factor':
+                    out.append((field.name, '0'))
+                continue  # a lockstep value of a realtime simulator: not on the wire
+            if isinstance(value, bool):
+                text = str(value).lower()
+            elif isinstance(value, tuple):
+                text = ' '.join(format(t, spec) for t in value)
+            else:
+                text = format(value, spec)  # (a TextEnum formats as its text)
+            out.append((field.name, text))
+        return out
+
+    @classmethod
+    def parse(cls, values: Mapping[str, str]) -> SimulatorStatus:
+        """The status from its key-values (a DiagnosticStatus's, as a dict); a key left out
+        keeps its default. A key the status does not name, or a value that is not of its
+        field's kind, raises ValueError naming the key."""
+        kinds = {field.name: _SIMULATOR_KINDS[str(field.type)] for field in dataclasses.fields(cls)}
+        kwargs: dict[str, Any] = {}
+        for key, text in values.items():
+            if key not in kinds:
+                raise ValueError(f'simulator status {key} = {text!r}: not a key of the status')
+            if key == 'real_time_factor' and text == '0':
+                continue  # no command yet
+            try:
+                kwargs[key] = kinds[key](text)
+            except ValueError:
+                raise ValueError(f'simulator status {key} = {text!r}: not a valid value') from None
+        return cls(**kwargs)
+
+
+# how ``SimulatorStatus.parse`` reads a field of each declared type
+_SIMULATOR_KINDS: dict[str, Callable[[str], Any]] = {
+    'SimulatorMode': SimulatorMode,
+    'WatchdogState': WatchdogState,
+    'WatchdogPolicy': WatchdogPolicy,
+    'float': float,
+    'Optional[float]': float,
+    'int': int,
+    'Optional[int]': int,
+    'str': str,
+    'bool': _flag,
+    'tuple[float, ...]': _times,
+}

@@ -190,3 +190,50 @@ def test_the_controller_status_codec_round_trips_and_names_a_bad_value():
     )
     with pytest.raises(ValueError, match='strikes'):
         ControllerStatus.parse({**values, 'strikes': 'many'})
+
+
+def test_the_simulator_status_codec_round_trips_and_names_a_bad_value():
+    import pytest
+
+    from impact_arm.contract import SimulatorMode, SimulatorStatus, WatchdogState
+
+    status = SimulatorStatus(
+        mode=SimulatorMode.LOCKSTEP,
+        publish_rate_requested=1000.0,
+        publish_rate_achieved=2411.3,
+        jitter_run_p99_us=37.0,
+        periods_published=6251,
+        periods_skipped=2,
+        periods_skipped_at_s=(1.25, 3.5),
+        paused=True,
+        kernel='compiled (numba)',
+        lockstep_wait_mean_us=412.5,
+        watchdog=WatchdogState.TIMEOUT,
+        brake_torque_limit_nm=200.0,
+        limits='joint2 velocity at 1.000000 s',
+        lockstep_repeats=1,
+        periods_waiting_for_recorder=0,
+        braked_periods=4,
+        sim_time=6.25,
+        real_time_factor=2.411,
+    )
+    values = status.values()
+    shown = dict(values)
+    assert values[0] == ('mode', 'lockstep') and values[-1] == ('events', '0')
+    assert shown['periods_skipped_at_s'] == '1.250000 3.500000'
+    assert shown['paused'] == 'true' and shown['publish_rate_requested'] == '1000'
+    assert shown['jitter_run_p99_us'] == '37' and shown['real_time_factor'] == '2.411'
+    assert SimulatorStatus.parse(shown) == status
+    # realtime: no lockstep values on the wire; no command yet: a real-time factor of '0'
+    realtime = dict(SimulatorStatus().values())
+    assert 'lockstep_wait_mean_us' not in realtime and 'braked_periods' not in realtime
+    assert realtime['real_time_factor'] == '0'
+    assert SimulatorStatus.parse(realtime) == SimulatorStatus()
+    with pytest.raises(ValueError, match='overruns'):
+        SimulatorStatus.parse({**shown, 'overruns': 'many'})
+    with pytest.raises(ValueError, match='paused'):
+        SimulatorStatus.parse({**shown, 'paused': 'yes'})
+    with pytest.raises(ValueError, match='watchdog'):
+        SimulatorStatus.parse({**shown, 'watchdog': 'asleep'})
+    with pytest.raises(ValueError, match='overrun_count'):
+        SimulatorStatus.parse({**shown, 'overrun_count': '0'})

@@ -140,11 +140,12 @@ def thread_cpu(pid) -> dict:
 
 
 def _values_now(seen):
-    return seen['diagnostics'][-1] if seen['diagnostics'] else {}
+    """The simulator's latest report (a runner.SimulatorReport), None before its first."""
+    return seen['diagnostics'][-1] if seen['diagnostics'] else None
 
 
 def _wait_diagnostics(executor, seen, since, timeout):
-    """The first diagnostics that arrive after ``since`` (a previous dict, or None)."""
+    """The first report that arrives after ``since`` (a previous report, or None)."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.05)
@@ -162,7 +163,7 @@ def measure(args, env, logdir) -> dict:
     try:
         start_nodes(procs, env, logdir)
         end = time.monotonic() + START_TIMEOUT
-        while _values_now(seen).get('commands', '0') == '0':
+        while not (seen['diagnostics'] and seen['diagnostics'][-1].status.commands):
             executor.spin_once(timeout_sec=0.05)
             if time.monotonic() > end or procs['simulator'].poll() is not None:
                 return {
@@ -219,12 +220,11 @@ def measure(args, env, logdir) -> dict:
 
 
 def _figures(before, after, sent, alive) -> dict:
-    def delta(key, cast=int):
-        return cast(after.get(key, 0)) - cast(before.get(key, 0))
-
-    wall = delta('wall_time', float)
-    periods = delta('periods_published')
-    nominal = float(after.get('publish_rate_requested', 1000.0))
+    """The flood window's figures from the simulator's reports ``before`` and ``after`` it."""
+    b, a = before.status, after.status
+    wall = a.wall_time - b.wall_time
+    periods = a.periods_published - b.periods_published
+    nominal = a.publish_rate_requested
     reached = [s['sent'] / s['seconds'] for s in sent if s.get('seconds')]
     return {
         'flood_rate_reached': sum(reached),
@@ -234,32 +234,35 @@ def _figures(before, after, sent, alive) -> dict:
         'periods': periods,
         'rate_achieved': periods / wall if wall > 0 else float('nan'),
         'rate_nominal': nominal,
-        'overruns': delta('overruns'),
-        'periods_skipped': delta('periods_skipped'),
-        'overrun_percent': 100.0 * delta('overruns') / periods if periods else float('nan'),
-        'commands': delta('commands'),
-        'commands_rejected': delta('commands_rejected'),
-        'commands_superseded': delta('commands_superseded'),
-        'periods_flooded': delta('commands_flooded'),
-        'periods_without_new_command': delta('periods_without_new_command'),
-        'impacts': delta('impacts'),
-        'sim_time_s': delta('sim_time', float),
-        'watchdog': after.get('watchdog', '?'),
-        'level': after.get('level', '?'),
-        'message': after.get('message', ''),
+        'overruns': a.overruns - b.overruns,
+        'periods_skipped': a.periods_skipped - b.periods_skipped,
+        'overrun_percent': 100.0 * (a.overruns - b.overruns) / periods if periods else float('nan'),
+        'commands': a.commands - b.commands,
+        'commands_rejected': a.commands_rejected - b.commands_rejected,
+        'commands_superseded': a.commands_superseded - b.commands_superseded,
+        'periods_flooded': a.commands_flooded - b.commands_flooded,
+        'periods_without_new_command': a.periods_without_new_command
+        - b.periods_without_new_command,
+        'impacts': a.impacts - b.impacts,
+        'sim_time_s': a.sim_time - b.sim_time,
+        'watchdog': a.watchdog.value,
+        'level': int(after.level),
+        'message': after.message,
         'alive': alive,
         # the flood window's mean period parts [us], from the whole-run means before and after
         'period_parts_us': {
-            part: _window_mean(before, after, f'compute_{part}_mean_us')
-            for part in ('commands', 'physics', 'publish')
+            'commands': _window_mean(b, a, lambda s: s.compute_commands_mean_us),
+            'physics': _window_mean(b, a, lambda s: s.compute_physics_mean_us),
+            'publish': _window_mean(b, a, lambda s: s.compute_publish_mean_us),
         },
     }
 
 
-def _window_mean(before, after, key):
-    """The mean of ``key`` over the periods between two diagnostics of whole-run means."""
-    n0, n1 = int(before.get('periods_published', 0)), int(after.get('periods_published', 0))
-    m0, m1 = float(before.get(key, 0.0)), float(after.get(key, 0.0))
+def _window_mean(before, after, mean):
+    """The mean over the periods between two simulator statuses of a whole-run mean
+    (``mean(status)``)."""
+    n0, n1 = before.periods_published, after.periods_published
+    m0, m1 = mean(before), mean(after)
     return (m1 * n1 - m0 * n0) / (n1 - n0) if n1 > n0 else float('nan')
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -26,9 +27,6 @@ from .common import cpu_seconds
 
 
 GENTLE_GAINS = ('p:=[60.0,30.0]', 'd:=[10.0,10.0]')
-
-# the parts of a period the simulator's /diagnostics time (compute_<part>_mean_us, ...)
-PERIOD_PARTS = ('commands', 'physics', 'publish')
 
 
 def add_arguments(parser):
@@ -85,7 +83,7 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
     )
     try:
         sim = run.procs['simulator']
-        while not run.diagnostics or run.diagnostics.get('commands', '0') == '0':
+        while not (run.simulator and run.simulator.status.commands):
             rclpy.spin_once(run.node, timeout_sec=0.05)
             if time.monotonic() - started > 60 or sim.poll() is not None:
                 raise RuntimeError(f'simulator did not start; see {run.logs["simulator"]}')
@@ -100,12 +98,12 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         cpu1 = {name: cpu_seconds(f'/proc/{p.pid}/stat') for name, p in run.procs.items()}
         wall1 = time.monotonic()
         load = os.getloadavg()[0]
-        final = run.diagnostics
+        final = run.simulator
         deadline = time.monotonic() + 2.5  # one more report, covering the last impact
-        while run.diagnostics is final and time.monotonic() < deadline:
+        while run.simulator is final and time.monotonic() < deadline:
             rclpy.spin_once(run.node, timeout_sec=0.05)
         memory = {name: _memory_mb(p.pid) for name, p in run.procs.items()}
-        d = run.diagnostics
+        d = run.simulator.status  # (set: the loop above waited for a command in it)
     finally:
         run.stop()
     return {
@@ -113,24 +111,30 @@ def _run_cycles(scene_path, mode, rate, timeout=300):
         'rate_hz': rate,
         'outcome': outcome,
         'impacts': len(run.impacts),
-        'sim_time_s': float(d.get('sim_time', 0)),
-        'real_time_factor': float(d.get('real_time_factor', 0)),
-        'overruns': int(d.get('overruns', -1)),
-        'publish_failures': int(d.get('publish_failures', -1)),
-        'jitter_p50_us': float(d.get('jitter_run_p50_us', 'nan')),
-        'jitter_p99_us': float(d.get('jitter_run_p99_us', 'nan')),
-        'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
-        'jitter_max_at_s': float(d.get('jitter_run_max_at_s', 'nan')),
-        'scheduling': d.get('scheduling', '?'),
-        'worst_compute_us': float(d.get('compute_worst_us', 'nan')),
+        'sim_time_s': d.sim_time,
+        'real_time_factor': d.real_time_factor or 0.0,
+        'overruns': d.overruns,
+        'publish_failures': d.publish_failures,
+        'jitter_p50_us': d.jitter_run_p50_us,
+        'jitter_p99_us': d.jitter_run_p99_us,
+        'jitter_max_us': d.jitter_run_max_us,
+        'jitter_max_at_s': d.jitter_run_max_at_s,
+        'scheduling': d.scheduling,
+        'worst_compute_us': d.compute_worst_us,
         'compute_mean_us': {
-            part: float(d.get(f'compute_{part}_mean_us', 'nan')) for part in PERIOD_PARTS
+            'commands': d.compute_commands_mean_us,
+            'physics': d.compute_physics_mean_us,
+            'publish': d.compute_publish_mean_us,
         },
         'worst_compute_parts_us': {
-            part: float(d.get(f'compute_worst_{part}_us', 'nan')) for part in PERIOD_PARTS
+            'commands': d.compute_worst_commands_us,
+            'physics': d.compute_worst_physics_us,
+            'publish': d.compute_worst_publish_us,
         },
-        'lockstep_wait_mean_us': float(d.get('lockstep_wait_mean_us', 'nan')),
-        'worst_compute_at_s': float(d.get('compute_worst_at_s', 'nan')),
+        'lockstep_wait_mean_us': (
+            d.lockstep_wait_mean_us if d.lockstep_wait_mean_us is not None else math.nan
+        ),
+        'worst_compute_at_s': d.compute_worst_at_s,
         'period_us': 1e6 / rate,
         'simulator_cpu_percent': 100 * (cpu1['simulator'] - cpu0['simulator']) / (wall1 - wall0),
         'cpu_percent': {name: 100 * (cpu1[name] - cpu0[name]) / (wall1 - wall0) for name in cpu0},
@@ -149,7 +153,7 @@ def _run_fast(scene_path, rate, seconds):
     from rclpy.experimental import EventsExecutor
     from sensor_msgs.msg import JointState
 
-    from impact_arm.tools.runner import simulator_diagnostics
+    from impact_arm.tools.runner import simulator_report
 
     run = _session(scene_path, 'realtime', rate)
     run.args.control_rate = 1000.0  # the controller keeps its 1 kHz
@@ -168,21 +172,18 @@ def _run_fast(scene_path, rate, seconds):
     )
 
     def on_diagnostics(msg):
-        values = simulator_diagnostics(msg)
-        if values is not None:
-            diagnostics.append(values)
+        report = simulator_report(msg)
+        if report is not None:
+            diagnostics.append(report.status)
 
     node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
     executor = EventsExecutor(context=context)
     executor.add_node(node)
     try:
         deadline = time.monotonic() + 60
-        while (
-            not (diagnostics and diagnostics[-1].get('commands', '0') != '0')
-            and time.monotonic() < deadline
-        ):
+        while not (diagnostics and diagnostics[-1].commands) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        if not (diagnostics and diagnostics[-1].get('commands', '0') != '0'):
+        if not (diagnostics and diagnostics[-1].commands):
             raise RuntimeError(
                 f'realtime {rate:g} Hz: no command reached the simulator within '
                 f'60 s (logs in {run.logdir})'
@@ -196,17 +197,17 @@ def _run_fast(scene_path, rate, seconds):
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         run.stop()
-    periods = int(last.get('periods_published', 0)) - int(first.get('periods_published', 0))
-    wall = float(last.get('wall_time', 0)) - float(first.get('wall_time', 0))
+    periods = last.periods_published - first.periods_published
+    wall = last.wall_time - first.wall_time
     sub_rate = (len(window) - 1) / (window[-1] - window[0]) if len(window) > 1 else 0.0
     return {
         'mode': 'realtime',
         'rate_hz': rate,
         'achieved_hz_simulator': periods / wall if wall > 0 else 0.0,
         'achieved_hz_subscriber': sub_rate,
-        'overruns': int(last.get('overruns', -1)),
-        'jitter_p99_us': float(last.get('jitter_run_p99_us', 'nan')),
-        'publish_failures': int(last.get('publish_failures', -1)),
+        'overruns': last.overruns,
+        'jitter_p99_us': last.jitter_run_p99_us,
+        'publish_failures': last.publish_failures,
         'outcome': 'completed' if periods else 'failed: no period published',
     }
 

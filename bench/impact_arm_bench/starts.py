@@ -54,7 +54,7 @@ def _listener(domain):
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
     from impact_arm import contract
-    from impact_arm.tools.runner import simulator_diagnostics
+    from impact_arm.tools.runner import simulator_report
 
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -68,9 +68,9 @@ def _listener(domain):
     )
 
     def on_diagnostics(msg):
-        values = simulator_diagnostics(msg)
-        if values is not None:
-            seen['diagnostics'].append(values)
+        report = simulator_report(msg)
+        if report is not None:
+            seen['diagnostics'].append(report)
 
     node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS, on_diagnostics, 10)
     executor = SingleThreadedExecutor(context=context)
@@ -121,16 +121,17 @@ def one_start(index, env, logdir):
         outcome = ''
         while not outcome:
             executor.spin_once(timeout_sec=0.05)
-            d = seen['diagnostics'][-1] if seen['diagnostics'] else {}
+            report = seen['diagnostics'][-1] if seen['diagnostics'] else None
+            status = report.status if report else None
             if sim.poll() is not None:
                 outcome = f'simulator exited ({sim.returncode})'
-            elif d.get('level') == 2:
-                outcome = 'stopped: ' + d.get('message', '')
+            elif report and report.stopped:
+                outcome = 'stopped: ' + report.message
             elif len(cycles_of(sorted(i['t_contact'] for i in seen['impacts']))) >= CYCLES:
                 outcome = 'completed'
-            elif float(d.get('sim_time', 0)) > SIM_TIME_LIMIT:
+            elif status and status.sim_time > SIM_TIME_LIMIT:
                 outcome = f'{SIM_TIME_LIMIT:g} s simulated'
-            elif d.get('commands', '0') == '0' and time.monotonic() - started > START_TIMEOUT:
+            elif not (status and status.commands) and time.monotonic() - started > START_TIMEOUT:
                 outcome = f'no command within {START_TIMEOUT:g} s'
         # one more report, covering the last impact
         last = seen['diagnostics'][-1] if seen['diagnostics'] else None
@@ -189,15 +190,53 @@ def cycles_of(times):
     return cycles
 
 
+def _simulator_counts(status):
+    """The row's values from the simulator's latest status (None: it never reported one:
+    -1, NaN or '?')."""
+    if status is None:
+        nan = float('nan')
+        return {
+            'overruns': -1,
+            'periods_skipped': 0,
+            'periods_without_new_command': 0,
+            'watchdog_timeouts': 0,
+            'longest_command_silence_s': nan,
+            'worst_period_us': nan,
+            'worst_period_at_s': nan,
+            'worst_split_us': {'commands': nan, 'physics': nan, 'publish': nan},
+            'jitter_max_us': nan,
+            'kernel': '?',
+        }
+    return {
+        'overruns': status.overruns,
+        'periods_skipped': status.periods_skipped,
+        'periods_without_new_command': status.periods_without_new_command,
+        # a silence of the controller longer than the watchdog zeroes the torque and the arm
+        # falls: a cycle lost that way is the transport's, not a missed down-up switch
+        'watchdog_timeouts': status.watchdog_timeouts,
+        # ~0.333 s here is Fast DDS's shared-memory health check (docs/benchmarks.md)
+        'longest_command_silence_s': status.longest_command_silence_s,
+        'worst_period_us': status.compute_worst_us,
+        'worst_period_at_s': status.compute_worst_at_s,
+        'worst_split_us': {
+            'commands': status.compute_worst_commands_us,
+            'physics': status.compute_worst_physics_us,
+            'publish': status.compute_worst_publish_us,
+        },
+        'jitter_max_us': status.jitter_run_max_us,
+        'kernel': status.kernel,
+    }
+
+
 def _row(index, outcome, seen):
-    d = seen['diagnostics'][-1] if seen['diagnostics'] else {}
+    status = seen['diagnostics'][-1].status if seen['diagnostics'] else None
     times = sorted(i['t_contact'] for i in seen['impacts'])
     starts = [c[0] for c in cycles_of(times)]
     gaps = [b - a for a, b in zip(starts, starts[1:])]
     period = (starts[-1] - starts[0]) / (len(starts) - 1) if len(starts) > 1 else float('nan')
     worst_gap = max((abs(g / ARTICLE_PERIOD - 1) for g in gaps), default=float('inf'))
-    sim_time = float(d.get('sim_time', 0.0))
-    periods = int(d.get('periods_published', 0))
+    sim_time = status.sim_time if status else 0.0
+    periods = status.periods_published if status else 0
     # a missed down-up switch leaves the arm on the surface: a cycle too long or too short
     missed = (
         len(starts) < min(CYCLES, sim_time / ARTICLE_PERIOD - 1) or worst_gap > PERIOD_TOLERANCE
@@ -215,22 +254,7 @@ def _row(index, outcome, seen):
         'worst_cycle_deviation': worst_gap,
         'missed_impact': missed,
         'periods': periods,
-        'overruns': int(d.get('overruns', -1)),
-        'periods_skipped': int(d.get('periods_skipped', 0)),
-        'periods_without_new_command': int(d.get('periods_without_new_command', 0)),
-        # a silence of the controller longer than the watchdog zeroes the torque and the arm
-        # falls: a cycle lost that way is the transport's, not a missed down-up switch
-        'watchdog_timeouts': int(d.get('watchdog_timeouts', 0)),
-        # ~0.333 s here is Fast DDS's shared-memory health check (docs/benchmarks.md)
-        'longest_command_silence_s': float(d.get('longest_command_silence_s', 'nan')),
-        'worst_period_us': float(d.get('compute_worst_us', 'nan')),
-        'worst_period_at_s': float(d.get('compute_worst_at_s', 'nan')),
-        'worst_split_us': {
-            part: float(d.get(f'compute_worst_{part}_us', 'nan'))
-            for part in ('commands', 'physics', 'publish')
-        },
-        'jitter_max_us': float(d.get('jitter_run_max_us', 'nan')),
-        'kernel': d.get('kernel', '?'),
+        **_simulator_counts(status),
         'impact_times_s': times,
     }
 

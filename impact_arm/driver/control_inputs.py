@@ -18,7 +18,7 @@ import time
 from collections import Counter, deque
 from typing import Callable, Sequence
 
-from ..contract import JointCoordinates
+from ..contract import ControlTrigger, JointCoordinates, StartAfter
 from ..physics.kinds import TextEnum
 from ..physics.control import CycleController
 from ..physics.prediction import StatePredictor
@@ -68,15 +68,6 @@ def follows(before: float, t: float, silent: float = 0.0) -> bool:
     return before - STAMP_EPS <= t <= before + MAX_STAMP_GAP + max(silent, 0.0)
 
 
-class StartAfter(TextEnum):
-    """What the start-up hold counts from: the first joint state, or the first contact wrench
-    (a simulator's own sample: through a driver stack the joint states may be the stack's
-    initial values, published before the hardware runs)."""
-
-    JOINT_STATE = 'joint_state'
-    WRENCH = 'wrench'
-
-
 class Answer(TextEnum):
     """How the driver showed that it applies the controller's commands: a reported effort
     equal to a command sent, or a state other than the one the first command was computed
@@ -97,7 +88,7 @@ class ControlInputs:
         joint_names: Sequence[str],
         order: Sequence[int],
         rate: float,
-        trigger: str,
+        trigger: ControlTrigger | str,
         send: Callable[[list[float]], None],
         log: Callable[[str], None] = lambda text: None,
         ready: Callable[[], bool] = lambda: True,
@@ -121,7 +112,7 @@ class ControlInputs:
         self.joint_names = list(joint_names)
         self.order = list(order)
         self.period = 1.0 / rate
-        self.trigger = trigger
+        self.trigger = ControlTrigger(trigger)
         self.send, self.log, self.ready = send, log, ready
         self.wrench_publishers = wrench_publishers
         self.clock = clock
@@ -304,7 +295,10 @@ class ControlInputs:
         if effort and self.latency_periods == -1:
             self._measure_latency(effort, index)
         tolerance = TICK_TOLERANCE * min(self.period, self.sample_gap)
-        if self.trigger != 'joint_states' or t < self.next_tick - tolerance - STAMP_EPS:
+        if (
+            self.trigger is not ControlTrigger.JOINT_STATES
+            or t < self.next_tick - tolerance - STAMP_EPS
+        ):
             return
         # the wrench of the same instant is published just before the joint state: wait for
         # it when someone publishes wrenches. A wrench publisher that sends no valid wrench

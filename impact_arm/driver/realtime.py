@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from ..physics.kinds import TextEnum
+from ..contract import WatchdogPolicy, WatchdogState
 
 if TYPE_CHECKING:
     from .arm import SimulatedArm, Tick
@@ -33,24 +33,6 @@ SKIPS_KEPT = 8  # the latest stalls whose simulated times the diagnostics give
 # impact: 0.1 s crashes the arm, 0.02 s does not. A slower controller needs a longer
 # timeout: a few of its periods.
 DEFAULT_COMMAND_TIMEOUT = 0.02
-
-
-class WatchdogState(TextEnum):
-    """waiting: no command yet (brakes on); ok: a fresh command is held; timeout: the newest
-    command is older than the timeout (the policy acts)."""
-
-    WAITING = 'waiting'
-    OK = 'ok'
-    TIMEOUT = 'timeout'
-
-
-class WatchdogPolicy(TextEnum):
-    """What the driver does on a command timeout. brake: hold the joints where they are
-    (``SimulatedArm.brake``), as a real drive's safe stop does; zero: zero torque, the arm
-    falls under gravity (onto the part, where it chatters)."""
-
-    BRAKE = 'brake'
-    ZERO = 'zero'
 
 
 # what the watchdog does unless told otherwise, in the driver and the simulator node alike: a

@@ -14,6 +14,7 @@ Both run on any clock: tests drive them with a fake one (test_session.py).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -22,17 +23,12 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from ..contract import SimulatorMode, SimulatorStatus
 from ..physics import jit
 from ..physics.kinds import TextEnum
 from .arm import CommandError, SimulatedArm, Tick
 from ..physics.errors import SimulationError
-from .realtime import (
-    DEFAULT_WATCHDOG_POLICY,
-    PERIOD_PARTS,
-    DriverLoop,
-    WatchdogPolicy,
-    WatchdogState,
-)
+from .realtime import DEFAULT_WATCHDOG_POLICY, DriverLoop, WatchdogPolicy, WatchdogState
 
 LOCKSTEP_REPEAT_S = 1.0  # lockstep: publish a period again when unanswered this long
 # lockstep release_after: before the release, a braked period of its own when no command came
@@ -82,14 +78,11 @@ class JointCommand:
 @dataclass(frozen=True)
 class SessionStatus:
     """One snapshot of a session for /diagnostics: severity, a one-line message and the
-    named values (in a fixed order, already formatted)."""
+    values (``diagnostics.values()`` is what goes on the wire)."""
 
     level: Level
     message: str
-    values: tuple[tuple[str, str], ...]
-
-    def value(self, key: str) -> str:
-        return dict(self.values)[key]
+    diagnostics: SimulatorStatus
 
 
 @dataclass
@@ -108,7 +101,7 @@ class Outputs:
 class Session:
     """What both kinds share: commands, control, failure and status."""
 
-    mode = ''
+    mode = SimulatorMode.REALTIME
 
     def __init__(
         self,
@@ -292,7 +285,7 @@ class Session:
             )
             return Level.WARN, (
                 f'no command for more than {self.loop.watchdog.timeout:g} s: '
-                f'{action}' + (' (lockstep paused)' if self.mode == 'lockstep' else '')
+                f'{action}' + (' (lockstep paused)' if self.mode is SimulatorMode.LOCKSTEP else '')
             )
         if watchdog is WatchdogState.WAITING:
             return Level.WARN, 'waiting for the first command (zero torque)'
@@ -322,92 +315,79 @@ class Session:
         start, first_command = loop.start_wall, loop.first_command_wall
         run_p50, run_p99 = stats.run_percentiles(50, 99)
         part_means = stats.part_means()
-        lockstep = self.mode == 'lockstep'
-        values = {
-            'mode': self.mode,
-            'publish_rate_requested': f'{self.publish_rate:g}',
-            'publish_rate_achieved': f'{achieved:.1f}' if lockstep else f'{achieved * pace:.1f}',
-            'jitter_p50_us': f'{np.percentile(jitter, 50) * 1e6:.1f}',
-            'jitter_p99_us': f'{np.percentile(jitter, 99) * 1e6:.1f}',
-            'jitter_max_us': f'{jitter.max() * 1e6:.1f}',
-            'jitter_run_p50_us': f'{run_p50 * 1e6:.0f}',
-            'jitter_run_p99_us': f'{run_p99 * 1e6:.0f}',
-            'jitter_run_max_us': f'{stats.jitter_max * 1e6:.1f}',
-            'jitter_run_max_at_s': f'{stats.jitter_max_t:.6f}',
-            'periods_published': str(published),
-            'periods_published_until_s': f'{t_published:.6f}',
-            'wall_time': f'{now - start if start else 0.0:.6f}',
-            'overruns': str(stats.overruns),
-            # periods skipped after stalls (simulated time fell behind by as many periods)
-            'periods_skipped': str(counts.skipped),
-            # the simulated times of the latest stalls that skipped periods [s], oldest first
-            'periods_skipped_at_s': ' '.join(f'{t:.6f}' for t in counts.skipped_at),
-            # periods that left commands queued (a flood): the rest waited a period
-            'commands_flooded': str(loop.flooded),
-            # commands taken but not checked: a newer valid one of the same period held
-            'commands_superseded': str(loop.superseded),
-            'watchdog_timeouts': str(dog.timeouts),
-            # the longest wait between two commands taken (s): a stall of the transport
-            'longest_command_silence_s': f'{dog.longest_silence:.6f}',
-            # realtime periods run with no command newer than the previous period's
-            'periods_without_new_command': str(loop.stale),
-            'paused': str(loop.paused).lower(),
-            'e_stop': str(loop.e_stop).lower(),
-            'kernel': 'compiled (numba)' if jit.AVAILABLE else f'interpreted ({jit.UNAVAILABLE})',
-            'compute_max_us': f'{(max(computes) if computes else 0.0) * 1e6:.1f}',
-            'compute_worst_us': f'{stats.worst_compute * 1e6:.1f}',
-            'compute_worst_at_s': f'{stats.worst_compute_t:.6f}',
-            'period_us': f'{nominal * 1e6:.1f}',
-            # where a realtime period's time goes (whole-run means): taking commands,
-            # the physics, publishing the period's messages
-            **{
-                f'compute_{part}_mean_us': f'{mean * 1e6:.1f}'
-                for part, mean in zip(PERIOD_PARTS, part_means)
-            },
-            **({'lockstep_wait_mean_us': f'{part_means[3] * 1e6:.1f}'} if lockstep else {}),
-            # and the worst period's (is it the physics of an impact, or a stall?)
-            **{
-                f'compute_worst_{part}_us': f'{t * 1e6:.1f}'
-                for part, t in zip(PERIOD_PARTS, stats.worst_parts)
-            },
-            'watchdog': watchdog.value,
-            'watchdog_policy': dog.policy.value,
-            # each timeout the brake policy answered by holding the joints, and the largest
-            # torque the brake needed (each joint's is limited to brake_torque_limit_nm)
-            'brake_events': str(dog.brakes),
-            'brake_torque_limit_nm': f'{self.arm.brake_torque:g}',
-            'brake_torque_max_nm': f'{dog.brake_peak:.3f}',
-            'scheduling': self.scheduling,
-            'commands': str(loop.commands),
-            'commands_rejected': str(self.rejected),
-            'commands_clipped': str(self.clipped),
-            # the periods beyond the robot's position and velocity limits ('' : none)
-            'limits': '; '.join(e.text() for e in tuple(self.arm.limits.found)),
-            # all-zero commands that did not release the brakes (release_on)
-            'zero_commands_before_release': str(self.zero_before_release),
-            'publish_failures': str(self.out.failures()),
-            **self._extra_values(),
-            'sim_time': f'{self.arm.t:.6f}',
-            'real_time_factor': f'{self.arm.t / (now - first_command):.3f}'
+        lockstep = self.mode is SimulatorMode.LOCKSTEP
+        commands_mean, physics_mean, publish_mean, wait_mean = part_means
+        worst_commands, worst_physics, worst_publish = stats.worst_parts
+        status = SimulatorStatus(
+            mode=self.mode,
+            publish_rate_requested=self.publish_rate,
+            publish_rate_achieved=achieved if lockstep else achieved * pace,
+            jitter_p50_us=np.percentile(jitter, 50) * 1e6,
+            jitter_p99_us=np.percentile(jitter, 99) * 1e6,
+            jitter_max_us=jitter.max() * 1e6,
+            jitter_run_p50_us=run_p50 * 1e6,
+            jitter_run_p99_us=run_p99 * 1e6,
+            jitter_run_max_us=stats.jitter_max * 1e6,
+            jitter_run_max_at_s=stats.jitter_max_t,
+            periods_published=published,
+            periods_published_until_s=t_published,
+            wall_time=now - start if start else 0.0,
+            overruns=stats.overruns,
+            periods_skipped=counts.skipped,
+            periods_skipped_at_s=tuple(counts.skipped_at),
+            commands_flooded=loop.flooded,
+            commands_superseded=loop.superseded,
+            watchdog_timeouts=dog.timeouts,
+            longest_command_silence_s=dog.longest_silence,
+            periods_without_new_command=loop.stale,
+            paused=bool(loop.paused),
+            e_stop=bool(loop.e_stop),
+            kernel='compiled (numba)' if jit.AVAILABLE else f'interpreted ({jit.UNAVAILABLE})',
+            compute_max_us=(max(computes) if computes else 0.0) * 1e6,
+            compute_worst_us=stats.worst_compute * 1e6,
+            compute_worst_at_s=stats.worst_compute_t,
+            period_us=nominal * 1e6,
+            compute_commands_mean_us=commands_mean * 1e6,
+            compute_physics_mean_us=physics_mean * 1e6,
+            compute_publish_mean_us=publish_mean * 1e6,
+            lockstep_wait_mean_us=wait_mean * 1e6 if lockstep else None,
+            compute_worst_commands_us=worst_commands * 1e6,
+            compute_worst_physics_us=worst_physics * 1e6,
+            compute_worst_publish_us=worst_publish * 1e6,
+            watchdog=watchdog,
+            watchdog_policy=dog.policy,
+            brake_events=dog.brakes,
+            brake_torque_limit_nm=self.arm.brake_torque,
+            brake_torque_max_nm=dog.brake_peak,
+            scheduling=self.scheduling,
+            commands=loop.commands,
+            commands_rejected=self.rejected,
+            commands_clipped=self.clipped,
+            limits='; '.join(e.text() for e in tuple(self.arm.limits.found)),
+            zero_commands_before_release=self.zero_before_release,
+            publish_failures=self.out.failures(),
+            sim_time=self.arm.t,
+            real_time_factor=self.arm.t / (now - first_command)
             if first_command and now > first_command
-            else '0',
-            'impacts': str(loop.impacts),
-            'rhs_evaluations': str(integ.rhs_evaluations),
-            'steps': str(integ.steps),
-            'rejected_steps': str(integ.rejected),
-            'events': str(integ.events),
-        }
+            else None,
+            impacts=loop.impacts,
+            rhs_evaluations=integ.rhs_evaluations,
+            steps=integ.steps,
+            rejected_steps=integ.rejected,
+            events=integ.events,
+        )
         level, message = self._message(watchdog)
-        return SessionStatus(level, message, tuple(values.items()))
+        return SessionStatus(level, message, self._with_extra_values(status))
 
-    def _extra_values(self) -> dict[str, str]:
-        return {}
+    def _with_extra_values(self, status: SimulatorStatus) -> SimulatorStatus:
+        """The status with the values only this kind of session has."""
+        return status
 
 
 class RealtimeSession(Session):
     """Periods paced by the wall clock; ``run`` is the loop thread's body."""
 
-    mode = 'realtime'
+    mode = SimulatorMode.REALTIME
 
     def __init__(self, arm: SimulatedArm, **kwargs: Any) -> None:
         super().__init__(arm, **kwargs)
@@ -451,7 +431,7 @@ class LockstepSession(Session):
     instead of losing what the writers' history could no longer resend. ``recorder_present``
     and ``controller_present`` tell whether those peers are still on the graph."""
 
-    mode = 'lockstep'
+    mode = SimulatorMode.LOCKSTEP
 
     def __init__(
         self,
@@ -630,10 +610,10 @@ class LockstepSession(Session):
             self.out.publish(tick)
             self.last_tick = (tick, now)
 
-    def _extra_values(self) -> dict[str, str]:
-        return {
-            'lockstep_repeats': str(self.repeats),
-            'periods_waiting_for_recorder': str(self.waits_for_recorder),
-            # periods run braked before the release (release_after), simulated time running
-            'braked_periods': str(self.braked_periods),
-        }
+    def _with_extra_values(self, status: SimulatorStatus) -> SimulatorStatus:
+        return dataclasses.replace(
+            status,
+            lockstep_repeats=self.repeats,
+            periods_waiting_for_recorder=self.waits_for_recorder,
+            braked_periods=self.braked_periods,
+        )

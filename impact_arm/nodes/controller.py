@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from .. import contract
-from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES
+from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, ControlTrigger
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
@@ -179,7 +179,7 @@ class Controller(Node):
                 f'{p.start_after.replace("_", " ")} '
                 f'while DDS discovery settles (startup_hold)'
             )
-        if p.trigger == 'timer':
+        if p.trigger is ControlTrigger.TIMER:
             self.create_timer(1.0 / p.rate, self._on_timer)
             # the ticks come from the executor thread (this one): at the control thread's
             # priority, as all of the controller's work was before it had a thread of its own

@@ -7,7 +7,16 @@ from __future__ import annotations
 import math
 
 from .. import contract
-from ..contract import ANTIWINDUP_STRATEGIES, COMMANDS, FEEDBACK_LAWS, PID_SPACES
+from ..contract import (
+    ANTIWINDUP_STRATEGIES,
+    COMMANDS,
+    CONTROL_TRIGGERS,
+    FEEDBACK_LAWS,
+    PID_SPACES,
+    START_AFTER,
+    ControlTrigger,
+    StartAfter,
+)
 from ..driver.control_inputs import SENT_HISTORY
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
@@ -36,12 +45,13 @@ def parameter_table(scene):
         Param('rate', 1000.0, 'command rate [Hz]', low=0.1, high=100000.0, read_only=True),
         Param(
             'trigger',
-            'joint_states',
+            ControlTrigger.JOINT_STATES.value,
             'joint_states: compute on each joint state reaching '
             'the next tick; timer: compute at rate on the node clock',
             'str',
-            choices=('joint_states', 'timer'),
+            choices=CONTROL_TRIGGERS,
             read_only=True,
+            enum=ControlTrigger,
             doc=' (joint_states: sensor-synchronous, deterministic on simulated time)',
         ),
         Param(
@@ -240,14 +250,15 @@ def parameter_table(scene):
         ),
         Param(
             'start_after',
-            'joint_state',
+            StartAfter.JOINT_STATE.value,
             'what startup_hold counts from: joint_state, the '
             "first joint state; wrench, the first contact wrench (the simulator's own sample: "
             'behind a driver stack the joint states start as its initial values, before the '
             'simulator runs)',
             'str',
-            choices=('joint_state', 'wrench'),
+            choices=START_AFTER,
             read_only=True,
+            enum=StartAfter,
             doc=' (docs/ros2_control.md sets wrench)',
         ),
         Param(

@@ -42,6 +42,9 @@ class Param:
     # for the generated tables of docs/*.md (param_docs.py), not for ``ros2 param describe``:
     doc: str = ''  # what the documentation says beyond the description (markdown)
     shown_default: str = ''  # the default in words, where the scene or the time sets it
+    # a 'str' parameter naming a member of this TextEnum: read as the member (its text on
+    # the wire and in files), so the node compares members, never text
+    enum: type | None = None
 
     def allowed(self) -> str:
         if self.choices:
@@ -126,7 +129,7 @@ class Param:
             fail('not a string')
         if self.choices and value not in self.choices:
             fail('unknown value')
-        return value
+        return self.enum(value) if self.enum is not None else value
 
     def _range(self, number, fail):
         if self.low is not None and (number < self.low or (self.open_low and number == self.low)):

@@ -27,10 +27,9 @@ from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from .. import contract
-from ..contract import COMMANDS, DIAGNOSTICS
+from ..contract import COMMANDS, DIAGNOSTICS, SimulatorMode
 from ..physics import jit
 from ..driver.arm import SimulatedArm
-from ..driver.realtime import WatchdogPolicy
 from ..driver.session import JointCommand, LockstepSession, Outputs, RealtimeSession
 from ..io.wire import float64_array_data, joint_state_command
 from . import sim_services
@@ -80,7 +79,7 @@ class Simulator(Node):
         command_order = check(p, names)
         refuse_unknown(self, self.table)
         self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
-        lockstep = p.mode == 'lockstep'
+        lockstep = p.mode is SimulatorMode.LOCKSTEP
         # lockstep runs in the executor thread, unprioritized (read by _runner.run)
         self.middleware_priority = 0 if lockstep else p.thread_priority
 
@@ -96,7 +95,7 @@ class Simulator(Node):
             command_timeout=p.command_timeout,
             outputs=outputs,
             command_order=command_order,
-            policy=WatchdogPolicy(p.watchdog_policy),
+            policy=p.watchdog_policy,
             max_takes=contract.qos(COMMANDS).depth,
             release=p.release_on,
             command_latency=p.command_latency_periods,
@@ -287,7 +286,7 @@ class Simulator(Node):
                     name=contract.SIMULATOR_STATUS,
                     message=status.message,
                     hardware_id='impact_arm_simulated_arm',
-                    values=[KeyValue(key=k, value=v) for k, v in status.values],
+                    values=[KeyValue(key=k, value=v) for k, v in status.diagnostics.values()],
                 )
             ]
         )

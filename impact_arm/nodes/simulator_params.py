@@ -3,9 +3,16 @@ default (the joint names from the scene), range, description (``ros2 param descr
 through ``params.declare``, the typed object the node reads."""
 
 from .. import contract
-from ..contract import COMMANDS, INTEGRATOR_PRESETS, JOINT_STATES
+from ..contract import (
+    COMMANDS,
+    INTEGRATOR_PRESETS,
+    JOINT_STATES,
+    SIMULATOR_MODES,
+    SimulatorMode,
+    WatchdogPolicy,
+)
 from ..driver.arm import DEFAULT_BRAKE_TORQUE
-from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, DEFAULT_WATCHDOG_POLICY, WatchdogPolicy
+from ..driver.realtime import DEFAULT_COMMAND_TIMEOUT, DEFAULT_WATCHDOG_POLICY
 from ..driver.session import Release
 from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
@@ -50,11 +57,12 @@ _PARAMS_BEFORE_JOINTS = (
     ),
     Param(
         'mode',
-        'realtime',
+        SimulatorMode.REALTIME.value,
         'realtime: paced by the wall clock; lockstep: one period per received command',
         'str',
-        choices=('realtime', 'lockstep'),
+        choices=SIMULATOR_MODES,
         read_only=True,
+        enum=SimulatorMode,
     ),
     Param(
         'rate_factor',
@@ -88,6 +96,7 @@ _PARAMS_BEFORE_JOINTS = (
         'str',
         choices=tuple(p.value for p in WatchdogPolicy),
         read_only=True,
+        enum=WatchdogPolicy,
         doc=' (see "The watchdog" below)',
     ),
     Param(
@@ -111,6 +120,7 @@ _PARAMS_BEFORE_JOINTS = (
         'str',
         choices=tuple(r.value for r in Release),
         read_only=True,
+        enum=Release,
     ),
     # a driver stack on simulated time (ros2_control_node with use_sim_time) updates only
     # when /clock advances: with time stopped until its controller's torque it never takes it
@@ -267,11 +277,11 @@ def check(p, names):
             f'joint_commands_topic = {p.joint_commands_topic!r}: the topic hardware '
             f'needs its own topics (not /joint_states, not {COMMANDS})'
         )
-    if p.mode == 'realtime' and p.release_after > 0.0:
+    if p.mode is SimulatorMode.REALTIME and p.release_after > 0.0:
         raise ParameterError(
             f'parameter release_after = {p.release_after}: lockstep only (realtime: 0.0)'
         )
-    if p.mode == 'realtime' and p.rate_factor == 0.0:
+    if p.mode is SimulatorMode.REALTIME and p.rate_factor == 0.0:
         raise ParameterError(
             'parameter rate_factor = 0.0: realtime mode needs a pace '
             '> 0 (use mode lockstep to run as fast as possible)'

@@ -15,7 +15,7 @@ import random
 from collections import deque
 from dataclasses import dataclass
 
-from ..contract import joint_names, to_absolute, to_joint_space
+from ..contract import ControlTrigger, joint_names, to_absolute, to_joint_space
 from ..driver.arm import SimulatedArm
 from ..driver.control_inputs import ControlInputs
 from ..driver.session import LockstepSession, Outputs
@@ -114,7 +114,7 @@ def closed_loop(
         names,
         list(range(arm.n)),
         rate,
-        'joint_states',
+        ControlTrigger.JOINT_STATES,
         commands.append,
         latency_periods=predicted,
         clock=lambda: 0.0,

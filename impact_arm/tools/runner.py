@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 
 from .. import contract
 from ..contract import (
@@ -28,8 +29,13 @@ from ..contract import (
     FEEDBACK_LAWS,
     IMPACT_REPORT,
     JOINT_STATES,
+    SIMULATOR_MODES,
     SURFACE_MOUNTS,
+    SimulatorMode,
+    SimulatorStatus,
+    WatchdogState,
 )
+from ..driver.session import Level
 from ..physics.errors import ImpactArmError
 from .progress import Progress
 
@@ -45,8 +51,8 @@ def add_arguments(parser):
     parser.add_argument('--scene', default='paper', help='scene file or installed scene name')
     parser.add_argument(
         '--mode',
-        choices=('realtime', 'lockstep'),
-        default='lockstep',
+        choices=SIMULATOR_MODES,
+        default=SimulatorMode.LOCKSTEP.value,
         help='lockstep (default): one period per controller command, '
         'deterministic, as fast as the loop allows; realtime: paced by '
         "the wall clock like hardware (the article's stiff gains need a "
@@ -80,6 +86,7 @@ def cli(args) -> int:
     from ..physics.scene import load_scene, resolve_scene_path
     from ..physics.simulate import RunResult, StopReason, format_table
 
+    lockstep = SimulatorMode(args.mode) is SimulatorMode.LOCKSTEP
     if not 1.0 <= args.rate <= 100000.0:
         raise ImpactArmError(f'--rate {args.rate:g}: allowed 1 ... 100000 Hz')
     scene_path = resolve_scene_path(args.scene)
@@ -133,20 +140,17 @@ def cli(args) -> int:
     print(format_table(result))
     if run.chatter:
         print(f'CHATTER: {run.chatter}: the law is unstable at its rate')
-    if run.diagnostics.get('limits'):
-        print(f'LIMIT: {run.diagnostics["limits"]}')
-    if args.mode == 'lockstep' and run.wall > 0:
+    simulator = run.simulator.status if run.simulator else None
+    if simulator and simulator.limits:
+        print(f'LIMIT: {simulator.limits}')
+    if lockstep and run.wall > 0:
         print(
             f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
             f"first command to the last impact; the nodes' start-up not included), "
             f'real-time factor {run.sim_time / run.wall:.2f}'
         )
-    elif run.diagnostics:
-        d = run.diagnostics
-        print(
-            f'realtime: {d.get("overruns", "?")} overruns; worst period compute '
-            f'{d.get("compute_worst_us", "?")} us of {d.get("period_us", "?")} us'
-        )
+    elif run.simulator:
+        print(f'realtime: {run.simulator.summary()}')
     failed = {n: c for n, c in codes.items() if c not in (0, None)}
     # a run a node failed in is no complete run, whatever the file holds
     why_failed = '; '.join(
@@ -162,7 +166,7 @@ def cli(args) -> int:
         # than the pause that ended it
         until = max(run.sim_time, run.published_until)
         check = check_recording(output, args.rate, simulator_topics(scene), until=until)
-        print(f'wrote {output}: {check.summary(args.mode == "lockstep", failed=why_failed)}')
+        print(f'wrote {output}: {check.summary(lockstep, failed=why_failed)}')
         from ..io.viewer_layout import write_layout_beside
 
         # made for this arm and the topics the file holds (every joint, the plates); a file
@@ -172,7 +176,7 @@ def cli(args) -> int:
         except Exception as exc:  # noqa: BLE001 - any reader failure: no layout, the run stands
             print(f'no viewer layout: {exc}')
         # lockstep waits for the recorder: a gap there is a defect, not load
-        incomplete = args.mode == 'lockstep' and not check.complete and outcome == 'completed'
+        incomplete = lockstep and not check.complete and outcome == 'completed'
     elif output:
         print(f'no recording: {output} was not written')
     if outcome == 'interrupted':
@@ -249,17 +253,49 @@ def _die_with_parent():
     os.setpgrp()  # Ctrl-C reaches the runner only; it stops the nodes in order
 
 
-def simulator_diagnostics(msg, name=contract.SIMULATOR_STATUS):
-    """The simulator's /diagnostics values in ``msg`` (a DiagnosticArray) with its ``level``
-    and ``message``, or None: the controller publishes its own status there too (``name``
-    contract.CONTROLLER_STATUS reads that one)."""
+def status_values(msg, name: str) -> dict[str, str] | None:
+    """The key-values of the status ``name`` (contract.SIMULATOR_STATUS,
+    contract.CONTROLLER_STATUS) in ``msg`` (a DiagnosticArray), or None: both nodes publish
+    their own status on /diagnostics."""
     for status in msg.status:
         if status.name == name:
-            values = {kv.key: kv.value for kv in status.values}
+            return {kv.key: kv.value for kv in status.values}
+    return None
+
+
+@dataclass(frozen=True)
+class SimulatorReport:
+    """One status of the simulator on /diagnostics: its severity (an error: the simulation
+    stopped), its one-line message and its values."""
+
+    level: Level
+    message: str
+    status: SimulatorStatus
+
+    @property
+    def stopped(self) -> bool:
+        return self.level is Level.ERROR
+
+    def summary(self) -> str:
+        """The realtime line of ``impact-arm run``'s summary."""
+        s = self.status
+        return (
+            f'{s.overruns} overruns; worst period compute '
+            f'{s.compute_worst_us:.1f} us of {s.period_us:.1f} us'
+        )
+
+
+def simulator_report(msg) -> SimulatorReport | None:
+    """The simulator's status in ``msg`` (a DiagnosticArray), parsed; None when ``msg``
+    holds only other nodes' statuses."""
+    for status in msg.status:
+        if status.name == contract.SIMULATOR_STATUS:
             level = status.level
-            values['level'] = level[0] if isinstance(level, (bytes, bytearray)) else int(level)
-            values['message'] = status.message
-            return values
+            return SimulatorReport(
+                Level(level[0] if isinstance(level, (bytes, bytearray)) else int(level)),
+                status.message,
+                SimulatorStatus.parse({kv.key: kv.value for kv in status.values}),
+            )
     return None
 
 
@@ -333,7 +369,8 @@ class Run:
         )
         self.procs, self.logs = {}, {}
         self.impacts = []
-        self.diagnostics = {}
+        self.mode = SimulatorMode(args.mode)
+        self.simulator: SimulatorReport | None = None  # its latest /diagnostics
         self.sim_time = 0.0
         # the simulator's own last reported time, its final report on exit included: the
         # periods it published, whether or not the run counts them
@@ -357,13 +394,13 @@ class Run:
             'simulator': [
                 f'scene:={self.scene_path}',
                 f'publish_rate:={a.rate}',
-                f'mode:={a.mode}',
-                f'rate_factor:={0.0 if a.mode == "lockstep" else 1.0}',
+                f'mode:={self.mode}',
+                f'rate_factor:={0.0 if self.mode is SimulatorMode.LOCKSTEP else 1.0}',
             ]
             # lockstep: the simulator waits for the recorder, so nothing is lost
             + (
                 [f'recorder_window:={contract.RECORDER_WINDOW}']
-                if self.output and a.mode == 'lockstep'
+                if self.output and self.mode is SimulatorMode.LOCKSTEP
                 else []
             ),
             'controller': [
@@ -374,13 +411,13 @@ class Run:
             + (['command_readers:=2'] if self.output else [])  # simulator + recorder
             + (
                 [f'command_history:={contract.WRITER_REPAIR_DEPTH}']
-                if self.output and a.mode == 'lockstep'
+                if self.output and self.mode is SimulatorMode.LOCKSTEP
                 else []
             )
-            + (['startup_hold:=0.0'] if a.mode == 'lockstep' else [])
+            + (['startup_hold:=0.0'] if self.mode is SimulatorMode.LOCKSTEP else [])
             # lockstep: the controller stops at the count itself, so time stops there
             # however late this process sees it (a loaded machine)
-            + ([f'cycles:={self.scene.cycles}'] if a.mode == 'lockstep' else [])
+            + ([f'cycles:={self.scene.cycles}'] if self.mode is SimulatorMode.LOCKSTEP else [])
             + list(getattr(a, 'controller_params', None) or []),
             'recorder': [f'output:={self.output}', f'scene:={self.scene_path}'],
         }[node]
@@ -427,7 +464,7 @@ class Run:
                     preexec_fn=_die_with_parent,
                 )
         print(
-            f'impact-arm run: scene {self.scene.name!r}, {self.args.mode} at '
+            f'impact-arm run: scene {self.scene.name!r}, {self.mode} at '
             f'{self.args.rate:g} Hz, ROS_DOMAIN_ID={self.env["ROS_DOMAIN_ID"]}, '
             f'logs in {self.logdir}',
             file=sys.stderr,
@@ -464,9 +501,8 @@ class Run:
             self.impacts.append(json.loads(msg.data))
 
     def _on_diagnostics(self, msg):
-        values = simulator_diagnostics(msg, contract.CONTROLLER_STATUS)
+        values = status_values(msg, contract.CONTROLLER_STATUS)
         if values is not None and not self.stopping:
-            values.pop('level'), values.pop('message')
             controller = contract.ControllerStatus.parse(values)
             # the controller's own commands alternating in sign and growing ('' : none)
             self.chatter = controller.chatter or self.chatter
@@ -475,14 +511,13 @@ class Run:
             # the first message of a strike count comes at the strike, while its cycle's
             # down half is still the latest
             self.down_half_start.setdefault(controller.strikes, controller.down_half_start)
-        values = simulator_diagnostics(msg)
-        if values is not None:
-            self.diagnostics = values
-            published = float(values.get('sim_time', self.published_until))
-            self.published_until = max(self.published_until, published)
+        report = simulator_report(msg)
+        if report is not None:
+            self.simulator = report
+            self.published_until = max(self.published_until, report.status.sim_time)
             if not self.stopping:  # the run's time ends with it; the counters with the node
-                self.sim_time = float(values.get('sim_time', self.sim_time))
-            self.rhs_evaluations = int(values.get('rhs_evaluations', 0))
+                self.sim_time = report.status.sim_time
+            self.rhs_evaluations = report.status.rhs_evaluations
 
     def watch(self, timeout) -> str:
         """Spin until the scene's cycles are done; returns why the run ended."""
@@ -492,11 +527,12 @@ class Run:
         while True:
             self._spin_once(0.1)
             now = time.monotonic()
-            if first is None and self.diagnostics.get('commands', '0') != '0':
+            simulator = self.simulator.status if self.simulator else None
+            if first is None and simulator and simulator.commands:
                 # diagnostics come once a second: seeing the first command in them can be a
                 # second late (which made the printed real-time factor up to ~30 % high), so
                 # count from the moment the simulator itself reports
-                first = now - float(self.diagnostics.get('wall_time', 0.0))
+                first = now - simulator.wall_time
             if self.impacts:
                 self.sim_time = max(
                     self.sim_time, self.impacts[-1]['t_contact'] + self.impacts[-1]['duration']
@@ -506,14 +542,14 @@ class Run:
             # a cycle counts once the controller saw its impact: an arm that bounces reports
             # several impacts per cycle (the article's reports one)
             if self._struck(cycles):
-                if self.args.mode == 'realtime':
+                if self.mode is SimulatorMode.REALTIME:
                     self._pause_simulator()
                 return 'completed'
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
                     return f'{name} exited with status {proc.returncode}'
-            if self.diagnostics.get('level') == 2:
-                return f'simulator stopped: {self.diagnostics.get("message")}'
+            if self.simulator and self.simulator.stopped:
+                return f'simulator stopped: {self.simulator.message}'
             if now - start > timeout:
                 return f'timeout after {timeout:g} s'
 
@@ -525,7 +561,7 @@ class Run:
         ``cycles``): the recording ends there."""
         if self.strikes < cycles or len(self.impacts) < cycles:
             return False
-        if self.args.mode == 'lockstep' and self.scene.cycles:
+        if self.mode is SimulatorMode.LOCKSTEP and self.scene.cycles:
             if self.cycles_completed < self.scene.cycles:
                 return False
         began = self.down_half_start.get(cycles, -math.inf)
@@ -557,8 +593,8 @@ class Run:
         )
         # /diagnostics come at 1 Hz: 'waiting' seen before the first command is stale once
         # impacts arrive, so only a state worth acting on is shown
-        watchdog = self.diagnostics.get('watchdog')
-        if watchdog == 'timeout' or (watchdog == 'waiting' and not count):
+        watchdog = self.simulator.status.watchdog if self.simulator else None
+        if watchdog is WatchdogState.TIMEOUT or (watchdog is WatchdogState.WAITING and not count):
             line += f'  watchdog {watchdog}'
         self.line.show(line, done=min(self.strikes, cycles), log=count != self._reported)
         self._reported = count

@@ -7,12 +7,12 @@ import math
 import pytest
 from fake_loop import RATE, FakeClock, make_loop
 
-from impact_arm.contract import to_absolute
+from impact_arm.contract import SimulatorMode, WatchdogPolicy, WatchdogState, to_absolute
 from impact_arm.physics.control import CycleController
 from impact_arm.driver.control_inputs import ControlInputs
 from impact_arm.driver.arm import CommandError, SimulatedArm
 from impact_arm.physics.model import ArmModel
-from impact_arm.driver.realtime import DEFAULT_COMMAND_TIMEOUT, WatchdogPolicy, WatchdogState
+from impact_arm.driver.realtime import DEFAULT_COMMAND_TIMEOUT
 from impact_arm.physics.scene import load_scene, resolve_scene_path
 from impact_arm.driver.session import (
     JointCommand,
@@ -73,14 +73,15 @@ def test_realtime_session_status_snapshot_says_what_the_arm_does(scene):
     s.publish_initial()
     status = s.take_status()
     assert status.level is Level.WARN and status.message.startswith('waiting for the first')
-    assert status.value('watchdog') == 'waiting' and status.value('mode') == 'realtime'
-    assert 'lockstep_repeats' not in dict(status.values)
+    assert status.diagnostics.watchdog is WatchdogState.WAITING
+    assert status.diagnostics.mode is SimulatorMode.REALTIME
+    assert 'lockstep_repeats' not in dict(status.diagnostics.values())
     s.offer(lambda: [1.0, 0.0])
     s.run(lambda: s.arm.periods >= 10)
     status = s.take_status()
     assert status.level is Level.OK and status.message == 'running'
-    assert status.value('periods_published') == '10' and status.value('commands') == '1'
-    assert status.value('watchdog_policy') == 'zero'
+    assert status.diagnostics.periods_published == 10 and status.diagnostics.commands == 1
+    assert status.diagnostics.watchdog_policy is WatchdogPolicy.ZERO
     clock.now += 1.0  # the controller went silent
     assert s.take_status().message == 'no command for more than 0.1 s: torques zeroed'
     assert s.set_e_stop(True) and not s.set_e_stop(True)
@@ -128,7 +129,7 @@ def test_lockstep_session_runs_one_period_per_command_and_holds_while_paused(sce
         'reset to the initial state at t = 0; brakes on until the next command',
     )
     assert s.arm.periods == 0 and published[-1].t == 0.0
-    assert s.take_status().value('mode') == 'lockstep'
+    assert s.take_status().diagnostics.mode is SimulatorMode.LOCKSTEP
 
 
 def test_lockstep_session_repeats_an_unanswered_period_once_a_second(scene):
@@ -190,7 +191,7 @@ def test_lockstep_session_waits_for_the_recorder_within_its_window(scene):
     recorder_there[0] = False  # it left: go on without
     s.tick()
     assert s.arm.periods == 5 and logs[-1] == 'the recorder left: the run goes on without it'
-    assert s.take_status().value('periods_waiting_for_recorder') == '3'
+    assert s.take_status().diagnostics.periods_waiting_for_recorder == 3
 
 
 # ----------------------------------------------------------------- the controller's inputs
@@ -402,7 +403,7 @@ def test_zero_joint_commands_leave_the_arm_braked_with_time_stopped(scene, kind)
     assert s.arm.periods == 0 and s.arm.t == 0.0 and not s.released()
     assert all(tick.t == 0.0 and list(tick.position) == q0 for tick in published)
     assert s.zero_before_release == 50 and s.loop.commands == 0
-    assert s.take_status().value('zero_commands_before_release') == '50'
+    assert s.take_status().diagnostics.zero_commands_before_release == 50
     assert s.offer(JointCommand(lambda: [0.0, 1.0]))  # a controller drives it
     if kind is RealtimeSession:
         s.loop.realtime_period()
@@ -666,11 +667,10 @@ def test_diagnostics_read_while_the_loop_records_stalls_see_one_snapshot(scene):
         thread.start()
         snapshots = 0
         while not done.is_set():
-            values = dict(s.take_status().values)
-            wall = float(values['wall_time'])
-            scheduled = int(values['periods_published']) + int(values['periods_skipped'])
-            assert scheduled <= wall * RATE + 2, values  # (one period in progress)
-            assert len(values['periods_skipped_at_s'].split()) <= 8
+            status = s.take_status().diagnostics
+            scheduled = status.periods_published + status.periods_skipped
+            assert scheduled <= status.wall_time * RATE + 2, status  # (one period in progress)
+            assert len(status.periods_skipped_at_s) <= 8
             snapshots += 1
             if snapshots >= 50:
                 stop.set()
@@ -751,7 +751,7 @@ def test_release_after_runs_braked_periods_until_its_time_then_releases():
     assert not session.released() and session.braked_periods == 4
     session.offer(JointCommand(lambda: [5.0, 1.0]))
     assert session.released() and arm.periods == 5 and ticks[-1].position != q0
-    assert session.take_status(0.0).value('braked_periods') == '4'
+    assert session.take_status(0.0).diagnostics.braked_periods == 4
     with pytest.raises(ValueError, match='release_after'):
         LockstepSession(
             arm,

@@ -10,7 +10,8 @@ import time
 
 from ros_helpers import (
     STANDIN_PD,
-    diagnostics_values,
+    simulator_report,
+    simulator_status,
     driven_standin,
     driver_commands,
     driver_position,
@@ -132,9 +133,9 @@ def test_controller_survives_garbage_absurd_states_stamp_jumps_and_bad_requests(
     assert 'Traceback' not in ctl.stderr
 
 
-def not_applied(values):
-    """Commands a simulator's diagnostics count as refused or superseded."""
-    return int(values['commands_rejected']) + int(values['commands_superseded'])
+def not_applied(status):
+    """Commands a simulator's status counts as refused or superseded."""
+    return status.commands_rejected + status.commands_superseded
 
 
 def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_env, tmp_path):  # noqa: F811,E501
@@ -190,22 +191,18 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
             flood_end = len(states)
 
             def settled():  # two diagnostics after the flood with the same counts
-                values = [diagnostics_values(m) for _, m in diags]
+                statuses = [simulator_status(m) for _, m in diags]
                 return (
-                    len(values) >= 2
-                    and not_applied(values[-1]) == not_applied(values[-2]) != 0
-                    and values[-1]['commands'] == values[-2]['commands']
-                    and values
+                    len(statuses) >= 2
+                    and not_applied(statuses[-1]) == not_applied(statuses[-2]) != 0
+                    and statuses[-1].commands == statuses[-2].commands
+                    and statuses
                 )
 
             running = wait_for(settled, timeout=15)
             assert running, [
-                {
-                    k: v
-                    for k, v in diagnostics_values(m).items()
-                    if k.startswith('command') or k == 'level'
-                }
-                for _, m in diags
+                (r.level, *((k, v) for k, v in r.status.values() if k.startswith('command')))
+                for r in (simulator_report(m) for _, m in diags)
             ][-4:]
             assert wait_for(lambda: len(states) > flood_end + 500, timeout=15), sim.stderr
             assert sim.alive(), sim.stderr
@@ -215,7 +212,7 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
             for publisher in (commands, hostile, empty):
                 probe.node.destroy_publisher(publisher)
     last = running[-1]
-    rejected, accepted = int(last['commands_rejected']), int(last['commands'])
+    rejected, accepted = last.commands_rejected, last.commands
     # a queue overflow on a stalled machine may drop some of either kind, never add any; a
     # superseded message may be garbage or an older valid command of the same period
     assert rejected <= len(garbage), (rejected, len(garbage))
@@ -226,18 +223,15 @@ def test_simulator_applies_only_valid_commands_among_1000_malformed(probe, ros_e
     )
     assert 0 < accepted <= valid_sent, (accepted, valid_sent)
     # every period of the run was published (the simulator's own count against sim time)
-    running = [v for v in running if float(v['periods_published_until_s']) > 0.2]
+    running = [s for s in running if s.periods_published_until_s > 0.2]
     first = running[0]
-    periods = round(
-        (float(last['periods_published_until_s']) - float(first['periods_published_until_s']))
-        / 1e-3
-    )
+    periods = round((last.periods_published_until_s - first.periods_published_until_s) / 1e-3)
     # (a diagnostics second may hold fewer than 1000 periods: a stalling VM makes the loop
     # skip periods, which advance neither count)
-    assert (
-        periods >= 500
-        and int(last['periods_published']) - int(first['periods_published']) == periods
-    ), (first, last)
+    assert periods >= 500 and last.periods_published - first.periods_published == periods, (
+        first,
+        last,
+    )
     # the torques held: zero before the first command, then only ever a valid command's
     held = {tuple(m.effort) for _, m in states}
     assert held <= {(0.0, 0.0), *map(tuple, valid)}, held - {(0.0, 0.0), *map(tuple, valid)}

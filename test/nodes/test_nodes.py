@@ -25,12 +25,16 @@ from ros_helpers import (
     from_simulator,
     node_args,
     simulator,
+    simulator_report,
+    simulator_status,
     stamp,
     start_process,
     wait_for,
 )
 
 from impact_arm import contract
+from impact_arm.contract import WatchdogState
+from impact_arm.driver.session import Level
 from impact_arm.physics.scene import load_scene, resolve_scene_path
 from impact_arm.physics.simulate import run
 
@@ -230,8 +234,7 @@ def test_lockstep_publishes_an_unanswered_period_again(probe, ros_env, tmp_path)
         )
         assert seen.count(0.003) == 2 and dropped
         assert wait_for(
-            lambda: diags and diagnostics_values(diags[-1][1]).get('lockstep_repeats') == '1',
-            timeout=5,
+            lambda: diags and simulator_status(diags[-1][1]).lockstep_repeats == 1, timeout=5
         )
         assert 'published it again' in sim.stderr + sim.stdout
     with probe.lock:
@@ -282,19 +285,16 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         # diagnostics, periods published = simulated time advanced / 1 ms, exactly
         # (1 Hz; this starved probe may receive them late, as it did the states)
         def running_diagnostics():
-            values = [diagnostics_values(m) for _, m in list(diags)]
-            return [v for v in values if float(v['periods_published_until_s']) > 0.2]
+            statuses = [simulator_status(m) for _, m in list(diags)]
+            return [s for s in statuses if s.periods_published_until_s > 0.2]
 
         assert wait_for(lambda: len(running_diagnostics()) >= 2, timeout=30), (
             'fewer than two /diagnostics while running'
         )
         running = running_diagnostics()
         first, last = running[0], running[-1]
-        periods = round(
-            (float(last['periods_published_until_s']) - float(first['periods_published_until_s']))
-            / 1e-3
-        )
-        published = int(last['periods_published']) - int(first['periods_published'])
+        periods = round((last.periods_published_until_s - first.periods_published_until_s) / 1e-3)
+        published = last.periods_published - first.periods_published
         assert periods >= 500 and published == periods, (first, last)
         # and at the wall-clock pace, by the simulator's own clock and counters (this probe,
         # at normal priority on a loaded machine, receives late and in bursts: its receive
@@ -303,8 +303,8 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         # bursting through them. So between two diagnostics the periods run plus those
         # skipped follow the wall time the simulator measured: never ahead of it (by one
         # period in progress at most) and behind it only by a stall still in progress.
-        wall = float(last['wall_time']) - float(first['wall_time'])
-        skipped = int(last['periods_skipped']) - int(first['periods_skipped'])
+        wall = last.wall_time - first.wall_time
+        skipped = last.periods_skipped - first.periods_skipped
         scheduled = published + skipped
         assert wall >= 0.5 and stamps[-1] - stamps[0] >= 3.0
         assert scheduled <= wall / 1e-3 + 2, f'{scheduled} periods in {wall:.3f} s: ahead'
@@ -332,15 +332,13 @@ def test_realtime_rate_and_watchdog(probe, ros_env, tmp_path):
         assert all(all(e == 0.0 for e in m.effort) for m in after[moving[-1] + 1 :])
         assert wait_for(
             lambda: any(
-                diagnostics_values(m)['watchdog'] == 'timeout'
-                and diagnostics_values(m)['level'] == 1
-                for t, m in diags
-                if t > killed
+                r.status.watchdog is WatchdogState.TIMEOUT and r.level is Level.WARN
+                for r in (simulator_report(m) for t, m in diags if t > killed)
             ),
             timeout=5.0,
         ), [
-            (v['level'], v['message'], v['watchdog'])
-            for v in map(diagnostics_values, (m for _, m in diags[-3:]))
+            (r.level, r.message, r.status.watchdog)
+            for r in map(simulator_report, (m for _, m in diags[-3:]))
         ]
         assert sim.alive(), sim.stderr
     probe.forget(states, diags)
@@ -364,11 +362,10 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
         for bad in ([1.0], [math.nan, 0.0], [1.0, 2.0, 3.0], [math.inf, 1.0]):
             pub.publish(Float64MultiArray(data=bad))
         assert wait_for(
-            lambda: diags and diagnostics_values(diags[-1][1])['commands_rejected'] == '4',
-            timeout=5,
-        ), diagnostics_values(diags[-1][1]) if diags else 'no diagnostics'
-        values = diagnostics_values(diags[-1][1])
-        assert values['commands'] == '0' and values['watchdog'] == 'waiting'
+            lambda: diags and simulator_status(diags[-1][1]).commands_rejected == 4, timeout=5
+        ), simulator_status(diags[-1][1]) if diags else 'no diagnostics'
+        status = simulator_status(diags[-1][1])
+        assert status.commands == 0 and status.watchdog is WatchdogState.WAITING
         assert all(all(e == 0.0 for e in m.effort) for _, m in states)
         assert 'command rejected' in sim.stderr + sim.stdout
 
@@ -377,12 +374,10 @@ def test_commands_validated_clipped_and_held(probe, ros_env, tmp_path):
             1
         ].effort
         # a later /diagnostics (every 0.2 s) counts it; no fixed wait: the probe may lag
-        assert wait_for(
-            lambda: diagnostics_values(diags[-1][1])['commands_clipped'] != '0', timeout=5
-        )
+        assert wait_for(lambda: simulator_status(diags[-1][1]).commands_clipped != 0, timeout=5)
         time.sleep(0.5)  # and counts nothing more
-        values = diagnostics_values(diags[-1][1])
-        assert values['commands_clipped'] == '1' and values['commands_rejected'] == '4'
+        status = simulator_status(diags[-1][1])
+        assert status.commands_clipped == 1 and status.commands_rejected == 4
     probe.forget(states, diags)
 
 

@@ -10,13 +10,15 @@ import pytest
 
 from ros_helpers import (
     controller,
-    diagnostics_values,
     from_simulator,
     simulator,
+    simulator_report,
     stamp,
     start_process,
     wait_for,
 )
+
+from impact_arm.driver.session import Level
 
 ARTICLE_PERIOD = 0.397
 
@@ -35,9 +37,10 @@ def call(probe, srv_type, name, request, timeout=10.0):
 
 
 def latest_diagnostics(diags, after):
-    """The first /diagnostics received after wall time ``after``."""
+    """The first simulator report (runner.SimulatorReport) received after wall time
+    ``after``."""
     assert wait_for(lambda: any(t > after for t, _ in diags), timeout=5.0), 'no /diagnostics'
-    return next(diagnostics_values(m) for t, m in diags if t > after)
+    return next(simulator_report(m) for t, m in diags if t > after)
 
 
 def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
@@ -79,12 +82,12 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
                 timeout=5,
             ), sim.stderr
             d = latest_diagnostics(diags, time.monotonic())
-            assert d['e_stop'] == 'true' and d['level'] == 2, d
+            assert d.status.e_stop and d.level is Level.ERROR, d
             time.sleep(0.3)  # commands keep arriving: latched
             assert tuple(states[-1][1].effort) == (0.0, 0.0)
             e_stop.publish(Bool(data=False))
             assert wait_for(lambda: tuple(states[-1][1].effort) == (5.0, 1.0), timeout=5)
-            assert latest_diagnostics(diags, time.monotonic())['e_stop'] == 'false'
+            assert not latest_diagnostics(diags, time.monotonic()).status.e_stop
 
             # pause: the held state goes on being published, its time frozen
             assert call(probe, SetBool, '/simulator/pause', SetBool.Request(data=True)).success
@@ -99,7 +102,7 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
             assert frozen, 'nothing published while paused, or its time not frozen'
             assert len({tuple(m.position) for m in frozen}) == 1
             t_frozen = stamp(frozen[-1])
-            assert latest_diagnostics(diags, time.monotonic())['paused'] == 'true'
+            assert latest_diagnostics(diags, time.monotonic()).status.paused
             # step: exactly step_periods periods
             assert call(probe, Trigger, '/simulator/step', Trigger.Request()).success
             assert wait_for(lambda: stamp(states[-1][1]) >= t_frozen + 5e-3 - 1e-9, timeout=5)
@@ -109,7 +112,7 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
             assert wait_for(lambda: stamp(states[-1][1]) > t_frozen + 0.1, timeout=5)
 
             # reset: the initial state at t = 0, counts reset; the commands start it again
-            before = latest_diagnostics(diags, time.monotonic())
+            before = latest_diagnostics(diags, time.monotonic()).status
             reset_at = time.monotonic()
             assert call(probe, Trigger, '/simulator/reset', Trigger.Request()).success
             assert wait_for(
@@ -118,9 +121,9 @@ def test_reset_pause_step_and_e_stop(probe, ros_env, tmp_path):
             first = next(m for t, m in states if t > reset_at and stamp(m) < 0.05)
             initial = states[0][1]
             assert stamp(first) == 0.0 and tuple(first.position) == tuple(initial.position)
-            after = latest_diagnostics(diags, time.monotonic() + 0.1)
-            assert float(after['sim_time']) < float(before['sim_time'])
-            assert int(after['commands']) < int(before['commands'])
+            after = latest_diagnostics(diags, time.monotonic() + 0.1).status
+            assert after.sim_time < before.sim_time
+            assert after.commands < before.commands
             assert sim.alive(), sim.stderr
         finally:
             stop_commanding.append(True)
@@ -178,7 +181,7 @@ def test_start_up_in_any_order_never_stops_the_simulator(probe, ros_env, tmp_pat
             sim = a if order != 'controller_first' else b
             assert wait_for(lambda: len(reports) >= 2 or not sim.alive(), timeout=90), sim.stderr
             assert sim.alive(), sim.stderr
-            assert not any(diagnostics_values(m)['level'] == 2 for _, m in diags), sim.stderr
+            assert not any(simulator_report(m).stopped for _, m in diags), sim.stderr
     # (the cycle period under load is bench starts' business: a loaded machine can delay the
     # controller's switch into a re-strike, which is no stop)
     probe.forget(reports, diags)

@@ -9,8 +9,10 @@ import time
 
 import pytest
 
-from ros_helpers import diagnostics_values, simulator, start_process, wait_for
+from ros_helpers import diagnostics_values, simulator, simulator_status, start_process, wait_for
 from repo_paths import EXAMPLES, SUPPORT_DIR
+
+from impact_arm.contract import SimulatorStatus
 
 PERIODS = 150
 
@@ -109,7 +111,7 @@ def drive(probe, env, workdir, kind):
 
 
 def rejected(diag):
-    return int(diagnostics_values(diag)['commands_rejected'])
+    return simulator_status(diag).commands_rejected
 
 
 @pytest.fixture(scope='module')
@@ -183,8 +185,8 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
         *helper_args(*args)[2:],
     ]
 
-    def sim_values():
-        return diagnostics_values(diags[-1][1]) if diags else {}
+    def sim_status():
+        return simulator_status(diags[-1][1]) if diags else SimulatorStatus()
 
     with start_process(standin, ros_env, tmp_path, 'standin') as cm:
         assert wait_for(lambda: '"update"' in cm.stdout or not cm.alive(), 60), cm.stderr
@@ -192,13 +194,10 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
         with start_process(simulator(*params), ros_env, tmp_path, 'sim_standin') as sim:
             # the hardware's zeros reach the simulator, which keeps the arm braked at t = 0
             assert wait_for(
-                lambda: (
-                    int(sim_values().get('zero_commands_before_release', 0)) > 100
-                    or not sim.alive()
-                ),
-                60,
+                lambda: sim_status().zero_commands_before_release > 100 or not sim.alive(), 60
             ), sim.stderr
-            assert float(sim_values()['sim_time']) == 0.0 and sim_values()['commands'] == '0'
+            status = sim_status()
+            assert status.sim_time == 0.0 and status.commands == 0
             remaps = (
                 '-r',
                 '/joint_states:=/joint_state_broadcaster/joint_states',
@@ -215,7 +214,7 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
                 # torque, as a deactivated controller leaves it) the stand-in's hardware
                 # still writes commands each update and the released arm falls
                 driven = list(reports)
-                values = sim_values()
+                status = sim_status()
                 assert wait_for(lambda: controller_diags, 5)
                 seen = diagnostics_values(controller_diags[-1][1])
             assert sim.alive(), sim.stderr
@@ -227,7 +226,7 @@ def test_the_controller_drives_the_arm_through_a_ros2_control_standin(
     offline = offline_start
     assert contacts[0] == pytest.approx(offline.t_contact[0], abs=0.02), contacts
     assert max(r['delta_m'] for r in impacts) < 1.5 * max(offline.delta_m)
-    assert int(values['zero_commands_before_release']) > 100
+    assert status.zero_commands_before_release > 100
     # the controller waited for no wrench of the other clock, dropped no state, and
     # predicted over the commands it measured in flight
     assert seen['missing_wrenches'] == '0' and seen['stamp_jumps'] == '0', seen

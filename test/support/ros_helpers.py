@@ -251,11 +251,28 @@ def stamp(msg):
 
 def from_simulator(msg):
     """A /diagnostics message of the simulator (the controller publishes its own)."""
-    return bool(msg.status) and msg.status[0].name == 'impact_arm: simulator'
+    from impact_arm.contract import SIMULATOR_STATUS
+
+    return bool(msg.status) and msg.status[0].name == SIMULATOR_STATUS
+
+
+def simulator_report(msg):
+    """The simulator's status in a /diagnostics message, parsed (runner.SimulatorReport:
+    level, message, status), or None when it holds only other nodes' statuses."""
+    from impact_arm.tools.runner import simulator_report as parse
+
+    return parse(msg)
+
+
+def simulator_status(msg):
+    """The simulator's values (contract.SimulatorStatus) in a /diagnostics message of the
+    simulator (``from_simulator``)."""
+    return simulator_report(msg).status
 
 
 def diagnostics_values(msg):
-    """The key/values of a /diagnostics message's first status, with its level and message."""
+    """The key/values of a /diagnostics message's first status, with its level and message
+    (the controller's; the simulator's are read typed: ``simulator_report``)."""
     status = msg.status[0]
     values = {kv.key: kv.value for kv in status.values}
     level = status.level

@@ -32,10 +32,12 @@ from ros_helpers import (
     diagnostics_values,
     from_simulator,
     simulator,
+    simulator_status,
     start_process,
     wait_for,
 )
 
+from impact_arm.contract import SimulatorStatus
 from impact_arm.driver.control_inputs import DROPPED
 from impact_arm.tools.latency_study import SECOND_STRIKE_S
 
@@ -65,7 +67,7 @@ class StackRun:
 
     order: tuple[str, ...]
     impacts: list[dict]
-    sim: dict
+    sim: SimulatorStatus | None  # None: the simulator never reported
     ctrl: dict
     standin_updates: dict
     alive: dict
@@ -109,7 +111,7 @@ class StackRun:
     @property
     def stalls(self) -> list[float]:
         """The simulated times of the simulator's latest stalls (``periods_skipped_at_s``)."""
-        return [float(t) for t in self.sim.get('periods_skipped_at_s', '').split()]
+        return list(self.sim.periods_skipped_at_s) if self.sim else []
 
     def second_strikes_at_stalls(self) -> bool:
         """Whether there are second strikes and each followed a simulator stall, between
@@ -124,10 +126,10 @@ class StackRun:
         processes' own counters: a command silence the simulator's watchdog braked, or a
         command latency beyond those the implicit law was shown to handle."""
         misses = []
-        if int(self.sim.get('watchdog_timeouts', 0)) > 0:
+        if self.sim and self.sim.watchdog_timeouts > 0:
             misses.append(
-                f'{self.sim["watchdog_timeouts"]} watchdog timeouts (longest command silence '
-                f'{self.sim.get("longest_command_silence_s")} s)'
+                f'{self.sim.watchdog_timeouts} watchdog timeouts (longest command silence '
+                f'{self.sim.longest_command_silence_s:.6f} s)'
             )
         latency_max = int(self.ctrl.get('latency_periods_max', 0))
         if latency_max > HANDLED_LATENCY:
@@ -153,12 +155,13 @@ class StackRun:
             # what the controller dropped or refused (its non-zero counters)
             'controller_dropped': {k: ctrl[k] for k in DROPPED if ctrl.get(k, '0') != '0'},
             'repeated_states': int(ctrl.get('repeated_states', -1)),
-            'overruns': int(sim.get('overruns', -1)),
-            'periods_skipped': int(sim.get('periods_skipped', -1)),
+            # -1: the simulator never reported
+            'overruns': sim.overruns if sim else -1,
+            'periods_skipped': sim.periods_skipped if sim else -1,
             'periods_skipped_at_s': self.stalls,
-            'periods_without_new_command': int(sim.get('periods_without_new_command', -1)),
-            'watchdog_timeouts': int(sim.get('watchdog_timeouts', -1)),
-            'zero_commands_before_release': int(sim.get('zero_commands_before_release', -1)),
+            'periods_without_new_command': sim.periods_without_new_command if sim else -1,
+            'watchdog_timeouts': sim.watchdog_timeouts if sim else -1,
+            'zero_commands_before_release': sim.zero_commands_before_release if sim else -1,
             'standin_updates': self.standin_updates,
             'cpu_percent': self.cpu_percent,
             'thread_cpu_percent': self.thread_cpu_percent,
@@ -269,12 +272,12 @@ def run_stack(
                 procs[role] = stack.enter_context(start_process(lines[role], env, workdir, role))
                 time.sleep(START_SPACING_S)
 
-            def sim_values():
-                return diagnostics_values(sim_diags[-1][1]) if sim_diags else {}
+            def sim_status():
+                return simulator_status(sim_diags[-1][1]) if sim_diags else None
 
             # the driven part: from the simulator's first command on
             deadline = time.monotonic() + 60
-            while int(sim_values().get('commands', '0') or 0) == 0:
+            while not (sim_diags and sim_status().commands):
                 if time.monotonic() > deadline or not procs['simulator'].alive():
                     break
                 time.sleep(0.02)
@@ -293,7 +296,8 @@ def run_stack(
             threads1 = {r: thread_cpu(procs[r].pid) if alive[r] else {} for r in threads0}
             wall = time.monotonic() - wall0
             driven = [json.loads(m.data) for _, m in list(reports)]
-            sim_time = float(sim_values().get('sim_time', 'nan'))  # (its latest report)
+            latest = sim_status()  # (its latest report)
+            sim_time = latest.sim_time if latest else float('nan')
             # one more report of each (1 Hz), for the counters: a lagging probe may hold
             # stale ones after a fixed wait, and a run to skip would read as a failure
             seen = (len(sim_diags), len(ctrl_diags))
@@ -303,7 +307,7 @@ def run_stack(
             return StackRun(
                 order=tuple(order),
                 impacts=driven,
-                sim=sim_values(),
+                sim=sim_status(),
                 ctrl=diagnostics_values(ctrl_diags[-1][1]) if ctrl_diags else {},
                 standin_updates=updates[-1] if updates else {},
                 alive=alive,
