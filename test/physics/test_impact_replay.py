@@ -30,8 +30,8 @@ from impact_arm.physics.replay import (
     replay_impact,
 )
 from impact_arm.physics.scene import parse_scene
+from repo_paths import CONFIG
 
-CONFIG = os.path.join(os.path.dirname(__file__), '..', 'config')
 SCENES = ['paper', 'three_link']
 # the reference preset in the run and the replay: what is left between them is the
 # integrator's error on a different step sequence (the run also stops at each sample)
