@@ -33,6 +33,7 @@ from ..contract import (
     SURFACE_MOUNTS,
     SimulatorMode,
     SimulatorStatus,
+    WatchdogPolicy,
     WatchdogState,
 )
 from ..driver.session import Level
@@ -143,6 +144,8 @@ def cli(args) -> int:
     simulator = run.simulator.status if run.simulator else None
     if simulator and simulator.limits:
         print(f'LIMIT: {simulator.limits}')
+    if run.simulator and run.simulator.watchdog_line():
+        print(run.simulator.watchdog_line())
     if lockstep and run.wall > 0:
         print(
             f'lockstep: {run.sim_time:.3f} s simulated in {run.wall:.3f} s wall (from the '
@@ -275,6 +278,24 @@ class SimulatorReport:
     @property
     def stopped(self) -> bool:
         return self.level is Level.ERROR
+
+    def watchdog_line(self) -> str:
+        """Why the arm was braked or let go while the run went on ('' : it never was): a
+        stall in command reception longer than ``command_timeout`` must not pass unsaid."""
+        s = self.status
+        if not s.watchdog_timeouts:
+            return ''
+        if s.watchdog_policy is WatchdogPolicy.BRAKE:
+            action = (
+                f'the brakes held the joints ({s.brake_events} times, at most '
+                f'{s.brake_torque_max_nm:.3f} of {s.brake_torque_limit_nm:g} N m)'
+            )
+        else:
+            action = 'zero torque (the arm fell)'
+        return (
+            f'WATCHDOG: {s.watchdog_timeouts} command timeout(s), the longest silence '
+            f'{s.longest_command_silence_s * 1e3:.1f} ms (parameter command_timeout): {action}'
+        )
 
     def summary(self) -> str:
         """The realtime line of ``impact-arm run``'s summary."""

@@ -611,6 +611,84 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 
+def freeze_node(domain, module, seconds):
+    """SIGSTOP the run's node ``module`` (e.g. 'nodes.controller') for ``seconds``."""
+    from pathlib import Path
+
+    pids = [
+        int(pid)
+        for pid in node_processes(domain)
+        if module.encode() in Path(f'/proc/{pid}/cmdline').read_bytes()
+    ]
+    assert len(pids) == 1, pids
+    os.kill(pids[0], signal.SIGSTOP)
+    time.sleep(seconds)
+    os.kill(pids[0], signal.SIGCONT)
+
+
+def test_a_stalled_controller_is_named_in_the_run_summary(ros_env, tmp_path):
+    """Commands stalled for 0.5 s in the middle of a realtime run (the controller frozen
+    with SIGSTOP, as a starved process): the simulator's watchdog brakes the arm, the run
+    still completes every cycle once the commands come back, and its summary says why the
+    arm was braked and for how long no command came."""
+    from pathlib import Path
+
+    env = dict(ros_env)
+    scene = tmp_path / 'short.yaml'
+    scene.write_text(
+        Path(resolve_scene_path('paper')).read_text().replace('cycles: 15', 'cycles: 5')
+    )
+    recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
+    run = subprocess.Popen(
+        [
+            PYTHON,
+            '-m',
+            'impact_arm.tools.cli',
+            'run',
+            '--mode',
+            'realtime',
+            '--scene',
+            str(scene),
+            '--name',
+            'stall',
+            '--out',
+            str(tmp_path / 'runs'),
+        ],
+        env=env,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+
+        def driven():
+            try:
+                return f'first samples on {contract.COMMANDS}' in recorder_log.read_text()
+            except OSError:
+                return False
+
+        wait_for(lambda: driven() or run.poll() is not None, timeout=240)
+        time.sleep(1.0)  # into the second cycle
+        froze = run.poll() is None
+        if froze:
+            freeze_node(env['ROS_DOMAIN_ID'], 'nodes.controller', 0.5)
+        out, _ = run.communicate(timeout=300)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert froze, out
+    assert run.returncode == 0, out
+    rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
+    assert len(rows) >= 5, out  # no cycle lost (a braked arm may strike again as it resumes)
+    watchdog = [line for line in out.splitlines() if line.startswith('WATCHDOG:')]
+    assert len(watchdog) == 1, out
+    silence = float(re.search(r'longest silence ([\d.]+) ms', watchdog[0]).group(1))
+    assert 400.0 < silence < 2000.0, watchdog[0]
+    assert 'the brakes held the joints' in watchdog[0]
+
+
 @pytest.mark.parametrize('frozen', [3.0, 8.0])
 def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path, frozen):
     """Realtime cannot wait for a recorder: one frozen (SIGSTOP) for ``frozen`` s loses
