@@ -13,9 +13,22 @@ import math
 from dataclasses import dataclass
 
 from .jit import jit_leaf as jit
+from .layout import ELASTIC, ELASTOPLASTIC, RESTITUTION
 from .scene.types import Material, reduced_modulus
 
 YIELD_ONSET_FACTOR = 1.9  # the elastic phase ends at δ = 1.9 δc (Jackson-Green)
+
+# A contact law's code in the compiled kernels' tables (the arm's surface table, the free
+# body's pair table), by its name in a scene file. Every law runs the same phase machine
+# (docs/model.md): free, elastic, elasto-plastic, restitution, free; a law decides which
+# phases it enters and where it switches (``yield_margin``, ``law_residual``).
+CONTACT_ELASTOPLASTIC, CONTACT_HERTZ, CONTACT_CONSTANT_COR, CONTACT_NONE = 0, 1, 2, 3
+CONTACT_LAW_CODES = {
+    'elastoplastic': CONTACT_ELASTOPLASTIC,
+    'hertz': CONTACT_HERTZ,
+    'constant_cor': CONTACT_CONSTANT_COR,
+    'none': CONTACT_NONE,
+}
 
 
 @dataclass(frozen=True)
@@ -104,3 +117,57 @@ def restitution_force(delta: float, delta_r: float, E: float, R_r: float) -> flo
 def friction_force(normal_force: float, slip_velocity: float, mu: float, v_d: float) -> float:
     """Tangential force opposing slip: -μ |Fn| tanh(v/v_d) (docs/model.md fixes eq. 14's sign)."""
     return -mu * abs(normal_force) * math.tanh(slip_velocity / v_d)
+
+
+# ------------------------------------------------------------------ the kernels' dispatch
+# Both compiled integrators (the arm's kernel/, the free body's bodies/kernel.py) call these
+# three for every law-dependent quantity of a contact, so a law is dispatched in one place.
+
+
+@jit
+def phase_normal_force(
+    phase: int,
+    delta: float,
+    E: float,
+    R: float,
+    S_y: float,
+    C_j: float,
+    delta_c: float,
+    P_c: float,
+    B: float,
+    delta_r: float,
+    R_r: float,
+) -> float:
+    """The normal force at indentation δ in a contact phase: Hertz while elastic, Jackson-Green
+    once yielded, the restitution curve about the dent δr (radius Rr) after the maximum
+    compression; zero when free. A law's choice is in which phases it enters."""
+    if phase == ELASTIC:
+        return hertz_force(delta, E, R)
+    if phase == ELASTOPLASTIC:
+        return jackson_green(delta, delta_c, R, S_y, C_j, P_c, B)
+    if phase == RESTITUTION:
+        return restitution_force(delta, delta_r, E, R_r)
+    return 0.0
+
+
+@jit
+def yield_margin(law: int, delta: float, delta_c: float) -> float:
+    """The elastic phase's yield event function: rises through zero at the yield onset
+    δ = 1.9 δc; -1 (never) for a law that does not yield."""
+    if law == CONTACT_ELASTOPLASTIC:
+        return delta - YIELD_ONSET_FACTOR * delta_c
+    return -1.0
+
+
+@jit
+def law_residual(law: int, delta_m: float, delta_c: float, cor: float) -> float:
+    """The residual indentation δr the restitution starts from after a maximum compression δm:
+    the Etsion fit for the elasto-plastic law; for the constant-CoR law the δr at which the
+    Hertz unloading from (δm, Pm) returns e² of the energy stored, so the contact's energetic
+    CoR is e (it returns (2/5) Pm (δm - δr) of (2/5) Pm δm: δr = (1 - e²) δm); 0 (elastic
+    unloading) for Hertz."""
+    if law == CONTACT_ELASTOPLASTIC:
+        return residual(delta_m, delta_c)
+    if law == CONTACT_CONSTANT_COR:
+        return (1.0 - cor**2) * delta_m
+    return 0.0

@@ -567,11 +567,13 @@ def _module_header(n, general=False, n_mount=0):
         if n <= SYMBOLIC_LINKS
         else 'from impact_arm.physics.jit import jit, jit as jit_leaf  # called, not inlined',
         'from impact_arm.physics.layout import *  # noqa: F401,F403',
-        'from impact_arm.physics.contact import (hertz_force, jackson_green, restitution_force,',
-        '                                friction_force, residual, restitution_radius,',
-        '                                YIELD_ONSET_FACTOR as YIELD_ONSET)',
+        'from impact_arm.physics.contact import friction_force, phase_normal_force',
+        'from impact_arm.physics.contact_phases import max_compression, phase_events',
+        'from impact_arm.physics.dormand_prince import (dormand_prince_step, error_norm,',
+        '                                D12, D13, D14, D32, D33, D34, D42, D43, D44,',
+        '                                D52, D53, D54, D62, D63, D64, D72, D73, D74)',
         'from impact_arm.physics.control import add_joint_torques, pid_error, pid_law, q_law',
-        'from impact_arm.physics.roots import event_tolerance, false_position, illinois_update',
+        'from impact_arm.physics.roots import event_tolerance, locate_crossing',
         f'N = {n}',
     ]
     lines += [f'NM = {n_mount}', f'HAS_MOUNT = {n_mount > 0}']

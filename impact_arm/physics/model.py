@@ -18,7 +18,7 @@ from enum import IntEnum
 import numpy as np
 
 from . import layout
-from .contact import ContactConstants, contact_constants
+from .contact import CONTACT_LAW_CODES, ContactConstants, contact_constants
 from .equations import load_equations
 from .scene.types import Mount, Scene
 
@@ -107,7 +107,7 @@ class ArmModel:
             c = s.constants
             self.surface_table[s.index] = (
                 s.height,
-                0 if s.law == 'elastoplastic' else 1,
+                CONTACT_LAW_CODES[s.law],
                 s.mu,
                 s.v_d,
                 c.E,

@@ -1,12 +1,18 @@
-"""Locating an event's zero crossing inside a step: the bracket both integrators shrink.
+"""Locating an event's zero crossing inside a step, for both compiled integrators.
 
-The arm's kernel (``kernel/events.py``, Newton inside the bracket) and the free body's
-(``bodies/kernel.py``, the bracket alone) step from the start of the step that crossed an
-event to a trial size c and read the event function there; these helpers keep the bracket
-[a, b] with g(a) < 0 <= g(b) around the crossing by Illinois regula falsi. Inlined into the
-compiled loops (``jit_leaf``): the same arithmetic as written out in place."""
+The arm's kernel (``kernel/events.py``) and the free body's (``bodies/kernel.py``) locate a
+switch with ``locate_crossing``: it steps from the start of the step that crossed the event
+to a trial size c, reads the event function there, and moves by Newton's method inside a
+bracket [a, b] with g(a) < 0 <= g(b) that Illinois regula falsi keeps shrinking. Each kernel
+hands it its own step, event function and event rate. Inlined into the compiled loops
+(``jit_leaf``): the same arithmetic as written out in place, and the functions handed in are
+compile-time constants there (a compiled function handed one at run time could not be cached).
+Those must be called, not inlined (``jit``): numba cannot inline a call with ``*args``."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 from .jit import jit_leaf
 
@@ -50,3 +56,52 @@ def illinois_update(
             fb *= 0.5
         side = 1
     return a, b, fa, fb, side
+
+
+@jit_leaf
+def locate_crossing(
+    step_to: Callable[..., None],
+    event_at: Callable[..., float],
+    event_rate_at: Callable[..., float],
+    k: int,
+    h: float,
+    ga: float,
+    gb: float,
+    tol: float,
+    args: tuple[Any, ...],
+) -> float:
+    """Smallest s in (0, h] with g_k(real step of size s) >= 0, to ``tol``, given g_k = ga < 0
+    at the step's start and gb >= 0 at its end; on return the trial state is the step to it.
+
+    ``step_to(s, *args)`` takes the real step of size s from the step's start into the trial
+    state, ``event_at(k, *args)`` reads g_k there and ``event_rate_at(k, *args)`` its time
+    derivative (0: no Newton step, the bracket alone). Newton's method on real steps (the
+    step's end derivative gives ġ for free), kept inside the shrinking bracket and falling
+    back to Illinois regula falsi when a Newton step would leave it."""
+    a, b = 0.0, h
+    fa, fb = ga, gb
+    side = 0
+    c = false_position(a, b, fa, fb)
+    for _ in range(100):
+        if not (a < c < b):  # a converged Newton step nudged onto an end of the bracket
+            c = 0.5 * (a + b)
+        step_to(c, *args)
+        fc = event_at(k, *args)
+        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
+        if fc == 0.0 or b - a <= tol:
+            break
+        rate = event_rate_at(k, *args)
+        newton = c - fc / rate if rate != 0.0 else -1.0
+        if abs(newton - c) <= tol:
+            # converged: step just past the root so the event has really happened
+            c = min(b, newton + tol)
+            if c == b:
+                break
+            continue
+        if a < newton < b:
+            c = newton
+        else:
+            c = false_position(a, b, fa, fb)
+    if b != c:
+        step_to(b, *args)
+    return b

@@ -7,15 +7,18 @@ from __future__ import annotations
 import copy
 import math
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from impact_arm.physics.bodies import kernel as K
 from impact_arm.physics.bodies.model import build_model, energy, simulate_body
 from impact_arm.physics.bodies.scene import BodyState, parse_body_scene
 from impact_arm.physics.contact import contact_constants
 from impact_arm.physics.errors import SceneError, SimulationError
 from impact_arm.physics.kinds import EventKind
+from impact_arm.physics.layout import ELASTIC, FREE, RESTITUTION
 from impact_arm.physics.scene import Material
 from impact_arm.physics.sphere_drop import drop
 
@@ -190,6 +193,32 @@ def test_the_constant_cor_law_rebounds_with_its_coefficient():
         model_of(data), BodyState(0.0, RADIUS + 1e-7, 0.0, 0.0, -2.5, 0.0), 0.01, settle=1e-4
     )
     assert run.state.vz == pytest.approx(0.65 * 2.5, rel=1e-7)
+
+
+@pytest.mark.parametrize('kind', [K.EV_CONTACT, K.EV_MAX, K.EV_SEPARATION])
+def test_the_event_rates_newton_locates_with_are_the_event_functions_time_derivatives(kind):
+    """The rate each event's Newton step uses (``event_rate``) is dg/dt along the motion:
+    the central difference of g over y ± ε ẏ, on a spinning, tilted square in contact (the
+    maximum compression's rate needs the corner's acceleration, spin included)."""
+    data = square(law='elastoplastic', mu=0.3)
+    data['gravity'] = 9.81
+    model = model_of(data)
+    state = lowest_corner_state(0.4, -2e-7, 0.7, -1.3, 25.0)  # the lowest corner 0.2 um in
+    y = np.array([state.x, state.z, state.theta, state.vx, state.vz, state.omega])
+    CS = np.zeros((model.n_pairs, K.CS_COLUMNS))
+    phase = {K.EV_CONTACT: FREE, K.EV_MAX: ELASTIC, K.EV_SEPARATION: RESTITUTION}[kind]
+    CS[:, K.CS_PHASE] = phase
+    CS[:, K.CS_RR] = RADIUS
+    f = np.zeros(6)
+    K.rhs(0.0, y, f, model.P, model.corners, model.pairs, CS, np.zeros(4))
+    g = np.zeros((2, K.EVENTS_PER_PAIR * model.n_pairs))
+    step = 1e-7
+    K.event_values(y + step * f, model.corners, model.pairs, CS, g[0])
+    K.event_values(y - step * f, model.corners, model.pairs, CS, g[1])
+    for k in range(model.n_pairs):
+        slot = K.EVENTS_PER_PAIR * k + kind
+        rate = K.event_rate(y, f, slot, model.corners, model.pairs)
+        assert rate == pytest.approx((g[0, slot] - g[1, slot]) / (2 * step), rel=1e-6, abs=1e-9)
 
 
 def _rotate(x: float, z: float, a: float) -> tuple[float, float]:

@@ -9,7 +9,8 @@ from impact_arm.physics.roots import event_tolerance, false_position, illinois_u
 
 
 def _locate(g, a, b, tol, illinois=True):
-    """The kernels' loop (bodies/kernel.py ``locate``) on a plain function: (b, evaluations)."""
+    """The bracket of the kernels' ``locate_crossing`` (physics/roots.py) without its Newton
+    steps, on a plain function: (b, evaluations)."""
     fa, fb, side = g(a), g(b), 0
     for n in range(1, 201):
         c = false_position(a, b, fa, fb)

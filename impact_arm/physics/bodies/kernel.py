@@ -2,8 +2,8 @@
 
 The state is y = (x, z, θ, ẋ, ż, ω): the centre of mass and the orientation. Each corner is a
 sphere of radius r centred at a body-frame point; each surface is a line through a point with
-a unit normal n pointing into free space. Every (corner, surface) pair has its own phase
-machine, the arm's (docs/model.md, physics/kernel/phases.py)::
+a unit normal n pointing into free space. Every (corner, surface) pair runs the arm's phase
+machine (docs/model.md, physics/contact_phases.py)::
 
     free --δ=0--> elastic --δ=1.9δc--> elasto-plastic --δ̇=0--> restitution --δ=δr--> free
     (elastic --δ̇=0--> restitution for a Hertz or constant-CoR law, or a gentle impact)
@@ -12,8 +12,11 @@ with the indentation δ = r - n·(c - p) of the corner centre c, measured from t
 (the residual indentation of its earlier impacts, kept while the corner stays below the
 original surface). Several pairs may be in contact at once; their forces add up.
 
-Stepping: adaptive Dormand-Prince 5(4). Every switch is located by regula falsi (Illinois)
-on *real* steps from the start of the step that crossed it, as the arm's integrator does, and
+What this module adds to the arm's machinery is the body: its state, the pairs' geometry and
+their bookkeeping. The step is the arm's Dormand-Prince 5(4) (physics/dormand_prince.py), the
+contact forces and switch quantities the arm's per-law dispatch (physics/contact.py), each
+switch is located as the arm locates its own (physics/roots.py ``locate_crossing``: Newton on
+*real* steps from the start of the step that crossed it, inside an Illinois bracket), and
 every switch whose function is non-negative at the located state is applied there (two corners
 landing together switch together). Functions take all their working arrays from the caller:
 compiled without numba's reference counting (``jit.OPTIONS``), they cannot allocate.
@@ -25,22 +28,14 @@ import math
 
 import numpy as np
 
-from ..contact import (
-    YIELD_ONSET_FACTOR,
-    friction_force,
-    hertz_force,
-    jackson_green,
-    residual,
-    restitution_force,
-    restitution_radius,
-)
+from ..contact import CONTACT_NONE, friction_force, phase_normal_force
+from ..contact_phases import max_compression, phase_events
+from ..dormand_prince import dormand_prince_step, error_norm
 from ..jit import jit, jit_leaf
-from ..roots import event_tolerance, false_position, illinois_update
+from ..layout import ELASTIC, ELASTOPLASTIC, FREE, RESTITUTION
+from ..roots import event_tolerance, locate_crossing
 
-# pair phases
-FREE, ELASTIC, ELASTOPLASTIC, RESTITUTION = 0, 1, 2, 3
-# pair laws
-LAW_ELASTOPLASTIC, LAW_HERTZ, LAW_CONSTANT_COR, LAW_NONE = 0, 1, 2, 3
+# pair phases: the arm's (layout.FREE ... RESTITUTION); pair laws: contact.CONTACT_LAW_CODES
 # columns of the pair table (one row per corner x surface)
 (
     PT_CORNER,
@@ -67,8 +62,10 @@ CS_PHASE, CS_DM, CS_PM, CS_DR, CS_RR, CS_DENT, CS_PEAK = range(7)
 CS_COLUMNS = 7
 # body parameters
 P_MASS, P_INERTIA, P_GRAVITY = range(3)
-# event log columns: time, pair, kind, value 1..3 (max compression: δm, Pm, δr)
+# event kinds, in ``phase_events``' order: pair k's event functions are slots 4k ... 4k+3
 EV_CONTACT, EV_YIELD, EV_MAX, EV_SEPARATION = range(4)
+EVENTS_PER_PAIR = 4
+# event log columns: time, pair, kind, value 1..3 (max compression: δm, Pm, δr)
 LOG_COLUMNS = 6
 # status codes of ``advance``
 DONE, SETTLED, UNDERFLOW, BAD_RESIDUAL, LOG_FULL, BUDGET, NOT_FINITE = range(7)
@@ -76,28 +73,16 @@ DONE, SETTLED, UNDERFLOW, BAD_RESIDUAL, LOG_FULL, BUDGET, NOT_FINITE = range(7)
 ST_STEPS, ST_REJECTED, ST_RHS, ST_EVENTS = range(4)
 EPS = 2.220446049250313e-16
 
-# Dormand-Prince 5(4) tableau
-C2, C3, C4, C5 = 0.2, 0.3, 0.8, 8.0 / 9.0
-A21 = 0.2
-A31, A32 = 3.0 / 40.0, 9.0 / 40.0
-A41, A42, A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
-A51, A52, A53, A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
-A61, A62, A63, A64, A65 = (
-    9017.0 / 3168.0,
-    -355.0 / 33.0,
-    46732.0 / 5247.0,
-    49.0 / 176.0,
-    -5103.0 / 18656.0,
-)
-B1, B3, B4, B5, B6 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0
-E1, E3, E4, E5, E6, E7 = (
-    71.0 / 57600.0,
-    -71.0 / 16695.0,
-    71.0 / 1920.0,
-    -17253.0 / 339200.0,
-    22.0 / 525.0,
-    -1.0 / 40.0,
-)
+
+@jit_leaf
+def corner_offset(
+    y: np.ndarray, corners: np.ndarray, PT: np.ndarray, k: int
+) -> tuple[float, float]:
+    """Pair k's corner centre relative to the centre of mass, in the world frame."""
+    c, s = math.cos(y[2]), math.sin(y[2])
+    j = int(PT[k, PT_CORNER])
+    bx, bz = corners[j, 0], corners[j, 1]
+    return c * bx - s * bz, s * bx + c * bz
 
 
 @jit_leaf
@@ -107,10 +92,7 @@ def pair_geometry(
     """Pair k at state y: indentation from the dent, its rate, the contact point's offset
     from the centre of mass (dx, dz), the slip velocity along the surface and δ from the
     original surface."""
-    c, s = math.cos(y[2]), math.sin(y[2])
-    j = int(PT[k, PT_CORNER])
-    bx, bz = corners[j, 0], corners[j, 1]
-    rx, rz = c * bx - s * bz, s * bx + c * bz  # corner centre relative to the centre of mass
+    rx, rz = corner_offset(y, corners, PT, k)
     nx, nz = PT[k, PT_NX], PT[k, PT_NZ]
     r = PT[k, PT_R]
     delta0 = r - (nx * (y[0] + rx - PT[k, PT_PX]) + nz * (y[1] + rz - PT[k, PT_PZ]))
@@ -123,23 +105,35 @@ def pair_geometry(
 @jit_leaf
 def normal_force(delta: float, PT: np.ndarray, CS: np.ndarray, k: int) -> float:
     """The pair's normal force in its current phase (zero when free)."""
-    phase = int(CS[k, CS_PHASE])
-    if phase == ELASTIC:
-        return hertz_force(delta, PT[k, PT_E], PT[k, PT_R])
-    if phase == ELASTOPLASTIC:
-        return jackson_green(
-            delta, PT[k, PT_DC], PT[k, PT_R], PT[k, PT_SY], PT[k, PT_CJ], PT[k, PT_PC], PT[k, PT_B]
-        )
-    if phase == RESTITUTION:
-        return restitution_force(delta, CS[k, CS_DR], PT[k, PT_E], CS[k, CS_RR])
-    return 0.0
+    return phase_normal_force(
+        int(CS[k, CS_PHASE]),
+        delta,
+        PT[k, PT_E],
+        PT[k, PT_R],
+        PT[k, PT_SY],
+        PT[k, PT_CJ],
+        PT[k, PT_DC],
+        PT[k, PT_PC],
+        PT[k, PT_B],
+        CS[k, CS_DR],
+        CS[k, CS_RR],
+    )
 
 
 @jit
 def rhs(
-    y: np.ndarray, P: np.ndarray, corners: np.ndarray, PT: np.ndarray, CS: np.ndarray, f: np.ndarray
+    t: float,
+    y: np.ndarray,
+    f: np.ndarray,
+    P: np.ndarray,
+    corners: np.ndarray,
+    PT: np.ndarray,
+    CS: np.ndarray,
+    stats: np.ndarray,
 ) -> None:
-    """f = dy/dt: gravity along -z and the forces of every pair in contact."""
+    """f = dy/dt: gravity along -z and the forces of every pair in contact (t: the step's
+    signature, ``dormand_prince_step``; nothing here depends on it)."""
+    stats[ST_RHS] += 1
     fx, fz, torque = 0.0, -P[P_MASS] * P[P_GRAVITY], 0.0
     for k in range(PT.shape[0]):
         if CS[k, CS_PHASE] == FREE:
@@ -169,60 +163,113 @@ def trial_step(
     y1: np.ndarray,
     f1: np.ndarray,
     err: np.ndarray,
+    work: np.ndarray,
     stats: np.ndarray,
 ) -> None:
-    """One Dormand-Prince step of size h from (y, f0): y1, f1 = f(y1) and the error estimate."""
-    n = y.shape[0]
-    for i in range(n):
-        y1[i] = y[i] + h * A21 * f0[i]
-    rhs(y1, P, corners, PT, CS, K[0])
-    for i in range(n):
-        y1[i] = y[i] + h * (A31 * f0[i] + A32 * K[0, i])
-    rhs(y1, P, corners, PT, CS, K[1])
-    for i in range(n):
-        y1[i] = y[i] + h * (A41 * f0[i] + A42 * K[0, i] + A43 * K[1, i])
-    rhs(y1, P, corners, PT, CS, K[2])
-    for i in range(n):
-        y1[i] = y[i] + h * (A51 * f0[i] + A52 * K[0, i] + A53 * K[1, i] + A54 * K[2, i])
-    rhs(y1, P, corners, PT, CS, K[3])
-    for i in range(n):
-        y1[i] = y[i] + h * (
-            A61 * f0[i] + A62 * K[0, i] + A63 * K[1, i] + A64 * K[2, i] + A65 * K[3, i]
-        )
-    rhs(y1, P, corners, PT, CS, K[4])
-    for i in range(n):
-        y1[i] = y[i] + h * (B1 * f0[i] + B3 * K[1, i] + B4 * K[2, i] + B5 * K[3, i] + B6 * K[4, i])
-    rhs(y1, P, corners, PT, CS, f1)
-    for i in range(n):
-        err[i] = h * (
-            E1 * f0[i] + E3 * K[1, i] + E4 * K[2, i] + E5 * K[3, i] + E6 * K[4, i] + E7 * f1[i]
-        )
-    stats[ST_RHS] += 6
+    """One Dormand-Prince step of size h from (y, f0): y1, f1 = f(y1) and the error estimate
+    (``work``: scratch of the state's size)."""
+    dormand_prince_step(rhs, (P, corners, PT, CS, stats), 0.0, y, f0, h, y1, f1, err, K, work)
 
 
 @jit
 def event_values(
     y: np.ndarray, corners: np.ndarray, PT: np.ndarray, CS: np.ndarray, g: np.ndarray
 ) -> None:
-    """Two event functions per pair (slot 2k: contact, yield onset or separation; slot 2k+1:
-    maximum compression); a switch happens when one rises through zero, -1 when unarmed."""
+    """The event functions of every pair's phase (``phase_events``: slots 4k ... 4k+3 of pair
+    k, by kind); a switch happens when one rises through zero, -1 when unarmed."""
     for k in range(PT.shape[0]):
-        a, b = -1.0, -1.0
         law = int(PT[k, PT_LAW])
-        if law != LAW_NONE:
-            delta, rate, _, _, _, _ = pair_geometry(y, corners, PT, CS, k)
-            phase = int(CS[k, CS_PHASE])
-            if phase == FREE:
-                a = delta
-            elif phase == ELASTIC:
-                if law == LAW_ELASTOPLASTIC:
-                    a = delta - YIELD_ONSET_FACTOR * PT[k, PT_DC]
-                b = -rate
-            elif phase == ELASTOPLASTIC:
-                b = -rate
-            else:
-                a = CS[k, CS_DR] - delta
-        g[2 * k], g[2 * k + 1] = a, b
+        at = EVENTS_PER_PAIR * k
+        if law == CONTACT_NONE:  # no geometry to read: nothing is armed
+            g[at], g[at + 1], g[at + 2], g[at + 3] = -1.0, -1.0, -1.0, -1.0
+            continue
+        delta, rate, _, _, _, _ = pair_geometry(y, corners, PT, CS, k)
+        g[at], g[at + 1], g[at + 2], g[at + 3] = phase_events(
+            int(CS[k, CS_PHASE]), law, delta, -rate, PT[k, PT_DC], CS[k, CS_DR]
+        )
+
+
+@jit_leaf
+def event_rate(
+    y: np.ndarray, f: np.ndarray, slot: int, corners: np.ndarray, PT: np.ndarray
+) -> float:
+    """Time derivative of event function ``slot`` at state y with derivative f (for Newton):
+    ±δ̇ for the contact, yield and separation, -δ̈ for the maximum compression."""
+    k, kind = slot // EVENTS_PER_PAIR, slot % EVENTS_PER_PAIR
+    rx, rz = corner_offset(y, corners, PT, k)
+    nx, nz = PT[k, PT_NX], PT[k, PT_NZ]
+    rate = -(nx * (y[3] - y[5] * rz) + nz * (y[4] + y[5] * rx))
+    if kind == EV_CONTACT or kind == EV_YIELD:
+        return rate
+    if kind == EV_SEPARATION:
+        return -rate
+    # δ̈ = -n·(a + α × r - ω² r): the corner centre's acceleration along -n
+    w2 = y[5] * y[5]
+    return nx * (f[3] - f[5] * rz - w2 * rx) + nz * (f[4] + f[5] * rx - w2 * rz)
+
+
+@jit
+def step_to(
+    s: float,
+    y: np.ndarray,
+    f0: np.ndarray,
+    P: np.ndarray,
+    corners: np.ndarray,
+    PT: np.ndarray,
+    CS: np.ndarray,
+    K: np.ndarray,
+    y1: np.ndarray,
+    f1: np.ndarray,
+    err: np.ndarray,
+    work: np.ndarray,
+    g: np.ndarray,
+    stats: np.ndarray,
+) -> None:
+    """``locate_crossing``'s trial: the real step of size s from (y, f0) into y1, f1."""
+    trial_step(y, f0, s, P, corners, PT, CS, K, y1, f1, err, work, stats)
+
+
+@jit
+def event_at(
+    slot: int,
+    y: np.ndarray,
+    f0: np.ndarray,
+    P: np.ndarray,
+    corners: np.ndarray,
+    PT: np.ndarray,
+    CS: np.ndarray,
+    K: np.ndarray,
+    y1: np.ndarray,
+    f1: np.ndarray,
+    err: np.ndarray,
+    work: np.ndarray,
+    g: np.ndarray,
+    stats: np.ndarray,
+) -> float:
+    """``locate_crossing``'s event function ``slot`` at the trial state."""
+    event_values(y1, corners, PT, CS, g)
+    return g[slot]
+
+
+@jit
+def event_rate_at(
+    slot: int,
+    y: np.ndarray,
+    f0: np.ndarray,
+    P: np.ndarray,
+    corners: np.ndarray,
+    PT: np.ndarray,
+    CS: np.ndarray,
+    K: np.ndarray,
+    y1: np.ndarray,
+    f1: np.ndarray,
+    err: np.ndarray,
+    work: np.ndarray,
+    g: np.ndarray,
+    stats: np.ndarray,
+) -> float:
+    """``locate_crossing``'s ġ at the trial state, from the step's end derivative."""
+    return event_rate(y1, f1, slot, corners, PT)
 
 
 @jit
@@ -242,22 +289,14 @@ def locate(
     y1: np.ndarray,
     f1: np.ndarray,
     err: np.ndarray,
+    work: np.ndarray,
     g: np.ndarray,
     stats: np.ndarray,
 ) -> float:
-    """Smallest s in (0, h] with g_slot(real step of size s) >= 0, by Illinois regula falsi
-    in a shrinking bracket (bisection when it stalls)."""
-    a, b, fa, fb = 0.0, h, ga, gb
-    side = 0
-    for _ in range(200):
-        c = false_position(a, b, fa, fb)
-        trial_step(y, f0, c, P, corners, PT, CS, K, y1, f1, err, stats)
-        event_values(y1, corners, PT, CS, g)
-        fc = g[slot]
-        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
-        if fc == 0.0 or b - a <= tol:
-            break
-    return b
+    """Smallest s in (0, h] with g_slot(real step of size s) >= 0 (the arm's
+    ``locate_crossing``); y1, f1 hold the step to it."""
+    args = (y, f0, P, corners, PT, CS, K, y1, f1, err, work, g, stats)
+    return locate_crossing(step_to, event_at, event_rate_at, slot, h, ga, gb, tol, args)
 
 
 @jit
@@ -265,46 +304,35 @@ def apply_event(
     t: float,
     y: np.ndarray,
     k: int,
-    second: int,
+    kind: int,
     corners: np.ndarray,
     PT: np.ndarray,
     CS: np.ndarray,
     log: np.ndarray,
     nlog: np.ndarray,
 ) -> int:
-    """Switch pair k's phase machine at its event (``second``: the maximum-compression slot);
-    books the event in ``log``. Returns a status (``DONE`` when fine)."""
+    """Switch pair k's phase machine at its event of ``kind`` (``EV_*``); books the event in
+    ``log``. Returns a status (``DONE`` when fine)."""
     delta, _, _, _, _, delta0 = pair_geometry(y, corners, PT, CS, k)
-    phase = int(CS[k, CS_PHASE])
-    law = int(PT[k, PT_LAW])
-    kind = EV_CONTACT
     v1, v2, v3 = 0.0, 0.0, 0.0
-    if second == 1:
-        kind = EV_MAX
+    if kind == EV_MAX:
         fn = normal_force(delta, PT, CS, k)
-        if law == LAW_ELASTOPLASTIC:
-            dr = residual(delta, PT[k, PT_DC])
-        elif law == LAW_CONSTANT_COR:
-            # a Hertz unloading from (δm, Pm) returns (2/5) Pm (δm - δr) of the (2/5) Pm δm
-            # stored: the pair's energetic CoR is e exactly when δr = (1 - e²) δm
-            dr = (1.0 - PT[k, PT_COR] ** 2) * delta
-        else:
-            dr = 0.0
+        dr, rr, valid = max_compression(
+            int(PT[k, PT_LAW]), delta, fn, PT[k, PT_E], PT[k, PT_DC], PT[k, PT_COR]
+        )
         CS[k, CS_DM], CS[k, CS_PM], CS[k, CS_DR] = delta, fn, dr
-        if not (0.0 <= dr < delta):
+        if not valid:
             return BAD_RESIDUAL
-        CS[k, CS_RR] = restitution_radius(delta, dr, fn, PT[k, PT_E])
+        CS[k, CS_RR] = rr
         CS[k, CS_PEAK] = max(CS[k, CS_PEAK], fn)
         CS[k, CS_PHASE] = RESTITUTION
         v1, v2, v3 = delta, fn, dr
-    elif phase == FREE:
+    elif kind == EV_CONTACT:
         CS[k, CS_PHASE], CS[k, CS_PEAK] = ELASTIC, 0.0
-    elif phase == ELASTIC:
-        kind = EV_YIELD
+    elif kind == EV_YIELD:
         CS[k, CS_PHASE] = ELASTOPLASTIC
         v1 = delta
     else:
-        kind = EV_SEPARATION
         # the corner leaves the dent's floor: keep it strictly below the corner, so the next
         # contact of this pair is seen rising through zero (as the arm keeps its levels)
         CS[k, CS_DENT] = max(
@@ -348,16 +376,16 @@ def advance(
     (``SETTLED``) once every pair has been free for ``settle`` seconds after a separation:
     the end of an impact, its bounces of other corners included. ``trace`` gets (t, y) at
     every accepted step while it has room. ``W`` is scratch (12 rows of the state's size),
-    ``G`` three rows of event values. It returns ``LOG_FULL`` with every event applied and
-    booked when fewer than two per pair fit in ``log`` (the caller drains it and calls again);
+    ``G`` three rows of event values (``EVENTS_PER_PAIR`` per pair). It returns ``LOG_FULL``
+    with every event applied and booked when fewer than two per pair fit in ``log`` (the
+    caller drains it and calls again);
     ``memory`` keeps (time every pair became free, a separation happened) between calls."""
     n = y.shape[0]
     f0, y1, f1, err, y2, f2 = W[0], W[1], W[2], W[3], W[4], W[5]
-    K = W[6:11]
+    K, work = W[6:11], W[11]
     g0, g1, g2 = G[0], G[1], G[2]
     npairs = PT.shape[0]
-    rhs(y, P, corners, PT, CS, f0)
-    stats[ST_RHS] += 1
+    rhs(t, y, f0, P, corners, PT, CS, stats)
     event_values(y, corners, PT, CS, g0)
     h = min(max_step, t_end - t, 1e-4)
     t_free = memory[0]
@@ -370,12 +398,8 @@ def advance(
         h = min(h, t_end - t, max_step)
         if t + h == t:
             return t, UNDERFLOW
-        trial_step(y, f0, h, P, corners, PT, CS, K, y1, f1, err, stats)
-        norm = 0.0
-        for i in range(n):
-            scale = atol + rtol * max(abs(y[i]), abs(y1[i]))
-            norm += (err[i] / scale) ** 2
-        norm = math.sqrt(norm / n)
+        trial_step(y, f0, h, P, corners, PT, CS, K, y1, f1, err, work, stats)
+        norm = error_norm(err, y, y1, rtol, atol)
         if not math.isfinite(norm):
             if h < 1e-15:
                 return t, NOT_FINITE
@@ -393,7 +417,7 @@ def advance(
         s_min = h
         crossed = -1
         tol = event_tolerance(h, t)
-        for slot in range(2 * npairs):
+        for slot in range(EVENTS_PER_PAIR * npairs):
             if g0[slot] < 0.0 <= g1[slot]:
                 s = locate(
                     y,
@@ -411,6 +435,7 @@ def advance(
                     y2,
                     f2,
                     err,
+                    work,
                     g2,
                     stats,
                 )
@@ -418,22 +443,23 @@ def advance(
                     s_min, crossed = s, slot
         if crossed >= 0:
             if s_min != h:
-                trial_step(y, f0, s_min, P, corners, PT, CS, K, y1, f1, err, stats)
+                trial_step(y, f0, s_min, P, corners, PT, CS, K, y1, f1, err, work, stats)
                 event_values(y1, corners, PT, CS, g1)
             t = t + s_min
             for i in range(n):
                 y[i] = y1[i]
             # every switch that has happened at this state, in slot order
-            for slot in range(2 * npairs):
+            for slot in range(EVENTS_PER_PAIR * npairs):
                 if g0[slot] < 0.0 <= g1[slot]:
-                    status = apply_event(t, y, slot // 2, slot % 2, corners, PT, CS, log, nlog)
+                    kind = slot % EVENTS_PER_PAIR
+                    k = slot // EVENTS_PER_PAIR
+                    status = apply_event(t, y, k, kind, corners, PT, CS, log, nlog)
                     stats[ST_EVENTS] += 1
                     if status != DONE:
                         return t, status
-                    if slot % 2 == 0 and CS[slot // 2, CS_PHASE] == FREE:
+                    if kind == EV_SEPARATION:
                         separated = True
-            rhs(y, P, corners, PT, CS, f0)
-            stats[ST_RHS] += 1
+            rhs(t, y, f0, P, corners, PT, CS, stats)
             h_next = min(h_next, max(s_min, 1e-9))
         else:
             t = t + h

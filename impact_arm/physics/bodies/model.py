@@ -12,19 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact import contact_constants
+from ..contact import CONTACT_LAW_CODES, contact_constants
 from ..errors import SimulationError
 from ..kinds import EventKind
 from ..scene import reduced_modulus
 from . import kernel as K
 from .scene import BodyScene, BodySpec, BodyState, LineSurface
 
-_LAW_CODES = {
-    'elastoplastic': K.LAW_ELASTOPLASTIC,
-    'hertz': K.LAW_HERTZ,
-    'constant_cor': K.LAW_CONSTANT_COR,
-    'none': K.LAW_NONE,
-}
 _EVENT_KINDS = {
     K.EV_CONTACT: EventKind.CONTACT,
     K.EV_YIELD: EventKind.YIELD,
@@ -80,7 +74,7 @@ def pair_row(body: BodySpec, surface: LineSurface, corner: int, index: int) -> n
     row[K.PT_CORNER], row[K.PT_SURFACE] = corner, index
     row[K.PT_PX], row[K.PT_PZ] = surface.point
     row[K.PT_NX], row[K.PT_NZ] = surface.normal
-    row[K.PT_LAW] = _LAW_CODES[surface.law]
+    row[K.PT_LAW] = CONTACT_LAW_CODES[surface.law]
     row[K.PT_E] = reduced_modulus(body.material, surface.material)
     row[K.PT_R], row[K.PT_SY], row[K.PT_CJ] = c.R, c.S_y, c.C_j
     row[K.PT_PC], row[K.PT_DC], row[K.PT_B] = c.P_c, c.delta_c, c.B
@@ -125,7 +119,7 @@ def simulate_body(
     rows = np.zeros((trace, 7))
     ntrace = np.zeros(1)
     W = np.zeros((12, 6))
-    G = np.zeros((3, 2 * model.n_pairs))
+    G = np.zeros((3, K.EVENTS_PER_PAIR * model.n_pairs))
     stats = np.zeros(4)
     memory = np.array([-1.0, 0.0])
     booked: list[np.ndarray] = []

@@ -20,9 +20,15 @@ switch itself (``apply_event``) and logs it for the Python wrapper, which asks i
 only after the kinds of event it needs to act on.
 
 - ``rhs``: the right-hand side (equations of motion, contact forces, control torque)
-- ``steps``: Dormand-Prince and Rosenbrock steps, error norm, starting step
-- ``events``: event functions and their location
+- ``steps``: the Dormand-Prince step (``physics/dormand_prince.py``) and the Rosenbrock step,
+  starting step
+- ``events``: event functions (``physics/contact_phases.py``) and their location
+  (``physics/roots.py``)
 - ``phases``: the phase machine (apply_event) and the contact bookkeeping per point
+
+The Dormand-Prince step, the event location, the phase machine's events and switches and the
+contact force dispatch (``physics/contact.py``) are plain modules the free body's kernel
+(``bodies/kernel.py``) uses too; the generated module's header imports them.
 - ``output``: dense output and the rows on the output grid
 - ``loop``: the stepping loop and ``advance``, the entry point
 """

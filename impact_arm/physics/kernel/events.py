@@ -1,13 +1,13 @@
 # Kernel part: event functions of the current phase and the location of their zero crossings
-# (Newton on real steps inside an Illinois bracket; the bracket is physics/roots.py's, shared
-# with the free body's kernel).
+# (physics/roots.py's ``locate_crossing``, shared with the free body's kernel: Newton on real
+# steps inside an Illinois bracket).
 # Template text (see kernel/__init__.py): the imports above the marker are for
 # linters and editors only: the generated module's header provides those names.
 # flake8: noqa: F401,F403,F405
-from ..contact import YIELD_ONSET_FACTOR as YIELD_ONSET  # the header's name for it
+from ..contact_phases import phase_events
 from ..jit import jit
 from ..layout import *
-from ..roots import event_tolerance, false_position, illinois_update
+from ..roots import event_tolerance, locate_crossing
 from .injected import *
 from .rhs import surface_level, surface_rate
 from .steps import trial_step
@@ -26,7 +26,8 @@ def event_values(y, P, I, SURF, C, levels, g):
     phase = int(C[C_PHASE])
     if phase == FREE:
         for s in range(ns):
-            g[s] = surface_level(y, SURF, levels, s) - y_tip
+            delta = surface_level(y, SURF, levels, s) - y_tip
+            g[s] = phase_events(FREE, int(SURF[s, S_LAW]), delta, 0.0, 0.0, 0.0)[0]
         if (I[I_LAW] == LAW_Q or I[I_LAW] == LAW_PID) and C[C_MODE] > 0.5:
             g[ns + EV_SWITCH] = y_tip - P[P_SWITCH]
         return
@@ -34,14 +35,10 @@ def event_values(y, P, I, SURF, C, levels, g):
     delta = surface_level(y, SURF, levels, s) - y_tip
     # δ̇ = ż - ẏ_B (ż: the plate's rate, 0 on a rigid mount) turns from + to -
     closing = tip_state[3] - surface_rate(y, SURF, s) if HAS_MOUNT else tip_state[3]
-    if phase == ELASTIC:
-        if SURF[s, S_LAW] == 0:
-            g[ns + EV_YIELD] = delta - YIELD_ONSET * SURF[s, S_DC]
-        g[ns + EV_MAX] = closing
-    elif phase == ELASTOPLASTIC:
-        g[ns + EV_MAX] = closing
-    else:
-        g[ns + EV_SEP] = C[C_DR] - delta  # δ falls through δr
+    _, yielding, maximum, separation = phase_events(
+        phase, int(SURF[s, S_LAW]), delta, closing, SURF[s, S_DC], C[C_DR]
+    )
+    g[ns + EV_YIELD], g[ns + EV_MAX], g[ns + EV_SEP] = yielding, maximum, separation
 
 
 @jit
@@ -71,6 +68,33 @@ def event_rate(y, f, k, P, SURF, C):
 
 
 @jit
+def step_to(
+    s, t, y0, f0, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels, tau_held, stats, W, JW
+):
+    """``locate_crossing``'s trial: the real step of size s from (t, y0) into y_out, f_tmp."""
+    trial_step(
+        t, y0, f0, s, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
+    )
+
+
+@jit
+def event_at(
+    k, t, y0, f0, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels, tau_held, stats, W, JW
+):
+    """``locate_crossing``'s event function k at the trial state."""
+    event_values(y_out, P, I, SURF, C, levels, g)
+    return g[k]
+
+
+@jit
+def event_rate_at(
+    k, t, y0, f0, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels, tau_held, stats, W, JW
+):
+    """``locate_crossing``'s ġ_k at the trial state, from the step's end derivative."""
+    return event_rate(y_out, f_tmp, k, P, SURF, C)
+
+
+@jit
 def locate(
     t,
     y0,
@@ -95,43 +119,10 @@ def locate(
     W,
     JW,
 ):
-    """Smallest s in (0, h] with g_k(RK step of size s) >= 0; y_out holds the state there.
-
-    Newton's method on real Runge-Kutta steps (the step's FSAL derivative gives ġ for free),
-    kept inside a shrinking bracket and falling back to Illinois regula falsi when a Newton
-    step would leave it."""
-    a, b = 0.0, h
-    fa, fb = ga, gb
-    side = 0
+    """Smallest s in (0, h] with g_k(RK step of size s) >= 0; y_out holds the state there
+    (``locate_crossing``, Newton inside an Illinois bracket)."""
     # a tighter tolerance took 5-8 extra real steps at each yield and separation of the
     # article's impacts, bisecting rounding noise
     tol = event_tolerance(h, t)
-    c = false_position(a, b, fa, fb)
-    for _ in range(100):
-        if not (a < c < b):  # a converged Newton step nudged onto an end of the bracket
-            c = 0.5 * (a + b)
-        trial_step(
-            t, y0, f0, c, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
-        )
-        event_values(y_out, P, I, SURF, C, levels, g)
-        fc = g[k]
-        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
-        if fc == 0.0 or b - a <= tol:
-            break
-        rate = event_rate(y_out, f_tmp, k, P, SURF, C)
-        newton = c - fc / rate if rate != 0.0 else -1.0
-        if abs(newton - c) <= tol:
-            # converged: step just past the root so the event has really happened
-            c = min(b, newton + tol)
-            if c == b:
-                break
-            continue
-        if a < newton < b:
-            c = newton
-        else:
-            c = false_position(a, b, fa, fb)
-    if b != c:
-        trial_step(
-            t, y0, f0, b, y_out, f_tmp, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW
-        )
-    return b
+    args = (t, y0, f0, y_out, f_tmp, err, K, work, g, P, I, SURF, C, levels, tau_held, stats, W, JW)
+    return locate_crossing(step_to, event_at, event_rate_at, k, h, ga, gb, tol, args)

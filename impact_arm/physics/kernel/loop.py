@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from ..dormand_prince import error_norm
 from ..jit import jit, jit_leaf
 from ..layout import *
 from .events import event_values, locate
@@ -14,7 +15,7 @@ from .injected import *
 from .output import emit_output, interpolate
 from .phases import apply_event, record_point
 from .rhs import contact_frequency, plate_displacement, rhs, surface_level
-from .steps import EPS, error_norm, initial_step, phase_tolerances, rosenbrock_now, trial_step
+from .steps import EPS, initial_step, phase_tolerances, rosenbrock_now, trial_step
 # --- template: equations.py copies what follows into the generated module ---
 
 

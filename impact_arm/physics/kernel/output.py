@@ -3,11 +3,7 @@
 # Template text (see kernel/__init__.py): the imports above the marker are for
 # linters and editors only: the generated module's header provides those names.
 # flake8: noqa: F401,F403,F405
-from ..jit import jit
-from ..layout import *
-from .injected import *
-from .rhs import control_torque
-from .steps import (
+from ..dormand_prince import (
     D12,
     D13,
     D14,
@@ -26,8 +22,12 @@ from .steps import (
     D72,
     D73,
     D74,
-    EPS,
 )
+from ..jit import jit
+from ..layout import *
+from .injected import *
+from .rhs import control_torque
+from .steps import EPS
 # --- template: equations.py copies what follows into the generated module ---
 
 

@@ -1,11 +1,12 @@
-# Kernel part: the contact phase machine: what each located event switches (apply_event), the
+# Kernel part: the contact phase machine (physics/contact_phases.py's, shared with the free
+# body's kernel) applied to the arm: what each located event switches (apply_event), the
 # controller's cycle half, and the impulse, peak force and trace booked at each contact point.
 # Template text (see kernel/__init__.py): the imports above the marker are for
 # linters and editors only: the generated module's header provides those names.
 # flake8: noqa: F401,F403,F405
 import numpy as np
 
-from ..contact import residual, restitution_radius
+from ..contact_phases import max_compression
 from ..jit import jit
 from ..layout import *
 from .injected import *
@@ -77,11 +78,14 @@ def apply_event(slot, t, y, P, I, SURF, C, levels, info):
         C[C_PHASE] = ELASTOPLASTIC
     elif kind == EV_MAX:
         delta, fn, _, _, _ = contact_forces(y, P, SURF, C, levels)
-        dr = residual(delta, SURF[s, S_DC]) if SURF[s, S_LAW] == 0 else 0.0
+        # the arm's laws have no restitution coefficient (no constant-CoR surface): cor 0
+        dr, rr, valid = max_compression(
+            int(SURF[s, S_LAW]), delta, fn, SURF[s, S_E], SURF[s, S_DC], 0.0
+        )
         C[C_DM], C[C_PM], C[C_DR] = delta, fn, dr
-        if not 0.0 <= dr < delta:
+        if not valid:
             return False
-        C[C_RR] = restitution_radius(delta, dr, fn, SURF[s, S_E])
+        C[C_RR] = rr
         C[C_PEAK] = max(C[C_PEAK], fn)
         C[C_PHASE] = RESTITUTION
         info[0], info[1], info[2], info[3] = delta, fn, dr, C[C_RR]

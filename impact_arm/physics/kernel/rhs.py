@@ -5,7 +5,7 @@
 # flake8: noqa: F401,F403,F405
 import math
 
-from ..contact import friction_force, hertz_force, jackson_green, restitution_force
+from ..contact import friction_force, phase_normal_force
 from ..control import add_joint_torques, pid_error, pid_law, q_law
 from ..jit import jit, jit_leaf
 from ..layout import *
@@ -129,26 +129,26 @@ def surface_rate(y, SURF, s):
 
 @jit_leaf
 def contact_forces(y, P, SURF, C, levels):
-    """(δ, F_n, F_f, ẋ_B) of the current contact phase."""
+    """(δ, F_n, F_f, ẋ_B) of the current contact phase (never free: the callers are in
+    contact). The surface's law is in the phase: ``phase_normal_force`` dispatches it."""
     L = P[P_L : P_L + NL]
     tip_state = tip(y[:N], y[N : 2 * N], L)
     s = int(C[C_SURF])
     phase = int(C[C_PHASE])
     delta = surface_level(y, SURF, levels, s) - tip_state[1]
-    if phase == ELASTIC:
-        fn = hertz_force(delta, SURF[s, S_E], SURF[s, S_R])
-    elif phase == ELASTOPLASTIC:
-        fn = jackson_green(
-            delta,
-            SURF[s, S_DC],
-            SURF[s, S_R],
-            SURF[s, S_SY],
-            SURF[s, S_CJ],
-            SURF[s, S_PC],
-            SURF[s, S_B],
-        )
-    else:
-        fn = restitution_force(delta, C[C_DR], SURF[s, S_E], C[C_RR])
+    fn = phase_normal_force(
+        phase,
+        delta,
+        SURF[s, S_E],
+        SURF[s, S_R],
+        SURF[s, S_SY],
+        SURF[s, S_CJ],
+        SURF[s, S_DC],
+        SURF[s, S_PC],
+        SURF[s, S_B],
+        C[C_DR],
+        C[C_RR],
+    )
     ff = 0.0
     if SURF[s, S_MU] > 0:
         ff = friction_force(fn, tip_state[2], SURF[s, S_MU], SURF[s, S_VD])

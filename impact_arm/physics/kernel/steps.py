@@ -1,10 +1,11 @@
-# Kernel part: the step methods (Dormand-Prince 5(4) with its quartic extension, Rosenbrock 4(3)),
-# the error norm and the starting step size.
+# Kernel part: the step methods (Dormand-Prince 5(4), from physics/dormand_prince.py, which the
+# free body's kernel steps with too; Rosenbrock 4(3)) and the starting step size.
 # Template text (see kernel/__init__.py): the imports above the marker are for
 # linters and editors only: the generated module's header provides those names.
 # flake8: noqa: F401,F403,F405
 import math
 
+from ..dormand_prince import dormand_prince_step
 from ..jit import jit, jit_leaf
 from ..layout import *
 from .injected import *
@@ -12,28 +13,6 @@ from .rhs import rhs
 # --- template: equations.py copies what follows into the generated module ---
 
 EPS = 2.220446049250313e-16  # unit roundoff of a double
-A21 = 1 / 5
-A31, A32 = 3 / 40, 9 / 40
-A41, A42, A43 = 44 / 45, -56 / 15, 32 / 9
-A51, A52, A53, A54 = 19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729
-A61, A62, A63, A64, A65 = 9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656
-B1, B3, B4, B5, B6 = 35 / 384, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84
-E1 = 35 / 384 - 5179 / 57600
-E3 = 500 / 1113 - 7571 / 16695
-E4 = 125 / 192 - 393 / 640
-E5 = -2187 / 6784 + 92097 / 339200
-E6 = 11 / 84 - 187 / 2100
-E7 = -1 / 40
-C2, C3, C4, C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
-# Dormand-Prince continuous extension of order 4 (Shampine's quartic): over a step of size h,
-# y(t + s h) = y + h sum_j b_j(s) k_j, b_j(s) = s^2 (D_j2 + s (D_j3 + s D_j4)) (+ s for j = 1),
-# for the stages k_1 = f0, k_3 ... k_6 (K[1] ... K[4]), k_7 = f1 (k_2's weights are zero).
-D12, D13, D14 = -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432
-D32, D33, D34 = 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799
-D42, D43, D44 = -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072
-D52, D53, D54 = 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632
-D62, D63, D64 = -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844
-D72, D73, D74 = 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423
 # Rosenbrock 4(3), Shampine's parameters (Kaps-Rentrop form, as in Numerical Recipes' stiff):
 # four stages, three evaluations, A-stable. The right-hand side has no explicit time
 # dependence (the control law switches at located events), so the dF/dt terms vanish.
@@ -50,31 +29,9 @@ FD_STEP = 1.4901161193847656e-08  # sqrt(machine epsilon): finite-difference Jac
 @jit
 def rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W):
     """One Dormand-Prince step of size h: y1, f1 = f(t+h, y1) (FSAL) and the error vector."""
-    size = y.shape[0]
-    for i in range(size):
-        work[i] = y[i] + h * A21 * f0[i]
-    rhs(t + C2 * h, work, K[0], P, I, SURF, C, levels, tau_held, stats, W)
-    for i in range(size):
-        work[i] = y[i] + h * (A31 * f0[i] + A32 * K[0, i])
-    rhs(t + C3 * h, work, K[1], P, I, SURF, C, levels, tau_held, stats, W)
-    for i in range(size):
-        work[i] = y[i] + h * (A41 * f0[i] + A42 * K[0, i] + A43 * K[1, i])
-    rhs(t + C4 * h, work, K[2], P, I, SURF, C, levels, tau_held, stats, W)
-    for i in range(size):
-        work[i] = y[i] + h * (A51 * f0[i] + A52 * K[0, i] + A53 * K[1, i] + A54 * K[2, i])
-    rhs(t + C5 * h, work, K[3], P, I, SURF, C, levels, tau_held, stats, W)
-    for i in range(size):
-        work[i] = y[i] + h * (
-            A61 * f0[i] + A62 * K[0, i] + A63 * K[1, i] + A64 * K[2, i] + A65 * K[3, i]
-        )
-    rhs(t + h, work, K[4], P, I, SURF, C, levels, tau_held, stats, W)
-    for i in range(size):
-        y1[i] = y[i] + h * (B1 * f0[i] + B3 * K[1, i] + B4 * K[2, i] + B5 * K[3, i] + B6 * K[4, i])
-    rhs(t + h, y1, f1, P, I, SURF, C, levels, tau_held, stats, W)
-    for i in range(size):
-        err[i] = h * (
-            E1 * f0[i] + E3 * K[1, i] + E4 * K[2, i] + E5 * K[3, i] + E6 * K[4, i] + E7 * f1[i]
-        )
+    dormand_prince_step(
+        rhs, (P, I, SURF, C, levels, tau_held, stats, W), t, y, f0, h, y1, f1, err, K, work
+    )
 
 
 @jit_leaf
@@ -193,16 +150,6 @@ def trial_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_hel
         ros_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W, JW)
     else:
         rk_step(t, y, f0, h, y1, f1, err, K, work, P, I, SURF, C, levels, tau_held, stats, W)
-
-
-@jit
-def error_norm(err, y0, y1, rtol, atol):
-    total = 0.0
-    size = err.shape[0]
-    for i in range(size):
-        scale = atol + rtol * max(abs(y0[i]), abs(y1[i]))
-        total += (err[i] / scale) ** 2
-    return math.sqrt(total / size)
 
 
 @jit_leaf
