@@ -86,7 +86,7 @@ class RecordingCheck:
         else:
             text += f', {len(self.missing_periods)} periods not in the file'
             last = self.missing_periods[-1] if self.missing_periods else -1
-            if self.lost_tail > last:  # not one period in the file
+            if self.lost_tail and self.lost_tail > last:  # not one period in the file
                 text += ' (the recorder received no joint state)'
             elif self.lost_tail and self.rate > 0:
                 ends = (last - self.lost_tail) / self.rate

@@ -20,6 +20,7 @@ def test_realtime_reports_counts_and_losses_without_calling_late_commands_missin
     text = RecordingCheck(100, [], 92, 3, [], {'/joint_states': 5}).summary(lockstep=False)
     assert 'INCOMPLETE' not in text and 'commands missing' not in text
     assert '92 commands' in text and '0 periods not in the file' in text
+    assert 'received no joint state' not in text  # a file that holds every period
     assert 'lost on the way (counted by the recorder): /joint_states 5' in text
 
 
