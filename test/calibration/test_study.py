@@ -21,6 +21,7 @@ from scenes import paper_dict, scene_from
 
 pa = pytest.importorskip('pyarrow')
 from impact_arm.tools import sweep  # noqa: E402  (needs pyarrow: the studies extra)
+from impact_arm.tools.sweep.rows import column_value  # noqa: E402
 from impact_arm_bench.sweep import live_descendants  # noqa: E402
 
 
@@ -311,7 +312,7 @@ def test_impact_rows_are_the_runs_records_whatever_their_overrides():
     expected = []
     for index, overrides in items:
         for record in study.run(overrides).impacts:
-            row = {'run': index, **{k: sweep._column_value(v) for k, v in overrides.items()}}
+            row = {'run': index, **{k: column_value(v) for k, v in overrides.items()}}
             for key, value in record.items():
                 row.update(
                     {f'{key}[{i}]': v for i, v in enumerate(value)}
