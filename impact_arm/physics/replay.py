@@ -4,7 +4,7 @@ where a replay's start state is placed, its integrator set up and its contacts c
 Two kinds of caller use it. The fit (``calibration/fit/replay.py``) drives a ``Replay`` edge
 by edge, since the recorded efforts change the held torque between samples and the compared
 samples fall inside and after the contact. The analysis of a recording
-(``tools/analysis.py``) replays a reported impact in one call, ``replay_impact``, from a
+(``tools/analysis/impacts.py``) replays a reported impact in one call, ``replay_impact``, from a
 moment before its reported contact state (``ReplayStart.before_contact``, with the joint
 rates of ``contact_rates``) to the event that ends what it draws.
 """

@@ -87,13 +87,13 @@ def test_a_resumed_sweep_prints_no_nan():
 
 
 def test_the_report_names_an_offline_recording_once():
-    from impact_arm.tools.analysis import _origin
+    from impact_arm.tools.analysis import recording_origin
 
-    assert _origin({'node': 'offline', 'mode': 'offline'}) == (
+    assert recording_origin({'node': 'offline', 'mode': 'offline'}) == (
         'offline run, impact-arm simulate --mcap'
     )
-    assert _origin({'node': 'recorder', 'mode': 'lockstep'}) == 'recorder, lockstep'
-    assert _origin({'node': 'recorder'}) == 'recorder, live'
+    assert recording_origin({'node': 'recorder', 'mode': 'lockstep'}) == 'recorder, lockstep'
+    assert recording_origin({'node': 'recorder'}) == 'recorder, live'
 
 
 def _option_helps(command):
