@@ -399,8 +399,15 @@ def test_the_sim_time_standin_stack_repeats_the_offline_loop_at_any_load(ros_env
         latencies = dict(p.split(':') for p in run.ctrl['latency_histogram'].split())
         return set(latencies) <= {'0', '1'} and int(latencies.get('0', 0)) <= 1
 
+    # with the periods run braked (where the release fell) and the stand-in's counters
     departed = [
-        (k, run.contacts[:n], run.ctrl['latency_histogram'])
+        (
+            k,
+            run.contacts[:n],
+            run.ctrl['latency_histogram'],
+            run.sim.braked_periods if run.sim else None,
+            run.standin_updates,
+        )
         for k, run in enumerate(runs)
         if run.contacts[:n] != list(offline.t_contact[:n])
         or [r['delta_m'] for r in run.impacts[:n]] != list(offline.delta_m[:n])
