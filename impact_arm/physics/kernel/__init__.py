@@ -25,13 +25,14 @@ only after the kinds of event it needs to act on.
 - ``phases``: the phase machine (apply_event) and the contact bookkeeping per point
 - ``output``: dense output and the rows on the output grid
 - ``loop``: the stepping loop and ``advance``, the entry point
+- ``predict``: the controller's prediction of the free motion over its commands in flight
 """
 
 import os
 
 __all__ = ['MARKER', 'PARTS', 'template_source']
 
-PARTS = ('rhs', 'steps', 'events', 'phases', 'output', 'loop')
+PARTS = ('rhs', 'steps', 'events', 'phases', 'output', 'loop', 'predict')
 MARKER = '# --- template: equations.py copies what follows into the generated module ---\n'
 
 
