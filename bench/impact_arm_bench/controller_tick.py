@@ -23,7 +23,10 @@ latency is measured as in the run); the bench says whether they do.
 Per round: the whole stream once (a fresh controller); the thread's CPU time over the
 round per joint state (with its wrench), which a preemption by other work on the machine
 does not inflate as it does wall time, and the median wall time of a joint state within the
-round; ``--repeats`` rounds, median and worst of the CPU figure printed. ``--profile``: one more round under
+round; ``--repeats`` rounds, median and worst of the CPU figure printed. ``--idle MS``: one
+more round sleeping MS ms after each state, as the node's thread waits for the next sample:
+with a period's sleep in between (caches and predictors gone cold, as in the node) the same
+work costs more CPU than back to back. ``--profile``: one more round under
 cProfile, the top entries by own time.
 """
 
@@ -55,6 +58,14 @@ def add_arguments(parser):
         help='chance a command takes one period more (default 0.3: the latency varies)',
     )
     parser.add_argument('--repeats', type=int, default=5, help='timed rounds (default 5)')
+    parser.add_argument(
+        '--idle',
+        type=float,
+        default=0.0,
+        metavar='MS',
+        help='also one round sleeping MS ms after each state, as the node waits for the next '
+        '(its caches go cold meanwhile); thread CPU per state (default 0: no such round)',
+    )
     parser.add_argument('--profile', action='store_true', help='cProfile one more round')
     parser.add_argument('--json', metavar='FILE', help='write the figures as JSON')
 
@@ -186,9 +197,11 @@ def replay_controller(scene, **overrides):
     return node
 
 
-def replay(node, stream, clock=time.perf_counter) -> list[float]:
+def replay(node, stream, clock=time.perf_counter, idle: float = 0.0) -> list[float]:
     """Feed ``stream`` to ``node`` as its control thread does (under its lock, a wrench
-    then the state); the time of each joint state with the wrench before it [s]."""
+    then the state); the time of each joint state with the wrench before it [s] by
+    ``clock``. ``idle`` > 0: sleep that long after each state, as the thread waits for the
+    next one (not counted)."""
     on_wrench, on_state, lock = node._on_wrench, node._on_joint_state, node.lock
     times = []
     start = clock()
@@ -200,6 +213,9 @@ def replay(node, stream, clock=time.perf_counter) -> list[float]:
             on_state(raw)
         end = clock()
         times.append(end - start)
+        if idle > 0:
+            time.sleep(idle)
+            end = clock()
         start = end
     return times
 
@@ -243,6 +259,12 @@ def run(args) -> int:
         f'us, worst {worst * 1e6:.1f} us of {len(rounds)} rounds; wall time per joint state, '
         f'median within a round: {" ".join(f"{m * 1e6:.1f}" for m in medians)} us'
     )
+    idle_us = None
+    if args.idle > 0:
+        node = replay_controller(scene)
+        times = replay(node, stream, clock=time.thread_time, idle=args.idle * 1e-3)
+        idle_us = sum(times) / len(times) * 1e6
+        print(f'CPU per joint state with {args.idle:g} ms idle after each: {idle_us:.1f} us')
     if args.profile:
         import cProfile
         import pstats
@@ -263,6 +285,8 @@ def run(args) -> int:
                     'round_mean_us': [r * 1e6 for r in rounds],
                     'median_us': median * 1e6,
                     'wall_median_us': [m * 1e6 for m in medians],
+                    'idle_ms': args.idle,
+                    'idle_cpu_us': idle_us,
                     'worst_us': worst * 1e6,
                 },
                 f,
