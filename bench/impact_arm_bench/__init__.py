@@ -82,6 +82,10 @@ SUBCOMMANDS = {
         'impact_arm_bench.implicit',
         "the controller's state prediction and implicit law per call, numpy formula vs floats",
     ),
+    'controller_tick': (
+        'impact_arm_bench.controller_tick',
+        "the controller node's Python per joint-state sample, replayed without ROS",
+    ),
     'features': (
         'impact_arm_bench.features',
         'cost per simulated second of free motion, Hertz contact, the article',

@@ -110,6 +110,9 @@ class ControlInputs:
         self.effort_limits = list(effort_limits) or [math.inf] * len(joint_names)
         self.clip = any(math.isfinite(limit) for limit in self.effort_limits)
         self.joint_names = list(joint_names)
+        # where our joints are in the latest joint state's names
+        self._names: list[str] | None = None
+        self._index: list[int] = []
         self.order = list(order)
         self.period = 1.0 / rate
         self.trigger = ControlTrigger(trigger)
@@ -186,7 +189,11 @@ class ControlInputs:
         tau = self.ctrl.torque(q, qd)
         self.predictor.ahead(q, qd, [tau])
         self.predictor.implicit_command(
-            lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at), q, qd, tau
+            lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at),
+            q,
+            qd,
+            tau,
+            q_law=self.ctrl.q_law_terms(),
         )
 
     def drop(self, counter: str, why: str) -> None:
@@ -229,7 +236,11 @@ class ControlInputs:
     ) -> None:
         t = sec + nanosec * 1e-9
         try:
-            index = [names.index(j) for j in self.joint_names]
+            if names == self._names:  # a driver names its joints alike in every message
+                index = self._index
+            else:
+                index = [names.index(j) for j in self.joint_names]
+                self._names, self._index = list(names), index
             pos = [position[k] for k in index]
             vel = [velocity[k] for k in index]
         except (ValueError, IndexError):
@@ -396,7 +407,12 @@ class ControlInputs:
         self.normal_force = None  # the latch covers one tick
         if self.implicit_periods and self.predictor is not None and self.latency_varies():
             tau = self.predictor.implicit_command(
-                lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at), q, qd, tau, self.implicit_ahead()
+                lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at),
+                q,
+                qd,
+                tau,
+                self.implicit_ahead(),
+                self.ctrl.q_law_terms(),
             )
             self.implicit_commands += 1
         if not all(math.isfinite(v) for v in tau):

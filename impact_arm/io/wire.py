@@ -331,9 +331,22 @@ def _doubles_at(r: CdrReader):
     return list(r.unpack('d', 8, n)), at
 
 
+# little-endian header: sec, nanosec, frame_id's length; then the force's three doubles
+_WRENCH_HEADER = struct.Struct('<iII')
+_VECTOR = struct.Struct('<3d')
+
+
 @_reader
 def wrench_stamped_fields(raw: bytes) -> tuple[int, int, tuple[float, ...]]:
     """``(sec, nanosec, (fx, fy, fz))`` of a serialized ``geometry_msgs/WrenchStamped``."""
+    if raw[:2] == b'\x00\x01' and len(raw) >= 16:
+        # the usual message, read at fixed offsets (a third of the cursor's time); anything
+        # the offsets do not fit is left to the cursor, which says what is wrong
+        sec, nanosec, length = _WRENCH_HEADER.unpack_from(raw, 4)
+        at = 16 + length
+        at += -(at - 4) % 8
+        if length <= len(raw) - 16 and at + 24 <= len(raw):
+            return sec, nanosec, _VECTOR.unpack_from(raw, at)
     r = CdrReader(raw)
     sec, nanosec = _header(r)
     r.align(8)

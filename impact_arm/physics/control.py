@@ -168,7 +168,7 @@ class CycleController:
     ):
         self.model = model
         self.law = law  # (parsed by the property: compared as a member below)
-        self.kp, self.kd, self.ki = list(kp), list(kd), list(ki)
+        self.kp, self.kd, self.ki = kp, kd, ki  # (float lists: the properties convert)
         self.targets = {CycleMode.DOWN: list(down_target), CycleMode.UP: list(up_target)}
         self.switch_height = switch_height
         self.surface_height = surface_height
@@ -180,6 +180,10 @@ class CycleController:
         self.switches = 0
         self._last_t: float | None = None
         self._last_vy: float | None = None
+        # the compiled kinematics take arrays: the sample is copied into these each call
+        # (numpy's conversion of a list allocates, which costs more than the kinematics)
+        self._q = np.zeros(model.n)
+        self._qd = np.zeros(model.n)
 
     @classmethod
     def for_scene(cls, model: ArmModel, spec: ControllerSpec) -> CycleController:
@@ -218,6 +222,34 @@ class CycleController:
         self._law = ControlLaw(law)
 
     @property
+    def kp(self) -> list[float]:
+        """Proportional gains, one per joint (set as any numbers: kept as floats, the
+        compiled laws' type, so that the float path of ``torque`` computes the same bits)."""
+        return self._kp
+
+    @kp.setter
+    def kp(self, gains: Sequence[float]) -> None:
+        self._kp = [float(k) for k in gains]
+
+    @property
+    def kd(self) -> list[float]:
+        """Derivative gains (as ``kp``)."""
+        return self._kd
+
+    @kd.setter
+    def kd(self, gains: Sequence[float]) -> None:
+        self._kd = [float(k) for k in gains]
+
+    @property
+    def ki(self) -> list[float]:
+        """Integral gains (as ``kp``)."""
+        return self._ki
+
+    @ki.setter
+    def ki(self, gains: Sequence[float]) -> None:
+        self._ki = [float(k) for k in gains]
+
+    @property
     def space(self) -> PidSpace:
         """The angles the PID/PD acts on (set as a member or its text)."""
         return self._space
@@ -254,10 +286,10 @@ class CycleController:
         torques will meet. The impact is then judged on the sample: the prediction's free
         motion goes through the surface, so a tip reversal it shows comes periods after the
         one the sample shows (with no wrench, four periods of latency struck twice)."""
-        _, y_tip, _, vy_tip = self.model.tip(q, qd)
+        _, y_tip, _, vy_tip = self._tip(q, qd)
         y_seen, vy_seen = y_tip, vy_tip
         if sensed is not None:
-            _, y_seen, _, vy_seen = self.model.tip(*sensed)
+            _, y_seen, _, vy_seen = self._tip(*sensed)
         if self.mode is CycleMode.DOWN and self.surface_height is not None:
             hit = normal_force is not None and normal_force > self.force_threshold
             reversed_near = (
@@ -274,9 +306,62 @@ class CycleController:
         self._last_t = t
         return self.torque(q, qd, dt)
 
+    def _state_arrays(
+        self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(``q``, ``qd``) in the reused arrays: what ``np.asarray(q, float)`` gives."""
+        bq, bqd = self._q, self._qd
+        for i in range(bq.shape[0]):
+            bq[i] = q[i]
+            bqd[i] = qd[i]
+        return bq, bqd
+
+    def _tip(
+        self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray
+    ) -> tuple[float, float, float, float]:
+        """``model.tip(q, qd)`` without its arrays' allocation."""
+        m = self.model
+        return m.eq.tip(*self._state_arrays(q, qd), m.geometry)
+
     def torque(
         self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray, dt: float = 0.0
     ) -> list[float]:
+        """The law's joint torques at (``q``, ``qd``); ``dt``: the time since the previous
+        sample, over which the PID integrates."""
+        if self.law is ControlLaw.Q:
+            return self._q_torque(q, qd)
+        return self.torque_arrays(q, qd, dt)
+
+    def _q_torque(
+        self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray
+    ) -> list[float]:
+        """``q_law`` on floats, its operations in its order (the same bits): for the two or
+        three joints of an arm, numpy's conversions and the compiled call's dispatch cost
+        several times its arithmetic. Only gravity comes from the compiled model."""
+        m = self.model
+        bq = self._state_arrays(q, qd)[0]
+        gravity = m.eq.gravity_forces(bq, m.geometry, m.m, m.g)
+        target, kp, kd = self.targets[self.mode], self._kp, self._kd
+        n = len(kp)
+        out = [0.0] * n
+        tail = 0.0
+        for i in range(n - 1, -1, -1):
+            tail += gravity[i]
+            out[i] = -kd[i] * float(qd[i]) - kp[i] * (float(q[i]) - float(target[i])) - tail
+        return out
+
+    def q_law_terms(self) -> tuple[list[float], list[float], list[float]] | None:
+        """(target, kp, kd) of the 'q' law as it acts now (this half of the cycle): what a
+        compiled caller needs to evaluate ``torque`` itself; None for the other laws."""
+        if self.law is not ControlLaw.Q:
+            return None
+        return self.targets[self.mode], self._kp, self._kd
+
+    def torque_arrays(
+        self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray, dt: float = 0.0
+    ) -> list[float]:
+        """``torque`` through numpy arrays and the compiled laws: every law (the reference
+        ``torque``'s float path for the 'q' law is tested against)."""
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
         n = q.shape[0]

@@ -22,6 +22,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from . import jit
 from .control import add_joint_torques
 from .model import ArmModel
 
@@ -39,7 +40,12 @@ class StatePredictor:
     arithmetic, so the steps run on Python floats, in the order ``ArrayStatePredictor`` (the
     plain numpy version) does them; only the compiled acceleration sees arrays, buffers
     reused from call to call (its array signature is compiled already). Two links in closed
-    form (the article's arm) run unrolled into scalars."""
+    form (the article's arm) run unrolled into scalars.
+
+    Where the scene's kernel module can take the acceleration itself (closed form, or three
+    general links), the same steps run compiled there instead (kernel/predict.py), and so
+    does the implicit law for the 'q' law: one call from Python per prediction. The float
+    steps stay the reference they are tested against, and the path of every other case."""
 
     def __init__(self, model: ArmModel, period: float, substeps: int = 1):
         if not period > 0 or substeps < 1:
@@ -58,6 +64,22 @@ class StatePredictor:
         self._parameters = (model.geometry, model.m, model.g)
         # the article's two links in closed form: the steps unrolled into scalars
         self._unrolled = model.n == 2 and self._accel_of is not None
+        # The same steps compiled into the scene's kernel module (``free_periods``): one call
+        # per prediction instead of four accelerations per period, each a compiled call from
+        # Python with its arrays filled item by item. Not for accelerations only LAPACK
+        # solves (general links beyond three), nor interpreted (numba off), where the float
+        # steps above are the faster.
+        n = model.n
+        compiled = jit.ENABLED and (self._accel_of is not None or n == 3)
+        self._compiled = getattr(model.eq, 'free_periods', None) if compiled else None
+        # and the implicit law's Newton step, for the 'q' law (``implicit_command``)
+        self._compiled_implicit = getattr(model.eq, 'implicit_q_law', None) if compiled else None
+        self._y = np.zeros(2 * n)  # the state in and out of the compiled functions
+        self._torques = np.zeros((1, n))  # a row per period, grown when needed
+        self._tau = np.zeros(n)
+        self._law_terms = np.zeros((3, n))  # target, kp, kd
+        self._out = np.zeros(n)
+        self._work = np.zeros(18 * n + n * n)
 
     def _accel(self, q: Sequence[float], qd: Sequence[float]) -> Sequence[float]:
         bq, bqd = self._q, self._qd
@@ -143,11 +165,88 @@ class StatePredictor:
             v1 = v1 + sixth * (a11 + 2.0 * a21 + 2.0 * a31 + a41)
         return [x0, x1], [v0, v1]
 
+    def _state(self, q: Sequence[float], qd: Sequence[float]) -> np.ndarray:
+        """(``q``, ``qd``) into the compiled functions' state array."""
+        y, n = self._y, self.model.n
+        for i in range(n):
+            y[i] = q[i]
+            y[n + i] = qd[i]
+        return y
+
+    def _rows(self, periods: int) -> np.ndarray:
+        """The compiled functions' torques, a row per period, at least ``periods`` rows."""
+        if self._torques.shape[0] < periods:
+            self._torques = np.zeros((periods, self.model.n))
+        return self._torques
+
+    def _compiled_implicit_q(
+        self,
+        q: Sequence[float],
+        qd: Sequence[float],
+        tau: Sequence[float],
+        periods: int,
+        terms: tuple[Sequence[float], Sequence[float], Sequence[float]],
+    ) -> list[float] | None:
+        """``implicit_command`` for the 'q' law of ``terms`` (target, kp, kd) by
+        ``implicit_q_law``; None where it needs LAPACK (or is not compiled)."""
+        compiled = self._compiled_implicit
+        if compiled is None:
+            return None
+        n, held, law_terms = self.model.n, self._tau, self._law_terms
+        for i in range(n):
+            held[i] = tau[i]
+        for row, values in enumerate(terms):
+            for i in range(n):
+                law_terms[row, i] = values[i]
+        target, kp, kd = law_terms
+        lengths, masses, g = self._parameters
+        status = compiled(
+            self._state(q, qd),
+            held,
+            periods,
+            self.substeps,
+            self.h,
+            lengths,
+            masses,
+            g,
+            target,
+            kp,
+            kd,
+            JACOBIAN_STEP,
+            self._rows(periods),
+            self._work,
+            self._out,
+        )
+        if status < 0:
+            return None
+        return self._out.tolist() if status else held.tolist()
+
+    def _compiled_ahead(
+        self, q: Sequence[float], qd: Sequence[float], torques: Sequence[Sequence[float]]
+    ) -> tuple[list[float], list[float]] | None:
+        """``ahead`` by ``free_periods``; None where it needs LAPACK (or is not compiled)."""
+        compiled = self._compiled
+        if compiled is None:
+            return None
+        y, n, periods = self._state(q, qd), self.model.n, len(torques)
+        rows = self._rows(periods)
+        for k, tau in enumerate(torques):
+            for i in range(n):
+                rows[k, i] = tau[i]
+        lengths, masses, g = self._parameters
+        if not compiled(y, rows, periods, self.substeps, self.h, lengths, masses, g, self._work):
+            return None
+        values = y.tolist()
+        return values[:n], values[n:]
+
     def ahead(
         self, q: Sequence[float], qd: Sequence[float], torques: Sequence[Sequence[float]]
     ) -> tuple[list[float], list[float]]:
         """The absolute link angles and rates one period per entry of ``torques`` (joint
         torques, oldest first) after the state (``q``, ``qd``)."""
+        compiled = self._compiled_ahead(q, qd, torques)
+        if compiled is not None:
+            return compiled
         y_q = [float(x) for x in q]
         y_v = [float(v) for v in qd]
         for tau in torques:
@@ -162,21 +261,33 @@ class StatePredictor:
         qd: Sequence[float],
         tau: Sequence[float],
         periods: int = 1,
+        q_law: tuple[Sequence[float], Sequence[float], Sequence[float]] | None = None,
     ) -> list[float]:
         """The joint torques τ that ``law`` (joint torques of absolute angles and rates) gives
         on the state τ itself leads to, held ``periods`` periods from (``q``, ``qd``):
         τ = law(ahead(q, qd, [τ] * periods)), one Newton step from ``tau`` (the law's output
         at (``q``, ``qd``)) with a finite-difference Jacobian. The explicit ``tau`` comes back
-        when the step cannot be taken (a singular Jacobian, a result that is not finite)."""
+        when the step cannot be taken (a singular Jacobian, a result that is not finite).
+
+        ``q_law``: when ``law`` is the 'q' law, its (target, kp, kd)
+        (``CycleController.q_law_terms``): then it all runs compiled (``implicit_q_law``),
+        to the same bits."""
         if periods < 1:
             raise ValueError(f'periods = {periods}: must be >= 1')
+        if q_law is not None:
+            compiled = self._compiled_implicit_q(q, qd, tau, periods, q_law)
+            if compiled is not None:
+                return compiled
         q0 = [float(x) for x in q]
         qd0 = [float(v) for v in qd]
         torque = [float(t) for t in tau]
 
         def closed(held: list[float]) -> list[float]:
-            self._hold(held)
-            return [float(t) for t in law(*self._periods(q0, qd0, periods))]
+            state = self._compiled_ahead(q0, qd0, [held] * periods)
+            if state is None:
+                self._hold(held)
+                state = self._periods(q0, qd0, periods)
+            return [float(t) for t in law(*state)]
 
         n = len(torque)
         base = closed(torque)
@@ -188,7 +299,7 @@ class StatePredictor:
             shifted[j] += step
             for i, value in enumerate(closed(shifted)):
                 system[i][j] = (value - base[i]) / step
-        rhs = [b - sum(row[j] * torque[j] for j in range(n)) for b, row in zip(base, system)]
+        rhs = [b - _dot(row, torque, 0) for b, row in zip(base, system)]
         for i in range(n):
             system[i] = [(1.0 if i == j else 0.0) - system[i][j] for j in range(n)]
         out = solve_small(system, rhs)
@@ -202,6 +313,14 @@ def solve_small(a: list[list[float]], b: list[float]) -> list[float] | None:
     algorithm, in Python floats: for the two or three joints of an arm numpy's call overhead
     is most of the cost); None when a pivot is zero (a singular matrix). ``a`` and ``b`` are
     overwritten."""
+    if len(b) == 2:
+        return _solve2(a, b)
+    return eliminate(a, b)
+
+
+def eliminate(a: list[list[float]], b: list[float]) -> list[float] | None:
+    """``solve_small``'s elimination for any size, written as the algorithm reads (the
+    reference of its two-unknown and compiled forms)."""
     n = len(b)
     for k in range(n):
         pivot = max(range(k, n), key=lambda i: abs(a[i][k]))
@@ -217,8 +336,35 @@ def solve_small(a: list[list[float]], b: list[float]) -> list[float] | None:
             b[i] -= factor * b[k]
     x = [0.0] * n
     for i in range(n - 1, -1, -1):
-        x[i] = (b[i] - sum(a[i][j] * x[j] for j in range(i + 1, n))) / a[i][i]
+        x[i] = (b[i] - _dot(a[i], x, i + 1)) / a[i][i]
     return x
+
+
+def _dot(row: Sequence[float], x: Sequence[float], start: int) -> float:
+    """Σ row[j] x[j] for j >= ``start``, added left to right from 0.0 (Python 3.11's
+    ``sum``; from 3.12 ``sum`` compensates its rounding, which the compiled form does not)."""
+    total = 0.0
+    for j in range(start, len(x)):
+        total += row[j] * x[j]
+    return total
+
+
+def _solve2(a: list[list[float]], b: list[float]) -> list[float] | None:
+    """``solve_small`` for two unknowns written out (the same operations in the same order,
+    down to the integer 0 its sums start from: the same bits, a third of the time)."""
+    (a00, a01), (a10, a11) = a
+    b0, b1 = b
+    if abs(a10) > abs(a00):  # (``max`` keeps the first of equal pivots)
+        a00, a01, a10, a11, b0, b1 = a10, a11, a00, a01, b1, b0
+    if a00 == 0.0:
+        return None
+    factor = a10 / a00
+    a11 -= factor * a01
+    b1 -= factor * b0
+    if a11 == 0.0:
+        return None
+    x1 = b1 / a11  # (its sum of no terms, 0, changes no float it is subtracted from)
+    return [(b0 - (0 + a01 * x1)) / a00, x1]
 
 
 def solve3(values: Sequence[float]) -> list[float] | None:

@@ -14,9 +14,10 @@ import math
 import random
 from collections import deque
 from dataclasses import dataclass
+from typing import Callable
 
 from ..contract import ControlTrigger, joint_names, to_absolute, to_joint_space
-from ..driver.arm import SimulatedArm
+from ..driver.arm import SimulatedArm, Tick
 from ..driver.control_inputs import ControlInputs
 from ..driver.session import LockstepSession, Outputs
 from ..physics.control import CycleController
@@ -68,6 +69,7 @@ def closed_loop(
     spread: int = 1,
     force_sensor: bool = True,
     release_after: float = 0.0,
+    tap: Callable[[int, int, Tick], None] | None = None,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -82,7 +84,8 @@ def closed_loop(
     sensor): it tells an impact from the tip's reversal alone.
     ``release_after`` > 0: the simulator's parameter of that name (the arm braked, time
     running, until then); meanwhile the driver writes its newest command each period, as a
-    ros2_control stack does."""
+    ros2_control stack does. ``tap(sec, nanosec, tick)``: each sample as the controller gets it
+    (a recording to replay, bench controller_tick)."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
     ctrl = CycleController.for_scene(model, scene.controller)
@@ -130,6 +133,8 @@ def closed_loop(
         while ticks:
             tick = ticks.popleft()
             sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
+            if tap is not None:
+                tap(sec, nsec, tick)
             if force_sensor:
                 inputs.wrench(sec, nsec, (tick.wrench[0], tick.wrench[1], 0.0))
             inputs.joint_state(sec, nsec, names, tick.position, tick.velocity, tick.effort)

@@ -86,3 +86,27 @@ def test_a_law_set_by_its_text_at_run_time_is_the_law_used():
     assert c.mode is CycleMode.UP
     with pytest.raises(ValueError):
         c.law = 'p'
+
+
+def test_the_q_laws_float_path_is_the_compiled_law_to_the_bit():
+    """``torque`` computes the 'q' law on floats; ``torque_arrays`` through numpy and the
+    compiled ``q_law``: the same operations in the same order, the same bits, for either
+    target, any state, integer gains (kept as floats) and a zero gain (a signed zero)."""
+    import numpy as np
+
+    model = ArmModel(scene_from({}))
+    ctrl = CycleController(
+        model, 'q', [300, 0], [20.0, 0], [0.0, 0.0], [0.5, -1.0], [-0.2, 0.3], 10.0, None
+    )
+    assert ctrl.kp == [300.0, 0.0] and all(isinstance(k, float) for k in ctrl.kd)
+    rng = np.random.default_rng(11)
+    for k in range(200):
+        ctrl.mode = ('down', 'up')[k % 2]
+        q, qd = rng.uniform(-4.0, 4.0, 2), rng.uniform(-30.0, 30.0, 2)
+        for state in ((q.tolist(), qd.tolist()), (q, qd), ([0.0, -0.0], [-0.0, 0.0])):
+            got = ctrl.torque(*state)
+            assert [v.hex() for v in got] == [v.hex() for v in ctrl.torque_arrays(*state)]
+            assert all(type(v) is float for v in got)
+    assert ctrl.q_law_terms() == (ctrl.targets[ctrl.mode], ctrl.kp, ctrl.kd)
+    ctrl.law = 'pd'
+    assert ctrl.q_law_terms() is None

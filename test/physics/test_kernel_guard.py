@@ -178,6 +178,7 @@ for name in sys.argv[1:]:
     for predictor in (StatePredictor(model, 1e-3), ArrayStatePredictor(model, 1e-3)):
         predictor.ahead(q, qd, [tau, tau])
         predictor.implicit_command(ctrl.torque, q, qd, tau, 2)
+    StatePredictor(model, 1e-3).implicit_command(ctrl.torque, q, qd, tau, 3, ctrl.q_law_terms())
     run(scene, t_max=0.3, control_rate=1000.0)
     closed_loop(scene, 1, -1, t_max=0.3)
     print(name, 'checked')
@@ -190,9 +191,9 @@ def test_python_callers_of_the_generated_functions_stay_in_bounds(tmp_path):
     shorter parameter block than it reads (once: the controller's prediction gave a URDF
     arm's rod lengths where the whole link geometry belongs) reads garbage, and nothing
     fails where it happens. Here every Python-side use of the generated functions (the
-    model's, the predictors', a sampled-control run, the closed loop with prediction) runs
-    for the article's arm and a URDF arm with numba's bounds checks on, compiled afresh in
-    a cache of its own: an out-of-bounds read raises."""
+    model's, the predictors' and their compiled steps, a sampled-control run, the closed
+    loop with prediction) runs for the article's arm and a URDF arm with numba's bounds
+    checks on, compiled afresh in a cache of its own: an out-of-bounds read raises."""
     env = dict(os.environ)
     env.update(
         NUMBA_BOUNDSCHECK='1',

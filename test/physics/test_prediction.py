@@ -9,6 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from impact_arm.physics import prediction as prediction_module
 from impact_arm.physics.control import CycleController
 from impact_arm.physics.model import ArmModel
 from impact_arm.physics.prediction import ArrayStatePredictor, StatePredictor, solve3, solve_small
@@ -223,3 +224,61 @@ def test_the_three_by_three_solve_is_numpys(entries, rhs):
     assert x is not None
     assert np.array(x) == pytest.approx(np.linalg.solve(a, r), rel=1e-6, abs=1e-6)
     assert solve3([1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 5.0, 1.0, 1.0, 1.0]) is None
+
+
+def _bits(values):
+    return [float(v).hex() for v in values]
+
+
+@pytest.mark.parametrize(
+    'scene_name', ['paper', 'examples/three_link.yaml', 'examples/real_arm.yaml']
+)
+def test_the_compiled_prediction_and_implicit_law_are_the_float_steps_to_the_bit(scene_name):
+    """``free_periods`` and ``implicit_q_law`` (compiled into the scene's kernel module) do
+    the float path's operations in its order: the same bits, for closed-form accelerations
+    (two and three rods) and for three general links (the mass matrix solved by its
+    adjugate), across the law's two targets and 1-3 periods."""
+    from repo_paths import REPO_ROOT
+
+    path = resolve_scene_path(scene_name) if '/' not in scene_name else f'{REPO_ROOT}/{scene_name}'
+    scene = load_scene(path)
+    model = ArmModel(scene)
+    ctrl = CycleController.for_scene(model, scene.controller)
+    compiled, floats = StatePredictor(model, PERIOD), StatePredictor(model, PERIOD)
+    assert compiled._compiled is not None and compiled._compiled_implicit is not None
+    floats._compiled = floats._compiled_implicit = None
+    rng = np.random.default_rng(5)
+    for k in range(60):
+        q = rng.uniform(-math.pi, math.pi, model.n).tolist()
+        qd = rng.uniform(-10.0, 10.0, model.n).tolist()
+        ctrl.mode = ('down', 'up')[k % 2]
+        tau = ctrl.torque(q, qd)
+        periods = 1 + k % 3
+        held = [[(1.0 - 0.3 * j) * t for t in tau] for j in range(periods)]
+        for got, expected in zip(compiled.ahead(q, qd, held), floats.ahead(q, qd, held)):
+            assert _bits(got) == _bits(expected)
+        got = compiled.implicit_command(ctrl.torque, q, qd, tau, periods, ctrl.q_law_terms())
+        expected = floats.implicit_command(ctrl.torque_arrays, q, qd, tau, periods)
+        assert _bits(got) == _bits(expected)
+        assert all(isinstance(t, float) for t in got)
+
+
+finite = st.floats(-1e3, 1e3) | st.sampled_from([0.0, -0.0, 1.0, -1.0])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(finite, min_size=4, max_size=4), st.lists(finite, min_size=2, max_size=2))
+def test_the_two_by_two_solve_is_the_elimination_to_the_bit(entries, rhs):
+    """Written out for two unknowns, ``solve_small`` is the general elimination: the same
+    pivot (the first of equal magnitudes), the same None for a zero pivot, the same bits
+    (signed zeros included)."""
+    a = [entries[:2], entries[2:]]
+    got = prediction_module._solve2([list(r) for r in a], list(rhs))
+    expected = prediction_module.eliminate([list(r) for r in a], list(rhs))
+    assert (got is None) == (expected is None)
+    if got is not None:
+        assert _bits(got) == _bits(expected)
+    tie = [[2.0, 1.0], [-2.0, 3.0]]  # equal pivots: the first row stays
+    assert _bits(solve_small([r[:] for r in tie], [1.0, 1.0])) == _bits(
+        prediction_module.eliminate([r[:] for r in tie], [1.0, 1.0])
+    )

@@ -31,13 +31,14 @@ contact force dispatch (``physics/contact.py``) are plain modules the free body'
 (``bodies/kernel.py``) uses too; the generated module's header imports them.
 - ``output``: dense output and the rows on the output grid
 - ``loop``: the stepping loop and ``advance``, the entry point
+- ``predict``: the controller's prediction of the free motion over its commands in flight
 """
 
 import os
 
 __all__ = ['MARKER', 'PARTS', 'template_source']
 
-PARTS = ('rhs', 'steps', 'events', 'phases', 'output', 'loop')
+PARTS = ('rhs', 'steps', 'events', 'phases', 'output', 'loop', 'predict')
 MARKER = '# --- template: equations.py copies what follows into the generated module ---\n'
 
 
