@@ -204,7 +204,8 @@ def run(args) -> int:
         cpu = ' '.join(f'{r} {v:.0f}%' for r, v in result['cpu_percent'].items())
         print(
             f'run {i + 1}: {result["impacts"]} impacts, {result["second_strikes"]} second '
-            f'strikes, first strike {result["first_strike_s"]} s, δm '
+            f'strikes, first strike {result["first_strike_s"]} s, last cycle '
+            f'{result["last_cycle_s"] or float("nan"):.4f} s, δm '
             f'{result["delta_m_max_mm"]:.3f} mm, t_sim {result["sim_time_s"]:.2f} s in '
             f'{result["wall_s"]:.1f} s wall; latency [{result["latency_histogram"]}], '
             f'implicit {result["implicit_commands"]}, repeated {result["repeated_states"]}; '

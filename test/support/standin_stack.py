@@ -105,6 +105,17 @@ class StackRun:
         return len(self.second_strike_pairs)
 
     @property
+    def last_cycle_s(self) -> float | None:
+        """The last cycle's duration: between the last two impacts more than
+        ``second_strike_s`` apart (None: fewer than two such impacts)."""
+        strikes = [
+            t
+            for k, t in enumerate(self.contacts)
+            if k == 0 or t - self.contacts[k - 1] >= self.second_strike_s
+        ]
+        return strikes[-1] - strikes[-2] if len(strikes) >= 2 else None
+
+    @property
     def held(self) -> bool:
         return len(self.impacts) >= CYCLES + 1 and self.second_strikes == 0
 
@@ -146,6 +157,7 @@ class StackRun:
             'impacts': len(self.impacts),
             'second_strikes': self.second_strikes,
             'first_strike_s': self.contacts[0] if self.contacts else None,
+            'last_cycle_s': self.last_cycle_s,
             'delta_m_max_mm': 1e3 * max((r['delta_m'] for r in self.impacts), default=float('nan')),
             'sim_time_s': self.sim_time_s,
             'wall_s': self.wall_s,
