@@ -48,6 +48,7 @@ from ..io.wire import (
 )
 from ._runner import SampleWait, name_thread, reader_node, realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
+from .param_types import ControllerParameters
 from .params import (
     NODE_OPTIONS,
     declare,
@@ -84,7 +85,8 @@ class Controller(Node):
         # the scene (given at start-up, hence already declared) sets the table's defaults
         _, scene = startup_scene(self)
         self.table = parameter_table(scene)
-        p = self.p = declare(self, self.table)
+        self.p: ControllerParameters = declare(self, self.table, ControllerParameters)
+        p = self.p
         self.n = scene.n_links
         self.model = ArmModel(scene)
         # targets and joint states in the robot's joint coordinates; the law in the model's

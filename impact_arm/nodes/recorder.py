@@ -59,6 +59,7 @@ from .params import (
     scene_joint_names,
     validator,
 )
+from .param_types import RecorderParameters
 from .recorder_params import PARAMS
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
@@ -83,7 +84,8 @@ def _string_reader():
 class Recorder(Node):
     def __init__(self):
         super().__init__('recorder', **NODE_OPTIONS)
-        p = self.p = declare(self, PARAMS)
+        self.p: RecorderParameters = declare(self, PARAMS, RecorderParameters)
+        p = self.p
         refuse_unknown(self, PARAMS)
         # every parameter is fixed at start-up: a change is refused, not silently ignored
         self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))

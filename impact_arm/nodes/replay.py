@@ -29,6 +29,7 @@ from ..io.msgdefs import has_type_support
 from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
 from .params import NODE_OPTIONS, declare, refuse_unknown, validator
+from .param_types import ReplayParameters
 from .replay_params import PARAMS, WAIT_SUBSCRIBERS_MAX
 
 PROGRESS_PERIOD = 5.0  # s of wall time between progress lines in the log
@@ -41,7 +42,7 @@ class Replay(Node):
             parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
             **NODE_OPTIONS,
         )
-        p = declare(self, PARAMS)
+        p = declare(self, PARAMS, ReplayParameters)
         refuse_unknown(self, PARAMS)
         # every parameter is fixed at start-up: a change is refused, not silently ignored
         self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))

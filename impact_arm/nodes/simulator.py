@@ -50,6 +50,7 @@ from .params import (
     startup_scene,
     validator,
 )
+from .param_types import SimulatorParameters
 from .simulator_params import check, parameter_table
 
 # s at most, at exit, for the readers to acknowledge the last samples: 2 s (under Fast DDS's
@@ -65,7 +66,8 @@ class Simulator(Node):
         # the scene (given at start-up, hence already declared) sets the joints' defaults
         scene_path, self.scene = startup_scene(self)
         self.table = parameter_table(self.scene)
-        p = self.p = declare(self, self.table)
+        self.p: SimulatorParameters = declare(self, self.table, SimulatorParameters)
+        p = self.p
         # no contact trace: impact reports are built from the located events
         arm = self.arm = SimulatedArm(
             self.scene,
