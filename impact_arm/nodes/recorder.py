@@ -301,7 +301,10 @@ class Recorder(Node):
         return stamp if 0 <= stamp < 1 << 63 else None  # a hostile peer's negative stamp
 
     def _report(self, data):
-        """The impact record in an /impact_report sample, None for one that is not."""
+        """The impact record in an /impact_report sample, None for one that is not (or when
+        neither the log time nor the 3D view needs it: no reader was built)."""
+        if self._read_string is None:
+            return None
         try:
             record = json.loads(self._read_string(data).data)
         except (SerdeError, ValueError) as e:
