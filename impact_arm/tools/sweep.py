@@ -33,6 +33,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Sequence
 
 from ..physics.errors import ImpactArmError
 from ..calibration.study import Study, load_scene_data, parse_key_path
@@ -265,7 +266,7 @@ def _impacts_table(tables: dict):
     return parts[0] if parts else None
 
 
-_STUDIES = {}  # spec hash -> Study, kept by each worker process between chunks
+_STUDIES: dict[str, Study] = {}  # spec hash -> Study, kept by each worker process between chunks
 
 
 def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, items: list):
@@ -276,7 +277,8 @@ def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, ite
     study = _STUDIES.get(spec_hash)
     if study is None:
         study = _STUDIES[spec_hash] = Study(scene_data, fixed)
-    runs, impacts = [], {}
+    runs: list[dict] = []
+    impacts: dict = {}  # layout -> {column: values} (_add_impacts)
     for index, overrides in items:
         result = study.run(overrides)
         columns = {'run': index, **{k: _column_value(v) for k, v in overrides.items()}}
@@ -349,7 +351,7 @@ class ResultStore:
         folder = os.path.join(self.out, table)
         return sorted(n for n in os.listdir(folder) if n.endswith('.parquet'))
 
-    def write(self, tables: dict):
+    def write(self, tables: list[dict]):
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -473,7 +475,7 @@ def execute(
     done = 0
     pending, pending_runs, last_flush = [], 0, time.perf_counter()
     failed, first_result, after_first = 0, None, 0
-    errors = {}  # distinct error -> runs that failed with it
+    errors: dict[str, int] = {}  # distinct error -> runs that failed with it
     try:
         for tables in results:
             pending.append(tables)
@@ -509,7 +511,11 @@ def execute(
         'errors': errors,
         'wall': end - wall0,
         'startup': (first_result or end) - wall0,
-        'rate': after_first / (end - first_result) if after_first else math.nan,
+        'rate': (
+            after_first / (end - first_result)
+            if after_first and first_result is not None
+            else math.nan
+        ),
     }
 
 
@@ -629,7 +635,7 @@ def plot(
                 f'table; columns: {", ".join(names)}'
             )
     data = rows.to_pydict()
-    keep = range(rows.num_rows)
+    keep: Sequence[int] = range(rows.num_rows)
     if table == 'runs':
         keep = [i for i in keep if not data['error'][i]]
     else:
@@ -669,7 +675,8 @@ def plot(
 def _spread(xs):
     """x values with repeated ones offset by up to ±1 % of the x range (or of the value),
     evenly, so that points stacked on one grid node show as a short row."""
-    counts, seen = {}, {}
+    counts: dict[object, int] = {}
+    seen: dict[object, int] = {}
     for v in xs:
         counts[v] = counts.get(v, 0) + 1
     finite = [v for v in xs if isinstance(v, (int, float)) and math.isfinite(v)]
