@@ -90,7 +90,7 @@ class ControlInputs:
         rate: float,
         trigger: ControlTrigger | str,
         send: Callable[[list[float]], None],
-        log: Callable[[str], None] = lambda text: None,
+        log: Callable[[str], object] = lambda text: None,
         ready: Callable[[], bool] = lambda: True,
         wrench_publishers: Callable[[], bool] = lambda: True,
         startup_hold: float = 0.0,

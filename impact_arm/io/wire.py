@@ -22,8 +22,8 @@ malformation (short, bad header, absurd sequence length, non-UTF-8 name) ends as
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar, cast
 
 import functools
 import struct
@@ -60,8 +60,12 @@ class CdrReader:
         return values
 
 
-def _reader(function):
-    """Any failure while reading hostile bytes becomes one ``MalformedMessage``."""
+_Reader = TypeVar('_Reader', bound=Callable[..., Any])
+
+
+def _reader(function: _Reader) -> _Reader:
+    """Any failure while reading hostile bytes becomes one ``MalformedMessage`` (the reader
+    keeps its signature: its callers are checked against its own types)."""
 
     @functools.wraps(function)
     def read(raw: bytes, *args: Any) -> Any:
@@ -77,7 +81,7 @@ def _reader(function):
             )
             raise MalformedMessage(f'{len(raw)}-byte payload: {reason}') from None
 
-    return read
+    return cast(_Reader, read)
 
 
 # values nobody publishes, to find where a field's bytes lie in the serialized template

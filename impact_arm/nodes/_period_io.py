@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import collections
 import json
+from typing import TYPE_CHECKING, Any
 
 from geometry_msgs.msg import WrenchStamped
 from rosgraph_msgs.msg import Clock
@@ -17,6 +18,9 @@ from ..contract import CLOCK, CONTACT_FORCE_PEAK, CONTACT_WRENCH, IMPACT_REPORT,
 from ..io.scene_visuals import mounted_surfaces
 from ..io.wire import PatchedMessage
 from ._visuals import VisualsPublisher
+
+if TYPE_CHECKING:
+    from rclpy.publisher import Publisher
 
 
 class PeriodPublishers:
@@ -50,7 +54,8 @@ class PeriodPublishers:
         # hardware gets the joints its <ros2_control> block names: the moving ones
         locked = [name for name, _ in scene.locked_joints]
         self.wire_joints = self.hw_joints
-        self._locked_tails = ()
+        # the locked joints' positions and zeros, appended to each period's /joint_states
+        self._locked_tails: tuple[list[float], list[float]] | None = None
         if locked:
             names, all_zeros = list(joint_names) + locked, [0.0] * (len(joint_names) + len(locked))
             self.wire_joints = PatchedMessage(
@@ -87,14 +92,14 @@ class PeriodPublishers:
         self.failures = 0
         # publisher -> samples published (loss accounting); keyed by the publisher, not its
         # topic_name, which asks rcl under the handle's lock on every call
-        self.sent = collections.Counter()
+        self.sent: collections.Counter[Publisher[Any]] = collections.Counter()
 
     def publish(self, tick):
         # the controller waits for this period's wrench and joint state: /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
         self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
-        if self._locked_tails:
+        if self._locked_tails is not None:
             values, zeros = self._locked_tails
             states = self.wire_joints.fill(
                 [*tick.position, *values, *tick.velocity, *zeros, *tick.effort, *zeros], (sec, nsec)

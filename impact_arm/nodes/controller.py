@@ -34,7 +34,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from .. import contract
-from ..contract import COMMANDS, CONTACT_WRENCH, DIAGNOSTICS, JOINT_STATES, ControlTrigger
+from ..contract import (
+    COMMANDS,
+    CONTACT_WRENCH,
+    DIAGNOSTICS,
+    JOINT_STATES,
+    ControlTrigger,
+    CycleMode,
+)
 from ..physics.control import CycleController, PidIntegrator
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
@@ -48,6 +55,7 @@ from ..io.wire import (
 )
 from ._runner import SampleWait, name_thread, reader_node, realtime_priority, run, take_raw
 from .controller_params import check, parameter_table
+from .param_types import ControllerParameters
 from .params import (
     NODE_OPTIONS,
     declare,
@@ -84,7 +92,8 @@ class Controller(Node):
         # the scene (given at start-up, hence already declared) sets the table's defaults
         _, scene = startup_scene(self)
         self.table = parameter_table(scene)
-        p = self.p = declare(self, self.table)
+        self.p: ControllerParameters = declare(self, self.table, ControllerParameters)
+        p = self.p
         self.n = scene.n_links
         self.model = ArmModel(scene)
         # targets and joint states in the robot's joint coordinates; the law in the model's
@@ -227,8 +236,8 @@ class Controller(Node):
         c.law, c.space = p.law, p.space
         c.kp, c.ki, c.kd = list(p.p), list(p.i), list(p.d)
         c.targets = {
-            'down': self.coordinates.absolute(p.down_target),
-            'up': self.coordinates.absolute(p.up_target),
+            CycleMode.DOWN: self.coordinates.absolute(p.down_target),
+            CycleMode.UP: self.coordinates.absolute(p.up_target),
         }
         c.switch_height, c.surface_height = p.switch_height, p.surface_height
         c.force_threshold, c.reversal_band = p.force_threshold, p.reversal_band

@@ -1,10 +1,13 @@
 """The controller node's parameters, declared once: ``parameter_table(scene)`` gives each its
-default (from the scene's controller section), range and description; ``ControllerParams``
-the typed object the node reads."""
+default (from the scene's controller section), range and description; through
+``params.declare``, the typed object the node reads (param_types.ControllerParameters,
+generated from this table)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from .. import contract
 from ..contract import (
@@ -20,8 +23,12 @@ from ..contract import (
 from ..driver.control_inputs import SENT_HISTORY
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
+if TYPE_CHECKING:
+    from ..physics.scene import Scene
+    from .param_types import ControllerParameters
 
-def parameter_table(scene):
+
+def parameter_table(scene: Scene) -> tuple[Param, ...]:
     """The controller's parameters; defaults come from the scene's controller section."""
     c, n = scene.controller, scene.n_links
     surfaces = [s.height for s in scene.surfaces]
@@ -303,7 +310,7 @@ def parameter_table(scene):
     )
 
 
-def check(p, names):
+def check(p: ControllerParameters, names: Sequence[str]) -> list[int]:
     """What no single parameter's range says: ParameterError naming the parameters.
     Returns the command order (the index in ``names`` of each entry of ``joints``)."""
     order = check_joints(p.joints, names)

@@ -1,9 +1,10 @@
-"""The parameter tables of docs/nodes.md and docs/topics.md, generated from the nodes' own
-tables (the ``Param`` declarations the nodes declare, check and describe with), so the
-documentation cannot drift from what the nodes accept.
+"""The parameter tables of docs/nodes.md and docs/topics.md and the typed parameter classes
+of param_types.py, generated from the nodes' own tables (the ``Param`` declarations the nodes
+declare, check and describe with), so neither the documentation nor the types the nodes read
+can drift from what the nodes accept.
 
-    python -m impact_arm.nodes.param_docs            # rewrite the tables in docs/
-    python -m impact_arm.nodes.param_docs --check    # exit 1 if a table is out of date
+    python -m impact_arm.nodes.param_docs            # rewrite the tables and param_types.py
+    python -m impact_arm.nodes.param_docs --check    # exit 1 if either is out of date
 
 Each table sits between a ``<!-- parameters: NODE ... -->`` line and ``<!-- end of
 parameters -->`` in its document; the rest of the document is left as it is.
@@ -21,9 +22,26 @@ from .params import Param
 
 END = '<!-- end of parameters -->'
 DOCS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(__file__))), 'docs')
+TYPES_MODULE = os.path.join(os.path.dirname(__file__), 'param_types.py')
+# node -> the class of param_types.py that ``params.declare`` fills for it
+CLASS_NAMES = {
+    'simulator': 'SimulatorParameters',
+    'controller': 'ControllerParameters',
+    'recorder': 'RecorderParameters',
+    'replay': 'ReplayParameters',
+}
+# each kind's field type: what ``Param.check`` returns for it (a 'str' with an enum: the enum)
+FIELD_TYPES = {
+    'float': 'float',
+    'int': 'int',
+    'str': 'str',
+    'bool': 'bool',
+    'floats': 'list[float]',
+    'strs': 'list[str]',
+}
 
 
-def tables() -> dict:
+def tables() -> dict[str, tuple[str, tuple[Param, ...]]]:
     """node -> (document, its parameter table); the scene-dependent tables as the article's
     scene makes them (their scene-set defaults are shown in words)."""
     from ..physics.scene import load_scene, resolve_scene_path
@@ -37,7 +55,7 @@ def tables() -> dict:
     }
 
 
-def _value(value) -> str:
+def _value(value: object) -> str:
     if isinstance(value, bool):
         return '`true`' if value else '`false`'
     if isinstance(value, str):
@@ -52,7 +70,7 @@ def _value(value) -> str:
     return str(value)
 
 
-def markdown_table(table) -> str:
+def markdown_table(table: tuple[Param, ...]) -> str:
     """One row per parameter: name, default, allowed values (and whether ``ros2 param set``
     may change it while the node runs), meaning."""
     rows = ['| parameter | default | allowed | meaning |', '|---|---|---|---|']
@@ -65,7 +83,7 @@ def markdown_table(table) -> str:
     return '\n'.join(rows) + '\n'
 
 
-def _begin(node) -> str:
+def _begin(node: str) -> str:
     return (
         f'<!-- parameters: {node} (generated from its table: '
         f'python -m impact_arm.nodes.param_docs) -->'
@@ -81,18 +99,85 @@ def rendered(text: str, node: str, table: tuple[Param, ...]) -> str:
     return pattern.sub(lambda _: f'{begin}\n{markdown_table(table)}{END}', text, count=1)
 
 
-def main(argv=None) -> int:
+def _field_type(p: Param) -> str:
+    return p.enum.__name__ if p.enum is not None else FIELD_TYPES[p.kind]
+
+
+def _enum_imports(tables: list[tuple[Param, ...]]) -> list[str]:
+    """The import lines of the enums the fields are typed with, relative to this package."""
+    by_module: dict[str, set[str]] = {}
+    for table in tables:
+        for p in table:
+            if p.enum is not None:
+                package, _, module = p.enum.__module__.partition('.')
+                if package != 'impact_arm':
+                    raise ValueError(f"{p.name}: enum {p.enum!r} is not impact_arm's")
+                by_module.setdefault(module, set()).add(p.enum.__name__)
+    return [
+        f'from ..{module} import {", ".join(sorted(names))}'
+        for module, names in sorted(by_module.items())
+    ]
+
+
+TYPES_HEADER = '''\
+"""The nodes' parameters as static types: one frozen dataclass per node, a field per
+parameter of its table (simulator_params.py, controller_params.py, recorder_params.py,
+replay_params.py) typed as ``Param.check`` returns it, which ``params.declare`` fills and the
+node reads as ``self.p.publish_rate``; a ``ros2 param set`` makes a new one with ``replace``.
+The scene-dependent tables have the same names whatever the scene, so the classes are fixed.
+
+Generated from the tables by ``python -m impact_arm.nodes.param_docs``: edit the tables and
+run it again (a test fails while this file differs from its output).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+'''
+
+
+def types_module(nodes: dict[str, tuple[str, tuple[Param, ...]]] | None = None) -> str:
+    """The text of param_types.py: one frozen dataclass per node's table (``nodes``, else
+    ``tables()``), fields in the table's order (the scene-dependent tables as the article's
+    scene makes them: the same names for any scene)."""
+    nodes = tables() if nodes is None else nodes
+    imports = _enum_imports([table for _, table in nodes.values()])
+    parts = [TYPES_HEADER, '\n', '\n'.join(imports) + '\n']
+    for node, (_, table) in nodes.items():
+        name = CLASS_NAMES[node]
+        fields = ''.join(f'    {p.name}: {_field_type(p)}\n' for p in table)
+        parts.append(
+            f'\n\n@dataclass(frozen=True)\nclass {name}:\n'
+            f'    """The {node} node\'s parameters, checked."""\n\n{fields}\n'
+            f'    def replace(self, **changes: Any) -> {name}:\n'
+            f'        """A copy with ``changes`` (checked values by parameter name)."""\n'
+            f'        return dataclasses.replace(self, **changes)\n'
+        )
+    return ''.join(parts)
+
+
+def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     check = '--check' in argv
     stale = []
-    documents: dict = {}
-    for node, (document, table) in tables().items():
+    documents: dict[str, tuple[str, str]] = {}  # path -> (its text, the text generated)
+    nodes = tables()
+    for node, (document, table) in nodes.items():
         path = os.path.join(DOCS, document)
         if path not in documents:
             with open(path, encoding='utf-8') as f:
-                documents[path] = (f.read(), None)
+                text = f.read()
+            documents[path] = (text, text)
         original, current = documents[path]
-        documents[path] = (original, rendered(current or original, node, table))
+        documents[path] = (original, rendered(current, node, table))
+    try:
+        with open(TYPES_MODULE, encoding='utf-8') as f:
+            original = f.read()
+    except FileNotFoundError:
+        original = ''
+    documents[TYPES_MODULE] = (original, types_module(nodes))
     for path, (original, new) in documents.items():
         if new != original:
             stale.append(path)

@@ -7,9 +7,10 @@ Numbers accept ints where floats are meant (``-p publish_rate:=500`` just works)
 
 from __future__ import annotations
 
-import dataclasses
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -21,6 +22,13 @@ from rcl_interfaces.msg import (
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
 from ..physics.errors import ImpactArmError
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from ..physics.scene import Scene
 
 
 class ParameterError(ImpactArmError, ValueError):
@@ -35,7 +43,7 @@ class Param:
     kind: str = 'float'
     low: float | None = None  # inclusive bounds
     high: float | None = None
-    choices: tuple = ()
+    choices: tuple[str, ...] = ()
     size: int | None = None  # arrays: required length (None: any, >= 1)
     read_only: bool = False  # start-up only (changing it needs a restart)
     open_low: bool = False  # low bound excluded (e.g. rates > 0)
@@ -78,10 +86,10 @@ class Param:
             d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high))]
         return d
 
-    def check(self, value):
+    def check(self, value: Any) -> Any:
         """The value converted to the parameter's type, or ParameterError."""
 
-        def fail(why):
+        def fail(why: str) -> NoReturn:
             raise ParameterError(
                 f'parameter {self.name} = {value!r}: {why}; allowed: {self.allowed()}'
             )
@@ -131,20 +139,22 @@ class Param:
             fail('unknown value')
         return self.enum(value) if self.enum is not None else value
 
-    def _range(self, number, fail):
+    def _range(self, number: float, fail: Callable[[str], NoReturn]) -> None:
         if self.low is not None and (number < self.low or (self.open_low and number == self.low)):
             fail('out of range')
         if self.high is not None and number > self.high:
             fail('out of range')
 
 
-def scene_joint_names(scene) -> list:
+def scene_joint_names(scene: Scene) -> list[str]:
     """The joint names of ``scene``'s arm, base first (``Scene.joint_names``: a URDF arm's
     own, else joint1..N): every node names the joints by this one function."""
     return list(scene.joint_names)
 
 
-def check_joints(given, names, parameter='joints') -> list:
+def check_joints(
+    given: Sequence[str], names: Sequence[str], parameter: str = 'joints'
+) -> list[int]:
     """The one joint check of every node: ``given`` (a node's joint order parameter) must
     name each of ``names`` (the scene's joints) exactly once. Returns, for each position of
     ``given``, the index of that joint in ``names``; ParameterError naming the parameter."""
@@ -156,19 +166,16 @@ def check_joints(given, names, parameter='joints') -> list:
     return [list(names).index(j) for j in given]
 
 
-def startup_scene(node, default='paper'):
+def startup_scene(node: Node, default: str = 'paper') -> tuple[str, Scene]:
     """(path, scene) of the node's ``scene`` parameter as given at start-up (declared from
     the command line or parameter file by ``NODE_OPTIONS``), before the node's table is
-    declared: the scene sets defaults of the table (joint names, gains). Empty: ``default``
-    (None: no scene, returns (None, None))."""
+    declared: the scene sets defaults of the table (joint names, gains). Empty: ``default``."""
     from ..physics.scene import load_scene, resolve_scene_path
 
     name = node.get_parameter('scene').value if node.has_parameter('scene') else ''
     if name is not None and not isinstance(name, str):
         raise ParameterError(f'parameter scene = {name!r}: not a string; allowed: a str')
     name = name or default
-    if not name:
-        return None, None
     path = resolve_scene_path(name)
     return path, load_scene(path)
 
@@ -176,25 +183,18 @@ def startup_scene(node, default='paper'):
 # Node options of a node whose parameters ``declare`` and ``refuse_unknown`` handle: every
 # value given at start-up (command line, parameter file) arrives as a parameter, so both can
 # see what was given through rclpy's public API.
-NODE_OPTIONS = dict(automatically_declare_parameters_from_overrides=True)
+NODE_OPTIONS: dict[str, Any] = dict(automatically_declare_parameters_from_overrides=True)
 
 
-_TYPES = {'float': float, 'int': int, 'str': str, 'bool': bool, 'floats': list, 'strs': list}
+_Values = TypeVar('_Values')
 
 
-def values_class(name, table) -> type:
-    """The typed object of a parameter table: a frozen dataclass with one field per
-    parameter (read as ``p.publish_rate``; a change makes a new one with ``p.replace``)."""
-    cls = dataclasses.make_dataclass(name, [(p.name, _TYPES[p.kind]) for p in table], frozen=True)
-    cls.replace = lambda self, **changes: dataclasses.replace(self, **changes)
-    return cls
-
-
-def declare(node, table, cls=None):
+def declare(node: Node, table: Sequence[Param], cls: Callable[..., _Values]) -> _Values:
     """Declare every parameter of ``table`` on a node made with ``NODE_OPTIONS``; returns
-    the checked values as a ``values_class`` object (``cls``, or one made for ``table``).
+    the checked values as ``cls``, the node's class of param_types.py (one field per
+    parameter, read as ``p.publish_rate``; a change makes a new one with ``p.replace``).
     Raises ParameterError for the first bad value, naming it and its range."""
-    values = {}
+    values: dict[str, object] = {}
     for p in table:
         default = list(p.default) if isinstance(p.default, tuple) else p.default
         given = None
@@ -204,7 +204,7 @@ def declare(node, table, cls=None):
             given = node.get_parameter(p.name).value
             node.undeclare_parameter(p.name)
         try:
-            value = node.declare_parameter(p.name, default, p.descriptor()).value
+            value: object = node.declare_parameter(p.name, default, p.descriptor()).value
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             # rclpy checks the descriptor's range itself; say it the way the rest of us do
             shown = given if given is not None else '?'
@@ -212,16 +212,18 @@ def declare(node, table, cls=None):
                 f'parameter {p.name} = {shown!r}: out of range; allowed: {p.allowed()}'
             ) from exc
         values[p.name] = p.check(value)
-    return (cls or values_class(f'{node.get_name()}_parameters', table))(**values)
+    return cls(**values)
 
 
-def validator(table, apply):
+def validator(
+    table: Sequence[Param], apply: Callable[[dict[str, Any]], None]
+) -> Callable[[list[Parameter]], SetParametersResult]:
     """An on-set-parameters callback: refuse bad or read-only values (with the reason ``ros2
     param set`` prints), else pass the checked values to ``apply(dict)``."""
     by_name = {p.name: p for p in table}
 
-    def callback(parameters):
-        checked = {}
+    def callback(parameters: list[Parameter]) -> SetParametersResult:
+        checked: dict[str, Any] = {}
         for param in parameters:
             if not param.name.strip():
                 # rclpy would store it as an undeclared parameter nobody can read back
@@ -249,7 +251,7 @@ def validator(table, apply):
     return callback
 
 
-def refuse_unknown(node, table):
+def refuse_unknown(node: Node, table: Sequence[Param]) -> None:
     """ROS ignores parameters a node never declares; a typo in a parameter file or on the
     command line would then silently change nothing. Refuse them instead (``node`` made with
     ``NODE_OPTIONS``, ``table`` declared)."""
@@ -263,7 +265,7 @@ def refuse_unknown(node, table):
         )
 
 
-def _declared_by_ros(context) -> set:
+def _declared_by_ros(context: Context) -> set[str]:
     """The parameters rclpy declares on every node (use_sim_time, ...): those of a bare node."""
     from rclpy.node import Node
 

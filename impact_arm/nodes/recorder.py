@@ -31,6 +31,7 @@ import heapq
 import json
 import os
 import time
+from typing import TYPE_CHECKING, Any
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -59,7 +60,11 @@ from .params import (
     scene_joint_names,
     validator,
 )
+from .param_types import RecorderParameters
 from .recorder_params import PARAMS
+
+if TYPE_CHECKING:
+    from rclpy.client import Client
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
@@ -83,7 +88,8 @@ def _string_reader():
 class Recorder(Node):
     def __init__(self):
         super().__init__('recorder', **NODE_OPTIONS)
-        p = self.p = declare(self, PARAMS)
+        self.p: RecorderParameters = declare(self, PARAMS, RecorderParameters)
+        p = self.p
         refuse_unknown(self, PARAMS)
         # every parameter is fixed at start-up: a change is refused, not silently ignored
         self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
@@ -130,7 +136,9 @@ class Recorder(Node):
             },
         )
         if scene_text is not None:
-            self.writer.add_attachment(os.path.basename(scene), scene_text, 'application/yaml')
+            self.writer.add_attachment(
+                os.path.basename(scene), scene_text.encode(), 'application/yaml'
+            )
             self.writer.add_metadata('scene', {'path': os.path.abspath(scene), 'yaml': scene_text})
         self.failed = False
         self.received = 0
@@ -168,7 +176,8 @@ class Recorder(Node):
         self.progress = self.create_publisher(
             Time, contract.RECORDER_PROGRESS, contract.PROGRESS_QOS.to_rclpy()
         )
-        self.written_until = self.announced = None  # ns: newest /joint_states stamp written
+        self.written_until: int | None = None  # ns: newest /joint_states stamp written
+        self.announced: int | None = None  # ns: the newest published on RECORDER_PROGRESS
         self.reader = reader_node(self, 'reader')  # ignores launch's __node remap
         self._subscribe_known()
         self.create_timer(interval, self._flush)
@@ -183,7 +192,7 @@ class Recorder(Node):
         self.started = time.monotonic()
         self.match_timer = self.create_timer(0.05, self._check_matched)
         self.params = {}  # node -> 'start'/'end' state; queries never block the recording
-        self.param_clients = {
+        self.param_clients: dict[str, tuple[Client[Any, Any], Client[Any, Any]]] = {
             n: (
                 self.create_client(ListParameters, f'{n}/list_parameters'),
                 self.create_client(GetParameters, f'{n}/get_parameters'),
@@ -281,9 +290,10 @@ class Recorder(Node):
             if self.failed:
                 break
             self._store(topic, data, received, published)
-        if self.written_until != self.announced and not self.failed:
-            self.announced = self.written_until
-            sec, nanosec = divmod(self.written_until, 1_000_000_000)
+        written = self.written_until
+        if written is not None and written != self.announced and not self.failed:
+            self.announced = written
+            sec, nanosec = divmod(written, 1_000_000_000)
             self.progress.publish(Time(sec=sec, nanosec=nanosec))
 
     @staticmethod
@@ -299,7 +309,10 @@ class Recorder(Node):
         return stamp if 0 <= stamp < 1 << 63 else None  # a hostile peer's negative stamp
 
     def _report(self, data):
-        """The impact record in an /impact_report sample, None for one that is not."""
+        """The impact record in an /impact_report sample, None for one that is not (or when
+        neither the log time nor the 3D view needs it: no reader was built)."""
+        if self._read_string is None:
+            return None
         try:
             record = json.loads(self._read_string(data).data)
         except (SerdeError, ValueError) as e:
@@ -347,7 +360,7 @@ class Recorder(Node):
             if topic == contract.JOINT_STATES and stamp is not None:
                 self.written_until = stamp
             if self.visuals is not None:
-                self._derive_visuals(topic, data, received, record)
+                self._derive_visuals(self.visuals, topic, data, received, record)
         except RecordingError as e:
             self._fail(e)
         except MalformedMessage as e:
@@ -358,12 +371,12 @@ class Recorder(Node):
                 throttle_duration_sec=2.0,
             )
 
-    def _derive_visuals(self, topic, data, received, record=None):
+    def _derive_visuals(self, visuals, topic, data, received, record=None):
         """Feed the recorded state to the visuals; a wrench may arrive before or after the
         joint state of its period, so it is drawn at the latest known arm pose."""
         if topic == contract.CONTACT_WRENCH:
             if self._q is not None:
-                self.visuals.force(self._q, wrench_stamped_fields(data)[2][:2])
+                visuals.force(self._q, wrench_stamped_fields(data)[2][:2])
         elif topic == contract.JOINT_STATES:
             sec, nanosec, names, position, _ = joint_state_fields(data)
             by_name = dict(zip(names, position))
@@ -371,15 +384,15 @@ class Recorder(Node):
                 self._q = self._coordinates.absolute([by_name[j] for j in self._joints])
             except KeyError:
                 return  # not this scene's joints: nothing to draw
-            self.visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
+            visuals.state(sec * 1_000_000_000 + nanosec, self._q, (0.0, 0.0), received)
         elif topic == contract.SURFACE_MOUNTS:
             # the mounted surfaces' frames, drawn from their own samples and stamps
             sec, nanosec, _, position, velocity = joint_state_fields(data)
             plates = [v for pair in zip(position, velocity) for v in pair]
-            self.visuals.plates(sec * 1_000_000_000 + nanosec, plates, received)
+            visuals.plates(sec * 1_000_000_000 + nanosec, plates, received)
         elif topic == contract.IMPACT_REPORT and record is not None:
             try:
-                self.visuals.impact(record)
+                visuals.impact(record)
             except (ValueError, KeyError, TypeError) as e:
                 self.get_logger().warning(f'impact report not drawn: {e}')
 

@@ -17,6 +17,7 @@ import math
 import os
 import threading
 import time
+from typing import TYPE_CHECKING, Any
 
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -29,7 +30,11 @@ from ..io.msgdefs import has_type_support
 from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
 from .params import NODE_OPTIONS, declare, refuse_unknown, validator
+from .param_types import ReplayParameters
 from .replay_params import PARAMS, WAIT_SUBSCRIBERS_MAX
+
+if TYPE_CHECKING:
+    from rclpy.publisher import Publisher
 
 PROGRESS_PERIOD = 5.0  # s of wall time between progress lines in the log
 
@@ -41,7 +46,7 @@ class Replay(Node):
             parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
             **NODE_OPTIONS,
         )
-        p = declare(self, PARAMS)
+        p = declare(self, PARAMS, ReplayParameters)
         refuse_unknown(self, PARAMS)
         # every parameter is fixed at start-up: a change is refused, not silently ignored
         self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
@@ -53,7 +58,7 @@ class Replay(Node):
             p.file, rate=p.rate, start_offset=p.start_offset, topics=topics, loop=loop
         )
         self.clock_period = 1.0 / clock if clock else math.inf
-        self.publishers_ = {}
+        self.publishers_: dict[str, Publisher[Any]] = {}
         for topic, info in self.plan.topics.items():
             if topic == CLOCK and clock:
                 self.get_logger().warning(
@@ -114,12 +119,13 @@ class Replay(Node):
                 return
             wall0 = time.monotonic()
             next_progress = PROGRESS_PERIOD
-            next_clock = 0.0 if self.clock_pub else math.inf
+            clock_pub = self.clock_pub
+            next_clock = 0.0 if clock_pub else math.inf
             for due, m in self.plan.events():
                 while True:
                     now = time.monotonic() - wall0
-                    if next_clock <= min(due, now):
-                        self._publish_clock(self.plan.recorded_time_ns(next_clock))
+                    if clock_pub is not None and next_clock <= min(due, now):
+                        self._publish_clock(clock_pub, self.plan.recorded_time_ns(next_clock))
                         next_clock += self.clock_period
                         continue
                     wait = min(due, next_clock) - now
@@ -139,10 +145,10 @@ class Replay(Node):
         except Exception as e:  # noqa: BLE001 - reported by finish(), exit code 1
             self.error = e
 
-    def _publish_clock(self, t_ns):
+    def _publish_clock(self, publisher, t_ns):
         msg = self._Clock()
         msg.clock.sec, msg.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
-        self.clock_pub.publish(msg)
+        publisher.publish(msg)
 
     def finish(self, executor) -> int:
         self._stop.set()

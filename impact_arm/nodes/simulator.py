@@ -50,6 +50,7 @@ from .params import (
     startup_scene,
     validator,
 )
+from .param_types import SimulatorParameters
 from .simulator_params import check, parameter_table
 
 # s at most, at exit, for the readers to acknowledge the last samples: 2 s (under Fast DDS's
@@ -65,7 +66,8 @@ class Simulator(Node):
         # the scene (given at start-up, hence already declared) sets the joints' defaults
         scene_path, self.scene = startup_scene(self)
         self.table = parameter_table(self.scene)
-        p = self.p = declare(self, self.table)
+        self.p: SimulatorParameters = declare(self, self.table, SimulatorParameters)
+        p = self.p
         # no contact trace: impact reports are built from the located events
         arm = self.arm = SimulatedArm(
             self.scene,
@@ -102,40 +104,42 @@ class Simulator(Node):
         )
         subscribe = self.create_subscription
         self.reader_node = None
+        self.session: LockstepSession | RealtimeSession
         if lockstep:
-            self.progress_sub = (
-                subscribe(
-                    Time,
-                    contract.RECORDER_PROGRESS,
-                    self._on_progress,
-                    contract.PROGRESS_QOS.to_rclpy(),
-                )
-                if p.recorder_window
-                else None
-            )
-            self.session = LockstepSession(
+            session = self.session = LockstepSession(
                 arm,
                 recorder_window=p.recorder_window,
                 release_after=p.release_after,
                 **common,
-                recorder_present=lambda: self.progress_sub.get_publisher_count() > 0,
+                recorder_present=lambda: (
+                    self.progress_sub is not None and self.progress_sub.get_publisher_count() > 0
+                ),
                 controller_present=lambda: self.command_sub.get_publisher_count() > 0,
             )
-            offer = self.session.offer
+
+            def on_progress(msg: Time) -> None:
+                session.recorder_progress(msg.sec * 1_000_000_000 + msg.nanosec)
+
+            self.progress_sub = (
+                subscribe(
+                    Time, contract.RECORDER_PROGRESS, on_progress, contract.PROGRESS_QOS.to_rclpy()
+                )
+                if p.recorder_window
+                else None
+            )
+            offer = session.offer
+
+            # callbacks return nothing: offer's answer (taken or refused) the session counts
+            def on_array_command(raw: bytes) -> None:
+                offer(self._array_command(raw))
+
+            def on_named_command(raw: bytes) -> None:
+                offer(self._named_command(raw))
+
             self.command_sub = subscribe(
-                Float64MultiArray,
-                COMMANDS,
-                lambda raw: offer(self._array_command(raw)),
-                qos(COMMANDS),
-                raw=True,
+                Float64MultiArray, COMMANDS, on_array_command, qos(COMMANDS), raw=True
             )
-            subscribe(
-                JointState,
-                p.joint_commands_topic,
-                lambda raw: offer(self._named_command(raw)),
-                qos(COMMANDS),
-                raw=True,
-            )
+            subscribe(JointState, p.joint_commands_topic, on_named_command, qos(COMMANDS), raw=True)
         else:
             # read by the loop thread itself at the start of each period: with the executor
             # delivering commands, two Python threads contended for the GIL each period
@@ -188,11 +192,12 @@ class Simulator(Node):
     def start(self):
         """Start the periods once the process has settled (_runner.run: its last full
         garbage collection held the GIL for 120-170 ms and stalled a loop started earlier)."""
-        if isinstance(self.session, LockstepSession):
-            self.create_timer(0.1, lambda: self.session.tick())  # (no TimerInfo)
+        session = self.session
+        if isinstance(session, LockstepSession):
+            self.create_timer(0.1, lambda: session.tick())  # (no TimerInfo)
         else:
             self._thread = threading.Thread(
-                target=self._realtime_loop, name='sim-loop', daemon=True
+                target=self._realtime_loop, args=(session,), name='sim-loop', daemon=True
             )
             self._thread.start()
 
@@ -217,9 +222,6 @@ class Simulator(Node):
             if taken is not None:
                 return read(taken[0])
         return None
-
-    def _on_progress(self, msg):
-        self.session.recorder_progress(msg.sec * 1_000_000_000 + msg.nanosec)
 
     # ------------------------------------------------------------------- control
     def _on_reset(self, request, response):
@@ -253,17 +255,17 @@ class Simulator(Node):
             self.arm.brake_torque = values['brake_torque']
 
     # --------------------------------------------------------------------- out
-    def _realtime_loop(self):
+    def _realtime_loop(self, session: RealtimeSession) -> None:
         try:
             # the executor thread (diagnostics) and this one share the GIL; a thread waking
             # from its sleep would otherwise wait up to the 5 ms default switch interval
             sys.setswitchinterval(5e-5)
             name_thread('sim-loop')
-            self.session.scheduling = realtime_priority(self.p.thread_priority)
-            self.session.run(self._stop.is_set)
+            session.scheduling = realtime_priority(self.p.thread_priority)
+            session.run(self._stop.is_set)
         except Exception as exc:  # noqa: BLE001 - reported, and the node stops with an error
             self.get_logger().error(traceback.format_exc())
-            self.session.fail(f'the stepping thread failed: {type(exc).__name__}: {exc}')
+            session.fail(f'the stepping thread failed: {type(exc).__name__}: {exc}')
 
     def _log(self, level, text):
         # rclpy fixes each call site's severity at its first call: one site per level

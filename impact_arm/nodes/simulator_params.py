@@ -1,6 +1,12 @@
 """The simulator node's parameters, declared once: ``parameter_table(scene)`` gives each its
 default (the joint names from the scene), range, description (``ros2 param describe``) and,
-through ``params.declare``, the typed object the node reads."""
+through ``params.declare``, the typed object the node reads (param_types.SimulatorParameters,
+generated from this table)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from .. import contract
 from ..contract import (
@@ -18,8 +24,12 @@ from ..io.scene_visuals import DEFAULT_TF_RATE
 from ..io.urdf import JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
+if TYPE_CHECKING:
+    from ..physics.scene import Scene
+    from .param_types import SimulatorParameters
 
-def parameter_table(scene):
+
+def parameter_table(scene: Scene) -> tuple[Param, ...]:
     """The simulator's parameters; the joint names and their number come from ``scene``."""
     return (
         _PARAMS_BEFORE_JOINTS
@@ -264,7 +274,7 @@ _PARAMS_AFTER_JOINTS = (
 )
 
 
-def check(p, names):
+def check(p: SimulatorParameters, names: Sequence[str]) -> list[int]:
     """What no single parameter's range says: ParameterError naming the parameters.
     Returns the command order (the index in ``names`` of each entry of ``joints``)."""
     order = check_joints(p.joints, names)

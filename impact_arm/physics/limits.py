@@ -12,9 +12,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
+from typing import TYPE_CHECKING
 
 from .errors import SimulationError
 from .scene import Scene
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class JointLimitStop(SimulationError):
@@ -113,7 +117,9 @@ class LimitWatch:
 
 
 def limit_excursions(
-    scene: Scene, q: Sequence[Sequence[float]], qd: Sequence[Sequence[float]]
+    scene: Scene,
+    q: Sequence[Sequence[float]] | np.ndarray,
+    qd: Sequence[Sequence[float]] | np.ndarray,
 ) -> list[LimitExcursion]:
     """The excursions of a run given as the model's absolute link angles and rates, one row
     per period (a recording's, ``tools/analysis``)."""

@@ -418,12 +418,12 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')
 
 
-def format_table(result: RunResult) -> str:
-    """The impact table people read in a terminal."""
+def impact_rows(impacts: list, robot: bool = False) -> str:
+    """The impact rows of ``format_table``: a header and a line per impact record. ``robot``:
+    the contact angles as the robot's joint angles (a URDF arm's), else as the article's
+    absolute link angles."""
     # every link's contact angle (the article's two in its columns)
-    n = len(result.impacts[0]['q_contact_deg']) if result.impacts else 2
-    # a URDF arm's own joint angles; the article's absolute link angles for the scene's rods
-    robot = result.scene is not None and not result.scene.joint_coordinates.is_identity
+    n = len(impacts[0]['q_contact_deg']) if impacts else 2
     key = 'joints_contact_deg' if robot else 'q_contact_deg'
     angles = ','.join(f'{"θ" if robot else "q"}{k + 1}' for k in range(n)) + ' [deg]'
     lines = [
@@ -431,7 +431,7 @@ def format_table(result: RunResult) -> str:
         f'{"dr [um]":>8} {"Fmax [kN]":>9} {"vx,vy before":>14} {"vx,vy after":>14} '
         f'{"e":>6} {"T before->after [J]":>19} {"e_energy":>17}'
     ]
-    for i in result.impacts:
+    for i in impacts:
         lines.append(
             f'{i["index"]:>3} {i["t_contact"]:>9.5f} '
             f'{",".join(f"{a:>7.2f}" for a in i[key])} '
@@ -442,6 +442,14 @@ def format_table(result: RunResult) -> str:
             f'{i["T_before"][-1]:>8.3f} -> {i["T_after"][-1]:>7.3f} '
             f'{", ".join(f"{e:.3f}" for e in i["cor_energetic"]):>17}'
         )
+    return '\n'.join(lines)
+
+
+def format_table(result: RunResult) -> str:
+    """The impact table people read in a terminal."""
+    # a URDF arm's own joint angles; the article's absolute link angles for the scene's rods
+    robot = result.scene is not None and not result.scene.joint_coordinates.is_identity
+    lines = [impact_rows(result.impacts, robot)]
     s = result.summary()
     lines.append('')
     lines.append(

@@ -477,7 +477,9 @@ class ChatterWatch:
 
 
 def find_chatter(
-    times: Sequence[float], commands: Sequence[Sequence[float]], names: Sequence[str]
+    times: Sequence[float] | np.ndarray,
+    commands: Sequence[Sequence[float]] | np.ndarray,
+    names: Sequence[str],
 ) -> list[Chatter]:
     """``ChatterWatch`` over a whole series: one row of joint torques per time."""
     watch = ChatterWatch(names)

@@ -19,11 +19,16 @@ from __future__ import annotations
 
 import math
 import os
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from ..contract import CONTACT_WRENCH
 from ..physics.errors import ImpactArmError
+
+if TYPE_CHECKING:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.transforms import Transform
 
 DEFAULT_FPS = 20.0
 DEFAULT_SLOW = 10.0  # frames this much closer near impacts
@@ -235,8 +240,9 @@ def _background(scene, reach, per_newton, bar_force):
         ax.text(x0, y0 + 0.04 * reach, f'force scale: {_kn(bar_force)}', fontsize=7)
     fig.canvas.draw()
     height = fig.canvas.get_width_height()[1]
-    transform = ax.transData.frozen()
-    image = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+    transform = cast('Transform', ax.transData.frozen())  # a transform's frozen copy
+    canvas = cast('FigureCanvasAgg', fig.canvas)  # the Agg backend chosen above
+    image = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
 
     def to_pixels(xy):
@@ -333,7 +339,7 @@ def _write_mp4(frames, out_path, fps):
     from matplotlib import animation
 
     fig = plt.figure(figsize=(PIXELS / DPI, PIXELS / DPI), dpi=DPI)
-    ax = fig.add_axes([0, 0, 1, 1])
+    ax = fig.add_axes((0, 0, 1, 1))
     ax.axis('off')
     shown = ax.imshow(np.asarray(frames[0]))
     writer = animation.FFMpegWriter(fps=fps)

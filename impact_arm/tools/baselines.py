@@ -9,6 +9,8 @@ two differ only in how they step and locate events.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -38,6 +40,17 @@ def _armed_slots(integ: PhaseIntegrator):
     return [n_surf + layout.EV_SEP]
 
 
+_Event = TypeVar('_Event', bound=Callable[..., Any])
+
+
+def _terminal_rising(event: _Event) -> _Event:
+    """Mark ``event`` for solve_ivp as stopping the integration at a rising zero crossing:
+    solve_ivp reads these two attributes of the function itself."""
+    event.terminal = True  # type: ignore[attr-defined]  # solve_ivp's event attributes
+    event.direction = 1.0  # type: ignore[attr-defined]
+    return event
+
+
 def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, contact_rtol=None):
     """Run ``scene`` for its cycles with solve_ivp; returns (impacts, t_end, nfev, wall).
     ``contact_rtol`` (default rtol) is the tolerance of contact phases, as in PhaseIntegrator;
@@ -63,9 +76,7 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
             eq.event_values(y, P, I, surf, st.c, st.levels, g)
             return g[slot]
 
-        event.terminal = True
-        event.direction = 1.0
-        return event
+        return _terminal_rising(event)
 
     L = model.geometry
     heights = [s.height for s in model.surfaces]
@@ -75,9 +86,7 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
         def event(t, y):
             return eq.tip(y[: model.n], y[model.n : 2 * model.n], L)[1] - heights[s]
 
-        event.terminal = True
-        event.direction = 1.0
-        return event
+        return _terminal_rising(event)
 
     while st.t < t_max and (not scene.cycles or cycles < scene.cycles):
         slots = _armed_slots(integ)

@@ -17,7 +17,7 @@ import time
 import warnings
 
 STARTED = time.perf_counter()  # this module's import: the fallback for the command's start
-NOTICE = []  # the command's CompileNotice (how long it compiled)
+NOTICE: list[CompileNotice] = []  # the command's CompileNotice (how long it compiled)
 
 # (the clock above starts before the package's own imports: they count in the command's time)
 from ..contract import INTEGRATOR_PRESETS  # noqa: E402

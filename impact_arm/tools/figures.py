@@ -364,8 +364,10 @@ def _by_phase(ax, tus, y, phase, scale=1.0, x=None, legend=True, last_is_end=Tru
             label=name if legend else None,
         )
     switches = np.nonzero(np.diff(phase) != 0)[0]
-    ends = np.concatenate([[0], switches] + ([[len(phase) - 1]] if last_is_end else []))
-    ends = ends.astype(int)
+    ends_parts = [np.asarray([0]), switches]
+    if last_is_end:
+        ends_parts.append(np.asarray([len(phase) - 1]))
+    ends = np.concatenate(ends_parts).astype(int)
     ax.plot(
         x[ends],
         y[ends] * scale,
@@ -569,8 +571,8 @@ def fig_force_indentation(impact, constants, out, elastic=None):
                 ms=5,
                 label='1.9 δc (Hertz → Jackson–Green)' if a is ax else None,
             )
-    curves = {1: (elastic.delta * 1e6, elastic.force)} if elastic is not None else None
-    _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta, curves=curves)
+    elastic_curves = {1: (elastic.delta * 1e6, elastic.force)} if elastic is not None else None
+    _by_phase(ax, delta, col['F_n'], col['phase'], 1e-3, x=delta, curves=elastic_curves)
     _by_phase(
         inset,
         delta,
@@ -580,7 +582,7 @@ def fig_force_indentation(impact, constants, out, elastic=None):
         x=delta,
         legend=False,
         last_is_end=False,
-        curves=curves,
+        curves=elastic_curves,
     )
     ax.set_xlabel('indentation δ [µm]')
     ax.set_ylabel('normal force F_n [kN]')

@@ -19,9 +19,11 @@ def cli(args) -> int:
     from ..physics.scene import load_scene, resolve_scene_path
 
     module = ArmModel(load_scene(resolve_scene_path(args.scene))).eq
+    path = module.__file__
+    assert path is not None, 'a kernel is loaded from the file it is generated into'
     if args.path:
-        print(module.__file__)
+        print(path)
         return 0
-    with open(module.__file__, encoding='utf-8') as f:
+    with open(path, encoding='utf-8') as f:
         sys.stdout.write(f.read())
     return 0

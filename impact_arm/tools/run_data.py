@@ -9,11 +9,15 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..contract import IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, to_absolute
 from ..physics.errors import ImpactArmError
+
+if TYPE_CHECKING:
+    from ..physics.scene import Scene
 
 
 class AnalysisError(ImpactArmError):
@@ -30,12 +34,13 @@ class Run:
     qd: np.ndarray  # (N, n) absolute link rates
     impacts: list = field(default_factory=list)
     traces: list = field(default_factory=list)  # [(columns, (rows, cols) array)]
-    scene: object = None
+    scene: Scene | None = None
     metadata: dict = field(default_factory=dict)
     law: str = ''
     topics: tuple = ()  # the topics the file holds (with or without messages)
     effort: np.ndarray | None = None  # (N, n) the joint states' efforts [N m]; None: not all
     joint_names: tuple = ()  # of the first joint state
+    target: np.ndarray | None = None  # a step response's target link angles [rad]
 
 
 def _quiet(text):
@@ -75,7 +80,8 @@ def load(path, progress=_quiet) -> Run:
         raise AnalysisError(f'{path}: no /joint_states recorded (topics: {sorted(info)})')
     total = sum(i.message_count for i in info.values()) or 1
     progress(f'reading {path} ({total} messages)')
-    t, pos, vel, impacts, traces, effort = [], [], [], [], [], []
+    t, pos, vel, impacts, effort = [], [], [], [], []
+    traces: list[tuple[list, np.ndarray]] = []  # (columns, (rows, cols) array)
     names: tuple = ()
     scene = _scene(metadata)
     # the wire holds the robot's joint angles; the analysis the model's absolute ones

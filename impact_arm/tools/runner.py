@@ -513,6 +513,7 @@ class Run:
         """One spin of the run's node; KeyboardInterrupt once the CLI was interrupted."""
         import rclpy
 
+        assert self.node is not None, 'start() makes the node before any wait'
         rclpy.spin_once(self.node, timeout_sec=timeout)
         if self.interrupted.is_set():
             raise KeyboardInterrupt
@@ -594,7 +595,9 @@ class Run:
         impacts in one recording); paused, the simulator holds the state."""
         from std_srvs.srv import SetBool
 
-        client = self.node.create_client(SetBool, '/simulator/pause')
+        node = self.node
+        assert node is not None, 'start() makes the node before the run can complete'
+        client = node.create_client(SetBool, '/simulator/pause')
         try:
             if not client.wait_for_service(timeout_sec=timeout):
                 return
@@ -603,7 +606,7 @@ class Run:
             while not future.done() and time.monotonic() < end:
                 self._spin_once(0.05)
         finally:
-            self.node.destroy_client(client)
+            node.destroy_client(client)
 
     def _progress(self, cycles):
         """One refreshed line on a terminal; otherwise a line per impact (logs stay short)."""

@@ -51,13 +51,16 @@ def surfaces_out_of_reach(scene) -> tuple:
     )
 
 
-def step_metrics(run: Run, band_deg: float = 0.1) -> dict:
+def step_metrics(run: Run, band_deg: float = 0.1) -> list[dict[str, float]]:
     """Per link, in degrees and seconds: the overshoot past the target (0 if none), the error
     at the end, and the time after which the angle stays within ``band_deg`` of the target
     (NaN if it never does)."""
+    target = run.target
+    if target is None:
+        raise AnalysisError(f'{run.label}: not a step response (no target)')
     out = []
-    for k in range(len(run.target)):
-        e = np.degrees(run.q[:, k] - run.target[k])
+    for k in range(len(target)):
+        e = np.degrees(run.q[:, k] - target[k])
         direction = np.sign(e[0])
         overshoot = max(0.0, float(-np.min(e * direction)))
         outside = np.nonzero(np.abs(e) > band_deg)[0]

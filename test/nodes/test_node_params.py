@@ -1,12 +1,13 @@
 """The nodes' parameter tables, without DDS: one joint check for every node, joint names and
 their number from the scene, and the shipped parameter files valid for any arm."""
 
+import dataclasses
 import os
 
 import pytest
 import yaml
 
-from impact_arm.nodes import controller_params, simulator_params
+from impact_arm.nodes import controller_params, param_types, simulator_params
 from impact_arm.nodes.params import ParameterError, check_joints, scene_joint_names
 from impact_arm.physics.scene import parse_scene
 from ros_helpers import ROOT
@@ -16,6 +17,10 @@ SCENES = {2: scene_from(), 3: parse_scene(arm_dict(3)), 4: parse_scene(arm_dict(
 SCENE_TABLES = {
     'simulator': simulator_params.parameter_table,
     'controller': controller_params.parameter_table,
+}
+SCENE_CLASSES = {
+    'simulator': param_types.SimulatorParameters,
+    'controller': param_types.ControllerParameters,
 }
 
 
@@ -81,6 +86,29 @@ def test_docs_parameter_tables_are_generated_from_the_nodes_tables():
     from impact_arm.nodes import param_docs
 
     assert param_docs.main(['--check']) == 0
+
+
+def test_parameter_classes_are_generated_from_the_nodes_tables():
+    """param_types.py is what the generator makes of the tables as they are now (regenerate
+    with python -m impact_arm.nodes.param_docs)."""
+    from impact_arm.nodes import param_docs
+
+    with open(param_docs.TYPES_MODULE, encoding='utf-8') as f:
+        assert f.read() == param_docs.types_module()
+
+
+@pytest.mark.parametrize('n', sorted(SCENES))
+@pytest.mark.parametrize('node', sorted(SCENE_TABLES))
+def test_parameter_classes_fit_the_table_of_any_scene(node, n):
+    """The classes are static: a scene-dependent table has their fields, in their order, for
+    an arm of any number of links, and its defaults fill them."""
+    table = SCENE_TABLES[node](SCENES[n])
+    cls = SCENE_CLASSES[node]
+    assert [p.name for p in table] == [f.name for f in dataclasses.fields(cls)]
+    values = cls(**{p.name: p.check(p.default) for p in table})
+    reordered = values.replace(joints=values.joints[::-1])
+    assert check_joints(reordered.joints, values.joints) == list(range(n))[::-1]
+    assert dataclasses.replace(reordered, joints=values.joints) == values
 
 
 def test_every_node_declares_its_parameters_through_one_table():

@@ -264,6 +264,22 @@ def test_impact_reports_are_read_as_dds_sends_them():
             read(garbage)
 
 
+def test_an_impact_report_nothing_needs_read_is_stored_unread():
+    """log_time reception and no scene: neither the log time nor a 3D view needs a report's
+    content, so the recorder builds no reader for it and stores each report as it came,
+    without reading it (reading it then raised TypeError and ended the recording)."""
+    from types import SimpleNamespace
+
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from impact_arm.nodes.recorder import Recorder
+
+    no_reader = SimpleNamespace(_read_string=None)
+    raw = serialize_message(String(data=json.dumps({'t_contact': 0.1, 'duration': 1e-4})))
+    assert Recorder._report(no_reader, raw) is None
+
+
 def test_says_recording_once_every_topic_has_a_publisher(ros_env, tmp_path):
     """A subscription is not a matched reader. The recorder names the topics
     without a publisher after its grace period, logs each topic as its reader matches one,

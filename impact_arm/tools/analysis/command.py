@@ -138,7 +138,7 @@ def cli(args) -> int:
         missing.append(
             f'Figure 3 not drawn: {args.file} stores no scene to simulate the step responses of'
         )
-    elif laws:
+    elif laws and run.scene is not None:
         if args.laws is None and not any(run.scene.controller.ki):
             # the default asks for every law the scene can run; asked for by name, pid is refused
             laws = [law for law in laws if law != 'pid']

@@ -53,9 +53,9 @@ def limit_cycle(impacts) -> dict:
 
 def impact_table(impacts) -> str:
     """The impact rows exactly as ``impact-arm simulate`` prints them."""
-    from ...physics.simulate import RunResult, format_table
+    from ...physics.simulate import impact_rows
 
-    return format_table(RunResult(scene=None, impacts=impacts)).split('\n\n')[0]
+    return impact_rows(impacts)
 
 
 def tip_velocity(run: Run) -> np.ndarray | None:
@@ -63,7 +63,7 @@ def tip_velocity(run: Run) -> np.ndarray | None:
     scene (absolute angles from the x axis: v = Σ L_i q̇_i (−sin q_i, cos q_i)), or None."""
     if run.scene is None or len(run.scene.lengths) != run.q.shape[1]:
         return None
-    L = np.asarray(run.scene.lengths, float)
+    L = np.asarray(run.scene.lengths, dtype=np.float64)
     if run.scene.general_links:  # the tip B off the last link's end: its point's velocity
         along, across = run.scene.contact_point
         q, w = run.q[:, -1], run.qd[:, -1]

@@ -96,7 +96,7 @@ def execute(
     done = 0
     pending, pending_runs, last_flush = [], 0, time.perf_counter()
     failed, first_result, after_first = 0, None, 0
-    errors = {}  # distinct error -> runs that failed with it
+    errors: dict[str, int] = {}  # distinct error -> runs that failed with it
     try:
         for tables in results:
             pending.append(tables)
@@ -132,7 +132,11 @@ def execute(
         'errors': errors,
         'wall': end - wall0,
         'startup': (first_result or end) - wall0,
-        'rate': after_first / (end - first_result) if after_first else math.nan,
+        'rate': (
+            after_first / (end - first_result)
+            if after_first and first_result is not None
+            else math.nan
+        ),
     }
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 
 from ...physics.errors import ImpactArmError
 from ...calibration.study import parse_key_path
@@ -109,7 +110,7 @@ def plot(
                 f'table; columns: {", ".join(names)}'
             )
     data = rows.to_pydict()
-    keep = range(rows.num_rows)
+    keep: Sequence[int] = range(rows.num_rows)
     if table == 'runs':
         keep = [i for i in keep if not data['error'][i]]
     else:
@@ -149,7 +150,8 @@ def plot(
 def _spread(xs):
     """x values with repeated ones offset by up to ±1 % of the x range (or of the value),
     evenly, so that points stacked on one grid node show as a short row."""
-    counts, seen = {}, {}
+    counts: dict[object, int] = {}
+    seen: dict[object, int] = {}
     for v in xs:
         counts[v] = counts.get(v, 0) + 1
     finite = [v for v in xs if isinstance(v, (int, float)) and math.isfinite(v)]

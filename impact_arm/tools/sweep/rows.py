@@ -59,7 +59,7 @@ def _impacts_table(tables: dict):
     return parts[0] if parts else None
 
 
-_STUDIES = {}  # spec hash -> Study, kept by each worker process between chunks
+_STUDIES: dict[str, Study] = {}  # spec hash -> Study, kept by each worker process between chunks
 
 
 def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, items: list):
@@ -70,7 +70,8 @@ def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, ite
     study = _STUDIES.get(spec_hash)
     if study is None:
         study = _STUDIES[spec_hash] = Study(scene_data, fixed)
-    runs, impacts = [], {}
+    runs: list[dict] = []
+    impacts: dict = {}  # layout -> {column: values} (_add_impacts)
     for index, overrides in items:
         result = study.run(overrides)
         columns = {'run': index, **{k: column_value(v) for k, v in overrides.items()}}

@@ -63,7 +63,7 @@ class ResultStore:
         folder = os.path.join(self.out, table)
         return sorted(n for n in os.listdir(folder) if n.endswith('.parquet'))
 
-    def write(self, tables: dict):
+    def write(self, tables: list[dict]):
         import pyarrow as pa
         import pyarrow.parquet as pq
 
