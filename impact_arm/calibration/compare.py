@@ -23,7 +23,7 @@ COLUMNS = ('t', 'impact_speed', 'cor', 'impulse_n', 'impulse_t', 'qd_after')
 
 
 def recorded_impacts(
-    rec: JointRecording, study: Study, timing: str | None = None
+    rec: JointRecording, study: Study
 ) -> tuple[list[dict], list[tuple[Any, Any]], Any]:
     """Rows of the impacts of a recording; the scene gives the kinematics and the free flight
     that carries the first sample after an impact back to its separation (for the CoR).

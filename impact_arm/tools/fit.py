@@ -114,7 +114,8 @@ def fit_recording(
         for line in diagnosis.lines():
             say(line)
         result = fit(rec, scene, params, options=options, progress=progress)
-        if corrections is not None and corrections.effort_latency and result.timing == 'controller':
+        reads_no_effort = not result.timing.reads_efforts
+        if corrections is not None and corrections.effort_latency and reads_no_effort:
             # the option was applied, but this reading replays no recorded effort
             result.warnings.append(
                 f'--effort-latency {corrections.effort_latency:g} moved the efforts, but the fit '

@@ -18,6 +18,7 @@ from impact_arm.calibration.diagnose import (
     diagnose,
     stamp_jitter,
 )
+from impact_arm.calibration.fit import EffortTiming
 from impact_arm.calibration.study import Study
 from impact_arm.physics.model import ArmModel
 from impact_arm.io.synthetic import driver_recording, synthetic_recording
@@ -425,7 +426,7 @@ def test_a_known_effort_latency_changes_the_fit_of_the_real_arm_example(tmp_path
     assert corrected.fits, corrected.verdict
     lo, hi = corrected.parameters['surfaces[0].mu'].ci95
     assert lo < 0.2 < hi
-    assert corrected.timing == 'controller'
+    assert corrected.timing is EffortTiming.CONTROLLER
     assert any(w.startswith('--effort-latency 0.002 moved the efforts') for w in corrected.warnings)
 
 
@@ -442,7 +443,7 @@ def difference_rates_fit(sensors):
     scene = apply_overrides(Study('paper').data, sampled)
     bounds = {'surfaces[0].mu': (0.05, 1.0), 'materials.steel.S_y': (2e8, 5e9)}
     result = fit(correct(rec, Corrections(difference_rates=True)), scene, bounds)
-    assert result.timing == 'previous'
+    assert result.timing is EffortTiming.PREVIOUS
     assert result.fits, result.verdict
     for key, value in TRUTH.items():
         lo, hi = result.parameters[key].ci95

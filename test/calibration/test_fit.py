@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from impact_arm.physics.errors import ImpactArmError
-from impact_arm.calibration.fit import FitError, fit
+from impact_arm.calibration.fit import EffortTiming, FitError, fit
 from impact_arm.calibration.identify import IdentifyError, JointRecording, LocalFit, find_impacts
 from impact_arm.io.recording import RecordingInputError, read_recording
 from impact_arm.io.synthetic import synthetic_recording, write_rosbag2
@@ -39,6 +39,14 @@ def recording(truth, seed, cycles=6, **kw):
 
 def relative_errors(result, truth):
     return {k: abs(result.parameters[k].value / v - 1) for k, v in truth.items()}
+
+
+def test_the_reading_of_the_efforts_is_written_as_its_text():
+    """fit.json and report.md name the reading as they did before it was a member."""
+    assert json.dumps({'effort_timing': EffortTiming.PREVIOUS}) == '{"effort_timing": "previous"}'
+    assert f'Effort timing used between samples: {EffortTiming.CONTROLLER}.'.endswith('controller.')
+    assert not EffortTiming.CONTROLLER.reads_efforts
+    assert all(t.reads_efforts for t in (EffortTiming.LINEAR, EffortTiming.PREVIOUS))
 
 
 @pytest.mark.parametrize('seed', [11, 12])
@@ -408,7 +416,7 @@ def test_fit_a_driver_recording_of_another_material_and_posture():
     rec = driver_recording('paper', {**variant, **truth}, cycles=6, seed=71)
     scene = apply_overrides(Study('paper').data, variant)
     result = fit(rec, scene, {'materials.steel.S_y': (5e7, 2e9), 'surfaces[0].mu': (0.05, 1.0)})
-    assert result.timing == 'previous'
+    assert result.timing is EffortTiming.PREVIOUS
     assert result.fits, result.verdict
     for key, err in relative_errors(result, truth).items():
         assert err < 0.05, (key, result.parameters[key], truth[key])
@@ -735,7 +743,7 @@ def test_the_reading_of_the_efforts_is_not_lost_to_one_impact_that_meets_the_sur
     rec = driver_recording('paper', {**truth, 'controller.rate': 1000.0}, cycles=6, seed=3)
     scene = apply_overrides(Study('paper').data, {'controller.rate': 1000.0})
     result = fit(rec, scene, BOUNDS)
-    assert result.timing == 'previous'
+    assert result.timing is EffortTiming.PREVIOUS
     assert result.fits, result.verdict
     for key, value in truth.items():
         lo, hi = result.parameters[key].ci95
@@ -939,7 +947,7 @@ def test_an_effort_latency_is_fitted_with_its_interval():
     assert 'sensors.effort_latency' in fixed.verdict
     freed = fit(rec, sampled_scene(), BOUNDS | {'sensors.effort_latency': (0.0, 0.005)})
     assert freed.fits, freed.verdict
-    assert freed.timing == 'previous'
+    assert freed.timing is EffortTiming.PREVIOUS
     for key, value in (truth | {'sensors.effort_latency': 0.002}).items():
         p = freed.parameters[key]
         assert p.identifiable and p.ci95[0] < value < p.ci95[1], (key, p.ci95, value)
@@ -1032,7 +1040,7 @@ def test_an_effort_latency_the_scenes_own_controller_replays_is_said_not_to_ente
     noise = {'position': 2e-5, 'velocity': 2e-3, 'effort': 0.05, 'wrench': 2.0}
     rec = recording({**truth, 'sensors.effort_latency': 0.002}, 3, noise=noise)
     result = fit(rec, 'paper', BOUNDS | {'sensors.effort_latency': (0.0, 0.005)})
-    assert result.timing == 'controller'
+    assert result.timing is EffortTiming.CONTROLLER
     assert result.fits, result.verdict
     assert not result.parameters['sensors.effort_latency'].identifiable
     assert any('sensors.effort_latency does not enter the replay' in x for x in result.notes)

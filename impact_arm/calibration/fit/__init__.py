@@ -6,7 +6,7 @@ recorded efforts acted between samples) -> problem (the impacts as whitened resi
 search (global stage, trust-region refinement) -> report (covariance, intervals, verdict).
 """
 
-from .efforts import EFFORT_TIMINGS, TorqueSchedule, effort_timing
+from .efforts import EFFORT_TIMINGS, EffortTiming, TorqueSchedule, effort_timing
 from .parameters import FitError, Parameter, parameter_specs, state_fit_keys
 from .problem import FitOptions, ImpactSet, RecordedImpacts, contact_test, prepare, read_impacts
 from .replay import FailureKind, Prediction, predict_impact, recorded_cor
@@ -15,6 +15,7 @@ from .search import fit
 
 __all__ = [
     'EFFORT_TIMINGS',
+    'EffortTiming',
     'FailureKind',
     'FitError',
     'FitOptions',

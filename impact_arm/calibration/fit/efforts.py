@@ -12,11 +12,30 @@ import numpy as np
 
 from ...physics.errors import SimulationError
 from ...physics.integrator import PhaseIntegrator
+from ...physics.kinds import TextEnum
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix
 
 
-EFFORT_TIMINGS = ('linear', 'previous', 'next')
+class EffortTiming(TextEnum):
+    """How the torque acted between the samples of the recorded efforts (``TorqueSchedule``
+    reads them; ``effort_timing`` chooses one; ``effort_timing`` in fit.json names it)."""
+
+    LINEAR = 'linear'  # the effort at a stamp is the torque at that instant
+    PREVIOUS = 'previous'  # the command held over the period that ends at the stamp
+    NEXT = 'next'  # the command held from the stamp to the next one
+    # no recorded effort read: the scene's own continuous controller recomputes the torque
+    CONTROLLER = 'controller'
+
+    @property
+    def reads_efforts(self) -> bool:
+        """Whether the torque is the recorded efforts, held piecewise between their renewals,
+        rather than the scene's controller integrated continuously."""
+        return self is not EffortTiming.CONTROLLER
+
+
+# the readings of the recorded efforts, in the order the first of equal errors is chosen
+EFFORT_TIMINGS = (EffortTiming.LINEAR, EffortTiming.PREVIOUS, EffortTiming.NEXT)
 SUBSTEPS = 8  # torque pieces per sample period (linear timing)
 
 
@@ -114,7 +133,7 @@ class TorqueSchedule:
     def __init__(
         self,
         win: ImpactWindow,
-        timing: str,
+        timing: EffortTiming,
         latency: float = 0.0,
         contact_command: np.ndarray | None = None,
     ):
@@ -139,7 +158,7 @@ class TorqueSchedule:
         # which the contact begins, recomputed, in place of the one before it.
         for k in range(2, ib):
             if off[k]:
-                if timing != 'previous':
+                if timing is not EffortTiming.PREVIOUS:
                     self.tau[k] = self.tau[ib]
                 elif k == 2 and contact_command is not None:
                     self.tau[k] = contact_command
@@ -148,9 +167,9 @@ class TorqueSchedule:
 
     def __call__(self, t0: float, t1: float, side: str) -> np.ndarray:
         t, tau, mid, last = self.t, self.tau, 0.5 * (t0 + t1), len(self.t) - 1
-        if self.timing == 'previous':
+        if self.timing is EffortTiming.PREVIOUS:
             return tau[min(max(int(np.searchsorted(t, mid, side='left')), 2), last)]
-        if self.timing == 'next':
+        if self.timing is EffortTiming.NEXT:
             return tau[min(max(int(np.searchsorted(t, mid, side='right')) - 1, 1), last)]
         if side == 'pre':
             i, j = 0, 1
@@ -167,7 +186,7 @@ class TorqueSchedule:
         """Times where the held torque is renewed: every sample, and SUBSTEPS per period for
         'linear'."""
         grid: list | np.ndarray = [x for x in self.t if t_from < x < t_to]
-        if self.timing == 'linear':
+        if self.timing is EffortTiming.LINEAR:
             edges = np.concatenate([[t_from], grid, [t_to]])
             grid = np.concatenate(
                 [np.linspace(lo, hi, SUBSTEPS + 1)[1:-1] for lo, hi in itertools.pairwise(edges)]
@@ -177,7 +196,7 @@ class TorqueSchedule:
 
 
 def free_flight_error(
-    model: ArmModel, win: ImpactWindow, timing: str, shift: float | None = None
+    model: ArmModel, win: ImpactWindow, timing: EffortTiming, shift: float | None = None
 ) -> float:
     """Squared error of one-period predictions between the compared post-impact samples,
     from the recorded state, under ``timing``: how well that reading of the efforts explains
@@ -195,7 +214,7 @@ def free_flight_error(
         state = model.initial_state()
         state.t = win.post_t[k]
         state.y[:n], state.y[n : 2 * n] = T @ q_post[k], T @ win.post_qd[k]
-        held = timing != 'controller'
+        held = timing.reads_efforts
         state.mode = 'up'  # after an impact the scene's controller lifts the arm
         integ = PhaseIntegrator(
             model, state, control='held' if held else 'continuous', preset='balanced'
@@ -216,7 +235,7 @@ def free_flight_error(
 
 
 def _mean_rate_change_error(
-    model: ArmModel, win: ImpactWindow, torque: TorqueSchedule, timing: str, period: float
+    model: ArmModel, win: ImpactWindow, torque: TorqueSchedule, timing: EffortTiming, period: float
 ) -> float:
     """``free_flight_error`` for rates that are period means: from the first compared sample
     after the impact, with the rate there that reproduces the recorded mean over the first
@@ -228,7 +247,7 @@ def _mean_rate_change_error(
     n = model.n
     T = joint_to_absolute_matrix(n)
     q0, qd0, _ = win.post.state(t[0])
-    held = timing != 'controller'
+    held = timing.reads_efforts
 
     def flight(qd: np.ndarray, until: int) -> list[np.ndarray] | None:
         state = model.initial_state()
@@ -267,8 +286,8 @@ def effort_timing(
     model: ArmModel,
     windows: Sequence[ImpactWindow],
     shift: float | None = None,
-    readings: Sequence[str] | None = None,
-) -> tuple[str, dict[str, float]]:
+    readings: Sequence[EffortTiming] | None = None,
+) -> tuple[EffortTiming, dict[EffortTiming, float]]:
     """The reading of the efforts that best predicts the free motion after the impacts, and
     the error of each: the three readings of the recorded efforts, and the scene's own
     controller when it is a continuous state feedback (a stiff controller changes its torque
@@ -276,7 +295,7 @@ def effort_timing(
     timings = list(readings or EFFORT_TIMINGS)
     ctrl = model.scene.controller
     if readings is None and ctrl.rate == 0 and ctrl.law in ('q', 'pd') and model.n_integral == 0:
-        timings.append('controller')
+        timings.append(EffortTiming.CONTROLLER)
     each = {t: [free_flight_error(model, w, t, shift) for w in windows] for t in timings}
     # an impact after which one reading's flight meets the surface again (inf) says nothing
     # of the readings: compared over the impacts every reading flies through (all of them
@@ -288,7 +307,7 @@ def effort_timing(
 
 # readings in the order a tie is resolved: 'previous' at a latency is 'next' one period
 # later, and 'previous' is the convention of the simulated driver (and of many real ones)
-TIE_ORDER = ('previous', 'next', 'linear')
+TIE_ORDER = (EffortTiming.PREVIOUS, EffortTiming.NEXT, EffortTiming.LINEAR)
 
 
 def effort_timing_and_latency(
@@ -297,7 +316,7 @@ def effort_timing_and_latency(
     state_latency: float,
     bounds: tuple[float, float],
     period: float,
-) -> tuple[str, float, dict[str, float]]:
+) -> tuple[EffortTiming, float, dict[EffortTiming, float]]:
     """For a fitted effort latency: the reading of the recorded efforts and the latency within
     ``bounds`` [s] that together best predict the free motion after the impacts (a grid of
     half periods; the scene's own controller is no candidate, it reads no effort). A reading
@@ -306,7 +325,7 @@ def effort_timing_and_latency(
     the error of each reading at its best latency)."""
     lo, hi = bounds
     grid = np.unique(np.concatenate([np.arange(lo, hi + 1e-12, 0.5 * period), [lo, hi]]))
-    best: dict[str, tuple[float, float]] = {}
+    best: dict[EffortTiming, tuple[float, float]] = {}
     for latency in grid:
         _, errors = effort_timing(model, windows, float(latency) - state_latency, EFFORT_TIMINGS)
         for reading, err in errors.items():

@@ -22,15 +22,14 @@ from ...physics.errors import SimulationError
 from ...physics.integrator import PhaseIntegrator
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix
-from .efforts import SUBSTEPS, effort_shift
+from .efforts import SUBSTEPS, EffortTiming, effort_shift
 from .replay import window_options
 
 NEWTON_STEPS = 3  # the flight over the window is nearly linear in its initial state
-HELD_READINGS = ('previous', 'next', 'linear')
 
 
 def _torque_pieces(
-    win: ImpactWindow, timing: str, t: np.ndarray, shift: float
+    win: ImpactWindow, timing: EffortTiming, t: np.ndarray, shift: float
 ) -> list[tuple[float, np.ndarray]]:
     """(end, torque) of each piece of held torque from t[0] to t[-1] under ``timing``: the
     effort of the period's end ('previous') or start ('next'), or the efforts interpolated
@@ -44,9 +43,9 @@ def _torque_pieces(
 
     pieces: list[tuple[float, np.ndarray]] = []
     for t0, t1 in zip(t[:-1], t[1:]):
-        if timing == 'previous':
+        if timing is EffortTiming.PREVIOUS:
             pieces.append((float(t1), effort(float(t1))))
-        elif timing == 'next':
+        elif timing is EffortTiming.NEXT:
             pieces.append((float(t1), effort(float(t0))))
         else:
             edges = np.linspace(t0, t1, SUBSTEPS + 1)
@@ -86,14 +85,14 @@ def _flight(
 
 
 def shot_start(
-    model: ArmModel, win: ImpactWindow, timing: str
+    model: ArmModel, win: ImpactWindow, timing: EffortTiming
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(q, q̇, cov) at the last sample before the impact (joint space; cov over [q, q̇]) from
     the model's flight through the positions before it under the recorded efforts read as
     ``timing``; None when it cannot be made (no recorded positions kept, a reading that
     reads no effort, a flight that meets a surface), the cubic then stands."""
     samples = getattr(win, 'pre_samples', None)
-    if samples is None or timing not in HELD_READINGS:
+    if samples is None or not timing.reads_efforts:
         return None
     t, q, sigma_q = samples
     n = model.n

@@ -24,7 +24,13 @@ from ..identify import (
     impact_windows,
 )
 from ..study import Study
-from .efforts import controller_reproduces, effort_timing, effort_timing_and_latency, wrench_shift
+from .efforts import (
+    EffortTiming,
+    controller_reproduces,
+    effort_timing,
+    effort_timing_and_latency,
+    wrench_shift,
+)
 from .parameters import FitError
 from .prestate import shot_start
 from .replay import FailureKind, Prediction, failed, predict_impact
@@ -77,7 +83,7 @@ class ImpactSet:
         self.use_wrench = use_wrench and any(w.impulse is not None for w in windows)
         self.evaluations = 0  # replays of every impact (a point asked for again is not)
         self._replayed: dict = {}  # (values, moved keys, reading) -> (windows, predictions)
-        self.timing = 'linear'
+        self.timing = EffortTiming.LINEAR  # until select chooses the reading
         self.timing_misfit: float | None = None  # set by select
         self.penalty = PENALTY
 
@@ -162,7 +168,7 @@ class ImpactSet:
                 model, self.windows, model.scene.sensors.state_latency, (spec.lo, spec.hi), period
             )
             own, own_errors = effort_timing(model, self.windows)
-            if own == 'controller' and own_errors[own] < errors[reading]:
+            if own is EffortTiming.CONTROLLER and own_errors[own] < errors[reading]:
                 # a stiff continuous controller the replay recomputes beats every reading of
                 # the recorded efforts at every latency: their latency does not enter it
                 self.timing, self.timing_errors = own, own_errors
@@ -189,7 +195,7 @@ class ImpactSet:
         expected = sum(len(w.post_t) - 1 for w in self.windows) * 2 * float(np.sum(sigma_qd**2))
         self.timing_misfit = (
             self.timing_errors[self.timing] / expected
-            if self.timing != 'controller' and expected > 0
+            if self.timing.reads_efforts and expected > 0
             else None
         )
         for w in self.windows:
@@ -201,7 +207,7 @@ class ImpactSet:
                 )
                 continue
             ib = getattr(w, 'effort_ib', 2)
-            if self.timing == 'next' and any(w.effort_off[k] for k in range(2, ib)):
+            if self.timing is EffortTiming.NEXT and any(w.effort_off[k] for k in range(2, ib)):
                 notes.append(
                     f'impact at t = {w.t_c:.4f} s left out: a sample taken during '
                     f'the contact shows no torque, so the command held after the '
@@ -355,7 +361,7 @@ class RecordedImpacts:
     the efforts are read between samples, the sensor noise and what was noted on the way."""
 
     windows: list[ImpactWindow]
-    timing: str
+    timing: EffortTiming
     noise: Noise
     notes: list[str]
 

@@ -17,7 +17,13 @@ from ...physics.integrator import IntegratorOptions
 from ...physics.model import ArmModel
 from ...physics.replay import Replay, ReplayStart, start_replay
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
-from .efforts import TorqueSchedule, contact_period_command, effort_shift, wrench_shift
+from .efforts import (
+    EffortTiming,
+    TorqueSchedule,
+    contact_period_command,
+    effort_shift,
+    wrench_shift,
+)
 
 FIT_RTOL = 1e-8  # loosest tolerance a replay may use (finite-difference Jacobians)
 # A sample this many rate standard deviations short of the model's separation is in the contact
@@ -67,7 +73,7 @@ class Prediction:
 def predict_impact(
     model: ArmModel,
     win: ImpactWindow,
-    timing: str = 'linear',
+    timing: EffortTiming = EffortTiming.LINEAR,
     pre_state: tuple[np.ndarray, np.ndarray] | None = None,
     dense: Sequence[float] | None = None,
 ) -> Prediction:
@@ -93,7 +99,7 @@ def predict_impact(
     ringing = win.plate is not None and len(win.plate) == 2 * model.n_mount
     # the scene's controller, if used, is approaching the surface
     start = ReplayStart(t0, T @ q, T @ qd, mode='down', plates=win.plate if ringing else None)
-    held = timing != 'controller'
+    held = timing.reads_efforts
     replay = Replay(model, start, window_options(model), control='held' if held else 'continuous')
     integ = replay.integrator
     torque = TorqueSchedule(win, timing, effort_shift(model), contact_period_command(model, win))
@@ -241,12 +247,12 @@ def _position_at(
 
 
 def free_flight(
-    model: ArmModel, win: ImpactWindow, timing: str, t0: float, y0: np.ndarray, t1: float
+    model: ArmModel, win: ImpactWindow, timing: EffortTiming, t0: float, y0: np.ndarray, t1: float
 ) -> np.ndarray | None:
     """Joint rates at ``t1`` after free flight from absolute state ``y0`` at ``t0`` under
     the torque ``timing`` uses after the impact (None if a contact intervenes)."""
     n = model.n
-    held = timing != 'controller'
+    held = timing.reads_efforts
     integ = start_replay(
         model,
         ReplayStart(t0, y0[:n], y0[n : 2 * n], mode='up'),
@@ -267,7 +273,7 @@ def free_flight(
 
 
 def recorded_separation_rates(
-    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: str
+    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: EffortTiming
 ) -> np.ndarray | None:
     """The joint rates at the predicted separation that carry the model's free flight onto
     the recorded first sample after the impact (Newton step through the flight's
@@ -293,7 +299,7 @@ def recorded_separation_rates(
 
 
 def recorded_cor(
-    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: str, v_in: float
+    model: ArmModel, win: ImpactWindow, pred: Prediction, timing: EffortTiming, v_in: float
 ) -> float:
     n = model.n
     qd = recorded_separation_rates(model, win, pred, timing)

@@ -12,6 +12,7 @@ from ...physics.model import ArmModel
 from ..identify import JointRecording, joint_to_absolute_matrix, tip_normal_speed
 from ..identify import Noise
 from .dependence import Dependence, dependences, one_impact
+from .efforts import EffortTiming
 from .outliers import Outlier
 from .parameters import Parameter
 from .physical import out_of_range
@@ -93,7 +94,8 @@ class FitResult:
     start_predictions: list = field(default_factory=list, repr=False)
     recording: JointRecording | None = field(default=None, repr=False)
     scene_path: str = ''
-    timing: str = ''  # how the efforts were read between samples
+    # how the efforts were read between samples (the fit always states it: ImpactSet.timing)
+    timing: EffortTiming = EffortTiming.LINEAR
     model: ArmModel | None = field(default=None, repr=False)  # the fitted scene's model
     verdict_kind: Verdict = Verdict.FITS
     output_tests: list[OutputTest] = field(default_factory=list)  # per output over the impacts
