@@ -3,6 +3,9 @@ a recorder process over DDS (this machine only), then count what reached the fil
 
     .venv/bin/python bench/recorder_throughput.py [--rate 10000] [--seconds 4]
 
+with impact_arm importable (installed, or PYTHONPATH naming the clone); the recorder it starts
+inherits the environment.
+
 Prints the achieved publish rate, messages recorded and drops (published - recorded).
 Not a test: numbers depend on the machine (two cores share publisher, DDS and recorder).
 """
@@ -17,9 +20,6 @@ import sys
 import tempfile
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -29,7 +29,6 @@ def main():
     a = ap.parse_args()
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
-    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get('PYTHONPATH', ''))
     tmp = tempfile.mkdtemp(prefix='recbench-')
     out = a.output or os.path.join(tmp, 'bench.mcap')
 
@@ -49,7 +48,6 @@ def main():
             '-p',
             'param_nodes:=[""]',
         ],
-        env=env,
         stdout=subprocess.DEVNULL,
         stderr=open(os.path.join(tmp, 'rec.err'), 'w'),
     )

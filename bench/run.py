@@ -2,12 +2,10 @@
 """`python bench/run.py speed [options]` is `impact-arm bench speed [options]` (docs/benchmarks.md):
 the benchmarks of bench/impact_arm_bench, run from a clone of the repository."""
 
-import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-from impact_arm_bench import main  # noqa: E402
+# Python puts this script's folder, bench/, first on the path: impact_arm_bench is found there
+from impact_arm_bench import main
 
 if __name__ == '__main__':
     sys.exit(main(sys.argv[1:]))

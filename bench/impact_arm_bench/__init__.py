@@ -6,27 +6,17 @@ are not tests: they time things and print ratios; tests never assert wall-clock 
 sub-command is a module with ``add_arguments(parser)`` and ``run(args) -> int``;
 ``SUBCOMMANDS`` maps its name to (module path, one-line help): to add one, write the module
 here and add its line. Modules import their heavy dependencies inside ``run`` (so ``bench
-speed`` never loads rclpy). The hostile-input generators they share with the tests are in
-test/support/generators.py: importing this package puts test/support (and bench/, for the worker
-processes the benchmarks start) on the path.
+speed`` never loads rclpy). The hostile-input generators the stress benchmarks share with
+the tests are ``generators`` here (the tests import this package). Importing the package
+changes no path: a worker process that imports it is given this folder where it is started
+(``common.worker_environment``).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
-
-_BENCH = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-_TESTS = os.path.join(os.path.dirname(_BENCH), 'test', 'support')
-for _folder in (_TESTS, _BENCH):
-    if _folder not in sys.path:
-        sys.path.insert(0, _folder)
-# worker processes (fuzz, flood, transport floor) import these modules too
-os.environ['PYTHONPATH'] = os.pathsep.join(
-    [_BENCH, _TESTS] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]
-)
 
 SUBCOMMANDS = {
     'speed': ('impact_arm_bench.speed', 'offline speed at equal accuracy vs scipy solve_ivp'),

@@ -69,7 +69,7 @@ def add_arguments(parser):
 
 
 def _child(n, cache):
-    env = dict(os.environ, IMPACT_ARM_CACHE=cache)
+    env = common.worker_environment(dict(os.environ, IMPACT_ARM_CACHE=cache))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     done = subprocess.run(

@@ -16,6 +16,9 @@ from impact_arm.tools.progress import Progress
 
 LEVELS_DOC = 'relative error vs the reference preset'
 
+# the folder holding this package: it is not installed, so a worker process is told where it is
+BENCH_FOLDER = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 
 _status = []  # the benchmark's status line, made on first use (stderr as it is then)
 
@@ -33,6 +36,15 @@ def progress_done() -> None:
     """Erase the status line before the results are printed."""
     if _status:
         _status.pop().end()
+
+
+def worker_environment(env: dict | None = None) -> dict:
+    """``env`` (default: this process's environment) with the benchmarks' folder first on
+    PYTHONPATH, for a worker process that imports impact_arm_bench."""
+    env = dict(os.environ if env is None else env)
+    others = [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p and p != BENCH_FOLDER]
+    env['PYTHONPATH'] = os.pathsep.join([BENCH_FOLDER, *others])
+    return env
 
 
 def load(scene_name: str):

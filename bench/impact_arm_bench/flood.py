@@ -26,7 +26,8 @@ import sys
 import tempfile
 import time
 
-from generators import malformed_commands  # test/support/generators.py (on the path: __init__)
+from .common import worker_environment
+from .generators import malformed_commands
 
 BURST_PERIOD = 0.005  # s between two bursts of a flooder
 PAYLOADS = 4000  # distinct garbage payloads a flooder cycles through
@@ -184,7 +185,7 @@ def measure(args, env, logdir) -> dict:
                         str(k),
                         go,
                     ],
-                    env=env,
+                    env=worker_environment(env),
                     stdout=subprocess.PIPE,
                     stderr=subprocess.DEVNULL,
                     text=True,

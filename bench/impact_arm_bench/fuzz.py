@@ -30,7 +30,7 @@ import time
 import traceback
 
 from . import common
-from generators import mutate  # test/support/generators.py (on the path: __init__)
+from .generators import mutate
 
 CLASSES = ('accepted-finite', 'refused', 'stopped-at-limit', 'traceback', 'hang', 'non-finite')
 GOOD = CLASSES[:3]
@@ -134,6 +134,7 @@ class Worker:
     def __init__(self):
         self.proc = subprocess.Popen(
             [sys.executable, '-c', 'from impact_arm_bench.fuzz import worker; worker()'],
+            env=common.worker_environment(),
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,

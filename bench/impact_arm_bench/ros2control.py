@@ -32,7 +32,7 @@ import subprocess
 import sys
 import tempfile
 
-from .common import cpu_seconds
+from .common import BENCH_FOLDER, cpu_seconds
 
 
 def add_arguments(parser):
@@ -168,7 +168,17 @@ def _identical(runs) -> bool:
     return len({repr(key(r)) for r in runs}) == 1
 
 
+def _reach_the_stand_in_stack() -> None:
+    """Put test/support on the path: the stand-in stack this benchmark drives is the tests'
+    (standin_stack, ros_helpers), one run shared with test/nodes/test_topic_hardware.py, and no
+    other benchmark needs that folder."""
+    support = os.path.join(os.path.dirname(BENCH_FOLDER), 'test', 'support')
+    if support not in sys.path:
+        sys.path.insert(0, support)
+
+
 def run(args) -> int:
+    _reach_the_stand_in_stack()
     from standin_stack import CYCLES, ROLES
 
     order = [r.strip() for r in args.order.split(',')]

@@ -21,6 +21,8 @@ import time
 from impact_arm import contract
 from impact_arm.contract import CLOCK, COMMANDS, CONTACT_WRENCH, JOINT_STATES, joint_names
 
+from .common import worker_environment
+
 WARM_UP = 200
 
 
@@ -123,7 +125,7 @@ def _driver(periods, clock):
 
 def measure(periods=3000, clock=True, env=None) -> float:
     """Mean period [s] of the bare exchange, both sides in their own processes."""
-    env = dict(env or os.environ)
+    env = worker_environment(env)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     module = [sys.executable, '-m', __name__]
     controller = subprocess.Popen(

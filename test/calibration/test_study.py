@@ -16,7 +16,7 @@ from impact_arm.physics.scene import parse_scene
 from impact_arm.physics.simulate import run as run_scene
 from impact_arm.calibration.study import Study, apply_overrides, parse_key_path
 
-from generators import key_paths
+from impact_arm_bench.generators import key_paths
 from scenes import paper_dict, scene_from
 
 pa = pytest.importorskip('pyarrow')

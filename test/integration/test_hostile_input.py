@@ -19,7 +19,7 @@ from impact_arm.io.wire import (
     joint_state_fields,
     wrench_stamped_fields,
 )
-from generators import key_paths
+from impact_arm_bench.generators import key_paths
 
 from scenes import PAPER, paper_dict
 

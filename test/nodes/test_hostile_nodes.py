@@ -23,7 +23,7 @@ from ros_helpers import (
     wait_for,
 )
 
-from generators import malformed_commands
+from impact_arm_bench.generators import malformed_commands
 from repo_paths import CONFIG
 
 

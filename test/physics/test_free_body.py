@@ -22,7 +22,7 @@ from impact_arm.physics.layout import ELASTIC, FREE, RESTITUTION
 from impact_arm.physics.scene import Material
 from impact_arm.physics.sphere_drop import drop
 
-from generators import key_paths
+from impact_arm_bench.generators import key_paths
 from repo_paths import REPO_ROOT
 
 SIDE = 0.06

@@ -1,6 +1,6 @@
-"""Generators of hostile input, shared by the tests and the stress benchmarks (bench/
-impact_arm_bench puts this folder on its path): mutated scene files (``mutate``, ``key_paths``)
-and malformed command payloads (``malformed_commands``). Seeded: the same generator gives the
+"""Generators of hostile input, shared by the stress benchmarks and the tests (which import
+impact_arm_bench: test/conftest.py): mutated scene files (``mutate``, ``key_paths``) and
+malformed command payloads (``malformed_commands``). Seeded: the same generator gives the
 same inputs, so a failure found once can be replayed."""
 
 from __future__ import annotations
