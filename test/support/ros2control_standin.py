@@ -39,11 +39,11 @@ period)``): an update runs at time 0 (no /clock yet), then each time /clock reac
 previous update's time + 1/``--rate``; the broadcaster's states and the commands are stamped
 with that time. Its read waits (at most ``--wait-for-peers`` wall seconds, default 1 here) for
 the hardware's state stamped with the update's time: /clock and the states are different
-topics, and the real TopicBasedSystem takes the newest state it has, which may be the
-previous period's (a period of variation the stand-in does not show). Its effort controller,
-when the state it broadcast has moved (an answer is due), waits (as long) for the controller's
-answer to it before it takes the newest command: the controller as if it ran inside the update,
-as gz_ros2_control's and mujoco_ros2_control's controllers do; the real
+topics, and the real TopicBasedSystem takes one state per read, the oldest it has queued,
+which may be the previous period's (a period of variation the stand-in does not show). Its
+effort controller, when the state it broadcast has moved (an answer is due), waits (as long)
+for the controller's answer to it before it takes the newest command: the controller as if it
+ran inside the update, as gz_ros2_control's and mujoco_ros2_control's controllers do; the real
 JointGroupEffortController takes what has arrived. Waits that ran out are counted in the JSON
 lines ("late_states", of which "late_driven" once a torque was written, and "unanswered").
 Written ``--late`` updates late (default 1): a command
