@@ -13,7 +13,10 @@ simulated time, the largest penetration δm, the controller's measured latency h
 implicit commands, the simulator's overruns and skipped periods, the stand-in's stale updates,
 and CPU per process (user + system over the driven part of the run). Processes run on a free
 local DDS domain (localhost discovery) and are ended by PID. ``--threads``: CPU per thread
-too (user + system from /proc/PID/task/*/stat, by thread name).
+too (user + system from /proc/PID/task/*/stat, by thread name). ``--standin-threads-model
+stack``: the stand-in with the real stack's threads (an executor thread for the commands, the
+update thread on its schedule reading one state per update as TopicBasedSystem does, the
+broadcaster's publishing thread; test/support/ros2control_standin.py) instead of its one loop.
 
 ``--sim-time X``: docs/ros2_control.md's reproducible set-up on simulated time instead (the
 stand-in updating on /clock, the simulator in lockstep braked until X s, the controller with
@@ -75,6 +78,30 @@ def add_arguments(parser):
         'priority)',
     )
     parser.add_argument(
+        '--standin-threads-model',
+        choices=('loop', 'stack'),
+        default='loop',
+        help="the stand-in's threads: loop (default: one loop takes its samples and "
+        "publishes, commands written one update late) or stack (the real stack's: an "
+        'executor thread for the commands, the update thread on its schedule, the '
+        "broadcaster's publishing thread; commands written in the update)",
+    )
+    parser.add_argument(
+        '--standin-state-reader',
+        choices=('spin-some', 'executor'),
+        default='spin-some',
+        help='with --standin-threads-model stack: the states taken one per read in the '
+        "update (TopicBasedSystem's spin_some, default) or by the executor, newest wins",
+    )
+    parser.add_argument(
+        '--standin-reception-stall',
+        type=float,
+        default=0.0,
+        metavar='S',
+        help='with --standin-threads-model stack: S s of reads that take nothing from the '
+        "simulator's first state on (a discovery stall of the stack's reception; default 0)",
+    )
+    parser.add_argument(
         '--standin',
         metavar='FILE',
         help="another stand-in program with the same options (default: the tests' one)",
@@ -110,7 +137,21 @@ def _one_run(args, order, workdir):
         timeout=args.timeout,
         standin=args.standin,
         standin_priority=args.standin_priority,
-        standin_args=('--fifo-threads', args.standin_fifo_threads),
+        standin_args=(
+            '--fifo-threads',
+            args.standin_fifo_threads,
+            *(
+                (
+                    '--state-reader',
+                    args.standin_state_reader,
+                    '--reception-stall',
+                    repr(args.standin_reception_stall),
+                )
+                if args.standin_threads_model == 'stack'
+                else ()
+            ),
+        ),
+        standin_threads_model=args.standin_threads_model,
         controller_params=args.controller_params,
         simulator_params=args.simulator_params,
         cpu_seconds=lambda pid: cpu_seconds(f'/proc/{pid}/stat'),

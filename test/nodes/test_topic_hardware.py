@@ -269,6 +269,28 @@ def test_the_standin_stack_in_real_time_runs_the_15_cycles_in_any_start_order(
     # simulated-time test above counts the zeros.)
 
 
+def test_the_standin_with_the_real_stacks_threads_runs_the_15_cycles(
+    ros_env, tmp_path, offline_start
+):
+    """The realtime set-up with the stand-in's threads as the real stack's (an executor
+    thread taking the commands into a realtime buffer, the update thread alone under
+    SCHED_FIFO reading one state per update as TopicBasedSystem does, the broadcaster's
+    publishing thread skipping while busy), stand-in first: judged as the one-loop stand-in
+    above."""
+    from standin_stack import run_stack
+
+    run = run_stack(
+        ('standin', 'simulator', 'controller'),
+        ros_env,
+        str(tmp_path),
+        timeout=60.0,
+        standin_args=('--fifo-threads', 'update'),
+        standin_threads_model='stack',
+    )
+    judge_realtime_stack(run, offline_start)
+    assert run.ctrl['driver_answered'] in ('effort', 'motion'), run.ctrl
+
+
 def test_the_standin_stack_in_real_time_drives_a_urdf_arm(ros_env, tmp_path):
     """The same set-up with the example's URDF arm (three joints named by its URDF, general
     links, joint friction, a mounted plate): the stand-in drives its joints, and the

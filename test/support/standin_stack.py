@@ -190,9 +190,12 @@ def commands(
     standin_args=(),
     sim_time: float | None = None,
     simulator_params=(),
+    standin_threads_model: str = 'loop',
 ) -> dict:
     """Each role's command line; ``scene``: a scene file for the simulator and the
-    controller (default: the article's), whose joints the stand-in then drives."""
+    controller (default: the article's), whose joints the stand-in then drives;
+    ``standin_threads_model``: the stand-in's ``--threads-model`` (loop: its one loop,
+    commands written one update late; stack: the real stack's threads, written at once)."""
     from impact_arm.nodes.params import scene_joint_names
     from impact_arm.physics.scene import load_scene
 
@@ -214,8 +217,14 @@ def commands(
             standin or os.path.join(HERE, 'ros2control_standin.py'),
             '--rate',
             '1000',
+            # (the option only when not the default: another stand-in may not know it)
+            *(
+                ['--threads-model', standin_threads_model]
+                if standin_threads_model != 'loop'
+                else []
+            ),
             '--late',
-            '1',
+            '0' if standin_threads_model == 'stack' else '1',
             '--duration',
             str(duration),
             '--priority',
@@ -247,13 +256,15 @@ def run_stack(
     cycles: int = CYCLES,
     thread_cpu: Callable[[int], dict[str, float]] | None = None,
     simulator_params=(),
+    standin_threads_model: str = 'loop',
 ) -> StackRun:
     """One run in ``order`` (a permutation of ROLES) on ``env``'s DDS domain, of the
     article's arm or ``scene``'s; every process is ended by PID on the way out. With
     ``cpu_seconds`` (a process's CPU time by PID), the CPU each process used while the
     controller drove the arm, and with ``thread_cpu`` (a process's CPU time by thread name)
     each thread's. ``sim_time``: the reproducible set-up on simulated time (``commands``);
-    ``cycles``: the run ends after cycles + 1 impacts."""
+    ``cycles``: the run ends after cycles + 1 impacts; ``standin_threads_model``: as
+    ``commands``'."""
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
 
@@ -276,6 +287,7 @@ def run_stack(
         standin_args,
         sim_time,
         simulator_params,
+        standin_threads_model,
     )
     procs = {}
     try:
