@@ -136,13 +136,14 @@ def test_run_in_which_a_node_failed_is_not_complete_and_exits_non_zero(ros_env, 
 def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
     """The runner's end of a run: cycles are the controller's strikes, not impact reports (an
     arm that bounces reports several per cycle), and the strike's own report must be in."""
+    from impact_arm.contract import SimulatorMode
     from impact_arm.tools.runner import Run
 
     def report(t):
         return {'t_contact': t, 'duration': 1e-4}
 
     run = Run.__new__(Run)  # the counting alone: no processes, no DDS
-    run.args, run.scene = SimpleNamespace(mode='realtime'), SimpleNamespace(cycles=2)
+    run.mode, run.scene = SimulatorMode.REALTIME, SimpleNamespace(cycles=2)
     run.strikes, run.down_half_start, run.cycles_completed = 0, {}, 0
     # cycle 1: the strike's impact and two bounces while the arm goes up again
     run.impacts = [report(0.211), report(0.213), report(0.216)]
@@ -155,7 +156,7 @@ def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
     run.impacts.append(report(0.619))
     assert run._struck(2)
     # lockstep: the recording ends where the controller stopped, at the scene's count
-    run.args.mode = 'lockstep'
+    run.mode = SimulatorMode.LOCKSTEP
     assert not run._struck(2)
     run.cycles_completed = 2
     assert run._struck(2)
