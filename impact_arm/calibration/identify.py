@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..physics.errors import ImpactArmError
+from ..physics.kinds import ImpactSide
 
 if TYPE_CHECKING:
     from ..physics.model import ArmModel
@@ -171,7 +172,7 @@ def _no_series() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.empty(0), np.empty((0, 0)), np.empty(0)
 
 
-def _not_widened(side: str) -> ImpactWindow | None:
+def _not_widened(side: ImpactSide) -> ImpactWindow | None:
     return None
 
 
@@ -216,8 +217,9 @@ class ImpactWindow:
     effort_off: list[bool] = field(default_factory=list)
     # the whole series (t, efforts, noise), for a replay that reads them by a fitted latency
     effort_source: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=_no_series)
-    # the window one sample wider on a side ('pre' or 'post'), or None where it cannot be
-    widened: Callable[[str], ImpactWindow | None] = _not_widened
+    # the window one sample wider on a side (before or after the impact), or None where it
+    # cannot be
+    widened: Callable[[ImpactSide], ImpactWindow | None] = _not_widened
     # (t, positions, noise) before the impact: a start state shot through the model's flight
     pre_samples: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=_no_series)
     # (t, positions, rates) before the impact as recorded: what a sampled controller saw
@@ -501,8 +503,8 @@ def make_window(
     _add_impulse(rec, noise, win, wrench_lag)
     win.plate = _plate_at(rec, rec.t[a])
 
-    def widened(side: str) -> ImpactWindow | None:
-        a2, b2 = (a - 1, b) if side == 'pre' else (a, b + 1)
+    def widened(side: ImpactSide) -> ImpactWindow | None:
+        a2, b2 = (a - 1, b) if side is ImpactSide.BEFORE else (a, b + 1)
         return make_window(
             rec, noise, a2, b2, lo, hi, window, min_samples, max_gap, post_samples, wrench_lag
         )[0]

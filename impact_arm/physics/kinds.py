@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from ..contract import TextEnum
 
-__all__ = ['TextEnum', 'EventKind']
+__all__ = ['TextEnum', 'EventKind', 'ImpactSide']
 
 
 class EventKind(TextEnum):
@@ -17,3 +17,13 @@ class EventKind(TextEnum):
     MAX_COMPRESSION = 'max_compression'  # compression -> restitution
     SEPARATION = 'separation'  # the tip leaves the surface
     SWITCH = 'switch'  # the controller's down/up switch
+
+
+class ImpactSide(TextEnum):
+    """Where a replayed or recorded impact stands: the free flight before it, the contact, or
+    the free flight after a separation (the torque read for a step, the side a window of
+    samples grows on)."""
+
+    BEFORE = 'pre'
+    CONTACT = 'contact'
+    AFTER = 'post'

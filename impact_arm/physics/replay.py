@@ -22,7 +22,7 @@ import numpy as np
 from .contact import hertz_force
 from .errors import ContactStateError
 from .integrator import Event, IntegratorOptions, PhaseIntegrator
-from .kinds import EventKind
+from .kinds import EventKind, ImpactSide
 from .metrics import ImpactBuilder
 from .model import ArmModel
 
@@ -97,7 +97,7 @@ def start_replay(
 class Replay:
     """One impact's replay in progress: its integrator and the contacts it has crossed
     (how many, the first contact, the last separation, and on which side of the impact the
-    arm is: 'pre' before any contact, 'contact', or 'post' after a separation)."""
+    arm is: ``ImpactSide``)."""
 
     def __init__(
         self,
@@ -113,7 +113,7 @@ class Replay:
         self.contacts = 0
         self.first: Event | None = None
         self.last: Event | None = None
-        self.side = 'pre'
+        self.side = ImpactSide.BEFORE
 
     def advance(self, t_end: float, stop_at: bool | Iterable[str]) -> list[Event]:
         """Integrate to ``t_end`` or to the first event of a kind in ``stop_at``
@@ -123,9 +123,9 @@ class Replay:
             if event.kind == EventKind.CONTACT:
                 self.contacts += 1
                 self.first = self.first or event
-                self.side = 'contact'
+                self.side = ImpactSide.CONTACT
             elif event.kind == EventKind.SEPARATION:
-                self.last, self.side = event, 'post'
+                self.last, self.side = event, ImpactSide.AFTER
         return events
 
 

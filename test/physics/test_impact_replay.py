@@ -19,6 +19,7 @@ from impact_arm.physics.contact import (
     jackson_green_force,
     restitution_radius,
 )
+from impact_arm.physics.kinds import ImpactSide
 from impact_arm.physics.integrator import IntegratorOptions
 from impact_arm.physics.kinds import EventKind
 from impact_arm.physics.model import ArmModel
@@ -211,11 +212,11 @@ def test_a_replay_ended_at_yield_and_the_fits_stepping_replay_see_the_runs_phase
         record['phase_durations'][0], rel=1e-9
     )
     stepping = Replay(model, start, options)
-    assert stepping.side == 'pre'
+    assert stepping.side is ImpactSide.BEFORE
     t_after = record['t_contact'] + 2 * record['duration']
     while stepping.integrator.state.t < t_after:
         stepping.advance(t_after, stop_at=('contact', 'separation'))
-    assert stepping.contacts == 1 and stepping.side == 'post'
+    assert stepping.contacts == 1 and stepping.side is ImpactSide.AFTER
     assert stepping.first is not None and stepping.last is not None
     assert abs(stepping.first.t - record['t_contact']) < 1e-14
     assert abs(stepping.last.t - record['t_contact'] - record['duration']) < 1e-13

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...physics.errors import SimulationError
 from ...physics.integrator import PhaseIntegrator
-from ...physics.kinds import TextEnum
+from ...physics.kinds import ImpactSide, TextEnum
 from ...physics.model import ArmModel
 from ..identify import ImpactWindow, joint_to_absolute_matrix
 
@@ -165,13 +165,13 @@ class TorqueSchedule:
                 else:
                     self.tau[k] = self.tau[1]
 
-    def __call__(self, t0: float, t1: float, side: str) -> np.ndarray:
+    def __call__(self, t0: float, t1: float, side: ImpactSide) -> np.ndarray:
         t, tau, mid, last = self.t, self.tau, 0.5 * (t0 + t1), len(self.t) - 1
         if self.timing is EffortTiming.PREVIOUS:
             return tau[min(max(int(np.searchsorted(t, mid, side='left')), 2), last)]
         if self.timing is EffortTiming.NEXT:
             return tau[min(max(int(np.searchsorted(t, mid, side='right')) - 1, 1), last)]
-        if side == 'pre':
+        if side is ImpactSide.BEFORE:
             i, j = 0, 1
         elif mid < t[self.ib]:
             i, j = self.ib, self.ib + 1
@@ -222,7 +222,7 @@ def free_flight_error(
         try:
             for edge in torque.boundaries(win.post_t[k], win.post_t[k + 1]):
                 if held:
-                    integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+                    integ.set_held_torque(torque(integ.state.t, edge, ImpactSide.AFTER))
                 integ.advance(edge)
         except SimulationError:
             return math.inf
@@ -262,7 +262,7 @@ def _mean_rate_change_error(
             for k in range(1, until + 1):
                 for edge in torque.boundaries(t[k - 1], t[k]):
                     if held:
-                        integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+                        integ.set_held_torque(torque(integ.state.t, edge, ImpactSide.AFTER))
                     integ.advance(edge)
                 q.append(np.linalg.solve(T, integ.state.y[:n]))
         except SimulationError:

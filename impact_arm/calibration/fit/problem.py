@@ -13,6 +13,7 @@ import numpy as np
 
 from ...physics.model import ArmModel
 from ...physics.errors import SceneError
+from ...physics.kinds import ImpactSide
 from ..identify import (
     IdentifyError,
     ImpactWindow,
@@ -232,9 +233,10 @@ class ImpactSet:
         after it (a long contact can span several samples): that sample leaves the free
         flight, as long as the model says so."""
         for _ in range(6):
-            side = {FailureKind.SURFACE_ABOVE_TIP: 'pre', FailureKind.CONTACT_OUTLASTS: 'post'}.get(
-                base.failure, ''
-            )
+            side = {
+                FailureKind.SURFACE_ABOVE_TIP: ImpactSide.BEFORE,
+                FailureKind.CONTACT_OUTLASTS: ImpactSide.AFTER,
+            }.get(base.failure)
             wider = w.widened(side) if side and getattr(w, 'widened', None) else None
             if wider is None:
                 break

@@ -14,6 +14,7 @@ import numpy as np
 
 from ...physics.errors import SimulationError
 from ...physics.integrator import IntegratorOptions
+from ...physics.kinds import ImpactSide
 from ...physics.model import ArmModel
 from ...physics.replay import Replay, ReplayStart, start_replay
 from ..identify import ImpactWindow, joint_to_absolute_matrix, tip_normal_speed
@@ -130,7 +131,13 @@ def predict_impact(
             while integ.state.t < edge:
                 if held:  # (ignored by the kernel while actuators are off in contact)
                     integ.set_held_torque(
-                        torque(integ.state.t, edge, 'pre' if replay.side == 'pre' else 'post')
+                        torque(
+                            integ.state.t,
+                            edge,
+                            ImpactSide.BEFORE
+                            if replay.side is ImpactSide.BEFORE
+                            else ImpactSide.AFTER,
+                        )
                     )
                 replay.advance(edge, stop_at=('contact', 'separation'))
             if period is not None:
@@ -142,7 +149,7 @@ def predict_impact(
                     [integ.state.t, *np.linalg.solve(T, integ.state.y[n : 2 * n]), *impulse]
                 )
             if targets and abs(edge - targets[0]) < 1e-12:
-                if replay.side == 'contact':
+                if replay.side is ImpactSide.CONTACT:
                     # a contact ending just after the sample in the model, just before it in
                     # the recording (the start state is uncertain by microseconds): let it
                     # end within a tenth of a period and compare there, unless what is left
@@ -154,7 +161,7 @@ def predict_impact(
                     if (
                         first_contact
                         and replay.last is not None
-                        and replay.side == 'post'
+                        and replay.side is ImpactSide.AFTER
                         and win.rate_sigma is not None
                     ):
                         rest = np.linalg.solve(T, replay.last.y[n : 2 * n]) - at_sample
@@ -166,8 +173,8 @@ def predict_impact(
                                 f'the first sample after the impact is taken in the contact '
                                 f'(the rest of it changes the rates by {sigmas:.3g} σ)',
                             )
-                if replay.side == 'pre' or replay.last is None:
-                    if replay.side == 'pre':
+                if replay.side is ImpactSide.BEFORE or replay.last is None:
+                    if replay.side is ImpactSide.BEFORE:
                         return failed(
                             n,
                             FailureKind.NO_CONTACT,
@@ -263,7 +270,7 @@ def free_flight(
     try:
         for edge in torque.boundaries(t0, t1):
             if held:
-                integ.set_held_torque(torque(integ.state.t, edge, 'post'))
+                integ.set_held_torque(torque(integ.state.t, edge, ImpactSide.AFTER))
             integ.advance(edge)
     except SimulationError:
         return None
