@@ -497,24 +497,28 @@ def test_controller_with_trigger_timer_drives_a_standin_driver(ros_env, tmp_path
 
 
 # ------------------------------------------------------------------------------ runner
-def freeze_recorder(domain, seconds):
-    """SIGSTOP the run's recorder for ``seconds``, as a recorder starved by a busy machine."""
+def freeze_node(domain, module, seconds):
+    """SIGSTOP the run's node ``module`` (e.g. 'nodes.recorder') for ``seconds``, as a process
+    starved by a busy machine."""
     from pathlib import Path
 
-    recorder = [
+    pids = [
         int(pid)
         for pid in node_processes(domain)
-        if b'nodes.recorder' in Path(f'/proc/{pid}/cmdline').read_bytes()
+        if module.encode() in Path(f'/proc/{pid}/cmdline').read_bytes()
     ]
-    assert len(recorder) == 1, recorder
-    os.kill(recorder[0], signal.SIGSTOP)
+    assert len(pids) == 1, pids
+    os.kill(pids[0], signal.SIGSTOP)
     time.sleep(seconds)
-    os.kill(recorder[0], signal.SIGCONT)
+    os.kill(pids[0], signal.SIGCONT)
 
 
-def run_with_frozen_recorder(argv, env, tmp_path, ready_line, after=0.0, seconds=3.0):
-    """``impact-arm run ARGV`` whose recorder is frozen for ``seconds`` once its log says
-    ``ready_line`` (and ``after`` more seconds); returns (process, output, whether it froze)."""
+def run_with_frozen_node(
+    argv, env, tmp_path, ready_line, after=0.0, seconds=3.0, node='nodes.recorder'
+):
+    """``impact-arm run ARGV`` whose recorder (or ``node``) is frozen for ``seconds`` once the
+    recorder's log says ``ready_line`` (and ``after`` more seconds); returns (process,
+    output, whether it froze)."""
     recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
     run = subprocess.Popen(
         [PYTHON, '-m', 'impact_arm.tools.cli', 'run', *argv, '--out', str(tmp_path / 'runs')],
@@ -536,7 +540,7 @@ def run_with_frozen_recorder(argv, env, tmp_path, ready_line, after=0.0, seconds
         time.sleep(after)
         froze = run.poll() is None
         if froze:
-            freeze_recorder(env['ROS_DOMAIN_ID'], seconds)
+            freeze_node(env['ROS_DOMAIN_ID'], node, seconds)
         out, _ = run.communicate(timeout=300)
     finally:
         if run.poll() is None:
@@ -558,7 +562,7 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     from impact_arm.nodes.recorder import FLOWING_LINE
 
     env = dict(ros_env)
-    run, out, froze = run_with_frozen_recorder(
+    run, out, froze = run_with_frozen_node(
         ['--mode', 'lockstep', '--name', 'r'], env, tmp_path, f'{FLOWING_LINE} {contract.COMMANDS}'
     )
     assert run.returncode == 0, out
@@ -611,21 +615,6 @@ def test_run_command_records_and_leaves_nothing_behind(ros_env, tmp_path):
     assert not node_processes(env['ROS_DOMAIN_ID'])
 
 
-def freeze_node(domain, module, seconds):
-    """SIGSTOP the run's node ``module`` (e.g. 'nodes.controller') for ``seconds``."""
-    from pathlib import Path
-
-    pids = [
-        int(pid)
-        for pid in node_processes(domain)
-        if module.encode() in Path(f'/proc/{pid}/cmdline').read_bytes()
-    ]
-    assert len(pids) == 1, pids
-    os.kill(pids[0], signal.SIGSTOP)
-    time.sleep(seconds)
-    os.kill(pids[0], signal.SIGCONT)
-
-
 def test_a_stalled_controller_is_named_in_the_run_summary(ros_env, tmp_path):
     """Commands stalled for 0.5 s in the middle of a realtime run (the controller frozen
     with SIGSTOP, as a starved process): the simulator's watchdog brakes the arm, the run
@@ -633,51 +622,22 @@ def test_a_stalled_controller_is_named_in_the_run_summary(ros_env, tmp_path):
     arm was braked and for how long no command came."""
     from pathlib import Path
 
+    from impact_arm.nodes.recorder import FLOWING_LINE
+
     env = dict(ros_env)
     scene = tmp_path / 'short.yaml'
     scene.write_text(
         Path(resolve_scene_path('paper')).read_text().replace('cycles: 15', 'cycles: 5')
     )
-    recorder_log = tmp_path / 'runs' / 'logs' / 'recorder.log'
-    run = subprocess.Popen(
-        [
-            PYTHON,
-            '-m',
-            'impact_arm.tools.cli',
-            'run',
-            '--mode',
-            'realtime',
-            '--scene',
-            str(scene),
-            '--name',
-            'stall',
-            '--out',
-            str(tmp_path / 'runs'),
-        ],
-        env=env,
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
+    run, out, froze = run_with_frozen_node(
+        ['--mode', 'realtime', '--scene', str(scene), '--name', 'stall'],
+        env,
+        tmp_path,
+        f'{FLOWING_LINE} {contract.COMMANDS}',
+        after=1.0,  # into the second cycle
+        seconds=0.5,
+        node='nodes.controller',
     )
-    try:
-
-        def driven():
-            try:
-                return f'first samples on {contract.COMMANDS}' in recorder_log.read_text()
-            except OSError:
-                return False
-
-        wait_for(lambda: driven() or run.poll() is not None, timeout=240)
-        time.sleep(1.0)  # into the second cycle
-        froze = run.poll() is None
-        if froze:
-            freeze_node(env['ROS_DOMAIN_ID'], 'nodes.controller', 0.5)
-        out, _ = run.communicate(timeout=300)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait()
     assert froze, out
     assert run.returncode == 0, out
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
@@ -712,7 +672,7 @@ def test_realtime_run_counts_what_a_frozen_recorder_lost(ros_env, tmp_path, froz
     scene.write_text(
         Path(resolve_scene_path('paper')).read_text().replace('cycles: 15', 'cycles: 12')
     )
-    run, out, froze = run_with_frozen_recorder(
+    run, out, froze = run_with_frozen_node(
         ['--mode', 'realtime', '--scene', str(scene), '--name', 'rt'],
         env,
         tmp_path,
