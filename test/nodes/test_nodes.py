@@ -648,8 +648,10 @@ def test_a_stalled_controller_is_named_in_the_run_summary(ros_env, tmp_path):
     assert len(strikes) == 5, out
     watchdog = [line for line in out.splitlines() if line.startswith('WATCHDOG:')]
     assert len(watchdog) == 1, out
+    # at least the freeze (the controller's last command came before it): a lower bound the
+    # SIGSTOP guarantees, no wall-clock figure of the machine
     silence = float(re.search(r'longest silence ([\d.]+) ms', watchdog[0]).group(1))
-    assert 400.0 < silence < 2000.0, watchdog[0]
+    assert silence >= 450.0, watchdog[0]
     assert 'the brakes held the joints' in watchdog[0]
 
 
