@@ -641,11 +641,13 @@ def test_a_stalled_controller_is_named_in_the_run_summary(ros_env, tmp_path):
     assert froze, out
     assert run.returncode == 0, out
     rows = [line for line in out.splitlines() if re.match(r'\s*\d+\s+\d+\.\d{5}\s', line)]
-    # no cycle lost: five strikes, each more than 50 ms after the one before (a strike may be
-    # followed by a second contact within milliseconds: not a cycle of its own)
+    # no cycle lost: at least five strikes, each more than 50 ms after the one before (a
+    # strike may be followed by a second contact within milliseconds: not a cycle of its
+    # own). A stall in a down half can add one: the brake (200 N m) does not stop the swing
+    # and the arm strikes with no controller, a 42 kN impact in one run: reported, not hidden
     times = [float(row.split()[1]) for row in rows]
     strikes = [t for k, t in enumerate(times) if k == 0 or t - times[k - 1] > 0.05]
-    assert len(strikes) == 5, out
+    assert len(strikes) >= 5, out
     watchdog = [line for line in out.splitlines() if line.startswith('WATCHDOG:')]
     assert len(watchdog) == 1, out
     # at least the freeze (the controller's last command came before it): a lower bound the
