@@ -99,6 +99,7 @@ class ControlInputs:
         latency_periods: int = 0,
         wrench_tolerance: float = math.inf,
         implicit_periods: int = 0,
+        anticipate_impacts: bool = True,
         coordinates: JointCoordinates | None = None,
         effort_limits: Sequence[float] = (),
     ):
@@ -175,6 +176,9 @@ class ControlInputs:
         if implicit_periods < 0:
             raise ValueError(f'implicit_periods = {implicit_periods}: must be >= 0')
         self.implicit_periods = implicit_periods
+        # an impact between the sample and the state a command meets: the command is the up
+        # half's, on the state with the tip stopped (CycleController.anticipate_impact)
+        self.anticipate_impacts = anticipate_impacts
         self.recent_latency: deque[int] = deque(maxlen=max(1, round(rate * LATENCY_WINDOW_S)))
         self.latency_counts: Counter[int] = Counter()  # of recent_latency's values
         self.implicit_commands = 0  # commands computed so
@@ -397,6 +401,11 @@ class ControlInputs:
             ):  # (also false for NaN)
                 sensed, (q, qd) = (q, qd), (q_ahead, qd_ahead)
                 t += len(ahead) * self.period
+                if self.anticipate_impacts:
+                    # a period of lead: the latency measured may be a period long
+                    q, qd = self.ctrl.anticipate_impact(
+                        q, qd, sensed, self.normal_force, lead=self.period
+                    )
             else:  # the model's free motion left any arm's range: act on the sample itself
                 self.drop(
                     'unsafe_predictions',

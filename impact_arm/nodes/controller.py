@@ -176,6 +176,7 @@ class Controller(Node):
             latency_periods=p.latency_periods,
             wrench_tolerance=p.wrench_tolerance,
             implicit_periods=p.implicit_periods,
+            anticipate_impacts=p.anticipate_impacts,
             coordinates=self.coordinates,
             effort_limits=scene.effort_limits,
         )

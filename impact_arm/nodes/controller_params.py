@@ -195,6 +195,18 @@ def parameter_table(scene: Scene) -> tuple[Param, ...]:
             read_only=True,
         ),
         Param(
+            'anticipate_impacts',
+            True,
+            'with prediction (latency_periods not 0): when the predicted state has the tip '
+            "in the surface, the command is the up half's, computed on that state with the "
+            "tip's approach stopped (a plastic impulse at the tip), as a sample in contact "
+            'would show it; false: the cycle switches only when a sample shows the impact, '
+            'and the commands in flight push the tip into the surface meanwhile (the cycle '
+            'then lengthens with the latency)',
+            'bool',
+            read_only=True,
+        ),
+        Param(
             'implicit_periods',
             1,
             'periods of its own command the law looks ahead when the measured latency '

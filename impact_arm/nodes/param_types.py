@@ -75,6 +75,7 @@ class ControllerParameters:
     force_threshold: float
     reversal_band: float
     latency_periods: int
+    anticipate_impacts: bool
     implicit_periods: int
     wrench_tolerance: float
     joints: list[str]

@@ -178,6 +178,9 @@ class CycleController:
         self.integral = integrator or PidIntegrator(len(kp))
         self.mode = CycleMode.DOWN
         self.switches = 0
+        # an impact the prediction met before the samples show it (``anticipate_impact``)
+        self.impact_ahead = False
+        self.anticipated = 0  # down-to-up switches made so, ahead of the sampled impact
         self._last_t: float | None = None
         self._last_vy: float | None = None
         # the compiled kinematics take arrays: the sample is copied into these each call
@@ -208,6 +211,7 @@ class CycleController:
         again from its down half (time went back: the arm was reset)."""
         self._last_t = None
         self._last_vy = None
+        self.impact_ahead = False
         self.integral.reset()
         if restart:
             self.mode = CycleMode.DOWN
@@ -271,6 +275,54 @@ class CycleController:
         self.mode = mode
         self.switches += 1
         self.integral.reset()
+
+    def anticipate_impact(
+        self,
+        q: Sequence[float],
+        qd: Sequence[float],
+        sensed: tuple[Sequence[float], Sequence[float]],
+        normal_force: float | None = None,
+        lead: float = 0.0,
+    ) -> tuple[list[float], list[float]]:
+        """The state to act on in place of the predicted one (``q``, ``qd``) when an impact
+        lies between the sample (``sensed``, with its ``normal_force``) and the state the
+        command will meet: (``q``, ``qd``) themselves when none does.
+
+        The prediction is free motion: it carries the tip through the surface at its
+        approach speed, where the arm will be in contact, its tip held at the surface. So
+        when the predicted tip is below the surface and moving into it (in the down half, or
+        after an impact anticipated so that the samples do not show it yet), the state comes
+        back with the tip at the surface and its approach stopped (``stopped_at_surface``):
+        the arm at the depth of the compression, as a sample inside the contact would show
+        it. And the cycle switches to its up half now, so that the command meets the impact
+        in it, as a sample in contact would have switched it with no latency; commands left
+        in the down half would push the tip into the surface for as long as the latency
+        lasts and lengthen the cycle about as much.
+
+        ``lead`` [s]: how long before the predicted state the tip must have reached the
+        surface (depth over approach speed) for the cycle to switch: a period when the
+        latency may be a period shorter than predicted, so that a command acting early
+        still meets the impact after it has begun, never the approach before it (an up
+        command during the whole compression drove the tip deeper, offline: up to 9 %)."""
+        if self.surface_height is None:
+            return list(q), list(qd)
+        if self.impact_ahead:
+            # the samples reach the impact: the wrench, or the tip no longer approaching
+            vy_seen = self._tip(*sensed)[3]
+            if (normal_force is not None and normal_force > self.force_threshold) or vy_seen >= 0:
+                self.impact_ahead = False
+        _, y_tip, _, vy_tip = self._tip(q, qd)
+        if not (y_tip < self.surface_height and vy_tip < 0):
+            return list(q), list(qd)
+        if self.mode is CycleMode.DOWN:
+            if self.surface_height - y_tip < -vy_tip * lead:
+                return list(q), list(qd)
+            self._switch(CycleMode.UP)
+            self.impact_ahead = True
+            self.anticipated += 1
+        elif not self.impact_ahead:
+            return list(q), list(qd)
+        return stopped_at_surface(self.model, q, qd, self.surface_height - y_tip)
 
     def update(
         self,
@@ -394,3 +446,26 @@ class CycleController:
         pid_law(error, rate, np.asarray(self.integral.value, float), *gains, out)
         self.integral.clamp(out)
         return out.tolist()
+
+
+def stopped_at_surface(
+    model: ArmModel, q: Sequence[float], qd: Sequence[float], depth: float
+) -> tuple[list[float], list[float]]:
+    """The state (``q``, ``qd``) of an arm whose tip is ``depth`` below a horizontal surface,
+    moved to the surface and stopped there: a perfectly plastic, frictionless impulse at
+    the tip, qd - (J qd) / (J M⁻¹ Jᵀ) M⁻¹ Jᵀ (of all rates that stop the tip vertically,
+    the nearest to ``qd`` in the kinetic-energy metric), and the angles moved by
+    depth / (J M⁻¹ Jᵀ) M⁻¹ Jᵀ, the same direction raising the tip by ``depth`` to first
+    order. J: the tip's vertical row of the Jacobian, M: the mass matrix, at ``q``.
+    Unchanged where the arm cannot move its tip vertically."""
+    q_arr = np.asarray(q, float)
+    qd_arr = np.asarray(qd, float)
+    n = model.n
+    row = np.asarray(model.tip_jacobian(q_arr), float)[n : 2 * n]
+    direction = np.linalg.solve(model.mass_matrix(q_arr), row)  # M⁻¹ Jᵀ
+    effective = float(row @ direction)  # 1 / (the tip's effective mass, vertically)
+    if not effective > 0:
+        return [float(v) for v in q_arr], [float(v) for v in qd_arr]
+    q_out = q_arr + (depth / effective) * direction
+    qd_out = qd_arr - (float(row @ qd_arr) / effective) * direction
+    return [float(v) for v in q_out], [float(v) for v in qd_out]

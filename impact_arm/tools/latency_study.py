@@ -70,6 +70,7 @@ def closed_loop(
     force_sensor: bool = True,
     release_after: float = 0.0,
     tap: Callable[[int, int, Tick], None] | None = None,
+    anticipate_impacts: bool = True,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -84,7 +85,8 @@ def closed_loop(
     sensor): it tells an impact from the tip's reversal alone.
     ``release_after`` > 0: the simulator's parameter of that name (the arm braked, time
     running, until then); meanwhile the driver writes its newest command each period, as a
-    ros2_control stack does. ``tap(sec, nanosec, tick)``: each sample as the controller gets it
+    ros2_control stack does. ``anticipate_impacts``: the controller's parameter of that name.
+    ``tap(sec, nanosec, tick)``: each sample as the controller gets it
     (a recording to replay, bench controller_tick)."""
     arm = SimulatedArm(scene, rate, trace=False)
     model = ArmModel(scene)
@@ -122,6 +124,7 @@ def closed_loop(
         latency_periods=predicted,
         clock=lambda: 0.0,
         implicit_periods=implicit_periods,
+        anticipate_impacts=anticipate_impacts,
         wrench_publishers=lambda: force_sensor,
     )
     rng = random.Random(seed)

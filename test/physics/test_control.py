@@ -110,3 +110,44 @@ def test_the_q_laws_float_path_is_the_compiled_law_to_the_bit():
     assert ctrl.q_law_terms() == (ctrl.targets[ctrl.mode], ctrl.kp, ctrl.kd)
     ctrl.law = 'pd'
     assert ctrl.q_law_terms() is None
+
+
+@pytest.mark.parametrize('scene_name', ['paper', 'three_link'])
+def test_the_tip_stopped_at_the_surface_is_a_plastic_impulse(scene_name):
+    """``stopped_at_surface`` against the impulse's defining properties, computed here by
+    other means: the tip's vertical velocity is zero after it, the change of rates is
+    M⁻¹ Jᵀ times a scalar (an impulse along the normal at the tip), so of all rates with the
+    tip stopped they are the nearest to the approach's in the kinetic-energy metric; the
+    tip rises by the depth to first order."""
+    import numpy as np
+
+    from impact_arm.physics.control import stopped_at_surface
+    from impact_arm.physics.scene import load_scene
+
+    model = ArmModel(load_scene(scene_name))
+    n = model.n
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = rng.uniform(-1.0, 1.0, n)
+        qd = rng.uniform(-5.0, 5.0, n)
+        depth = 2e-4
+        q2, qd2 = (np.array(v) for v in stopped_at_surface(model, q, qd, depth))
+        # the tip's vertical velocity where the impulse acts (q), by a finite difference of
+        # its height
+        h = 1e-7
+        y = lambda angles: model.tip(angles, np.zeros(n))[1]  # noqa: E731
+        assert abs((y(q + h * qd2) - y(q - h * qd2)) / (2 * h)) < 1e-6 * abs(qd).max()
+        assert y(q2) - y(q) == pytest.approx(depth, rel=1e-2)
+        # the change is M⁻¹ Jᵀ λ: M Δqd is parallel to the vertical Jacobian row
+        mass = model.mass_matrix(q)
+        row = np.array([(y(q + h * e) - y(q - h * e)) / (2 * h) for e in np.eye(n)])
+        push = mass @ (qd2 - qd)
+        assert np.allclose(push, row * (push @ row) / (row @ row), atol=1e-6 * abs(push).max())
+
+        # of the rates that stop the tip, the nearest to the approach's in the kinetic-energy
+        # metric (Gauss): any other differs from qd2 by a null-space direction of the row
+        for _ in range(3):
+            d = rng.normal(size=n)
+            d -= row * (d @ row) / (row @ row)
+            other = qd2 + 0.1 * d
+            assert (other - qd) @ mass @ (other - qd) > (qd2 - qd) @ mass @ (qd2 - qd)
