@@ -73,7 +73,7 @@ def fit_recording(
     say=print,
     corrections=None,
 ):
-    """Read ``recording``, diagnose it (``calibration/diagnose.py``: findings said and
+    """Read ``recording``, diagnose it (``calibration/diagnose/``: findings said and
     reported; only the ``corrections`` asked for are applied), fit ``params`` ({key: (lo,
     hi)}) of ``scene`` and write ``out``/fitted.yaml, fit.json, report.md and the PNGs
     (``out`` None: the default runs/fit_<name>/; False: write nothing). Returns the

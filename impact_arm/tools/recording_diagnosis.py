@@ -1,5 +1,5 @@
 """``impact-arm fit``'s options that correct a recording before the fit (the corrections of
-``calibration/diagnose.py``): none is applied unless given."""
+``calibration/diagnose/``): none is applied unless given."""
 
 from __future__ import annotations
 
