@@ -24,7 +24,7 @@ from ..physics.scene import Scene
 SCIPY_METHODS = ('RK45', 'DOP853', 'LSODA', 'Radau')
 
 
-def _armed_slots(integ: PhaseIntegrator):
+def _armed_slots(integ: PhaseIntegrator) -> list[int]:
     """Event slots that can fire in the current phase (the others hold a constant -1)."""
     st, n_surf = integ.state, len(integ.model.surfaces)
     if st.phase == Phase.FREE:
@@ -51,7 +51,14 @@ def _terminal_rising(event: _Event) -> _Event:
     return event
 
 
-def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, contact_rtol=None):
+def run_scipy(
+    scene: Scene,
+    method: str = 'RK45',
+    rtol: float = 1e-6,
+    atol: float | None = None,
+    t_max: float | None = None,
+    contact_rtol: float | None = None,
+) -> tuple[list[dict], float, int, float]:
     """Run ``scene`` for its cycles with solve_ivp; returns (impacts, t_end, nfev, wall).
     ``contact_rtol`` (default rtol) is the tolerance of contact phases, as in PhaseIntegrator;
     the contact atol keeps the atol/rtol ratio."""
@@ -71,8 +78,8 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
     cycles = 0
     wall0 = time.perf_counter()
 
-    def make_event(slot):
-        def event(t, y):
+    def make_event(slot: int) -> Callable[[float, np.ndarray], float]:
+        def event(t: float, y: np.ndarray) -> float:
             eq.event_values(y, P, I, surf, st.c, st.levels, g)
             return g[slot]
 
@@ -81,9 +88,9 @@ def run_scipy(scene: Scene, method='RK45', rtol=1e-6, atol=None, t_max=None, con
     L = model.geometry
     heights = [s.height for s in model.surfaces]
 
-    def make_rise(s):
+    def make_rise(s: int) -> Callable[[float, np.ndarray], float]:
         # the kernel forgets a surface's dent once the tip is back above the surface
-        def event(t, y):
+        def event(t: float, y: np.ndarray) -> float:
             return eq.tip(y[: model.n], y[model.n : 2 * model.n], L)[1] - heights[s]
 
         return _terminal_rising(event)

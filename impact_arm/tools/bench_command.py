@@ -5,8 +5,10 @@ the work tree itself), or in the folder ``IMPACT_ARM_BENCH`` names."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
+import types
 
 from ..physics.errors import ImpactArmError
 
@@ -23,7 +25,7 @@ def bench_folder() -> str | None:
     return None
 
 
-def _benchmarks():
+def _benchmarks() -> types.ModuleType | None:
     folder = bench_folder()
     if folder is None:
         return None
@@ -34,7 +36,7 @@ def _benchmarks():
     return impact_arm_bench
 
 
-def add_arguments(parser) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     bench = _benchmarks()
     if bench is not None:
         bench.add_arguments(parser)
@@ -42,7 +44,7 @@ def add_arguments(parser) -> None:
         parser.add_argument('args', nargs='*', help='(the benchmarks are not installed)')
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     if getattr(args, 'bench_run', None) is None:
         raise ImpactArmError(
             'the benchmarks are not installed with the package: run '

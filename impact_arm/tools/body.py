@@ -10,6 +10,7 @@ separation the peak force. Angles print in degrees (the user-facing edge).
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -17,13 +18,13 @@ import os
 from ..physics.errors import ImpactArmError
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scene', required=True, help='a free-body scene file or installed name')
     parser.add_argument('--t-end', type=float, help="end time [s] (default: the scene's t_max)")
     parser.add_argument('--json', metavar='FILE', help='write the events and end state as JSON')
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from ..physics.bodies.model import build_model, simulate_body
     from ..physics.bodies.scene import load_body_scene
     from ..physics.kinds import EventKind

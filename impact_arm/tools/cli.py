@@ -15,6 +15,8 @@ import os
 import sys
 import time
 import warnings
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, NoReturn, TextIO
 
 STARTED = time.perf_counter()  # this module's import: the fallback for the command's start
 NOTICE: list[CompileNotice] = []  # the command's CompileNotice (how long it compiled)
@@ -24,24 +26,28 @@ from ..contract import INTEGRATOR_PRESETS  # noqa: E402
 from ..physics.errors import ImpactArmError, UnstableControlWarning  # noqa: E402
 from .progress import CompileNotice, Progress  # noqa: E402
 
+if TYPE_CHECKING:
+    from ..physics.scene import Scene
+    from ..physics.simulate import RunResult
+
 DEFAULT_SCENE = 'paper'
 
 
-def _positive(value):
+def _positive(value: str) -> float:
     number = float(value)
     if not number > 0:
         raise argparse.ArgumentTypeError(f'{value} must be > 0')
     return number
 
 
-def _non_negative(value):
+def _non_negative(value: str) -> float:
     number = float(value)
     if not number >= 0:
         raise argparse.ArgumentTypeError(f'{value} must be >= 0')
     return number
 
 
-def cmd_simulate(args) -> int:
+def cmd_simulate(args: argparse.Namespace) -> int:
     from ..physics.scene import load_scene
     from ..physics.simulate import format_table, run
 
@@ -77,7 +83,7 @@ def cmd_simulate(args) -> int:
 
     line = Progress(prefix='  ', keep=True)
 
-    def progress(cycle, cycles, impacts, t):
+    def progress(cycle: int, cycles: int, impacts: int, t: float) -> None:
         line.total = cycles
         line.show(
             f'cycle {min(cycle + 1, cycles)}/{cycles}  impacts {impacts}  t = {t:.3f} s', done=cycle
@@ -129,7 +135,7 @@ RUN_SIZE_LIMIT = 1e7
 SECONDS_PER_SAMPLE, MCAP_BYTES_PER_SAMPLE = 3e-6, 120
 
 
-def _check_run_size(scene, args):
+def _check_run_size(scene: Scene, args: argparse.Namespace) -> None:
     samples = scene.publish_rate * scene.t_max
     if samples <= RUN_SIZE_LIMIT / 10:
         return
@@ -146,7 +152,7 @@ def _check_run_size(scene, args):
     print(f'impact-arm simulate: {estimate}', file=sys.stderr)
 
 
-def cmd_urdf(args) -> int:
+def cmd_urdf(args: argparse.Namespace) -> int:
     from ..physics.scene import load_scene
     from ..io.urdf import robot_description
 
@@ -154,7 +160,7 @@ def cmd_urdf(args) -> int:
     return 0
 
 
-def _load_kernel(scene) -> float:
+def _load_kernel(scene: Scene) -> float:
     """Load (or compile, announced) the scene's kernel before the run is timed: the first
     call in a process reads numba's cache (~0.1-0.3 s), which is start-up, not integration.
     Returns the seconds it took."""
@@ -181,7 +187,7 @@ def whole_command_seconds() -> float:
     return max(now - started, since_import)
 
 
-def _timing(result, load_s, what) -> str:
+def _timing(result: RunResult, load_s: float, what: str) -> str:
     """What the printed times include, in one line."""
     total = whole_command_seconds()
     compiled = NOTICE[-1].total if NOTICE else 0.0
@@ -198,7 +204,7 @@ def _timing(result, load_s, what) -> str:
     )
 
 
-def _simulate_without_samples(scene, args, load_s=0.0) -> int:
+def _simulate_without_samples(scene: Scene, args: argparse.Namespace, load_s: float = 0.0) -> int:
     from ..physics.simulate import format_table, run
 
     rate = scene.controller.rate if args.control_rate is None else args.control_rate
@@ -218,7 +224,7 @@ def _simulate_without_samples(scene, args, load_s=0.0) -> int:
     return 1 if result.error else 0
 
 
-def writable_output(path, flag) -> str:
+def writable_output(path: str, flag: str) -> str:
     """The file to write for ``flag``, checked before any work: its directory must exist and
     be writable (none is created), and it must be absent, a regular file, or a symlink to one
     (then its target is written and the link kept). Directories, FIFOs and devices are refused.
@@ -253,7 +259,7 @@ def writable_output(path, flag) -> str:
     return target
 
 
-def finite_or_null(value):
+def finite_or_null(value: object) -> object:
     """JSON has no NaN or infinity: such a number is written as null."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
@@ -264,7 +270,7 @@ def finite_or_null(value):
     return value
 
 
-def write_json(path, data):
+def write_json(path: str, data: object) -> None:
     """Written to a temporary file next to ``path`` and renamed over it: a reader never sees
     half a file, and a failure leaves no temporary file behind."""
     import tempfile
@@ -284,7 +290,7 @@ def write_json(path, data):
         raise
 
 
-def build_parser(selected=None) -> argparse.ArgumentParser:
+def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='impact-arm',
         description='impact_arm from the command line: '
@@ -408,7 +414,7 @@ COMMANDS = {
 }
 
 
-def _attach(parser, module):
+def _attach(parser: argparse.ArgumentParser, module: str) -> None:
     import importlib
 
     try:
@@ -422,17 +428,24 @@ def _attach(parser, module):
     parser.set_defaults(func=mod.cli)
 
 
-def _missing(prog):
+def _missing(prog: str) -> NoReturn:
     raise ImpactArmError(f'{prog} is not available in this version')
 
 
 @contextlib.contextmanager
-def _warnings(args):
+def _warnings(args: argparse.Namespace) -> Iterator[None]:
     """The core's warnings meant for the user (an unstable law the scene allows) as one line
     on stderr, like the errors; other warnings as Python shows them."""
     shown = warnings.showwarning
 
-    def show(message, category, filename, lineno, file=None, line=None):
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: TextIO | None = None,
+        line: str | None = None,
+    ) -> None:
         if issubclass(category, UnstableControlWarning):
             print(f'impact-arm {args.command}: warning: {message}', file=sys.stderr)
         else:
@@ -444,7 +457,7 @@ def _warnings(args):
         yield
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     # every sub-command that touches DDS keeps discovery on this machine unless the user
     # chose otherwise
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

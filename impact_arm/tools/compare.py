@@ -16,8 +16,10 @@ is the command over it: the recording's scene or the article's, the table, the f
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
+from typing import Any
 
 import numpy as np
 
@@ -25,7 +27,7 @@ from ..contract import JOINT_STATES
 from ..physics.errors import ImpactArmError
 
 
-def format_table(result) -> str:
+def format_table(result: dict[str, Any]) -> str:
     lines = [
         (
             f'{"#":>3} {"t A [s]":>8} {"t B [s]":>8} {"v A":>6} {"v B":>6} {"e A":>7} '
@@ -49,7 +51,7 @@ def format_table(result) -> str:
     return '\n'.join(lines)
 
 
-def write_plot(result, path, a_name, b_name):
+def write_plot(result: dict[str, Any], path: str, a_name: str, b_name: str) -> None:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -72,17 +74,17 @@ def write_plot(result, path, a_name, b_name):
     plt.close(fig)
 
 
-def default_out(a, b) -> str:
+def default_out(a: str, b: str) -> str:
     """runs/compare_<A>_vs_<B>: one directory per pair, so comparing A with another B
     does not land on the first result."""
 
-    def name(path):
+    def name(path: str) -> str:
         return os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
 
     return os.path.join('runs', f'compare_{name(a)}_vs_{name(b)}')
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from .recording_options import add_recording_arguments
 
     parser.add_argument('a', help='recording (rosbag2 folder or MCAP file)')
@@ -113,7 +115,7 @@ def add_arguments(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from .cli import write_json
 
     joints = [j.strip() for j in args.joints.split(',')] if args.joints else None

@@ -12,9 +12,11 @@ Prints both tables, writes ``cor.csv`` and ``cor.png`` to ``--out``. Discussion:
 
 from __future__ import annotations
 
+import argparse
 import os
+from collections.abc import Iterable
 
-from ..physics.contact import contact_constants
+from ..physics.contact import ContactConstants, contact_constants
 from ..physics.scene import Material
 from ..physics.sphere_drop import (
     RIGID,
@@ -59,13 +61,13 @@ def hertz_case() -> dict:
     return {key: (getattr(model, key), theory[key]) for key in ('delta_m', 'F_max', 'duration')}
 
 
-def steel_pairing():
+def steel_pairing() -> tuple[ContactConstants, float, float]:
     c = contact_constants(STEEL, STEEL, TIP_RADIUS)
     mass = sphere_mass(TIP_RADIUS, STEEL_DENSITY)
     return c, mass, yield_speed(c, mass)
 
 
-def cor_table(ratios=RATIOS) -> list[dict]:
+def cor_table(ratios: Iterable[float] = RATIOS) -> list[dict]:
     """(b): a row per V / V_y: the integrated CoR, the energy-balance CoR, Thornton's."""
     c, mass, v_y = steel_pairing()
     rows = []
@@ -85,7 +87,7 @@ def cor_table(ratios=RATIOS) -> list[dict]:
     return rows
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('name', choices=['contact'], help='the study to run')
     parser.add_argument(
         '--out',
@@ -95,7 +97,7 @@ def add_arguments(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     print('(a) Hertz, aluminium sphere R = 0.1 m at 0.2 m/s on a rigid wall')
     print(f'{"":10} {"model":>13} {"Hertz":>13} {"rel. diff":>10}')
     for key, (model, theory) in hertz_case().items():

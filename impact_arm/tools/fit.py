@@ -11,17 +11,29 @@ figures. ``fit_recording(...)`` does all that from Python and returns the ``FitR
 
 from __future__ import annotations
 
+import argparse
 import functools
 import math
 import os
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from ..physics.errors import ImpactArmError
 from .fit_figures import FigureData, ImpactPanel, draw_figures
 
+if TYPE_CHECKING:
+    from ..api.fitting import Bounds
+    from ..api.scenes import SceneLike
+    from ..calibration.diagnose import Corrections
+    from ..calibration.diagnose.findings import Diagnosis
+    from ..calibration.fit import FitOptions, FitResult, Prediction
+    from ..calibration.identify import ImpactWindow, JointRecording
 
-def parse_param(text: str):
+
+def parse_param(text: str) -> tuple[str, tuple[float, float] | tuple[float, float, float]]:
     """'KEY=LO:HI' -> (key, (lo, hi)), 'KEY=LO:HI@START' -> (key, (lo, hi, start)); a
     one-line error naming the argument."""
     key, eq, rest = text.partition('=')
@@ -30,7 +42,7 @@ def parse_param(text: str):
     try:
         if not (key and eq and colon) or (at and not start):
             raise ValueError
-        bounds = (float(lo), float(hi)) + ((float(start),) if at else ())
+        bounds = (float(lo), float(hi), float(start)) if at else (float(lo), float(hi))
         return key.strip(), bounds
     except ValueError:
         raise ImpactArmError(
@@ -39,7 +51,9 @@ def parse_param(text: str):
         ) from None
 
 
-def scene_of(recording, scene=None):
+def scene_of(
+    recording: str | os.PathLike[str], scene: SceneLike | None = None
+) -> tuple[SceneLike, str]:
     """The scene to read ``recording`` with: ``scene`` when given (path or installed name),
     else the one the recording stores (the recorder and ``simulate --mcap`` store it), else
     the article's. Returns (scene for ``Study``, its name for the user)."""
@@ -53,27 +67,27 @@ def scene_of(recording, scene=None):
     return stored, f'{stored.name!r}, stored in the recording'
 
 
-def default_out(recording) -> str:
+def default_out(recording: str | os.PathLike[str]) -> str:
     name = os.path.basename(os.path.normpath(os.fspath(recording)))
     return os.path.join('runs', f'fit_{os.path.splitext(name)[0]}')
 
 
 def fit_recording(
-    recording,
-    scene,
-    params: dict,
+    recording: str | os.PathLike[str],
+    scene: SceneLike | None,
+    params: Mapping[str, Bounds],
     *,
-    joints=None,
-    states_topic=None,
-    wrench_topic=None,
-    out=None,
-    json_path=None,
-    options=None,
-    progress=None,
-    say=print,
-    corrections=None,
-):
-    """Read ``recording``, diagnose it (``calibration/diagnose.py``: findings said and
+    joints: Sequence[str] | None = None,
+    states_topic: str | None = None,
+    wrench_topic: str | None = None,
+    out: str | Literal[False] | None = None,
+    json_path: str | None = None,
+    options: FitOptions | None = None,
+    progress: Callable[..., Any] | None = None,
+    say: Callable[[str], Any] = print,
+    corrections: Corrections | None = None,
+) -> FitResult:
+    """Read ``recording``, diagnose it (``calibration/diagnose/``: findings said and
     reported; only the ``corrections`` asked for are applied), fit ``params`` ({key: (lo,
     hi)}) of ``scene`` and write ``out``/fitted.yaml, fit.json, report.md and the PNGs
     (``out`` None: the default runs/fit_<name>/; False: write nothing). Returns the
@@ -91,7 +105,7 @@ def fit_recording(
     if conflict:  # refused before the recording is read: the efforts would be shifted twice
         raise ImpactArmError(conflict)
 
-    def read():
+    def read() -> JointRecording:
         return read_recording(
             recording,
             base,
@@ -151,11 +165,16 @@ def fit_recording(
             side.close()
 
 
-def _fmt(v):
+def _fmt(v: object) -> str:
     return f'{v:.5g}' if isinstance(v, float) and math.isfinite(v) else str(v)
 
 
-def report_text(result, recording, scene, diagnosis=None) -> str:
+def report_text(
+    result: FitResult,
+    recording: str | os.PathLike[str],
+    scene: str,
+    diagnosis: Diagnosis | None = None,
+) -> str:
     lines = [
         f'# Fit of {os.fspath(recording)}',
         '',
@@ -179,10 +198,10 @@ def report_text(result, recording, scene, diagnosis=None) -> str:
     ]
     for key, p in result.parameters.items():
         ident = 'yes' if p.identifiable else f'no ({p.why or "correlated"})'
-        d = p.digits()
+        digits = p.digits()
         lines.append(
-            f'| `{key}` | {_fmt(p.start)} | {p.value:.{d}g} | '
-            f'[{p.ci95[0]:.{d}g}, {p.ci95[1]:.{d}g}] | {ident}'
+            f'| `{key}` | {_fmt(p.start)} | {p.value:.{digits}g} | '
+            f'[{p.ci95[0]:.{digits}g}, {p.ci95[1]:.{digits}g}] | {ident}'
             + (' (at a bound)' if p.at_bound else '')
             + ' |'
         )
@@ -270,11 +289,13 @@ def report_text(result, recording, scene, diagnosis=None) -> str:
     return '\n'.join(lines)
 
 
-def _ms_from(origin, t):
+def _ms_from(origin: float, t: npt.ArrayLike) -> np.ndarray:
     return (np.asarray(t) - origin) * 1e3
 
 
-def fitted_period_forces(path, ts, period, n, lag=0.0) -> tuple:
+def fitted_period_forces(
+    path: np.ndarray, ts: npt.ArrayLike, period: float, n: int, lag: float = 0.0
+) -> tuple[np.ndarray, ...]:
     """The fitted contact force averaged over each period ending at ``ts`` (a wrench's
     stamps), (tangential, normal), from a prediction's ``path`` rows: t, the ``n`` joint rates,
     then the cumulative impulse (tangential, normal): the impulse gained over the period over
@@ -291,7 +312,9 @@ def fitted_period_forces(path, ts, period, n, lag=0.0) -> tuple:
     return tuple(out)
 
 
-def impact_replay(result, win):
+def impact_replay(
+    result: FitResult, win: ImpactWindow
+) -> tuple[Prediction, tuple[np.ndarray, ...] | None]:
     """The fitted scene's replay of one impact for the figures, with its path at 80 instants
     and, with a recorded wrench, at the ends of the periods its stamps report (moved back by
     the wrench's delay, fitted or stated), and those stamps' fitted period-averaged forces:
@@ -300,10 +323,14 @@ def impact_replay(result, win):
     from ..calibration.fit.efforts import wrench_shift
 
     rec = result.recording
+    assert rec is not None and result.model is not None, (
+        "a fit's result holds its recording and model"
+    )
     extra = list(np.linspace(win.t_a, win.post_t[-1], 80))
     stamps = period = None
     lag = wrench_shift(result.model)  # a wrench published late shows the impact that late
     if rec.wrench is not None:
+        assert rec.wrench_t is not None, 'a recorded wrench has its stamps'
         ends = rec.wrench_t - lag
         stamps = rec.wrench_t[(ends > win.t_a) & (ends <= win.post_t[-1])]
         period = float(np.median(np.diff(rec.wrench_t)))
@@ -312,15 +339,16 @@ def impact_replay(result, win):
         ends = stamps - lag
         extra += list(ends) + list(ends[ends - period > win.t_a] - period)
     pred = predict_impact(result.model, win, result.timing, dense=extra)
-    if stamps is None or pred.error or not len(pred.path):
+    if stamps is None or period is None or pred.error or not len(pred.path):
         return pred, None
     return pred, (stamps, *fitted_period_forces(pred.path, stamps, period, rec.n, lag))
 
 
-def figure_data(result) -> FigureData:
+def figure_data(result: FitResult) -> FigureData:
     """The arrays of impacts.png (recorded vs fitted rates and wrench around up to 4 impacts)
     and cor.png, from the fit's result."""
     rec = result.recording
+    assert rec is not None, "a fit's result holds its recording"
     wins = [w for w, p in zip(result.windows, result.predictions) if not p.error][:4]
     data = FigureData(list(rec.joints), 2 if rec.wrench is not None else 1)
     for w in wins:
@@ -337,6 +365,7 @@ def figure_data(result) -> FigureData:
         )
         wrench = forces = None
         if data.rows == 2:
+            assert rec.wrench is not None and rec.wrench_t is not None, 'rows == 2: a wrench'
             wsel = (rec.wrench_t >= lo) & (rec.wrench_t <= hi)
             wrench = (t_ms(rec.wrench_t[wsel]), rec.wrench[wsel, 1], rec.wrench[wsel, 0])
             if fitted_wrench is not None:
@@ -351,12 +380,12 @@ def figure_data(result) -> FigureData:
     return data
 
 
-def write_figures(result, out) -> list:
+def write_figures(result: FitResult, out: str) -> list[str]:
     """impacts.png (recorded vs fitted rates and wrench around up to 4 impacts) and cor.png."""
     return draw_figures(figure_data(result), out)
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from .recording_diagnosis import add_correction_arguments
     from .recording_options import add_recording_arguments
 
@@ -403,7 +432,7 @@ def add_arguments(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from ..calibration.fit import FitOptions
     from .recording_diagnosis import corrections_from
     from .cli import writable_output
@@ -418,9 +447,9 @@ def cli(args) -> int:
     corrections = corrections_from(args)
     line = Progress(prefix='  ')
 
-    def progress(text, done=None, total=None):
+    def progress(text: str, done: float | None = None, total: float | None = None) -> None:
         line.total = total
-        line.show(text, done=done, log=done is None or (total and done == total))
+        line.show(text, done=done, log=done is None or bool(total and done == total))
 
     try:
         result = fit_recording(

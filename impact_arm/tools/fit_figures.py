@@ -35,7 +35,7 @@ class FigureData:
     cor_start: list = field(default_factory=list)
 
 
-def draw_figures(data: FigureData, out) -> list:
+def draw_figures(data: FigureData, out: str) -> list[str]:
     """Draw ``data`` into impacts.png and cor.png in ``out``; their paths."""
     from matplotlib import rc_context
 
@@ -45,7 +45,7 @@ def draw_figures(data: FigureData, out) -> list:
         return _draw(data, out)
 
 
-def _draw(data: FigureData, out) -> list:
+def _draw(data: FigureData, out: str) -> list[str]:
     # the object API with the Agg canvas, not pyplot: no backend machinery to import in the
     # fresh process a fit runs in
     from matplotlib.backends.backend_agg import FigureCanvasAgg

@@ -4,17 +4,18 @@ compiles, for reading or for a debugger. ``--path`` prints where the file is ins
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest='action', required=True)
     dump = sub.add_parser('dump', help="print the generated kernel module of a scene's shape")
     dump.add_argument('--scene', default='paper', help='scene file or installed scene name')
     dump.add_argument('--path', action='store_true', help='print the file path, not the text')
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from ..physics.model import ArmModel
     from ..physics.scene import load_scene, resolve_scene_path
 

@@ -4,12 +4,13 @@ and the topics it holds; from a scene: the topics a recording of it holds."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from ..physics.errors import ImpactArmError
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('recording', nargs='?', help='MCAP file or rosbag2 folder')
     parser.add_argument(
         '--scene',
@@ -19,7 +20,7 @@ def add_arguments(parser):
     parser.add_argument('--out', default=None, metavar='FILE', help='write here (default: print)')
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from ..io.recording import RecordingInputError
     from ..io.viewer_layout import layout_text, recording_layout, viewer_layout
     from ..physics.scene import load_scene, resolve_scene_path

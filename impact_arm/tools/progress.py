@@ -11,6 +11,8 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections.abc import Callable
+from typing import Any, Literal, TextIO
 
 
 class _Screen:
@@ -18,17 +20,18 @@ class _Screen:
     open (from its first line to its last), progress output waits and follows it, so the two
     never interleave (the notice's counter runs in a thread of its own)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.lock = threading.RLock()
         self.held = False
-        self.waiting: list = []  # (stream, text) of log lines held back
-        self.line = None  # (progress, stream, text) of the terminal line last drawn
+        self.waiting: list[tuple[TextIO, str]] = []  # (stream, text) of log lines held back
+        # (progress, stream, text) of the terminal line last drawn
+        self.line: tuple[Progress, TextIO, str] | None = None
 
-    def hold(self):
+    def hold(self) -> None:
         with self.lock:
             self.held = True
 
-    def release(self):
+    def release(self) -> None:
         """After the notice's last line: the held log lines, then the last terminal line."""
         with self.lock:
             self.held = False
@@ -53,7 +56,14 @@ class Progress:
     starts every line. ``keep``: on a terminal, leave the last line visible at ``end()``
     (else it is erased). ``stream``/``clock`` are for tests."""
 
-    def __init__(self, total=None, prefix='', keep=False, stream=None, clock=time.monotonic):
+    def __init__(
+        self,
+        total: float | None = None,
+        prefix: str = '',
+        keep: bool = False,
+        stream: TextIO | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.total = total
         self.prefix = prefix
         self.keep = keep
@@ -63,7 +73,7 @@ class Progress:
         self.tty = self.stream.isatty()
         self.shown = False
 
-    def eta(self, done) -> str:
+    def eta(self, done: float | None) -> str:
         """' 40 %  ETA 12 s' from the average pace so far ('' while it cannot be told)."""
         if not self.total or done is None or done <= 0:
             return ''
@@ -71,7 +81,7 @@ class Progress:
         left = (self.clock() - self.started) * (1.0 - fraction) / fraction
         return f'  {100 * fraction:3.0f} %  ETA {_duration(left)}'
 
-    def show(self, text: str, done=None, log: bool = False) -> None:
+    def show(self, text: str, done: float | None = None, log: bool = False) -> None:
         with SCREEN.lock:
             if self.tty:
                 line = f'\r\033[K{self.prefix}{text}{self.eta(done)}'
@@ -127,29 +137,34 @@ class CompileNotice:
     SETTLE = 1.5  # s without a compile before the notice ends
     LOG_EVERY = 10.0  # s between lines off a terminal
 
-    def __init__(self, stream=None, clock=time.monotonic, prefix=''):
+    def __init__(
+        self,
+        stream: TextIO | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        prefix: str = '',
+    ) -> None:
         self.stream = sys.stderr if stream is None else stream
         self.clock = clock
         self.prefix = prefix
         self.tty = self.stream.isatty()
         self.total = 0.0  # s compiled in this process so far
-        self._burst_start = None  # start of the compile running now
-        self._first = None  # start of the first compile of this notice
-        self._idle_since = None  # end of the last compile (None while one runs)
+        self._burst_start: float | None = None  # start of the compile running now
+        self._first: float | None = None  # start of the first compile of this notice
+        self._idle_since: float | None = None  # end of the last compile (None while one runs)
         self._compiled = 0.0  # s compiled within this notice
         self._shown = False
         self._logged = 0.0
         self._lock = threading.Lock()
-        self._thread = None
-        self._remove = None
+        self._thread: threading.Thread | None = None
+        self._remove: Callable[[], Any] | None = None
 
-    def __enter__(self):
+    def __enter__(self) -> CompileNotice:
         from ..physics import jit
 
         self._remove = jit.add_compile_hook(self._start, self._end)
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         if self._remove is not None:
             self._remove()
         with self._lock:
@@ -158,7 +173,7 @@ class CompileNotice:
             self._finish()
         return False
 
-    def _start(self):
+    def _start(self) -> None:
         with self._lock:
             self._burst_start = self.clock()
             self._idle_since = None
@@ -168,19 +183,20 @@ class CompileNotice:
                 self._thread = threading.Thread(target=self._tick, daemon=True)
                 self._thread.start()
 
-    def _end(self):
+    def _end(self) -> None:
         with self._lock:
             if self._burst_start is not None:
                 self._close_burst()
 
-    def _close_burst(self):
+    def _close_burst(self) -> None:
+        assert self._burst_start is not None, 'called with a compile running'
         elapsed = self.clock() - self._burst_start
         self._compiled += elapsed
         self.total += elapsed
         self._burst_start = None
         self._idle_since = self.clock()
 
-    def _finish(self):
+    def _finish(self) -> None:
         """End the notice (lock held): the closing line if the opening one was shown."""
         if self._first is None:
             return
@@ -192,7 +208,7 @@ class CompileNotice:
             SCREEN.release()
         self._first, self._idle_since, self._shown = None, None, False
 
-    def _tick(self):
+    def _tick(self) -> None:
         while True:
             time.sleep(0.5 if self.tty else 1.0)
             with self._lock:
@@ -216,11 +232,11 @@ class CompileNotice:
                     self._logged = elapsed
                     self._write(f'  ... {elapsed:.0f} s')
 
-    def _write(self, text, final=False):
+    def _write(self, text: str, final: bool = False) -> None:
         with SCREEN.lock:
             self._write_now(text, final)
 
-    def _write_now(self, text, final):
+    def _write_now(self, text: str, final: bool) -> None:
         if self.tty:
             self.stream.write(f'\r\033[K{self.prefix}{text}' + ('\n' if final else ''))
         else:

@@ -1,12 +1,18 @@
 """``impact-arm fit``'s options that correct a recording before the fit (the corrections of
-``calibration/diagnose.py``): none is applied unless given."""
+``calibration/diagnose/``): none is applied unless given."""
 
 from __future__ import annotations
 
+import argparse
+from typing import TYPE_CHECKING
+
 from ..physics.errors import ImpactArmError
 
+if TYPE_CHECKING:
+    from ..calibration.diagnose import Corrections
 
-def add_correction_arguments(parser) -> None:
+
+def add_correction_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--effort-latency',
         type=float,
@@ -40,7 +46,7 @@ def add_correction_arguments(parser) -> None:
     )
 
 
-def corrections_from(args):
+def corrections_from(args: argparse.Namespace) -> Corrections:
     """The ``Corrections`` the options ask for; a bad value refused in one line."""
     from ..calibration.diagnose import Corrections
 

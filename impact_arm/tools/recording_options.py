@@ -4,8 +4,12 @@
 
 from __future__ import annotations
 
+import argparse
 
-def add_recording_arguments(parser, *, states_of: str = '', without_wrench: str = '') -> None:
+
+def add_recording_arguments(
+    parser: argparse.ArgumentParser, *, states_of: str = '', without_wrench: str = ''
+) -> None:
     """Declare ``--joints``, ``--states-topic`` and ``--wrench-topic`` on ``parser``.
 
     ``states_of`` follows "topic" in the states option's help (" of the recordings" for a

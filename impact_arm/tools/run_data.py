@@ -8,8 +8,9 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,11 +44,13 @@ class Run:
     target: np.ndarray | None = None  # a step response's target link angles [rad]
 
 
-def _quiet(text):
+def _quiet(text: str) -> None:
     pass
 
 
-def _scene_joints(scene, names, position, velocity):
+def _scene_joints(
+    scene: Scene, names: Sequence[str], position: np.ndarray, velocity: np.ndarray
+) -> tuple[np.ndarray | list[float], np.ndarray | list[float]]:
     """The positions and velocities of ``scene``'s moving joints in a joint state: picked
     by name when the message names them all, else its first ``scene.n_links`` entries."""
     n = scene.n_links
@@ -62,7 +65,7 @@ def _scene_joints(scene, names, position, velocity):
     )
 
 
-def load(path, progress=_quiet) -> Run:
+def load(path: str | os.PathLike[str], progress: Callable[[str], Any] = _quiet) -> Run:
     """Read a recording. ``progress(text)`` is told what is being read."""
     from ..io.mcap_ros2 import iter_raw, read_metadata, topics_info, unreadable_reason
     from ..io.msgdefs import typestore
@@ -163,14 +166,14 @@ def chatter(run: Run) -> list:
     return find_chatter(run.t, run.effort, names)
 
 
-def _number(value) -> float:
+def _number(value: Any) -> float:  # a JSON value
     try:
         return float(value)
     except (TypeError, ValueError):
         return math.inf
 
 
-def _scene(metadata):
+def _scene(metadata: dict[str, dict[str, str]]) -> Scene | None:
     text = metadata.get('scene', {}).get('yaml')
     if not text:
         return None

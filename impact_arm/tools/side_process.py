@@ -19,12 +19,20 @@ import signal
 import sys
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from ..physics.errors import ImpactArmError
 
+if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+    from multiprocessing.process import BaseProcess
 
-def _serve(conn: Any, first: Callable[[], Any]) -> None:
+    from .fit_figures import FigureData
+
+T = TypeVar('T')  # what the process's first job returns
+
+
+def _serve(conn: Connection, first: Callable[[], Any]) -> None:
     """The forked process: ``first()`` answered as ('ok', value) or ('refused', error), then
     the drawing library imported, then each (data, out) it is sent drawn and answered
     ('ok', paths), until told to stop (None) or the pipe closes. Anything else that fails
@@ -64,19 +72,19 @@ def other_threads() -> list[str]:
     return [t.name for t in threading.enumerate() if t is not threading.main_thread()]
 
 
-class SideProcess:
+class SideProcess(Generic[T]):
     """``start(first)`` forks the process, which runs ``first`` (None when it cannot fork);
     ``first_result()`` is its value; ``submit(data, out)`` hands it the figures,
     ``figures()`` waits for their paths; ``close()`` ends it."""
 
-    def __init__(self, process: Any, conn: Any, first: Callable[[], Any]) -> None:
+    def __init__(self, process: BaseProcess, conn: Connection, first: Callable[[], T]) -> None:
         self._process = process
         self._conn = conn
         self._first = first
-        self._job: tuple | None = None
+        self._job: tuple[FigureData, str] | None = None
 
     @classmethod
-    def start(cls, first: Callable[[], Any]) -> SideProcess | None:
+    def start(cls, first: Callable[[], T]) -> SideProcess[T] | None:
         if not sys.platform.startswith('linux') or other_threads():
             return None  # fork is only safe without other threads (and is POSIX's)
         try:
@@ -95,7 +103,7 @@ class SideProcess:
         except (EOFError, OSError):
             return 'failed', 'the side process ended'
 
-    def first_result(self) -> Any:
+    def first_result(self) -> T:
         """``first()``'s value from the process, its refusal raised here, or, if the process
         failed, ``first()`` run here."""
         status, answer = self._answer()
@@ -105,14 +113,14 @@ class SideProcess:
             raise answer
         return self._first()
 
-    def submit(self, data: Any, out: str) -> None:
+    def submit(self, data: FigureData, out: str) -> None:
         self._job = (data, out)
         try:
             self._conn.send(self._job)
         except (OSError, ValueError):
             pass  # figures() draws them here
 
-    def figures(self) -> list:
+    def figures(self) -> list[str]:
         """The figures' paths, drawn by the process, or here if it could not."""
         from .fit_figures import draw_figures
 

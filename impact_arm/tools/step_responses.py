@@ -6,19 +6,27 @@ time."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..contract import FEEDBACK_LAWS, ControlLaw
 from .run_data import AnalysisError, Run, _quiet
 
+if TYPE_CHECKING:
+    from ..physics.scene import Scene, Surface
+    from ..physics.simulate import RunResult
+
 
 STEP_LAWS = ('q', 'pd', 'pid')
 LAW_NAMES = {'q': 'Q controller (eq. 9)', 'pd': 'PD (eq. 10, Ki = 0)', 'pid': 'PID (eq. 10)'}
 
 
-def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
+def step_response(
+    scene: Scene, law: str, t_max: float = 5.0, progress: Callable[[str], Any] = _quiet
+) -> Run:
     """The article's Figure 3 for one law: the arm driven from the scene's initial position
     to its down target with the surfaces taken away (no impact: a step response), the
     controller evaluated continuously. ``run.target`` holds the target (rad)."""
@@ -39,7 +47,7 @@ def step_response(scene, law: str, t_max: float = 5.0, progress=_quiet) -> Run:
     return out
 
 
-def surfaces_out_of_reach(scene) -> tuple:
+def surfaces_out_of_reach(scene: Scene) -> tuple[Surface, ...]:
     """The surfaces a step response keeps: none but each mounted one, moved below the arm's
     reach. A mounted plate adds its state to the compiled kernel's shape, so taking it away
     would compile another kernel; out of reach and unloaded, its plate stays at rest and the
@@ -76,7 +84,7 @@ def step_metrics(run: Run, band_deg: float = 0.1) -> list[dict[str, float]]:
     return out
 
 
-def _offline_run(label: str, result, scene, law: str) -> Run:
+def _offline_run(label: str, result: RunResult, scene: Scene, law: str) -> Run:
     """An offline run's samples as a Run (like a recording's)."""
     samples = result.samples
     return Run(

@@ -1,4 +1,4 @@
-"""The diagnosis of a recording before its fit (calibration/diagnose.py): each detector runs on
+"""The diagnosis of a recording before its fit (calibration/diagnose/): each detector runs on
 recordings the synthetic tool makes with and without its effect (through the simulated
 driver's sensor chain), fires on the one and stays quiet on the other, and estimates the
 effect; each correction removes what it corrects; ``impact-arm fit`` says what it found."""

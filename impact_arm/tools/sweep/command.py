@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 
 from .execute import execute, summary_line
@@ -10,7 +11,7 @@ from .spec import Spec, SpecError, TABLES
 from .store import read_table
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = (
         'Run a sweep spec (impact-arm sweep SPEC.yaml) or plot its results '
         '(impact-arm sweep plot OUT --metric M --x PARAM [--y PARAM]).'
@@ -63,7 +64,7 @@ def add_arguments(parser):
     drawing.add_argument('-o', '--output', metavar='PNG', help='where to write the plot')
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     if args.target == 'plot':
         if not args.results or not args.x:
             raise SpecError('sweep plot needs the output directory and --x PARAM')
@@ -101,7 +102,7 @@ def cli(args) -> int:
     return 0
 
 
-def _print_errors(errors: dict, failed: int, show: int = 10):
+def _print_errors(errors: dict[str, int], failed: int, show: int = 10) -> None:
     """The distinct errors of the failed runs, most frequent first, on stderr."""
     import sys
 

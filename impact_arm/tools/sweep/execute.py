@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable, Iterable, Iterator
+from typing import TYPE_CHECKING
 
 from ...calibration.study import Study
 from ..progress import Progress
@@ -12,21 +14,28 @@ from .rows import run_chunk
 from .spec import Spec
 from .store import ResultStore
 
+if TYPE_CHECKING:
+    import pyarrow as pa
 
-def _chunks(items, workers):
+# (run index, overrides) of each run of a chunk, and the chunk's tables (run_chunk's)
+Chunk = list[tuple[int, dict]]
+Task = Callable[[Chunk], 'dict[str, pa.Table]']
+
+
+def _chunks(items: Chunk, workers: int) -> list[Chunk]:
     """Chunks small enough to balance the workers, large enough to amortise a hand-over."""
     size = max(1, min(50, len(items) // (8 * max(1, workers))))
     return [items[i : i + size] for i in range(0, len(items), size)]
 
 
-def _exit_with_parent():
+def _exit_with_parent() -> None:
     """Pool worker initializer: when the sweep dies (SIGKILL included), its workers stop
     too instead of computing runs that nobody will record."""
     import threading
 
     parent = os.getppid()
 
-    def watch():
+    def watch() -> None:
         while os.getppid() == parent:
             time.sleep(0.5)
         os._exit(1)
@@ -34,7 +43,7 @@ def _exit_with_parent():
     threading.Thread(target=watch, daemon=True).start()
 
 
-def _local_pool(workers, task, chunks):
+def _local_pool(workers: int, task: Task, chunks: Iterable[Chunk]) -> Iterator[dict[str, pa.Table]]:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
@@ -50,7 +59,7 @@ def _local_pool(workers, task, chunks):
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _dask(address, task, chunks):
+def _dask(address: str, task: Task, chunks: Iterable[Chunk]) -> Iterator[dict[str, pa.Table]]:
     from distributed import Client, as_completed
 
     with Client(address) as client:

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING
 
 from ...calibration.study import Study
 
+if TYPE_CHECKING:
+    import pyarrow as pa
 
-def column_value(value):
+
+def column_value(value: object) -> float | str:
     """An override as a table cell: numbers as floats, anything else as its JSON text."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return float(value)
@@ -20,7 +24,7 @@ def _layout(fixed: dict, record: dict) -> tuple:
     return tuple(fixed), tuple(len(v) if isinstance(v, list) else -1 for v in record.values())
 
 
-def _add_impacts(tables: dict, fixed: dict, records: list):
+def _add_impacts(tables: dict, fixed: dict, records: list[dict]) -> None:
     """Append one run's impact records to ``tables`` (layout -> {column: values}): ``fixed``
     (run index, overrides) repeated per impact, the records' lists spread over columns
     named by key path (v_before[1]). Filled a column at a time while the records are
@@ -48,7 +52,7 @@ def _add_impacts(tables: dict, fixed: dict, records: list):
             next(columns).extend(column)
 
 
-def _impacts_table(tables: dict):
+def _impacts_table(tables: dict) -> pa.Table | None:
     """The impact rows collected by ``_add_impacts`` as one table (None without impacts);
     runs of different layouts make tables joined by column name."""
     import pyarrow as pa
@@ -62,7 +66,9 @@ def _impacts_table(tables: dict):
 _STUDIES: dict[str, Study] = {}  # spec hash -> Study, kept by each worker process between chunks
 
 
-def run_chunk(spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, items: list):
+def run_chunk(
+    spec_hash: str, scene_data: dict, fixed: dict, outputs: tuple, items: list[tuple[int, dict]]
+) -> dict[str, pa.Table]:
     """Run ``items`` [(run index, overrides)] in this process; returns {table: pyarrow Table}.
     Module-level so that worker processes and Dask workers import it by name."""
     import pyarrow as pa

@@ -7,6 +7,8 @@ import itertools
 import json
 import math
 import os
+from collections.abc import Callable
+from typing import NoReturn
 
 from ...physics.errors import ImpactArmError
 from ...calibration.study import Study, load_scene_data, parse_key_path
@@ -28,8 +30,8 @@ class SpecError(ImpactArmError):
 class Spec:
     """A validated sweep spec: base scene data, fixed overrides, parameters and their runs."""
 
-    def __init__(self, data: dict, origin: str = '<spec>', base_dir: str = '.'):
-        def fail(key, message):
+    def __init__(self, data: dict, origin: str = '<spec>', base_dir: str = '.') -> None:
+        def fail(key: str, message: str) -> NoReturn:
             raise SpecError(f"sweep '{origin}': {key} {message}")
 
         if not isinstance(data, dict):
@@ -75,7 +77,7 @@ class Spec:
         self.runs = self._expand()
         self._check_key_paths(origin)
 
-    def _check_key_paths(self, origin):
+    def _check_key_paths(self, origin: str) -> None:
         """Refuse a key path the scene does not have (``surfaces[0].muu``, an index past the
         end) now, before any run: otherwise every run fails with the same error. Each path is
         tried alone with its first run's value; out-of-range values are the runs' business
@@ -85,7 +87,7 @@ class Spec:
         first = self.runs[0] if self.runs else {}
         errors = []
 
-        def check(base, key, value):
+        def check(base: dict, key: str, value: object) -> None:
             try:
                 Study(self.scene_data, base).scene({key: value})
             except SceneError as exc:
@@ -147,7 +149,7 @@ class Spec:
         )
 
 
-def _parameter(key, entry, fail) -> dict:
+def _parameter(key: str, entry: object, fail: Callable[..., NoReturn]) -> dict:
     if (
         not isinstance(entry, dict)
         or len(set(entry) & set(KINDS)) != 1

@@ -4,15 +4,19 @@ from __future__ import annotations
 
 import json
 import os
+from typing import TYPE_CHECKING
 
 from .spec import Spec, SpecError, TABLES
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 
 class ResultStore:
     """Part files of one spec under ``out``: ``runs/`` and ``impacts/``, each part written to
     a temporary name and renamed, the runs part last (it marks its runs as finished)."""
 
-    def __init__(self, out: str, spec: Spec):
+    def __init__(self, out: str, spec: Spec) -> None:
         self.out, self.spec = out, spec
         for table in TABLES:
             os.makedirs(os.path.join(out, table), exist_ok=True)
@@ -59,11 +63,11 @@ class ResultStore:
                 self.done.update(column.column('run').to_pylist())
         self.sequence = 1 + max((int(n.rsplit('-', 1)[1].split('.')[0]) for n in runs), default=-1)
 
-    def _parts(self, table):
+    def _parts(self, table: str) -> list[str]:
         folder = os.path.join(self.out, table)
         return sorted(n for n in os.listdir(folder) if n.endswith('.parquet'))
 
-    def write(self, tables: list[dict]):
+    def write(self, tables: list[dict[str, pa.Table]]) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -78,13 +82,13 @@ class ResultStore:
         self.sequence += 1
 
 
-def _write_atomically(path, data: bytes):
+def _write_atomically(path: str, data: bytes) -> None:
     with open(path + '.tmp', 'wb') as f:
         f.write(data)
     os.replace(path + '.tmp', path)
 
 
-def read_table(out: str, table: str = 'runs'):
+def read_table(out: str, table: str = 'runs') -> pa.Table:
     """A sweep's table (all parts), in run order (then impact order): a pyarrow Table."""
     import pyarrow as pa
     import pyarrow.parquet as pq
