@@ -9,7 +9,9 @@ stack adds, with and without the controller's prediction (its ``latency_periods`
    the controller node, ``latency_periods`` -1 (measured) or 0, on a free local domain.
 
 Controllers: no prediction, prediction over the measured latency with the explicit law
-(``implicit_periods`` 0), and the default (also the implicit law while the latency varies).
+(``implicit_periods`` 0), the implicit law while the latency varies switching to the up half
+on the sampled impact (``anticipate_impacts`` false), and the default (the implicit law and
+the impact anticipated when the prediction meets it).
 For each: impacts, second strikes (an impact within 50 ms of the previous one), the largest
 penetration δm and the mean cycle period after the first five impacts; over seeds the
 median, and the worst run in brackets.
@@ -64,10 +66,17 @@ def add_arguments(parser):
     )
 
 
-# the controller's settings compared: no prediction; prediction over the measured latency
-# with an explicit law; and the node's default, which also evaluates the law implicitly
-# while the measured latency varies
-CONTROLLERS = (('off', 0, 0), ('measured', -1, 0), ('measured + implicit', -1, 1))
+# the controller's settings compared (name, latency_periods, implicit_periods,
+# anticipate_impacts): no prediction; prediction over the measured latency with an explicit
+# law; the law also evaluated implicitly while the measured latency varies, switching to the
+# up half on the sampled impact; and the node's default, which also anticipates an impact
+# the prediction meets
+CONTROLLERS = (
+    ('off', 0, 0, False),
+    ('measured', -1, 0, False),
+    ('measured + implicit, switch on the sample', -1, 1, False),
+    ('measured + implicit + anticipation', -1, 1, True),
+)
 
 
 def _metrics(contacts, delta_m):
@@ -119,7 +128,7 @@ def _row(kind, latency, controller, runs):
 def _offline(scene, args):
     from impact_arm.tools.latency_study import closed_loop
 
-    def run(latency, predicted, implicit, jitter=0.0, seed=0):
+    def run(latency, predicted, implicit, anticipate, jitter=0.0, seed=0):
         r = closed_loop(
             scene,
             latency,
@@ -129,19 +138,21 @@ def _offline(scene, args):
             seed=seed,
             implicit_periods=implicit,
             spread=args.spread,
+            anticipate_impacts=anticipate,
         )
         return r.t_contact, r.delta_m, r.failed
 
     rows = []
     for latency in args.latencies:
-        for name, predicted, implicit in CONTROLLERS:
-            runs = [run(latency, predicted, implicit)]  # deterministic: one run
+        for name, *settings in CONTROLLERS:
+            runs = [run(latency, *settings)]  # deterministic: one run
             rows.append(_row('offline, steady', str(latency), name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)
     for k in args.varying:
-        for name, predicted, implicit in CONTROLLERS:
+        for name, *settings in CONTROLLERS:
             runs = [
-                run(k, predicted, implicit, args.jitter, seed) for seed in range(1, args.seeds + 1)
+                run(k, *settings, jitter=args.jitter, seed=seed)
+                for seed in range(1, args.seeds + 1)
             ]
             rows.append(_row('offline, varying', f'{k}..{k + args.spread}', name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)

@@ -402,10 +402,11 @@ class ControlInputs:
                 sensed, (q, qd) = (q, qd), (q_ahead, qd_ahead)
                 t += len(ahead) * self.period
                 if self.anticipate_impacts:
-                    # a period of lead: the latency measured may be a period long
-                    q, qd = self.ctrl.anticipate_impact(
-                        q, qd, sensed, self.normal_force, lead=self.period
-                    )
+                    # the command may act earlier than predicted by the latencies' spread:
+                    # the impact must lie that far before the predicted state, a period at
+                    # least (a wider lead, offline, gave up what anticipation restores)
+                    lead = max(1, self.latency_spread()) * self.period
+                    q, qd = self.ctrl.anticipate_impact(q, qd, sensed, self.normal_force, lead=lead)
             else:  # the model's free motion left any arm's range: act on the sample itself
                 self.drop(
                     'unsafe_predictions',

@@ -300,10 +300,10 @@ class CycleController:
         lasts and lengthen the cycle about as much.
 
         ``lead`` [s]: how long before the predicted state the tip must have reached the
-        surface (depth over approach speed) for the cycle to switch: a period when the
-        latency may be a period shorter than predicted, so that a command acting early
-        still meets the impact after it has begun, never the approach before it (an up
-        command during the whole compression drove the tip deeper, offline: up to 9 %)."""
+        surface (depth over approach speed) for the cycle to switch: as much as the command
+        may act earlier than predicted, so that it meets the impact begun, never the
+        approach before it (an up command through the whole compression drove the tip
+        deeper, offline: up to 9 %)."""
         if self.surface_height is None:
             return list(q), list(qd)
         if self.impact_ahead:
