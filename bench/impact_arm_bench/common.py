@@ -11,8 +11,14 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
 
 from impact_arm.tools.progress import Progress
+
+if TYPE_CHECKING:
+    from impact_arm.physics.impact import Impact
+    from impact_arm.physics.scene import Scene
 
 LEVELS_DOC = 'relative error vs the reference preset'
 
@@ -23,7 +29,7 @@ BENCH_FOLDER = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _status = []  # the benchmark's status line, made on first use (stderr as it is then)
 
 
-def progress(message: str, done=None, total=None) -> None:
+def progress(message: str, done: float | None = None, total: float | None = None) -> None:
     """The benchmark's status line (``tools.progress``): rewritten on a terminal, one line
     per message otherwise; with ``done`` of ``total``, an ETA on a terminal."""
     if not _status:
@@ -47,14 +53,22 @@ def worker_environment(env: dict | None = None) -> dict:
     return env
 
 
-def load(scene_name: str):
+def load(scene_name: str) -> Scene:
     from impact_arm.physics.scene import load_scene
 
     return load_scene(scene_name)
 
 
 # --- timed runs -----------------------------------------------------------------------------
-def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', contact_rtol=None):
+def time_ours(
+    scene: Scene,
+    rtol: float,
+    atol: float | None,
+    repeats: int = 3,
+    max_step: float | None = None,
+    method: str = 'dopri5',
+    contact_rtol: float | None = None,
+) -> dict[str, Any]:
     """Best-of-``repeats`` event-to-event run (continuous control, no sampled output)."""
     from impact_arm.physics.simulate import run
 
@@ -79,7 +93,14 @@ def time_ours(scene, rtol, atol, repeats=3, max_step=None, method='dopri5', cont
     return {'impacts': impacts, 't_end': t_end, 'rhs_evaluations': nfev, 'wall': best}
 
 
-def time_scipy(scene, method, rtol, atol, repeats=3, contact_rtol=None):
+def time_scipy(
+    scene: Scene,
+    method: str,
+    rtol: float,
+    atol: float | None,
+    repeats: int = 3,
+    contact_rtol: float | None = None,
+) -> dict[str, Any]:
     from impact_arm.tools.baselines import run_scipy
 
     best = math.inf
@@ -138,36 +159,39 @@ METRIC_LABELS = {
 }
 
 
-def _impact_errors(a, b):
-    """One impact's relative errors against its reference (keys of TRADEOFF_METRICS)."""
+def _impact_errors(a: Impact, b: Impact) -> dict[str, float]:
+    """One impact's relative errors against its reference (keys of TRADEOFF_METRICS); both
+    ``Impact`` records."""
     return {
-        'delta_m': _rel(a['delta_m'], b['delta_m']),
-        'F_max': _rel(a['F_max'], b['F_max']),
-        'duration': _rel(a['duration'], b['duration']),
-        'v_after': _rel_vec(a['v_after'], b['v_after']),
-        'cor_kin': _rel(a['cor_kinematic'], b['cor_kinematic']),
-        'cor_energy': max(_rel(x, y) for x, y in zip(a['cor_energetic'], b['cor_energetic'])),
+        'delta_m': _rel(a.delta_m, b.delta_m),
+        'F_max': _rel(a.F_max, b.F_max),
+        'duration': _rel(a.duration, b.duration),
+        'v_after': _rel_vec(a.v_after, b.v_after),
+        'cor_kin': _rel(a.cor_kinematic, b.cor_kinematic),
+        'cor_energy': max(_rel(x, y) for x, y in zip(a.cor_energetic, b.cor_energetic)),
     }
 
 
-def _period(impacts):
-    return impacts[-1]['t_contact'] - impacts[-2]['t_contact'] if len(impacts) > 1 else math.nan
+def _period(impacts: Sequence[Impact]) -> float:
+    return impacts[-1].t_contact - impacts[-2].t_contact if len(impacts) > 1 else math.nan
 
 
-def per_impact_errors(impacts, ref_impacts):
+def per_impact_errors(
+    impacts: Sequence[Impact], ref_impacts: Sequence[Impact]
+) -> list[dict[str, float]]:
     """One dict of errors per impact (``TRADEOFF_METRICS`` but the period), in order."""
     period = _period(ref_impacts)
     rows = []
     for a, b in zip(impacts, ref_impacts):
         row = _impact_errors(a, b)
         row['t_impact'] = (
-            abs(a['t_contact'] - b['t_contact']) / period if math.isfinite(period) else math.nan
+            abs(a.t_contact - b.t_contact) / period if math.isfinite(period) else math.nan
         )
         rows.append(row)
     return rows
 
 
-def tradeoff_errors(impacts, ref_impacts):
+def tradeoff_errors(impacts: Sequence[Impact], ref_impacts: Sequence[Impact]) -> dict[str, float]:
     """Each metric's worst error over every impact (and the limit-cycle period's error);
     inf everywhere when the run has another number of impacts than the reference."""
     out = {k: math.inf for k in TRADEOFF_METRICS}
@@ -181,7 +205,7 @@ def tradeoff_errors(impacts, ref_impacts):
     return out
 
 
-def every_impact_error(impacts, ref_impacts):
+def every_impact_error(impacts: Sequence[Impact], ref_impacts: Sequence[Impact]) -> float:
     """The worst of ``tradeoff_errors``: the level a setting reaches."""
     return worst(tradeoff_errors(impacts, ref_impacts))
 
@@ -200,13 +224,15 @@ def fmt_err(x: float) -> str:
     return f'{x:.1e}'
 
 
-def table(header, rows, align=None) -> str:
+def table(
+    header: Sequence[Any], rows: Iterable[Sequence[Any]], align: Sequence[str] | None = None
+) -> str:
     """Plain-text table (also valid Markdown)."""
     cells = [list(map(str, header))] + [[str(c) for c in r] for r in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
     align = align or ['<'] + ['>'] * (len(header) - 1)
 
-    def line(r):
+    def line(r: Sequence[str]) -> str:
         return '| ' + ' | '.join(f'{c:{a}{w}}' for c, a, w in zip(r, align, widths)) + ' |'
 
     sep = (
@@ -219,7 +245,7 @@ def table(header, rows, align=None) -> str:
     return '\n'.join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
 
 
-def write_json(path, data) -> None:
+def write_json(path: str, data: Any) -> None:
     """The CLI's atomic JSON writer (non-finite numbers as null), creating the directory."""
     from impact_arm.tools.cli import write_json as write_atomically
 
@@ -252,14 +278,14 @@ def machine() -> dict:
     }
 
 
-def cpu_seconds(stat_path) -> float:
+def cpu_seconds(stat_path: str) -> float:
     """User + system CPU seconds from a /proc ``stat`` file (a process's or a thread's)."""
     with open(stat_path) as f:
         fields = f.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def paper_dict():
+def paper_dict() -> dict[str, Any]:
     """The article's scene file as YAML data, to vary in the benchmarks."""
     import yaml
     from impact_arm.physics.scene import resolve_scene_path

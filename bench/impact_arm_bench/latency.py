@@ -19,7 +19,7 @@ median, and the worst run in brackets.
 
 from __future__ import annotations
 
-import json
+import argparse
 import os
 import random
 import statistics
@@ -30,7 +30,7 @@ import time
 from .common import table
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scene', default='paper', help='scene file or installed name')
     parser.add_argument('--seconds', type=float, default=10.0, help='simulated s per run')
     parser.add_argument(
@@ -128,7 +128,14 @@ def _row(kind, latency, controller, runs):
 def _offline(scene, args):
     from impact_arm.tools.latency_study import closed_loop
 
-    def run(latency, predicted, implicit, anticipate, jitter=0.0, seed=0):
+    def run(
+        latency: int,
+        predicted: int,
+        implicit: int,
+        anticipate: bool,
+        jitter: float = 0.0,
+        seed: int = 0,
+    ) -> tuple[tuple[float, ...], tuple[float, ...], str]:
         r = closed_loop(
             scene,
             latency,
@@ -167,6 +174,8 @@ def _dds_run(scene_name, latency, predicted, seconds):
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from std_msgs.msg import String
 
+    from impact_arm.physics.impact import impact_from_json
+
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['ROS_DOMAIN_ID'] = str(random.randint(101, 200))
@@ -204,7 +213,7 @@ def _dds_run(scene_name, latency, predicted, seconds):
     node.create_subscription(
         String,
         '/impact_report',
-        lambda m: reports.append(json.loads(m.data)),
+        lambda m: reports.append(impact_from_json(m.data)),
         QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL),
     )
     executor = SingleThreadedExecutor(context=context)
@@ -217,7 +226,7 @@ def _dds_run(scene_name, latency, predicted, seconds):
     try:
         while time.monotonic() < end and all(p.poll() is None for p in procs):
             executor.spin_once(timeout_sec=0.1)
-            if reports and reports[-1]['t_contact'] > seconds:
+            if reports and reports[-1].t_contact > seconds:
                 break
     finally:
         for p in procs:  # ended by PID
@@ -230,7 +239,7 @@ def _dds_run(scene_name, latency, predicted, seconds):
                 p.kill()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-    done = [r for r in reports if r['t_contact'] <= seconds]
+    done = [r for r in reports if r.t_contact <= seconds]
     failed = '' if procs[0].returncode in (0, -2, None) else f'simulator exit {procs[0].returncode}'
     return done, failed
 
@@ -240,13 +249,13 @@ def _dds(args):
     for latency in args.latencies:
         for predicted, name in ((0, 'off'), (-1, 'measured + implicit')):
             done, failed = _dds_run(args.scene, latency, predicted, args.dds_seconds)
-            runs = [([r['t_contact'] for r in done], [r['delta_m'] for r in done], failed)]
+            runs = [([r.t_contact for r in done], [r.delta_m for r in done], failed)]
             rows.append(_row('DDS lockstep, steady', str(latency), name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)
     return rows
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from impact_arm.physics.scene import load_scene, resolve_scene_path
 
     scene = load_scene(resolve_scene_path(args.scene))

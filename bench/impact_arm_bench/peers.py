@@ -15,10 +15,17 @@ the whole 15 cycles (6 s simulated), best of ``--repeats``.
 
 from __future__ import annotations
 
+import argparse
 import math
 import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 from . import common
+
+if TYPE_CHECKING:
+    from impact_arm.physics.impact import Impact
+    from impact_arm.physics.scene import Scene
 
 MJCF = """<mujoco model="impact_arm">
   <option timestep="{dt}" gravity="0 {gy} 0" integrator="{integrator}"/>
@@ -37,13 +44,18 @@ MJCF = """<mujoco model="impact_arm">
 </mujoco>"""
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scene', default='paper', help='a two-link scene (default: paper)')
     parser.add_argument('--repeats', type=int, default=2, help='timed repeats (best kept)')
     parser.add_argument('--json', metavar='FILE', help='write the rows as JSON')
 
 
-def build(scene, dt, solref=None, integrator='implicitfast'):
+def build(
+    scene: Scene,
+    dt: float,
+    solref: tuple[float, float] | None = None,
+    integrator: str = 'implicitfast',
+) -> Any:
     import mujoco
 
     (L1, L2), (m1, m2) = scene.lengths, scene.masses
@@ -71,7 +83,9 @@ def build(scene, dt, solref=None, integrator='implicitfast'):
     return mujoco.MjModel.from_xml_string(xml)
 
 
-def simulate(scene, model, t_end, max_impacts=None):
+def simulate(
+    scene: Scene, model: Any, t_end: float, max_impacts: int | None = None
+) -> list[dict[str, Any]]:
     """The cycle under MuJoCo; impact records (t, v before/after, F_max, duration, e)."""
     import mujoco
     import numpy as np
@@ -135,7 +149,7 @@ def simulate(scene, model, t_end, max_impacts=None):
 TIMECONSTS = (8e-5, 1.2e-4, 1.6e-4, 2e-4, 2.5e-4, 3e-4)  # MuJoCo solref time constants [s]
 
 
-def tune_dampratio(scene, dt, timeconst, e_target):
+def tune_dampratio(scene: Scene, dt: float, timeconst: float, e_target: float) -> float:
     """MuJoCo's damping ratio that gives the first impact's CoR (bisection: more damping,
     less rebound)."""
     lo, hi = 0.0, 1.5
@@ -152,7 +166,16 @@ def tune_dampratio(scene, dt, timeconst, e_target):
     return 0.5 * (lo + hi)
 
 
-def errors(impacts, ref):
+def _outcome(record: Impact | dict[str, Any]) -> tuple[float, float, float]:
+    """(F_max, duration, kinematic CoR) of one impact: ours (an ``Impact``) or MuJoCo's
+    (``simulate``'s dict)."""
+    if isinstance(record, dict):
+        return record['F_max'], record['duration'], record['e']
+    return record.F_max, record.duration, record.cor_kinematic
+
+
+def errors(impacts: Sequence[Impact | dict[str, Any]], ref: Sequence[Impact]) -> dict[str, float]:
+    """``impacts`` (ours or MuJoCo's) against ``ref`` (ours)."""
     out = {
         'F_max #1': math.inf,
         'duration #1': math.inf,
@@ -160,17 +183,17 @@ def errors(impacts, ref):
         'impacts': len(impacts),
     }
     if impacts:
-        out['F_max #1'] = abs(impacts[0]['F_max'] / ref[0]['F_max'] - 1)
-        out['duration #1'] = abs(impacts[0]['duration'] / ref[0]['duration'] - 1)
+        force, duration, _ = _outcome(impacts[0])
+        out['F_max #1'] = abs(force / ref[0].F_max - 1)
+        out['duration #1'] = abs(duration / ref[0].duration - 1)
     if len(impacts) >= len(ref):
         out['e (worst impact)'] = max(
-            abs(a.get('e', a.get('cor_kinematic')) / b['cor_kinematic'] - 1)
-            for a, b in zip(impacts, ref)
+            abs(_outcome(a)[2] / b.cor_kinematic - 1) for a, b in zip(impacts, ref)
         )
     return out
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     try:
         import mujoco  # noqa: F401
     except ImportError:
@@ -203,9 +226,9 @@ def run(args) -> int:
         common.progress(
             f'MuJoCo: tuning solref on the first impact (time constant {timeconst:g} s, dt 10 µs)'
         )
-        damp = tune_dampratio(scene, 1e-5, timeconst, ref[0]['cor_kinematic'])
+        damp = tune_dampratio(scene, 1e-5, timeconst, ref[0].cor_kinematic)
         first = simulate(scene, build(scene, 1e-5, (timeconst, damp)), 0.5, max_impacts=1)
-        miss = abs(first[0]['duration'] / ref[0]['duration'] - 1) if first else math.inf
+        miss = abs(first[0]['duration'] / ref[0].duration - 1) if first else math.inf
         if best is None or miss < best[0]:
             best = (miss, timeconst, damp)
     _, timeconst, damp = best

@@ -29,16 +29,18 @@ even-numbered runs (run 2, 4, ...): the same run at another load.
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
 import sys
 import tempfile
+from typing import Any
 
 from .common import BENCH_FOLDER, cpu_seconds
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--runs', type=int, default=1, help='runs (default 1)')
     parser.add_argument(
         '--order',
@@ -201,8 +203,8 @@ def _identical(runs) -> bool:
     (its histogram's counts run on until its latest diagnostics, at a wall-clock moment)."""
     from standin_stack import CYCLES
 
-    def key(run):
-        impacts = [(r['t_contact'], r['delta_m'], r['F_max']) for r in run.impacts[: CYCLES + 1]]
+    def key(run: Any) -> tuple[list[tuple[float, float, float]], list[str]]:
+        impacts = [(r.t_contact, r.delta_m, r.F_max) for r in run.impacts[: CYCLES + 1]]
         latencies = sorted(p.split(':')[0] for p in run.ctrl.get('latency_histogram', '').split())
         return impacts, latencies
 
@@ -218,7 +220,7 @@ def _reach_the_stand_in_stack() -> None:
         sys.path.insert(0, support)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     _reach_the_stand_in_stack()
     from standin_stack import CYCLES, ROLES
 
@@ -248,8 +250,8 @@ def run(args) -> int:
             n = min(len(run_i.impacts), CYCLES + 1)
             result['equals_offline'] = (
                 n > 0
-                and [r['t_contact'] for r in run_i.impacts] == list(offline.t_contact[:n])
-                and [r['delta_m'] for r in run_i.impacts] == list(offline.delta_m[:n])
+                and [r.t_contact for r in run_i.impacts] == list(offline.t_contact[:n])
+                and [r.delta_m for r in run_i.impacts] == list(offline.delta_m[:n])
             )
         results.append(result)
         cpu = ' '.join(f'{r} {v:.0f}%' for r, v in result['cpu_percent'].items())

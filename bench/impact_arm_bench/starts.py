@@ -15,6 +15,7 @@ summary the targets are stated in.
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import signal
@@ -23,6 +24,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 ARTICLE_PERIOD = 0.397  # s, the article's limit cycle
 CYCLES = 15
@@ -31,7 +34,7 @@ SIM_TIME_LIMIT = 7.0  # s simulated: the 15th impact is due at ~5.8 s
 START_TIMEOUT = 120.0  # wall s for the first command (a cold numba cache compiles)
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--runs',
         type=int,
@@ -54,6 +57,7 @@ def _listener(domain):
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
     from impact_arm import contract
+    from impact_arm.physics.impact import impact_from_json
     from impact_arm.tools.runner import simulator_report
 
     context = Context()
@@ -63,11 +67,11 @@ def _listener(domain):
     node.create_subscription(
         String,
         contract.IMPACT_REPORT,
-        lambda m: seen['impacts'].append(json.loads(m.data)),
+        lambda m: seen['impacts'].append(impact_from_json(m.data)),
         contract.qos(contract.IMPACT_REPORT).to_rclpy(),
     )
 
-    def on_diagnostics(msg):
+    def on_diagnostics(msg: Any) -> None:
         report = simulator_report(msg)
         if report is not None:
             seen['diagnostics'].append(report)
@@ -78,7 +82,9 @@ def _listener(domain):
     return rclpy, context, node, executor, seen
 
 
-def start_nodes(procs, env, logdir, prefix=''):
+def start_nodes(
+    procs: dict[str, subprocess.Popen], env: dict[str, str], logdir: str, prefix: str = ''
+) -> None:
     """Start simulator and controller into ``procs`` as a user does (``python -m`` is what
     ``ros2 run`` runs), each logging to LOGDIR/PREFIX<node>.log; filled one by one, so
     ``stop_all`` ends whatever started even if the second start fails."""
@@ -93,7 +99,9 @@ def start_nodes(procs, env, logdir, prefix=''):
             )
 
 
-def stop_all(procs, rclpy, context, node, executor):
+def stop_all(
+    procs: dict[str, subprocess.Popen], rclpy: Any, context: Any, node: Any, executor: Any
+) -> None:
     """SIGINT every node still running (by PID; SIGKILL after 10 s), then the listener."""
     for p in procs.values():
         if p.poll() is None:
@@ -109,7 +117,7 @@ def stop_all(procs, rclpy, context, node, executor):
     rclpy.try_shutdown(context=context)
 
 
-def one_start(index, env, logdir):
+def one_start(index: int, env: dict[str, str], logdir: str) -> dict[str, Any]:
     """One user-like start; returns its row."""
     domain = int(env['ROS_DOMAIN_ID'])
     rclpy, context, node, executor, seen = _listener(domain)
@@ -127,7 +135,7 @@ def one_start(index, env, logdir):
                 outcome = f'simulator exited ({sim.returncode})'
             elif report and report.stopped:
                 outcome = 'stopped: ' + report.message
-            elif len(cycles_of(sorted(i['t_contact'] for i in seen['impacts']))) >= CYCLES:
+            elif len(cycles_of(sorted(i.t_contact for i in seen['impacts']))) >= CYCLES:
                 outcome = 'completed'
             elif status and status.sim_time > SIM_TIME_LIMIT:
                 outcome = f'{SIM_TIME_LIMIT:g} s simulated'
@@ -147,7 +155,9 @@ def one_start(index, env, logdir):
     return _row(index, outcome, seen)
 
 
-def wakeup_floor(seconds=2.0, period=1e-3, priority=50):
+def wakeup_floor(
+    seconds: float = 2.0, period: float = 1e-3, priority: int = 50
+) -> dict[str, float]:
     """The machine's own share of late periods: a bare loop that only sleeps to a 1 ms
     schedule, at the simulator loop's default priority (SCHED_FIFO 50 where allowed), counts
     wake-ups later than one period after their deadline — what an overrun is to the
@@ -178,7 +188,7 @@ def wakeup_floor(seconds=2.0, period=1e-3, priority=50):
     return {'periods': k, 'late': late, 'worst_us': worst * 1e6}
 
 
-def cycles_of(times):
+def cycles_of(times: Iterable[float]) -> list[list[float]]:
     """Impact times grouped into cycles: an impact within half a period of the previous one
     is a re-strike of the same cycle (the arm bounced before it rose), not a new cycle."""
     cycles = []
@@ -230,7 +240,7 @@ def _simulator_counts(status):
 
 def _row(index, outcome, seen):
     status = seen['diagnostics'][-1].status if seen['diagnostics'] else None
-    times = sorted(i['t_contact'] for i in seen['impacts'])
+    times = sorted(i.t_contact for i in seen['impacts'])
     starts = [c[0] for c in cycles_of(times)]
     gaps = [b - a for a, b in zip(starts, starts[1:])]
     period = (starts[-1] - starts[0]) / (len(starts) - 1) if len(starts) > 1 else float('nan')
@@ -304,7 +314,7 @@ def _print_row(r):
         )
 
 
-def summary(rows):
+def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """The target figures over all starts."""
     periods = sum(max(r['periods'], 0) for r in rows)
     overruns = sum(max(r['overruns'], 0) for r in rows)
@@ -336,7 +346,7 @@ def summary(rows):
     }
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from impact_arm.tools.runner import dds_environment
 
     if args.runs < 1:

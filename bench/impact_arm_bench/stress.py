@@ -19,16 +19,22 @@ full sweep, including a soak of 10 000 impacts, and prints the matrix as a table
 
 from __future__ import annotations
 
+import argparse
 import copy
 import math
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from impact_arm.contract import INTEGRATOR_METHODS
 from . import common
 from .common import paper_dict
+
+if TYPE_CHECKING:
+    from impact_arm.physics.scene import Scene
 
 OK, STOPPED, FAIL = 'ok', 'stopped', 'FAIL'
 
@@ -47,7 +53,9 @@ class Case:
     note: str = ''
 
 
-def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):
+def strike_dict(
+    v: float, law: str = 'elastoplastic', mu: float = 0.2, qd2: float = 0.0
+) -> dict[str, Any]:
     """Link 2 hanging straight down, link 1 turning so the tip moves straight down at v and
     meets the floor 1e-7 m below its start; no gravity, no controller, 1 impact."""
     data = paper_dict()
@@ -60,7 +68,7 @@ def strike_dict(v, law='elastoplastic', mu=0.2, qd2=0.0):
     return data
 
 
-def build(case: Case):
+def build(case: Case) -> Scene:
     from impact_arm.physics.scene import parse_scene
 
     data = strike_dict(case.strike_speed) if case.base == 'strike' else paper_dict()
@@ -90,7 +98,7 @@ def _surface(**kw):
     return [s]
 
 
-def cases(full=False):
+def cases(full: bool = False) -> list[Case]:
     """The matrix. ``full`` adds the intermediate values and the soak."""
     c = []
     c2 = {'cycles': 2, 't_max': 5.0}
@@ -220,7 +228,9 @@ class Outcome:
     t_end: float
 
 
-def check_run(case: Case, scene, deadline=None, method='dopri5'):
+def check_run(
+    case: Case, scene: Scene, deadline: float | None = None, method: str = 'dopri5'
+) -> Outcome:
     """Run one case event to event, checking every impact. Returns an ``Outcome``."""
     from impact_arm.physics.errors import SimulationError
     from impact_arm.physics.integrator import PhaseIntegrator
@@ -240,11 +250,11 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
     sequence = []
     e_contact = None
 
-    def energy(y):
+    def energy(y: np.ndarray) -> float:
         q, qd = y[:n].tolist(), y[n : 2 * n].tolist()
         return float(sum(model.link_energies(q, qd)) + model.potential_energy(q))
 
-    def stop(outcome, message):
+    def stop(outcome: str, message: str) -> Outcome:
         return Outcome(
             case.name,
             outcome,
@@ -285,31 +295,27 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
                 want = (
                     ['contact', 'yield', 'max_compression', 'separation']
                     if surf.law == 'elastoplastic'
-                    and record['delta_m'] >= 1.9 * surf.constants.delta_c
+                    and record.delta_m >= 1.9 * surf.constants.delta_c
                     else ['contact', 'max_compression', 'separation']
                 )
                 if sequence != want:
-                    problems.append(f'impact {record["index"]}: phases {sequence}, expected {want}')
+                    problems.append(f'impact {record.index}: phases {sequence}, expected {want}')
                 rows = integ.trace[:]
                 integ.trace.clear()
                 deltas = [r[2] for r in rows]
-                dm, dr = record['delta_m'], record['delta_r']
-                numbers = (
-                    [dm, dr, record['F_max'], record['duration']]
-                    + record['v_after']
-                    + record['T_after']
-                )
+                dm, dr = record.delta_m, record.delta_r
+                numbers = [dm, dr, record.F_max, record.duration, *record.v_after, *record.T_after]
                 if not all(math.isfinite(x) for x in numbers):
-                    problems.append(f'impact {record["index"]}: non-finite metrics')
+                    problems.append(f'impact {record.index}: non-finite metrics')
                 if not dm > 0:
-                    problems.append(f'impact {record["index"]}: δm = {dm:g} <= 0')
+                    problems.append(f'impact {record.index}: δm = {dm:g} <= 0')
                 if not 0 <= dr < dm:
-                    problems.append(f'impact {record["index"]}: δr = {dr:g} not in [0, δm)')
+                    problems.append(f'impact {record.index}: δr = {dr:g} not in [0, δm)')
                 if deltas and min(deltas) < -1e-6 * dm:
-                    problems.append(f'impact {record["index"]}: δ = {min(deltas):g} < 0')
+                    problems.append(f'impact {record.index}: δ = {min(deltas):g} < 0')
                 if not motors_in_contact:
                     e_sep = energy(ev.y)
-                    scale = max(abs(e_contact), sum(record['T_before']) / 2, 1e-300)
+                    scale = max(abs(e_contact), sum(record.T_before) / 2, 1e-300)
                     gain = (
                         abs(e_sep - e_contact) if elastic_frictionless else e_sep - e_contact
                     ) / scale
@@ -317,7 +323,7 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
                     tol = 1e-6 if case.preset != 'fast' else 1e-4
                     if gain > tol:
                         problems.append(
-                            f'impact {record["index"]}: contact added energy ({gain:.2e} of E)'
+                            f'impact {record.index}: contact added energy ({gain:.2e} of E)'
                         )
                 if problems:
                     return stop(FAIL, '; '.join(problems[:3]))
@@ -346,7 +352,7 @@ def check_run(case: Case, scene, deadline=None, method='dopri5'):
     )
 
 
-def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
+def run_case(case: Case, deadline: float | None = None, method: str = 'dopri5') -> Outcome:
     from impact_arm.physics.errors import SceneError
 
     try:
@@ -358,7 +364,7 @@ def run_case(case: Case, deadline=None, method='dopri5') -> Outcome:
     return check_run(case, scene, deadline, method)
 
 
-def format_matrix(outcomes) -> str:
+def format_matrix(outcomes: Iterable[Outcome]) -> str:
     body = [
         [
             o.case,
@@ -377,7 +383,7 @@ def format_matrix(outcomes) -> str:
     )
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--quick', action='store_true', help='only the fast cases (the ones make test runs)'
     )
@@ -416,7 +422,7 @@ def add_arguments(parser):
     flood_arguments(parser)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     if args.fuzz:
         from .fuzz import report
 

@@ -34,7 +34,7 @@ class RunResult:
     exception: SimulationError | None
     wall_time: float  # the integration and its bookkeeping [s]
     mcap: str | None  # the MCAP file written, if asked for
-    run: Run  # the physics' own result (dict records, integrator, chatter, limits)
+    run: Run  # the physics' own result (the same records, integrator, chatter, limits)
 
     @property
     def ok(self) -> bool:
@@ -102,7 +102,7 @@ def simulate(
             observer.close(result)  # with the result: its summary is stored in the file
     return RunResult(
         scene=sc,
-        impacts=tuple(Impact.from_dict(record) for record in result.impacts),
+        impacts=tuple(result.impacts),
         samples=tuple(result.samples),
         t_end=result.t_end,
         stop_reason=result.stop_reason,

@@ -4,7 +4,7 @@ A run is a base scene plus *overrides* addressed by key path, the way the scene 
 them: ``surfaces[0].mu``, ``controller.kp`` (a whole list), ``controller.kp[0]`` (one entry),
 ``materials.steel.E``, ``integrator.rtol``. Overrides are written into the scene's YAML data
 before validation, so a refused value is named by its key path like any scene error. Runs
-integrate from event to event (no samples, no traces) and return impact records and a summary;
+integrate from event to event (no samples, no traces) and return ``Impact`` records and a summary;
 a refused scene or a simulation error is part of the result, never an exception::
 
     from impact_arm.calibration.study import Study
@@ -12,7 +12,7 @@ a refused scene or a simulation error is part of the result, never an exception:
     study = Study('paper', {'integrator.rtol': 1e-2, 'integrator.contact_rtol': 3e-4,
                             'integrator.method': 'rosenbrock'})
     result = study.run({'surfaces[0].mu': 0.5, 'controller.kp': [800, 300]})
-    result.summary['cor_kinematic'], result.impacts[0]['F_max'], result.error
+    result.summary['cor_kinematic'], result.impacts[0].F_max, result.error
 
 The YAML is parsed once per study, and what a run's overrides leave alone is validated once
 (``parse_scene(checked=...)``; the checks across keys run for every run); the compiled kernel
@@ -33,6 +33,7 @@ import time
 from dataclasses import dataclass, field
 
 from ..physics.errors import SceneError
+from ..physics.impact import Impact
 from ..physics.metrics import limit_cycle
 from ..physics.scene import Scene, parse_scene, read_scene_file, scene_data
 from ..physics.simulate import run as run_scene
@@ -159,14 +160,14 @@ def load_scene_data(scene: str | Scene | dict) -> tuple[dict, str]:
 @dataclass
 class StudyRun:
     overrides: dict
-    impacts: list = field(default_factory=list)
+    impacts: list[Impact] = field(default_factory=list)
     summary: dict = field(default_factory=dict)
     error: str = ''  # the refusal or simulation error, '' if the run completed
     error_kind: str = ''  # 'scene' | 'simulation' | ''
 
 
 def summarize(
-    impacts: Sequence[dict],
+    impacts: Sequence[Impact],
     t_end: float = math.nan,
     stats: Stats | None = None,
     wall: float = math.nan,
@@ -181,13 +182,13 @@ def summarize(
     return {
         'impacts': len(impacts),
         't_end': t_end,
-        'period': impacts[-1]['t_contact'] - impacts[-1 - every]['t_contact']
+        'period': impacts[-1].t_contact - impacts[-1 - every].t_contact
         if len(impacts) > every
         else math.nan,
         'settled_after': cycle.settled_after if cycle else 0,
         'impacts_per_cycle': every if cycle else 0,
-        'cor_kinematic': last['cor_kinematic'] if last else math.nan,
-        'cor_energetic': last['cor_energetic'][-1] if last else math.nan,
+        'cor_kinematic': last.cor_kinematic if last else math.nan,
+        'cor_energetic': last.cor_energetic[-1] if last else math.nan,
         'rhs_evaluations': stats.rhs_evaluations if stats else 0,
         'steps': stats.steps if stats else 0,
         'wall_time': wall,

@@ -19,6 +19,7 @@ import numpy as np
 from ..physics.limits import LimitWatch
 from ..physics.control import q_law
 from ..physics.errors import ImpactArmError
+from ..physics.impact import Impact
 from ..physics.integrator import PRESETS, IntegratorOptions, PhaseIntegrator
 from ..physics.metrics import ImpactBuilder
 from ..physics.periods import advance_period
@@ -46,7 +47,8 @@ class Tick:
     velocity: list  # joint rates [rad/s]
     effort: list  # joint torques acting now [N m] (0 while actuators are off)
     wrench: tuple  # (tangential, normal) contact force averaged over the period [N]
-    impacts: list = field(default_factory=list)  # [(record, trace rows)] completed this period
+    # [(record, trace rows)] of the impacts completed this period
+    impacts: list[tuple[Impact, list]] = field(default_factory=list)
     force_peak: float = 0.0  # the largest normal contact force in the period [N]
     plates: tuple = ()  # (z, ż) of each mounted surface's plate (ArmModel.plate_states)
 
@@ -125,7 +127,7 @@ class SimulatedArm:
         for event in scratch.advance(scratch.state.t + 2.0):
             record = builder.feed(event)
             if record is not None:
-                json.dumps(record)
+                json.dumps(record.to_dict())  # as the report sends it
                 break
         n, y = self.n, scratch.state.y
         scratch.torque()
@@ -239,7 +241,9 @@ class SimulatedArm:
         self.limits.add(tick.position, tick.velocity)
         return tick
 
-    def sample(self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable = ()) -> Tick:
+    def sample(
+        self, wrench: tuple[float, float] = (0.0, 0.0), impacts: Iterable[tuple[Impact, list]] = ()
+    ) -> Tick:
         """The sensors' view of the current state (``driver/sensors.py``: one reading per
         period; asked again in the same period, they repeat it, as a driver republishing its
         last sample does)."""

@@ -178,11 +178,11 @@ def our_impacts(scene: Scene, impacts: int, rate: float) -> tuple[list[ImpactRow
     )
     rows = [
         ImpactRow(
-            float(r['t_contact']),
-            -float(r['v_before'][1]),
-            float(r['cor_kinematic']),
-            float(r['duration']),
-            float(r['F_max']),
+            float(r.t_contact),
+            -float(r.v_before[1]),
+            float(r.cor_kinematic),
+            float(r.duration),
+            float(r.F_max),
         )
         for r in result.impacts[:impacts]
     ]

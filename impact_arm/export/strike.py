@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.errors import SimulationError
+from ..physics.impact import Impact
 from ..physics.integrator import IntegratorOptions, PhaseIntegrator
 from ..physics.metrics import ImpactBuilder
 from ..physics.model import ArmModel
@@ -80,7 +81,7 @@ def rigid(scene: Scene) -> Scene:
     )
 
 
-def limit_cycle_impact(scene: Scene) -> dict:
+def limit_cycle_impact(scene: Scene) -> Impact:
     """The impact record the scene's run settles on (its last impact)."""
     result = run(scene, samples=False)
     if not result.impacts:
@@ -91,18 +92,18 @@ def limit_cycle_impact(scene: Scene) -> dict:
     return result.impacts[-1]
 
 
-def contact_rates(model: ArmModel, record: dict) -> np.ndarray:
+def contact_rates(model: ArmModel, record: Impact) -> np.ndarray:
     """The absolute link rates at an impact's contact: J⁻¹ v for two links; for more, the
     rates that give the record's tip velocity and every link's kinetic energy."""
     n = model.n
-    q = np.radians(np.asarray(record['q_contact_deg'], float))
-    v = np.asarray(record['v_before'], float)
+    q = np.radians(np.asarray(record.q_contact_deg, float))
+    v = np.asarray(record.v_before, float)
     jacobian = np.asarray(model.tip_jacobian(q), float).reshape(2, n)
     if n == 2:
         return np.linalg.solve(jacobian, v)
     from scipy.optimize import least_squares
 
-    energies = np.asarray(record['T_before'][:n], float)
+    energies = np.asarray(record.T_before[:n], float)
     scale_v, scale_t = max(float(np.hypot(*v)), 1e-9), max(float(np.sum(energies)), 1e-12)
 
     def misfit(qd: np.ndarray) -> np.ndarray:
@@ -119,19 +120,19 @@ def contact_rates(model: ArmModel, record: dict) -> np.ndarray:
 
 
 def strikes(
-    scene: Scene, ratios: tuple[float, ...] = SPEED_RATIOS, record: dict | None = None
+    scene: Scene, ratios: tuple[float, ...] = SPEED_RATIOS, record: Impact | None = None
 ) -> list[Strike]:
     """The normal and oblique strikes at each speed ratio, from the limit-cycle impact."""
     for ratio in ratios:
         if not 0.0 < ratio <= 10.0:
             raise ValueError(f'speed ratio {ratio}: must be in (0, 10]')
     model = ArmModel(scene)
-    record = record or limit_cycle_impact(scene)
+    record = record if record is not None else limit_cycle_impact(scene)
     n = model.n
-    q = np.radians(np.asarray(record['q_contact_deg'], float))
+    q = np.radians(np.asarray(record.q_contact_deg, float))
     qd_cycle = contact_rates(model, record)
     jacobian = np.asarray(model.tip_jacobian(q), float).reshape(2, n)
-    speed = float(np.hypot(*record['v_before']))
+    speed = float(np.hypot(*record.v_before))
     qd_normal = np.linalg.pinv(jacobian) @ np.array([0.0, -speed])
     coordinates = scene.joint_coordinates
     out = []
@@ -147,7 +148,7 @@ def strikes(
                     tuple(float(x) for x in coordinates.positions(q)),
                     tuple(float(x) for x in coordinates.rates(qd)),
                     (float(jacobian[0] @ qd), float(jacobian[1] @ qd)),
-                    int(record.get('surface', 0)),
+                    0,  # the first surface: an impact record names none
                 )
             )
     return out
@@ -174,9 +175,9 @@ def our_outcome(scene: Scene, strike: Strike) -> Outcome:
         if done:
             record = done[0][0]
             return Outcome(
-                float(record['cor_kinematic']),
-                float(record['duration']),
-                float(record['F_max']),
-                float(record['v_after'][0]),
+                float(record.cor_kinematic),
+                float(record.duration),
+                float(record.F_max),
+                float(record.v_after[0]),
             )
     raise SimulationError(f'strike {strike.label}: the contact did not end within {t_end} s')

@@ -13,10 +13,13 @@ Column names carry their units; they are the table's header in Foxglove and Lich
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 import json
 import math
+
+if TYPE_CHECKING:
+    from ..physics.impact import Impact
 
 SIGNIFICANT = 4  # digits: the model's outputs are not known better than ~0.1 %
 # the contact instant: to 0.1 ms, which tells apart every impact and every event frame
@@ -32,7 +35,7 @@ def rounded(value: float, digits: int = SIGNIFICANT) -> float | None:
     return 0.0 if value == 0 else float(f'{value:.{digits}g}')
 
 
-# column -> (report field, scale to the column's unit); vectors: their z (index 1 of the
+# column -> (``Impact`` field, scale to the column's unit); vectors: their z (index 1 of the
 # plane's (x, z)); the energetic CoR: its last entry, the whole arm's
 COLUMNS: tuple[tuple[str, str, float], ...] = (
     ('duration [µs]', 'duration', 1e6),
@@ -47,18 +50,16 @@ COLUMNS: tuple[tuple[str, str, float], ...] = (
 VECTOR_INDEX = {'v_before': 1, 'v_after': 1, 'cor_energetic': -1}
 
 
-def table_row(record: Mapping[str, Any]) -> dict[str, float | int | None]:
-    """One impact report as a row: its number and time, then each of ``COLUMNS`` the report
-    carries (a report without a field has no cell for it). Raises KeyError, TypeError or
-    ValueError for a report without a number or time, or with a field that is no number."""
+def table_row(record: Impact) -> dict[str, float | int | None]:
+    """One impact as a row: its number and time, then each of ``COLUMNS``. Raises
+    TypeError or ValueError for a record (read from the wire) with a field that is no
+    number."""
     row: dict[str, float | int | None] = {
-        'impact': int(record['index']),
-        't_contact [s]': round(float(record['t_contact']), TIME_DECIMALS),
+        'impact': int(record.index),
+        't_contact [s]': round(float(record.t_contact), TIME_DECIMALS),
     }
     for column, field, scale in COLUMNS:
-        if field not in record:
-            continue
-        value = record[field]
+        value = getattr(record, field)
         if field in VECTOR_INDEX and isinstance(value, (list, tuple)):
             value = value[VECTOR_INDEX[field]]
         row[column] = rounded(float(value) * scale)

@@ -95,6 +95,7 @@ from .msgdefs import typestore
 from .scene_visuals import DEFAULT_TF_RATE, VisualsWriter, mounted_surfaces
 
 if TYPE_CHECKING:
+    from ..physics.impact import Impact
     from ..physics.simulate import RunResult, Sample
 
 OFFLINE_TOPICS = {  # what an offline run records: the simulator's topics and the traces
@@ -259,11 +260,13 @@ class OfflineRecorder:
             self.visuals.plates(t_ns, plates)
         self.visuals.state(t_ns, sample.q, sample.wrench)
 
-    def on_impact(self, record: dict, trace_rows: Sequence[Sequence[float]]) -> None:
-        t_ns = sim_time_ns(record['t_contact'] + record['duration'])
+    def on_impact(self, record: Impact, trace_rows: Sequence[Sequence[float]]) -> None:
+        t_ns = sim_time_ns(record.t_contact + record.duration)
         self.visuals.impact(record)  # its frames are stamped from the contact on: first
         self._write(
-            IMPACT_REPORT, self._types['std_msgs/msg/String'](data=json.dumps(record)), t_ns
+            IMPACT_REPORT,
+            self._types['std_msgs/msg/String'](data=json.dumps(record.to_dict())),
+            t_ns,
         )
         self._write(IMPACT_TRACE, self.trace_message(trace_rows), t_ns)
         self.writer.flush()  # an impact is never lost, whatever happens later

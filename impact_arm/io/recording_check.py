@@ -9,7 +9,6 @@ rclpy): header stamps straight from the CDR bytes, impact reports as JSON.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -23,6 +22,8 @@ from ..contract import (
     LOSSES_METADATA,
     SURFACE_MOUNTS,
 )
+from ..physics.errors import ImpactArmError
+from ..physics.impact import impact_from_json
 from .mcap_ros2 import iter_raw, read_metadata, topics_info
 from .msgdefs import typestore
 from .wire import MalformedMessage, header_stamp_ns
@@ -129,8 +130,8 @@ def check_recording(
             if read_string is None:
                 read_string = typestore().deserialize_cdr
             try:
-                indices.append(int(json.loads(read_string(m.data, m.type_name).data)['index']))
-            except (ValueError, KeyError, TypeError):
+                indices.append(int(impact_from_json(read_string(m.data, m.type_name).data).index))
+            except (ImpactArmError, ValueError, TypeError):
                 indices.append(None)
     last = max((max(seen, default=-1) for seen in stamps.values()), default=-1)
     last = max(last, math.floor(until * rate + 1e-6))

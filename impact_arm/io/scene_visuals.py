@@ -37,10 +37,9 @@ viewer that jumps to any time shows them right from one message.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-import json
 import math
 
 from ..contract import (
@@ -54,6 +53,8 @@ from ..contract import (
     VISUAL_TOPICS,
     plane_to_world,
 )
+from ..physics.errors import ImpactArmError
+from ..physics.impact import Impact, impact_from_json
 from .impact_table import table_json, table_row
 from .msgdefs import append_cdr, sequence_cdr_prefix, serialize_cdr
 from .urdf import (
@@ -121,19 +122,18 @@ def force_colour(force: float) -> tuple[float, float, float, float]:
     return (*stops[-1][1], 1.0)
 
 
-def event_states(record: Mapping[str, Any]) -> list[tuple[str, int, list[float]]]:
-    """[(event, stamp [ns], absolute link angles [rad])] of an impact report: first contact,
-    maximum compression and separation (the last two only in reports that carry their
-    angles). The contact stamp is rounded up and the separation stamp down to the ns, so both
-    lie inside the contact interval."""
-    t0 = float(record['t_contact'])
-    out = [('contact', math.ceil(t0 * 1e9 - 1e-6), record['q_contact_deg'])]
-    if 'q_max_compression_deg' in record:
-        t_max = t0 + math.fsum(record['phase_durations'][:2])
-        out.append(('max_compression', round(t_max * 1e9), record['q_max_compression_deg']))
-    if 'q_separation_deg' in record:
-        t_sep = t0 + float(record['duration'])
-        out.append(('separation', math.floor(t_sep * 1e9 + 1e-6), record['q_separation_deg']))
+def event_states(record: Impact) -> list[tuple[str, int, list[float]]]:
+    """[(event, stamp [ns], absolute link angles [rad])] of an impact: first contact,
+    maximum compression and separation. The contact stamp is rounded up and the separation
+    stamp down to the ns, so both lie inside the contact interval."""
+    t0 = float(record.t_contact)
+    t_max = t0 + math.fsum(record.phase_durations[:2])
+    t_sep = t0 + float(record.duration)
+    out = [
+        ('contact', math.ceil(t0 * 1e9 - 1e-6), record.q_contact_deg),
+        ('max_compression', round(t_max * 1e9), record.q_max_compression_deg),
+        ('separation', math.floor(t_sep * 1e9 + 1e-6), record.q_separation_deg),
+    ]
     return [(kind, int(t), [math.radians(a) for a in q]) for kind, t, q in out]
 
 
@@ -240,16 +240,16 @@ class SceneVisuals:
             for j, (frame, height) in enumerate(self.mounted)
         ]
 
-    def add_impact(self, record: Mapping[str, Any] | str | bytes) -> None:
-        """An impact report (the JSON record or its text): its contact point becomes a
-        marker, its force the arrow, and its event frames are queued (``take_events``)."""
-        if isinstance(record, (str, bytes)):
-            record = json.loads(record)
-        # ignored [arg-type], [call-overload, index]: ``record`` is the mapping from here on
+    def add_impact(self, record: Impact | str | bytes) -> None:
+        """An impact (its ``Impact``, or the JSON text of its report as it came from the
+        wire): its contact point becomes a marker, its force the arrow, and its event frames
+        are queued (``take_events``). A report that is no usable record (not the record's
+        fields, or values that are no finite numbers) raises ValueError."""
         try:
-            events = event_states(record)  # type: ignore[arg-type]
-            row = table_row(record)  # type: ignore[arg-type]
-            force = float(record['F_max'])  # type: ignore[call-overload,index]
+            impact = impact_from_json(record) if isinstance(record, (str, bytes)) else record
+            events = event_states(impact)
+            row = table_row(impact)
+            force = float(impact.F_max)
             _, t_contact, q_contact = events[0]
             # the model's contact begins when the tip centre B reaches the surface plane
             x, _, z = plane_to_world(
@@ -258,6 +258,7 @@ class SceneVisuals:
             n = self.scene.n_links
             numbers = [force, x, z] + [a for _, _, q in events for a in q]
         except (
+            ImpactArmError,
             KeyError,
             TypeError,
             IndexError,
@@ -420,12 +421,11 @@ class VisualsWriter:
         """A sampled contact wrench: accepted and not drawn. The arrow comes from the impact
         reports, whose contact point is exact; a period-averaged force belongs to no pose."""
 
-    def impact(
-        self, record: Mapping[str, Any] | str | bytes, log_time_ns: int | None = None
-    ) -> None:
-        """An impact report: writes its event frames (``SceneVisuals.add_impact``). Their log
-        time is ``log_time_ns`` if given, else their stamp shifted by the latest state's
-        (log time - stamp): the stamp itself where log time is simulated time."""
+    def impact(self, record: Impact | str | bytes, log_time_ns: int | None = None) -> None:
+        """An impact (or its report's text): writes its event frames
+        (``SceneVisuals.add_impact``). Their log time is ``log_time_ns`` if given, else their
+        stamp shifted by the latest state's (log time - stamp): the stamp itself where log
+        time is simulated time."""
         self.visuals.add_impact(record)
         offset = 0 if self._last is None else self._last[2] - self._last[0]
         events = self.visuals.take_events()

@@ -22,13 +22,15 @@ from ._visuals import VisualsPublisher
 if TYPE_CHECKING:
     from rclpy.publisher import Publisher
 
+    from ..driver.arm import Tick
+
 
 class PeriodPublishers:
     """``publish(tick)`` a period's sensor messages, ``report(tick)`` its impacts.
     ``failures`` counts the samples the middleware refused."""
 
     def __init__(self, node, scene, joint_names, p, lockstep):
-        def qos(topic, depth=1):
+        def qos(topic: str, depth: int = 1) -> Any:
             return contract.qos(topic).to_rclpy(depth)
 
         self.log = node.get_logger()
@@ -94,7 +96,7 @@ class PeriodPublishers:
         # topic_name, which asks rcl under the handle's lock on every call
         self.sent: collections.Counter[Publisher[Any]] = collections.Counter()
 
-    def publish(self, tick):
+    def publish(self, tick: Tick) -> None:
         # the controller waits for this period's wrench and joint state: /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
         self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
@@ -122,11 +124,11 @@ class PeriodPublishers:
         if self.clock is not None:
             self._send(self.clock, self.wire_clock.fill((), (sec, nsec)))
 
-    def report(self, tick):
+    def report(self, tick: Tick) -> None:
         """Impact reports once the period's sensor messages are out: their JSON takes
         40-200 us, which in the impact's own period made it the slowest of a run."""
         for record, _rows in tick.impacts:
-            self._send(self.impact, String(data=json.dumps(record)))
+            self._send(self.impact, String(data=json.dumps(record.to_dict())))
         self.visuals.add_impacts(tick)
 
     def _send(self, publisher, data):

@@ -26,11 +26,14 @@ loop being recorded. DDS keeps acknowledging in the background (reader history
 ``RECORDER_MIN_DEPTH``), so nothing waits for the poll.
 """
 
+from __future__ import annotations
+
 import functools
 import heapq
 import json
 import os
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from builtin_interfaces.msg import Time
@@ -51,6 +54,8 @@ from ..io.mcap_ros2 import (
 from ..io.msgdefs import typestore
 from ..io.scene_visuals import VisualsWriter
 from ..io.wire import MalformedMessage, header_stamp_ns, joint_state_fields, wrench_stamped_fields
+from ..physics.errors import ImpactArmError
+from ..physics.impact import Impact, impact_from_json
 from ._runner import reader_node, run, take_raw
 from .params import (
     NODE_OPTIONS,
@@ -65,6 +70,7 @@ from .recorder_params import PARAMS
 
 if TYPE_CHECKING:
     from rclpy.client import Client
+    from rclpy.executors import Executor
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
@@ -205,7 +211,7 @@ class Recorder(Node):
         )
 
     @property
-    def done(self):
+    def done(self) -> bool:
         return self.failed
 
     # ---------------------------------------------------------------- subscriptions
@@ -263,7 +269,7 @@ class Recorder(Node):
             self._subscribe_known()
         self._query_parameters('start')
 
-    def spin(self, executor, should_stop):
+    def spin(self, executor: Executor, should_stop: Callable[[], bool]) -> None:
         """Timers and parameter replies through the executor, messages by polling."""
         while not should_stop() and not self.failed:
             executor.spin_once(timeout_sec=POLL_PERIOD)
@@ -308,24 +314,25 @@ class Recorder(Node):
             return None
         return stamp if 0 <= stamp < 1 << 63 else None  # a hostile peer's negative stamp
 
-    def _report(self, data):
-        """The impact record in an /impact_report sample, None for one that is not (or when
-        neither the log time nor the 3D view needs it: no reader was built)."""
+    def _report(self, data: bytes) -> Impact | None:
+        """The impact record in an /impact_report sample (read once, here), None for one
+        that is not (or when neither the log time nor the 3D view needs it: no reader was
+        built)."""
         if self._read_string is None:
             return None
         try:
-            record = json.loads(self._read_string(data).data)
-        except (SerdeError, ValueError) as e:
+            return impact_from_json(self._read_string(data).data)
+        except (SerdeError, ImpactArmError) as e:
             self.get_logger().warning(f'impact report not read: {e}')
             return None
-        return record if isinstance(record, dict) else None
 
     @staticmethod
-    def _separation_ns(record):
-        """Simulated time [ns] an impact record ends (its separation), None if it has none."""
+    def _separation_ns(record: Impact) -> int | None:
+        """Simulated time [ns] an impact record ends (its separation), None if a record
+        from the wire has no number there."""
         try:
-            t = float(record['t_contact']) + float(record['duration'])
-        except (KeyError, TypeError, ValueError):
+            t = float(record.t_contact) + float(record.duration)
+        except (TypeError, ValueError):
             return None
         return round(t * 1e9) if 0.0 <= t < 9e9 else None
 
@@ -458,7 +465,7 @@ class Recorder(Node):
         self.writer.add_metadata(f'parameters/{name}/{phase}', values)
         self.params[name] = phase
 
-    def finish(self, executor) -> int:
+    def finish(self, executor: Executor | None) -> int:
         """Final parameter query (≤ 1 s, recording continues meanwhile), then close."""
         if executor is not None and not self.failed:
             self._query_parameters('end')
@@ -488,7 +495,7 @@ class Recorder(Node):
         )
         return 1 if self.failed else 0
 
-    def destroy_node(self):
+    def destroy_node(self) -> None:
         if getattr(self, 'reader', None) is not None:  # absent if the output was refused
             self.reader.destroy_node()
         super().destroy_node()
@@ -507,7 +514,7 @@ class Losses:
         self.before_first = {}  # topic -> samples published before the first
         self.changed = False
 
-    def count(self, topic, info):
+    def count(self, topic: str, info: dict) -> None:
         seq = info.get('publication_sequence_number')
         gid = (info.get('publisher_gid') or {}).get('data')
         if not seq or gid is None:
@@ -525,7 +532,7 @@ class Losses:
     def lost_total(self) -> int:
         return sum(self.lost.values())
 
-    def as_metadata(self) -> dict:
+    def as_metadata(self) -> dict[str, str]:
         out = {f'lost:{t}': str(n) for t, n in sorted(self.lost.items())}
         out.update({f'before_first:{t}': str(n) for t, n in sorted(self.before_first.items())})
         return out
@@ -538,7 +545,7 @@ def _never_called(msg):
     """Subscriptions of the reader node are drained by ``Recorder._drain``."""
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> None:
     raise SystemExit(run(Recorder, args))
 
 

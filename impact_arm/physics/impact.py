@@ -1,9 +1,12 @@
 """One impact as a typed, frozen record: the fields of the impact record (``metrics``,
 docs/outputs.md), SI units, angles in degrees as in the JSON.
 
-The runs keep their records as dicts (the JSON and ``/impact_report`` carry them as they are);
-``Impact.from_dict`` gives the typed view, ``to_dict`` the same dict back, so a JSON written
-from either is the same bytes."""
+``metrics.ImpactBuilder`` makes an ``Impact`` for every impact and the package passes these
+records around as they are (``RunResult.impacts``, the observers, the analysis, the tables).
+Dicts exist only at the edges: ``to_dict`` gives the record as the JSON, ``/impact_report``
+and the MCAP files carry it (sequences as lists, in the fields' order; a sweep's impact
+table spreads the same fields over its columns), and ``from_dict`` (``impact_from_json`` for
+the text) reads one back, once, where such a record enters the package again."""
 
 from __future__ import annotations
 
@@ -11,6 +14,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import dataclasses
+import json
 from dataclasses import dataclass
 
 from .errors import ImpactArmError
@@ -51,8 +55,8 @@ class Impact:
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any]) -> Impact:
-        """The typed record of an impact record dict (a run's, or one read from JSON); a
-        one-line ``ImpactArmError`` names a missing or unknown key."""
+        """The typed record of an impact record dict (one read from JSON: a file, an
+        ``/impact_report``); a one-line ``ImpactArmError`` names a missing or unknown key."""
         names = [f.name for f in dataclasses.fields(cls)]
         missing = [k for k in names if k not in record]
         unknown = sorted(set(record) - set(names))
@@ -74,3 +78,16 @@ class Impact:
             for k, v in ((k, record[k]) for k in names)
         }
         return cls(**values)
+
+
+def impact_from_json(text: str | bytes) -> Impact:
+    """The ``Impact`` of a record's JSON text (an ``/impact_report``'s data): the one
+    reader of a record from the wire or a file. A one-line ``ImpactArmError`` when the text
+    is no JSON object with the record's fields."""
+    try:
+        record = json.loads(text)
+    except ValueError as exc:  # JSONDecodeError, or bytes that are no UTF-8
+        raise ImpactArmError(f'impact record: not JSON ({exc})') from None
+    if not isinstance(record, dict):
+        raise ImpactArmError(f'impact record: JSON {type(record).__name__}, not an object')
+    return Impact.from_dict(record)

@@ -4,13 +4,14 @@ comes from the state at an exactly located phase switch, not from a sampled sign
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from .impact import Impact
 from .model import ArmModel
 
 if TYPE_CHECKING:
@@ -20,13 +21,13 @@ PHASE_ORDER = ('contact', 'yield', 'max_compression', 'separation')
 
 
 class ImpactBuilder:
-    """Feed it events in order; it emits one impact record per completed impact and checks
+    """Feed it events in order; it emits one ``Impact`` per completed impact and checks
     that no phase is skipped or repeated."""
 
-    def __init__(self, model: ArmModel):
+    def __init__(self, model: ArmModel) -> None:
         self.model = model
-        self.impacts: list[dict] = []
-        self._open: dict | None = None
+        self.impacts: list[Impact] = []
+        self._open: dict[str, Any] | None = None
         # the generated functions' Python originals: two calls per impact cost ~10 us each
         # this way, while their compiled versions would be compiled (a new arm shape: ~1 s
         # each) or loaded (every process: milliseconds) for these calls alone
@@ -46,7 +47,7 @@ class ImpactBuilder:
             parts = [T + float(J) for T, J in zip(parts, model.rotor_energies(qd))]
         return q.tolist(), (float(vx), float(vy)), parts + [math.fsum(parts)]
 
-    def feed(self, event: Event) -> dict | None:
+    def feed(self, event: Event) -> Impact | None:
         """Returns the finished impact record when ``event`` completes one, else None."""
         kind = event.kind
         if kind not in PHASE_ORDER:
@@ -80,41 +81,41 @@ class ImpactBuilder:
         self.impacts.append(record)
         return record
 
-    def _finish(self, impact, event):
+    def _finish(self, impact: dict[str, Any], event: Event) -> Impact:
         _, v_after, T_after = self._tip_and_energy(event.y)
         times = impact['times']
         t0, t_sep = times['contact'], times['separation']
         t_max = times['max_compression']
         t_yield = times.get('yield', t_max)  # Hertz-only or gentle: no elasto-plastic phase
         v_before, T_before = impact['v_before'], impact['T_before']
-        return {
-            'index': len(self.impacts) + 1,
-            't_contact': t0,
-            'q_contact_deg': [math.degrees(a) for a in impact['q']],
+        return Impact(
+            index=len(self.impacts) + 1,
+            t_contact=t0,
+            q_contact_deg=tuple(math.degrees(a) for a in impact['q']),
             # the robot's joint angles (its URDF's zero and sign; relative angles for rods)
-            'joints_contact_deg': [
+            joints_contact_deg=tuple(
                 math.degrees(a) for a in self.model.scene.joint_coordinates.positions(impact['q'])
-            ],
-            'duration': t_sep - t0,
-            'delta_m': impact['delta_m'],
-            'delta_r': impact['delta_r'],
-            'F_max': impact['F_max'],
-            'v_before': list(v_before),
-            'v_after': list(v_after),
-            'cor_kinematic': -v_after[1] / v_before[1] if v_before[1] else math.nan,
-            'T_before': list(T_before),
-            'T_after': list(T_after),
-            'cor_energetic': [
+            ),
+            duration=t_sep - t0,
+            delta_m=impact['delta_m'],
+            delta_r=impact['delta_r'],
+            F_max=impact['F_max'],
+            v_before=(v_before[0], v_before[1]),
+            v_after=(v_after[0], v_after[1]),
+            cor_kinematic=-v_after[1] / v_before[1] if v_before[1] else math.nan,
+            T_before=tuple(T_before),
+            T_after=tuple(T_after),
+            cor_energetic=tuple(
                 math.sqrt(a / b) if b > 0 else math.nan for a, b in zip(T_after, T_before)
-            ],
-            'phase_durations': [t_yield - t0, t_max - t_yield, t_sep - t_max],
-            'q_max_compression_deg': [math.degrees(a) for a in impact['q_max']],
-            'q_separation_deg': [math.degrees(a) for a in event.y[: self.model.n]],
-        }
+            ),
+            phase_durations=(t_yield - t0, t_max - t_yield, t_sep - t_max),
+            q_max_compression_deg=tuple(math.degrees(a) for a in impact['q_max']),
+            q_separation_deg=tuple(math.degrees(a) for a in event.y[: self.model.n]),
+        )
 
 
 def settle_index(
-    impacts: Sequence[dict],
+    impacts: Sequence[Impact],
     rel_tol: float = 1e-3,
     keys: Sequence[str] = ('q_contact_deg', 'v_before'),
     every: int = 1,
@@ -122,11 +123,12 @@ def settle_index(
     """The number N of the impact (1-based) from which every later impact repeats the one
     ``every`` impacts before it (its predecessor by default) in contact angles and
     velocities to ``rel_tol``: the limit cycle is reached after N impacts. None if the run
-    never settles so (or has too few impacts to show one whole repetition)."""
+    never settles so (or has too few impacts to show one whole repetition). ``keys`` name
+    the compared fields of ``Impact`` (sequences of numbers)."""
 
-    def close(a: dict, b: dict) -> bool:
+    def close(a: Impact, b: Impact) -> bool:
         for key in keys:
-            for x, y in zip(a[key], b[key]):
+            for x, y in zip(getattr(a, key), getattr(b, key)):
                 if abs(x - y) > rel_tol * max(1.0, abs(y)):
                     return False
         return True
@@ -150,9 +152,9 @@ class LimitCycle:
     settled_after: int
     impacts_per_cycle: int
 
-    def period(self, impacts: Sequence[dict]) -> float:
+    def period(self, impacts: Sequence[Impact]) -> float:
         """The duration of one repetition, the mean over the settled part."""
-        times = [i['t_contact'] for i in impacts[self.settled_after - 1 :]]
+        times = [i.t_contact for i in impacts[self.settled_after - 1 :]]
         every = self.impacts_per_cycle
         spans = [b - a for a, b in zip(times, times[every:])]
         return sum(spans) / len(spans)
@@ -167,7 +169,7 @@ class LimitCycle:
 MOST_IMPACTS_PER_CYCLE = 4
 
 
-def limit_cycle(impacts: Sequence[dict], rel_tol: float = 1e-3) -> LimitCycle | None:
+def limit_cycle(impacts: Sequence[Impact], rel_tol: float = 1e-3) -> LimitCycle | None:
     """The limit cycle with the fewest impacts per repetition (up to
     ``MOST_IMPACTS_PER_CYCLE``) the run settles into, or None."""
     for every in range(1, MOST_IMPACTS_PER_CYCLE + 1):

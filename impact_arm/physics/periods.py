@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 
+from .impact import Impact
 from .integrator import PhaseIntegrator
 from .metrics import ImpactBuilder
 
@@ -15,10 +16,10 @@ def feed_events(
     builder: ImpactBuilder,
     events: Iterable,
     on_event: Callable | None = None,
-) -> list:
+) -> list[tuple[Impact, list]]:
     """Feed located ``events`` to the impact ``builder`` (``on_event`` sees each first).
     Returns the impacts completed [(record, trace rows)], each taking the trace so far."""
-    impacts = []
+    impacts: list[tuple[Impact, list]] = []
     for event in events:
         if on_event is not None:
             on_event(event)
@@ -33,7 +34,7 @@ def feed_events(
 
 def advance_period(
     integ: PhaseIntegrator, builder: ImpactBuilder, t_end: float, on_event: Callable | None = None
-) -> tuple[list, tuple[float, float]]:
+) -> tuple[list[tuple[Impact, list]], tuple[float, float]]:
     """The one period loop of every sampled run (the driver's periods, offline held control):
     advance ``integ`` to ``t_end`` and ``feed_events``. Returns the impacts completed and the
     contact impulse (tangential, normal) over the period, which callers divide by the period

@@ -12,7 +12,6 @@ rates of ``contact_rates``) to the event that ends what it draws.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import Any
 
 import math
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ import numpy as np
 
 from .contact import hertz_force
 from .errors import ContactStateError
+from .impact import Impact
 from .integrator import Event, IntegratorOptions, PhaseIntegrator
 from .kinds import EventKind, ImpactSide
 from .metrics import ImpactBuilder
@@ -140,7 +140,7 @@ class ImpactReplay:
     events: tuple[Event, ...]
     contact: Event | None
     end: Event | None
-    record: dict[str, Any] | None
+    record: Impact | None
     trace: np.ndarray
     output: np.ndarray
     levels: np.ndarray
@@ -170,7 +170,7 @@ def replay_impact(
     events: list[Event] = []
     contact: Event | None = None
     end: Event | None = None
-    record = None
+    record: Impact | None = None
     # every event stops the kernel: the impact record and the trace are read at its end
     while integ.state.t < horizon and end is None:
         for event in replay.advance(horizon, stop_at=True):

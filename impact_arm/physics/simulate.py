@@ -21,6 +21,7 @@ from .limits import LimitWatch
 from .control import CycleController
 from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
+from .impact import Impact
 from .integrator import Event, IntegratorOptions, PhaseIntegrator
 from .kinds import TextEnum
 from .metrics import ImpactBuilder, LimitCycle, limit_cycle
@@ -97,7 +98,7 @@ class RunResult:
     it stopped (``stop_reason``; ``stopped`` is the same in words, with its numbers)."""
 
     scene: Scene
-    impacts: list
+    impacts: list[Impact]
     samples: list = field(default_factory=list)  # empty when run(keep_samples=False)
     ranges: SampleRanges = field(default_factory=SampleRanges)
     traces: list = field(default_factory=list)  # one list of trace rows per impact
@@ -129,7 +130,7 @@ class RunResult:
     def summary(self) -> dict:
         """The "run" object of the JSON output (SI units, angles in degrees)."""
         imp = self.impacts
-        contact_times = [i['t_contact'] for i in imp]
+        contact_times = [i.t_contact for i in imp]
         ranges = self.ranges
         return {
             'impacts': len(imp),
@@ -146,7 +147,8 @@ class RunResult:
         }
 
     def to_json(self) -> dict:
-        return {'impacts': self.impacts, 'run': self.summary()}
+        """The JSON output: {'impacts': [record dicts], 'run': the summary}."""
+        return {'impacts': [i.to_dict() for i in self.impacts], 'run': self.summary()}
 
     @property
     def limit_cycle(self) -> LimitCycle | None:
@@ -256,7 +258,7 @@ def run(
         nonlocal cycles_done
         cycles_done += event.kind == 'switch'
 
-    def report(impacts: Iterable[tuple[dict, list]]) -> None:
+    def report(impacts: Iterable[tuple[Impact, list]]) -> None:
         """Impact records and their trace rows to the result, observers and progress."""
         for record, rows in impacts:
             if trace:
@@ -418,13 +420,12 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
     result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')
 
 
-def impact_rows(impacts: list, robot: bool = False) -> str:
+def impact_rows(impacts: Sequence[Impact], robot: bool = False) -> str:
     """The impact rows of ``format_table``: a header and a line per impact record. ``robot``:
     the contact angles as the robot's joint angles (a URDF arm's), else as the article's
     absolute link angles."""
     # every link's contact angle (the article's two in its columns)
-    n = len(impacts[0]['q_contact_deg']) if impacts else 2
-    key = 'joints_contact_deg' if robot else 'q_contact_deg'
+    n = len(impacts[0].q_contact_deg) if impacts else 2
     angles = ','.join(f'{"θ" if robot else "q"}{k + 1}' for k in range(n)) + ' [deg]'
     lines = [
         f'{"#":>3} {"t [s]":>9} {angles:>{8 * n - 1}} {"dur [us]":>9} {"dm [um]":>8} '
@@ -432,15 +433,16 @@ def impact_rows(impacts: list, robot: bool = False) -> str:
         f'{"e":>6} {"T before->after [J]":>19} {"e_energy":>17}'
     ]
     for i in impacts:
+        angles_deg = i.joints_contact_deg if robot else i.q_contact_deg
         lines.append(
-            f'{i["index"]:>3} {i["t_contact"]:>9.5f} '
-            f'{",".join(f"{a:>7.2f}" for a in i[key])} '
-            f'{i["duration"] * 1e6:>9.2f} {i["delta_m"] * 1e6:>8.2f} {i["delta_r"] * 1e6:>8.2f} '
-            f'{i["F_max"] / 1e3:>9.3f} '
-            f'{i["v_before"][0]:>6.3f},{i["v_before"][1]:>7.3f} '
-            f'{i["v_after"][0]:>6.3f},{i["v_after"][1]:>7.3f} {i["cor_kinematic"]:>6.3f} '
-            f'{i["T_before"][-1]:>8.3f} -> {i["T_after"][-1]:>7.3f} '
-            f'{", ".join(f"{e:.3f}" for e in i["cor_energetic"]):>17}'
+            f'{i.index:>3} {i.t_contact:>9.5f} '
+            f'{",".join(f"{a:>7.2f}" for a in angles_deg)} '
+            f'{i.duration * 1e6:>9.2f} {i.delta_m * 1e6:>8.2f} {i.delta_r * 1e6:>8.2f} '
+            f'{i.F_max / 1e3:>9.3f} '
+            f'{i.v_before[0]:>6.3f},{i.v_before[1]:>7.3f} '
+            f'{i.v_after[0]:>6.3f},{i.v_after[1]:>7.3f} {i.cor_kinematic:>6.3f} '
+            f'{i.T_before[-1]:>8.3f} -> {i.T_after[-1]:>7.3f} '
+            f'{", ".join(f"{e:.3f}" for e in i.cor_energetic):>17}'
         )
     return '\n'.join(lines)
 

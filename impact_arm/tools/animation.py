@@ -17,9 +17,11 @@ seconds for a whole run, where redrawing every frame with matplotlib took minute
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
-from typing import TYPE_CHECKING, cast
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -29,6 +31,8 @@ from ..physics.errors import ImpactArmError
 if TYPE_CHECKING:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.transforms import Transform
+
+    from .run_data import Run
 
 DEFAULT_FPS = 20.0
 DEFAULT_SLOW = 10.0  # frames this much closer near impacts
@@ -46,11 +50,11 @@ class AnimationError(ImpactArmError):
 def frame_times(
     t0: float,
     t1: float,
-    impact_times,
+    impact_times: Iterable[float],
     fps: float = DEFAULT_FPS,
     slow: float = DEFAULT_SLOW,
     window: float = DEFAULT_WINDOW,
-    contacts=(),
+    contacts: Iterable[tuple[float, float]] = (),
     contact_frames: int = 0,
 ) -> np.ndarray:
     """Simulated times of the frames from ``t0`` to ``t1``: 1/fps apart, 1/(fps·slow) apart
@@ -67,7 +71,7 @@ def frame_times(
     return np.unique(np.asarray(out, float))
 
 
-def contact_forces(path):
+def contact_forces(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray] | None:
     """(times [s], (N, 2) tangential and normal force) of /contact_wrench, or None."""
     from ..io.mcap_ros2 import iter_raw, topics_info
     from ..io.wire import wrench_stamped_fields
@@ -94,7 +98,7 @@ class _Contact:
         self.force = np.stack([col['F_f'], col['F_n']], axis=1)
         self.delta = col['delta']
 
-    def at(self, t):
+    def at(self, t: float) -> tuple[np.ndarray, float]:
         """(tangential, normal) force [N] and indentation [m] at ``t``, linear between points;
         zero before the first point (the contact itself, δ = 0)."""
         if t < self.t[0]:
@@ -111,7 +115,7 @@ def _contacts(run):
             continue
         contact = _Contact(k + 1, columns, np.asarray(rows, float))
         if k < len(run.impacts):  # the trace's first point is a step end, not the contact
-            contact.start = min(contact.start, float(run.impacts[k]['t_contact']))
+            contact.start = min(contact.start, float(run.impacts[k].t_contact))
         out.append(contact)
     return out
 
@@ -132,13 +136,13 @@ def _kn(force: float) -> str:
 
 
 def animate(
-    run,
-    out_path,
-    forces=None,
+    run: Run,
+    out_path: str,
+    forces: tuple[np.ndarray, np.ndarray] | None = None,
     fps: float = DEFAULT_FPS,
     slow: float = DEFAULT_SLOW,
     window: float = DEFAULT_WINDOW,
-    progress=None,
+    progress: Callable[[str], Any] | None = None,
     contact_frames: int = DEFAULT_CONTACT_FRAMES,
 ) -> int:
     """Write the animation of ``run`` (analysis.Run, with its scene) to ``out_path`` (.gif or
@@ -170,7 +174,7 @@ def animate(
     times = frame_times(
         run.t[0],
         run.t[-1],
-        [i['t_contact'] for i in run.impacts],
+        [i.t_contact for i in run.impacts],
         fps,
         slow,
         window,
@@ -245,7 +249,7 @@ def _background(scene, reach, per_newton, bar_force):
     image = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
 
-    def to_pixels(xy):
+    def to_pixels(xy: Any) -> np.ndarray:
         display = transform.transform(np.asarray(xy, float))
         return np.stack([display[:, 0], height - display[:, 1]], axis=1)
 
@@ -352,7 +356,7 @@ def _write_mp4(frames, out_path, fps):
         plt.close(fig)
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('file', help='MCAP recording (live or simulate --mcap)')
     parser.add_argument(
         '--out', metavar='FILE', help='GIF or MP4 to write (default: runs/<file name>.gif)'
@@ -387,7 +391,7 @@ def add_arguments(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from .run_data import load
 
     out = args.out or os.path.join(
@@ -399,7 +403,7 @@ def cli(args) -> int:
 
     line = Progress(prefix='animate: ')
 
-    def say(text):
+    def say(text: str) -> None:
         line.show(text, log=True)
 
     run = load(args.file, progress=say)

@@ -17,6 +17,7 @@ from scipy.integrate import solve_ivp
 
 from ..physics import layout
 from ..physics.integrator import Event, PhaseIntegrator
+from ..physics.impact import Impact
 from ..physics.metrics import ImpactBuilder
 from ..physics.model import ArmModel, Phase
 from ..physics.scene import Scene
@@ -58,7 +59,7 @@ def run_scipy(
     atol: float | None = None,
     t_max: float | None = None,
     contact_rtol: float | None = None,
-) -> tuple[list[dict], float, int, float]:
+) -> tuple[list[Impact], float, int, float]:
     """Run ``scene`` for its cycles with solve_ivp; returns (impacts, t_end, nfev, wall).
     ``contact_rtol`` (default rtol) is the tolerance of contact phases, as in PhaseIntegrator;
     the contact atol keeps the atol/rtol ratio."""

@@ -11,9 +11,19 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..physics.contact import ContactConstants
+    from ..physics.replay import ElasticCurve
+    from .analysis.impacts import ImpactPoints
+    from .run_data import Run
 
 DPI = 100
 FIGURE_INCHES = (9.0, 5.5)
@@ -71,18 +81,20 @@ def _deg(a):
     return np.degrees(a)
 
 
-def fig3_controllers(runs, out):
+def fig3_controllers(runs: Sequence[Run], out: str) -> Figure:
     """The article's Figure 3: step responses of the control laws (no impact), each link in
     its panel, the target dotted, a zoom on the approach to the target where PD's offset and
     PID's overshoot show, and each law's numbers under its panel."""
     from .step_responses import step_metrics
 
+    targets = runs[0].target
+    assert targets is not None, 'step responses (step_response) carry their target'
     plt = _plt()
     fig, axes = plt.subplots(1, runs[0].q.shape[1], figsize=FIGURE_INCHES)
     notes_size = 7 if len(axes) <= 2 else 5  # each law's numbers fit under a narrower panel
     styles = {'q': ('tab:blue', '-'), 'pd': ('tab:orange', '--'), 'pid': ('tab:green', '-.')}
     for k, ax in enumerate(axes):
-        target = math.degrees(runs[0].target[k])
+        target = math.degrees(targets[k])
         inset = ax.inset_axes([0.45, 0.42, 0.52, 0.5])
         lines = []
         for run in runs:
@@ -152,7 +164,7 @@ def fig3_controllers(runs, out):
     return fig
 
 
-def fig_recordings(runs, out):
+def fig_recordings(runs: Sequence[Run], out: str) -> Figure:
     """Link angles of several recordings (``analyze --compare``), over the time all cover."""
     plt = _plt()
     fig, axes = plt.subplots(1, min(r.q.shape[1] for r in runs), figsize=FIGURE_INCHES)
@@ -188,7 +200,7 @@ def _time_series(t, series, ylabels, titles):
     return fig
 
 
-def fig4_link_angles(run, out):
+def fig4_link_angles(run: Run, out: str) -> Figure:
     """Every link's angle: the article's two panels, one more per further link. A URDF arm
     whose joint angles are not the model's link angles is drawn in its own joint angles,
     as its driver reports them, under its joint names."""
@@ -217,7 +229,7 @@ def angle_pair(k: int) -> tuple[int, int]:
     return (0, 1) if k < 2 else (k - 1, k)
 
 
-def fig5_phase_portraits(run, out):
+def fig5_phase_portraits(run: Run, out: str) -> Figure:
     """One 3-D phase portrait per link: its rate against two link angles (``angle_pair``),
     the article's (q1, q2, q̇1) and (q1, q2, q̇2) for two links. Angles and rates in one unit
     system: degrees and degrees per second (as Figure 4)."""
@@ -247,7 +259,7 @@ def fig5_phase_portraits(run, out):
 DIRECTIONS = {-1.0: 'falling', 1.0: 'rising'}
 
 
-def fig6_poincare(run, sections, out):
+def fig6_poincare(run: Run, sections: dict[int, np.ndarray], out: str) -> Figure:
     """One panel per section (q̇k = 0 for every link k, one row each) and direction of the
     crossing (falling, rising), drawn in the two link angles of Figure 5's portrait of that
     link (``angle_pair``: q1, q2 for the article's two links): the crossings of one
@@ -308,7 +320,7 @@ def fig6_poincare(run, sections, out):
     return fig
 
 
-def fig7_tip_velocity(run, v_tip, out):
+def fig7_tip_velocity(run: Run, v_tip: np.ndarray, out: str) -> Figure:
     return _time_series(
         run.t,
         [v_tip[:, k] for k in (0, 1)],
@@ -325,7 +337,7 @@ def _trace(impact):
     their times in µs since contact."""
     columns, rows = impact[0], impact[1]
     col = {name: rows[:, i] for i, name in enumerate(columns)}
-    return col, (col['t'] - impact[2]['t_contact']) * 1e6
+    return col, (col['t'] - impact[2].t_contact) * 1e6
 
 
 def _by_phase(ax, tus, y, phase, scale=1.0, x=None, legend=True, last_is_end=True, curves=None):
@@ -393,25 +405,25 @@ def _elastic(elastic, impact, x='t'):
     (the caller scales)."""
     if elastic is None:
         return None
-    xs = (elastic.t - impact[2]['t_contact']) * 1e6 if x == 't' else elastic.delta * 1e6
+    xs = (elastic.t - impact[2].t_contact) * 1e6 if x == 't' else elastic.delta * 1e6
     return xs, elastic
 
 
-def fig8_indentation(impact, out, elastic=None):
+def fig8_indentation(impact: ImpactPoints, out: str, elastic: ElasticCurve | None = None) -> Figure:
     from ..physics.contact import YIELD_ONSET_FACTOR
 
     plt = _plt()
     col, tus = _trace(impact)
-    k = impact[2].get('index', '?')
+    k = impact[2].index
     fig, ax = plt.subplots(figsize=FIGURE_INCHES)
     dense = _elastic(elastic, impact)
-    curves = {1: (dense[0], elastic.delta)} if dense else None
+    curves = {1: (dense[0], elastic.delta)} if dense and elastic is not None else None
     _by_phase(ax, tus, col['delta'], col['phase'], 1e6, curves=curves)
     ax.set_xlabel('t since contact [µs]')
     ax.set_ylabel('indentation δ [µm]')
     ax.set_title(
-        f'Indentation during impact {k}: δm = {impact[2]["delta_m"] * 1e6:.1f} µm, '
-        f'δr = {impact[2]["delta_r"] * 1e6:.1f} µm'
+        f'Indentation during impact {k}: δm = {impact[2].delta_m * 1e6:.1f} µm, '
+        f'δr = {impact[2].delta_r * 1e6:.1f} µm'
     )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc='upper left')
@@ -458,10 +470,10 @@ def fig8_indentation(impact, out, elastic=None):
     return fig
 
 
-def fig9_impact_velocity(impact, out):
+def fig9_impact_velocity(impact: ImpactPoints, out: str) -> Figure:
     plt = _plt()
     col, tus = _trace(impact)
-    k = impact[2].get('index', '?')
+    k = impact[2].index
     fig, axes = plt.subplots(1, 2, figsize=FIGURE_INCHES)
     for i, (ax, name) in enumerate(zip(axes, ('v_x', 'v_y'))):
         _by_phase(ax, tus, col[name], col['phase'], legend=i == 1)
@@ -479,19 +491,21 @@ def fig9_impact_velocity(impact, out):
     return fig
 
 
-def fig10_contact_force(impact, out, elastic=None):
+def fig10_contact_force(
+    impact: ImpactPoints, out: str, elastic: ElasticCurve | None = None
+) -> Figure:
     plt = _plt()
     col, tus = _trace(impact)
-    k = impact[2].get('index', '?')
+    k = impact[2].index
     fig, ax = plt.subplots(figsize=FIGURE_INCHES)
     dense = _elastic(elastic, impact)
-    curves = {1: (dense[0], elastic.force)} if dense else None
+    curves = {1: (dense[0], elastic.force)} if dense and elastic is not None else None
     _by_phase(ax, tus, col['F_n'], col['phase'], 1e-3, curves=curves)
     if np.any(col['F_f'] != 0):
         ax.plot(tus, col['F_f'] * 1e-3, 'k--', lw=0.8, label='friction force F_f')
     ax.set_xlabel('t since contact [µs]')
     ax.set_ylabel('contact force: normal F_n, friction F_f [kN]')
-    ax.set_title(f'Contact force during impact {k} (F_max = {impact[2]["F_max"] * 1e-3:.2f} kN)')
+    ax.set_title(f'Contact force during impact {k} (F_max = {impact[2].F_max * 1e-3:.2f} kN)')
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc='upper left')
     in_elastic = np.nonzero(col['phase'] == 1)[0]
@@ -517,7 +531,12 @@ def fig10_contact_force(impact, out, elastic=None):
     return fig
 
 
-def fig_force_indentation(impact, constants, out, elastic=None):
+def fig_force_indentation(
+    impact: ImpactPoints,
+    constants: ContactConstants | None,
+    out: str,
+    elastic: ElasticCurve | None = None,
+) -> Figure:
     """Normal force against indentation: the points of the impact on the model's three laws
     (Hertz to 1.9 δc, Jackson–Green to δm, restitution from δm down to δr)."""
     from ..physics.contact import (
@@ -531,13 +550,13 @@ def fig_force_indentation(impact, constants, out, elastic=None):
     plt = _plt()
     col, _ = _trace(impact)
     record = impact[2]
-    k = record.get('index', '?')
+    k = record.index
     fig, ax = plt.subplots(figsize=FIGURE_INCHES)
     delta = col['delta'] * 1e6
     inset = ax.inset_axes([0.08, 0.45, 0.32, 0.4])
     if constants is not None:
         c = constants
-        dm = record['delta_m']
+        dm = record.delta_m
         dy = min(c.delta_yield, dm)
         d1 = np.linspace(0, dy, 200)
         d2 = np.linspace(dy, dm, 400)
@@ -588,7 +607,7 @@ def fig_force_indentation(impact, constants, out, elastic=None):
     ax.set_ylabel('normal force F_n [kN]')
     ax.set_title(
         f'Force against indentation, impact {k} (not in the article): loading, '
-        f'unloading to δr = {record["delta_r"] * 1e6:.1f} µm',
+        f'unloading to δr = {record.delta_r * 1e6:.1f} µm',
         fontsize=10,
     )
     ax.grid(alpha=0.3)
@@ -603,7 +622,7 @@ def fig_force_indentation(impact, constants, out, elastic=None):
     return fig
 
 
-def fig11_kinetic_energy(impact, out):
+def fig11_kinetic_energy(impact: ImpactPoints, out: str) -> Figure:
     plt = _plt()
     col, tus = _trace(impact)
     links = sorted(
@@ -662,18 +681,18 @@ CAPTIONS = {
 
 
 def draw_all(
-    run,
-    steps,
-    sections,
-    v_tip,
-    impact,
-    out,
-    progress=None,
-    recordings=(),
-    constants=None,
-    style=None,
-    elastic=None,
-):
+    run: Run,
+    steps: Sequence[Run],
+    sections: dict[int, np.ndarray],
+    v_tip: np.ndarray | None,
+    impact: ImpactPoints | None,
+    out: str,
+    progress: Callable[[str], Any] | None = None,
+    recordings: Sequence[Run] = (),
+    constants: ContactConstants | None = None,
+    style: Style | None = None,
+    elastic: ElasticCurve | None = None,
+) -> list[tuple[str, str]]:
     """Draw every figure the data allows into ``out``; returns [(file name, caption)].
     ``steps``: the step-response runs of Figure 3 (none: no Figure 3); ``impact``: (columns,
     rows, record, note) of the impact for Figures 8–11, or None; ``recordings``: more
@@ -713,9 +732,8 @@ def draw_all(
         _save(draw(), out, name, style)
         caption = CAPTIONS[stem]
         if stem in IMPACT_FIGURES:
-            caption += f' (impact {impact[2].get("index", "?")}' + (
-                f'; {impact[3]})' if impact[3] else ')'
-            )
+            assert impact is not None  # the impact's figures are drawn only with one
+            caption += f' (impact {impact[2].index}' + (f'; {impact[3]})' if impact[3] else ')')
         made.append((name, caption))
     return made
 

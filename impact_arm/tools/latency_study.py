@@ -97,9 +97,9 @@ def closed_loop(
     commands: deque = deque()
     contacts: list[tuple[float, float, float]] = []
 
-    def report(tick):
+    def report(tick: Tick) -> None:
         for record, _ in tick.impacts:
-            contacts.append((record['t_contact'], record['delta_m'], record['v_before'][1]))
+            contacts.append((record.t_contact, record.delta_m, record.v_before[1]))
 
     session = LockstepSession(
         arm,

@@ -5,7 +5,6 @@ chattered. No rclpy: CDR is decoded by ``rosbags``' typestore."""
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -16,6 +15,7 @@ import numpy as np
 
 from ..contract import IMPACT_REPORT, IMPACT_TRACE, JOINT_STATES, to_absolute
 from ..physics.errors import ImpactArmError
+from ..physics.impact import Impact, impact_from_json
 
 if TYPE_CHECKING:
     from ..physics.scene import Scene
@@ -33,7 +33,7 @@ class Run:
     t: np.ndarray  # joint state times [s] (header stamps)
     q: np.ndarray  # (N, n) absolute link angles
     qd: np.ndarray  # (N, n) absolute link rates
-    impacts: list = field(default_factory=list)
+    impacts: list[Impact] = field(default_factory=list)  # the /impact_report records
     traces: list = field(default_factory=list)  # [(columns, (rows, cols) array)]
     scene: Scene | None = None
     metadata: dict = field(default_factory=dict)
@@ -83,7 +83,8 @@ def load(path: str | os.PathLike[str], progress: Callable[[str], Any] = _quiet) 
         raise AnalysisError(f'{path}: no /joint_states recorded (topics: {sorted(info)})')
     total = sum(i.message_count for i in info.values()) or 1
     progress(f'reading {path} ({total} messages)')
-    t, pos, vel, impacts, effort = [], [], [], [], []
+    t, pos, vel, effort = [], [], [], []
+    impacts: list[Impact] = []
     traces: list[tuple[list, np.ndarray]] = []  # (columns, (rows, cols) array)
     names: tuple = ()
     scene = _scene(metadata)
@@ -116,10 +117,10 @@ def load(path: str | os.PathLike[str], progress: Callable[[str], Any] = _quiet) 
             names = names or tuple(msg.name)
         elif m.topic == IMPACT_REPORT:
             try:
-                impacts.append(json.loads(msg.data))
-            except ValueError as e:
+                impacts.append(impact_from_json(msg.data))
+            except ImpactArmError as e:
                 raise AnalysisError(
-                    f'{path}: /impact_report message {len(impacts) + 1} is not JSON ({e})'
+                    f'{path}: /impact_report message {len(impacts) + 1}: {e}'
                 ) from None
         else:
             dims = msg.layout.dim
@@ -135,7 +136,7 @@ def load(path: str | os.PathLike[str], progress: Callable[[str], Any] = _quiet) 
         raise AnalysisError(f'{path}: /joint_states has no messages')
     # stamp order, never file order: a recorder that stalled writes what it received late
     # after newer messages (impact reports by their contact time, joint states by stamp)
-    impacts.sort(key=lambda record: _number(record.get('t_contact')))
+    impacts.sort(key=lambda record: _number(record.t_contact))
     order = np.argsort(t, kind='stable')
     law = scene.controller.law if scene is not None else ''
     return Run(

@@ -9,7 +9,7 @@ dies with this process even if it is killed (PR_SET_PDEATHSIG).
 
 from __future__ import annotations
 
-import json
+import argparse
 import math
 import os
 import random
@@ -18,7 +18,10 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
+from types import FrameType
+from typing import TYPE_CHECKING, Any
 
 from .. import contract
 from ..contract import (
@@ -38,7 +41,13 @@ from ..contract import (
 )
 from ..driver.session import Level
 from ..physics.errors import ImpactArmError
+from ..physics.impact import Impact, impact_from_json
 from .progress import Progress
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from ..physics.scene import Scene
 
 NODES = ('recorder', 'simulator', 'controller')  # start order (the arm moves with the
 # first command, so the controller comes last, once the recorder listens)
@@ -48,7 +57,7 @@ STOP_ORDER = ('controller', 'simulator', 'recorder')  # zero command first, reco
 SIMULATOR_TOPICS = (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, IMPACT_REPORT, DIAGNOSTICS)
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scene', default='paper', help='scene file or installed scene name')
     parser.add_argument(
         '--mode',
@@ -83,7 +92,7 @@ def add_arguments(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from ..physics.scene import load_scene, resolve_scene_path
     from ..physics.simulate import RunResult, StopReason, format_table
 
@@ -108,7 +117,7 @@ def cli(args) -> int:
 
     run = Run(scene, scene_path, args, output, env)
 
-    def interrupt(signum, frame):
+    def interrupt(signum: int, frame: FrameType | None) -> None:
         # raised here, KeyboardInterrupt can land inside an rclpy call, whose pybind11 layer
         # turns it into a RuntimeError traceback: flag it, the run's loops stop between calls
         run.interrupted.set()
@@ -196,7 +205,7 @@ def cli(args) -> int:
     return 0
 
 
-def precompile(scene, rate):
+def precompile(scene: Scene, rate: float) -> None:
     """Compile, or load from the cache, what the simulator and controller nodes run, here
     where the CLI announces it: otherwise each node compiles in its own process on the first
     run of a scene shape, 20-45 s of silence before the arm moves."""
@@ -211,7 +220,7 @@ def precompile(scene, rate):
     arm.model.tip(scene.q0, scene.qd0)
 
 
-def dds_environment() -> dict:
+def dds_environment() -> dict[str, str]:
     """The children's environment: localhost discovery, and a domain nobody is using, unless
     the user set them."""
     env = dict(os.environ)
@@ -223,7 +232,7 @@ def dds_environment() -> dict:
     return env
 
 
-def free_domain(env, tries=5, listen=0.3) -> int:
+def free_domain(env: dict[str, str], tries: int = 5, listen: float = 0.3) -> int:
     """A ROS_DOMAIN_ID in 1..101 on which no participant answers within ``listen`` s."""
     import rclpy
     from rclpy.context import Context
@@ -256,7 +265,7 @@ def _die_with_parent():
     os.setpgrp()  # Ctrl-C reaches the runner only; it stops the nodes in order
 
 
-def status_values(msg, name: str) -> dict[str, str] | None:
+def status_values(msg: Any, name: str) -> dict[str, str] | None:
     """The key-values of the status ``name`` (contract.SIMULATOR_STATUS,
     contract.CONTROLLER_STATUS) in ``msg`` (a DiagnosticArray), or None: both nodes publish
     their own status on /diagnostics."""
@@ -306,7 +315,7 @@ class SimulatorReport:
         )
 
 
-def simulator_report(msg) -> SimulatorReport | None:
+def simulator_report(msg: Any) -> SimulatorReport | None:
     """The simulator's status in ``msg`` (a DiagnosticArray), parsed; None when ``msg``
     holds only other nodes' statuses."""
     for status in msg.status:
@@ -328,10 +337,10 @@ class RecorderProgress:
     /recorder/progress (ns; None until it says anything). A progress message proves the
     recorder is writing the simulator's stream, not merely subscribed to it."""
 
-    def __init__(self, node):
+    def __init__(self, node: Node) -> None:
         from builtin_interfaces.msg import Time
 
-        self.written_until = None
+        self.written_until: int | None = None
         self.subscription = node.create_subscription(
             Time, contract.RECORDER_PROGRESS, self._on_progress, contract.PROGRESS_QOS.to_rclpy()
         )
@@ -340,14 +349,14 @@ class RecorderProgress:
         self.written_until = msg.sec * 1_000_000_000 + msg.nanosec
 
 
-def simulator_topics(scene) -> tuple:
+def simulator_topics(scene: Scene) -> tuple[str, ...]:
     """What the recorder must have matched for ``scene``: ``SIMULATOR_TOPICS``, and the
     plates of its mounted surfaces if it has any."""
     mounted = any(s.mount is not None and s.law != 'none' for s in scene.surfaces)
     return SIMULATOR_TOPICS + ((SURFACE_MOUNTS,) if mounted else ())
 
 
-def recorder_subscribed(node, topics=SIMULATOR_TOPICS) -> set:
+def recorder_subscribed(node: Node, topics: Sequence[str] = SIMULATOR_TOPICS) -> set[str]:
     """The simulator ``topics`` the recorder's reader subscribes to, as ``node`` sees the
     graph."""
     return {
@@ -360,7 +369,9 @@ def recorder_subscribed(node, topics=SIMULATOR_TOPICS) -> set:
     }
 
 
-def ready_for_commands(node, recorder=None, topics=SIMULATOR_TOPICS) -> bool:
+def ready_for_commands(
+    node: Node, recorder: RecorderProgress | None = None, topics: Sequence[str] = SIMULATOR_TOPICS
+) -> bool:
     """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
     its command reader (and the recorder's) are known and, with a recorder (``recorder``: a
     RecorderProgress), the recorder's reader subscribes to every simulator topic (``topics``)
@@ -389,7 +400,7 @@ class Run:
             env,
         )
         self.procs, self.logs = {}, {}
-        self.impacts = []
+        self.impacts: list[Impact] = []  # the /impact_report records, read as they come
         self.mode = SimulatorMode(args.mode)
         self.simulator: SimulatorReport | None = None  # its latest /diagnostics
         self.sim_time = 0.0
@@ -409,7 +420,7 @@ class Run:
         self.line = Progress(total=scene.cycles or 1, prefix='  ', keep=True)
         self.logdir = os.path.join(args.out, 'logs')
 
-    def command(self, node):
+    def command(self, node: str) -> list[str]:
         a = self.args
         params = {
             'simulator': [
@@ -447,7 +458,7 @@ class Run:
             cmd += ['-p', p]
         return cmd
 
-    def start(self):
+    def start(self) -> None:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from std_msgs.msg import String
@@ -493,6 +504,7 @@ class Run:
 
     def _await_graph(self, timeout=60.0):
         """Until the controller may start (``ready_for_commands``)."""
+        assert self.node is not None, 'start() makes the node before it waits for the graph'
         recorder = RecorderProgress(self.node) if 'recorder' in self.procs else None
         self.recorder_progress = recorder
         end = time.monotonic() + timeout
@@ -520,7 +532,7 @@ class Run:
 
     def _on_impact(self, msg):
         if not self.stopping:  # the arm released by the stopped controller falls: not the run
-            self.impacts.append(json.loads(msg.data))
+            self.impacts.append(impact_from_json(msg.data))
 
     def _on_diagnostics(self, msg):
         values = status_values(msg, contract.CONTROLLER_STATUS)
@@ -541,7 +553,7 @@ class Run:
                 self.sim_time = report.status.sim_time
             self.rhs_evaluations = report.status.rhs_evaluations
 
-    def watch(self, timeout) -> str:
+    def watch(self, timeout: float) -> str:
         """Spin until the scene's cycles are done; returns why the run ended."""
         cycles = self.scene.cycles or 1
         start = time.monotonic()
@@ -557,7 +569,7 @@ class Run:
                 first = now - simulator.wall_time
             if self.impacts:
                 self.sim_time = max(
-                    self.sim_time, self.impacts[-1]['t_contact'] + self.impacts[-1]['duration']
+                    self.sim_time, self.impacts[-1].t_contact + self.impacts[-1].duration
                 )
             self.wall = now - (first or start)
             self._progress(cycles)
@@ -587,7 +599,7 @@ class Run:
             if self.cycles_completed < self.scene.cycles:
                 return False
         began = self.down_half_start.get(cycles, -math.inf)
-        return any(record['t_contact'] >= began for record in self.impacts)
+        return any(record.t_contact >= began for record in self.impacts)
 
     def _pause_simulator(self, timeout=2.0):
         """Realtime: freeze the arm where the run completed. Stopping the controller first
@@ -663,7 +675,7 @@ class Run:
             elif seen is not None and seen >= target and time.monotonic() - since >= settle:
                 return
 
-    def stop(self) -> dict:
+    def stop(self) -> dict[str, int | None]:
         """SIGINT each node in order (controller first: it sends a zero command), SIGKILL any
         that does not exit; returns exit codes by node."""
         self.stopping = True

@@ -126,12 +126,14 @@ def test_the_five_lines_on_a_three_link_recording(tmp_path):
 
 
 def test_impacts_are_typed_and_give_back_the_same_json():
+    """The run's own records are the API's, not converted; the JSON holds their dicts, and
+    a record read back from it is the same record."""
     res = ia.simulate('paper', samples=False)
     assert res.ok and res.impacts and all(isinstance(i, ia.Impact) for i in res.impacts)
-    records = res.run.impacts
-    assert [i.to_dict() for i in res.impacts] == records
-    assert json.dumps([i.to_dict() for i in res.impacts]) == json.dumps(records)
-    assert json.dumps(res.to_json()) == json.dumps(res.run.to_json())
+    assert list(res.impacts) == res.run.impacts and res.impacts[0] is res.run.impacts[0]
+    data = res.to_json()
+    assert data['impacts'] == [i.to_dict() for i in res.impacts]
+    assert json.dumps(data) == json.dumps(res.run.to_json())
     first = res.impacts[0]
     assert ia.Impact.from_dict(json.loads(json.dumps(first.to_dict()))) == first
     with pytest.raises(AttributeError):
@@ -139,12 +141,27 @@ def test_impacts_are_typed_and_give_back_the_same_json():
 
 
 def test_an_impact_record_with_a_wrong_key_is_refused_in_one_line():
-    record = dict(ia.simulate('paper', samples=False).run.impacts[0])
+    record = ia.simulate('paper', samples=False).impacts[0].to_dict()
     record['F_peak'] = record.pop('F_max')
     with pytest.raises(ia.ImpactArmError) as exc:
         ia.Impact.from_dict(record)
     message = str(exc.value)
     assert 'missing F_max' in message and 'unknown F_peak' in message and '\n' not in message
+
+
+def test_a_report_is_read_back_once_into_its_record_or_refused_in_one_line():
+    """``impact_from_json``, the readers' one way from a report's text to its ``Impact``:
+    the text of ``to_dict`` gives the record back; text that is no JSON object of the
+    record's fields is refused with a one-line ImpactArmError."""
+    from impact_arm.physics.impact import impact_from_json
+
+    first = ia.simulate('paper', samples=False).impacts[0]
+    text = json.dumps(first.to_dict())
+    assert impact_from_json(text) == first == impact_from_json(text.encode())
+    for bad in ('', 'ab', '[1, 2]', '{"index": 1}', b'\xff'):
+        with pytest.raises(ia.ImpactArmError) as exc:
+            impact_from_json(bad)
+        assert str(exc.value).startswith('impact record:') and '\n' not in str(exc.value)
 
 
 def test_load_scene_takes_a_name_a_path_data_and_a_scene(tmp_path):

@@ -637,7 +637,7 @@ def test_a_sample_in_the_contact_is_no_free_flight_with_late_efforts():
 
     truth = {'surfaces[0].mu': 0.3, 'materials.steel.S_y': 9e8}
     rec = late_efforts(synthetic_recording('paper', truth, cycles=15, seed=3), 2)
-    contacts = [(x['t_contact'], x['t_contact'] + x['duration']) for x in rec.truth]
+    contacts = [(x.t_contact, x.t_contact + x.duration) for x in rec.truth]
     inside = sum(bool(np.any((rec.t > t0) & (rec.t < t1))) for t0, t1 in contacts)
     assert inside >= 2  # the case this guards: samples taken inside contacts
     for w in read_impacts(rec, Study('paper')).windows:
@@ -654,7 +654,7 @@ def test_an_outlier_impact_is_named_with_the_fit_without_it():
     """The elbow rate reads 0.03 rad/s (15 sigma) high for 20 ms after the 7th impact (a
     glitch): that impact is named, and the fit without it covers the truth and fits."""
     truth, rec = limit_cycle_recording({}, 5)
-    t7 = sorted(x['t_contact'] for x in rec.truth)[6]
+    t7 = sorted(x.t_contact for x in rec.truth)[6]
     rec.velocity[(rec.t > t7 + 5e-4) & (rec.t < t7 + 0.02), 1] += 0.03
     result = fit(rec, 'paper', BOUNDS)
     assert [o.number for o in result.outliers] == [7], result.outliers

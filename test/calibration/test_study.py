@@ -99,8 +99,8 @@ def test_a_run_with_overrides_is_the_event_run_of_the_scene_they_describe():
     )[0]
     assert not result.error and result.impacts == expected
     assert result.summary['impacts'] == 4
-    assert result.summary['period'] == expected[3]['t_contact'] - expected[2]['t_contact']
-    assert result.summary['cor_kinematic'] == expected[3]['cor_kinematic']
+    assert result.summary['period'] == expected[3].t_contact - expected[2].t_contact
+    assert result.summary['cor_kinematic'] == expected[3].cor_kinematic
     # the override did something: the article's gains give another motion
     assert study.run({'cycles': 4}).impacts != expected
 
@@ -110,7 +110,7 @@ def test_an_arm_striking_several_times_per_cycle_is_summarised_by_its_cycle():
     cycle: the summary counts three impacts per cycle, and its period is the cycle's, not
     the few ms."""
     result = Study('three_link').run({'cycles': 10})
-    times = [i['t_contact'] for i in result.impacts]
+    times = [i.t_contact for i in result.impacts]
     assert not result.error and result.summary['impacts_per_cycle'] == 3
     assert 0 < result.summary['settled_after'] < len(times) - 3
     assert result.summary['period'] == times[-1] - times[-4]
@@ -313,7 +313,7 @@ def test_impact_rows_are_the_runs_records_whatever_their_overrides():
     for index, overrides in items:
         for record in study.run(overrides).impacts:
             row = {'run': index, **{k: column_value(v) for k, v in overrides.items()}}
-            for key, value in record.items():
+            for key, value in record.to_dict().items():  # the JSON's keys and lists
                 row.update(
                     {f'{key}[{i}]': v for i, v in enumerate(value)}
                     if isinstance(value, list)
@@ -480,9 +480,9 @@ def test_simulate_no_samples_prints_the_sampled_runs_impacts(tmp_path, capsys):
     fast = json.loads(out.read_text())
     sampled = run(load_scene('paper'), preset='fast')
     assert fast['run']['impacts'] == 15 and fast['run']['q1_range_deg'] == []
-    for a, b in zip(fast['impacts'], sampled.impacts):
-        assert a['t_contact'] == pytest.approx(b['t_contact'], rel=1e-6)
-        assert a['F_max'] == pytest.approx(b['F_max'], rel=1e-4)  # rtol 1e-5 both
+    for a, b in zip(fast['impacts'], sampled.impacts):  # the JSON's records, the run's
+        assert a['t_contact'] == pytest.approx(b.t_contact, rel=1e-6)
+        assert a['F_max'] == pytest.approx(b.F_max, rel=1e-4)  # rtol 1e-5 both
     assert '15 cycles completed' in capsys.readouterr().out
     assert main(['simulate', '--no-samples', '--control-rate', '500']) == 2
     assert 'sampled controller (500 Hz)' in capsys.readouterr().err

@@ -332,7 +332,7 @@ def _silenced_in_the_down_swing(scene, policy, silence_from=0.1, silence=0.5, t_
     while loop.arm.t < t_end:
         loop.realtime_period()
         tick = published[-1]
-        impacts += [record['t_contact'] for record, _ in tick.impacts]
+        impacts += [record.t_contact for record, _ in tick.impacts]
         if tick is answered or silence_from <= tick.t < silence_from + silence:
             continue
         answered = tick

@@ -98,14 +98,14 @@ def test_the_sdf_carries_the_joint_dynamics_and_effort_limits(real_arm):
 def test_strikes_span_the_speed_range_at_the_limit_cycle_posture(paper):
     record = limit_cycle_impact(paper)
     chosen = strikes(paper, (0.5, 1.0, 1.5), record)
-    speed = float(np.hypot(*record['v_before']))
+    speed = float(np.hypot(*record.v_before))
     for s in chosen:
         assert s.speed == pytest.approx(s.speed_ratio * speed, rel=1e-9)
         if s.kind is StrikeKind.NORMAL:
             assert s.v_before[0] == pytest.approx(0.0, abs=1e-9)
         else:
             assert s.v_before[0] / s.v_before[1] == pytest.approx(
-                record['v_before'][0] / record['v_before'][1]
+                record.v_before[0] / record.v_before[1]
             )
     with pytest.raises(ValueError, match='speed ratio'):
         strikes(paper, (0.0,), record)

@@ -20,7 +20,7 @@ from types import SimpleNamespace
 from impact_arm import contract
 from impact_arm.physics.scene import load_scene
 from impact_arm.physics.simulate import run
-from scenes import arm_dict, write_arm_scene
+from scenes import arm_dict, impact_at, write_arm_scene
 from tf_frames import stamp_ns, tip_in_world
 from cli_runs import impact_arm_run, read_back
 from repo_paths import EXAMPLES, REPO_ROOT
@@ -79,7 +79,7 @@ def test_lockstep_run_of_an_arm_of_n_links_completes_records_and_draws_it(
     assert strikes and max(strikes) >= cycles, strikes
     # the same scene offline, its controller sampled at the same 1 kHz: the same impacts
     offline = run(load_scene(scene_path), control_rate=1000.0)
-    times = [i['t_contact'] for i in offline.impacts]
+    times = [i.t_contact for i in offline.impacts]
     shared = min(len(times), len(reports))
     assert shared >= cycles
     assert [r['t_contact'] for r in reports[:shared]] == pytest.approx(times[:shared], abs=1e-9)
@@ -140,7 +140,7 @@ def test_a_cycle_counts_once_its_strike_and_the_report_of_its_impact_are_in():
     from impact_arm.tools.runner import Run
 
     def report(t):
-        return {'t_contact': t, 'duration': 1e-4}
+        return impact_at([-45.0, -20.0], t_contact=t)
 
     run = Run.__new__(Run)  # the counting alone: no processes, no DDS
     run.mode, run.scene = SimulatorMode.REALTIME, SimpleNamespace(cycles=2)
@@ -256,5 +256,5 @@ def test_a_shipped_scene_runs_in_lockstep_as_offline_at_the_same_rate(
     shared = min(len(reports), len(offline.impacts))
     assert shared >= load_scene(path).cycles
     assert [r['t_contact'] for r in reports[:shared]] == pytest.approx(
-        [i['t_contact'] for i in offline.impacts[:shared]], abs=1e-9
+        [i.t_contact for i in offline.impacts[:shared]], abs=1e-9
     )

@@ -91,7 +91,7 @@ def test_the_ur5_strikes_over_dds_in_its_own_joints_and_its_forearm_mass_is_fitt
     shared = min(len(offline.impacts), len(reports))
     assert shared >= 3
     assert [r['t_contact'] for r in reports[:shared]] == pytest.approx(
-        [i['t_contact'] for i in offline.impacts[:shared]], abs=1e-9
+        [i.t_contact for i in offline.impacts[:shared]], abs=1e-9
     )
     # every link of the whole robot moves in /tf (the locked ones at their values)
     children = {t.child_frame_id for m in by_topic['/tf'] for t in m.transforms}

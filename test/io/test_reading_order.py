@@ -63,7 +63,7 @@ def test_a_scrambled_recording_is_analysed_in_stamp_order(tmp_path):
     # the file really is out of order ...
     assert [m.data for m in in_file] != [m.data for m in iter_raw(source, [contract.IMPACT_REPORT])]
     # ... and the analysis reads it as the run happened
-    assert [r['index'] for r in scrambled.impacts] == list(range(1, 16))
+    assert [r.index for r in scrambled.impacts] == list(range(1, 16))
     assert scrambled.impacts == original.impacts
     assert np.all(np.diff(scrambled.t) > 0)
     np.testing.assert_array_equal(scrambled.t, original.t)

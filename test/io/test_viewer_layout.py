@@ -211,11 +211,11 @@ def test_after_any_seek_the_table_lists_every_impact_so_far_rounded(paper):
         assert [r['impact'] for r in rows] == list(range(1, len(done) + 1)), t_ns
     rows = json.loads(messages['/impact_table'][-1][1].data)['rows']
     for row, impact in zip(rows, result.impacts):
-        assert row['F max [kN]'] == pytest.approx(impact['F_max'] / 1e3, rel=5e-4)
-        assert row['duration [µs]'] == pytest.approx(impact['duration'] * 1e6, rel=5e-4)
-        assert row['δ max [µm]'] == pytest.approx(impact['delta_m'] * 1e6, rel=5e-4)
+        assert row['F max [kN]'] == pytest.approx(impact.F_max / 1e3, rel=5e-4)
+        assert row['duration [µs]'] == pytest.approx(impact.duration * 1e6, rel=5e-4)
+        assert row['δ max [µm]'] == pytest.approx(impact.delta_m * 1e6, rel=5e-4)
         # the time to 0.1 ms (tells every impact and event frame apart), the rest to 4 digits
-        assert row['t_contact [s]'] == round(impact['t_contact'], 4)
+        assert row['t_contact [s]'] == round(impact.t_contact, 4)
         for column, value in row.items():
             if column in ('impact', 't_contact [s]'):
                 continue

@@ -11,6 +11,7 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from impact_arm.physics.impact import impact_from_json
 from impact_arm.physics.model import ArmModel
 from impact_arm.physics.simulate import run
 from impact_arm.contract import to_absolute
@@ -96,12 +97,12 @@ def test_every_impact_is_shown_with_the_tip_on_the_surface_and_the_arrow_at_it(r
         for a in ma.markers
         if a.ns == 'contact_force'
     }  # by the arrow's stamp
-    reports = [json.loads(m.data) for _, m in by_topic['/impact_report']]
+    reports = [impact_from_json(m.data) for _, m in by_topic['/impact_report']]
     assert len(reports) == len(result.impacts) == 2
     height = scene.surfaces[0].height
     for report in reports:
-        t0 = round(report['t_contact'] * 1e9)
-        t1 = round((report['t_contact'] + report['duration']) * 1e9)
+        t0 = round(report.t_contact * 1e9)
+        t1 = round((report.t_contact + report.duration) * 1e9)
         inside = [
             m for _, m in by_topic['/tf'] if t0 - 1 <= stamp_ns(m.transforms[0].header) <= t1 + 1
         ]
@@ -113,7 +114,7 @@ def test_every_impact_is_shown_with_the_tip_on_the_surface_and_the_arrow_at_it(r
         ]
         assert on_surface, 'no frame of the impact shows the tip on the surface'
         stamp, b = on_surface[0]
-        q_contact = np.radians(report['q_contact_deg'])
+        q_contact = np.radians(report.q_contact_deg)
         assert b == pytest.approx(model_tip_in_world(model, q_contact), abs=1e-9)
         arrow = next(m for m in markers[stamp].markers if m.ns == 'contact_force')
         assert arrow.action == arrow.ADD and stamp_ns(arrow.header) == stamp
@@ -167,7 +168,7 @@ def test_markers_show_the_surface_the_contact_force_and_every_impact(recording):
     paced = {stamp_ns(m.header) for _, m in by_topic['/joint_states']} & {
         stamp_ns(m.transforms[0].header) for _, m in by_topic['/tf']
     }
-    contacts = [i['t_contact'] for i in result.impacts]
+    contacts = [i.t_contact for i in result.impacts]
     held = [t for t in paced if any(0 <= t * 1e-9 - c < ARROW_HOLD for c in contacts)]
     assert len(result.impacts) == 2 and len(held) > 30
     assert len(arrows) == 3 * len(result.impacts) + len(held)
@@ -179,7 +180,7 @@ def test_markers_show_the_surface_the_contact_force_and_every_impact(recording):
     points = [m for m in last if m.ns == 'impact_points']
     assert len(points) == len(result.impacts)
     reach = sum(scene.lengths)
-    forces = [i['F_max'] for i in result.impacts]
+    forces = [i.F_max for i in result.impacts]
     for m, force in zip(points, forces):
         # resting on the surface at the contact point: above the slab's top face, which
         # hid them from below (any zoom); apart from the tip and the arrow by colour
@@ -270,16 +271,16 @@ def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
     for s in result.samples:  # up to the first state after the separation
         t_ns = round(s.t * 1e9)
         visuals.state(t_ns, s.q, (0.0, 0.0), t_ns + offset + 123)
-        if s.t > report['t_contact'] + report['duration']:
+        if s.t > report.t_contact + report.duration:
             break
     before = len(writer.written)
-    visuals.impact(json.dumps(report))
+    visuals.impact(json.dumps(report.to_dict()))  # the text of the report, as received
     events = writer.written[before:]
     assert [topic for topic, _, _ in events] == ['/impact_table'] + ['/tf', '/impact_markers'] * 3
     # the table: logged with the contact's frame, so a seek to the impact shows its row
     assert events.pop(0)[2] == events[0][2]
     stamps = [t for _, t, _ in event_states(report)]
-    assert stamps[0] <= stamps[1] <= stamps[2] and stamps[0] >= report['t_contact'] * 1e9
+    assert stamps[0] <= stamps[1] <= stamps[2] and stamps[0] >= report.t_contact * 1e9
     assert [log for _, _, log in events[::2]] == [t + offset + 123 for t in stamps]
     tf = store.deserialize_cdr(events[0][1], 'tf2_msgs/msg/TFMessage')
     assert [stamp_ns(t.header) for t in tf.transforms] == [stamps[0]] * scene.n_links
@@ -300,16 +301,50 @@ def test_event_frames_of_a_report_come_after_its_state_on_the_recorders_clock():
     assert not any(m.ns == 'contact_force' for m in after.markers)  # its time is over
 
 
+# a whole report of the article's two links, as /impact_report carries one (made-up numbers)
+WHOLE_REPORT = {
+    'index': 1,
+    't_contact': 0.1,
+    'q_contact_deg': [1.0, 2.0],
+    'joints_contact_deg': [1.0, 1.0],
+    'duration': 1.4e-4,
+    'delta_m': 3.5e-4,
+    'delta_r': 2.8e-4,
+    'F_max': 1.0,
+    'v_before': [-3.7, -5.5],
+    'v_after': [-2.4, 2.2],
+    'cor_kinematic': 0.4,
+    'T_before': [2.5, 14.0, 16.5],
+    'T_after': [4.4, 6.6, 11.0],
+    'cor_energetic': [1.3, 0.7, 0.8],
+    'phase_durations': [1e-6, 9.9e-5, 4e-5],
+    'q_max_compression_deg': [1.0, 2.0],
+    'q_separation_deg': [1.0, 2.0],
+}
+
+
+def test_a_whole_report_from_the_wire_is_drawn():
+    """The text of a whole report becomes its record once: its point, its three event
+    frames and its table row (the malformed ones below differ from it in one thing)."""
+    from impact_arm.io.scene_visuals import SceneVisuals
+
+    visuals = SceneVisuals(scene_from())
+    visuals.add_impact(json.dumps(WHOLE_REPORT))
+    assert len(visuals.impacts) == 1 and len(visuals.take_events()) == 3
+    assert [row['impact'] for row in visuals.rows] == [1]
+
+
 @pytest.mark.parametrize(
     'bad',
     [
         {},
-        {'t_contact': 0.1},
-        {'t_contact': 0.1, 'q_contact_deg': 'ab', 'F_max': 1.0},
-        {'t_contact': float('nan'), 'q_contact_deg': [1.0, 2.0], 'F_max': 1.0},
-        {'t_contact': 0.1, 'q_contact_deg': [1.0], 'F_max': 1.0},
-        {'t_contact': 0.1, 'q_contact_deg': [1.0, 2.0], 'F_max': None},
-        {'t_contact': 0.1, 'q_contact_deg': [1.0, float('inf')], 'F_max': 1.0},
+        {'t_contact': 0.1, 'q_contact_deg': [1.0, 2.0], 'F_max': 1.0},  # not the whole record
+        {**WHOLE_REPORT, 'F_peak': 1.0},  # a field the record does not have
+        {**WHOLE_REPORT, 'q_contact_deg': 'ab'},
+        {**WHOLE_REPORT, 't_contact': float('nan')},
+        {**WHOLE_REPORT, 'q_contact_deg': [1.0]},
+        {**WHOLE_REPORT, 'F_max': None},
+        {**WHOLE_REPORT, 'q_contact_deg': [1.0, float('inf')]},
         [1, 2],
     ],
 )

@@ -22,7 +22,7 @@ from impact_arm.io.robot_tf import (
     rpy_from_rotation,
 )
 from impact_arm.physics.model import ArmModel
-from scenes import paper_dict
+from scenes import impact_at, paper_dict
 from repo_paths import TEST_DATA
 from robots import UR5_ARM, UR5_JOINTS, robots_dir
 
@@ -199,9 +199,7 @@ def test_tf_for_a_joint_state_is_pinocchios_robot_and_the_markers_land_on_it():
         # ... and frame 'tip' of the description sits there too
         assert compose(transforms, 'tip', 'world')[:3, 3] == pytest.approx(projected, abs=1e-9)
     # impact points and the force arrow are drawn in impact_plane
-    visuals.add_impact(
-        {'index': 1, 't_contact': 0.001, 'F_max': 100.0, 'q_contact_deg': list(np.degrees(q))}
-    )
+    visuals.add_impact(impact_at(np.degrees(q)))
     from impact_arm.io.msgdefs import typestore
 
     markers = typestore().deserialize_cdr(

@@ -82,11 +82,11 @@ def test_lockstep_article_matches_offline_and_repeats_bit_identically(
     assert len(reports) >= 15
     first, offline = reports[0], article_offline.impacts[0]
     for key in ('delta_m', 'F_max'):
-        assert first[key] == pytest.approx(offline[key], rel=0.03), key
+        assert first[key] == pytest.approx(getattr(offline, key), rel=0.03), key
     for k in range(2):
-        assert first['v_after'][k] == pytest.approx(offline['v_after'][k], rel=0.03)
+        assert first['v_after'][k] == pytest.approx(offline.v_after[k], rel=0.03)
     # every report carries the offline JSON's fields
-    assert set(first) == set(offline)
+    assert set(first) == set(offline.to_dict())
 
     # a second run: the same joint states, bit for bit, through the first impact and beyond
     _, again = lockstep_run(

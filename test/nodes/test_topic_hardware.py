@@ -334,8 +334,8 @@ def judge_realtime_stack(run, offline):
         failures.append(
             f'first strike at {run.contacts[0]:.3f} s, offline {offline.t_contact[0]:.3f} s'
         )
-    if run.impacts and max(r['delta_m'] for r in run.impacts) > 1.5 * max(offline.delta_m):
-        failures.append(f'largest penetration {max(r["delta_m"] for r in run.impacts):.3g} m')
+    if run.impacts and max(r.delta_m for r in run.impacts) > 1.5 * max(offline.delta_m):
+        failures.append(f'largest penetration {max(r.delta_m for r in run.impacts):.3g} m')
     if not all(run.alive.values()):
         failures.append(f'processes ended: {run.alive}')
     report = f'{failures}; run {run.as_dict()}'
@@ -408,9 +408,7 @@ def test_the_sim_time_standin_stack_repeats_the_offline_loop_at_any_load(ros_env
         waits = {k: run.standin_updates[k] for k in ('late_driven', 'unanswered')}
         if any(waits.values()):
             pytest.skip(f'a wait for a peer ran out (the machine stalled it 1 s): {waits}')
-    first, second = (
-        [(r['t_contact'], r['delta_m'], r['F_max']) for r in run.impacts[:n]] for run in runs
-    )
+    first, second = ([(r.t_contact, r.delta_m, r.F_max) for r in run.impacts[:n]] for run in runs)
 
     # released at the fixed time, every impact the offline loop's to the bit, and the two
     # runs equal: still not so in every run (a fresh-clone CI run left the offline loop
@@ -432,7 +430,7 @@ def test_the_sim_time_standin_stack_repeats_the_offline_loop_at_any_load(ros_env
         )
         for k, run in enumerate(runs)
         if run.contacts[:n] != list(offline.t_contact[:n])
-        or [r['delta_m'] for r in run.impacts[:n]] != list(offline.delta_m[:n])
+        or [r.delta_m for r in run.impacts[:n]] != list(offline.delta_m[:n])
         or not one_period(run)
     ]
     if departed or first != second:

@@ -17,10 +17,10 @@ def _check_periods(t, peak, mean, impacts, traces, dt):
     assert len(impacts) >= 1
     for record, rows in zip(impacts, traces):
         rows = np.asarray(rows, float)
-        t_max = record['t_contact'] + sum(record['phase_durations'][:2])
+        t_max = record.t_contact + sum(record.phase_durations[:2])
         k = int(np.searchsorted(t, t_max - 1e-12))  # the period (t[k-1], t[k]] holding it
-        assert peak[k] == pytest.approx(record['F_max'], rel=1e-12)
-        assert record['F_max'] == pytest.approx(rows[:, 3].max(), rel=1e-12)  # the trace's F_n
+        assert peak[k] == pytest.approx(record.F_max, rel=1e-12)
+        assert record.F_max == pytest.approx(rows[:, 3].max(), rel=1e-12)  # the trace's F_n
     assert np.all(peak >= mean - 1e-9 * np.abs(mean).max())
     touching = mean > 0
     assert np.all(peak[~touching] == 0.0)

@@ -58,12 +58,12 @@ def full_run(scene):
 def contact_of(model, result, record):
     """(q, q̇) absolute at the reported contact: q̇ from the tip velocity (and the link
     energies beyond two links, from the last sample's rates)."""
-    q = np.radians(record['q_contact_deg'])
-    v = np.asarray(record['v_before'], float)
+    q = np.radians(record.q_contact_deg)
+    v = np.asarray(record.v_before, float)
     if model.n == 2:
         return q, np.linalg.solve(np.asarray(model.tip_jacobian(q)).reshape(2, 2), v)
-    last = [s for s in result.samples if s.t <= record['t_contact']][-1]
-    energies = np.asarray(record['T_before'][: model.n], float)
+    last = [s for s in result.samples if s.t <= record.t_contact][-1]
+    energies = np.asarray(record.T_before[: model.n], float)
     return q, contact_rates(model, q, v, energies, np.asarray(last.qd, float))
 
 
@@ -73,7 +73,7 @@ def exact_start(model, record, q, qd):
     reported contact state, not one a gravity step (~1e-6 rad/s) away from it."""
     h = CONTACT_LEAD
     qdd = np.linalg.solve(model.mass_matrix(q), model.free_forces(q, qd))
-    return ReplayStart(record['t_contact'] - h, q - qd * h + 0.5 * qdd * h * h, qd - qdd * h)
+    return ReplayStart(record.t_contact - h, q - qd * h + 0.5 * qdd * h * h, qd - qdd * h)
 
 
 def replayed(model, start):
@@ -84,18 +84,17 @@ def replayed(model, start):
 def disagreement(replay_record, record) -> dict:
     """Relative (absolute for times [s]) differences of what the run reported."""
     out = {
-        't_contact': abs(replay_record['t_contact'] - record['t_contact']),
+        't_contact': abs(replay_record.t_contact - record.t_contact),
         't_separation': abs(
-            replay_record['t_contact']
-            + replay_record['duration']
-            - record['t_contact']
-            - record['duration']
+            replay_record.t_contact + replay_record.duration - record.t_contact - record.duration
         ),
     }
     for key in ('cor_kinematic', 'delta_m', 'delta_r', 'F_max'):
-        out[key] = abs(replay_record[key] / record[key] - 1)
+        out[key] = abs(getattr(replay_record, key) / getattr(record, key) - 1)
     for key in ('T_before', 'T_after', 'cor_energetic'):
-        out[key] = float(np.max(np.abs(np.divide(replay_record[key], record[key]) - 1)))
+        out[key] = float(
+            np.max(np.abs(np.divide(getattr(replay_record, key), getattr(record, key)) - 1))
+        )
     return out
 
 
@@ -133,7 +132,7 @@ def test_the_comparison_with_the_run_tells_a_start_a_micro_radian_per_second_off
     q, qd = contact_of(model, result, record)
     start = exact_start(model, record, q, qd)
     nudged = ReplayStart(start.t, start.q, start.qd * (1 + 1e-6))
-    for other in (nudged, ReplayStart.before_contact(record['t_contact'], q, qd)):
+    for other in (nudged, ReplayStart.before_contact(record.t_contact, q, qd)):
         off = disagreement(replayed(model, other).record, record)
         assert max(v for k, v in off.items() if not k.startswith('t_')) > 10 * TIGHT, off
         # ... while both are still the same impact to a micro-part
@@ -169,12 +168,12 @@ def energy_balance(name, **surface):
     q, qd = contact_of(model, result, record)
     made = replayed(model, exact_start(model, record, q, qd)).record
     assert made is not None
-    before = made['T_before'][-1] + model.potential_energy(np.radians(made['q_contact_deg']))
-    after = made['T_after'][-1] + model.potential_energy(np.radians(made['q_separation_deg']))
+    before = made.T_before[-1] + model.potential_energy(np.radians(made.q_contact_deg))
+    after = made.T_after[-1] + model.potential_energy(np.radians(made.q_separation_deg))
     work = plastic_work(
-        model.surfaces[0].constants, made['delta_m'], made['delta_r'], scene.surfaces[0].law
+        model.surfaces[0].constants, made.delta_m, made.delta_r, scene.surfaces[0].law
     )
-    return before - after, work, made['T_before'][-1]
+    return before - after, work, made.T_before[-1]
 
 
 @pytest.mark.parametrize('name', SCENES)
@@ -208,18 +207,16 @@ def test_a_replay_ended_at_yield_and_the_fits_stepping_replay_see_the_runs_phase
     options = IntegratorOptions.of_scene(scene.integrator, preset=OPTIONS)
     elastic = replay_impact(model, start, options, start.t + 1e-3, end_at=('yield',))
     assert elastic.record is None and elastic.end is not None and elastic.end.kind == 'yield'
-    assert elastic.end.t - record['t_contact'] == pytest.approx(
-        record['phase_durations'][0], rel=1e-9
-    )
+    assert elastic.end.t - record.t_contact == pytest.approx(record.phase_durations[0], rel=1e-9)
     stepping = Replay(model, start, options)
     assert stepping.side is ImpactSide.BEFORE
-    t_after = record['t_contact'] + 2 * record['duration']
+    t_after = record.t_contact + 2 * record.duration
     while stepping.integrator.state.t < t_after:
         stepping.advance(t_after, stop_at=('contact', 'separation'))
     assert stepping.contacts == 1 and stepping.side is ImpactSide.AFTER
     assert stepping.first is not None and stepping.last is not None
-    assert abs(stepping.first.t - record['t_contact']) < 1e-14
-    assert abs(stepping.last.t - record['t_contact'] - record['duration']) < 1e-13
+    assert abs(stepping.first.t - record.t_contact) < 1e-14
+    assert abs(stepping.last.t - record.t_contact - record.duration) < 1e-13
 
 
 def test_a_replay_refuses_an_end_that_is_not_an_impacts_nor_plates_it_cannot_place():

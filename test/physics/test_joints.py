@@ -340,7 +340,7 @@ def test_joint_values_are_sweep_keys_even_where_the_scene_states_no_joints():
     assert [j.damping for j in scene.joint_specs] == [0.0, 2.0]
     ideal, damped = study.run({'cycles': 1}), study.run({'cycles': 1, 'joints[1].damping': 2.0})
     assert not ideal.error and not damped.error
-    assert abs(damped.impacts[0]['t_contact'] - ideal.impacts[0]['t_contact']) > 1e-3
+    assert abs(damped.impacts[0].t_contact - ideal.impacts[0].t_contact) > 1e-3
     refused = study.run({'joints[2].damping': 2.0})
     assert 'joints[2]' in refused.error and 'has 2 entries' in refused.error
 

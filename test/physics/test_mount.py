@@ -283,7 +283,7 @@ def test_mount_values_are_sweep_keys_and_fit_parameters():
     soft = study.run({'cycles': 1, 'surfaces[0].mount': mount})
     stiff = study.run({'cycles': 1, 'surfaces[0].mount': {**mount, 'stiffness': 2e9}})
     assert not soft.error and not stiff.error
-    assert soft.impacts[0]['F_max'] < stiff.impacts[0]['F_max']
+    assert soft.impacts[0].F_max < stiff.impacts[0].F_max
     missing = study.run({'surfaces[0].mount.stiffness': 1e8})
     assert 'surfaces[0].mount.mass is missing' in missing.error
     scene = apply_overrides(study.data, {'surfaces[0].mount': mount})

@@ -63,11 +63,11 @@ def test_hertz_impact_matches_closed_form_indentation_and_duration():
     k = 4.0 / 3.0 * c.E * math.sqrt(c.R)
     delta_m = (5 * m_eff * v**2 / (4 * k)) ** 0.4  # ½mv² = (2/5) k δm^(5/2)
     duration = 2 * (2 / 5) * beta(2 / 5, 1 / 2) * delta_m / v  # ∫ dδ / δ̇ over load + unload
-    assert impact['delta_m'] == pytest.approx(delta_m, rel=1e-6)
-    assert impact['duration'] == pytest.approx(duration, rel=1e-6)
-    assert impact['F_max'] == pytest.approx(k * delta_m**1.5, rel=1e-6)
-    assert impact['delta_r'] == 0.0
-    assert impact['cor_kinematic'] == pytest.approx(1.0, abs=1e-6)  # Hertz is elastic
+    assert impact.delta_m == pytest.approx(delta_m, rel=1e-6)
+    assert impact.duration == pytest.approx(duration, rel=1e-6)
+    assert impact.F_max == pytest.approx(k * delta_m**1.5, rel=1e-6)
+    assert impact.delta_r == 0.0
+    assert impact.cor_kinematic == pytest.approx(1.0, abs=1e-6)  # Hertz is elastic
 
 
 def test_sliding_friction_impulse_is_mu_times_normal_impulse():
@@ -120,8 +120,8 @@ def test_first_impact_metrics_converge_as_tolerances_tighten():
     keys = ('delta_m', 'F_max', 'duration', 'cor_kinematic')
 
     def error(impact):
-        rel = [abs(impact[k] / reference[k] - 1) for k in keys]
-        rel.append(abs(impact['v_after'][1] / reference['v_after'][1] - 1))
+        rel = [abs(getattr(impact, k) / getattr(reference, k) - 1) for k in keys]
+        rel.append(abs(impact.v_after[1] / reference.v_after[1] - 1))
         return max(rel)
 
     errors = [error(first_impact(rtol)) for rtol in (1e-4, 1e-6, 1e-8, 1e-10)]

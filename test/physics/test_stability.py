@@ -115,7 +115,7 @@ def test_the_three_link_scene_strikes_at_1khz_without_chatter():
     # the largest torque is the shoulder's swing, not a runaway (the old gains: ~1e5 N m)
     assert np.abs(tau).max() < 3000.0
     first = result.impacts[0]
-    assert -6.0 < first['v_before'][1] < -4.0  # the strike as before the gains changed (-4.6)
+    assert -6.0 < first.v_before[1] < -4.0  # the strike as before the gains changed (-4.6)
 
 
 # ------------------------------------------------------------------ analysis vs simulation

@@ -59,7 +59,7 @@ def test_rosenbrock_step_is_not_capped_by_the_stiff_free_flight():
 def test_article_first_impact_with_rosenbrock_free_flight():
     first = run(scene_from({('integrator', 'method'): 'rosenbrock'})).impacts[0]
     for key, expected in ARTICLE_FIRST_IMPACT.items():
-        values = first[key] if isinstance(expected, list) else [first[key]]
+        values = getattr(first, key) if isinstance(expected, list) else [getattr(first, key)]
         targets = expected if isinstance(expected, list) else [expected]
         for got, want in zip(values, targets):
             assert got == pytest.approx(want, rel=0.01), (key, got, want)
@@ -68,7 +68,7 @@ def test_article_first_impact_with_rosenbrock_free_flight():
 def first_impact_error(impacts, reference):
     keys = ('duration', 'delta_m', 'delta_r', 'F_max')
     first, ref = impacts[0], reference[0]
-    return max(abs(first[k] / ref[k] - 1) for k in keys)
+    return max(abs(getattr(first, k) / getattr(ref, k) - 1) for k in keys)
 
 
 def test_a_tighter_contact_tolerance_buys_the_impact_accuracy():
@@ -126,9 +126,9 @@ def test_the_sweep_setting_holds_every_limit_cycle_impact():
     fast = run_events(scene, rtol=1e-2, atol=1e-4, method='rosenbrock', contact_rtol=3e-4)[0]
     assert len(fast) == len(reference) == 15
     for got, want in zip(fast, reference):
-        assert got['cor_kinematic'] == pytest.approx(want['cor_kinematic'], rel=1e-3)
-        assert got['duration'] == pytest.approx(want['duration'], rel=1e-3)
-        assert got['cor_energetic'] == pytest.approx(want['cor_energetic'], rel=1e-3)
+        assert got.cor_kinematic == pytest.approx(want.cor_kinematic, rel=1e-3)
+        assert got.duration == pytest.approx(want.duration, rel=1e-3)
+        assert got.cor_energetic == pytest.approx(want.cor_energetic, rel=1e-3)
 
 
 def test_the_fast_preset_spends_its_tolerance_on_the_contact():
@@ -143,7 +143,7 @@ def test_the_fast_preset_spends_its_tolerance_on_the_contact():
 
     def worst(impacts):
         return max(
-            max(abs(a[k] / b[k] - 1) for k in ('delta_m', 'cor_kinematic'))
+            max(abs(getattr(a, k) / getattr(b, k) - 1) for k in ('delta_m', 'cor_kinematic'))
             for a, b in zip(impacts, reference)
         )
 

@@ -1,10 +1,12 @@
-"""Small scene builders for tests: the article's scene with a few fields changed."""
+"""Small scene builders for tests: the article's scene with a few fields changed; and an
+impact record of a given pose (``impact_at``)."""
 
 import copy
 import os
 
 import yaml
 
+from impact_arm.physics.impact import Impact
 from impact_arm.physics.scene import parse_scene
 from repo_paths import CONFIG
 
@@ -89,3 +91,30 @@ ARTICLE_FIRST_IMPACT = {
     'T_after': [4.43, 6.56, 11.02],
     'cor_energetic': [1.34, 0.69, 0.82],
 }
+
+
+def impact_at(q_deg, index=1, t_contact=0.001, F_max=100.0, v_before=(-3.7, -5.5)) -> Impact:
+    """A whole impact record whose contact, maximum compression and separation all show the
+    absolute link angles ``q_deg`` (made-up numbers elsewhere: for what draws or compares
+    impacts, not for their physics)."""
+    q = tuple(float(a) for a in q_deg)
+    n = len(q)
+    return Impact(
+        index=index,
+        t_contact=t_contact,
+        q_contact_deg=q,
+        joints_contact_deg=q,
+        duration=1.4e-4,
+        delta_m=3.5e-4,
+        delta_r=2.8e-4,
+        F_max=F_max,
+        v_before=(float(v_before[0]), float(v_before[1])),
+        v_after=(-2.4, 2.2),
+        cor_kinematic=0.4,
+        T_before=(1.0,) * n + (float(n),),
+        T_after=(0.5,) * n + (n / 2,),
+        cor_energetic=(0.7,) * (n + 1),
+        phase_durations=(1e-6, 9.9e-5, 4e-5),
+        q_max_compression_deg=q,
+        q_separation_deg=q,
+    )

@@ -19,7 +19,6 @@ send its first command before the simulator reaches X).
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import sys
 import time
@@ -39,6 +38,7 @@ from ros_helpers import (
 
 from impact_arm.contract import SimulatorStatus
 from impact_arm.driver.control_inputs import DROPPED
+from impact_arm.physics.impact import Impact, impact_from_json
 from impact_arm.tools.latency_study import SECOND_STRIKE_S
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -66,7 +66,7 @@ class StackRun:
     arm, the last diagnostics of the simulator and the controller, the stand-in's counts."""
 
     order: tuple[str, ...]
-    impacts: list[dict]
+    impacts: list[Impact]
     sim: SimulatorStatus | None  # None: the simulator never reported
     ctrl: dict
     standin_updates: dict
@@ -80,7 +80,7 @@ class StackRun:
     contacts: list[float] = field(init=False)
 
     def __post_init__(self):
-        self.contacts = [r['t_contact'] for r in self.impacts]
+        self.contacts = [r.t_contact for r in self.impacts]
 
     @property
     def second_strike_pairs(self) -> list[tuple[float, float]]:
@@ -94,9 +94,9 @@ class StackRun:
         of itself (tip velocities before and after, penetration, contact duration): whether
         the rebound was weak or the arm came back down fast says where to look."""
         keys = ('t_contact', 'v_before', 'v_after', 'cor_kinematic', 'delta_m', 'duration')
-        by_contact = {r['t_contact']: r for r in self.impacts}
+        by_contact = {r.t_contact: r for r in self.impacts}
         return [
-            [{k: by_contact[t].get(k) for k in keys} for t in pair]
+            [{k: getattr(by_contact[t], k) for k in keys} for t in pair]
             for pair in self.second_strike_pairs
         ]
 
@@ -158,7 +158,7 @@ class StackRun:
             'second_strikes': self.second_strikes,
             'first_strike_s': self.contacts[0] if self.contacts else None,
             'last_cycle_s': self.last_cycle_s,
-            'delta_m_max_mm': 1e3 * max((r['delta_m'] for r in self.impacts), default=float('nan')),
+            'delta_m_max_mm': 1e3 * max((r.delta_m for r in self.impacts), default=float('nan')),
             'sim_time_s': self.sim_time_s,
             'wall_s': self.wall_s,
             'alive': self.alive,
@@ -319,7 +319,7 @@ def run_stack(
             cpu1 = {r: cpu_seconds(procs[r].pid) if alive[r] else cpu0[r] for r in cpu0}
             threads1 = {r: thread_cpu(procs[r].pid) if alive[r] else {} for r in threads0}
             wall = time.monotonic() - wall0
-            driven = [json.loads(m.data) for _, m in list(reports)]
+            driven = [impact_from_json(m.data) for _, m in list(reports)]
             latest = sim_status()  # (its latest report)
             sim_time = latest.sim_time if latest else float('nan')
             # one more report of each (1 Hz), for the counters: a lagging probe may hold

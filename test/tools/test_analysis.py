@@ -14,6 +14,7 @@ import pytest
 from impact_arm.tools.analysis import limit_cycle, poincare
 from impact_arm.tools.figures import FIGURE_SIZE
 from repo_paths import CONFIG
+from scenes import impact_at
 
 
 FIGURES = [
@@ -153,7 +154,7 @@ def test_poincare_crossings_of_a_known_signal():
 
 def test_limit_cycle_of_records():
     impacts = [
-        {'t_contact': 0.4 * i, 'q_contact_deg': [1.0, 2.0 + (i < 3)], 'v_before': [0.0, -1.0]}
+        impact_at([1.0, 2.0 + (i < 3)], index=i + 1, t_contact=0.4 * i, v_before=(0.0, -1.0))
         for i in range(8)
     ]
     lc = limit_cycle(impacts)
@@ -171,11 +172,12 @@ def test_a_limit_cycle_of_two_strikes_per_cycle_is_found_with_its_period():
         for first in (True, False):
             settling = 2.0 * 0.5**k  # the first cycles approach the limit cycle
             impacts.append(
-                {
-                    't_contact': 0.47 * k + (0.0 if first else 0.002),
-                    'q_contact_deg': [-49.0 + settling, -22.0 if first else -22.5],
-                    'v_before': [-3.3, -4.9] if first else [-1.2, -0.4],
-                }
+                impact_at(
+                    [-49.0 + settling, -22.0 if first else -22.5],
+                    index=len(impacts) + 1,
+                    t_contact=0.47 * k + (0.0 if first else 0.002),
+                    v_before=(-3.3, -4.9) if first else (-1.2, -0.4),
+                )
             )
     assert settle_index(impacts) is None  # not every impact repeats its predecessor
     cycle = find(impacts)
@@ -276,6 +278,33 @@ def without_trace(src, dst):
     return dst
 
 
+def test_an_impact_traced_but_not_reported_is_drawn_from_its_trace(article, tmp_path):
+    """An impact with its /impact_trace and no /impact_report: the record of Figures 8-11 is
+    read off the trace (its number, δm, δr and F_max, the time and state at its first
+    point), with no contact angles, so nothing integrates it again."""
+    import dataclasses
+
+    import matplotlib
+
+    matplotlib.use('Agg')
+    from impact_arm.tools import analysis, figures
+
+    d, _, _ = article
+    recorded = analysis.load(d / 'paper.mcap')
+    unreported = dataclasses.replace(recorded, impacts=[])
+    impact, constants = analysis.impact_points(unreported, 2)
+    assert impact is not None and constants is None  # no report: no contact posture
+    columns, rows, record, note = impact
+    reported = recorded.impacts[1]
+    assert record.index == 2 and note == '' and record.q_contact_deg == ()
+    assert record.delta_m == pytest.approx(reported.delta_m, rel=1e-12)
+    assert record.F_max == pytest.approx(reported.F_max, rel=1e-12)
+    assert record.t_contact == pytest.approx(reported.t_contact, abs=1e-5)
+    assert math.isnan(record.duration) and math.isnan(record.cor_kinematic)
+    assert analysis.elastic_curve(unreported.scene, record) is None
+    assert 'impact 2: δm = ' in figures.fig8_indentation(impact, tmp_path).axes[0].get_title()
+
+
 def test_a_live_recording_gets_figures_8_to_11_from_its_impact_reports(article, tmp_path):
     """No /impact_trace: impact 2 is integrated again from its reported contact state; its
     points are the offline trace's (the same impact, actuators off during contact)."""
@@ -308,16 +337,16 @@ def test_a_live_recording_gets_figures_8_to_11_from_its_impact_reports(article, 
     assert note and not trace_note
     assert rows.shape == trace_rows.shape
     delta, force = columns.index('delta'), columns.index('F_n')
-    assert np.max(rows[:, delta]) == pytest.approx(record['delta_m'], rel=1e-5)
+    assert np.max(rows[:, delta]) == pytest.approx(record.delta_m, rel=1e-5)
     assert rows[:, delta] == pytest.approx(trace_rows[:, delta], rel=1e-4, abs=1e-9)
     assert rows[:, force] == pytest.approx(trace_rows[:, force], rel=1e-4, abs=1e-3)
     # the points start at contact and every phase switch is among them
-    assert rows[0, delta] == 0 and rows[0, 0] == record['t_contact']
+    assert rows[0, delta] == 0 and rows[0, 0] == record.t_contact
     phase = rows[:, columns.index('phase')]
     assert list(np.unique(phase)) == [1, 2, 3]
-    t_us = (rows[:, 0] - record['t_contact']) * 1e6
+    t_us = (rows[:, 0] - record.t_contact) * 1e6
     switches = t_us[np.nonzero(np.diff(phase))[0]]
-    elastic, plastic, _ = np.array(record['phase_durations']) * 1e6
+    elastic, plastic, _ = np.array(record.phase_durations) * 1e6
     assert switches == pytest.approx([elastic, elastic + plastic], abs=1e-6)
     # maximum compression is a point: v_y = 0 there, no jump to the next phase's points
     v_y = rows[:, columns.index('v_y')]
@@ -428,11 +457,11 @@ def test_the_elastic_phase_is_drawn_from_a_fine_grid_of_the_integrators_output(a
     columns, rows = run.traces[0]
     phase = rows[:, columns.index('phase')]
     assert np.count_nonzero(phase == 1) <= 2  # what the trace alone would draw: a segment
-    assert curve.t[-1] - curve.t[0] == pytest.approx(record['phase_durations'][0], rel=1e-6)
+    assert curve.t[-1] - curve.t[0] == pytest.approx(record.phase_durations[0], rel=1e-6)
     c = ArmModel(run.scene).surfaces[0].constants
     assert curve.delta[-1] == pytest.approx(YIELD_ONSET_FACTOR * c.delta_c, rel=1e-6)
     rate = np.diff(curve.delta) / np.diff(curve.t)
-    assert rate[0] == pytest.approx(-record['v_before'][1], rel=1e-4)
+    assert rate[0] == pytest.approx(-record.v_before[1], rel=1e-4)
     # at a nearly constant rate δ ∝ t, so F ∝ t^1.5: half way in time the force is
     # 0.5^1.5 = 0.354 of the end's, where the straight segment between the two step ends
     # would give 0.5

@@ -53,7 +53,7 @@ def test_gif_has_one_frame_per_frame_time_showing_the_moving_arm(recording, tmp_
     expected = frame_times(
         run_.t[0],
         run_.t[-1],
-        [i['t_contact'] for i in run_.impacts],
+        [i.t_contact for i in run_.impacts],
         fps=40,
         contacts=contacts,
         contact_frames=DEFAULT_CONTACT_FRAMES,

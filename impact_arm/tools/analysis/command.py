@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 
 from ...contract import FEEDBACK_LAWS
@@ -12,7 +13,7 @@ from .report import no_impact_figures, no_impact_reason, write_outputs
 from .sections import limit_cycle_text, impact_table, limit_cycle
 
 
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('file', help='MCAP recording (live or simulate --mcap)')
     parser.add_argument(
         '--out', metavar='DIR', help='output directory (default: runs/<file name>_analysis)'
@@ -62,7 +63,7 @@ def add_arguments(parser):
     figure_options(parser)
 
 
-def figure_options(parser):
+def figure_options(parser: argparse.ArgumentParser) -> None:
     """--format and --dpi, shared with the commands that draw figures."""
     from ..figures import DPI, FORMATS
 
@@ -82,13 +83,13 @@ def figure_options(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     from .. import figures
     from ..progress import Progress
 
     line = Progress(prefix='analyze: ')
 
-    def say(text):
+    def say(text: str) -> None:
         line.show(text, log=True)
 
     out = args.out or os.path.join(
@@ -163,7 +164,7 @@ def cli(args) -> int:
         missing=missing,
         style=figures.Style(args.format, args.dpi),
         elastic=elastic_curve(
-            run.scene, impact[2], guess=rates_before(run, float(impact[2]['t_contact']))
+            run.scene, impact[2], guess=rates_before(run, float(impact[2].t_contact))
         )
         if impact is not None
         else None,

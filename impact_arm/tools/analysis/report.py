@@ -5,14 +5,22 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable, Sequence
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...contract import IMPACT_REPORT, IMPACT_TRACE
 from ..run_data import Run, _quiet
 from ..step_responses import step_metrics
-from .impacts import trace_missing_reason
+from .impacts import ImpactPoints, trace_missing_reason
 from .sections import limit_cycle_text, impact_table, limit_cycle, poincare, tip_velocity
+
+if TYPE_CHECKING:
+    from ...physics.contact import ContactConstants
+    from ...physics.replay import ElasticCurve
+    from ..figures import Style
 
 
 def no_impact_reason(run: Run) -> str:
@@ -23,7 +31,7 @@ def no_impact_reason(run: Run) -> str:
     return f'it has no {IMPACT_REPORT} topic'
 
 
-def no_impact_figures(run: Run, path) -> str:
+def no_impact_figures(run: Run, path: str) -> str:
     if not run.impacts and not run.traces and IMPACT_REPORT in run.topics:
         return f'Figures 8-11 not drawn: {path} has no impact to show (the arm struck no surface)'
     return (
@@ -42,21 +50,24 @@ def _write(path, text):
 
 def write_outputs(
     run: Run,
-    steps,
-    out,
-    impact,
-    figures,
-    progress=_quiet,
-    recordings=(),
-    constants=None,
-    missing=(),
-    style=None,
-    elastic=None,
+    steps: Sequence[Run],
+    out: str,
+    impact: ImpactPoints | None,
+    figures: ModuleType,
+    progress: Callable[[str], Any] = _quiet,
+    recordings: Sequence[Run] = (),
+    constants: ContactConstants | None = None,
+    missing: Sequence[str] = (),
+    style: Style | None = None,
+    elastic: ElasticCurve | None = None,
 ) -> dict:
     """Tables, CSVs, figures and report.md in ``out``; returns what was written."""
     table = impact_table(run.impacts)
     lc = limit_cycle(run.impacts)
-    _write(os.path.join(out, 'impacts.json'), json.dumps({'impacts': run.impacts}, indent=1))
+    _write(
+        os.path.join(out, 'impacts.json'),
+        json.dumps({'impacts': [i.to_dict() for i in run.impacts]}, indent=1),
+    )
     _write(os.path.join(out, 'impact_table.txt'), table + '\n')
     sections = {}
     links = range(run.q.shape[1])
@@ -102,7 +113,16 @@ def _figure_named(made, stem) -> str:
     return next((name for name, _ in made if name.startswith(stem + '.')), stem + '.png')
 
 
-def report(run: Run, others, table, lc, sections, made, steps=(), missing=()) -> str:
+def report(
+    run: Run,
+    others: Sequence[Run],
+    table: str,
+    lc: dict,
+    sections: dict[int, np.ndarray],
+    made: Sequence[tuple[str, str]],
+    steps: Sequence[Run] = (),
+    missing: Sequence[str] = (),
+) -> str:
     info = run.metadata.get('impact_arm', {})
     nonfinite = int(np.count_nonzero(~np.isfinite(run.q)) + np.count_nonzero(~np.isfinite(run.qd)))
     lines = [

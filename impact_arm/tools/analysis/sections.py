@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from ...physics.impact import Impact
 from ...physics.metrics import LimitCycle
 from ...physics.metrics import limit_cycle as find_limit_cycle
 from ..run_data import Run
 
 
-def poincare(t, q, qd, k: int) -> np.ndarray:
+def poincare(t: np.ndarray, q: np.ndarray, qd: np.ndarray, k: int) -> np.ndarray:
     """Rows (t, q1, ..., qn, direction) where q̇_k crosses zero (linear interpolation
     between samples; direction +1 rising, -1 falling): every link's angle, the article's
     (t, q1, q2, direction) for two links. Samples with a non-finite rate are skipped."""
@@ -30,11 +33,11 @@ def poincare(t, q, qd, k: int) -> np.ndarray:
     return np.array(rows).reshape(-1, q.shape[1] + 2)
 
 
-def limit_cycle(impacts) -> dict:
+def limit_cycle(impacts: Sequence[Impact]) -> dict:
     """Impacts until the motion repeats itself (``metrics.limit_cycle``: every impact, or
     every second one for an arm that strikes twice per cycle, ...) and the period: one
     repetition's duration."""
-    times = [i['t_contact'] for i in impacts]
+    times = [i.t_contact for i in impacts]
     periods = np.diff(times)
     cycle = find_limit_cycle(impacts)
     if cycle is not None:
@@ -51,7 +54,7 @@ def limit_cycle(impacts) -> dict:
     }
 
 
-def impact_table(impacts) -> str:
+def impact_table(impacts: Sequence[Impact]) -> str:
     """The impact rows exactly as ``impact-arm simulate`` prints them."""
     from ...physics.simulate import impact_rows
 
@@ -77,7 +80,7 @@ def tip_velocity(run: Run) -> np.ndarray | None:
     return np.stack([vx, vy], axis=1)
 
 
-def limit_cycle_text(lc) -> str:
+def limit_cycle_text(lc: dict) -> str:
     if not lc['impacts']:
         return 'no impacts recorded'
     per = lc.get('impacts_per_cycle') or 1

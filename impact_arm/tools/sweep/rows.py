@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
-import json
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+import dataclasses
+import json
+
 from ...calibration.study import Study
+from ...physics.impact import Impact
+
+# an impact row's record columns, in the order of the JSON's keys (``Impact.to_dict``)
+IMPACT_FIELDS = tuple(f.name for f in dataclasses.fields(Impact))
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -18,37 +25,41 @@ def column_value(value: object) -> float | str:
     return value if isinstance(value, str) else json.dumps(value)
 
 
-def _layout(fixed: dict, record: dict) -> tuple:
-    """What decides an impact row's columns: the override keys and the record's list
+def _layout(fixed: dict, record: Impact) -> tuple:
+    """What decides an impact row's columns: the override keys and the record's sequence
     lengths (the number of links, which an override may change)."""
-    return tuple(fixed), tuple(len(v) if isinstance(v, list) else -1 for v in record.values())
+    return tuple(fixed), tuple(
+        len(v) if isinstance(v, tuple) else -1 for v in (getattr(record, k) for k in IMPACT_FIELDS)
+    )
 
 
-def _add_impacts(tables: dict, fixed: dict, records: list[dict]) -> None:
+def _add_impacts(tables: dict, fixed: dict, records: Sequence[Impact]) -> None:
     """Append one run's impact records to ``tables`` (layout -> {column: values}): ``fixed``
-    (run index, overrides) repeated per impact, the records' lists spread over columns
-    named by key path (v_before[1]). Filled a column at a time while the records are
-    fresh: per-value appends, or columns gathered from the whole chunk's records at the
-    end, cost a sweep worker several % of a run."""
+    (run index, overrides) repeated per impact, the records' fields (the keys of their
+    ``to_dict``) in columns, their sequences spread over columns named by key path
+    (v_before[1]). Filled a column at a time from the records' attributes while the
+    records are fresh: per-value appends, columns gathered from the whole chunk's records
+    at the end, or a dict per record (``to_dict``, ~5 us an impact) cost a sweep worker
+    several % of a run."""
     if not records:
         return
     first = records[0]
     layout = _layout(fixed, first)
     if layout not in tables:
         names = list(fixed)
-        for key, length in zip(first, layout[1]):
+        for key, length in zip(IMPACT_FIELDS, layout[1]):
             names += [key] if length < 0 else [f'{key}[{i}]' for i in range(length)]
         tables[layout] = {name: [] for name in names}
     columns = iter(tables[layout].values())
     for value in fixed.values():
         next(columns).extend([value] * len(records))
-    for key, length in zip(first, layout[1]):
+    for key, length in zip(IMPACT_FIELDS, layout[1]):
         if length < 0:
-            next(columns).extend([r[key] for r in records])
+            next(columns).extend([getattr(r, key) for r in records])
             continue
-        # the records' lists, transposed: one column per entry (every record of a run has
-        # the first's lengths)
-        for column in zip(*[r[key] for r in records]):
+        # the records' sequences, transposed: one column per entry (every record of a run
+        # has the first's lengths)
+        for column in zip(*[getattr(r, key) for r in records]):
             next(columns).extend(column)
 
 

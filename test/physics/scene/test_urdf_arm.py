@@ -4,7 +4,6 @@ and refused, naming the joint and why, when it is not a planar chain the model c
 
 import copy
 import xml.etree.ElementTree as ET
-import json
 import math
 import os
 import re
@@ -674,6 +673,8 @@ def test_impact_arm_run_of_a_urdf_arm_completes_and_puts_its_tip_on_the_surface(
     from cli_runs import impact_arm_run, read_back
     from tf_frames import compose, stamp_ns
 
+    from impact_arm.physics.impact import impact_from_json
+
     urdf = open(os.path.join(os.path.dirname(EXAMPLE), 'three_link.urdf')).read()
     urdf = urdf.replace('xyz="0.6 0 0"', 'xyz="0.6 0 0.02"')
     (tmp_path / 'three_link.urdf').write_text(urdf)
@@ -685,7 +686,7 @@ def test_impact_arm_run_of_a_urdf_arm_completes_and_puts_its_tip_on_the_surface(
     )
     assert code == 0 and ': complete' in out, out
     by_topic = read_back(tmp_path / 'runs' / 'arm.mcap')
-    reports = [json.loads(m.data) for m in by_topic['/impact_report']]
+    reports = [impact_from_json(m.data) for m in by_topic['/impact_report']]
     assert len(reports) >= 2
     (static,) = by_topic['/tf_static']
 
@@ -701,11 +702,11 @@ def test_impact_arm_run_of_a_urdf_arm_completes_and_puts_its_tip_on_the_surface(
     model = pin.buildModelFromXML(urdf)
     data = model.createData()
     for report in reports:
-        t0 = round(report['t_contact'] * 1e9)
+        t0 = round(report.t_contact * 1e9)
         first = next(m for m in by_topic['/tf'] if stamp_ns(m.transforms[0].header) >= t0 - 1)
         at_contact = tip_in_world(first)
         assert at_contact[2] == pytest.approx(-1.2, abs=1e-6)  # the surface's height
-        q = np.radians(report['q_contact_deg'])
+        q = np.radians(report.q_contact_deg)
         theta = np.concatenate([[q[0]], np.diff(q)])  # joint values: relative angles
         config = np.array([math.cos(theta[0]), math.sin(theta[0]), theta[1], theta[2]])
         pin.framesForwardKinematics(model, data, config)
