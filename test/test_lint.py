@@ -1,10 +1,10 @@
 """The habits the repository keeps, as tests: lint clean (ruff), the typed modules type-check
 (mypy, over every package's modules), every public function of physics/, driver/,
-calibration/, export/, io/ and api/ annotated, and imports point down the layers physics ->
-driver, calibration, export (side by side) -> io -> nodes, api (side by side) -> tools, with
-contract.py at the bottom importing nothing of the package. The top-level package is the API's
-face (``import impact_arm as ia``): it sits in the api layer, so the core never imports its
-names, and it may import nothing but the api package."""
+calibration/, export/, io/, nodes/ and api/ annotated, and imports point down the layers
+physics -> driver, calibration, export (side by side) -> io -> nodes, api (side by side) ->
+tools, with contract.py at the bottom importing nothing of the package. The top-level package
+is the API's face (``import impact_arm as ia``): it sits in the api layer, so the core never
+imports its names, and it may import nothing but the api package."""
 
 import ast
 import os
@@ -26,10 +26,10 @@ LAYERS = {
     'api': 4,
     'tools': 5,
 }
-TYPED = ('physics', 'driver', 'calibration', 'export', 'io', 'api')
-# the packages mypy checks every module of: the typed ones, and the nodes and the command line,
-# whose bodies are checked though not every function states its types
-TYPE_CHECKED = TYPED + ('nodes', 'tools')
+TYPED = ('physics', 'driver', 'calibration', 'export', 'io', 'nodes', 'api')
+# the packages mypy checks every module of: the typed ones, and the command line, whose bodies
+# are checked though not every function states its types
+TYPE_CHECKED = TYPED + ('tools',)
 
 
 def _tool(module, *args):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import collections
 import json
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from geometry_msgs.msg import WrenchStamped
@@ -20,17 +21,28 @@ from ..io.wire import PatchedMessage
 from ._visuals import VisualsPublisher
 
 if TYPE_CHECKING:
+    from rclpy.node import Node
     from rclpy.publisher import Publisher
+    from rclpy.qos import QoSProfile
 
     from ..driver.arm import Tick
+    from ..physics.scene import Scene
+    from .param_types import SimulatorParameters
 
 
 class PeriodPublishers:
     """``publish(tick)`` a period's sensor messages, ``report(tick)`` its impacts.
     ``failures`` counts the samples the middleware refused."""
 
-    def __init__(self, node, scene, joint_names, p, lockstep):
-        def qos(topic: str, depth: int = 1) -> Any:
+    def __init__(
+        self,
+        node: Node,
+        scene: Scene,
+        joint_names: Sequence[str],
+        p: SimulatorParameters,
+        lockstep: bool,
+    ) -> None:
+        def qos(topic: str, depth: int = 1) -> QoSProfile:
             return contract.qos(topic).to_rclpy(depth)
 
         self.log = node.get_logger()
@@ -131,7 +143,7 @@ class PeriodPublishers:
             self._send(self.impact, String(data=json.dumps(record.to_dict())))
         self.visuals.add_impacts(tick)
 
-    def _send(self, publisher, data):
+    def _send(self, publisher: Publisher[Any], data: Any) -> None:
         """A sample the middleware refuses (Fast DDS, when its readers lag too far for too
         long; seen at 5 kHz on two cores) is lost like a dropped packet: counted, logged,
         and the periods go on (it used to end the stepping thread)."""
@@ -151,7 +163,7 @@ class PeriodPublishers:
         counts = sorted((p.topic_name, n) for p, n in self.sent.items())
         return 'samples sent: ' + ', '.join(f'{t} {n}' for t, n in counts)
 
-    def _check_hw_listeners(self):
+    def _check_hw_listeners(self) -> None:
         # asking DDS for the subscription count costs ~3 us: with the 3D view's timer, not
         # each period
         self.hw_states_wanted = self.hw_states.get_subscription_count() > 0

@@ -6,14 +6,25 @@ ask other nodes anything. Here SIGINT/SIGTERM only set a flag: the spin loop end
 process exits with the node's exit code and no traceback.
 """
 
+from __future__ import annotations
+
 import gc
 import os
 import signal
 import sys
 import threading
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.executors import Executor
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+    from rclpy.subscription import MessageInfo, Subscription
 
 
-def realtime_priority(priority, thread=0):
+def realtime_priority(priority: int, thread: int = 0) -> str:
     """Run the calling thread (or the thread with task id ``thread``) under SCHED_FIFO at
     ``priority`` (1-99), as ros2_control's loop does when the system allows it; 0 leaves the
     normal scheduler. Returns what was obtained, for /diagnostics."""
@@ -26,7 +37,7 @@ def realtime_priority(priority, thread=0):
         return f'normal (SCHED_FIFO refused: {exc.strerror or exc})'
 
 
-def name_thread(name):
+def name_thread(name: str) -> None:
     """Give the calling thread an OS name (``ps -T``, ``top -H``, /proc/PID/task/*/comm):
     Python names its threads for itself only."""
     try:
@@ -37,7 +48,9 @@ def name_thread(name):
         pass
 
 
-def take_raw(subscription, msg_type=None):
+def take_raw(
+    subscription: Subscription[Any], msg_type: type | None = None
+) -> tuple[bytes, MessageInfo] | None:
     """The oldest queued message of a ``raw=True`` subscription as (serialized bytes,
     message info), or None when its queue is empty. A node polls its readers with this
     instead of an executor callback: in the realtime loop thread (no second Python thread
@@ -58,16 +71,21 @@ class SampleWait:
     sees it either. rclpy's executors and ``wait_for_message`` wait on the same wait set; it
     has no public wrapper."""
 
-    def __init__(self, owner, subscriptions):
+    def __init__(self, owner: Node, subscriptions: Iterable[Subscription[Any]]) -> None:
         from rclpy.impl.implementation_singleton import rclpy_implementation
 
+        context = owner.context.handle
+        if context is None:  # (never: a node's context is initialised while it exists)
+            raise RuntimeError(f'{owner.get_name()}: its context is not initialised')
         self.subscriptions = tuple(subscriptions)
         self.guard = owner.create_guard_condition(lambda: None)
         self._wait_set = rclpy_implementation.WaitSet(
-            len(self.subscriptions), 1, 0, 0, 0, 0, owner.context.handle
+            len(self.subscriptions), 1, 0, 0, 0, 0, context
         )
 
-    def wait(self, timeout: float, subscriptions=None) -> None:
+    def wait(
+        self, timeout: float, subscriptions: Iterable[Subscription[Any]] | None = None
+    ) -> None:
         """Until a sample is queued on any of ``subscriptions`` (a subset of the ones given
         at construction; default all), ``wake()`` or ``timeout`` s (the GIL is released
         meanwhile)."""
@@ -83,7 +101,7 @@ class SampleWait:
         self.guard.trigger()
 
 
-def reader_node(owner, suffix):
+def reader_node(owner: Node, suffix: str) -> Node:
     """A helper node for ``owner``'s polled readers (no executor spins it), named
     ``_<owner>_<suffix>`` in the owner's namespace. It ignores the process's global ROS
     arguments: launch's ``__node`` remap names the owner, and would give this one the same
@@ -101,10 +119,11 @@ def reader_node(owner, suffix):
     )
 
 
-def topic_remaps(argv) -> list:
+def topic_remaps(argv: Sequence[str]) -> list[str]:
     """The remap rules of ``argv``'s ROS arguments, except those naming the node
     (``__node``, ``__name``, ``__ns``), as ROS arguments for another node."""
-    rules, inside, args = [], False, iter(argv)
+    rules: list[str] = []
+    inside, args = False, iter(argv)
     for arg in args:
         if arg in ('--ros-args', '--'):
             inside = arg == '--ros-args'
@@ -115,7 +134,7 @@ def topic_remaps(argv) -> list:
     return ['--ros-args', *rules] if rules else []
 
 
-def await_acknowledgements(node, publishers, wait):
+def await_acknowledgements(node: Node, publishers: Iterable[Publisher[Any]], wait: float) -> None:
     """Samples a reader has not acknowledged die with the process (a lagging recorder lost
     the last impact reports of a run): give the readers of ``publishers`` up to ``wait`` s
     in all. A reader that missed samples asks for them again only when the writer's periodic
@@ -136,14 +155,14 @@ def await_acknowledgements(node, publishers, wait):
             return
 
 
-def _threads():
+def _threads() -> set[int]:
     try:
         return {int(t) for t in os.listdir('/proc/self/task')}
     except OSError:  # not Linux: nothing to raise
         return set()
 
 
-def raise_middleware_threads(threads, priority):
+def raise_middleware_threads(threads: Iterable[int], priority: int) -> None:
     """The middleware's own threads (created with the node's participant: socket receivers,
     timed events) deliver every sample the loop waits for. Traced under load, a loop at
     realtime priority still waited 100-450 ms for samples those threads, at normal priority,
@@ -153,15 +172,15 @@ def raise_middleware_threads(threads, priority):
         realtime_priority(priority, thread)
 
 
-def guard_parameter_services(node):
+def guard_parameter_services(node: Node) -> None:
     """Answer a malformed request to the node's parameter services with a refusal instead of
     letting it end the node. rclpy converts each requested ``ParameterValue`` inside its
     service callback, and an invalid ``type`` (e.g. 200) raises ValueError there, which the
     executor re-raises from spin: one bad request from any peer would stop the node."""
     from rcl_interfaces.msg import SetParametersResult
 
-    def guarded(callback):
-        def call(request, response):
+    def guarded(callback: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+        def call(request: Any, response: Any) -> Any:
             try:
                 return callback(request, response)
             except (ValueError, TypeError) as exc:
@@ -183,7 +202,7 @@ def guard_parameter_services(node):
             service.callback = guarded(service.callback)
 
 
-def make_executor(context=None, prefer=None):
+def make_executor(context: Context | None = None, prefer: str | None = None) -> Executor:
     """A single-threaded executor. ``IMPACT_ARM_EXECUTOR=events`` picks rclpy's C++ events
     executor instead; it is not the default because in rclpy 9 (Kilted) it cannot call
     subscription callbacks that take a ``MessageInfo`` (spin fails with "SystemError: null
@@ -205,7 +224,7 @@ def make_executor(context=None, prefer=None):
     return SingleThreadedExecutor(context=context)
 
 
-def run(node_factory, args=None) -> int:
+def run(node_factory: Callable[[], Any], args: list[str] | None = None) -> int:
     """Create the node, spin until it is done or a signal arrives, let it finish. The node
     provides ``done`` (bool) and ``finish(executor) -> int`` (the exit code)."""
     import rclpy

@@ -8,6 +8,8 @@ slower one looks for listeners (``LISTENER_CHECK``)."""
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from std_msgs.msg import String
 
@@ -15,22 +17,38 @@ from ..contract import IMPACT_MARKERS, IMPACT_TABLE, ROBOT_DESCRIPTION, TF, TF_S
 from ..io.msgdefs import has_type_support
 from ..io.scene_visuals import SceneVisuals
 
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+    from rclpy.qos import QoSProfile
+
+    from ..driver.arm import Tick
+    from ..physics.scene import Scene
+
 # s between two looks for a listener while nobody listens to /tf or /impact_markers: woken at
 # tf_rate only to find no listener, the executor thread took ~1.5 % of a core at 100 Hz
 LISTENER_CHECK = 0.2
 
 
 class VisualsPublisher:
-    def __init__(self, node, scene, tf_rate, publish_tf, on_timer=lambda: None, rod_radius=0.0):
+    def __init__(
+        self,
+        node: Node,
+        scene: Scene,
+        tf_rate: float,
+        publish_tf: bool,
+        on_timer: Callable[[], None] = lambda: None,
+        rod_radius: float = 0.0,
+    ) -> None:
         from visualization_msgs.msg import MarkerArray
 
-        def qos(topic):
+        def qos(topic: str) -> QoSProfile:
             return VISUAL_TOPICS[topic][1].to_rclpy()
 
         self.visuals = SceneVisuals(scene, tf_rate, rod_radius)
         self.lock = threading.Lock()
-        self.latest = None  # the latest published period (a Tick)
-        self._stamp = None
+        self.latest: Tick | None = None  # the latest published period
+        self._stamp: float | None = None
         self._on_timer = on_timer
         node.create_publisher(String, ROBOT_DESCRIPTION, qos(ROBOT_DESCRIPTION)).publish(
             self.visuals.description()
@@ -56,12 +74,12 @@ class VisualsPublisher:
         self.timer = node.create_timer(1.0 / tf_rate, self._publish)
         node.create_timer(LISTENER_CHECK, self._look_for_listeners)
 
-    def observe(self, tick):
+    def observe(self, tick: Tick) -> None:
         """A published period (any thread). Its period-averaged force draws no arrow: it
         belongs to no single pose (the arrows come from the impact reports' events)."""
         self.latest = tick
 
-    def add_impacts(self, tick):
+    def add_impacts(self, tick: Tick) -> None:
         with self.lock:
             for record, _rows in tick.impacts:
                 self.visuals.add_impact(record)
@@ -72,7 +90,7 @@ class VisualsPublisher:
             except RuntimeError:  # refused by the middleware: lost like a dropped packet,
                 pass  # the next impact's table holds this row again
 
-    def _listeners(self):
+    def _listeners(self) -> tuple[Publisher[Any] | None, Publisher[Any] | None]:
         """The publishers of /tf and /impact_markers that have a subscriber (None for the
         others): built and sent only while someone subscribes, since at 100 Hz the markers
         alone took ~5 % of a core of the simulator's executor thread (asking costs ~3 us)."""
@@ -80,7 +98,7 @@ class VisualsPublisher:
         markers = self.pub_markers if self.pub_markers.get_subscription_count() else None
         return tf, markers
 
-    def _look_for_listeners(self):
+    def _look_for_listeners(self) -> None:
         """While the tf_rate timer is stopped: restart it once someone listens; until then
         drop the impacts' events (nobody is there to be shown them, as at tf_rate)."""
         if not self.timer.is_canceled():
@@ -92,7 +110,7 @@ class VisualsPublisher:
         else:
             self.timer.reset()
 
-    def _publish(self):
+    def _publish(self) -> None:
         self._on_timer()
         tf, markers = self._listeners()
         if tf is None and markers is None:

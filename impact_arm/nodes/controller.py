@@ -26,6 +26,8 @@ from __future__ import annotations
 import sys
 import threading
 import traceback
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
@@ -65,6 +67,11 @@ from .params import (
     validator,
 )
 
+if TYPE_CHECKING:
+    from rclpy.executors import Executor
+
+    from ..physics.scene import Scene
+
 # s: the control thread's longest wait for a sample before it looks at its stop flag again
 WAIT_TIMEOUT = 0.1
 # s: how long ``finish`` waits for the control thread to end before sending the zero command
@@ -87,22 +94,55 @@ INTEGRAL_SETTINGS = (
 class Controller(Node):
     executor_kind = 'events'  # see _runner.make_executor
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__('controller', **NODE_OPTIONS)
+        self._declare()
+        self._configure()
+        self._activate()
+
+    # ------------------------------------------------------------------------ start-up
+    def _declare(self) -> None:
+        """The parameters of the start-up scene's table as ``self.p``; ParameterError for a
+        bad value, an unknown name or a joint order that is not the scene's."""
         # the scene (given at start-up, hence already declared) sets the table's defaults
-        _, scene = startup_scene(self)
-        self.table = parameter_table(scene)
+        _, self.scene = startup_scene(self)
+        self.table = parameter_table(self.scene)
         self.p: ControllerParameters = declare(self, self.table, ControllerParameters)
-        p = self.p
+        self.joint_names = scene_joint_names(self.scene)
+        self.command_order = check(self.p, self.joint_names)
+        refuse_unknown(self, self.table)
+
+    def _configure(self) -> None:
+        """The arm model, the cycle's control law and the input handling (ROS-free), warmed
+        up; the counts /diagnostics reports and what the control thread shares."""
+        scene = self.scene
         self.n = scene.n_links
         self.model = ArmModel(scene)
         # targets and joint states in the robot's joint coordinates; the law in the model's
         self.coordinates = scene.joint_coordinates
-        names = self.joint_names = scene_joint_names(scene)
-        command_order = check(p, names)
-        refuse_unknown(self, self.table)
         self._check_stability(scene)
-        self.ctrl = CycleController(
+        self.ctrl = self._cycle_controller()
+        self._warm_up(scene)
+        self._init_counts()
+        # the inputs and the control law are shared by the control thread and the executor
+        # (parameters, diagnostics, the timer trigger): one at a time. Reentrant: a strike's
+        # command publishes the diagnostics at once, from inside the control thread's turn.
+        self.lock = threading.RLock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.failure: str | None = None
+        self.inputs = self._control_inputs()
+        self.inputs.warm_up(scene.q0, scene.qd0)
+        # its own commands, in the order sent: chatter is reported on /diagnostics
+        self.chatter = ChatterWatch([self.joint_names[j] for j in self.inputs.order])
+        self.wire_command = PatchedMessage(
+            Float64MultiArray(data=[0.0] * self.n), ('data',), stamp=None
+        )
+        self.middleware_priority = self.p.thread_priority  # for the runner (_runner.run)
+
+    def _cycle_controller(self) -> CycleController:
+        p = self.p
+        return CycleController(
             self.model,
             p.law,
             p.p,
@@ -117,8 +157,9 @@ class Controller(Node):
             reversal_band=p.reversal_band,
             integrator=self._integrator(p),
         )
-        self._warm_up(scene)
-        self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
+
+    def _init_counts(self) -> None:
+        """The counts /diagnostics reports, all zero, and the half the cycle begins in."""
         self.sent = 0
         # down halves ended by a detected impact (the cycles struck) and the stamp at which
         # the latest down half began: `impact-arm run` ends a run on them (an arm that
@@ -132,16 +173,63 @@ class Controller(Node):
         self.finished = False
         self._mode = self.ctrl.mode
         self._switches = self.ctrl.switches  # a re-arm sets the down half without a switch
+
+    def _control_inputs(self) -> ControlInputs:
+        p = self.p
+        return ControlInputs(
+            self.ctrl,
+            self.joint_names,
+            self.command_order,
+            p.rate,
+            p.trigger,
+            self._send,
+            log=lambda text: self.get_logger().warning(text, throttle_duration_sec=2.0),
+            ready=self._readers_matched,
+            startup_hold=p.startup_hold,
+            start_after=p.start_after,
+            wrench_publishers=self._wrench_published,
+            latency_periods=p.latency_periods,
+            wrench_tolerance=p.wrench_tolerance,
+            implicit_periods=p.implicit_periods,
+            anticipate_impacts=p.anticipate_impacts,
+            coordinates=self.coordinates,
+            effort_limits=self.scene.effort_limits,
+        )
+
+    def _activate(self) -> None:
+        """Parameter changes, the command publisher, the sample readers, the timers and
+        /diagnostics (the control thread begins in ``start``)."""
+        p = self.p
+        self.add_on_set_parameters_callback(validator(self.table, self._set_parameters))
         self.pub = self.create_publisher(
             Float64MultiArray, COMMANDS, contract.qos(COMMANDS).to_rclpy(p.command_history)
         )
+        self._create_readers()
+        if p.startup_hold > 0:
+            self.get_logger().info(
+                f'first command held {p.startup_hold:g} s after the first '
+                f'{p.start_after.replace("_", " ")} '
+                f'while DDS discovery settles (startup_hold)'
+            )
+        if p.trigger is ControlTrigger.TIMER:
+            self._create_tick_timer()
+        self.pub_diag = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS, contract.qos(DIAGNOSTICS).to_rclpy()
+        )
+        self.create_timer(1.0, self._publish_diagnostics)
+        self.get_logger().info(
+            f'law {p.law} at {p.rate:g} Hz ({p.trigger}), scene {self.scene.name!r}'
+        )
+
+    def _create_readers(self) -> None:
+        """The subscriptions to the wrenches and the joint states, taken by the control
+        thread (_control_loop) from a helper node no executor spins: handled in the
+        executor's callbacks, a period's two samples cost the callback thread ~10x the
+        control law itself. Raw: the few fields needed are read from the bytes, a fraction
+        of rclpy's conversion to message objects."""
         # keep only the newest sample: a controller that fell behind acts on the present
         latest_only = contract.qos(JOINT_STATES).to_rclpy()
         latest_only.depth = 1
-        # Taken by the control thread (_control_loop) from a helper node no executor spins:
-        # handled in the executor's callbacks, a period's two samples cost the callback
-        # thread ~10x the control law itself. Raw: the few fields needed are read from the
-        # bytes, a fraction of rclpy's conversion to message objects.
         self.reader_node = reader = reader_node(self, 'state_reader')
         # the wrenches since the last state, all of them (the largest force is latched): the
         # thread wakes on states only, unless a state waits for its wrench (_control_loop)
@@ -154,57 +242,15 @@ class Controller(Node):
             JointState, JOINT_STATES, _unused, latest_only, raw=True
         )
         self.samples = SampleWait(reader, (self.sub_wrench, self.sub_state))
-        # the inputs and the control law are shared by the control thread and the executor
-        # (parameters, diagnostics, the timer trigger): one at a time. Reentrant: a strike's
-        # command publishes the diagnostics at once, from inside the control thread's turn.
-        self.lock = threading.RLock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.failure: str | None = None
-        self.inputs = ControlInputs(
-            self.ctrl,
-            names,
-            command_order,
-            p.rate,
-            p.trigger,
-            self._send,
-            log=lambda text: self.get_logger().warning(text, throttle_duration_sec=2.0),
-            ready=self._readers_matched,
-            startup_hold=p.startup_hold,
-            start_after=p.start_after,
-            wrench_publishers=lambda: self.sub_wrench.get_publisher_count() > 0,
-            latency_periods=p.latency_periods,
-            wrench_tolerance=p.wrench_tolerance,
-            implicit_periods=p.implicit_periods,
-            anticipate_impacts=p.anticipate_impacts,
-            coordinates=self.coordinates,
-            effort_limits=scene.effort_limits,
-        )
-        self.inputs.warm_up(scene.q0, scene.qd0)
-        # its own commands, in the order sent: chatter is reported on /diagnostics
-        self.chatter = ChatterWatch([names[j] for j in self.inputs.order])
-        if p.startup_hold > 0:
-            self.get_logger().info(
-                f'first command held {p.startup_hold:g} s after the first '
-                f'{p.start_after.replace("_", " ")} '
-                f'while DDS discovery settles (startup_hold)'
-            )
-        if p.trigger is ControlTrigger.TIMER:
-            self.create_timer(1.0 / p.rate, self._on_timer)
-            # the ticks come from the executor thread (this one): at the control thread's
-            # priority, as all of the controller's work was before it had a thread of its own
-            realtime_priority(p.thread_priority)
-        self.pub_diag = self.create_publisher(
-            DiagnosticArray, DIAGNOSTICS, contract.qos(DIAGNOSTICS).to_rclpy()
-        )
-        self.create_timer(1.0, self._publish_diagnostics)
-        self.wire_command = PatchedMessage(
-            Float64MultiArray(data=[0.0] * self.n), ('data',), stamp=None
-        )
-        self.middleware_priority = p.thread_priority  # for the runner (_runner.run)
-        self.get_logger().info(f'law {p.law} at {p.rate:g} Hz ({p.trigger}), scene {scene.name!r}')
 
-    def _warm_up(self, scene):
+    def _create_tick_timer(self) -> None:
+        """trigger timer: the ticks at ``rate`` on the node's clock."""
+        self.create_timer(1.0 / self.p.rate, self._on_timer)
+        # the ticks come from the executor thread (this one): at the control thread's
+        # priority, as all of the controller's work was before it had a thread of its own
+        realtime_priority(self.p.thread_priority)
+
+    def _warm_up(self, scene: Scene) -> None:
         """Load the compiled laws and kinematics now: their first call reads numba's cache
         (~0.5 s), which must not happen on the first tick, with the arm already moving."""
         c, law = self.ctrl, self.ctrl.law
@@ -214,7 +260,7 @@ class Controller(Node):
         self.model.tip(scene.q0, scene.qd0)
 
     @staticmethod
-    def _integrator(p):
+    def _integrator(p: ControllerParameters) -> PidIntegrator:
         return PidIntegrator(
             len(p.p),
             p.i_clamp_max,
@@ -224,11 +270,11 @@ class Controller(Node):
             p.u_clamp_min,
         )
 
-    def _set_parameters(self, values):
+    def _set_parameters(self, values: dict[str, Any]) -> None:
         with self.lock:  # never half-applied to a tick
             self._apply_parameters(values)
 
-    def _apply_parameters(self, values):
+    def _apply_parameters(self, values: dict[str, Any]) -> None:
         p = self.p.replace(**values)
         check(p, self.joint_names)
         c = self.ctrl
@@ -247,15 +293,15 @@ class Controller(Node):
 
     # ------------------------------------------------------------------------- inputs
     @property
-    def done(self):
+    def done(self) -> bool:
         return self.failure is not None
 
-    def start(self):
+    def start(self) -> None:
         """Start the control thread once the process has settled (_runner.run)."""
         self._thread = threading.Thread(target=self._control_loop, name='control', daemon=True)
         self._thread.start()
 
-    def _control_loop(self):
+    def _control_loop(self) -> None:
         try:
             # the executor thread (parameters, diagnostics) shares the GIL with this one; a
             # thread woken by a sample would otherwise wait up to the 5 ms switch interval
@@ -275,7 +321,7 @@ class Controller(Node):
             self.get_logger().error(traceback.format_exc())
             self.failure = f'the control thread failed: {type(exc).__name__}: {exc}'
 
-    def _take_samples(self):
+    def _take_samples(self) -> None:
         """The queued samples: the wrenches, oldest first, then the state (its reader keeps
         only the newest), as the driver publishes a period's wrench before its joint state
         (ControlInputs takes either order). One that arrives meanwhile ends the next wait at
@@ -290,11 +336,11 @@ class Controller(Node):
             if taken is not None:
                 self._on_joint_state(taken[0])
 
-    def _on_timer(self):
+    def _on_timer(self) -> None:
         with self.lock:
             self.inputs.timer()
 
-    def _on_wrench(self, raw):
+    def _on_wrench(self, raw: bytes) -> None:
         try:
             fields = wrench_stamped_fields(raw)
         except MalformedMessage as exc:
@@ -302,7 +348,7 @@ class Controller(Node):
             return
         self.inputs.wrench(*fields)
 
-    def _on_joint_state(self, raw):
+    def _on_joint_state(self, raw: bytes) -> None:
         try:
             fields = joint_state_fields(raw)
             # the acting torques, only to measure the latency from them
@@ -313,7 +359,7 @@ class Controller(Node):
         self.inputs.joint_state(*fields, effort)
 
     # ------------------------------------------------------------------------ output
-    def _check_stability(self, scene):
+    def _check_stability(self, scene: Scene) -> None:
         """Warn at start when the law, at this node's rate with its gains, is unstable on the
         scene's arm: its commands would chatter. A warning, not a refusal: the node may drive
         an arm that is not the scene's (a stand-in, hardware); ``impact-arm run`` and
@@ -339,7 +385,11 @@ class Controller(Node):
                 f'{report.refusal("the rate parameter")}'
             )
 
-    def _readers_matched(self):
+    def _wrench_published(self) -> bool:
+        """Whether anyone publishes the contact wrench."""
+        return self.sub_wrench.get_publisher_count() > 0
+
+    def _readers_matched(self) -> bool:
         """The arm is held until our first command: send it only once the readers we were
         told of (command_readers) and every one the graph already knows of are matched (our
         own view of the graph may not show a recorder yet)."""
@@ -347,7 +397,7 @@ class Controller(Node):
             self.p.command_readers, self.count_subscribers(COMMANDS)
         )
 
-    def _send(self, values):
+    def _send(self, values: Sequence[float]) -> None:
         if self.finished:
             return  # the cycles are done: the driver holds the last command
         mode, self._mode = self._mode, self.ctrl.mode
@@ -372,7 +422,7 @@ class Controller(Node):
             elif self.inputs.latest is not None:
                 self.down_half_start = self.inputs.latest[0]
 
-    def _publish(self, values):
+    def _publish(self, values: Sequence[float]) -> None:
         self.pub.publish(self.wire_command.fill([float(v) for v in values]))
         self.sent += 1
         if self.sent == 1 and self.inputs.first_command_after is not None:
@@ -382,7 +432,7 @@ class Controller(Node):
                 f'{self.p.start_after.replace("_", " ")})'
             )
 
-    def _stop_thread(self):
+    def _stop_thread(self) -> None:
         self._stop.set()
         self.samples.wake()
         if self._thread is not None:
@@ -392,11 +442,11 @@ class Controller(Node):
                     f'control thread still running {JOIN_TIMEOUT:g} s after the stop'
                 )
 
-    def destroy_node(self):
+    def destroy_node(self) -> None:
         self.reader_node.destroy_node()
         super().destroy_node()
 
-    def finish(self, executor) -> int:
+    def finish(self, executor: Executor | None) -> int:
         """Like a deactivated controller: leave the actuators with zero torque (after the
         control thread's last command)."""
         from rclpy.duration import Duration
@@ -416,7 +466,7 @@ class Controller(Node):
         )
         return 1 if self.failure is not None else 0
 
-    def _publish_diagnostics(self):
+    def _publish_diagnostics(self) -> None:
         with self.lock:  # one instant's counts
             msg = self._diagnostics()
         self.pub_diag.publish(msg)
@@ -440,7 +490,7 @@ class Controller(Node):
             dropped=tuple(inputs.dropped.items()),
         )
 
-    def _diagnostics(self):
+    def _diagnostics(self) -> DiagnosticArray:
         dropped = sum(self.inputs.dropped.values())
         message = 'cycles completed' if self.finished else 'running'
         chatter = self.chatter.summary()
@@ -460,11 +510,11 @@ class Controller(Node):
         return msg
 
 
-def _unused(raw):
+def _unused(raw: bytes) -> None:
     """The callback of a subscription only taken from (``take_raw``): never called."""
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> NoReturn:
     raise SystemExit(run(Controller, args))
 
 

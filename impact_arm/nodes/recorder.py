@@ -34,7 +34,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -71,6 +71,8 @@ from .recorder_params import PARAMS
 if TYPE_CHECKING:
     from rclpy.client import Client
     from rclpy.executors import Executor
+    from rclpy.task import Future
+    from rclpy.subscription import MessageInfo, Subscription
 
 POLL_PERIOD = 0.01  # s between two drains of the subscriptions
 # reader history: absorbs bursts while a chunk is compressed/written, and a writer's whole
@@ -81,7 +83,7 @@ MATCHED_LINE = 'publishers matched on'  # the log lines `impact-arm run` waits f
 FLOWING_LINE = 'first samples on'
 
 
-def _string_reader():
+def _string_reader() -> Callable[[bytes], Any]:
     """CDR of a std_msgs/msg/String -> the message, by rosbags; built here because its first
     use loads the type store and generates the reader (~1 s on a loaded machine), which the
     drain loop must not spend at the first impact."""
@@ -92,36 +94,70 @@ def _string_reader():
 
 
 class Recorder(Node):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__('recorder', **NODE_OPTIONS)
+        self._declare()
+        self._configure()
+        self._activate()
+
+    # ------------------------------------------------------------------------ start-up
+    def _declare(self) -> None:
+        """The parameters as ``self.p``; ParameterError for a bad value or an unknown name."""
         self.p: RecorderParameters = declare(self, PARAMS, RecorderParameters)
-        p = self.p
         refuse_unknown(self, PARAMS)
-        # every parameter is fixed at start-up: a change is refused, not silently ignored
-        self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
+
+    def _configure(self) -> None:
+        """The MCAP file with the run's metadata (and scene), the topics to record and the
+        3D view derived from the scene; nothing subscribed yet."""
+        p = self.p
         self.output = p.output or f'runs/{time.strftime("%Y%m%d-%H%M%S")}.mcap'
-        topics, scene, interval, tf_rate = p.topics, p.scene, p.flush_interval, p.tf_rate
         self.param_nodes = [n for n in p.param_nodes if n]
         self.by_stamps = p.log_time == 'stamps'
         self.now_ns = 0  # stamps: the newest /clock or /joint_states stamp
-        scene_text = None
-        if scene:
-            from ..physics.scene import resolve_scene_path
+        scene, scene_text = self._read_scene()
+        self._open_writer(scene, scene_text)
+        self.failed = False
+        self.received = 0
+        self.losses = Losses()
+        self.malformed = 0  # samples stored but not drawn (malformed payloads)
+        self.wanted: dict[str, str] = {}  # topic -> type name ('' until discovered)
+        for entry in p.topics:
+            name, _, type_name = entry.partition(':')
+            self.wanted[name] = type_name or TOPICS.get(name, ('',))[0]
+        self.visuals: VisualsWriter | None = None
+        # reads /impact_report: its log time (stamps) and its 3D event frames (a scene)
+        self._read_string = _string_reader() if self.by_stamps or scene_text else None
+        if scene_text is not None:
+            self._configure_visuals(scene, scene_text)
+        self._init_progress()
 
-            scene = resolve_scene_path(scene)  # an installed scene name, as the simulator's
-            try:
-                with open(scene, encoding='utf-8') as f:
-                    scene_text = f.read()
-            except OSError as e:
-                raise ParameterError(
-                    f'parameter scene = {scene!r}: cannot read ({e.strerror})'
-                ) from None
-            from ..physics.scene import scene_from_text, self_contained_text
+    def _read_scene(self) -> tuple[str, str | None]:
+        """(path, text) of the ``scene`` parameter, an installed name resolved as the
+        simulator resolves it, an arm from a URDF file made self-contained; ('', None)
+        without a scene. ParameterError for a file that cannot be read."""
+        scene = self.p.scene
+        if not scene:
+            return scene, None
+        from ..physics.scene import resolve_scene_path
 
-            # an arm from a URDF file: the file's text goes into the recording's scene
-            scene_text = self_contained_text(scene_from_text(scene_text, scene, path=scene))
+        scene = resolve_scene_path(scene)  # an installed scene name, as the simulator's
         try:
-            self.writer = Ros2McapWriter(self.output, flush_interval=interval)
+            with open(scene, encoding='utf-8') as f:
+                scene_text = f.read()
+        except OSError as e:
+            raise ParameterError(
+                f'parameter scene = {scene!r}: cannot read ({e.strerror})'
+            ) from None
+        from ..physics.scene import scene_from_text, self_contained_text
+
+        # an arm from a URDF file: the file's text goes into the recording's scene
+        return scene, self_contained_text(scene_from_text(scene_text, scene, path=scene))
+
+    def _open_writer(self, scene: str, scene_text: str | None) -> None:
+        """The MCAP file with the recording's metadata: package, node, topics, this node's
+        parameters and the scene (attachment and metadata)."""
+        try:
+            self.writer = Ros2McapWriter(self.output, flush_interval=self.p.flush_interval)
         except RecordingError as e:
             raise RecordingError(f'output = {self.output!r}: {e}') from None
         self.writer.add_metadata(
@@ -131,7 +167,7 @@ class Recorder(Node):
                 'ros_distro': ros_distro(),
                 'node': 'recorder',
                 'start_time_ns': str(time.time_ns()),
-                'topics': json.dumps(topics),
+                'topics': json.dumps(self.p.topics),
             },
         )
         self.writer.add_metadata(
@@ -146,76 +182,81 @@ class Recorder(Node):
                 os.path.basename(scene), scene_text.encode(), 'application/yaml'
             )
             self.writer.add_metadata('scene', {'path': os.path.abspath(scene), 'yaml': scene_text})
-        self.failed = False
-        self.received = 0
-        self.losses = Losses()
-        self.malformed = 0  # samples stored but not drawn (malformed payloads)
-        self.wanted = {}  # topic -> type name ('' until discovered)
-        for entry in topics:
-            name, _, type_name = entry.partition(':')
-            self.wanted[name] = type_name or TOPICS.get(name, ('',))[0]
-        self.visuals = None
-        # reads /impact_report: its log time (stamps) and its 3D event frames (a scene)
-        self._read_string = _string_reader() if self.by_stamps or scene_text else None
-        if scene_text is not None:
-            from ..physics.scene import scene_from_text
 
-            self.visuals = VisualsWriter(
-                self.writer,
-                scene_from_text(scene_text, scene),
-                tf_rate,
-                log_time_ns=0 if self.by_stamps else time.time_ns(),
-            )
-            if self.visuals.visuals.mounted and contract.SURFACE_MOUNTS not in self.wanted:
-                # the scene's plates move its surfaces: their topic is recorded and drawn
-                self.wanted[contract.SURFACE_MOUNTS] = contract.JOINT_STATE_TYPE
-            derived = sorted(set(self.wanted) & set(contract.VISUAL_TOPICS))
-            if derived:
-                self.get_logger().info(f'not subscribing to {derived}: derived from the scene')
-            for topic in derived:
-                del self.wanted[topic]
-            self._q = None  # absolute link angles of the latest joint state
-            self._joints = scene_joint_names(self.visuals.visuals.scene)
-            self._coordinates = self.visuals.visuals.scene.joint_coordinates
-        self.subs = {}
+    def _configure_visuals(self, scene: str, scene_text: str) -> None:
+        """The 3D view of the scene, derived from the recorded topics: those the view derives
+        itself are not subscribed to, the plates of mounted surfaces are."""
+        from ..physics.scene import scene_from_text
+
+        visuals = self.visuals = VisualsWriter(
+            self.writer,
+            scene_from_text(scene_text, scene),
+            self.p.tf_rate,
+            log_time_ns=0 if self.by_stamps else time.time_ns(),
+        )
+        if visuals.visuals.mounted and contract.SURFACE_MOUNTS not in self.wanted:
+            # the scene's plates move its surfaces: their topic is recorded and drawn
+            self.wanted[contract.SURFACE_MOUNTS] = contract.JOINT_STATE_TYPE
+        derived = sorted(set(self.wanted) & set(contract.VISUAL_TOPICS))
+        if derived:
+            self.get_logger().info(f'not subscribing to {derived}: derived from the scene')
+        for topic in derived:
+            del self.wanted[topic]
+        self._q: list[float] | None = None  # absolute link angles of the latest joint state
+        self._joints = scene_joint_names(visuals.visuals.scene)
+        self._coordinates = visuals.visuals.scene.joint_coordinates
+
+    def _init_progress(self) -> None:
+        """What is subscribed, matched, flowing, written and asked so far: nothing."""
+        self.subs: dict[str, Subscription[Any]] = {}
+        self.written_until: int | None = None  # ns: newest /joint_states stamp written
+        self.announced: int | None = None  # ns: the newest published on RECORDER_PROGRESS
+        self.matched: set[str] = set()  # topics whose subscription has matched a publisher
+        self.flowing: set[str] = set()  # topics a sample has arrived on
+        self.named_unmatched = False
+        self.params: dict[str, str] = {}  # node -> 'start'/'end'; queries never block the recording
+
+    def _activate(self) -> None:
+        """Parameter changes refused, the progress publisher, the subscriptions, the
+        flush, diagnostics, discovery and match timers, the parameter clients."""
+        # every parameter is fixed at start-up: a change is refused, not silently ignored
+        self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
         # what has been written, for a lockstep simulator that waits for the recording
         self.progress = self.create_publisher(
             Time, contract.RECORDER_PROGRESS, contract.PROGRESS_QOS.to_rclpy()
         )
-        self.written_until: int | None = None  # ns: newest /joint_states stamp written
-        self.announced: int | None = None  # ns: the newest published on RECORDER_PROGRESS
         self.reader = reader_node(self, 'reader')  # ignores launch's __node remap
         self._subscribe_known()
-        self.create_timer(interval, self._flush)
+        self.create_timer(self.p.flush_interval, self._flush)
         self.pub_diag = self.create_publisher(
             DiagnosticArray, contract.DIAGNOSTICS, contract.qos(contract.DIAGNOSTICS).to_rclpy()
         )
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_timer(0.5, self._discover)
-        self.matched = set()  # topics whose subscription has matched a publisher
-        self.flowing = set()  # topics a sample has arrived on
-        self.named_unmatched = False
         self.started = time.monotonic()
         self.match_timer = self.create_timer(0.05, self._check_matched)
-        self.params = {}  # node -> 'start'/'end' state; queries never block the recording
-        self.param_clients: dict[str, tuple[Client[Any, Any], Client[Any, Any]]] = {
+        self.param_clients = self._parameter_clients()
+        self.get_logger().info(
+            f'subscribed to {len(self.wanted)} topics, writing '
+            f'{self.output}; waiting for their publishers'
+        )
+
+    def _parameter_clients(self) -> dict[str, tuple[Client[Any, Any], Client[Any, Any]]]:
+        """node -> (list, get) clients of the parameter services of each ``param_nodes``."""
+        return {
             n: (
                 self.create_client(ListParameters, f'{n}/list_parameters'),
                 self.create_client(GetParameters, f'{n}/get_parameters'),
             )
             for n in self.param_nodes
         }
-        self.get_logger().info(
-            f'subscribed to {len(self.wanted)} topics, writing '
-            f'{self.output}; waiting for their publishers'
-        )
 
     @property
     def done(self) -> bool:
         return self.failed
 
     # ---------------------------------------------------------------- subscriptions
-    def _subscribe_known(self):
+    def _subscribe_known(self) -> None:
         for topic, type_name in self.wanted.items():
             if type_name and topic not in self.subs:
                 qos = contract.qos(topic, self._offered_default(topic)).to_rclpy(RECORDER_MIN_DEPTH)
@@ -223,7 +264,7 @@ class Recorder(Node):
                     message_class(type_name), topic, _never_called, qos, raw=True
                 )
 
-    def _check_matched(self):
+    def _check_matched(self) -> None:
         """Say "recording" only once a publisher is matched on every topic: a subscription
         in the graph is not yet a matched reader, and what is published before the match is
         lost (1-2.4 s at the start of a run). After MATCH_GRACE, name the topics still
@@ -246,7 +287,7 @@ class Recorder(Node):
                 f'recording to {self.output}; no publisher yet on {" ".join(missing)}'
             )
 
-    def _offered_default(self, topic) -> TopicQos:
+    def _offered_default(self, topic: str) -> TopicQos:
         """For a topic outside the contract: a QoS every current publisher is compatible with."""
         offers = [
             TopicQos.from_rclpy(i.qos_profile) for i in self.get_publishers_info_by_topic(topic)
@@ -258,7 +299,7 @@ class Recorder(Node):
             durability='transient_local' if durable else 'volatile',
         )
 
-    def _discover(self):
+    def _discover(self) -> None:
         """Find the types of topics given without one, once someone publishes them."""
         missing = [t for t, ty in self.wanted.items() if not ty]
         if missing:
@@ -275,7 +316,7 @@ class Recorder(Node):
             executor.spin_once(timeout_sec=POLL_PERIOD)
             self._drain()
 
-    def _drain(self):
+    def _drain(self) -> None:
         """Take every queued message of every topic; write them in order of reception, each
         topic's messages strictly in the order they were taken."""
         per_topic = []
@@ -303,7 +344,7 @@ class Recorder(Node):
             self.progress.publish(Time(sec=sec, nanosec=nanosec))
 
     @staticmethod
-    def _stamp(topic, data):
+    def _stamp(topic: str, data: bytes) -> int | None:
         """The stamp [ns] of a /joint_states or /clock sample (both begin with a
         builtin_interfaces/Time), None for other topics and for one that is no time."""
         if topic not in (contract.JOINT_STATES, contract.CLOCK):
@@ -336,7 +377,7 @@ class Recorder(Node):
             return None
         return round(t * 1e9) if 0.0 <= t < 9e9 else None
 
-    def _store(self, topic, data, received, published):
+    def _store(self, topic: str, data: bytes, received: int, published: int) -> None:
         try:
             stamp = self._stamp(topic, data)
             record = self._report(data) if topic == contract.IMPACT_REPORT else None
@@ -378,7 +419,14 @@ class Recorder(Node):
                 throttle_duration_sec=2.0,
             )
 
-    def _derive_visuals(self, visuals, topic, data, received, record=None):
+    def _derive_visuals(
+        self,
+        visuals: VisualsWriter,
+        topic: str,
+        data: bytes,
+        received: int,
+        record: Impact | None = None,
+    ) -> None:
         """Feed the recorded state to the visuals; a wrench may arrive before or after the
         joint state of its period, so it is drawn at the latest known arm pose."""
         if topic == contract.CONTACT_WRENCH:
@@ -403,7 +451,7 @@ class Recorder(Node):
             except (ValueError, KeyError, TypeError) as e:
                 self.get_logger().warning(f'impact report not drawn: {e}')
 
-    def _publish_diagnostics(self):
+    def _publish_diagnostics(self) -> None:
         lost = self.losses.lost_total()
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if lost else DiagnosticStatus.OK,
@@ -417,7 +465,7 @@ class Recorder(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 
-    def _flush(self):
+    def _flush(self) -> None:
         try:
             if self.losses.changed:  # (the diagnostics read it too: only the file resets it)
                 self.writer.add_metadata(contract.LOSSES_METADATA, self.losses.as_metadata())
@@ -426,7 +474,7 @@ class Recorder(Node):
         except RecordingError as e:
             self._fail(e)
 
-    def _fail(self, err):
+    def _fail(self, err: Exception) -> None:
         if not self.failed:
             self.get_logger().error(f'recording stopped: {err}')
         self.failed = True
@@ -435,7 +483,7 @@ class Recorder(Node):
         self.subs.clear()
 
     # ------------------------------------------------------------------- parameters
-    def _query_parameters(self, phase):
+    def _query_parameters(self, phase: str) -> None:
         """Ask each param node (list, then get) without waiting; results become metadata."""
         for name, (list_cli, get_cli) in self.param_clients.items():
             if (
@@ -448,19 +496,21 @@ class Recorder(Node):
             future = list_cli.call_async(ListParameters.Request())
             future.add_done_callback(functools.partial(self._on_list, name, phase))
 
-    def _on_list(self, name, phase, future):
-        names = list(future.result().result.names) if future.result() else []
+    def _on_list(self, name: str, phase: str, future: Future[Any]) -> None:
+        listed = future.result()
+        names = list(listed.result.names) if listed else []
         future = self.param_clients[name][1].call_async(GetParameters.Request(names=names))
         future.add_done_callback(functools.partial(self._on_get, name, phase, names))
 
-    def _on_get(self, name, phase, names, future):
+    def _on_get(self, name: str, phase: str, names: list[str], future: Future[Any]) -> None:
         from rclpy.parameter import parameter_value_to_python
 
-        if future.result() is None or self.failed:
+        answer = future.result()
+        if answer is None or self.failed:
             return
         values = {
             n: json.dumps(parameter_value_to_python(v), default=str)
-            for n, v in zip(names, future.result().values)
+            for n, v in zip(names, answer.values)
         }
         self.writer.add_metadata(f'parameters/{name}/{phase}', values)
         self.params[name] = phase
@@ -508,13 +558,13 @@ class Losses:
     writer published before its first sample reached us (before the match). Like rosbag2's
     lost-message events, but exact and independent of the middleware's event support."""
 
-    def __init__(self):
-        self.last = {}  # (topic, writer gid) -> last sequence number
-        self.lost = {}  # topic -> samples missing between two received
-        self.before_first = {}  # topic -> samples published before the first
+    def __init__(self) -> None:
+        self.last: dict[tuple[str, bytes], int] = {}  # (topic, writer gid) -> last sequence number
+        self.lost: dict[str, int] = {}  # topic -> samples missing between two received
+        self.before_first: dict[str, int] = {}  # topic -> samples published before the first
         self.changed = False
 
-    def count(self, topic: str, info: dict) -> None:
+    def count(self, topic: str, info: MessageInfo) -> None:
         seq = info.get('publication_sequence_number')
         gid = (info.get('publisher_gid') or {}).get('data')
         if not seq or gid is None:
@@ -541,11 +591,11 @@ class Losses:
         return ', '.join(f'{t} {n}' for t, n in sorted(self.lost.items()) if n)
 
 
-def _never_called(msg):
+def _never_called(msg: bytes) -> None:
     """Subscriptions of the reader node are drained by ``Recorder._drain``."""
 
 
-def main(args: list[str] | None = None) -> None:
+def main(args: list[str] | None = None) -> NoReturn:
     raise SystemExit(run(Recorder, args))
 
 

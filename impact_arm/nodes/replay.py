@@ -13,19 +13,20 @@ services) never delays a message; a late message is published at once, never ski
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..physics.errors import ImpactArmError
 from .. import contract
-from ..contract import CLOCK
-from ..io.mcap_ros2 import message_class
+from ..contract import CLOCK, TopicQos
+from ..io.mcap_ros2 import TopicInfo, message_class
 from ..io.msgdefs import has_type_support
 from ..io.replay_plan import ReplayError, ReplayPlan, summarize
 from ._runner import run
@@ -34,47 +35,72 @@ from .param_types import ReplayParameters
 from .replay_params import PARAMS, WAIT_SUBSCRIBERS_MAX
 
 if TYPE_CHECKING:
+    from rclpy.executors import Executor
     from rclpy.publisher import Publisher
 
 PROGRESS_PERIOD = 5.0  # s of wall time between progress lines in the log
 
 
 class Replay(Node):
-    def __init__(self, **overrides):
+    def __init__(self, **overrides: Any) -> None:
         super().__init__(
             'replay',
             parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
             **NODE_OPTIONS,
         )
-        p = declare(self, PARAMS, ReplayParameters)
+        self._declare()
+        self._configure()
+        self._activate()
+
+    # ------------------------------------------------------------------------ start-up
+    def _declare(self) -> None:
+        """The parameters as ``self.p``; ParameterError for a bad value or an unknown name,
+        ReplayError without a file."""
+        self.p: ReplayParameters = declare(self, PARAMS, ReplayParameters)
         refuse_unknown(self, PARAMS)
-        # every parameter is fixed at start-up: a change is refused, not silently ignored
-        self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
-        if not p.file:
+        if not self.p.file:
             raise ReplayError('file = "": the MCAP file to replay is required (-p file:=run.mcap)')
-        clock, self.delay, self.wait_subs, loop = p.clock, p.delay, p.wait_for_subscribers, p.loop
+
+    def _configure(self) -> None:
+        """The schedule of the file's messages (``ReplayPlan``) and the playing state."""
+        p = self.p
+        self.delay, self.wait_subs = p.delay, p.wait_for_subscribers
         topics = [t for t in p.topics if t]
         self.plan = ReplayPlan.open(
-            p.file, rate=p.rate, start_offset=p.start_offset, topics=topics, loop=loop
+            p.file, rate=p.rate, start_offset=p.start_offset, topics=topics, loop=p.loop
         )
-        self.clock_period = 1.0 / clock if clock else math.inf
+        self.clock_period = 1.0 / p.clock if p.clock else math.inf
+        self.published = 0
+        self.error: Exception | None = None
+        self._stop = threading.Event()
+
+    def _activate(self) -> None:
+        """Parameter changes refused, a publisher per replayed topic (and /clock), then the
+        thread that plays the schedule starts."""
+        # every parameter is fixed at start-up: a change is refused, not silently ignored
+        self.add_on_set_parameters_callback(validator(PARAMS, lambda values: None))
+        self._create_publishers()
+        self.clock_pub = None
+        if self.p.clock:
+            from rosgraph_msgs.msg import Clock
+
+            self.clock_pub = self.create_publisher(Clock, CLOCK, contract.qos(CLOCK).to_rclpy())
+            self._Clock = Clock
+        self._thread = threading.Thread(target=self._play, name='replay', daemon=True)
+        self.get_logger().info('replaying ' + summarize(self.plan))
+        self._thread.start()
+
+    def _create_publishers(self) -> None:
+        """A publisher per recorded topic with its recorded type and QoS; not the recorded
+        /clock when the replay publishes its own, nor a type not installed here."""
         self.publishers_: dict[str, Publisher[Any]] = {}
         for topic, info in self.plan.topics.items():
-            if topic == CLOCK and clock:
+            if topic == CLOCK and self.p.clock:
                 self.get_logger().warning(
                     'not replaying the recorded /clock: clock > 0 publishes it from the replay'
                 )
                 continue
-            qos = (
-                info.qos[0]
-                if info.qos
-                and all(
-                    (q.reliability, q.durability)
-                    == (info.qos[0].reliability, info.qos[0].durability)
-                    for q in info.qos
-                )
-                else contract.qos(topic)
-            )
+            qos = _recorded_qos(topic, info)
             cls = message_class(info.type_name)
             if not has_type_support(cls):  # /tf without tf2_msgs: rclpy cannot publish it
                 self.get_logger().info(
@@ -82,24 +108,12 @@ class Replay(Node):
                 )
                 continue
             self.publishers_[topic] = self.create_publisher(cls, topic, qos.to_rclpy(min_depth=10))
-        self.clock_pub = None
-        if clock:
-            from rosgraph_msgs.msg import Clock
-
-            self.clock_pub = self.create_publisher(Clock, CLOCK, contract.qos(CLOCK).to_rclpy())
-            self._Clock = Clock
-        self.published = 0
-        self.error = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._play, name='replay', daemon=True)
-        self.get_logger().info('replaying ' + summarize(self.plan))
-        self._thread.start()
 
     @property
-    def done(self):
+    def done(self) -> bool:
         return not self._thread.is_alive()
 
-    def _wait_for_subscribers(self):
+    def _wait_for_subscribers(self) -> None:
         if not self.wait_subs:
             return
         end = time.monotonic() + WAIT_SUBSCRIBERS_MAX
@@ -112,7 +126,7 @@ class Replay(Node):
             f'every topic after {WAIT_SUBSCRIBERS_MAX:g} s'
         )
 
-    def _play(self):
+    def _play(self) -> None:
         try:
             self._wait_for_subscribers()
             if self._stop.wait(self.delay):
@@ -145,12 +159,12 @@ class Replay(Node):
         except Exception as e:  # noqa: BLE001 - reported by finish(), exit code 1
             self.error = e
 
-    def _publish_clock(self, publisher, t_ns):
+    def _publish_clock(self, publisher: Publisher[Any], t_ns: int) -> None:
         msg = self._Clock()
         msg.clock.sec, msg.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
         publisher.publish(msg)
 
-    def finish(self, executor) -> int:
+    def finish(self, executor: Executor | None) -> int:
         self._stop.set()
         self._thread.join(5.0)
         if self.error is not None:
@@ -160,8 +174,22 @@ class Replay(Node):
         return 0
 
 
+def _recorded_qos(topic: str, info: TopicInfo) -> TopicQos:
+    """The QoS the topic's recorded publishers offered, where they all agreed on reliability
+    and durability; else the contract's."""
+    return (
+        info.qos[0]
+        if info.qos
+        and all(
+            (q.reliability, q.durability) == (info.qos[0].reliability, info.qos[0].durability)
+            for q in info.qos
+        )
+        else contract.qos(topic)
+    )
+
+
 # ------------------------------------------------------------------- impact-arm replay
-def add_arguments(parser):
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('file', help='MCAP file to replay')
     parser.add_argument(
         '--rate',
@@ -209,7 +237,7 @@ def add_arguments(parser):
     )
 
 
-def cli(args) -> int:
+def cli(args: argparse.Namespace) -> int:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     overrides = {
         'file': os.path.abspath(args.file),
@@ -234,7 +262,7 @@ def cli(args) -> int:
     return run(lambda: Replay(**overrides), ['impact-arm-replay'])
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> NoReturn:
     raise SystemExit(run(Replay, args))
 
 

@@ -38,7 +38,10 @@ pause, step and its state, the same actions as its ~/reset, ~/pause and ~/step s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
 
 # the standard's constants (msg/Result, msg/SimulationState, msg/SimulatorFeatures,
 # srv/ResetSimulation, srv/SetSimulationState), so the mapping needs no package
@@ -182,7 +185,7 @@ def available() -> bool:
     return True
 
 
-def attach(node, controls: SimulationControls):
+def attach(node: Node, controls: SimulationControls) -> SimulationInterfaces | None:
     """Serve the standard's services on ``node`` where ``simulation_interfaces`` is
     installed. Returns the ``SimulationInterfaces`` served, or None without the package."""
     if not available():
@@ -191,18 +194,18 @@ def attach(node, controls: SimulationControls):
 
     mapping = SimulationInterfaces(controls)
 
-    def features(request, response):
+    def features(request: Any, response: Any) -> Any:
         response.features.features = mapping.features()
         response.features.spawn_formats = []
         response.features.custom_info = CUSTOM_INFO
         return response
 
-    def get_state(request, response):
+    def get_state(request: Any, response: Any) -> Any:
         response.state.state = mapping.state()
         response.result.result = RESULT_OK
         return response
 
-    def answer(response, outcome):
+    def answer(response: Any, outcome: tuple[int, str]) -> Any:
         response.result.result, response.result.error_message = outcome
         if response.result.result != RESULT_OK:
             node.get_logger().warning(f'simulation_interfaces: {outcome[1]}')
