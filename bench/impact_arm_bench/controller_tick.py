@@ -121,79 +121,38 @@ class _Logger:
 
 def replay_controller(scene, **overrides):
     """The controller node's per-sample state without a node: an object of the node's class
-    (its methods as they are) holding what ``Controller.__init__`` builds, from the parameter
-    table's defaults and ``overrides``. ``replay(node, stream)`` feeds it."""
-    import dataclasses
-    import threading
-
-    from std_msgs.msg import Float64MultiArray
-
-    from impact_arm.driver.control_inputs import ControlInputs
-    from impact_arm.io.wire import PatchedMessage
+    (its methods as they are) configured by its own ``_configure`` step from the parameter
+    table's defaults and ``overrides``, with no publisher, reader or thread (``_activate``
+    never runs; the publisher is a stub). ``replay(node, stream)`` feeds it."""
     from impact_arm.nodes.controller import Controller
     from impact_arm.nodes.controller_params import check, parameter_table
-    from impact_arm.nodes.params import values_class
-    from impact_arm.physics.control import CycleController
-    from impact_arm.physics.model import ArmModel
-    from impact_arm.physics.stability import ChatterWatch
+    from impact_arm.nodes.param_types import ControllerParameters
+    from impact_arm.nodes.params import scene_joint_names
 
     table = parameter_table(scene)
-    defaults = {
-        p.name: list(p.default) if isinstance(p.default, tuple) else p.default for p in table
+    # each value as the node declares it: the table's default, checked (enums parsed);
+    # no start-up hold, which only waits for DDS discovery
+    given = {'startup_hold': 0.0, **overrides}
+    values = {
+        p.name: p.check(
+            given.get(p.name, list(p.default) if isinstance(p.default, tuple) else p.default)
+        )
+        for p in table
     }
-    p = values_class('controller_parameters', table)(**{**defaults, **overrides})
     node = Controller.__new__(Controller)  # (no rclpy Node: its __init__ is never run)
-    node.p = p
-    node.n = scene.n_links
-    node.model = ArmModel(scene)
-    node.coordinates = scene.joint_coordinates
-    names = node.joint_names = list(scene.joint_names)
-    order = check(p, names)
-    node.ctrl = CycleController(
-        node.model,
-        p.law,
-        p.p,
-        p.d,
-        p.i,
-        node.coordinates.absolute(p.down_target),
-        node.coordinates.absolute(p.up_target),
-        p.switch_height,
-        p.surface_height,
-        space=p.space,
-        force_threshold=p.force_threshold,
-        reversal_band=p.reversal_band,
-        integrator=Controller._integrator(p),
-    )
-    node._warm_up(scene)
-    node.sent, node.strikes, node.down_half_start, node.cycles_completed = 0, 0, 0.0, 0
-    node.finished = False
-    node._mode, node._switches = node.ctrl.mode, node.ctrl.switches
-    node.pub = _Publisher()
-    node.lock = threading.RLock()
     logger = _Logger()
     node.get_logger = lambda: logger
+    # what the node asks its readers: here every sample is delivered
+    node._readers_matched = lambda: True
+    node._wrench_published = lambda: True
+    node.scene = scene
+    node.table = table
+    node.p = ControllerParameters(**values)
+    node.joint_names = scene_joint_names(scene)
+    node.command_order = check(node.p, node.joint_names)
+    node._configure()
+    node.pub = _Publisher()
     node._publish_diagnostics = lambda: None
-    node.inputs = ControlInputs(
-        node.ctrl,
-        names,
-        order,
-        p.rate,
-        p.trigger,
-        node._send,
-        startup_hold=0.0,
-        start_after=p.start_after,
-        latency_periods=p.latency_periods,
-        wrench_tolerance=p.wrench_tolerance,
-        implicit_periods=p.implicit_periods,
-        coordinates=node.coordinates,
-        effort_limits=scene.effort_limits,
-    )
-    node.inputs.warm_up(scene.q0, scene.qd0)
-    node.chatter = ChatterWatch([names[j] for j in node.inputs.order])
-    node.wire_command = PatchedMessage(
-        Float64MultiArray(data=[0.0] * node.n), ('data',), stamp=None
-    )
-    assert dataclasses.is_dataclass(p)
     return node
 
 
