@@ -31,7 +31,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -191,6 +193,56 @@ def _offline(args):
     )
 
 
+def _direct_cycle(args) -> float:
+    """The mean cycle of the scene's offline closed loop without latency (the direct run the
+    realtime criteria compare with), after the fifth impact."""
+    from standin_stack import CYCLES
+
+    from impact_arm.physics.scene import load_scene, resolve_scene_path
+    from impact_arm.tools.latency_study import closed_loop
+
+    scene = load_scene(args.scene or resolve_scene_path('paper'))
+    run = closed_loop(scene, 0, 0, t_max=0.45 * (CYCLES + 2))
+    cycles = run.cycle_periods(skip=5)
+    return sum(cycles) / len(cycles)
+
+
+def _latency_shares(histogram: str) -> tuple[int | None, float]:
+    """(the most frequent latency, the share of commands at 4 periods or fewer) of a
+    controller's ``latency_histogram`` text ('periods:count ...')."""
+    counts = {int(k): int(v) for k, v in (pair.split(':') for pair in histogram.split())}
+    total = sum(counts.values())
+    if not total:
+        return None, 0.0
+    mode = max(counts, key=lambda k: counts[k])
+    return mode, sum(v for k, v in counts.items() if k <= 4) / total
+
+
+def _criteria(results: list[dict], direct: float) -> None:
+    """The realtime criteria of docs/ros2_control.md beside the strikes: the mean cycle
+    within 1 % of the direct run's, the command latency's mode at most 2 periods and at
+    most 4 in 99 % of the commands, and the median CPU of the simulator and the
+    controller under a third of a core."""
+    n = len(results)
+    within = sum(
+        r['cycle_departure'] is not None and abs(r['cycle_departure']) <= 0.01 for r in results
+    )
+    modes = sum(r['latency_mode'] is not None and r['latency_mode'] <= 2 for r in results)
+    tails = sum(r['latency_within_4'] >= 0.99 for r in results)
+    print(
+        f'direct run (offline, no latency): mean cycle {direct:.4f} s; cycle within 1 %: '
+        f'{within} of {n}; latency mode <= 2: {modes} of {n}; <= 4 in 99 % of commands: '
+        f'{tails} of {n}'
+    )
+    for role in ('simulator', 'controller'):
+        cpu = [r['cpu_percent'][role] for r in results if role in r['cpu_percent']]
+        if cpu:
+            print(
+                f'{role} CPU: median {statistics.median(cpu):.1f} %, worst {max(cpu):.1f} % '
+                f'of a core (criterion: under 33.3 % in the median)'
+            )
+
+
 def _busy(n):
     return [
         subprocess.Popen([sys.executable, '-c', 'while True: pass'], stdin=subprocess.DEVNULL)
@@ -229,6 +281,7 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f'--order = {args.order}: must be a permutation of {",".join(ROLES)}')
     results, runs = [], []
     offline = _offline(args) if args.sim_time else None
+    direct = _direct_cycle(args)
     for i in range(args.runs):
         busy = _busy(args.busy) if i % 2 else []
         try:
@@ -253,12 +306,18 @@ def run(args: argparse.Namespace) -> int:
                 and [r.t_contact for r in run_i.impacts] == list(offline.t_contact[:n])
                 and [r.delta_m for r in run_i.impacts] == list(offline.delta_m[:n])
             )
+        mode, within_4 = _latency_shares(result['latency_histogram'])
+        result['latency_mode'], result['latency_within_4'] = mode, within_4
+        cycle = result['mean_cycle_s']
+        result['cycle_departure'] = cycle / direct - 1.0 if cycle else None
         results.append(result)
         cpu = ' '.join(f'{r} {v:.0f}%' for r, v in result['cpu_percent'].items())
         print(
             f'run {i + 1}: {result["impacts"]} impacts, {result["second_strikes"]} second '
             f'strikes, first strike {result["first_strike_s"]} s, last cycle '
-            f'{result["last_cycle_s"] or float("nan"):.4f} s, δm '
+            f'{result["last_cycle_s"] or float("nan"):.4f} s, mean cycle '
+            f'{cycle or float("nan"):.4f} s ({100 * (result["cycle_departure"] or math.nan):+.2f} '
+            f'% of the direct run), δm '
             f'{result["delta_m_max_mm"]:.3f} mm, t_sim {result["sim_time_s"]:.2f} s in '
             f'{result["wall_s"]:.1f} s wall; latency [{result["latency_histogram"]}], '
             f'implicit {result["implicit_commands"]}, repeated {result["repeated_states"]}; '
@@ -276,6 +335,7 @@ def run(args: argparse.Namespace) -> int:
             print(f'  {role} threads: ' + ', '.join(f'{k} {v:.1f}%' for k, v in top if v >= 0.1))
     held = sum(r['impacts'] >= CYCLES + 1 and r['second_strikes'] == 0 for r in results)
     print(f'{held} of {len(results)} runs: {CYCLES} cycles, no second strike')
+    _criteria(results, direct)
     if offline is not None:
         print(
             f'offline closed loop, 1 period of latency, released at {args.sim_time:g} s: first '

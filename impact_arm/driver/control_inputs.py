@@ -18,7 +18,7 @@ import time
 from collections import Counter, deque
 from typing import Callable, Sequence
 
-from ..contract import ControlTrigger, JointCoordinates, StartAfter
+from ..contract import ControlTrigger, CycleMode, JointCoordinates, StartAfter
 from ..physics.kinds import TextEnum
 from ..physics.control import CycleController
 from ..physics.prediction import StatePredictor
@@ -48,6 +48,8 @@ SENT_HISTORY = 32
 # start-up measures each shorter latency once)
 LATENCY_WINDOW_S = 1.0
 LATENCY_RECURS = 3
+# the controller node's implicit_window [s]: the rebound, where the implicit law matters
+DEFAULT_IMPLICIT_WINDOW = 0.05
 DROPPED = (
     'malformed_joint_states',
     'malformed_wrenches',
@@ -99,6 +101,7 @@ class ControlInputs:
         latency_periods: int = 0,
         wrench_tolerance: float = math.inf,
         implicit_periods: int = 0,
+        implicit_window: float = math.inf,
         anticipate_impacts: bool = True,
         coordinates: JointCoordinates | None = None,
         effort_limits: Sequence[float] = (),
@@ -176,6 +179,14 @@ class ControlInputs:
         if implicit_periods < 0:
             raise ValueError(f'implicit_periods = {implicit_periods}: must be >= 0')
         self.implicit_periods = implicit_periods
+        # ... only this long after the cycle switched to its up half (an impact): a command
+        # held longer than planned turns the rebound back into the surface, where in the
+        # swing it costs only a slower cycle (the implicit law's own cost: ~1 %, offline)
+        if not implicit_window >= 0:
+            raise ValueError(f'implicit_window = {implicit_window} s: must be >= 0')
+        self.implicit_window = implicit_window
+        self._up_since: float | None = None  # sample time of the latest switch to the up half
+        self._up_switch = -1  # the controller's switch count that time
         # an impact between the sample and the state a command meets: the command is the up
         # half's, on the state with the tip stopped (CycleController.anticipate_impact)
         self.anticipate_impacts = anticipate_impacts
@@ -415,7 +426,12 @@ class ControlInputs:
                 )
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force, sensed=sensed)
         self.normal_force = None  # the latch covers one tick
-        if self.implicit_periods and self.predictor is not None and self.latency_varies():
+        if (
+            self.implicit_periods
+            and self.predictor is not None
+            and self.latency_varies()
+            and self._after_impact(t)
+        ):
             tau = self.predictor.implicit_command(
                 lambda q_at, qd_at: self.ctrl.torque(q_at, qd_at),
                 q,
@@ -441,6 +457,18 @@ class ControlInputs:
             self.first_efforts = [float(v) for v in tau]
             self.first_state = self.latest_joint
         self.send([tau[j] for j in self.order])
+
+    def _after_impact(self, t: float) -> bool:
+        """Whether the sample at ``t`` lies within ``implicit_window`` of the cycle's latest
+        switch to its up half (always with an infinite window)."""
+        if math.isinf(self.implicit_window):
+            return True
+        ctrl = self.ctrl
+        if ctrl.mode is not CycleMode.UP:
+            return False
+        if ctrl.switches != self._up_switch:
+            self._up_switch, self._up_since = ctrl.switches, t
+        return self._up_since is not None and t - self._up_since < self.implicit_window
 
     # ------------------------------------------------------------------------- latency
     def in_flight(self) -> list[list[float]]:

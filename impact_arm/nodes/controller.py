@@ -191,6 +191,7 @@ class Controller(Node):
             latency_periods=p.latency_periods,
             wrench_tolerance=p.wrench_tolerance,
             implicit_periods=p.implicit_periods,
+            implicit_window=p.implicit_window,
             anticipate_impacts=p.anticipate_impacts,
             coordinates=self.coordinates,
             effort_limits=self.scene.effort_limits,

@@ -20,7 +20,7 @@ from ..contract import (
     ControlTrigger,
     StartAfter,
 )
-from ..driver.control_inputs import SENT_HISTORY
+from ..driver.control_inputs import DEFAULT_IMPLICIT_WINDOW, SENT_HISTORY
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
 if TYPE_CHECKING:
@@ -221,6 +221,18 @@ def parameter_table(scene: Scene) -> tuple[Param, ...]:
             'int',
             low=0,
             high=8,
+            read_only=True,
+        ),
+        Param(
+            'implicit_window',
+            DEFAULT_IMPLICIT_WINDOW,
+            'how long after the cycle switches to its up half (an impact) the implicit law '
+            '(implicit_periods) acts while the latency varies [s]: in the rebound a command '
+            'held longer than planned turns the arm back into the surface; in the swing the '
+            'explicit law only oscillates a little, where the implicit one slows the cycle '
+            '(~1 % offline); a window longer than the cycle: always',
+            low=0.0,
+            high=1e3,
             read_only=True,
         ),
         Param(

@@ -77,6 +77,7 @@ class ControllerParameters:
     latency_periods: int
     anticipate_impacts: bool
     implicit_periods: int
+    implicit_window: float
     wrench_tolerance: float
     joints: list[str]
     command_readers: int

@@ -18,7 +18,7 @@ from typing import Callable
 
 from ..contract import ControlTrigger, joint_names, to_absolute, to_joint_space
 from ..driver.arm import SimulatedArm, Tick
-from ..driver.control_inputs import ControlInputs
+from ..driver.control_inputs import DEFAULT_IMPLICIT_WINDOW, ControlInputs
 from ..driver.session import LockstepSession, Outputs
 from ..physics.control import CycleController
 from ..physics.model import ArmModel
@@ -71,6 +71,7 @@ def closed_loop(
     release_after: float = 0.0,
     tap: Callable[[int, int, Tick], None] | None = None,
     anticipate_impacts: bool = True,
+    implicit_window: float = DEFAULT_IMPLICIT_WINDOW,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -85,7 +86,8 @@ def closed_loop(
     sensor): it tells an impact from the tip's reversal alone.
     ``release_after`` > 0: the simulator's parameter of that name (the arm braked, time
     running, until then); meanwhile the driver writes its newest command each period, as a
-    ros2_control stack does. ``anticipate_impacts``: the controller's parameter of that name.
+    ros2_control stack does. ``anticipate_impacts``, ``implicit_window``: the controller's
+    parameters of those names.
     ``tap(sec, nanosec, tick)``: each sample as the controller gets it
     (a recording to replay, bench controller_tick)."""
     arm = SimulatedArm(scene, rate, trace=False)
@@ -125,6 +127,7 @@ def closed_loop(
         clock=lambda: 0.0,
         implicit_periods=implicit_periods,
         anticipate_impacts=anticipate_impacts,
+        implicit_window=implicit_window,
         wrench_publishers=lambda: force_sensor,
     )
     rng = random.Random(seed)

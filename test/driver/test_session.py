@@ -630,6 +630,29 @@ def test_an_anticipated_impact_keeps_the_cycle_when_the_latency_varies(scene, se
     assert max(ahead.delta_m) == pytest.approx(max(base.delta_m), rel=0.01)
 
 
+@pytest.mark.parametrize('latency, spread', [(1, 1), (1, 3)])
+def test_the_implicit_law_in_the_rebound_only_keeps_the_cycle(scene, latency, spread):
+    """A latency that varies (1..2 and 1..4 periods): the implicit law only for the rebound
+    (implicit_window, 50 ms after the switch to the up half) strikes once per cycle like
+    the law implicit throughout, at the penetration of the run without latency, and keeps
+    the cycle within 1 % of it, where the law implicit throughout slows it by more."""
+    from impact_arm.tools.latency_study import closed_loop
+
+    def cycle(run):
+        return sum(run.cycle_periods()) / len(run.cycle_periods())
+
+    base = closed_loop(scene, 0, 0, t_max=6.0)
+    for seed in (1, 2, 3):
+        kw = dict(jitter=0.5, seed=seed, spread=spread)
+        rebound = closed_loop(scene, latency, -1, 6.0, **kw)
+        always = closed_loop(scene, latency, -1, 6.0, implicit_window=math.inf, **kw)
+        for run in (rebound, always):
+            assert not run.failed and run.second_strikes == 0 and run.impacts == base.impacts
+        assert cycle(rebound) == pytest.approx(cycle(base), rel=0.01)
+        assert cycle(always) > cycle(rebound)
+        assert max(rebound.delta_m) == pytest.approx(max(base.delta_m), rel=0.03)
+
+
 @pytest.mark.parametrize('spread, seed', [(3, 5), (4, 4)])
 def test_the_implicit_law_looks_further_ahead_when_the_latency_varies_more(scene, spread, seed):
     """Each command taking 1 to 1 + spread periods (a driver stack scheduled worse than the

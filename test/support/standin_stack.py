@@ -116,6 +116,14 @@ class StackRun:
         return strikes[-1] - strikes[-2] if len(strikes) >= 2 else None
 
     @property
+    def mean_cycle_s(self) -> float | None:
+        """The mean time between strikes after the fifth impact, as the offline latency
+        study measures a cycle (None: too few strikes)."""
+        gaps = [b - a for a, b in zip(self.contacts, self.contacts[1:])][4:]
+        cycles = [g for g in gaps if g >= self.second_strike_s]
+        return sum(cycles) / len(cycles) if cycles else None
+
+    @property
     def held(self) -> bool:
         return len(self.impacts) >= CYCLES + 1 and self.second_strikes == 0
 
@@ -158,6 +166,7 @@ class StackRun:
             'second_strikes': self.second_strikes,
             'first_strike_s': self.contacts[0] if self.contacts else None,
             'last_cycle_s': self.last_cycle_s,
+            'mean_cycle_s': self.mean_cycle_s,
             'delta_m_max_mm': 1e3 * max((r.delta_m for r in self.impacts), default=float('nan')),
             'sim_time_s': self.sim_time_s,
             'wall_s': self.wall_s,
