@@ -94,7 +94,13 @@ class PeriodPublishers:
             self.mounts = make(
                 JointState, contract.SURFACE_MOUNTS, contract.SURFACE_MOUNTS_QOS.to_rclpy(depth)
             )
-            self.mount_state = JointState(name=frames)
+            # serialized once, its floats and stamp patched each period as /joint_states'
+            # (a message built and converted by rclpy each period cost the loop ~10 % more)
+            plate_zeros = [0.0] * len(frames)
+            self.wire_mounts = PatchedMessage(
+                JointState(name=frames, position=plate_zeros, velocity=plate_zeros),
+                ('position', 'velocity'),
+            )
         self.visuals = VisualsPublisher(
             node,
             scene,
@@ -121,10 +127,8 @@ class PeriodPublishers:
         else:
             states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
         if self.mounts is not None:
-            msg = self.mount_state
-            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
-            msg.position, msg.velocity = list(tick.plates[0::2]), list(tick.plates[1::2])
-            self._send(self.mounts, msg)
+            plates = tick.plates
+            self._send(self.mounts, self.wire_mounts.fill(plates[0::2] + plates[1::2], (sec, nsec)))
         self._send(self.joints, states)
         if self.hw_states_wanted:
             if self.hw_joints is not self.wire_joints:
