@@ -28,6 +28,12 @@ class EffortTiming(TextEnum):
     CONTROLLER = 'controller'
 
     @property
+    def held(self) -> bool:
+        """Whether the torque is held over each period (a sampled controller's commands):
+        it jumps from period to period."""
+        return self in (EffortTiming.PREVIOUS, EffortTiming.NEXT)
+
+    @property
     def reads_efforts(self) -> bool:
         """Whether the torque is the recorded efforts, held piecewise between their renewals,
         rather than the scene's controller integrated continuously."""

@@ -1,5 +1,5 @@
 """The state before an impact shot through the model's free flight under the recorded
-efforts, for rates that are period means.
+efforts, for rates that are period means or efforts held over each period.
 
 A cubic through the positions before an impact (``LocalFit``) is the state when the torque
 changes smoothly. A controller that acts on difference rates of a coarse encoder does not:

@@ -254,11 +254,15 @@ class ImpactSet:
         return self._shoot(model, ready)
 
     def _shoot(self, model: ArmModel, w: ImpactWindow) -> ImpactWindow:
-        """Rates that are period means: the window whose replay starts from the state the
-        model's flight under the recorded efforts gives at the last sample before the impact
-        (fitted to the positions before it), not from the cubic's (``prestate.py`` says why).
-        A new window when the start is set: one replayed before keeps its start."""
-        if w.rate_period is None:
+        """Rates that are period means, or efforts held over each period (a sampled
+        controller's commands, the torque jumping from period to period): the window whose
+        replay starts from the state the model's flight under the recorded efforts gives at
+        the last sample before the impact (fitted to the positions before it), not from the
+        cubic's (``prestate.py`` says why; a cubic through a held torque's flight is off the
+        same way at every impact of a limit cycle, which the verdict's sign test then
+        reads as a misfit). A new window when the start is set: one replayed before keeps
+        its start."""
+        if w.rate_period is None and not self.timing.held:
             return w
         shot = copy.copy(w)
         shot.start = shot_start(model, w, self.timing)
