@@ -134,12 +134,13 @@ def cli(args: argparse.Namespace) -> int:
     finally:
         run.line.end()
         codes = run.stop()
+    status = run.simulator.status if run.simulator else None
     result = RunResult(
         scene=scene,
         impacts=run.impacts,
         t_end=run.sim_time,
         rhs_evaluations=run.rhs_evaluations,
-        wall_time=run.wall,
+        wall_time=integrating_wall(status, run.wall),
         stop_reason=StopReason.CYCLES_COMPLETED
         if outcome == 'completed'
         else StopReason.INTERRUPTED
@@ -150,7 +151,7 @@ def cli(args: argparse.Namespace) -> int:
     print(format_table(result))
     if run.chatter:
         print(f'CHATTER: {run.chatter}: the law is unstable at its rate')
-    simulator = run.simulator.status if run.simulator else None
+    simulator = status
     if simulator and simulator.limits:
         print(f'LIMIT: {simulator.limits}')
     if run.simulator and run.simulator.watchdog_line():
@@ -330,6 +331,17 @@ def simulator_report(msg: Any) -> SimulatorReport | None:
 
 
 RECORDER_READER = '_recorder_reader'  # the recorder's reader node (nodes/_runner.reader_node)
+
+
+def integrating_wall(status: SimulatorStatus | None, run_wall: float) -> float:
+    """The wall time the simulator spent in its physics [s] (its mean per stepped period
+    times the periods stepped), what "s wall integrating" means offline; ``run_wall`` (the
+    run's wall time) when the simulator never reported it. In a realtime run the run's
+    wall time is about its simulated time, and it counted the start-up wait too."""
+    if status is None or status.compute_physics_mean_us <= 0:
+        return run_wall
+    stepped = round(status.periods_published_until_s * status.publish_rate_requested)
+    return status.compute_physics_mean_us * 1e-6 * stepped
 
 
 class RecorderProgress:
