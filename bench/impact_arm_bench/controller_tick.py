@@ -209,7 +209,8 @@ def run(args) -> int:
     print(
         f'{scene.name}: {states} joint states ({args.seconds:g} s; latency {args.latency}, '
         f'jitter {args.jitter:g}), {result.impacts} impacts offline; replayed: '
-        f'{first.sent} commands, {first.strikes} strikes, implicit {inputs.implicit_commands}, '
+        f'{first.sent} commands, {first.cycle_count.strikes} strikes, '
+        f'implicit {inputs.implicit_commands}, '
         f'latency {dict(sorted(inputs.latency_seen.items()))}'
     )
     median, worst = statistics.median(rounds), max(rounds)

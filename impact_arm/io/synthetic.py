@@ -210,6 +210,7 @@ def driver_recording(
     applied) under the scene's controller sampled at ``rate`` — the reading of efforts of a
     ros2_control driver. The controller sees what is published, as over the topics."""
     from ..physics.control import CycleController
+    from ..physics.cycle_count import CycleCount
     from ..driver.arm import SimulatedArm
     from ..calibration.study import Study
 
@@ -217,9 +218,9 @@ def driver_recording(
     arm = SimulatedArm(sc, rate)
     ctrl = CycleController.for_scene(arm.model, sc.controller)
     rng = np.random.default_rng(seed)
-    rows, done, t_end = [], 0, t_max or sc.t_max
+    rows, count, t_end = [], CycleCount(cycles), t_max or sc.t_max
     tick = arm.sample()
-    while done < cycles and tick.t < t_end:
+    while count.completed < cycles and tick.t < t_end:
         before = ctrl.mode
         coordinates = arm.coordinates  # the wire's: the robot's joint coordinates
         arm.apply(
@@ -232,7 +233,7 @@ def driver_recording(
                 )
             )
         )
-        done += before == 'up' and ctrl.mode == 'down'
+        count.turn(before, ctrl.mode, tick.t)
         tick = arm.step()
         rows.append((tick.t, tick.position, tick.velocity, tick.effort, tick.wrench))
     noise = _default_noise(sc, noise)

@@ -45,6 +45,7 @@ from ..contract import (
     CycleMode,
 )
 from ..physics.control import CycleController, PidIntegrator
+from ..physics.cycle_count import CycleCount
 from ..driver.control_inputs import ControlInputs
 from ..physics.model import ArmModel
 from ..physics.stability import ChatterWatch, analyse
@@ -161,16 +162,13 @@ class Controller(Node):
     def _init_counts(self) -> None:
         """The counts /diagnostics reports, all zero, and the half the cycle begins in."""
         self.sent = 0
-        # down halves ended by a detected impact (the cycles struck) and the stamp at which
-        # the latest down half began: `impact-arm run` ends a run on them (an arm that
-        # bounces reports several impacts per cycle; its strike is the first contact after
-        # the down half began)
-        self.strikes = 0
-        self.down_half_start = 0.0
-        # cycles whose up half ended (the arm back through switch_height, the offline run's
-        # count); at ``cycles`` of them no further command is sent
-        self.cycles_completed = 0
-        self.finished = False
+        # the cycles struck (down halves ended by a detected impact), the stamp at which the
+        # latest down half began and the cycles completed (up halves ended: the arm back
+        # through switch_height, the offline run's count), told the cycle's half at each
+        # command: `impact-arm run` ends a run on them (an arm that bounces reports several
+        # impacts per cycle; its strike is the first contact after the down half began); at
+        # ``cycles`` completed no further command is sent
+        self.cycle_count = CycleCount(self.p.cycles)
         self._mode = self.ctrl.mode
         self._switches = self.ctrl.switches  # a re-arm sets the down half without a switch
 
@@ -399,29 +397,28 @@ class Controller(Node):
         )
 
     def _send(self, values: Sequence[float]) -> None:
-        if self.finished:
+        count = self.cycle_count
+        if count.done:
             return  # the cycles are done: the driver holds the last command
+        # the half since the previous command: a change with no switch is a re-arm's
         mode, self._mode = self._mode, self.ctrl.mode
         switched, self._switches = self.ctrl.switches != self._switches, self.ctrl.switches
-        if mode == 'up' and self._mode == 'down' and switched:
-            self.cycles_completed += 1
-            if self.p.cycles and self.cycles_completed >= self.p.cycles:
-                # before the next down half's first command: not one period of it is run
-                self.finished = True
-                self.get_logger().info(
-                    f'{self.cycles_completed} cycles completed: no further commands (cycles)'
-                )
-                self._publish_diagnostics()  # now: a run ends on it
-                return
         latest = self.inputs.latest
+        strikes = count.strikes
+        count.turn(
+            mode, self._mode, latest[0] if latest is not None else None, rearmed=not switched
+        )
+        if count.done:
+            # before the next down half's first command: not one period of it is run
+            self.get_logger().info(
+                f'{count.completed} cycles completed: no further commands (cycles)'
+            )
+            self._publish_diagnostics()  # now: a run ends on it
+            return
         self.chatter.add(latest[0] if latest is not None else 0.0, values)
         self._publish(values)
-        if mode != self._mode:
-            if self._mode == 'up':
-                self.strikes += 1
-                self._publish_diagnostics()  # now: a run ends on its count
-            elif self.inputs.latest is not None:
-                self.down_half_start = self.inputs.latest[0]
+        if count.strikes != strikes:
+            self._publish_diagnostics()  # now: a run ends on its count
 
     def _publish(self, values: Sequence[float]) -> None:
         self.pub.publish(self.wire_command.fill([float(v) for v in values]))
@@ -478,9 +475,9 @@ class Controller(Node):
         return contract.ControllerStatus(
             chatter=self.chatter.summary(),
             commands_sent=self.sent,
-            strikes=self.strikes,
-            cycles_completed=self.cycles_completed,
-            down_half_start=self.down_half_start,
+            strikes=self.cycle_count.strikes,
+            cycles_completed=self.cycle_count.completed,
+            down_half_start=self.cycle_count.down_half_start,
             repeated_states=inputs.repeated,
             latency_periods=len(inputs.in_flight()),
             latency_periods_max=inputs.latency_max,
@@ -493,7 +490,7 @@ class Controller(Node):
 
     def _diagnostics(self) -> DiagnosticArray:
         dropped = sum(self.inputs.dropped.values())
-        message = 'cycles completed' if self.finished else 'running'
+        message = 'cycles completed' if self.cycle_count.done else 'running'
         chatter = self.chatter.summary()
         if dropped:
             message = f'{dropped} inputs dropped'

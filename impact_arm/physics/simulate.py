@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 from .limits import LimitWatch
 from .control import CycleController
+from .cycle_count import CycleCount
 from .periods import advance_period, feed_events
 from .errors import SceneError, SimulationError
 from .impact import Impact
@@ -231,7 +232,9 @@ def run(
         ctrl = CycleController.for_scene(model, scene.controller)
     builder = ImpactBuilder(model)
     result = RunResult(scene=scene, impacts=builder.impacts)
-    cycles_done = 0
+    # the cycles completed: the kernel's switches (continuous control), the sampled
+    # controller's up-to-down changes (sampled control), as the controller node counts them
+    count = CycleCount(scene.cycles)
     impulse = [0.0, 0.0]
     last_publish = 0.0
     wall0 = time.perf_counter()
@@ -254,10 +257,6 @@ def run(
         integ.set_held_torque(tau)
         return mode_before, ctrl.mode
 
-    def count_switch(event: Event) -> None:
-        nonlocal cycles_done
-        cycles_done += event.kind == 'switch'
-
     def report(impacts: Iterable[tuple[Impact, list]]) -> None:
         """Impact records and their trace rows to the result, observers and progress."""
         for record, rows in impacts:
@@ -266,11 +265,11 @@ def run(
             if observer is not None and hasattr(observer, 'on_impact'):
                 observer.on_impact(record, rows)
             if progress:
-                progress(cycles_done, scene.cycles, len(builder.impacts), st.t)
+                progress(count.completed, scene.cycles, len(builder.impacts), st.t)
 
     def feed(events: Iterable[Event]) -> None:
         """Cycles, impact records, observers and progress for the located events."""
-        report(feed_events(integ, builder, events, count_switch))
+        report(feed_events(integ, builder, events, count.on_event))
 
     def publish(sample: Sample, tip_velocity: Sequence[float] | np.ndarray) -> None:
         if keep_samples:
@@ -285,7 +284,7 @@ def run(
         # continuous control: nothing happens on the sample grid, so the integrator's own
         # steps run on and the samples come from each step's continuous extension
         try:
-            _run_sampled(scene, integ, dt_pub, t_max, feed, publish, result, lambda: cycles_done)
+            _run_sampled(scene, integ, dt_pub, t_max, feed, publish, result, count)
         except SimulationError as exc:
             result.fail(exc)
         return _finish(result, integ, wall0)
@@ -303,7 +302,7 @@ def run(
                 result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')
                 break
             if t_next > st.t:
-                impacts, j = advance_period(integ, builder, t_next, count_switch)
+                impacts, j = advance_period(integ, builder, t_next, count.on_event)
                 impulse[0] += j[0]
                 impulse[1] += j[1]
                 impulse_since_ctl[0] += j[0]
@@ -312,8 +311,7 @@ def run(
             if ctrl and t_ctl <= t_next:
                 before, after = apply_control(t_ctl)
                 impulse_since_ctl = [0.0, 0.0]
-                if before == 'up' and after == 'down':
-                    cycles_done += 1
+                count.turn(before, after, t_ctl)
                 k_ctl += 1
             if t_pub <= t_next:
                 q, qd = st.y[:n].tolist(), st.y[n : 2 * n].tolist()
@@ -342,7 +340,7 @@ def run(
                     model.tip(q, qd)[2:],
                 )
                 k_pub += 1
-            if scene.cycles and cycles_done >= scene.cycles:
+            if count.done:
                 result.stop(StopReason.CYCLES_COMPLETED, f'{scene.cycles} cycles completed')
                 break
     except SimulationError as exc:  # keep what was simulated; the caller reports the error
@@ -361,7 +359,7 @@ def _finish(result, integ, wall0):
     return result
 
 
-def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
+def _run_sampled(scene, integ, dt, t_max, feed, publish, result, count):
     """``run`` with continuous control: samples every ``dt`` from the integrator's output
     rows (``PhaseIntegrator.start_output``), handed on as each kernel call ends (at most
     ``OUTPUT_CAPACITY`` rows held), events fed as they are located."""
@@ -409,7 +407,7 @@ def _run_sampled(scene, integ, dt, t_max, feed, publish, result, cycles_done):
         # stop where the cycle half changes: the samples after it carry the new mode
         events = integ.advance(t_final, stop_at_event=('contact', 'switch'))
         feed(events)
-        if scene.cycles and cycles_done() >= scene.cycles:
+        if count.done:
             # as on the sampled clock: the run ends with the first sample from then on
             if last_t < st.t:
                 next_sample = min(t_final, math.ceil(st.t / dt - 1e-9) * dt)
@@ -491,16 +489,16 @@ def _run_events(scene: Scene, t_max: float, options: IntegratorOptions, progress
     integ = PhaseIntegrator(model, options=options)
     builder = ImpactBuilder(model)
     result = RunResult(scene=scene, impacts=builder.impacts)
-    cycles = 0
+    count = CycleCount(scene.cycles)
     wall0 = time.perf_counter()
     try:
-        while integ.state.t < t_max and (not scene.cycles or cycles < scene.cycles):
+        while integ.state.t < t_max and not count.done:
             for event in integ.advance(t_max, stop_at_event=('switch',)):
-                cycles += event.kind == 'switch'
+                count.on_event(event)
                 builder.feed(event)
             if progress:
-                progress(cycles, scene.cycles, len(builder.impacts), integ.state.t)
-        if scene.cycles and cycles >= scene.cycles:
+                progress(count.completed, scene.cycles, len(builder.impacts), integ.state.t)
+        if count.done:
             result.stop(StopReason.CYCLES_COMPLETED, f'{scene.cycles} cycles completed')
         else:
             result.stop(StopReason.T_MAX_REACHED, f't_max = {t_max:g} s reached')

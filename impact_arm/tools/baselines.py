@@ -16,6 +16,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..physics import layout
+from ..physics.cycle_count import CycleCount
 from ..physics.integrator import Event, PhaseIntegrator
 from ..physics.impact import Impact
 from ..physics.metrics import ImpactBuilder
@@ -76,7 +77,7 @@ def run_scipy(
     g = np.zeros(len(model.surfaces) + 4)
     eq, P, I, surf = model.eq, integ._P, integ._I, model.surface_table
     nfev = 0
-    cycles = 0
+    count = CycleCount(scene.cycles)  # completed at each switch, as in our own event path
     wall0 = time.perf_counter()
 
     def make_event(slot: int) -> Callable[[float, np.ndarray], float]:
@@ -96,7 +97,7 @@ def run_scipy(
 
         return _terminal_rising(event)
 
-    while st.t < t_max and (not scene.cycles or cycles < scene.cycles):
+    while st.t < t_max and not count.done:
         slots = _armed_slots(integ)
         if st.phase == Phase.FREE:
             slots += [-1 - s for s in range(len(heights)) if st.levels[s] != heights[s]]
@@ -123,7 +124,7 @@ def run_scipy(
             st.levels[-1 - slots[i]] = heights[-1 - slots[i]]
             continue
         kind, surface, info = integ._apply_event(slots[i])
-        if kind == 'switch':
-            cycles += 1
-        builder.feed(Event(kind, st.t, surface, st.y.copy(), info))
+        event = Event(kind, st.t, surface, st.y.copy(), info)
+        count.on_event(event)
+        builder.feed(event)
     return builder.impacts, st.t, nfev, time.perf_counter() - wall0

@@ -25,7 +25,9 @@ from ..physics.model import ArmModel
 from ..physics.scene import Scene
 
 # an impact this soon after the previous one is a second strike of the same down-swing (the
-# article's cycle strikes every ~0.4 s; a second strike follows within a few ms)
+# article's cycle strikes every ~0.4 s; a second strike follows within a few ms). Told apart
+# by the contact times alone, not by the cycle's halves (physics/cycle_count.py): the study
+# counts impacts, a strike each, as the arm makes them
 SECOND_STRIKE_S = 0.05
 
 

@@ -421,6 +421,10 @@ class Run:
         self.published_until = 0.0
         self.rhs_evaluations = 0
         self.chatter = ''  # the controller's /diagnostics 'chatter'
+        # the controller's cycle counts (its CycleCount, physics/cycle_count.py) as its
+        # /diagnostics report them: not counted here from the cycle's halves, which the run
+        # never sees, but kept from messages that come at 1 Hz and at each strike: the
+        # largest count seen, and each strike count's down half start
         self.strikes = 0  # cycles whose down half an impact ended (the controller's count)
         self.down_half_start = {}  # strike count -> stamp at which that cycle's down half began
         self.cycles_completed = 0  # the controller's count of cycles whose up half ended
