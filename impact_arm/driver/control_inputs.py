@@ -426,6 +426,7 @@ class ControlInputs:
                 )
         tau = self.ctrl.update(t, q, qd, normal_force=self.normal_force, sensed=sensed)
         self.normal_force = None  # the latch covers one tick
+        self._note_up_switch(t)
         if (
             self.implicit_periods
             and self.predictor is not None
@@ -458,17 +459,21 @@ class ControlInputs:
             self.first_state = self.latest_joint
         self.send([tau[j] for j in self.order])
 
+    def _note_up_switch(self, t: float) -> None:
+        """Remember when (``t``) the cycle last switched to its up half: each tick, so that
+        the window counts from the switch even when the latency begins to vary later."""
+        ctrl = self.ctrl
+        if ctrl.mode is CycleMode.UP and ctrl.switches != self._up_switch:
+            self._up_switch, self._up_since = ctrl.switches, t
+
     def _after_impact(self, t: float) -> bool:
         """Whether the sample at ``t`` lies within ``implicit_window`` of the cycle's latest
         switch to its up half (always with an infinite window)."""
         if math.isinf(self.implicit_window):
             return True
-        ctrl = self.ctrl
-        if ctrl.mode is not CycleMode.UP:
+        if self.ctrl.mode is not CycleMode.UP or self._up_since is None:
             return False
-        if ctrl.switches != self._up_switch:
-            self._up_switch, self._up_since = ctrl.switches, t
-        return self._up_since is not None and t - self._up_since < self.implicit_window
+        return t - self._up_since < self.implicit_window
 
     # ------------------------------------------------------------------------- latency
     def in_flight(self) -> list[list[float]]:
