@@ -202,9 +202,7 @@ def _direct_cycle(args) -> float:
     from impact_arm.tools.latency_study import closed_loop
 
     scene = load_scene(args.scene or resolve_scene_path('paper'))
-    run = closed_loop(scene, 0, 0, t_max=0.45 * (CYCLES + 2))
-    cycles = run.cycle_periods(skip=5)
-    return sum(cycles) / len(cycles)
+    return closed_loop(scene, 0, 0, t_max=0.45 * (CYCLES + 2)).mean_cycle(skip=5)
 
 
 def _latency_shares(histogram: str) -> tuple[int | None, float]:

@@ -58,6 +58,11 @@ class LoopResult:
         t = [x for i, x in enumerate(self.t_contact) if i >= skip]
         return [b - a for a, b in zip(t, t[1:]) if b - a >= SECOND_STRIKE_S]
 
+    def mean_cycle(self, skip: int = 5) -> float:
+        """The mean of ``cycle_periods(skip)`` [s] (nan without a whole cycle)."""
+        periods = self.cycle_periods(skip)
+        return sum(periods) / len(periods) if periods else math.nan
+
 
 def closed_loop(
     scene: Scene,

@@ -595,17 +595,14 @@ def test_an_anticipated_impact_keeps_the_cycle_of_the_run_without_latency(scene,
     cycle is longer by at least 0.2 % (0.5 % at 4 periods, 1.5 % at 8)."""
     from impact_arm.tools.latency_study import closed_loop
 
-    def cycle(run):
-        return sum(run.cycle_periods()) / len(run.cycle_periods())
-
     # (12 strikes; at 8 periods the first comes 10 ms early: no 13th falls in so)
     base = closed_loop(scene, 0, 0, t_max=4.8)
     ahead = closed_loop(scene, latency, latency, t_max=4.8)
     late = closed_loop(scene, latency, latency, t_max=4.8, anticipate_impacts=False)
     for run in (ahead, late):
         assert not run.failed and run.second_strikes == 0 and run.impacts == base.impacts
-    assert cycle(ahead) == pytest.approx(cycle(base), rel=1e-3)
-    assert cycle(late) > cycle(base) * 1.002
+    assert ahead.mean_cycle() == pytest.approx(base.mean_cycle(), rel=1e-3)
+    assert late.mean_cycle() > base.mean_cycle() * 1.002
     assert max(ahead.delta_m) == pytest.approx(max(base.delta_m), rel=0.01)
 
 
@@ -617,16 +614,13 @@ def test_an_anticipated_impact_keeps_the_cycle_when_the_latency_varies(scene, se
     a period before the predicted state); switching on the sampled impact it is longer."""
     from impact_arm.tools.latency_study import closed_loop
 
-    def cycle(run):
-        return sum(run.cycle_periods()) / len(run.cycle_periods())
-
     base = closed_loop(scene, 0, 0, t_max=5.0)
     kw = dict(jitter=0.7, seed=seed)
     ahead = closed_loop(scene, 2, -1, 5.0, **kw)
     late = closed_loop(scene, 2, -1, 5.0, anticipate_impacts=False, **kw)
     assert not ahead.failed and ahead.second_strikes == 0 and ahead.impacts == base.impacts
-    assert cycle(ahead) == pytest.approx(cycle(base), rel=0.01)
-    assert cycle(late) > cycle(ahead)
+    assert ahead.mean_cycle() == pytest.approx(base.mean_cycle(), rel=0.01)
+    assert late.mean_cycle() > ahead.mean_cycle()
     assert max(ahead.delta_m) == pytest.approx(max(base.delta_m), rel=0.01)
 
 
@@ -638,9 +632,6 @@ def test_the_implicit_law_in_the_rebound_only_keeps_the_cycle(scene, latency, sp
     the cycle within 1 % of it, where the law implicit throughout slows it by more."""
     from impact_arm.tools.latency_study import closed_loop
 
-    def cycle(run):
-        return sum(run.cycle_periods()) / len(run.cycle_periods())
-
     base = closed_loop(scene, 0, 0, t_max=6.0)
     for seed in (1, 2, 3):
         kw = dict(jitter=0.5, seed=seed, spread=spread)
@@ -648,8 +639,8 @@ def test_the_implicit_law_in_the_rebound_only_keeps_the_cycle(scene, latency, sp
         always = closed_loop(scene, latency, -1, 6.0, implicit_window=math.inf, **kw)
         for run in (rebound, always):
             assert not run.failed and run.second_strikes == 0 and run.impacts == base.impacts
-        assert cycle(rebound) == pytest.approx(cycle(base), rel=0.01)
-        assert cycle(always) > cycle(rebound)
+        assert rebound.mean_cycle() == pytest.approx(base.mean_cycle(), rel=0.01)
+        assert always.mean_cycle() > rebound.mean_cycle()
         assert max(rebound.delta_m) == pytest.approx(max(base.delta_m), rel=0.03)
 
 

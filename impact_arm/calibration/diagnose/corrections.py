@@ -177,13 +177,19 @@ def _regular_stamps(rec: JointRecording) -> JointRecording:
         out.wrench_t = a + b * kw
     if rec.plates_t is not None:
         out.plates_t = a + b * np.round((rec.plates_t - a) / b)
+    return _from_zero(out, rec.t0_ns)
+
+
+def _from_zero(out: JointRecording, t0_ns: int) -> JointRecording:
+    """``out`` with its first stamp moved to 0 (and its wrench and plate stamps with it),
+    ``t0_ns`` (the source's origin) advanced by as much."""
     shift = out.t[0]
     out.t = out.t - shift
     if out.wrench_t is not None:
         out.wrench_t = out.wrench_t - shift
     if out.plates_t is not None:
         out.plates_t = out.plates_t - shift
-    out.t0_ns = rec.t0_ns + round(shift * 1e9)
+    out.t0_ns = t0_ns + round(shift * 1e9)
     return out
 
 
@@ -200,11 +206,4 @@ def _earlier_efforts(rec: JointRecording, latency: float) -> JointRecording:
         velocity=rec.velocity[keep],
         effort=effort.reshape(-1, rec.n),
     )
-    shift = out.t[0]
-    out.t = out.t - shift
-    if out.wrench_t is not None:
-        out.wrench_t = out.wrench_t - shift
-    if out.plates_t is not None:
-        out.plates_t = out.plates_t - shift
-    out.t0_ns = rec.t0_ns + round(shift * 1e9)
-    return out
+    return _from_zero(out, rec.t0_ns)
