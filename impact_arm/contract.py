@@ -153,8 +153,11 @@ IMPACT_MARKERS = '/impact_markers'
 # viewer's table shows after a seek
 IMPACT_TABLE = '/impact_table'
 E_STOP = '/e_stop'  # std_msgs/msg/Bool: true = zero torque, latched (simulator)
-# builtin_interfaces/msg/Time: the stamp of the newest /joint_states the recorder has written.
-# In lockstep the simulator stays at most ``recorder_window`` periods ahead of it, so a
+# the simulator's topics with one stamped sample per period (the held initial state included)
+PERIOD_TOPICS = (JOINT_STATES, CONTACT_WRENCH, CONTACT_FORCE_PEAK, SURFACE_MOUNTS)
+# builtin_interfaces/msg/Time: the stamp up to which the recorder has written every one of the
+# ``PERIOD_TOPICS`` it records that has a publisher (none until each has a sample). In
+# lockstep the simulator stays at most ``recorder_window`` periods ahead of it, so a
 # recording is complete however long the recorder stalls (docs/nodes.md, "Recording in
 # lockstep").
 RECORDER_PROGRESS = '/recorder/progress'

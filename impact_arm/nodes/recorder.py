@@ -9,8 +9,11 @@ also holds the scene YAML (attachment and metadata), the parameters of ``param_n
 start and at shutdown, the package version and the samples lost on the way per topic (from
 the writers' sequence numbers: ``contract.LOSSES_METADATA``, also on /diagnostics).
 
-After each drain the recorder publishes the newest /joint_states stamp it has written on
-/recorder/progress: a lockstep simulator with ``recorder_window`` waits for it.
+After each drain the recorder publishes on /recorder/progress the stamp up to which it has
+written every per-period topic it records (``contract.PERIOD_TOPICS``) that has a publisher:
+a lockstep simulator with ``recorder_window`` waits for it, and `impact-arm run` starts the
+controller only once it has one (what a per-period topic sent before its writer matched the
+recorder's reader was not for us, and its first stamp proves the match).
 
 With a ``scene``, the file also shows the arm in 3D by itself (docs/topics.md): the recorder
 derives /robot_description and /tf_static (once, at the start), /tf and /impact_markers (at
@@ -209,7 +212,8 @@ class Recorder(Node):
     def _init_progress(self) -> None:
         """What is subscribed, matched, flowing, written and asked so far: nothing."""
         self.subs: dict[str, Subscription[Any]] = {}
-        self.written_until: int | None = None  # ns: newest /joint_states stamp written
+        self.written_until: int | None = None  # ns: every per-period topic written up to here
+        self.period_written: dict[str, int] = {}  # per-period topic -> newest stamp written
         self.announced: int | None = None  # ns: the newest published on RECORDER_PROGRESS
         self.matched: set[str] = set()  # topics whose subscription has matched a publisher
         self.flowing: set[str] = set()  # topics a sample has arrived on
@@ -337,17 +341,30 @@ class Recorder(Node):
             if self.failed:
                 break
             self._store(topic, data, received, published)
-        written = self.written_until
+        written = self.written_until = self._written_every_period_topic()
         if written is not None and written != self.announced and not self.failed:
             self.announced = written
             sec, nanosec = divmod(written, 1_000_000_000)
             self.progress.publish(Time(sec=sec, nanosec=nanosec))
 
+    def _written_every_period_topic(self) -> int | None:
+        """The newest stamp [ns] every recorded per-period topic has been written up to;
+        None while one that has a publisher in the graph has no sample written yet (a topic
+        nobody publishes, a scene's plates when it has none, is not waited for)."""
+        unwritten = [
+            t for t in contract.PERIOD_TOPICS if t in self.subs and t not in self.period_written
+        ]
+        # asks the graph only until each topic has its first sample
+        if any(self.count_publishers(t) > 0 for t in unwritten):
+            return None
+        return min(self.period_written.values(), default=None)
+
     @staticmethod
     def _stamp(topic: str, data: bytes) -> int | None:
-        """The stamp [ns] of a /joint_states or /clock sample (both begin with a
-        builtin_interfaces/Time), None for other topics and for one that is no time."""
-        if topic not in (contract.JOINT_STATES, contract.CLOCK):
+        """The stamp [ns] of a sample of a per-period topic or /clock (each begins with a
+        builtin_interfaces/Time, in its header or as itself), None for other topics and for
+        one that is no time."""
+        if topic not in contract.PERIOD_TOPICS and topic != contract.CLOCK:
             return None
         try:
             stamp = header_stamp_ns(data)
@@ -384,7 +401,8 @@ class Recorder(Node):
             if self.by_stamps:
                 # simulated time, one clock for the whole file: a viewer plays it at 1x
                 # and its index is in stamp order
-                self.now_ns = self.now_ns if stamp is None else stamp
+                if stamp is not None and topic in (contract.JOINT_STATES, contract.CLOCK):
+                    self.now_ns = stamp
                 received = self.now_ns
                 # a report is logged when its impact ended, as offline files log it: a
                 # recorder that was descheduled receives it only after the states that
@@ -405,8 +423,8 @@ class Recorder(Node):
                 )
             self.writer.write(topic, data, received, published)
             self.received += 1
-            if topic == contract.JOINT_STATES and stamp is not None:
-                self.written_until = stamp
+            if stamp is not None and topic in contract.PERIOD_TOPICS:
+                self.period_written[topic] = stamp
             if self.visuals is not None:
                 self._derive_visuals(self.visuals, topic, data, received, record)
         except RecordingError as e:

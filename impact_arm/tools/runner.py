@@ -345,9 +345,10 @@ def integrating_wall(status: SimulatorStatus | None, run_wall: float) -> float:
 
 
 class RecorderProgress:
-    """What the recorder says it has written: the newest joint-state stamp on
-    /recorder/progress (ns; None until it says anything). A progress message proves the
-    recorder is writing the simulator's stream, not merely subscribed to it."""
+    """What the recorder says it has written: on /recorder/progress, the stamp up to which
+    it has written every per-period topic (ns; None until it says anything). A progress
+    message proves the recorder is writing each of the simulator's streams, not merely
+    subscribed to them."""
 
     def __init__(self, node: Node) -> None:
         from builtin_interfaces.msg import Time
@@ -387,10 +388,10 @@ def ready_for_commands(
     """Whether the controller may start, as ``node`` sees the graph: the simulator publishes,
     its command reader (and the recorder's) are known and, with a recorder (``recorder``: a
     RecorderProgress), the recorder's reader subscribes to every simulator topic (``topics``)
-    and the recorder has said it wrote joint states (the simulator publishes its held initial state
-    until the first command). The arm starts moving with the first command and nothing must go
-    unrecorded: a subscription in the graph is not a matched reader (it may match seconds
-    later); a written sample is proof."""
+    and the recorder has said it wrote every per-period topic (the simulator publishes its
+    held initial state on each until the first command). The arm starts moving with the
+    first command and nothing must go unrecorded: a subscription in the graph is not a
+    matched reader (it may match seconds later); a written sample is proof."""
     listeners = 1 if recorder is not None else 0
     if not (
         node.count_publishers(JOINT_STATES) >= 1

@@ -320,6 +320,75 @@ def test_says_recording_once_every_topic_has_a_publisher(ros_env, tmp_path):
     assert matched == {'/joint_states', '/contact_wrench'}, lines
 
 
+def test_progress_waits_for_every_per_period_topic(probe, ros_env, tmp_path):
+    """/recorder/progress says how far every per-period topic with a publisher has been
+    written: not while one of them has nothing written yet, then the older of the newest
+    stamps (what `impact-arm run` and a lockstep simulator rely on to lose no period)."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import WrenchStamped
+    from sensor_msgs.msg import JointState
+
+    out = tmp_path / 'progress.mcap'
+    rec_args = node_args(
+        RECORDER, f'output:={out}', 'topics:=[/joint_states,/contact_wrench]', 'flush_interval:=0.1'
+    )
+    progress = []
+    with probe.lock:
+        sub = probe.node.create_subscription(
+            Time,
+            contract.RECORDER_PROGRESS,
+            lambda m: progress.append(m.sec + 1e-9 * m.nanosec),
+            contract.PROGRESS_QOS.to_rclpy(),
+        )
+    states = probe.publisher(JointState, contract.JOINT_STATES)
+    wrenches = probe.publisher(WrenchStamped, contract.CONTACT_WRENCH)
+
+    def state(sec):
+        msg = JointState(name=['a'], position=[0.0])
+        msg.header.stamp.sec = sec
+        return msg
+
+    def wrench(sec):
+        msg = WrenchStamped()
+        msg.header.stamp.sec = sec
+        return msg
+
+    def publishing(publish, until, timeout=20.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            publish()
+            if until():
+                return True
+            time.sleep(0.05)
+        return False
+
+    try:
+        with start_process(rec_args, ros_env, tmp_path, 'recorder') as rec:
+            assert wait_for(lambda: 'every topic has a publisher' in rec.stderr, 20), rec.stderr
+            # joint states written, the wrench's publisher silent: no progress
+            assert publishing(
+                lambda: states.publish(state(3)),
+                lambda: topic_count(out, contract.JOINT_STATES) >= 5,
+            ), rec.stderr
+            time.sleep(0.5)
+            assert progress == [], progress
+            assert publishing(lambda: wrenches.publish(wrench(2)), lambda: progress), rec.stderr
+            assert wait_for(lambda: progress[-1] == 2.0, 5), progress
+            assert publishing(
+                lambda: wrenches.publish(wrench(5)), lambda: topic_count(out, '/contact_wrench') > 5
+            ), rec.stderr
+            time.sleep(0.3)
+            assert progress[-1] == 3.0, progress  # the joint states' newest
+            rec.stop()
+            assert rec.popen.returncode == 0, rec.stderr
+    finally:
+        # nothing of this test stays in the module's graph for the next one
+        with probe.lock:
+            probe.node.destroy_subscription(sub)
+            probe.node.destroy_publisher(states)
+            probe.node.destroy_publisher(wrenches)
+
+
 def test_simulator_exit_waits_for_a_lagging_recorder(ros_env, tmp_path):
     """The end of a run: the simulator exits right after the last impact report, while a
     recorder on a loaded machine may not have taken the last samples yet (stopped here with
