@@ -58,6 +58,14 @@ class PeriodPublishers:
         # someone listens there (updated at tf_rate; every _visuals.LISTENER_CHECK s while
         # nobody listens to the 3D view)
         self.hw_states_wanted = False
+        # realtime: the per-period topics are published only while a reader is matched
+        # (refreshed with the topic hardware's, below); lockstep: always, each period is
+        # what a controller and a recorder wait for
+        self.only_to_readers = not lockstep
+        # every ``joint_states_gap``-th period's hardware state is left out (0: none)
+        self.hw_gap = p.joint_states_gap
+        self.hw_until_gap = p.joint_states_gap
+        self.hw_gaps = 0  # periods left out so far
         zeros = [0.0] * len(joint_names)
         fields = ('position', 'velocity', 'effort')
         self.hw_joints = PatchedMessage(
@@ -106,19 +114,29 @@ class PeriodPublishers:
             scene,
             p.tf_rate,
             p.publish_tf,
-            on_timer=self._check_hw_listeners,
+            on_timer=self._check_listeners,
             rod_radius=p.rod_radius,
         )
         self.failures = 0
         # publisher -> samples published (loss accounting); keyed by the publisher, not its
         # topic_name, which asks rcl under the handle's lock on every call
         self.sent: collections.Counter[Publisher[Any]] = collections.Counter()
+        self.read: set[Publisher[Any]] = set(self.per_period())  # those published
+        self._check_listeners()
+
+    def per_period(self) -> list[Publisher[Any]]:
+        """The publishers of /joint_states, /contact_wrench, /contact_force_peak and, with a
+        mounted surface, /surface_mounts."""
+        return [self.joints, self.wrench, self.peak] + ([self.mounts] if self.mounts else [])
 
     def publish(self, tick: Tick) -> None:
         # the controller waits for this period's wrench and joint state: /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-        self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
-        self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
+        read = self.read
+        if self.wrench in read:
+            self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
+        if self.peak in read:
+            self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
         if self._locked_tails is not None:
             values, zeros = self._locked_tails
             states = self.wire_joints.fill(
@@ -126,11 +144,12 @@ class PeriodPublishers:
             )
         else:
             states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
-        if self.mounts is not None:
+        if self.mounts is not None and self.mounts in read:
             plates = tick.plates
             self._send(self.mounts, self.wire_mounts.fill(plates[0::2] + plates[1::2], (sec, nsec)))
-        self._send(self.joints, states)
-        if self.hw_states_wanted:
+        if self.joints in read:
+            self._send(self.joints, states)
+        if self.hw_states_wanted and not self._hw_gap_now():
             if self.hw_joints is not self.wire_joints:
                 hw = self.hw_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
             else:
@@ -139,6 +158,20 @@ class PeriodPublishers:
         self.visuals.observe(tick)
         if self.clock is not None:
             self._send(self.clock, self.wire_clock.fill((), (sec, nsec)))
+
+    def _hw_gap_now(self) -> bool:
+        """Whether this period's hardware state is left out: TopicBasedSystem's read takes
+        one queued state per update, the oldest, so a state delivered after its update's
+        read stays queued and adds a period to every later one; only an update with no new
+        state shrinks that queue (docs/ros2_control.md, "The queue of states")."""
+        if not self.hw_gap:
+            return False
+        self.hw_until_gap -= 1
+        if self.hw_until_gap > 0:
+            return False
+        self.hw_until_gap = self.hw_gap
+        self.hw_gaps += 1
+        return True
 
     def report(self, tick: Tick) -> None:
         """Impact reports once the period's sensor messages are out: their JSON takes
@@ -167,7 +200,12 @@ class PeriodPublishers:
         counts = sorted((p.topic_name, n) for p, n in self.sent.items())
         return 'samples sent: ' + ', '.join(f'{t} {n}' for t, n in counts)
 
-    def _check_hw_listeners(self) -> None:
-        # asking DDS for the subscription count costs ~3 us: with the 3D view's timer, not
-        # each period
+    def _check_listeners(self) -> None:
+        """Who reads what, asked with the 3D view's timer (at tf_rate, every
+        _visuals.LISTENER_CHECK s while nobody views): asking DDS costs ~3 us a topic, and a
+        sample nobody reads costs the loop's thread its whole publication (a ros2_control
+        set-up reads two or three of the five topics)."""
         self.hw_states_wanted = self.hw_states.get_subscription_count() > 0
+        if self.only_to_readers:
+            # a set replaced whole: the loop thread reads it without a lock
+            self.read = {pub for pub in self.per_period() if pub.get_subscription_count() > 0}

@@ -41,6 +41,7 @@ class SimulatorParameters:
     frame_id: str
     joint_commands_topic: str
     joint_states_topic: str
+    joint_states_gap: int
     tf_rate: float
     recorder_window: int
     rod_radius: float

@@ -234,6 +234,21 @@ _PARAMS_AFTER_JOINTS = (
         doc='; published while someone subscribes',
     ),
     Param(
+        'joint_states_gap',
+        0,
+        'periods between two periods whose state is left out on joint_states_topic '
+        '(0: none), so that a driver taking one queued state per update '
+        '(topic_based_ros2_control) does not keep a standing queue of old states',
+        'int',
+        low=0,
+        high=100000,
+        read_only=True,
+        doc=(
+            '; an update that finds its queue empty keeps the previous state '
+            '(docs/ros2_control.md, "The queue of states")'
+        ),
+    ),
+    Param(
         'tf_rate',
         DEFAULT_TF_RATE,
         'rate of /tf and /impact_markers [Hz] (wall clock)',
@@ -290,6 +305,11 @@ def check(p: SimulatorParameters, names: Sequence[str]) -> list[int]:
     if p.mode is SimulatorMode.REALTIME and p.release_after > 0.0:
         raise ParameterError(
             f'parameter release_after = {p.release_after}: lockstep only (realtime: 0.0)'
+        )
+    if p.mode is SimulatorMode.LOCKSTEP and p.joint_states_gap:
+        raise ParameterError(
+            f'parameter joint_states_gap = {p.joint_states_gap}: realtime only (lockstep: 0, '
+            f'a stack paced by the simulator takes each state it is sent)'
         )
     if p.mode is SimulatorMode.REALTIME and p.rate_factor == 0.0:
         raise ParameterError(

@@ -4,6 +4,7 @@ on their own topic, the robot description and markers (real node processes, rand
 import itertools
 import math
 import os
+import re
 import threading
 import time
 
@@ -136,6 +137,73 @@ def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_
     assert len(common) > PERIODS // 2
     assert all(hw_name[s] == by_name[s][0] for s in common)
     assert rejected(diags[-1]) == 2
+
+
+def test_joint_states_gap_leaves_out_every_nth_hardware_state(probe, ros_env, tmp_path):
+    """``joint_states_gap:=N`` (realtime): the hardware-state topic lacks one period in N, the
+    same one of every N, while /joint_states has each; refused in lockstep. And in realtime
+    a per-period topic nobody reads is not published (here /contact_wrench and
+    /contact_force_peak: the simulator's own count of what it sent)."""
+    from collections import Counter
+
+    from sensor_msgs.msg import JointState
+
+    from std_msgs.msg import Float64MultiArray
+
+    gap, period_ns = 7, 1_000_000  # stamps 1 ms apart; at rate_factor 0.25, 250 a wall second
+    states, hw_states = set(), set()
+    with probe.lock:
+        subs = [
+            probe.node.create_subscription(
+                JointState, '/joint_states', lambda m: states.add(stamp(m)), 1000
+            ),
+            probe.node.create_subscription(
+                JointState, '/robot_joint_states', lambda m: hw_states.add(stamp(m)), 1000
+            ),
+        ]
+        commands = probe.node.create_publisher(Float64MultiArray, '/effort_controller/commands', 10)
+    try:
+        params = ('mode:=realtime', 'rate_factor:=0.25', f'joint_states_gap:={gap}')
+        with start_process(simulator(*params), ros_env, tmp_path, 'sim_gap') as sim:
+            # time runs from the first command on (a small torque: the brakes release)
+            assert wait_for(
+                lambda: (
+                    commands.publish(Float64MultiArray(data=[0.01, 0.0]))
+                    or len(hw_states) > 30 * gap
+                    or not sim.alive()
+                ),
+                60,
+            ), sim.stderr
+            sim.stop()
+        sent = re.search(r'samples sent: (.*)', sim.stderr)
+        assert sent, sim.stderr
+        counts = dict(item.rsplit(' ', 1) for item in sent.group(1).strip().split(', '))
+        assert int(counts['/joint_states']) > 30 * gap
+        assert (
+            int(counts.get('/contact_wrench', 0)) == int(counts.get('/contact_force_peak', 0)) == 0
+        )
+        with start_process(
+            simulator('mode:=lockstep', f'joint_states_gap:={gap}'), ros_env, tmp_path, 'sim_ls'
+        ) as refused:
+            assert wait_for(lambda: not refused.alive(), 30)
+        assert refused.popen.returncode != 0
+        assert 'parameter joint_states_gap = 7: realtime only' in refused.stderr, refused.stderr
+    finally:
+        with probe.lock:
+            for sub in subs:
+                probe.node.destroy_subscription(sub)
+            probe.node.destroy_publisher(commands)
+    # the periods both topics could have carried: from the first to the last hardware state
+    first, last = min(hw_states), max(hw_states)
+    periods = {round(t / period_ns) for t in states if first <= t <= last}
+    seen = {round(t / period_ns) for t in hw_states}
+    assert len(periods) > 30 * gap
+    missing = Counter(k % gap for k in periods - seen)
+    assert missing, 'no period left out'
+    left_out, _ = missing.most_common(1)[0]
+    assert not any(k % gap == left_out for k in seen)  # that period of every N, never sent
+    others = [k for k in periods if k % gap != left_out]
+    assert len(seen & set(others)) >= 0.95 * len(others)  # (a sample lost on the way aside)
 
 
 # The stand-in stack (ros2control_standin.py) at up to 250 updates per wall second: the
