@@ -62,8 +62,9 @@ class PeriodPublishers:
         # (refreshed with the topic hardware's, below); lockstep: always, each period is
         # what a controller and a recorder wait for
         self.only_to_readers = not lockstep
-        # every ``joint_states_gap``-th period's hardware state is left out (0: none)
-        self.hw_gap = p.joint_states_gap
+        # realtime: every ``joint_states_gap``-th period's hardware state is left out (0:
+        # none); lockstep: none (a stack the simulator paces waits for each)
+        self.hw_gap = 0 if lockstep else p.joint_states_gap
         self.hw_until_gap = p.joint_states_gap
         self.hw_gaps = 0  # periods left out so far
         zeros = [0.0] * len(joint_names)
