@@ -16,6 +16,7 @@ from std_msgs.msg import String
 
 from .. import contract
 from ..contract import CLOCK, CONTACT_FORCE_PEAK, CONTACT_WRENCH, IMPACT_REPORT, JOINT_STATES
+from ..driver.state_gaps import REBOUND_QUIET_S, StateGaps
 from ..io.scene_visuals import mounted_surfaces
 from ..io.wire import PatchedMessage
 from ._visuals import VisualsPublisher
@@ -62,11 +63,11 @@ class PeriodPublishers:
         # (refreshed with the topic hardware's, below); lockstep: always, each period is
         # what a controller and a recorder wait for
         self.only_to_readers = not lockstep
-        # realtime: every ``joint_states_gap``-th period's hardware state is left out (0:
-        # none); lockstep: none (a stack the simulator paces waits for each)
-        self.hw_gap = 0 if lockstep else p.joint_states_gap
-        self.hw_until_gap = p.joint_states_gap
-        self.hw_gaps = 0  # periods left out so far
+        # realtime: one period's hardware state in ``joint_states_gap`` left out, none in
+        # contact and its rebound; lockstep: none (a stack the simulator paces waits for each)
+        self.hw_gaps = StateGaps(
+            0 if lockstep else p.joint_states_gap, round(REBOUND_QUIET_S * p.publish_rate)
+        )
         zeros = [0.0] * len(joint_names)
         fields = ('position', 'velocity', 'effort')
         self.hw_joints = PatchedMessage(
@@ -150,7 +151,7 @@ class PeriodPublishers:
             self._send(self.mounts, self.wire_mounts.fill(plates[0::2] + plates[1::2], (sec, nsec)))
         if self.joints in read:
             self._send(self.joints, states)
-        if self.hw_states_wanted and not self._hw_gap_now():
+        if self.hw_states_wanted and not self.hw_gaps.leave_out(tick.force_peak > 0.0):
             if self.hw_joints is not self.wire_joints:
                 hw = self.hw_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
             else:
@@ -159,20 +160,6 @@ class PeriodPublishers:
         self.visuals.observe(tick)
         if self.clock is not None:
             self._send(self.clock, self.wire_clock.fill((), (sec, nsec)))
-
-    def _hw_gap_now(self) -> bool:
-        """Whether this period's hardware state is left out: TopicBasedSystem's read takes
-        one queued state per update, the oldest, so a state delivered after its update's
-        read stays queued and adds a period to every later one; only an update with no new
-        state shrinks that queue (docs/ros2_control.md, "The queue of states")."""
-        if not self.hw_gap:
-            return False
-        self.hw_until_gap -= 1
-        if self.hw_until_gap > 0:
-            return False
-        self.hw_until_gap = self.hw_gap
-        self.hw_gaps += 1
-        return True
 
     def report(self, tick: Tick) -> None:
         """Impact reports once the period's sensor messages are out: their JSON takes
