@@ -59,10 +59,6 @@ class PeriodPublishers:
         # someone listens there (updated at tf_rate; every _visuals.LISTENER_CHECK s while
         # nobody listens to the 3D view)
         self.hw_states_wanted = False
-        # realtime: the per-period topics are published only while a reader is matched
-        # (refreshed with the topic hardware's, below); lockstep: always, each period is
-        # what a controller and a recorder wait for
-        self.only_to_readers = not lockstep
         # realtime: one period's hardware state in ``joint_states_gap`` left out, none in
         # contact and its rebound; lockstep: none (a stack the simulator paces waits for each)
         self.hw_gaps = StateGaps(
@@ -116,29 +112,19 @@ class PeriodPublishers:
             scene,
             p.tf_rate,
             p.publish_tf,
-            on_timer=self._check_listeners,
+            on_timer=self._check_hw_listeners,
             rod_radius=p.rod_radius,
         )
         self.failures = 0
         # publisher -> samples published (loss accounting); keyed by the publisher, not its
         # topic_name, which asks rcl under the handle's lock on every call
         self.sent: collections.Counter[Publisher[Any]] = collections.Counter()
-        self.read: set[Publisher[Any]] = set(self.per_period())  # those published
-        self._check_listeners()
-
-    def per_period(self) -> list[Publisher[Any]]:
-        """The publishers of /joint_states, /contact_wrench, /contact_force_peak and, with a
-        mounted surface, /surface_mounts."""
-        return [self.joints, self.wrench, self.peak] + ([self.mounts] if self.mounts else [])
 
     def publish(self, tick: Tick) -> None:
         # the controller waits for this period's wrench and joint state: /clock after them
         sec, nsec = divmod(round(tick.t * 1e9), 1_000_000_000)
-        read = self.read
-        if self.wrench in read:
-            self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
-        if self.peak in read:
-            self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
+        self._send(self.wrench, self.wire_wrench.fill(tick.wrench, (sec, nsec)))
+        self._send(self.peak, self.wire_peak.fill((tick.force_peak,), (sec, nsec)))
         if self._locked_tails is not None:
             values, zeros = self._locked_tails
             states = self.wire_joints.fill(
@@ -146,11 +132,10 @@ class PeriodPublishers:
             )
         else:
             states = self.wire_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
-        if self.mounts is not None and self.mounts in read:
+        if self.mounts is not None:
             plates = tick.plates
             self._send(self.mounts, self.wire_mounts.fill(plates[0::2] + plates[1::2], (sec, nsec)))
-        if self.joints in read:
-            self._send(self.joints, states)
+        self._send(self.joints, states)
         if self.hw_states_wanted and not self.hw_gaps.leave_out(tick.force_peak > 0.0):
             if self.hw_joints is not self.wire_joints:
                 hw = self.hw_joints.fill(tick.position + tick.velocity + tick.effort, (sec, nsec))
@@ -188,12 +173,7 @@ class PeriodPublishers:
         counts = sorted((p.topic_name, n) for p, n in self.sent.items())
         return 'samples sent: ' + ', '.join(f'{t} {n}' for t, n in counts)
 
-    def _check_listeners(self) -> None:
-        """Who reads what, asked with the 3D view's timer (at tf_rate, every
-        _visuals.LISTENER_CHECK s while nobody views): asking DDS costs ~3 us a topic, and a
-        sample nobody reads costs the loop's thread its whole publication (a ros2_control
-        set-up reads two or three of the five topics)."""
+    def _check_hw_listeners(self) -> None:
+        # asking DDS for the subscription count costs ~3 us: with the 3D view's timer, not
+        # each period
         self.hw_states_wanted = self.hw_states.get_subscription_count() > 0
-        if self.only_to_readers:
-            # a set replaced whole: the loop thread reads it without a lock
-            self.read = {pub for pub in self.per_period() if pub.get_subscription_count() > 0}

@@ -4,7 +4,6 @@ on their own topic, the robot description and markers (real node processes, rand
 import itertools
 import math
 import os
-import re
 import threading
 import time
 
@@ -144,9 +143,7 @@ def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_
 
 def test_joint_states_gap_leaves_out_every_nth_hardware_state(probe, ros_env, tmp_path):
     """``joint_states_gap:=N`` (realtime): the hardware-state topic lacks one period in N, the
-    same one of every N, while /joint_states has each. And in realtime
-    a per-period topic nobody reads is not published (here /contact_wrench and
-    /contact_force_peak: the simulator's own count of what it sent)."""
+    same one of every N, while /joint_states has each."""
     from collections import Counter
 
     from sensor_msgs.msg import JointState
@@ -178,13 +175,6 @@ def test_joint_states_gap_leaves_out_every_nth_hardware_state(probe, ros_env, tm
                 60,
             ), sim.stderr
             sim.stop()
-        sent = re.search(r'samples sent: (.*)', sim.stderr)
-        assert sent, sim.stderr
-        counts = dict(item.rsplit(' ', 1) for item in sent.group(1).strip().split(', '))
-        assert int(counts['/joint_states']) > 30 * gap
-        assert (
-            int(counts.get('/contact_wrench', 0)) == int(counts.get('/contact_force_peak', 0)) == 0
-        )
     finally:
         with probe.lock:
             for sub in subs:
