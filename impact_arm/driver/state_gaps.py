@@ -5,10 +5,10 @@ queued: a state delivered after the read it was meant for stays queued, and ever
 read is a period late, until an update finds no new state (docs/ros2_control.md, "The queue
 of states"). Leaving out one period's state in ``every`` drains that queue. An update that
 finds it empty repeats its previous state instead, and the controller holds its previous
-command a period longer: harmless in the swing, not in an impact's rebound (the URDF
-example struck twice in 3 of ~25 realtime runs with the gap anywhere). So no state is left
-out while the arm is in contact nor for ``quiet`` periods after: the gap that falls due
-then waits until they have passed.
+command a period longer: harmless in the swing, not in an impact's rebound, where it can
+turn the arm back into the surface (docs/benchmarks.md, "The queue of states"). So no state
+is left out while the arm is in contact nor for ``quiet`` periods after: the gap that falls
+due then waits until they have passed.
 """
 
 from __future__ import annotations
