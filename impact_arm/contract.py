@@ -77,6 +77,8 @@ class ControllerStatus:
     cycles_completed: int = 0  # cycles whose up half ended
     down_half_start: float = 0.0  # the latest down half's start (sample stamp) [s]
     repeated_states: int = 0  # the driver's repetitions of a sample, not new periods
+    # of which a command was computed on (the latest state predicted a period further)
+    repetition_ticks: int = 0
     latency_periods: int = 0  # commands in flight the latest command was predicted over
     latency_periods_max: int = 0
     # the run's measured latencies: (periods, count), ascending

@@ -161,6 +161,10 @@ class ControlInputs:
         # the driver's repetitions of a sample (a broadcaster republishing the state each
         # update): not new periods
         self.repeated = 0
+        # repetitions that ticked (``_tick_on_repetition``), and the stamp of the real state
+        # the latest one predicted from
+        self.repetition_ticks = 0
+        self.repetition_ticked = -math.inf
         self.sample_gap = math.inf  # stamp spacing of the newest two distinct samples
         # prediction over the commands in flight: ``latency_periods`` >= 0 fixed, -1 measured
         # from the efforts the driver reports (``measured_latency``)
@@ -274,6 +278,7 @@ class ControlInputs:
             # state still waiting for its wrench is answered by the repetition (below); an
             # arm that really stands still ticks again once the window has passed.
             self.repeated += 1
+            self._tick_on_repetition(t)
             return
         if not (all(abs(v) <= MAX_ANGLE for v in pos) and all(abs(v) <= MAX_RATE for v in vel)):
             # also false for NaN
@@ -350,6 +355,27 @@ class ControlInputs:
         self.waiting = None
         self._tick(*self.latest)
 
+    def _tick_on_repetition(self, t: float) -> None:
+        """A repetition stamped at the next tick: the driver's update found no new state (it
+        came late, or the simulator left one out) and its command slot is open now. Skipping
+        it would hold the previous command a period longer, which the prediction does not
+        model; instead the command is computed on the latest real state predicted over one
+        more command in flight (the one sent on that state), so one command still goes per
+        update. Only with a prediction, once the loop is closed, and once per real state: a
+        second repetition is past the repeat window and ticks as a sample."""
+        if (
+            self.predictor is None
+            or self.answered_by is None
+            or self.trigger is not ControlTrigger.JOINT_STATES
+            or self.latest is None
+            or self.repetition_ticked == self.latest[0]
+            or t < self.next_tick - TICK_TOLERANCE * min(self.period, self.sample_gap) - STAMP_EPS
+        ):
+            return
+        self.repetition_ticked = self.latest[0]
+        self.repetition_ticks += 1
+        self._tick(*self.latest, extra=1)
+
     def _check_answer(
         self, pos: list[float], vel: list[float], effort: Sequence[float], index: list[int]
     ) -> None:
@@ -383,7 +409,10 @@ class ControlInputs:
             self._tick(*self.latest)
 
     # --------------------------------------------------------------------------- output
-    def _tick(self, t: float, q: list[float], qd: list[float]) -> None:
+    def _tick(self, t: float, q: list[float], qd: list[float], extra: int = 0) -> None:
+        """A command from the state (``q``, ``qd``) sampled at ``t``; ``extra`` periods
+        have passed since without a new state (``_tick_on_repetition``): the prediction
+        covers that many more of the commands sent."""
         if not self.started:
             # the driver repeats its held state, which brings us back here
             now = self.clock()
@@ -391,7 +420,7 @@ class ControlInputs:
                 return
             self.started = True
             self.first_command_after = now - self.created
-        self.next_tick = (math.floor(t / self.period + 1e-6) + 1) * self.period
+        self.next_tick = (math.floor(t / self.period + 1e-6) + 1 + extra) * self.period
         if self.first_efforts is not None and self.answered_by is None:
             self.unanswered += 1
             # in the history as the law's own would be (the same command on the same held
@@ -401,7 +430,7 @@ class ControlInputs:
             self.sent.append(self.sent[-1])
             self.send([self.first_efforts[j] for j in self.order])
             return
-        ahead = self.in_flight()
+        ahead = self.in_flight(extra)
         sensed = None
         if ahead and self.predictor is not None:
             # act on the state this command will meet: the driver applies it only after
@@ -476,9 +505,12 @@ class ControlInputs:
         return t - self._up_since < self.implicit_window
 
     # ------------------------------------------------------------------------- latency
-    def in_flight(self) -> list[list[float]]:
-        """The sent commands that have not reached the actuators yet, oldest first."""
+    def in_flight(self, extra: int = 0) -> list[list[float]]:
+        """The newest sent commands the latest state does not show yet, oldest first: the
+        latency's, and ``extra`` more when that state is ``extra`` periods old (the commands
+        sent on it and since)."""
         k = self.measured_latency if self.latency_periods == -1 else self.latency_periods
+        k = min(k + extra, len(self.sent))
         return list(self.sent)[len(self.sent) - k :] if k else []
 
     def latency_spread(self) -> int:

@@ -479,6 +479,7 @@ class Controller(Node):
             cycles_completed=self.cycle_count.completed,
             down_half_start=self.cycle_count.down_half_start,
             repeated_states=inputs.repeated,
+            repetition_ticks=inputs.repetition_ticks,
             latency_periods=len(inputs.in_flight()),
             latency_periods_max=inputs.latency_max,
             latency_histogram=tuple(sorted(inputs.latency_seen.items())),

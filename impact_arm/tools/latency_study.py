@@ -20,6 +20,7 @@ from ..contract import ControlTrigger, joint_names, to_absolute, to_joint_space
 from ..driver.arm import SimulatedArm, Tick
 from ..driver.control_inputs import DEFAULT_IMPLICIT_WINDOW, ControlInputs
 from ..driver.session import LockstepSession, Outputs
+from ..driver.state_gaps import REBOUND_QUIET_S, StateGaps
 from ..physics.control import CycleController
 from ..physics.model import ArmModel
 from ..physics.scene import Scene
@@ -79,6 +80,8 @@ def closed_loop(
     tap: Callable[[int, int, Tick], None] | None = None,
     anticipate_impacts: bool = True,
     implicit_window: float = DEFAULT_IMPLICIT_WINDOW,
+    repeat_every: int = 0,
+    repeat_quiet: float = REBOUND_QUIET_S,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -95,6 +98,10 @@ def closed_loop(
     running, until then); meanwhile the driver writes its newest command each period, as a
     ros2_control stack does. ``anticipate_impacts``, ``implicit_window``: the controller's
     parameters of those names.
+    ``repeat_every`` > 0: in one period of that many the controller gets the previous
+    period's state again under this period's stamp (a driver stack's update that found no
+    new state: ``joint_states_gap``), never in contact nor ``repeat_quiet`` seconds after;
+    the driver then holds its newest command while no new one comes.
     ``tap(sec, nanosec, tick)``: each sample as the controller gets it
     (a recording to replay, bench controller_tick)."""
     arm = SimulatedArm(scene, rate, trace=False)
@@ -117,7 +124,7 @@ def closed_loop(
         command_timeout=math.inf,
         command_order=list(range(arm.n)),
         outputs=Outputs(publish=ticks.append, report=report),
-        command_latency=0 if jitter else latency,
+        command_latency=0 if jitter or repeat_every else latency,
         clock=lambda: 0.0,
         sleep=lambda s: None,
         release_after=release_after,
@@ -137,6 +144,8 @@ def closed_loop(
         implicit_window=implicit_window,
         wrench_publishers=lambda: force_sensor,
     )
+    gaps = StateGaps(repeat_every, round(repeat_quiet * rate))
+    previous: Tick | None = None
     rng = random.Random(seed)
     line: list[tuple[int, int, list[float]]] = []  # (period it acts from, order, torques)
     sent = 0
@@ -150,13 +159,17 @@ def closed_loop(
                 tap(sec, nsec, tick)
             if force_sensor:
                 inputs.wrench(sec, nsec, (tick.wrench[0], tick.wrench[1], 0.0))
-            inputs.joint_state(sec, nsec, names, tick.position, tick.velocity, tick.effort)
+            state = tick
+            if gaps.leave_out(tick.force_peak > 0.0) and previous is not None:
+                state = previous
+            previous = state
+            inputs.joint_state(sec, nsec, names, state.position, state.velocity, state.effort)
         if not commands and release_after and not session.released() and acting:
             session.offer(functools.partial(list, acting))  # the driver writes it again
             continue
-        if not commands:
+        if not commands and not repeat_every:
             return _result(latency, predicted, t_max, contacts, 'the controller sent nothing')
-        if not jitter:
+        if not jitter and not repeat_every:
             while commands:
                 acting = commands.popleft()
                 session.offer(functools.partial(list, acting))

@@ -528,6 +528,23 @@ def test_prediction_keeps_the_limit_cycle_under_command_latency(scene):
         assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
 
 
+@pytest.mark.parametrize('latency', [1, 2])
+@pytest.mark.parametrize('every', [5, 20])
+def test_a_repeated_state_costs_the_cycle_nothing(scene, latency, every):
+    """A driver stack's update that finds no new state repeats its previous one
+    (TopicBasedSystem behind a broadcaster; the simulator's joint_states_gap). The controller
+    then computes that update's command on its latest state predicted a period further, so
+    the arm strikes as if every state had come, in the rebound too: held a period longer
+    instead (the repetition skipped), a command moves the strikes by milliseconds."""
+    from impact_arm.tools.latency_study import closed_loop
+
+    base = closed_loop(scene, latency, -1, t_max=2.5)
+    gaps = closed_loop(scene, latency, -1, t_max=2.5, repeat_every=every, repeat_quiet=0.0)
+    assert base.impacts >= 5 and not gaps.failed and gaps.impacts == base.impacts
+    assert gaps.t_contact == pytest.approx(base.t_contact, abs=1e-6)
+    assert gaps.delta_m == pytest.approx(base.delta_m, rel=1e-5)
+
+
 @pytest.mark.parametrize('latency', [4, 5])
 def test_without_a_force_sensor_a_predicting_controller_sees_the_impact_in_the_sample(
     scene, latency
