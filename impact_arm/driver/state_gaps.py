@@ -4,11 +4,12 @@ TopicBasedSystem (topic_based_ros2_control 0.3) takes one state per update, the 
 queued: a state delivered after the read it was meant for stays queued, and every later
 read is a period late, until an update finds no new state (docs/ros2_control.md, "The queue
 of states"). Leaving out one period's state in ``every`` drains that queue. An update that
-finds it empty repeats its previous state instead, and the controller holds its previous
-command a period longer: harmless in the swing, not in an impact's rebound, where it can
-turn the arm back into the surface (docs/benchmarks.md, "The queue of states"). So no state
-is left out while the arm is in contact nor for ``quiet`` periods after: the gap that falls
-due then waits until they have passed.
+finds it empty repeats its previous state instead; the controller computes that update's
+command on its latest state predicted a period further (before it did, it held its previous
+command a period longer, which in an impact's rebound can turn the arm back into the
+surface: docs/benchmarks.md, "The queue of states"). Its prediction does not model the
+contact, so no state is left out while the arm is in contact nor for ``quiet`` periods
+after: the gap that falls due then waits until they have passed.
 """
 
 from __future__ import annotations

@@ -29,10 +29,10 @@ if TYPE_CHECKING:
     from .param_types import SimulatorParameters
 
 
-# none by default: with a gap every 20 periods the ros2_control set-up's latency criteria
-# held in every stand-in run, but the URDF example struck twice in some (docs/benchmarks.md,
-# "The queue of states")
-JOINT_STATES_GAP = 0
+# a gap every 20 periods drains topic_based_ros2_control's queue of states without a cost to
+# the cycle once the controller predicts over a repeated state (docs/benchmarks.md, "The
+# queue of states"); every 10 drained no better, every 50 too little
+JOINT_STATES_GAP = 20
 
 
 def parameter_table(scene: Scene) -> tuple[Param, ...]:
@@ -250,11 +250,12 @@ _PARAMS_AFTER_JOINTS = (
         high=100000,
         read_only=True,
         doc=(
-            '; none in contact nor in the 50 ms after it (a gap due then waits): an update '
-            'that finds its queue empty keeps the previous state, and a command held a '
-            'period longer in the rebound can strike again (docs/ros2_control.md, "The queue '
-            'of states"). Realtime only: in lockstep every state goes out (a stack the '
-            'simulator paces takes each)'
+            '; none in contact nor in the 50 ms after it (a gap due then waits). An update '
+            'that finds its queue empty keeps the previous state, which the broadcaster '
+            "publishes again; the project's controller computes that update's command on its "
+            'latest state predicted a period further (docs/ros2_control.md, "The queue of '
+            'states"). Realtime only: in lockstep every state goes out (a stack the simulator '
+            'paces takes each)'
         ),
     ),
     Param(

@@ -176,6 +176,7 @@ class StackRun:
             # what the controller dropped or refused (its non-zero counters)
             'controller_dropped': {k: ctrl[k] for k in DROPPED if ctrl.get(k, '0') != '0'},
             'repeated_states': int(ctrl.get('repeated_states', -1)),
+            'repetition_ticks': int(ctrl.get('repetition_ticks', -1)),
             # -1: the simulator never reported
             'overruns': sim.overruns if sim else -1,
             'periods_skipped': sim.periods_skipped if sim else -1,
