@@ -644,6 +644,8 @@ class SimulatorStatus:
     # all-zero commands that did not release the brakes (release_on)
     zero_commands_before_release: int = 0
     publish_failures: int = 0
+    # realtime: periods whose state was left out on joint_states_topic (joint_states_gap)
+    hardware_states_left_out: int = 0
     # lockstep only (None: not on the wire): periods published again unanswered, periods that
     # waited for the recorder, periods run braked before the release (release_after)
     lockstep_repeats: Optional[int] = None

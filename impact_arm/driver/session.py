@@ -90,12 +90,14 @@ class Outputs:
     """Where a session's results go: ``publish(tick)`` a period's sensor messages,
     ``report(tick)`` its impact reports (after the sensor messages), ``log(level, text)``
     (levels info, warning, waiting: a repeated warning, error); ``failures()`` counts the
-    samples the transport refused."""
+    samples the transport refused, ``left_out()`` the periods whose state a driver stack's
+    topic was not sent (``joint_states_gap``)."""
 
     publish: Callable[[Tick], None] = lambda tick: None
     report: Callable[[Tick], None] = lambda tick: None
     log: Callable[[str, str], None] = lambda level, text: None
     failures: Callable[[], int] = lambda: 0
+    left_out: Callable[[], int] = lambda: 0
 
 
 class Session:
@@ -366,6 +368,7 @@ class Session:
             limits='; '.join(e.text() for e in tuple(self.arm.limits.found)),
             zero_commands_before_release=self.zero_before_release,
             publish_failures=self.out.failures(),
+            hardware_states_left_out=self.out.left_out(),
             sim_time=self.arm.t,
             real_time_factor=self.arm.t / (now - first_command)
             if first_command and now > first_command

@@ -116,7 +116,11 @@ class Simulator(Node):
         """The session settings both modes share."""
         p = self.p
         outputs = Outputs(
-            self._publish_period, self._report_period, self._log, self._publish_failures
+            self._publish_period,
+            self._report_period,
+            self._log,
+            self._publish_failures,
+            self._hardware_states_left_out,
         )
         return dict(
             publish_rate=p.publish_rate,
@@ -333,6 +337,9 @@ class Simulator(Node):
 
     def _publish_failures(self) -> int:
         return self.out.failures
+
+    def _hardware_states_left_out(self) -> int:
+        return self.out.hw_gaps.left_out
 
     def _log(self, level: str, text: str) -> None:
         # rclpy fixes each call site's severity at its first call: one site per level

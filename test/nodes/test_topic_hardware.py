@@ -139,6 +139,7 @@ def test_joint_state_commands_move_the_arm_exactly_as_array_commands(probe, ros_
     # first our reader received
     assert [s for s in by_name if s >= min(hw_name)] == sorted(hw_name)
     assert rejected(diags[-1]) == 2
+    assert simulator_status(diags[-1]).hardware_states_left_out == 0
 
 
 def test_joint_states_gap_leaves_out_every_nth_hardware_state(probe, ros_env, tmp_path):
@@ -146,12 +147,15 @@ def test_joint_states_gap_leaves_out_every_nth_hardware_state(probe, ros_env, tm
     same one of every N, while /joint_states has each."""
     from collections import Counter
 
+    from diagnostic_msgs.msg import DiagnosticArray
+    from ros_helpers import from_simulator
     from sensor_msgs.msg import JointState
 
     from std_msgs.msg import Float64MultiArray
 
     gap, period_ns = 7, 1_000_000  # stamps 1 ms apart; at rate_factor 0.25, 250 a wall second
     states, hw_states = set(), set()
+    diags = probe.listen(DiagnosticArray, '/diagnostics', keep=from_simulator)
     with probe.lock:
         subs = [
             probe.node.create_subscription(
@@ -174,12 +178,22 @@ def test_joint_states_gap_leaves_out_every_nth_hardware_state(probe, ros_env, tm
                 ),
                 60,
             ), sim.stderr
+            # the count on /diagnostics is the run's: at least the gaps seen so far
+            n_seen = len(hw_states)
+            assert wait_for(
+                lambda: (
+                    diags
+                    and simulator_status(diags[-1][1]).hardware_states_left_out >= n_seen // gap - 1
+                ),
+                10,
+            ), (diags[-1:], n_seen)
             sim.stop()
     finally:
         with probe.lock:
             for sub in subs:
                 probe.node.destroy_subscription(sub)
             probe.node.destroy_publisher(commands)
+        probe.forget(diags)
     # the periods both topics could have carried: from the first to the last hardware state
     first, last = min(hw_states), max(hw_states)
     periods = {round(t / period_ns) for t in states if first <= t <= last}

@@ -164,6 +164,9 @@ class StackRun:
             'order': list(self.order),
             'impacts': len(self.impacts),
             'second_strikes': self.second_strikes,
+            # each second strike with the strike before it (what the simulator reported)
+            'second_strike_details': self.second_strike_details(),
+            'contacts': list(self.contacts),
             'first_strike_s': self.contacts[0] if self.contacts else None,
             'last_cycle_s': self.last_cycle_s,
             'mean_cycle_s': self.mean_cycle_s,
