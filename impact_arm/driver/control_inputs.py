@@ -325,11 +325,7 @@ class ControlInputs:
         self.latest_joint = (pos, vel)
         if effort and self.latency_periods == -1:
             self._measure_latency(effort, index)
-        tolerance = TICK_TOLERANCE * min(self.period, self.sample_gap)
-        if (
-            self.trigger is not ControlTrigger.JOINT_STATES
-            or t < self.next_tick - tolerance - STAMP_EPS
-        ):
+        if self.trigger is not ControlTrigger.JOINT_STATES or not self._reaches_next_tick(t):
             return
         # the wrench of the same instant is published just before the joint state: wait for
         # it when someone publishes wrenches. A wrench publisher that sends no valid wrench
@@ -369,7 +365,7 @@ class ControlInputs:
             or self.trigger is not ControlTrigger.JOINT_STATES
             or self.latest is None
             or self.repetition_ticked == self.latest[0]
-            or t < self.next_tick - TICK_TOLERANCE * min(self.period, self.sample_gap) - STAMP_EPS
+            or not self._reaches_next_tick(t)
         ):
             return
         self.repetition_ticked = self.latest[0]
@@ -397,6 +393,12 @@ class ControlInputs:
                 f'the driver answered the first command ({self.answered_by.value}) after '
                 f'{self.unanswered} ticks that sent it again: the law runs'
             )
+
+    def _reaches_next_tick(self, t: float) -> bool:
+        """Whether a sample stamped ``t`` is due to tick: at the next tick, or within
+        TICK_TOLERANCE of the period (or of the stream's own spacing, when finer) before it."""
+        tolerance = TICK_TOLERANCE * min(self.period, self.sample_gap)
+        return t >= self.next_tick - tolerance - STAMP_EPS
 
     def _spacing(self) -> float:
         """The stamp spacing of the driver's new samples: a control period, or the stream's

@@ -117,6 +117,9 @@ def closed_loop(
         for record, _ in tick.impacts:
             contacts.append((record.t_contact, record.delta_m, record.v_before[1]))
 
+    # jitter or repeated states: the commands go through the delay line below (a period's
+    # newest acts, held while none comes) instead of the session's fixed latency
+    delay_line = bool(jitter or repeat_every)
     session = LockstepSession(
         arm,
         publish_rate=rate,
@@ -124,7 +127,7 @@ def closed_loop(
         command_timeout=math.inf,
         command_order=list(range(arm.n)),
         outputs=Outputs(publish=ticks.append, report=report),
-        command_latency=0 if jitter or repeat_every else latency,
+        command_latency=0 if delay_line else latency,
         clock=lambda: 0.0,
         sleep=lambda s: None,
         release_after=release_after,
@@ -169,7 +172,7 @@ def closed_loop(
             continue
         if not commands and not repeat_every:
             return _result(latency, predicted, t_max, contacts, 'the controller sent nothing')
-        if not jitter and not repeat_every:
+        if not delay_line:
             while commands:
                 acting = commands.popleft()
                 session.offer(functools.partial(list, acting))
