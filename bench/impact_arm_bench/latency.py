@@ -20,6 +20,7 @@ median, and the worst run in brackets.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import random
 import statistics
@@ -28,6 +29,19 @@ import sys
 import time
 
 from .common import table
+
+
+# the controller's settings compared (name, latency_periods, implicit_periods,
+# anticipate_impacts): no prediction; prediction over the measured latency with an explicit
+# law; the law also evaluated implicitly while the measured latency varies, switching to the
+# up half on the sampled impact; and the node's default, which also anticipates an impact
+# the prediction meets
+CONTROLLERS = (
+    ('off', 0, 0, False),
+    ('measured', -1, 0, False),
+    ('measured + implicit, switch on the sample', -1, 1, False),
+    ('measured + implicit + anticipation', -1, 1, True),
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,24 +73,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1,
         help='varying latency: k to k+SPREAD periods (SPREAD chances of an extra period each)',
     )
+    parser.add_argument(
+        '--bursts',
+        nargs=3,
+        metavar=('PROBABILITY', 'TOP', 'DECAY'),
+        help='varying latency in bursts instead (tools/latency_study.LatencyBursts): each '
+        'period a burst starts with PROBABILITY, adding 1..TOP periods, falling back one '
+        'every DECAY periods (e.g. 0.05 2 1)',
+    )
+    parser.add_argument(
+        '--controller',
+        action='append',
+        choices=[c[0] for c in CONTROLLERS],
+        help='only this controller (repeatable; default: all four)',
+    )
     parser.add_argument('--seeds', type=int, default=5, help='varying latency: runs (seeds)')
     parser.add_argument('--dds', action='store_true', help='also over DDS (nodes)')
     parser.add_argument(
         '--dds-seconds', type=float, default=4.0, help='simulated s per run over DDS'
     )
-
-
-# the controller's settings compared (name, latency_periods, implicit_periods,
-# anticipate_impacts): no prediction; prediction over the measured latency with an explicit
-# law; the law also evaluated implicitly while the measured latency varies, switching to the
-# up half on the sampled impact; and the node's default, which also anticipates an impact
-# the prediction meets
-CONTROLLERS = (
-    ('off', 0, 0, False),
-    ('measured', -1, 0, False),
-    ('measured + implicit, switch on the sample', -1, 1, False),
-    ('measured + implicit + anticipation', -1, 1, True),
-)
 
 
 def _metrics(contacts, delta_m):
@@ -126,7 +141,13 @@ def _row(kind, latency, controller, runs):
 
 
 def _offline(scene, args):
-    from impact_arm.tools.latency_study import closed_loop
+    from impact_arm.tools.latency_study import LatencyBursts, closed_loop
+
+    controllers = [c for c in CONTROLLERS if not args.controller or c[0] in args.controller]
+    bursts = None
+    if args.bursts:
+        probability, top, decay = float(args.bursts[0]), int(args.bursts[1]), int(args.bursts[2])
+        bursts = functools.partial(LatencyBursts, probability=probability, top=top, decay=decay)
 
     def run(
         latency: int,
@@ -146,22 +167,25 @@ def _offline(scene, args):
             implicit_periods=implicit,
             spread=args.spread,
             anticipate_impacts=anticipate,
+            bursts=bursts(latency) if bursts and jitter else None,
         )
         return r.t_contact, r.delta_m, r.failed
 
     rows = []
     for latency in args.latencies:
-        for name, *settings in CONTROLLERS:
+        for name, *settings in controllers:
             runs = [run(latency, *settings)]  # deterministic: one run
             rows.append(_row('offline, steady', str(latency), name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)
+    kind = 'offline, bursts' if bursts else 'offline, varying'
+    widest = int(args.bursts[1]) if bursts else args.spread
     for k in args.varying:
-        for name, *settings in CONTROLLERS:
+        for name, *settings in controllers:
             runs = [
                 run(k, *settings, jitter=args.jitter, seed=seed)
                 for seed in range(1, args.seeds + 1)
             ]
-            rows.append(_row('offline, varying', f'{k}..{k + args.spread}', name, runs))
+            rows.append(_row(kind, f'{k}..{k + widest}', name, runs))
             print('  ' + ' | '.join(rows[-1]), flush=True)
     return rows
 

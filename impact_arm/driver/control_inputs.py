@@ -50,6 +50,11 @@ LATENCY_WINDOW_S = 1.0
 LATENCY_RECURS = 3
 # the controller node's implicit_window [s]: the rebound, where the implicit law matters
 DEFAULT_IMPLICIT_WINDOW = 0.05
+# The first this long of the rebound, where its rates make the law's torques largest: a
+# command there may act for as long as the recurring latencies' spread plus one period (sent
+# at the shortest latency, overtaken by one at the longest), and the implicit law looks that
+# far ahead; afterwards half the spread suffices (docs/benchmarks.md)
+REBOUND_HOLD_S = 0.005
 DROPPED = (
     'malformed_joint_states',
     'malformed_wrenches',
@@ -469,7 +474,7 @@ class ControlInputs:
                 q,
                 qd,
                 tau,
-                self.implicit_ahead(),
+                self.implicit_ahead(t),
                 self.ctrl.q_law_terms(),
             )
             self.implicit_commands += 1
@@ -526,13 +531,18 @@ class ControlInputs:
         LATENCY_WINDOW_S."""
         return self.latency_spread() > 0
 
-    def implicit_ahead(self) -> int:
-        """Periods the implicit law looks ahead: ``implicit_periods``, and at least half the
-        recurring latencies' spread (rounded up) when they vary by more than two periods: a
-        command may then be held three periods or more, and one period ahead no longer
-        keeps the damping from overshooting (offline, latency 1..4 and 1..5: one period
-        ahead struck twice, two did not; docs/benchmarks.md)."""
-        return max(self.implicit_periods, -(-self.latency_spread() // 2))
+    def implicit_ahead(self, t: float = -math.inf) -> int:
+        """Periods the implicit law looks ahead for the command acting at ``t``:
+        ``implicit_periods``, and at least the longest a command may then act while the
+        recurring latencies vary: their spread plus one period in the rebound's first
+        REBOUND_HOLD_S (a command held one period longer than the look-ahead there reverses
+        the rebound's rates into the surface), half the spread (rounded up) after it, where
+        a look-ahead that long would only slow the cycle (offline, latency 1..4 and 1..5:
+        one period ahead struck twice, two did not; docs/benchmarks.md)."""
+        spread = self.latency_spread()
+        if self._up_since is not None and t - self._up_since < REBOUND_HOLD_S:
+            return max(self.implicit_periods, spread + 1) if spread else self.implicit_periods
+        return max(self.implicit_periods, -(-spread // 2))
 
     def _measure_latency(self, effort: Sequence[float], index: list[int]) -> None:
         """The driver reports the torques acting now: the commands sent after the one it

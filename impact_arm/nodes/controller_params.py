@@ -20,7 +20,7 @@ from ..contract import (
     ControlTrigger,
     StartAfter,
 )
-from ..driver.control_inputs import DEFAULT_IMPLICIT_WINDOW, SENT_HISTORY
+from ..driver.control_inputs import DEFAULT_IMPLICIT_WINDOW, REBOUND_HOLD_S, SENT_HISTORY
 from .params import Param, ParameterError, check_joints, scene_joint_names
 
 if TYPE_CHECKING:
@@ -214,9 +214,11 @@ def parameter_table(scene: Scene) -> tuple[Param, ...]:
             'where a command acts a period early or late and is held one period or two): '
             'the torque is the law evaluated on the state that torque itself leads to after '
             'this many periods (implicit, a Newton step on the model), so that a command '
-            'held longer than planned does not overshoot; at least half the spread of the '
-            'recurring latencies, rounded up (a stack that makes them vary by three periods '
-            'or more holds a command longer still); with a steady latency the law is '
+            'held longer than planned does not overshoot; at least the recurring '
+            f"latencies' spread plus one period in the rebound's first "
+            f'{REBOUND_HOLD_S * 1e3:g} ms (the longest a '
+            'command may then act, where its torque is largest) and half that spread, rounded '
+            'up, after it; with a steady latency the law is '
             "the scene's; 0: never (needs latency_periods -1)",
             'int',
             low=0,

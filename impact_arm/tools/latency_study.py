@@ -65,6 +65,34 @@ class LoopResult:
         return sum(periods) / len(periods) if periods else math.nan
 
 
+class LatencyBursts:
+    """Command delays that come in bursts, as a loaded machine delays a driver stack's
+    threads: each period, with probability ``probability``, the delay jumps to
+    ``latency`` + 1..``top`` periods (evenly), then falls back a period every ``decay``
+    periods; between bursts it is ``latency``. Consecutive commands see nearly the same
+    delay, so a burst that starts at an impact holds its first command several periods
+    where independent draws (``closed_loop``'s ``jitter``) rarely do. Call it with the
+    period a command is sent in and the run's random generator."""
+
+    def __init__(self, latency: int, probability: float, top: int, decay: int = 1):
+        if not 0.0 <= probability <= 1.0:
+            raise ValueError(f'probability = {probability}: must be within [0, 1]')
+        if top < 1 or decay < 1:
+            raise ValueError(f'top = {top}, decay = {decay}: each must be >= 1')
+        self.latency, self.probability, self.top, self.decay = latency, probability, top, decay
+        self.extra = 0
+        self.period = -1  # the latest period drawn
+
+    def __call__(self, period: int, rng: random.Random) -> int:
+        while self.period < period:
+            self.period += 1
+            if self.extra and self.period % self.decay == 0:
+                self.extra -= 1
+            if rng.random() < self.probability:
+                self.extra = max(self.extra, rng.randint(1, self.top))
+        return self.latency + self.extra
+
+
 def closed_loop(
     scene: Scene,
     latency: int,
@@ -82,6 +110,7 @@ def closed_loop(
     implicit_window: float = DEFAULT_IMPLICIT_WINDOW,
     repeat_every: int = 0,
     repeat_quiet: float = REBOUND_QUIET_S,
+    bursts: LatencyBursts | None = None,
 ) -> LoopResult:
     """Run the scene's controller (the node's defaults) on the simulated arm for ``t_max``
     simulated seconds, the driver delaying each command by ``latency`` periods and the
@@ -91,6 +120,7 @@ def closed_loop(
     unsynchronised controller manager), so that some periods hold the previous command and
     some commands are superseded before they act (the driver applies a period's newest);
     ``spread`` such chances per command: it takes ``latency`` to ``latency + spread`` periods.
+    ``bursts``: the delays come from it instead (its own ``latency``; ``jitter`` unused).
     ``implicit_periods``: the controller's parameter of that name (0: off).
     ``force_sensor`` False: no contact wrench reaches the controller (an arm without a force
     sensor): it tells an impact from the tip's reversal alone.
@@ -119,7 +149,7 @@ def closed_loop(
 
     # jitter or repeated states: the commands go through the delay line below (a period's
     # newest acts, held while none comes) instead of the session's fixed latency
-    delay_line = bool(jitter or repeat_every)
+    delay_line = bool(jitter or repeat_every or bursts)
     session = LockstepSession(
         arm,
         publish_rate=rate,
@@ -180,8 +210,12 @@ def closed_loop(
         # the delay line: each command acts from the period it arrives in, the newest wins
         while commands:
             sent += 1
-            late = sum(rng.random() < jitter for _ in range(spread)) if sent > 1 else 0
-            delay = latency + late if sent > 1 else 0  # the release: at once
+            if sent == 1:
+                delay = 0  # the release: at once
+            elif bursts is not None:
+                delay = bursts(arm.periods, rng)
+            else:
+                delay = latency + sum(rng.random() < jitter for _ in range(spread))
             line.append((arm.periods + delay, sent, commands.popleft()))
         arrived = [c for c in line if c[0] <= arm.periods]
         if arrived:

@@ -6,6 +6,7 @@ import math
 
 import pytest
 from fake_loop import RATE, FakeClock, make_loop
+from repo_paths import EXAMPLES
 
 from impact_arm.contract import SimulatorMode, WatchdogPolicy, WatchdogState, to_absolute
 from impact_arm.physics.control import CycleController
@@ -674,6 +675,33 @@ def test_the_implicit_law_looks_further_ahead_when_the_latency_varies_more(scene
     assert not run.failed and run.second_strikes == 0
     assert run.impacts == base.impacts
     assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
+
+
+@pytest.mark.parametrize('seed, t_max', [(7, 1.5), (9, 10.0)])
+def test_a_latency_burst_at_an_impact_does_not_strike_twice(seed, t_max):
+    """The URDF example, its commands delayed in bursts (1 period, now and then 2 or 3 for a
+    few periods: a loaded machine's driver stack). A burst that begins at an impact holds
+    the rebound's first, largest command up to three periods where the law planned one; the
+    implicit law looks as far ahead there (the spread plus one period) and the arm strikes
+    once per cycle, with the base run's impacts and penetration. (Half the spread ahead, as
+    after the rebound's first milliseconds, these draws strike twice.)"""
+    from impact_arm.tools.latency_study import LatencyBursts, closed_loop
+
+    urdf = load_scene(f'{EXAMPLES}/real_arm.yaml')
+    base = closed_loop(urdf, 0, 0, t_max=t_max)
+    run = closed_loop(urdf, 1, -1, t_max, seed=seed, bursts=LatencyBursts(1, 0.05, 2))
+    assert not run.failed and run.second_strikes == 0
+    assert run.impacts == base.impacts
+    assert max(run.delta_m) == pytest.approx(max(base.delta_m), rel=0.02)
+
+
+def test_latency_bursts_reject_what_no_machine_does():
+    from impact_arm.tools.latency_study import LatencyBursts
+
+    with pytest.raises(ValueError, match='probability = 1.5'):
+        LatencyBursts(1, 1.5, 2)
+    with pytest.raises(ValueError, match='top = 0'):
+        LatencyBursts(1, 0.1, 0)
 
 
 def test_a_stale_echo_or_a_wild_prediction_does_not_steer_the_arm(scene):
