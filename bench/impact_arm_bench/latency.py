@@ -167,6 +167,7 @@ def _offline(scene, args):
             implicit_periods=implicit,
             spread=args.spread,
             anticipate_impacts=anticipate,
+            # (the steady rows pass no jitter: no bursts there either)
             bursts=bursts(latency) if bursts and jitter else None,
         )
         return r.t_contact, r.delta_m, r.failed

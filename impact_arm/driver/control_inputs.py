@@ -540,8 +540,8 @@ class ControlInputs:
         a look-ahead that long would only slow the cycle (offline, latency 1..4 and 1..5:
         one period ahead struck twice, two did not; docs/benchmarks.md)."""
         spread = self.latency_spread()
-        if self._up_since is not None and t - self._up_since < REBOUND_HOLD_S:
-            return max(self.implicit_periods, spread + 1) if spread else self.implicit_periods
+        if spread and self._up_since is not None and t - self._up_since < REBOUND_HOLD_S:
+            return max(self.implicit_periods, spread + 1)
         return max(self.implicit_periods, -(-spread // 2))
 
     def _measure_latency(self, effort: Sequence[float], index: list[int]) -> None:
